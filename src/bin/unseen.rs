@@ -1,0 +1,278 @@
+//! The `unseen` command line. Errors are one sentence on stderr and a non-zero exit.
+
+use clap::{Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+use unseen::camera::{Camera, inria};
+use unseen::error::{Error, Result};
+use unseen::gaussian::ply;
+use unseen::io::image::{ImageF32, write_exr, write_png};
+use unseen::raster::{Outputs, RenderOptions, render};
+
+#[derive(Parser)]
+#[command(
+    name = "unseen",
+    version,
+    about = "Deterministic CPU scene extrapolation with 3D Gaussian Splatting"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render the bundled scene from all its cameras into ./demo-out/.
+    Demo {
+        /// Output folder.
+        #[arg(long, default_value = "demo-out")]
+        out: PathBuf,
+    },
+    /// Render a 3DGS PLY from cameras in INRIA cameras.json layout.
+    Render {
+        /// Scene in INRIA 3DGS PLY layout.
+        scene: PathBuf,
+        /// Cameras (INRIA cameras.json).
+        #[arg(long)]
+        cameras: PathBuf,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Render only the camera with this img_name.
+        #[arg(long)]
+        camera: Option<String>,
+        /// Highest SH degree to evaluate (default: the scene's).
+        #[arg(long)]
+        sh_degree: Option<u32>,
+        /// Background colour, linear, e.g. 0,0,0 or 1,1,1.
+        #[arg(long, default_value = "0,0,0", value_parser = parse_rgb)]
+        background: [f32; 3],
+        /// Float EXR outputs besides the PNG: rgb, alpha, depth (accumulated D),
+        /// expected_depth (ED = D / alpha).
+        #[arg(long, value_delimiter = ',', default_value = "rgb")]
+        outputs: Vec<String>,
+    },
+}
+
+fn parse_rgb(s: &str) -> std::result::Result<[f32; 3], String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|t| {
+            t.trim()
+                .parse::<f32>()
+                .map_err(|_| format!("'{t}' is not a number"))
+        })
+        .collect::<std::result::Result<_, _>>()?;
+    match v.as_slice() {
+        [r, g, b] if v.iter().all(|x| x.is_finite()) => Ok([*r, *g, *b]),
+        _ => Err(format!("expected three finite numbers R,G,B, got '{s}'")),
+    }
+}
+
+fn parse_outputs(names: &[String]) -> Result<Outputs> {
+    let mut o = Outputs {
+        rgb: true,
+        ..Outputs::RGB
+    };
+    for n in names {
+        match n.as_str() {
+            "rgb" => o.rgb = true,
+            "alpha" => o.alpha = true,
+            "depth" => o.depth = true,
+            "expected_depth" | "expected-depth" => o.expected_depth = true,
+            other => {
+                return Err(Error::invalid(format!(
+                    "unknown output '{other}' (choose from rgb, alpha, depth, expected_depth)"
+                )));
+            }
+        }
+    }
+    Ok(o)
+}
+
+/// A file-name-safe version of a camera name.
+fn file_stem(name: &str) -> String {
+    let stem = Path::new(name)
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned());
+    stem.unwrap_or_else(|| name.to_string())
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || "-_.".contains(c) {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+struct Job<'a> {
+    scene_path: &'a Path,
+    cameras: Vec<Camera>,
+    out: &'a Path,
+    opts: RenderOptions,
+    exr: Outputs,
+}
+
+/// Render every camera; returns the files written.
+fn run_render(job: &Job) -> Result<Vec<PathBuf>> {
+    let t0 = Instant::now();
+    let (scene, info) = ply::read_ply(job.scene_path)?;
+    if !info.ignored_properties.is_empty() {
+        eprintln!(
+            "note: {}: ignored vertex properties: {}",
+            job.scene_path.display(),
+            info.ignored_properties.join(", ")
+        );
+    }
+    eprintln!(
+        "loaded {} Gaussians (SH degree {}) in {:.0} ms",
+        scene.len(),
+        scene.sh_degree,
+        t0.elapsed().as_secs_f64() * 1e3
+    );
+    unseen::io::create_dir_all(job.out)?;
+    let bar = ProgressBar::new(job.cameras.len() as u64);
+    bar.set_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} cameras {msg}").expect("template"),
+    );
+    let mut written = Vec::new();
+    let (mut pairs, mut secs, mut skipped) = (0u64, 0f64, 0u64);
+    for cam in &job.cameras {
+        let t = Instant::now();
+        let r = render(&scene, cam, &job.opts)?;
+        secs += t.elapsed().as_secs_f64();
+        pairs += r.report.pairs_evaluated;
+        skipped += r.report.non_finite + r.report.degenerate;
+        let (w, h) = (r.width, r.height);
+        let stem = job.out.join(file_stem(&cam.name));
+        let rgb = ImageF32::new(w, h, 3, r.rgb.clone().unwrap_or_default())?;
+        let mut put = |suffix: &str, img: &ImageF32, exr: bool| -> Result<()> {
+            let p = stem.with_extension(suffix);
+            if exr {
+                write_exr(&p, img)?
+            } else {
+                write_png(&p, img)?
+            }
+            written.push(p);
+            Ok(())
+        };
+        put("png", &rgb, false)?;
+        if job.exr.rgb {
+            put("rgb.exr", &rgb, true)?;
+        }
+        for (flag, data, suffix) in [
+            (job.exr.alpha, &r.alpha, "alpha.exr"),
+            (job.exr.depth, &r.depth, "depth.exr"),
+            (
+                job.exr.expected_depth,
+                &r.expected_depth,
+                "expected_depth.exr",
+            ),
+        ] {
+            if let (true, Some(d)) = (flag, data) {
+                put(suffix, &ImageF32::new(w, h, 1, d.clone())?, true)?;
+            }
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    eprintln!(
+        "rendered {} camera(s) in {:.1} ms: {:.1} M Gaussian-pixel evaluations, {:.0} M/s{}",
+        job.cameras.len(),
+        secs * 1e3,
+        pairs as f64 / 1e6,
+        pairs as f64 / 1e6 / secs.max(1e-9),
+        if skipped > 0 {
+            format!(", {skipped} Gaussian(s) skipped as non-finite or degenerate")
+        } else {
+            String::new()
+        }
+    );
+    Ok(written)
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Demo { out } => {
+            let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("reference_data/demo");
+            let scene = dir.join("scene.ply");
+            let cameras = inria::read_cameras_json(&dir.join("cameras.json"))?;
+            let opts = RenderOptions {
+                outputs: Outputs {
+                    alpha: true,
+                    expected_depth: true,
+                    ..Outputs::RGB
+                },
+                ..RenderOptions::default()
+            };
+            let exr = opts.outputs;
+            let files = run_render(&Job {
+                scene_path: &scene,
+                cameras,
+                out: &out,
+                opts,
+                exr,
+            })?;
+            println!(
+                "demo: rendered the bundled scene ({}) into {}:",
+                scene.display(),
+                out.display()
+            );
+            for f in files {
+                println!("  {}", f.display());
+            }
+            Ok(())
+        }
+        Command::Render {
+            scene,
+            cameras,
+            out,
+            camera,
+            sh_degree,
+            background,
+            outputs,
+        } => {
+            let mut cams = inria::read_cameras_json(&cameras)?;
+            if let Some(name) = camera {
+                cams.retain(|c| c.name == name);
+                if cams.is_empty() {
+                    return Err(Error::invalid(format!("no camera named '{name}'")).at(&cameras));
+                }
+            }
+            let exr = parse_outputs(&outputs)?;
+            let exr = Outputs {
+                rgb: outputs.iter().any(|o| o == "rgb"),
+                ..exr
+            };
+            let opts = RenderOptions {
+                background,
+                sh_degree,
+                outputs: Outputs { rgb: true, ..exr },
+                ..RenderOptions::default()
+            };
+            let files = run_render(&Job {
+                scene_path: &scene,
+                cameras: cams,
+                out: &out,
+                opts,
+                exr,
+            })?;
+            println!("wrote {} file(s) into {}", files.len(), out.display());
+            Ok(())
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

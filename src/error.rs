@@ -1,0 +1,83 @@
+//! The crate's one error type.
+//!
+//! Every error names the file (when there is one) and says what is wrong in one sentence,
+//! so the CLI can print it as is. No panics on bad input: readers return these instead.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// What went wrong, coarse enough to match on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ErrorKind {
+    /// Reading or writing a file failed at the operating-system level.
+    Io,
+    /// A file exists but its content is malformed.
+    Parse,
+    /// The content is well-formed but describes something we do not support
+    /// (e.g. a distorted COLMAP camera model).
+    Unsupported,
+    /// Arguments or data are inconsistent (wrong sizes, NaN where a number is required).
+    Invalid,
+}
+
+/// An error with a human-readable message and, when relevant, the file it concerns.
+#[derive(Debug)]
+pub struct Error {
+    pub kind: ErrorKind,
+    pub path: Option<PathBuf>,
+    pub message: String,
+}
+
+pub type Result<T> = std::result::Result<T, Error>;
+
+impl Error {
+    pub fn new(kind: ErrorKind, message: impl Into<String>) -> Self {
+        Error {
+            kind,
+            path: None,
+            message: message.into(),
+        }
+    }
+    pub fn parse(path: &Path, message: impl Into<String>) -> Self {
+        Error {
+            kind: ErrorKind::Parse,
+            path: Some(path.to_path_buf()),
+            message: message.into(),
+        }
+    }
+    pub fn unsupported(path: &Path, message: impl Into<String>) -> Self {
+        Error {
+            kind: ErrorKind::Unsupported,
+            path: Some(path.to_path_buf()),
+            message: message.into(),
+        }
+    }
+    pub fn invalid(message: impl Into<String>) -> Self {
+        Error::new(ErrorKind::Invalid, message)
+    }
+    pub fn io(path: &Path, err: std::io::Error) -> Self {
+        Error {
+            kind: ErrorKind::Io,
+            path: Some(path.to_path_buf()),
+            message: err.to_string(),
+        }
+    }
+    /// Attach a path if the error has none yet.
+    pub fn at(mut self, path: &Path) -> Self {
+        if self.path.is_none() {
+            self.path = Some(path.to_path_buf());
+        }
+        self
+    }
+}
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match &self.path {
+            Some(p) => write!(f, "{}: {}", p.display(), self.message),
+            None => f.write_str(&self.message),
+        }
+    }
+}
+
+impl std::error::Error for Error {}

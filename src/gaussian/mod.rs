@@ -1,0 +1,133 @@
+//! Gaussians as INRIA 3DGS stores them: raw (pre-activation) parameters, struct of arrays.
+//!
+//! | field | activation | shape |
+//! |---|---|---|
+//! | `means` | identity (world units) | N × 3 |
+//! | `log_scales` | `exp` | N × 3 |
+//! | `quats` | normalize, **wxyz** | N × 4 |
+//! | `opacity_logits` | sigmoid | N |
+//! | `sh_dc` | colour = `max(C0·dc + Σ rest·Y + 0.5, 0)` | N × 3 |
+//! | `sh_rest` | coefficient-major `(N, K−1, 3)` like gsplat | N × (K−1) × 3 |
+//!
+//! `K = (degree+1)²`. The PLY file stores `f_rest` channel-major (see [`ply`]).
+
+pub mod ply;
+
+use crate::error::{Error, Result};
+use crate::math::sh::{MAX_SH_DEGREE, num_coeffs};
+
+/// A set of 3D Gaussians with raw parameters.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Gaussians {
+    pub means: Vec<[f32; 3]>,
+    pub log_scales: Vec<[f32; 3]>,
+    /// Rotation quaternions, `[w, x, y, z]`, not necessarily normalized.
+    pub quats: Vec<[f32; 4]>,
+    pub opacity_logits: Vec<f32>,
+    pub sh_dc: Vec<[f32; 3]>,
+    /// `(N, K−1, 3)`: entry `(i, j, c)` at `(i·(K−1) + j)·3 + c` is coefficient `j+1` of
+    /// channel `c`.
+    pub sh_rest: Vec<f32>,
+    pub sh_degree: u32,
+}
+
+impl Gaussians {
+    /// An empty set with the given SH degree.
+    pub fn new(sh_degree: u32) -> Result<Self> {
+        if sh_degree > MAX_SH_DEGREE {
+            return Err(Error::invalid(format!(
+                "SH degree {sh_degree} > {MAX_SH_DEGREE}"
+            )));
+        }
+        Ok(Gaussians {
+            sh_degree,
+            ..Default::default()
+        })
+    }
+
+    pub fn len(&self) -> usize {
+        self.means.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.means.is_empty()
+    }
+
+    /// Higher-order coefficients per channel, `K − 1`.
+    pub fn rest_per_channel(&self) -> usize {
+        num_coeffs(self.sh_degree) - 1
+    }
+
+    /// The `K−1` rest coefficients of Gaussian `i`, as `[j][channel]`.
+    pub fn rest(&self, i: usize) -> &[f32] {
+        let r = self.rest_per_channel() * 3;
+        &self.sh_rest[i * r..(i + 1) * r]
+    }
+
+    /// Append one Gaussian. `rest` must hold `(K−1)·3` values, coefficient-major.
+    pub fn push(
+        &mut self,
+        mean: [f32; 3],
+        log_scale: [f32; 3],
+        quat_wxyz: [f32; 4],
+        opacity_logit: f32,
+        dc: [f32; 3],
+        rest: &[f32],
+    ) {
+        assert_eq!(
+            rest.len(),
+            self.rest_per_channel() * 3,
+            "rest coefficient count"
+        );
+        self.means.push(mean);
+        self.log_scales.push(log_scale);
+        self.quats.push(quat_wxyz);
+        self.opacity_logits.push(opacity_logit);
+        self.sh_dc.push(dc);
+        self.sh_rest.extend_from_slice(rest);
+    }
+
+    /// Check that every array has N entries.
+    pub fn validate(&self) -> Result<()> {
+        let n = self.len();
+        let ok = self.log_scales.len() == n
+            && self.quats.len() == n
+            && self.opacity_logits.len() == n
+            && self.sh_dc.len() == n
+            && self.sh_rest.len() == n * self.rest_per_channel() * 3
+            && self.sh_degree <= MAX_SH_DEGREE;
+        if ok {
+            Ok(())
+        } else {
+            Err(Error::invalid(
+                "Gaussian parameter arrays have inconsistent lengths",
+            ))
+        }
+    }
+
+    /// The highest SH band with a non-zero coefficient in any Gaussian (0 if none).
+    /// Bands above it contribute exactly zero, so the rasterizer may skip them
+    /// (test `plan_skips_zero_sh_bands_bit_identically`).
+    pub fn highest_nonzero_band(&self) -> u32 {
+        let k1 = self.rest_per_channel();
+        let mut best = 0u32;
+        for g in
+            self.sh_rest
+                .chunks_exact((k1 * 3).max(1))
+                .take(if k1 == 0 { 0 } else { self.len() })
+        {
+            for band in (best + 1..=self.sh_degree).rev() {
+                let lo = (num_coeffs(band - 1) - 1) * 3;
+                let hi = (num_coeffs(band) - 1) * 3;
+                if g[lo..hi].iter().any(|&v| v != 0.0) {
+                    best = band;
+                    break;
+                }
+            }
+            if best == self.sh_degree {
+                break;
+            }
+        }
+        best
+    }
+}

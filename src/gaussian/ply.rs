@@ -1,0 +1,522 @@
+//! INRIA 3DGS PLY files, read and write.
+//!
+//! Vertex properties as INRIA's `save_ply` writes them, all `float`:
+//! `x y z nx ny nz f_dc_0..2 f_rest_0..(3(K−1)−1) opacity scale_0..2 rot_0..3`.
+//! `f_rest` is channel-major: `f_rest_{c·(K−1)+j}` is coefficient `j+1` of channel `c`.
+//! The SH degree is inferred from the number of `f_rest_*` fields (0, 9, 24, 45, 72, 105).
+//!
+//! Reading accepts `binary_little_endian`, `binary_big_endian` and `ascii`, any scalar
+//! property type (converted to f32), properties in any order, and other elements (skipped).
+//! Unknown vertex properties are ignored and their names reported in [`PlyInfo`].
+//! Writing produces binary little-endian in INRIA's layout (normals written as 0).
+
+use super::Gaussians;
+use crate::error::{Error, Result};
+use crate::math::sh::{degree_for_coeffs, num_coeffs};
+use std::io::Write;
+use std::path::Path;
+
+/// What a read found besides the Gaussians.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PlyInfo {
+    /// Vertex properties that are not part of the INRIA layout, in file order.
+    pub ignored_properties: Vec<String>,
+    /// Other elements in the file (name, count), skipped.
+    pub ignored_elements: Vec<(String, usize)>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Format {
+    Ascii,
+    BinaryLe,
+    BinaryBe,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Scalar {
+    I8,
+    U8,
+    I16,
+    U16,
+    I32,
+    U32,
+    F32,
+    F64,
+}
+
+impl Scalar {
+    fn parse(s: &str) -> Option<Scalar> {
+        Some(match s {
+            "char" | "int8" => Scalar::I8,
+            "uchar" | "uint8" => Scalar::U8,
+            "short" | "int16" => Scalar::I16,
+            "ushort" | "uint16" => Scalar::U16,
+            "int" | "int32" => Scalar::I32,
+            "uint" | "uint32" => Scalar::U32,
+            "float" | "float32" => Scalar::F32,
+            "double" | "float64" => Scalar::F64,
+            _ => return None,
+        })
+    }
+    fn size(self) -> usize {
+        match self {
+            Scalar::I8 | Scalar::U8 => 1,
+            Scalar::I16 | Scalar::U16 => 2,
+            Scalar::I32 | Scalar::U32 | Scalar::F32 => 4,
+            Scalar::F64 => 8,
+        }
+    }
+    /// Decode one value from exactly `size()` bytes.
+    fn decode(self, b: &[u8], le: bool) -> f64 {
+        macro_rules! get {
+            ($t:ty) => {{
+                let a = b.try_into().unwrap();
+                if le {
+                    <$t>::from_le_bytes(a)
+                } else {
+                    <$t>::from_be_bytes(a)
+                }
+            }};
+        }
+        match self {
+            Scalar::I8 => b[0] as i8 as f64,
+            Scalar::U8 => b[0] as f64,
+            Scalar::I16 => get!(i16) as f64,
+            Scalar::U16 => get!(u16) as f64,
+            Scalar::I32 => get!(i32) as f64,
+            Scalar::U32 => get!(u32) as f64,
+            Scalar::F32 => get!(f32) as f64,
+            Scalar::F64 => get!(f64),
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+struct Property {
+    name: String,
+    /// `None` for a scalar; `Some(count_type)` for a list.
+    list_count: Option<Scalar>,
+    ty: Scalar,
+}
+
+#[derive(Clone, Debug)]
+struct Element {
+    name: String,
+    count: usize,
+    props: Vec<Property>,
+}
+
+struct Header {
+    format: Format,
+    elements: Vec<Element>,
+    body_start: usize,
+}
+
+fn parse_header(data: &[u8], path: &Path) -> Result<Header> {
+    let err = |m: String| Error::parse(path, m);
+    let end = data
+        .windows(10)
+        .position(|w| w == b"end_header")
+        .ok_or_else(|| err("not a PLY file: no end_header line".into()))?;
+    let mut body_start = end + 10;
+    // end_header is followed by "\n" or "\r\n".
+    if data.get(body_start) == Some(&b'\r') {
+        body_start += 1;
+    }
+    if data.get(body_start) == Some(&b'\n') {
+        body_start += 1;
+    }
+    let text =
+        std::str::from_utf8(&data[..end]).map_err(|_| err("PLY header is not ASCII".into()))?;
+    let mut lines = text.lines().map(str::trim);
+    if lines.next() != Some("ply") {
+        return Err(err("not a PLY file: first line is not 'ply'".into()));
+    }
+    let mut format = None;
+    let mut elements: Vec<Element> = Vec::new();
+    for l in lines {
+        let t: Vec<&str> = l.split_whitespace().collect();
+        match t.as_slice() {
+            [] | ["comment", ..] | ["obj_info", ..] => {}
+            ["format", f, _ver] => {
+                format = Some(match *f {
+                    "ascii" => Format::Ascii,
+                    "binary_little_endian" => Format::BinaryLe,
+                    "binary_big_endian" => Format::BinaryBe,
+                    other => return Err(err(format!("unknown PLY format '{other}'"))),
+                })
+            }
+            ["element", name, count] => {
+                let count = count
+                    .parse()
+                    .map_err(|_| err(format!("element '{name}' has invalid count '{count}'")))?;
+                elements.push(Element {
+                    name: name.to_string(),
+                    count,
+                    props: Vec::new(),
+                });
+            }
+            ["property", "list", ct, ty, name] => {
+                let e = elements
+                    .last_mut()
+                    .ok_or_else(|| err("property before element".into()))?;
+                let (ct, ty) = (Scalar::parse(ct), Scalar::parse(ty));
+                let (Some(ct), Some(ty)) = (ct, ty) else {
+                    return Err(err(format!("list property '{name}' has an unknown type")));
+                };
+                e.props.push(Property {
+                    name: name.to_string(),
+                    list_count: Some(ct),
+                    ty,
+                });
+            }
+            ["property", ty, name] => {
+                let e = elements
+                    .last_mut()
+                    .ok_or_else(|| err("property before element".into()))?;
+                let ty = Scalar::parse(ty)
+                    .ok_or_else(|| err(format!("property '{name}' has unknown type '{ty}'")))?;
+                e.props.push(Property {
+                    name: name.to_string(),
+                    list_count: None,
+                    ty,
+                });
+            }
+            _ => return Err(err(format!("unrecognized header line '{l}'"))),
+        }
+    }
+    let format = format.ok_or_else(|| err("PLY header has no format line".into()))?;
+    Ok(Header {
+        format,
+        elements,
+        body_start,
+    })
+}
+
+/// Token source over the body: binary (fixed sizes) or ASCII (whitespace separated).
+struct Body<'a> {
+    data: &'a [u8],
+    pos: usize,
+    format: Format,
+    path: &'a Path,
+}
+
+impl Body<'_> {
+    fn value(&mut self, ty: Scalar, what: &str) -> Result<f64> {
+        match self.format {
+            Format::Ascii => {
+                let rest = &self.data[self.pos..];
+                let start = rest.iter().position(|b| !b.is_ascii_whitespace());
+                let Some(start) = start else {
+                    return Err(Error::parse(
+                        self.path,
+                        format!("file ends while reading {what}"),
+                    ));
+                };
+                let len = rest[start..].iter().position(|b| b.is_ascii_whitespace());
+                let len = len.unwrap_or(rest.len() - start);
+                let tok = std::str::from_utf8(&rest[start..start + len]).unwrap_or("");
+                self.pos += start + len;
+                tok.parse::<f64>().map_err(|_| {
+                    Error::parse(self.path, format!("invalid number '{tok}' for {what}"))
+                })
+            }
+            Format::BinaryLe | Format::BinaryBe => {
+                let n = ty.size();
+                if self.data.len() - self.pos < n {
+                    return Err(Error::parse(
+                        self.path,
+                        format!("file ends at byte {} while reading {what}", self.data.len()),
+                    ));
+                }
+                let v = ty.decode(
+                    &self.data[self.pos..self.pos + n],
+                    self.format == Format::BinaryLe,
+                );
+                self.pos += n;
+                Ok(v)
+            }
+        }
+    }
+
+    fn skip_element(&mut self, e: &Element) -> Result<()> {
+        // Fixed-size binary elements are skipped in one step, with a size check.
+        if self.format != Format::Ascii && e.props.iter().all(|p| p.list_count.is_none()) {
+            let row: usize = e.props.iter().map(|p| p.ty.size()).sum();
+            let need = row.checked_mul(e.count);
+            if need.is_none_or(|n| n > self.data.len() - self.pos) {
+                return Err(Error::parse(
+                    self.path,
+                    format!("element '{}' is truncated", e.name),
+                ));
+            }
+            self.pos += row * e.count;
+            return Ok(());
+        }
+        for _ in 0..e.count {
+            for p in &e.props {
+                let n = match p.list_count {
+                    Some(ct) => self.value(ct, &p.name)?,
+                    None => 1.0,
+                };
+                if !(0.0..=1e9).contains(&n) {
+                    return Err(Error::parse(
+                        self.path,
+                        format!("invalid list length in '{}'", p.name),
+                    ));
+                }
+                for _ in 0..n as usize {
+                    self.value(p.ty, &p.name)?;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Read an INRIA 3DGS PLY file.
+pub fn read_ply(path: &Path) -> Result<(Gaussians, PlyInfo)> {
+    let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    parse_ply(&data, path)
+}
+
+/// Parse PLY bytes; `path` names the source in errors.
+pub fn parse_ply(data: &[u8], path: &Path) -> Result<(Gaussians, PlyInfo)> {
+    let header = parse_header(data, path)?;
+    let err = |m: String| Error::parse(path, m);
+    let mut info = PlyInfo::default();
+    let vi = header
+        .elements
+        .iter()
+        .position(|e| e.name == "vertex")
+        .ok_or_else(|| err("no 'vertex' element".into()))?;
+    let vertex = &header.elements[vi];
+    for e in &header.elements {
+        if e.name != "vertex" {
+            info.ignored_elements.push((e.name.clone(), e.count));
+        }
+    }
+    // Map every vertex property to its destination slot.
+    let mut n_rest = 0usize;
+    for p in &vertex.props {
+        if let Some(k) = p.name.strip_prefix("f_rest_") {
+            let k: usize = k
+                .parse()
+                .map_err(|_| err(format!("bad property name '{}'", p.name)))?;
+            n_rest = n_rest.max(k + 1);
+        }
+    }
+    let rest_per_channel = n_rest / 3;
+    let degree = (n_rest % 3 == 0)
+        .then(|| degree_for_coeffs(rest_per_channel + 1))
+        .flatten()
+        .ok_or_else(|| {
+            err(format!(
+                "{n_rest} f_rest fields do not match an SH degree 0–5 (expected 0, 9, 24, 45, 72 \
+                 or 105)"
+            ))
+        })?;
+    #[derive(Clone, Copy)]
+    enum Slot {
+        Mean(usize),
+        Dc(usize),
+        Rest(usize),
+        Opacity,
+        Scale(usize),
+        Rot(usize),
+        Ignore,
+    }
+    let mut seen = vec![false; 3 + 3 + n_rest + 1 + 3 + 4];
+    let mut slots = Vec::with_capacity(vertex.props.len());
+    for p in &vertex.props {
+        let idx = |prefix: &str, n: usize| {
+            p.name
+                .strip_prefix(prefix)
+                .and_then(|k| k.parse::<usize>().ok())
+                .filter(|&k| k < n)
+        };
+        let slot = match p.name.as_str() {
+            "x" => Slot::Mean(0),
+            "y" => Slot::Mean(1),
+            "z" => Slot::Mean(2),
+            "opacity" => Slot::Opacity,
+            "nx" | "ny" | "nz" => Slot::Ignore,
+            _ => {
+                if let Some(k) = idx("f_dc_", 3) {
+                    Slot::Dc(k)
+                } else if let Some(k) = idx("f_rest_", n_rest) {
+                    Slot::Rest(k)
+                } else if let Some(k) = idx("scale_", 3) {
+                    Slot::Scale(k)
+                } else if let Some(k) = idx("rot_", 4) {
+                    Slot::Rot(k)
+                } else {
+                    info.ignored_properties.push(p.name.clone());
+                    Slot::Ignore
+                }
+            }
+        };
+        if p.list_count.is_some() && !matches!(slot, Slot::Ignore) {
+            return Err(err(format!(
+                "vertex property '{}' is a list, expected a scalar",
+                p.name
+            )));
+        }
+        let flat = match slot {
+            Slot::Mean(k) => Some(k),
+            Slot::Dc(k) => Some(3 + k),
+            Slot::Rest(k) => Some(6 + k),
+            Slot::Opacity => Some(6 + n_rest),
+            Slot::Scale(k) => Some(7 + n_rest + k),
+            Slot::Rot(k) => Some(10 + n_rest + k),
+            Slot::Ignore => None,
+        };
+        if let Some(f) = flat {
+            if seen[f] {
+                return Err(err(format!("vertex property '{}' appears twice", p.name)));
+            }
+            seen[f] = true;
+        }
+        slots.push(slot);
+    }
+    if let Some(missing) = seen.iter().position(|s| !s) {
+        let name = match missing {
+            0..=2 => ["x", "y", "z"][missing].to_string(),
+            3..=5 => format!("f_dc_{}", missing - 3),
+            m if m < 6 + n_rest => format!("f_rest_{}", m - 6),
+            m if m == 6 + n_rest => "opacity".to_string(),
+            m if m < 10 + n_rest => format!("scale_{}", m - 7 - n_rest),
+            m => format!("rot_{}", m - 10 - n_rest),
+        };
+        return Err(err(format!("vertex property '{name}' is missing")));
+    }
+
+    let mut body = Body {
+        data,
+        pos: header.body_start,
+        format: header.format,
+        path,
+    };
+    for e in &header.elements[..vi] {
+        body.skip_element(e)?;
+    }
+    // Guard the allocation against a lying count before reading anything: every vertex
+    // takes at least `row_min` bytes (binary: the scalar sizes and list counts; ASCII: one
+    // digit and one separator per property).
+    let row_min: usize = match header.format {
+        Format::Ascii => 2 * vertex.props.len(),
+        _ => vertex
+            .props
+            .iter()
+            .map(|p| p.list_count.unwrap_or(p.ty).size())
+            .sum(),
+    };
+    let left = data.len() - body.pos;
+    if row_min
+        .checked_mul(vertex.count)
+        .is_none_or(|need| need > left)
+    {
+        return Err(err(format!(
+            "file is truncated: {} vertices need at least {row_min} bytes each, {left} bytes left",
+            vertex.count
+        )));
+    }
+
+    let mut g = Gaussians::new(degree)?;
+    let n = vertex.count;
+    g.means.reserve(n);
+    let mut rest_cm = vec![0f32; n_rest];
+    for v in 0..n {
+        let mut mean = [0f32; 3];
+        let mut dc = [0f32; 3];
+        let mut op = 0f32;
+        let mut sc = [0f32; 3];
+        let mut rot = [0f32; 4];
+        for (p, slot) in vertex.props.iter().zip(&slots) {
+            if let Some(ct) = p.list_count {
+                let len = body.value(ct, &p.name)?;
+                if !(0.0..=1e9).contains(&len) {
+                    return Err(err(format!(
+                        "vertex {v}: invalid list length in '{}'",
+                        p.name
+                    )));
+                }
+                for _ in 0..len as usize {
+                    body.value(p.ty, &p.name)?;
+                }
+                continue;
+            }
+            let x = body
+                .value(p.ty, &p.name)
+                .map_err(|e| Error::parse(path, format!("vertex {v} of {n}: {}", e.message)))?
+                as f32;
+            match *slot {
+                Slot::Mean(k) => mean[k] = x,
+                Slot::Dc(k) => dc[k] = x,
+                Slot::Rest(k) => rest_cm[k] = x,
+                Slot::Opacity => op = x,
+                Slot::Scale(k) => sc[k] = x,
+                Slot::Rot(k) => rot[k] = x,
+                Slot::Ignore => {}
+            }
+        }
+        g.means.push(mean);
+        g.sh_dc.push(dc);
+        g.opacity_logits.push(op);
+        g.log_scales.push(sc);
+        g.quats.push(rot);
+        // Channel-major file order -> coefficient-major memory order.
+        for j in 0..rest_per_channel {
+            for c in 0..3 {
+                g.sh_rest.push(rest_cm[c * rest_per_channel + j]);
+            }
+        }
+    }
+    Ok((g, info))
+}
+
+/// The PLY bytes of `g` in INRIA's binary little-endian layout.
+pub fn ply_bytes(g: &Gaussians) -> Result<Vec<u8>> {
+    g.validate()?;
+    let k1 = num_coeffs(g.sh_degree) - 1;
+    let mut header = String::from("ply\nformat binary_little_endian 1.0\n");
+    header += &format!("element vertex {}\n", g.len());
+    let mut names: Vec<String> = [
+        "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    names.extend((0..3 * k1).map(|k| format!("f_rest_{k}")));
+    names.push("opacity".into());
+    names.extend((0..3).map(|k| format!("scale_{k}")));
+    names.extend((0..4).map(|k| format!("rot_{k}")));
+    for n in &names {
+        header += &format!("property float {n}\n");
+    }
+    header += "end_header\n";
+    let mut out = Vec::with_capacity(header.len() + g.len() * names.len() * 4);
+    out.extend_from_slice(header.as_bytes());
+    for i in 0..g.len() {
+        let mut put = |v: f32| out.extend_from_slice(&v.to_le_bytes());
+        g.means[i].iter().for_each(|&v| put(v));
+        (0..3).for_each(|_| put(0.0));
+        g.sh_dc[i].iter().for_each(|&v| put(v));
+        let rest = g.rest(i);
+        for c in 0..3 {
+            for j in 0..k1 {
+                put(rest[j * 3 + c]);
+            }
+        }
+        put(g.opacity_logits[i]);
+        g.log_scales[i].iter().for_each(|&v| put(v));
+        g.quats[i].iter().for_each(|&v| put(v));
+    }
+    Ok(out)
+}
+
+/// Write `g` as an INRIA PLY, atomically (temporary file, then rename).
+pub fn write_ply(g: &Gaussians, path: &Path) -> Result<()> {
+    let bytes = ply_bytes(g)?;
+    crate::io::write_atomic(path, |f| f.write_all(&bytes))
+}

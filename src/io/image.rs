@@ -1,0 +1,153 @@
+//! PNG (8-bit) and OpenEXR (32-bit float, ZIP-compressed) images.
+//!
+//! Images in memory are row-major `f32`, `channels` interleaved values per pixel.
+
+use super::{temp_sibling, write_atomic};
+use crate::error::{Error as UError, Result};
+use std::path::Path;
+
+/// A float image: `height` rows of `width` pixels of `channels` values.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImageF32 {
+    pub width: usize,
+    pub height: usize,
+    pub channels: usize,
+    pub data: Vec<f32>,
+}
+
+impl ImageF32 {
+    pub fn new(width: usize, height: usize, channels: usize, data: Vec<f32>) -> Result<Self> {
+        if data.len() != width * height * channels {
+            return Err(UError::invalid(format!(
+                "image data has {} values, {width}x{height}x{channels} needs {}",
+                data.len(),
+                width * height * channels
+            )));
+        }
+        Ok(ImageF32 {
+            width,
+            height,
+            channels,
+            data,
+        })
+    }
+}
+
+/// Quantize `[0, 1]` to 8 bits: clamp, then round half up (`floor(v·255 + 0.5)`).
+/// NaN becomes 0.
+pub fn to_u8(v: f32) -> u8 {
+    let v = if v > 0.0 { v } else { 0.0 };
+    let v = if v < 1.0 { v } else { 1.0 };
+    (v * 255.0 + 0.5).floor() as u8
+}
+
+/// Write an 8-bit PNG (1 or 3 channels) from values in `[0, 1]` (clamped).
+pub fn write_png(path: &Path, img: &ImageF32) -> Result<()> {
+    let color = match img.channels {
+        1 => image::ExtendedColorType::L8,
+        3 => image::ExtendedColorType::Rgb8,
+        4 => image::ExtendedColorType::Rgba8,
+        c => return Err(UError::invalid(format!("cannot write a {c}-channel PNG")).at(path)),
+    };
+    let bytes: Vec<u8> = img.data.iter().map(|&v| to_u8(v)).collect();
+    write_atomic(path, |w| {
+        use image::ImageEncoder;
+        image::codecs::png::PngEncoder::new(w)
+            .write_image(&bytes, img.width as u32, img.height as u32, color)
+            .map_err(std::io::Error::other)
+    })
+}
+
+/// Read a PNG (or any format the `image` crate decodes) as RGB or gray floats in `[0, 1]`.
+pub fn read_png(path: &Path) -> Result<ImageF32> {
+    let img =
+        image::open(path).map_err(|e| UError::parse(path, format!("cannot read image: {e}")))?;
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let (channels, raw) = if img.color().channel_count() == 1 {
+        (1, img.into_luma8().into_raw())
+    } else {
+        (3, img.into_rgb8().into_raw())
+    };
+    ImageF32::new(
+        w,
+        h,
+        channels,
+        raw.into_iter().map(|b| b as f32 / 255.0).collect(),
+    )
+}
+
+/// Write a float EXR (ZIP compression). Channel names: 1 → `Y`, 3 → `R G B`,
+/// 4 → `R G B A`; other counts are named `C0, C1, ...`.
+pub fn write_exr(path: &Path, img: &ImageF32) -> Result<()> {
+    use exr::prelude::*;
+    let names: Vec<String> = match img.channels {
+        1 => vec!["Y".into()],
+        3 => vec!["R".into(), "G".into(), "B".into()],
+        4 => vec!["R".into(), "G".into(), "B".into(), "A".into()],
+        c => (0..c).map(|k| format!("C{k}")).collect(),
+    };
+    let (w, h, c) = (img.width, img.height, img.channels);
+    let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = names
+        .iter()
+        .enumerate()
+        .map(|(k, n)| {
+            let samples: Vec<f32> = (0..w * h).map(|p| img.data[p * c + k]).collect();
+            AnyChannel::new(n.as_str(), FlatSamples::F32(samples))
+        })
+        .collect();
+    let layer = Layer::new(
+        (w, h),
+        LayerAttributes::default(),
+        Encoding {
+            compression: Compression::ZIP16,
+            ..Encoding::default()
+        },
+        AnyChannels::sort(channels),
+    );
+    let image = Image::from_layer(layer);
+    let tmp = temp_sibling(path);
+    let r = image.write().to_file(&tmp);
+    match r
+        .map_err(|e| e.to_string())
+        .and_then(|_| std::fs::rename(&tmp, path).map_err(|e| e.to_string()))
+    {
+        Ok(()) => Ok(()),
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            Err(UError::new(
+                crate::error::ErrorKind::Io,
+                format!("cannot write EXR: {e}"),
+            )
+            .at(path))
+        }
+    }
+}
+
+/// Read the first layer of an EXR as float channels, in the order of `names`
+/// (e.g. `["R","G","B"]` or `["Y"]`). Missing channels are an error naming them.
+pub fn read_exr(path: &Path, names: &[&str]) -> Result<ImageF32> {
+    use exr::prelude::*;
+    let image = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_file(path)
+        .map_err(|e| UError::parse(path, format!("cannot read EXR: {e}")))?;
+    let layer = &image.layer_data;
+    let (w, h) = (layer.size.width(), layer.size.height());
+    let mut data = vec![0f32; w * h * names.len()];
+    for (k, name) in names.iter().enumerate() {
+        let ch = layer
+            .channel_data
+            .list
+            .iter()
+            .find(|c| c.name.to_string() == *name)
+            .ok_or_else(|| UError::parse(path, format!("EXR has no channel '{name}'")))?;
+        for (p, v) in ch.sample_data.values_as_f32().enumerate() {
+            data[p * names.len() + k] = v;
+        }
+    }
+    ImageF32::new(w, h, names.len(), data)
+}

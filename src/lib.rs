@@ -1,0 +1,22 @@
+//! # unseen
+//!
+//! A pure-CPU, deterministic reference implementation of *Filling the Unseen: Scene
+//! Extrapolation via 3D Gaussian Splatting*. The contract — every constant, convention and
+//! tolerance, with its source and the test that pins it — is `SPEC.md`.
+//!
+//! Conventions (SPEC.md §2): camera frame +x right, +y down, +z forward (OpenCV / gsplat);
+//! pixel centres at `(j + 0.5, i + 0.5)`; quaternions wxyz; transforms named `b_from_a`.
+//!
+//! Modules: [`gaussian`] (parameters, INRIA PLY), [`camera`] (pinhole cameras and readers),
+//! [`math`] (own `exp`, spherical harmonics), [`raster`] (projection, tiles, blending),
+//! [`io`] (atomic writes, PNG, EXR), [`scene`] (procedural scenes for demos, tests, benches).
+
+pub mod camera;
+pub mod error;
+pub mod gaussian;
+pub mod io;
+pub mod math;
+pub mod raster;
+pub mod scene;
+
+pub use error::{Error, ErrorKind, Result};

@@ -1,0 +1,156 @@
+//! The crate's own `exp` and `ln` for `f32`.
+//!
+//! The rasterizer must not depend on the platform's libm (DESIGN.md §4): `f32::exp` may
+//! differ by an ulp between glibc, musl, macOS and a GPU's `__expf`. These functions use only
+//! IEEE-754 additions, multiplications, comparisons and bit manipulation, in a fixed order and
+//! without fused multiply-add, so they give the same bits on every platform and in every SIMD
+//! lane (the lane kernels call exactly this code).
+//!
+//! `exp`: Cody–Waite range reduction `x = k·ln2 + r`, `|r| <= ln2/2`, then the minimax
+//! polynomial of Cephes `expf` (S. Moshier, Cephes Math Library, `expf.c`) and `2^k` built in
+//! the exponent bits. Domain `[-87.0, 88.0]` (inputs outside are clamped; NaN gives NaN).
+//! Measured error against `f64::exp` over the domain: at most [`EXP_MAX_ULP`] ulp
+//! (test `fastexp_error_bound`).
+//!
+//! `ln`: exponent/mantissa split with the mantissa in `[sqrt(1/2), sqrt(2))`, then the Cephes
+//! `logf` polynomial. Domain: positive normal floats; `ln(x <= 0)` returns `-inf` for `0` and
+//! NaN for negatives, like libm. Measured error at most [`LN_MAX_ULP`] ulp.
+
+/// Largest error of [`exp`] in ulp of the correctly rounded result, pinned by a test.
+pub const EXP_MAX_ULP: u32 = 2;
+/// Largest error of [`ln`] in ulp of the correctly rounded result, pinned by a test.
+pub const LN_MAX_ULP: u32 = 2;
+
+const LOG2_E: f32 = std::f32::consts::LOG2_E;
+/// `ln 2` split so that `k·LN2_HI` is exact for |k| < 2^9 (Cephes `C1`, `C2`).
+const LN2_HI: f32 = 0.693_359_4;
+const LN2_LO: f32 = -2.121_944_4e-4;
+/// Adding and subtracting 1.5·2^23 rounds to the nearest integer (ties to even) for
+/// |v| < 2^22, using only additions, so it vectorizes without SSE4.1 `roundps`.
+const ROUND_MAGIC: f32 = 12_582_912.0;
+
+/// `e^x` for `f32`, platform-independent, no FMA. See the module docs for the error bound.
+#[inline(always)]
+pub fn exp(x: f32) -> f32 {
+    // Clamp by selects (not f32::min/max) so that the NaN behaviour is explicit: NaN fails
+    // both comparisons, stays NaN and propagates through the arithmetic below.
+    let x = if x < -87.0 { -87.0 } else { x };
+    let x = if x > 88.0 { 88.0 } else { x };
+    let k = (x * LOG2_E + ROUND_MAGIC) - ROUND_MAGIC;
+    let r = (x - k * LN2_HI) - k * LN2_LO;
+    let z = r * r;
+    let p = ((((1.987_569_1e-4 * r + 1.398_199_9e-3) * r + 8.333_452e-3) * r + 4.166_579_6e-2) * r
+        + 1.666_666_5e-1)
+        * r
+        + 5.000_000_1e-1;
+    let y = (p * z + r) + 1.0;
+    // 2^k with k in [-126, 127]: exact power of two assembled in the exponent field.
+    // `k` is integral here, so the cast is exact (NaN casts to 0 and y is already NaN).
+    let scale = f32::from_bits(((k as i32 + 127) as u32) << 23);
+    y * scale
+}
+
+/// Natural logarithm for positive normal `f32`, platform-independent, no FMA.
+#[inline]
+pub fn ln(x: f32) -> f32 {
+    if x.is_nan() || x < 0.0 {
+        return f32::NAN;
+    }
+    if x == 0.0 {
+        return f32::NEG_INFINITY;
+    }
+    if x == f32::INFINITY {
+        return f32::INFINITY;
+    }
+    // Subnormals: scale into the normal range first.
+    let (x, bias) = if x < f32::MIN_POSITIVE {
+        (x * 16_777_216.0, -24i32)
+    } else {
+        (x, 0)
+    };
+    let bits = x.to_bits();
+    let mut e = ((bits >> 23) & 0xff) as i32 - 126 + bias;
+    // Mantissa in [0.5, 1).
+    let mut m = f32::from_bits((bits & 0x007f_ffff) | 0x3f00_0000);
+    if m < std::f32::consts::FRAC_1_SQRT_2 {
+        e -= 1;
+        m = (m + m) - 1.0;
+    } else {
+        m -= 1.0;
+    }
+    let z = m * m;
+    // Cephes logf: p(m) = (((((((c0·m + c1)·m + c2)·m + ...)·m + c8.
+    const LOG_P: [f32; 9] = [
+        7.037_683_6e-2,
+        -1.151_461e-1,
+        1.167_699_9e-1,
+        -1.242_014_1e-1,
+        1.424_932_3e-1,
+        -1.666_805_8e-1,
+        2.000_071_4e-1,
+        -2.499_999_4e-1,
+        3.333_333_1e-1,
+    ];
+    let mut p = LOG_P[0];
+    for c in &LOG_P[1..] {
+        p = p * m + c;
+    }
+    let mut y = (p * m) * z;
+    let ef = e as f32;
+    y += -2.121_944_4e-4 * ef;
+    y += -0.5 * z;
+    let mut r = m + y;
+    r += 0.693_359_4 * ef;
+    r
+}
+
+/// Logistic sigmoid `1 / (1 + e^-x)` on top of [`exp`].
+#[inline]
+pub fn sigmoid(x: f32) -> f32 {
+    1.0 / (1.0 + exp(-x))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Distance in ulp between an f32 and the correctly rounded f32 of an f64 value.
+    fn ulp_error(got: f32, exact: f64) -> u32 {
+        let want = exact as f32;
+        (got.to_bits() as i64 - want.to_bits() as i64).unsigned_abs() as u32
+    }
+
+    #[test]
+    fn fastexp_error_bound() {
+        let mut worst = 0;
+        let n = 2_000_000;
+        for i in 0..=n {
+            let x = -87.0 + 175.0 * (i as f64 / n as f64);
+            let x = x as f32;
+            worst = worst.max(ulp_error(exp(x), (x as f64).exp()));
+        }
+        assert!(worst <= EXP_MAX_ULP, "exp worst error {worst} ulp");
+    }
+
+    #[test]
+    fn ln_error_bound() {
+        let mut worst = 0;
+        let mut x = 1e-37f32;
+        while x < 1e37 {
+            worst = worst.max(ulp_error(ln(x), (x as f64).ln()));
+            x *= 1.000_37;
+        }
+        assert!(worst <= LN_MAX_ULP, "ln worst error {worst} ulp");
+        assert_eq!(ln(1.0), 0.0);
+        assert_eq!(ln(0.0), f32::NEG_INFINITY);
+        assert!(ln(-1.0).is_nan());
+    }
+
+    #[test]
+    fn exp_special_values() {
+        assert_eq!(exp(0.0), 1.0);
+        assert!(exp(f32::NAN).is_nan());
+        assert!(exp(-1000.0) > 0.0 && exp(-1000.0).is_normal());
+        assert!(exp(1000.0).is_finite());
+    }
+}

@@ -1,0 +1,198 @@
+//! Real spherical harmonics, degrees 0..=5, in the basis and ordering of 3DGS / gsplat.
+//!
+//! Real SH with the Condon–Shortley phase, evaluated on a unit direction `(x, y, z)` as
+//! polynomials (REFERENCE.md §B; degrees 4–5 from Sloan, "Efficient Spherical Harmonic
+//! Evaluation", JCGT 2013). Coefficient `k` of degree `l` and order `m` sits at
+//! `k = l² + l + m`; a degree-`L` colour has `(L+1)²` coefficients per channel.
+//!
+//! The basis is written once, generic over [`ShScalar`], and instantiated for `f32` (the
+//! rasterizer), `f64` (tests) and [`Dual3`] (forward-mode derivatives with respect to the
+//! direction), so value and gradient can never disagree about the basis.
+
+use std::ops::{Add, Mul, Neg, Sub};
+
+/// Highest SH degree supported.
+pub const MAX_SH_DEGREE: u32 = 5;
+/// Coefficients per channel for the highest degree.
+pub const MAX_SH_COEFFS: usize = 36;
+/// `Y_0^0 = 1 / (2 sqrt(pi))`.
+pub const SH_C0: f64 = 0.282_094_791_773_878_14;
+
+/// Number of coefficients per channel for SH degree `degree`.
+pub const fn num_coeffs(degree: u32) -> usize {
+    ((degree + 1) * (degree + 1)) as usize
+}
+
+/// The SH degree whose coefficient count per channel is `k`, if `k` is a square ≤ 36.
+pub fn degree_for_coeffs(k: usize) -> Option<u32> {
+    (0..=MAX_SH_DEGREE).find(|&d| num_coeffs(d) == k)
+}
+
+/// What the generic basis needs from a number type.
+pub trait ShScalar:
+    Copy + Add<Output = Self> + Sub<Output = Self> + Mul<Output = Self> + Neg<Output = Self>
+{
+    fn c(v: f64) -> Self;
+}
+
+impl ShScalar for f32 {
+    #[inline(always)]
+    fn c(v: f64) -> Self {
+        v as f32
+    }
+}
+
+impl ShScalar for f64 {
+    #[inline(always)]
+    fn c(v: f64) -> Self {
+        v
+    }
+}
+
+/// A number with its derivatives with respect to `(x, y, z)` (forward-mode AD).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Dual3 {
+    pub v: f64,
+    pub d: [f64; 3],
+}
+
+impl Add for Dual3 {
+    type Output = Self;
+    fn add(self, o: Self) -> Self {
+        Dual3 {
+            v: self.v + o.v,
+            d: [self.d[0] + o.d[0], self.d[1] + o.d[1], self.d[2] + o.d[2]],
+        }
+    }
+}
+impl Sub for Dual3 {
+    type Output = Self;
+    fn sub(self, o: Self) -> Self {
+        Dual3 {
+            v: self.v - o.v,
+            d: [self.d[0] - o.d[0], self.d[1] - o.d[1], self.d[2] - o.d[2]],
+        }
+    }
+}
+impl Mul for Dual3 {
+    type Output = Self;
+    fn mul(self, o: Self) -> Self {
+        let d = |i: usize| self.d[i] * o.v + self.v * o.d[i];
+        Dual3 {
+            v: self.v * o.v,
+            d: [d(0), d(1), d(2)],
+        }
+    }
+}
+impl Neg for Dual3 {
+    type Output = Self;
+    fn neg(self) -> Self {
+        Dual3 {
+            v: -self.v,
+            d: [-self.d[0], -self.d[1], -self.d[2]],
+        }
+    }
+}
+impl ShScalar for Dual3 {
+    fn c(v: f64) -> Self {
+        Dual3 { v, d: [0.0; 3] }
+    }
+}
+
+/// Evaluate the basis functions of degrees `0..=degree` at the unit direction `(x, y, z)`
+/// into `out[..num_coeffs(degree)]`. Directions are not normalized here.
+///
+/// # Panics
+/// If `degree > 5` or `out` is shorter than `num_coeffs(degree)` (programming errors).
+#[inline]
+pub fn sh_basis<T: ShScalar>(degree: u32, x: T, y: T, z: T, out: &mut [T]) {
+    assert!(degree <= MAX_SH_DEGREE && out.len() >= num_coeffs(degree));
+    let c = T::c;
+    out[0] = c(SH_C0);
+    if degree == 0 {
+        return;
+    }
+    let c1 = 0.488_602_511_902_919_9;
+    out[1] = -(c(c1) * y);
+    out[2] = c(c1) * z;
+    out[3] = -(c(c1) * x);
+    if degree == 1 {
+        return;
+    }
+    let (xx, yy, zz) = (x * x, y * y, z * z);
+    let (xy, yz, xz) = (x * y, y * z, x * z);
+    out[4] = c(1.092_548_430_592_079_2) * xy;
+    out[5] = c(-1.092_548_430_592_079_2) * yz;
+    out[6] = c(0.315_391_565_252_520_05) * (((zz + zz) - xx) - yy);
+    out[7] = c(-1.092_548_430_592_079_2) * xz;
+    out[8] = c(0.546_274_215_296_039_6) * (xx - yy);
+    if degree == 2 {
+        return;
+    }
+    out[9] = c(-0.590_043_589_926_643_5) * y * ((c(3.0) * xx) - yy);
+    out[10] = c(2.890_611_442_640_554) * xy * z;
+    out[11] = c(-0.457_045_799_464_465_8) * y * ((c(4.0) * zz - xx) - yy);
+    out[12] = c(0.373_176_332_590_115_4) * z * ((c(2.0) * zz - c(3.0) * xx) - c(3.0) * yy);
+    out[13] = c(-0.457_045_799_464_465_8) * x * ((c(4.0) * zz - xx) - yy);
+    out[14] = c(1.445_305_721_320_277) * z * (xx - yy);
+    out[15] = c(-0.590_043_589_926_643_5) * x * (xx - c(3.0) * yy);
+    if degree == 3 {
+        return;
+    }
+    let z4 = zz * zz;
+    out[16] = c(2.503_342_941_796_704_6) * xy * (xx - yy);
+    out[17] = c(-1.770_130_769_779_930_4) * yz * (c(3.0) * xx - yy);
+    out[18] = c(0.946_174_695_757_560_1) * xy * (c(7.0) * zz - c(1.0));
+    out[19] = c(-0.669_046_543_557_289_2) * yz * (c(7.0) * zz - c(3.0));
+    out[20] = c(0.105_785_546_915_204_31) * ((c(35.0) * z4 - c(30.0) * zz) + c(3.0));
+    out[21] = c(-0.669_046_543_557_289_2) * xz * (c(7.0) * zz - c(3.0));
+    out[22] = c(0.473_087_347_878_780_04) * (xx - yy) * (c(7.0) * zz - c(1.0));
+    out[23] = c(-1.770_130_769_779_930_4) * xz * (xx - c(3.0) * yy);
+    out[24] = c(0.625_835_735_449_176_1) * ((xx * xx - c(6.0) * xx * yy) + yy * yy);
+    if degree == 4 {
+        return;
+    }
+    let (x4, y4) = (xx * xx, yy * yy);
+    let x4_6x2y2_y4 = (x4 - c(6.0) * xx * yy) + y4;
+    out[25] = c(-0.656_382_056_840_170_1) * y * ((c(5.0) * x4 - c(10.0) * xx * yy) + y4);
+    out[26] = c(2.075_662_314_881_041_6) * (c(4.0) * xy * z) * (xx - yy);
+    out[27] = c(-0.489_238_299_435_250_4) * y * (c(3.0) * xx - yy) * (c(9.0) * zz - c(1.0));
+    out[28] = c(2.396_768_392_486_662) * (c(2.0) * xy * z) * (c(3.0) * zz - c(1.0));
+    out[29] = c(-0.452_946_651_195_696_94) * y * ((c(21.0) * z4 - c(14.0) * zz) + c(1.0));
+    out[30] = c(0.116_950_322_453_423_6) * z * ((c(63.0) * z4 - c(70.0) * zz) + c(15.0));
+    out[31] = c(-0.452_946_651_195_696_94) * x * ((c(21.0) * z4 - c(14.0) * zz) + c(1.0));
+    out[32] = c(2.396_768_392_486_662) * (xx - yy) * z * (c(3.0) * zz - c(1.0));
+    out[33] = c(-0.489_238_299_435_250_4) * x * (xx - c(3.0) * yy) * (c(9.0) * zz - c(1.0));
+    out[34] = c(2.075_662_314_881_041_6) * z * x4_6x2y2_y4;
+    out[35] = c(-0.656_382_056_840_170_1) * x * ((x4 - c(10.0) * xx * yy) + c(5.0) * y4);
+}
+
+/// Basis values and their derivatives with respect to the (unnormalized-agnostic) direction
+/// components, in f64: `values[k]` and `grads[k] = dY_k/d(x, y, z)` treating `x, y, z` as
+/// independent. Chain through the normalization separately when the direction is
+/// `v / |v|` (the backward pass does).
+pub fn sh_basis_grad(degree: u32, dir: [f64; 3], values: &mut [f64], grads: &mut [[f64; 3]]) {
+    let n = num_coeffs(degree);
+    let mut tmp = [Dual3::c(0.0); MAX_SH_COEFFS];
+    let var = |i: usize| {
+        let mut d = [0.0; 3];
+        d[i] = 1.0;
+        Dual3 { v: dir[i], d }
+    };
+    sh_basis(degree, var(0), var(1), var(2), &mut tmp);
+    for k in 0..n {
+        values[k] = tmp[k].v;
+        grads[k] = tmp[k].d;
+    }
+}
+
+/// Colour of one channel: `sum_k coeff[k] · Y_k`, summed in `k` order, in f32.
+/// `coeffs[0]` is the DC term. The caller adds 0.5 and clamps at 0 (3DGS convention).
+#[inline]
+pub fn sh_dot(basis: &[f32], coeffs: impl Iterator<Item = f32>) -> f32 {
+    let mut acc = 0.0f32;
+    for (b, c) in basis.iter().zip(coeffs) {
+        acc += b * c;
+    }
+    acc
+}

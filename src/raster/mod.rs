@@ -1,0 +1,150 @@
+//! The deterministic CPU rasterizer (forward pass).
+//!
+//! `render` = [`project::project`] (per Gaussian) → [`tile::bin`] (per-tile depth-sorted
+//! lists) → [`composite`] (per-pixel front-to-back blending). Conventions and constants are
+//! gsplat's (SPEC.md §4–5); every stage is a pure function of its inputs and gives the same
+//! bits for any thread count and any SIMD path.
+
+pub mod composite;
+pub mod plan;
+pub mod project;
+pub mod tile;
+
+pub use composite::Kernel;
+pub use plan::{Outputs, RenderPlan};
+
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::gaussian::Gaussians;
+use crate::math::sh::MAX_SH_DEGREE;
+
+/// What the caller wants from a render.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderOptions {
+    /// Background colour added as `T·bg` (linear, any finite values).
+    pub background: [f32; 3],
+    /// Evaluate SH up to this degree (default: the scene's degree).
+    pub sh_degree: Option<u32>,
+    pub outputs: Outputs,
+    /// gsplat's antialiased mode (opacity × `sqrt(det₀/det)`); off like INRIA.
+    pub antialiased: bool,
+    pub kernel: Kernel,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        RenderOptions {
+            background: [0.0; 3],
+            sh_degree: None,
+            outputs: Outputs::RGB,
+            antialiased: false,
+            kernel: Kernel::Auto,
+        }
+    }
+}
+
+/// Counts of what happened to the Gaussians in one render.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RenderReport {
+    pub visible: u64,
+    pub non_finite: u64,
+    pub behind_near_plane: u64,
+    pub beyond_far_plane: u64,
+    pub degenerate: u64,
+    pub low_opacity: u64,
+    pub off_screen: u64,
+    /// (tile, Gaussian) pairs after binning.
+    pub intersections: u64,
+    /// Gaussian-pixel evaluations of the blend kernel (the throughput unit).
+    pub pairs_evaluated: u64,
+}
+
+/// A rendered image. Planar per output, row-major, `width × height` pixels; `rgb` has 3
+/// interleaved channels.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Render {
+    pub width: usize,
+    pub height: usize,
+    pub rgb: Option<Vec<f32>>,
+    pub alpha: Option<Vec<f32>>,
+    /// Accumulated depth `D` (camera z, background 0).
+    pub depth: Option<Vec<f32>>,
+    /// Expected depth `ED = D / max(alpha, 1e-10)`.
+    pub expected_depth: Option<Vec<f32>>,
+    /// Final transmittance per pixel (backward state).
+    pub final_t: Option<Vec<f32>>,
+    /// Per pixel: one past the position, in its tile's list, of the last blended splat
+    /// (INRIA's `n_contrib`; 0 when nothing was blended). Backward state.
+    pub n_contrib: Option<Vec<u32>>,
+    pub plan: Option<RenderPlan>,
+    pub report: RenderReport,
+}
+
+fn check_options(scene: &Gaussians, opts: &RenderOptions) -> Result<()> {
+    scene.validate()?;
+    if !opts.background.iter().all(|v| v.is_finite()) {
+        return Err(Error::invalid(format!(
+            "background {:?} is not finite",
+            opts.background
+        )));
+    }
+    if let Some(d) = opts.sh_degree {
+        if d > MAX_SH_DEGREE {
+            return Err(Error::invalid(format!("SH degree {d} > {MAX_SH_DEGREE}")));
+        }
+    }
+    Ok(())
+}
+
+/// Render `scene` from `cam` with the minimal plan for `opts`.
+pub fn render(scene: &Gaussians, cam: &Camera, opts: &RenderOptions) -> Result<Render> {
+    check_options(scene, opts)?;
+    render_with_plan(scene, cam, opts, &RenderPlan::new(scene, opts))
+}
+
+/// Render with an explicit plan (tests compare the minimal plan against [`RenderPlan::full`]).
+pub fn render_with_plan(
+    scene: &Gaussians,
+    cam: &Camera,
+    opts: &RenderOptions,
+    plan: &RenderPlan,
+) -> Result<Render> {
+    check_options(scene, opts)?;
+    cam.validate()?;
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    let mut report = RenderReport::default();
+    let projected = project::project(scene, cam, plan, opts, &mut report);
+    let bins = tile::bin(&projected, w, h);
+    report.intersections = bins.intersections() as u64;
+    let o = opts.outputs;
+    let want = composite::Want {
+        rgb: o.rgb,
+        alpha: o.alpha,
+        depth: o.depth && plan.accumulate_depth,
+        expected_depth: o.expected_depth && plan.accumulate_depth,
+        backward_state: o.backward_state && plan.track_backward_state,
+    };
+    let out = composite::composite(
+        w,
+        h,
+        &projected,
+        &bins,
+        plan,
+        opts.background,
+        want,
+        opts.kernel,
+        &mut report,
+    );
+    Ok(Render {
+        width: w,
+        height: h,
+        rgb: out.rgb,
+        alpha: out.alpha,
+        depth: out.depth,
+        expected_depth: out.expected_depth,
+        final_t: out.final_t,
+        n_contrib: out.n_contrib,
+        plan: Some(*plan),
+        report,
+    })
+}
