@@ -1,0 +1,85 @@
+"""Shared writers for the golden-data generators (INRIA PLY, cameras.json, EXR).
+
+Independent of the unseen crate: these follow the file formats' public definitions.
+"""
+import json
+import os
+
+import numpy as np
+
+SH_C0 = 0.28209479177387814
+
+
+def write_inria_ply(path, means, log_scales, quats_wxyz, opacity_logits, sh_dc, sh_rest):
+    """Write an INRIA 3DGS PLY (binary little-endian, all float).
+
+    sh_rest is (N, K-1, 3), coefficient-major like gsplat; the file stores f_rest
+    channel-major: f_rest_{c*(K-1)+j} = sh_rest[:, j, c] (INRIA save_ply transposes
+    features_rest (N, K-1, 3) to (N, 3, K-1) before flattening).
+    """
+    n = means.shape[0]
+    k1 = sh_rest.shape[1]
+    names = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
+    names += [f"f_rest_{i}" for i in range(3 * k1)]
+    names += ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+    cols = [means, np.zeros((n, 3)), sh_dc,
+            np.transpose(sh_rest, (0, 2, 1)).reshape(n, 3 * k1),
+            opacity_logits.reshape(n, 1), log_scales, quats_wxyz]
+    data = np.concatenate(cols, axis=1).astype("<f4")
+    assert data.shape[1] == len(names)
+    header = "ply\nformat binary_little_endian 1.0\n"
+    header += f"element vertex {n}\n"
+    header += "".join(f"property float {p}\n" for p in names)
+    header += "end_header\n"
+    with open(path, "wb") as f:
+        f.write(header.encode("ascii"))
+        f.write(data.tobytes())
+
+
+def write_cameras_json(path, cams):
+    """cams: list of dicts with name, width, height, fx, fy, R_wc (3x3 world_from_camera,
+    OpenCV frame), center (3,), optional cx, cy."""
+    out = []
+    for i, c in enumerate(cams):
+        e = {
+            "id": i,
+            "img_name": c["name"],
+            "width": int(c["width"]),
+            "height": int(c["height"]),
+            "position": [float(v) for v in c["center"]],
+            "rotation": [[float(v) for v in row] for row in np.asarray(c["R_wc"])],
+            "fy": float(c["fy"]),
+            "fx": float(c["fx"]),
+        }
+        if "cx" in c:
+            e["cx"] = float(c["cx"])
+            e["cy"] = float(c["cy"])
+        out.append(e)
+    with open(path, "w") as f:
+        json.dump(out, f, indent=1)
+
+
+def look_at(eye, target, up):
+    """world_from_camera rotation (OpenCV frame: +x right, +y down, +z forward)."""
+    eye, target, up = (np.asarray(v, dtype=np.float64) for v in (eye, target, up))
+    z = target - eye
+    z /= np.linalg.norm(z)
+    x = np.cross(-up, z)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    return np.stack([x, y, z], axis=1)
+
+
+def write_exr(path, img):
+    """Float32 EXR via Mitsuba's Bitmap (channels Y or R,G,B)."""
+    import mitsuba as mi
+
+    img = np.ascontiguousarray(img, dtype=np.float32)
+    if img.ndim == 2:
+        img = img[:, :, None]
+    mi.Bitmap(img).write(str(path))
+
+
+def ensure_dir(path):
+    os.makedirs(path, exist_ok=True)
+    return path

@@ -1,0 +1,3 @@
+mod common;
+mod golden_drjit;
+mod mitsuba_crosscheck;

@@ -1,0 +1,2 @@
+//! The one integration-test binary; the suites live in `tests/suite/`.
+mod suite;
