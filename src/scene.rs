@@ -16,11 +16,11 @@ impl Uniform {
         Uniform(Pcg64Mcg::seed_from_u64(seed))
     }
     /// Uniform in `[0, 1)` with 24 random bits.
-    pub fn next(&mut self) -> f32 {
+    pub fn unit(&mut self) -> f32 {
         (self.0.next_u32() >> 8) as f32 * (1.0 / 16_777_216.0)
     }
     pub fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.next()
+        lo + (hi - lo) * self.unit()
     }
 }
 

@@ -133,7 +133,7 @@ pub fn read_colmap_model(dir: &Path) -> Result<ColmapModel> {
         })?;
         let q = img.qvec;
         let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
-        if !(n > 0.0 && n.is_finite()) || !img.tvec.iter().all(|t| t.is_finite()) {
+        if !(n > 0.0 && n.is_finite() && img.tvec.iter().all(|t| t.is_finite())) {
             return Err(Error::parse(
                 &imgs_p,
                 format!("image '{}' has an invalid pose", img.name),

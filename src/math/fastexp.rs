@@ -42,7 +42,7 @@ pub fn exp(x: f32) -> f32 {
     let p = ((((1.987_569_1e-4 * r + 1.398_199_9e-3) * r + 8.333_452e-3) * r + 4.166_579_6e-2) * r
         + 1.666_666_5e-1)
         * r
-        + 5.000_000_1e-1;
+        + 0.5;
     let y = (p * z + r) + 1.0;
     // 2^k with k in [-126, 127]: exact power of two assembled in the exponent field.
     // `k` is integral here, so the cast is exact (NaN casts to 0 and y is already NaN).
@@ -89,7 +89,7 @@ pub fn ln(x: f32) -> f32 {
         -1.666_805_8e-1,
         2.000_071_4e-1,
         -2.499_999_4e-1,
-        3.333_333_1e-1,
+        0.333_333_33,
     ];
     let mut p = LOG_P[0];
     for c in &LOG_P[1..] {

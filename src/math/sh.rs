@@ -74,6 +74,7 @@ impl Sub for Dual3 {
         }
     }
 }
+#[allow(clippy::suspicious_arithmetic_impl)] // product rule
 impl Mul for Dual3 {
     type Output = Self;
     fn mul(self, o: Self) -> Self {
@@ -195,4 +196,68 @@ pub fn sh_dot(basis: &[f32], coeffs: impl Iterator<Item = f32>) -> f32 {
         acc += b * c;
     }
     acc
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The forward-mode gradient equals central finite differences of the f64 basis.
+    #[test]
+    fn sh_gradient_matches_finite_differences() {
+        let dirs = [
+            [0.3, -0.5, 0.81],
+            [-0.9, 0.1, 0.2],
+            [0.0, 0.0, 1.0],
+            [0.577, 0.577, -0.577],
+        ];
+        for d in dirs {
+            let mut vals = [0.0; MAX_SH_COEFFS];
+            let mut grads = [[0.0; 3]; MAX_SH_COEFFS];
+            sh_basis_grad(5, d, &mut vals, &mut grads);
+            let h = 1e-6;
+            for axis in 0..3 {
+                let (mut p, mut m) = (d, d);
+                p[axis] += h;
+                m[axis] -= h;
+                let (mut vp, mut vm) = ([0.0; MAX_SH_COEFFS], [0.0; MAX_SH_COEFFS]);
+                sh_basis(5, p[0], p[1], p[2], &mut vp);
+                sh_basis(5, m[0], m[1], m[2], &mut vm);
+                for k in 0..MAX_SH_COEFFS {
+                    let fd = (vp[k] - vm[k]) / (2.0 * h);
+                    assert!((fd - grads[k][axis]).abs() < 1e-7, "k {k} axis {axis}");
+                }
+            }
+            let mut v64 = [0.0; MAX_SH_COEFFS];
+            sh_basis(5, d[0], d[1], d[2], &mut v64);
+            assert_eq!(v64, vals);
+        }
+    }
+
+    /// Orthonormality on the sphere (Fibonacci quadrature, 20k points): ∫Y_i Y_j = δ_ij.
+    #[test]
+    fn sh_basis_is_orthonormal() {
+        let n = 20_000;
+        let mut gram = vec![0.0f64; MAX_SH_COEFFS * MAX_SH_COEFFS];
+        let mut y = [0.0; MAX_SH_COEFFS];
+        for i in 0..n {
+            let z = 1.0 - (2.0 * i as f64 + 1.0) / n as f64;
+            let r = (1.0 - z * z).sqrt();
+            let phi = i as f64 * std::f64::consts::PI * (3.0 - 5f64.sqrt());
+            sh_basis(5, r * phi.cos(), r * phi.sin(), z, &mut y);
+            for a in 0..MAX_SH_COEFFS {
+                for b in 0..MAX_SH_COEFFS {
+                    gram[a * MAX_SH_COEFFS + b] += y[a] * y[b];
+                }
+            }
+        }
+        let w = 4.0 * std::f64::consts::PI / n as f64;
+        for a in 0..MAX_SH_COEFFS {
+            for b in 0..MAX_SH_COEFFS {
+                let want = if a == b { 1.0 } else { 0.0 };
+                let got = gram[a * MAX_SH_COEFFS + b] * w;
+                assert!((got - want).abs() < 1e-3, "<Y{a}, Y{b}> = {got}");
+            }
+        }
+    }
 }

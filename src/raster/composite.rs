@@ -299,6 +299,7 @@ fn band_impl<const DEPTH: bool, const TRACK: bool, const SCALAR: bool>(
                 (0, rows)
             };
             let pos1 = pos as u32 + 1;
+            #[allow(clippy::needless_range_loop)] // `row` indexes the tile state too
             for row in r0..r1 {
                 if !alive[row] {
                     continue;
@@ -449,20 +450,19 @@ pub(crate) fn composite(
         final_t: want.backward_state.then(|| Vec::with_capacity(npix)),
         n_contrib: want.backward_state.then(|| Vec::with_capacity(npix)),
     };
+    fn append<T: Copy>(dst: &mut Option<Vec<T>>, src: &[T]) {
+        if let Some(v) = dst {
+            v.extend_from_slice(src);
+        }
+    }
     for b in bands {
         report.pairs_evaluated += b.pairs;
-        out.rgb.as_mut().map(|v| v.extend_from_slice(&b.rgb));
-        out.alpha.as_mut().map(|v| v.extend_from_slice(&b.alpha));
-        out.depth.as_mut().map(|v| v.extend_from_slice(&b.depth));
-        out.expected_depth
-            .as_mut()
-            .map(|v| v.extend_from_slice(&b.expected_depth));
-        out.final_t
-            .as_mut()
-            .map(|v| v.extend_from_slice(&b.final_t));
-        out.n_contrib
-            .as_mut()
-            .map(|v| v.extend_from_slice(&b.n_contrib));
+        append(&mut out.rgb, &b.rgb);
+        append(&mut out.alpha, &b.alpha);
+        append(&mut out.depth, &b.depth);
+        append(&mut out.expected_depth, &b.expected_depth);
+        append(&mut out.final_t, &b.final_t);
+        append(&mut out.n_contrib, &b.n_contrib);
     }
     out
 }

@@ -252,7 +252,7 @@ pub fn project_one(
         let ratio = det_orig / det;
         opacity *= if ratio > 0.0 { ratio.sqrt() } else { 0.0 };
     }
-    if !(opacity >= ALPHA_THRESHOLD) {
+    if opacity < ALPHA_THRESHOLD {
         return Err(Cull::LowOpacity);
     }
     let ext = (2.0 * ln(opacity * 255.0)).sqrt();

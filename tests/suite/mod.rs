@@ -1,3 +1,5 @@
 mod common;
 mod golden_drjit;
 mod mitsuba_crosscheck;
+mod raster;
+mod readers;

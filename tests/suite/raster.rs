@@ -1,0 +1,316 @@
+//! Exact answers, hard cases, render-plan skips and determinism of the forward rasterizer.
+use super::common::{bits, with_threads};
+use unseen::camera::Camera;
+use unseen::gaussian::Gaussians;
+use unseen::raster::{
+    Kernel, Outputs, Render, RenderOptions, RenderPlan, render, render_with_plan,
+};
+use unseen::scene::{default_camera, random_scene};
+
+const LOGIT_ONE: f32 = 100.0; // sigmoid(100) == 1.0 exactly in f32
+
+fn one(g: &mut Gaussians, mean: [f32; 3], log_scale: f32, logit: f32, rgb: [f32; 3]) {
+    let c0 = unseen::raster::project::SH_C0_F32;
+    let dc = rgb.map(|c| (c - 0.5) / c0);
+    let rest = vec![0.0; g.rest_per_channel() * 3];
+    g.push(mean, [log_scale; 3], [1.0, 0.0, 0.0, 0.0], logit, dc, &rest);
+}
+
+fn all_outputs(bg: [f32; 3]) -> RenderOptions {
+    RenderOptions {
+        background: bg,
+        outputs: Outputs::ALL,
+        ..Default::default()
+    }
+}
+
+fn assert_all_finite(r: &Render, what: &str) {
+    for (name, v) in [
+        ("rgb", r.rgb.as_ref()),
+        ("alpha", r.alpha.as_ref()),
+        ("depth", r.depth.as_ref()),
+        ("expected_depth", r.expected_depth.as_ref()),
+        ("final_t", r.final_t.as_ref()),
+    ] {
+        if let Some(v) = v {
+            assert!(
+                v.iter().all(|x| x.is_finite()),
+                "{what}: non-finite value in {name}"
+            );
+        }
+    }
+}
+
+#[test]
+fn empty_scene_renders_background_exactly() {
+    let g = Gaussians::new(3).unwrap();
+    let bg = [0.25, 0.5, 0.75];
+    let r = render(&g, &default_camera(37, 21), &all_outputs(bg)).unwrap();
+    for px in r.rgb.unwrap().chunks_exact(3) {
+        assert_eq!(bits(px), bits(&bg));
+    }
+    assert!(r.alpha.unwrap().iter().all(|&a| a.to_bits() == 0));
+    assert!(r.depth.unwrap().iter().all(|&d| d.to_bits() == 0));
+    assert!(r.expected_depth.unwrap().iter().all(|&d| d.to_bits() == 0));
+    assert!(r.final_t.unwrap().iter().all(|&t| t == 1.0));
+    assert!(r.n_contrib.unwrap().iter().all(|&n| n == 0));
+}
+
+/// One opaque Gaussian covering the image: α = 0.99 (the clamp) at every pixel, so the
+/// output is exactly `c·0.99 + (1 − 0.99)·bg`; a second one cannot push T below 1e-4
+/// because the stop is exclusive (T would become 0.01² < 1e-4).
+#[test]
+fn opaque_gaussian_hides_background_to_the_clamp() {
+    let cam = default_camera(48, 32);
+    let bg = [1.0, 0.5, 0.25];
+    let mut g = Gaussians::new(0).unwrap();
+    one(
+        &mut g,
+        [0.0, 0.0, 5.0],
+        1000f32.ln(),
+        LOGIT_ONE,
+        [0.2, 0.4, 0.6],
+    );
+    let r = render(&g, &cam, &all_outputs(bg)).unwrap();
+    let c = [0.2f32, 0.4, 0.6].map(|v| {
+        // The colour as the renderer computes it from the DC coefficient.
+        let c0 = unseen::raster::project::SH_C0_F32;
+        c0 * ((v - 0.5) / c0) + 0.5
+    });
+    let t = 1.0f32 * (1.0 - 0.99f32);
+    for (i, px) in r.rgb.as_ref().unwrap().chunks_exact(3).enumerate() {
+        for k in 0..3 {
+            assert_eq!(
+                px[k],
+                c[k] * (0.99f32 * 1.0) + t * bg[k],
+                "pixel {i} channel {k}"
+            );
+        }
+    }
+    assert!(r.final_t.as_ref().unwrap().iter().all(|&v| v == t));
+    assert!(r.alpha.as_ref().unwrap().iter().all(|&a| a == 1.0 - t));
+
+    one(
+        &mut g,
+        [0.0, 0.0, 6.0],
+        1000f32.ln(),
+        LOGIT_ONE,
+        [0.9, 0.9, 0.9],
+    );
+    let r2 = render(&g, &cam, &all_outputs(bg)).unwrap();
+    assert_eq!(
+        r2.rgb, r.rgb,
+        "the second opaque Gaussian must be stopped before blending"
+    );
+    assert!(r2.n_contrib.unwrap().iter().all(|&n| n == 1));
+}
+
+#[test]
+fn gaussians_behind_camera_or_near_plane_contribute_nothing() {
+    let cam = default_camera(32, 32);
+    let bg = [0.1, 0.2, 0.3];
+    let mut g = Gaussians::new(1).unwrap();
+    for z in [-1.0, 0.0, 0.005, 0.0099] {
+        one(
+            &mut g,
+            [0.0, 0.0, z],
+            0.5f32.ln(),
+            LOGIT_ONE,
+            [1.0, 0.0, 0.0],
+        );
+    }
+    let r = render(&g, &cam, &all_outputs(bg)).unwrap();
+    assert_eq!(r.report.behind_near_plane, 4);
+    for px in r.rgb.as_ref().unwrap().chunks_exact(3) {
+        assert_eq!(bits(px), bits(&bg));
+    }
+    // Exactly on the near plane (z = 0.01) is drawn, as in gsplat (`z < near` culls).
+    let mut g = Gaussians::new(0).unwrap();
+    one(
+        &mut g,
+        [0.0, 0.0, 0.01],
+        0.001f32.ln(),
+        2.0,
+        [1.0, 0.0, 0.0],
+    );
+    let r = render(&g, &cam, &all_outputs(bg)).unwrap();
+    assert_eq!(r.report.behind_near_plane, 0);
+    assert_all_finite(&r, "near plane");
+}
+
+/// Scales 1e-12 and 1e6, zero quaternions, NaN/Inf in every parameter, opacity 0 and 1,
+/// means at the image corners, 1×1 and 4096×1 images: no NaN or Inf in any output, and the
+/// bad Gaussians are skipped and counted.
+#[test]
+fn hard_cases_produce_finite_outputs() {
+    let mut g = Gaussians::new(3).unwrap();
+    let rest = vec![0.1; g.rest_per_channel() * 3];
+    let q = [0.9, 0.1, -0.2, 0.3];
+    g.push([0.0, 0.0, 3.0], [1e-12f32.ln(); 3], q, 2.0, [0.5; 3], &rest);
+    g.push([0.1, 0.0, 3.0], [1e6f32.ln(); 3], q, 2.0, [0.5; 3], &rest);
+    g.push([0.0, 0.1, 0.02], [1e6f32.ln(); 3], q, 2.0, [0.5; 3], &rest);
+    g.push([0.0, 0.0, 3.0], [0.0; 3], [0.0; 4], 2.0, [0.5; 3], &rest); // zero quaternion
+    g.push([0.0, 0.0, 3.0], [-1.0; 3], q, -1e30, [0.5; 3], &rest); // opacity 0
+    g.push([0.0, 0.0, 3.0], [-1.0; 3], q, 1e30, [0.5; 3], &rest); // opacity 1
+    g.push([-1.7, -1.7, 3.0], [-2.0; 3], q, 1.0, [0.5; 3], &rest); // corners
+    g.push([1.7, 1.7, 3.0], [-2.0; 3], q, 1.0, [0.5; 3], &rest);
+    g.push([0.0, 0.0, 3.0], [-30.0, 5.0, 0.0], q, 3.0, [0.5; 3], &rest); // needle
+    let n_good = g.len();
+    let bad = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY];
+    let mut n_bad = 0;
+    for &b in &bad {
+        for field in 0..6 {
+            let (mut m, mut s, mut qq, mut o, mut dc) =
+                ([0.0, 0.0, 3.0], [-1.0; 3], q, 1.0, [0.5; 3]);
+            let mut r = rest.clone();
+            match field {
+                0 => m[1] = b,
+                1 => s[2] = b,
+                2 => qq[0] = b,
+                3 => o = b,
+                4 => dc[1] = b,
+                _ => r[7] = b,
+            }
+            g.push(m, s, qq, o, dc, &r);
+            n_bad += 1;
+        }
+    }
+    for (w, h) in [(64, 48), (1, 1), (4096, 1), (1, 300)] {
+        let cam = default_camera(w, h);
+        for kernel in [Kernel::Auto, Kernel::Scalar] {
+            let opts = RenderOptions {
+                kernel,
+                ..all_outputs([0.3, 0.3, 0.3])
+            };
+            let r = render(&g, &cam, &opts).unwrap();
+            assert_all_finite(&r, &format!("{w}x{h}"));
+            assert_eq!(r.report.non_finite, n_bad as u64, "{w}x{h}");
+            // The zero quaternion, plus (for wide images) the 1e6-scale Gaussian at z = 0.02
+            // whose 2D covariance determinant overflows f32: both are skipped as degenerate.
+            assert!(
+                (1..=2).contains(&r.report.degenerate),
+                "{w}x{h}: {:?}",
+                r.report
+            );
+            let counted = r.report.visible
+                + r.report.non_finite
+                + r.report.degenerate
+                + r.report.low_opacity
+                + r.report.off_screen
+                + r.report.behind_near_plane
+                + r.report.beyond_far_plane;
+            assert_eq!(counted as usize, n_good + n_bad);
+        }
+    }
+}
+
+/// A scene with SH degree 3 whose bands 2 and 3 are zero: the plan evaluates degree 1.
+fn scene_with_zero_high_bands() -> Gaussians {
+    let mut g = random_scene(3000, 3, 11, 0.01, 0.2);
+    let k1 = g.rest_per_channel();
+    for i in 0..g.len() {
+        for j in 3..k1 {
+            for c in 0..3 {
+                g.sh_rest[(i * k1 + j) * 3 + c] = 0.0;
+            }
+        }
+    }
+    g
+}
+
+/// Each skip of the minimal plan gives the same bits as the full computation.
+#[test]
+fn plan_skips_are_bit_identical() {
+    let cam = default_camera(173, 131);
+    let zero_bands = scene_with_zero_high_bands();
+    assert_eq!(
+        RenderPlan::new(&zero_bands, &RenderOptions::default()).sh_degree,
+        1
+    );
+    let elongated = {
+        let mut g = random_scene(2000, 1, 5, 0.001, 0.5);
+        for ls in g.log_scales.iter_mut() {
+            ls[0] += 2.0;
+            ls[2] -= 3.0;
+        }
+        g
+    };
+    let scenes = [random_scene(4000, 2, 3, 0.01, 0.3), zero_bands, elongated];
+    for (si, scene) in scenes.iter().enumerate() {
+        for bg in [[0.0; 3], [0.2, 0.7, 1.0]] {
+            for outputs in [
+                Outputs::RGB,
+                Outputs {
+                    alpha: true,
+                    ..Outputs::RGB
+                },
+                Outputs::ALL,
+            ] {
+                let opts = RenderOptions {
+                    background: bg,
+                    outputs,
+                    ..Default::default()
+                };
+                let minimal = render(scene, &cam, &opts).unwrap();
+                let full =
+                    render_with_plan(scene, &cam, &opts, &RenderPlan::full(scene, &opts)).unwrap();
+                let what = format!("scene {si}, bg {bg:?}, {outputs:?}");
+                assert_eq!(
+                    bits(minimal.rgb.as_ref().unwrap()),
+                    bits(full.rgb.as_ref().unwrap()),
+                    "{what}"
+                );
+                for (a, b) in [
+                    (&minimal.alpha, &full.alpha),
+                    (&minimal.depth, &full.depth),
+                    (&minimal.expected_depth, &full.expected_depth),
+                    (&minimal.final_t, &full.final_t),
+                ] {
+                    if let (Some(a), Some(b)) = (a, b) {
+                        assert_eq!(bits(a), bits(b), "{what}");
+                    }
+                }
+                assert_eq!(
+                    minimal.n_contrib,
+                    full.n_contrib.filter(|_| outputs.backward_state)
+                );
+                assert!(minimal.report.pairs_evaluated <= full.report.pairs_evaluated);
+            }
+        }
+    }
+}
+
+/// The vectorized kernel (AVX2 when the CPU has it) and the one-pixel-at-a-time reference
+/// give the same bits.
+#[test]
+fn simd_and_scalar_kernels_are_bit_identical() {
+    let cam = default_camera(211, 97);
+    for (n, deg, seed) in [(500, 0, 1), (5000, 3, 2), (20000, 5, 3)] {
+        let scene = random_scene(n, deg, seed, 0.005, 0.4);
+        let auto = render(&scene, &cam, &all_outputs([0.1, 0.2, 0.3])).unwrap();
+        let scalar = render(
+            &scene,
+            &cam,
+            &RenderOptions {
+                kernel: Kernel::Scalar,
+                ..all_outputs([0.1, 0.2, 0.3])
+            },
+        )
+        .unwrap();
+        assert_eq!(auto, scalar, "{n} Gaussians, degree {deg}");
+    }
+}
+
+/// 100k Gaussians: bit-identical outputs for 1, 2 and 7 threads and across runs.
+#[test]
+fn render_is_deterministic_across_thread_counts() {
+    let scene = random_scene(100_000, 3, 42, 0.002, 0.08);
+    let cam: Camera = default_camera(320, 240);
+    let opts = all_outputs([0.05, 0.1, 0.15]);
+    let reference = with_threads(1, || render(&scene, &cam, &opts).unwrap());
+    assert!(reference.report.visible > 90_000);
+    for threads in [2, 7, 2] {
+        let r = with_threads(threads, || render(&scene, &cam, &opts).unwrap());
+        assert_eq!(r, reference, "{threads} threads");
+    }
+}

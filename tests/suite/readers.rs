@@ -1,0 +1,280 @@
+//! Readers and writers: COLMAP (against files COLMAP wrote), cameras.json, transforms.json,
+//! INRIA PLY (round trip, ASCII, big-endian, malformed input).
+use super::common::reference;
+use glam::{DMat3, DVec3};
+use std::path::{Path, PathBuf};
+use unseen::camera::colmap::read_colmap_model;
+use unseen::camera::inria::{cameras_json_string, read_cameras_json};
+use unseen::camera::transforms::read_transforms_json;
+use unseen::error::ErrorKind;
+use unseen::gaussian::ply::{parse_ply, ply_bytes, read_ply, write_ply};
+use unseen::scene::random_scene;
+
+fn temp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("unseen-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn mat_from_rows(v: &serde_json::Value) -> DMat3 {
+    let r = |i: usize, j: usize| v[i][j].as_f64().unwrap();
+    DMat3::from_cols(
+        DVec3::new(r(0, 0), r(1, 0), r(2, 0)),
+        DVec3::new(r(0, 1), r(1, 1), r(2, 1)),
+        DVec3::new(r(0, 2), r(1, 2), r(2, 2)),
+    )
+}
+
+#[test]
+fn colmap_text_and_binary_match_pycolmap() {
+    let dir = reference("colmap/pinhole");
+    let exp: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("expected.json")).unwrap()).unwrap();
+    for sub in ["sparse_txt", "sparse_bin"] {
+        let model = read_colmap_model(&dir.join(sub)).unwrap();
+        let cams = exp["cameras"].as_array().unwrap();
+        assert_eq!(model.cameras.len(), cams.len(), "{sub}");
+        for (c, e) in model.cameras.iter().zip(cams) {
+            assert_eq!(c.name, e["name"].as_str().unwrap());
+            assert_eq!(c.width as u64, e["width"].as_u64().unwrap());
+            assert_eq!(c.height as u64, e["height"].as_u64().unwrap());
+            // Text files print 17 significant digits, so intrinsics round-trip exactly.
+            for (got, key) in [(c.fx, "fx"), (c.fy, "fy"), (c.cx, "cx"), (c.cy, "cy")] {
+                assert_eq!(got, e[key].as_f64().unwrap(), "{sub} {key}");
+            }
+            let r = mat_from_rows(&e["world_from_camera"]);
+            assert!(
+                (c.world_from_camera_rotation - r).abs_diff_eq(DMat3::ZERO, 1e-14),
+                "{sub}"
+            );
+            let centre = DVec3::new(
+                e["center"][0].as_f64().unwrap(),
+                e["center"][1].as_f64().unwrap(),
+                e["center"][2].as_f64().unwrap(),
+            );
+            assert!(
+                (c.center - centre).length() < 1e-13,
+                "{sub}: {} vs {}",
+                c.center,
+                centre
+            );
+        }
+        let pts = exp["points"].as_array().unwrap();
+        assert_eq!(model.points.len(), pts.len());
+        for (p, e) in model.points.iter().zip(pts) {
+            for k in 0..3 {
+                assert_eq!(p.xyz[k], e["xyz"][k].as_f64().unwrap());
+                assert_eq!(p.rgb[k] as u64, e["rgb"][k].as_u64().unwrap());
+            }
+        }
+    }
+}
+
+#[test]
+fn colmap_distorted_model_is_a_clear_error() {
+    for sub in ["sparse_txt", "sparse_bin"] {
+        let err = read_colmap_model(&reference("colmap/distorted").join(sub)).unwrap_err();
+        assert_eq!(err.kind, ErrorKind::Unsupported, "{sub}: {err}");
+        assert!(
+            err.to_string().contains("OPENCV") && err.to_string().contains("cameras."),
+            "{err}"
+        );
+    }
+    let err = read_colmap_model(Path::new("/nonexistent/sparse")).unwrap_err();
+    assert_eq!(err.kind, ErrorKind::Io);
+    assert!(
+        err.to_string().contains("/nonexistent/sparse/cameras.txt"),
+        "{err}"
+    );
+}
+
+#[test]
+fn colmap_binary_truncations_are_errors_not_panics() {
+    let dir = reference("colmap/pinhole/sparse_bin");
+    for file in ["cameras.bin", "images.bin", "points3D.bin"] {
+        let full = std::fs::read(dir.join(file)).unwrap();
+        let t = temp_dir(&format!("trunc-{file}"));
+        for f in ["cameras.bin", "images.bin", "points3D.bin"] {
+            std::fs::copy(dir.join(f), t.join(f)).unwrap();
+        }
+        for cut in [0, 1, 7, 8, 9, full.len() / 2, full.len() - 1] {
+            std::fs::write(t.join(file), &full[..cut]).unwrap();
+            let err = read_colmap_model(&t).unwrap_err();
+            assert_eq!(err.kind, ErrorKind::Parse, "{file} cut at {cut}: {err}");
+            assert!(err.to_string().contains(file), "{err}");
+        }
+    }
+}
+
+#[test]
+fn cameras_json_round_trip() {
+    let model = read_colmap_model(&reference("colmap/pinhole/sparse_bin")).unwrap();
+    let d = temp_dir("cams");
+    let p = d.join("cameras.json");
+    std::fs::write(&p, cameras_json_string(&model.cameras)).unwrap();
+    let back = read_cameras_json(&p).unwrap();
+    assert_eq!(back, model.cameras);
+    std::fs::write(&p, b"[{\"id\": 0}]").unwrap();
+    let err = read_cameras_json(&p).unwrap_err();
+    assert!(
+        err.to_string().contains("cameras.json") && err.kind == ErrorKind::Parse,
+        "{err}"
+    );
+}
+
+#[test]
+fn transforms_json_opengl_to_opencv() {
+    let d = temp_dir("transforms");
+    // nerfstudio style: intrinsics given; identity c2w looks down world -z with y up.
+    let text = r#"{"fl_x": 100.0, "fl_y": 110.0, "cx": 40.0, "cy": 30.0, "w": 80, "h": 60,
+        "frames": [{"file_path": "images/a.png",
+                    "transform_matrix": [[1,0,0,1],[0,1,0,2],[0,0,1,3],[0,0,0,1]]}]}"#;
+    std::fs::write(d.join("transforms.json"), text).unwrap();
+    let cams = read_transforms_json(&d.join("transforms.json")).unwrap();
+    let c = &cams[0];
+    assert_eq!(
+        (c.width, c.height, c.fx, c.fy, c.cx, c.cy),
+        (80, 60, 100.0, 110.0, 40.0, 30.0)
+    );
+    assert_eq!(c.center, DVec3::new(1.0, 2.0, 3.0));
+    assert_eq!(
+        c.world_from_camera_rotation,
+        DMat3::from_diagonal(DVec3::new(1.0, -1.0, -1.0))
+    );
+    // A point in front of the camera (world -z) has positive camera z.
+    assert!(c.camera_from_world_point(DVec3::new(1.0, 2.0, 0.0)).z > 0.0);
+    // NeRF-synthetic style: camera_angle_x and the image size from the PNG header.
+    std::fs::create_dir_all(d.join("train")).unwrap();
+    image::RgbImage::new(40, 20)
+        .save(d.join("train/r_0.png"))
+        .unwrap();
+    let text = r#"{"camera_angle_x": 0.6911112070083618,
+        "frames": [{"file_path": "./train/r_0",
+                    "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,4],[0,0,0,1]]}]}"#;
+    std::fs::write(d.join("transforms_train.json"), text).unwrap();
+    let c = &read_transforms_json(&d.join("transforms_train.json")).unwrap()[0];
+    assert_eq!((c.width, c.height), (40, 20));
+    assert!((c.fx - 20.0 / (0.5f64 * 0.6911112070083618).tan()).abs() < 1e-12);
+    // Missing image and no w/h: an error naming the image.
+    let text = r#"{"camera_angle_x": 0.7, "frames": [{"file_path": "nope",
+        "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,4],[0,0,0,1]]}]}"#;
+    std::fs::write(d.join("bad.json"), text).unwrap();
+    let err = read_transforms_json(&d.join("bad.json")).unwrap_err();
+    assert!(err.to_string().contains("nope"), "{err}");
+}
+
+#[test]
+fn ply_round_trip_is_exact_for_every_degree() {
+    let d = temp_dir("ply");
+    for deg in 0..=5 {
+        let g = random_scene(257, deg, deg as u64 + 100, 0.01, 0.5);
+        let p = d.join(format!("deg{deg}.ply"));
+        write_ply(&g, &p).unwrap();
+        let (back, info) = read_ply(&p).unwrap();
+        assert_eq!(back, g, "degree {deg}");
+        assert!(info.ignored_properties.is_empty());
+        assert!(
+            !d.join(format!(".deg{deg}.ply.tmp-{}", std::process::id()))
+                .exists()
+        );
+    }
+}
+
+/// The same Gaussians as ASCII, big-endian with doubles, and with extra properties and
+/// elements, load to the same values.
+#[test]
+fn ply_ascii_big_endian_and_extra_properties() {
+    let g = random_scene(5, 1, 9, 0.01, 0.5);
+    let bin = ply_bytes(&g).unwrap();
+    let (base, _) = parse_ply(&bin, Path::new("bin.ply")).unwrap();
+    let header_end = bin.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
+    let header = std::str::from_utf8(&bin[..header_end]).unwrap();
+    let names: Vec<&str> = header
+        .lines()
+        .filter_map(|l| l.strip_prefix("property float "))
+        .collect();
+    let values: Vec<f32> = bin[header_end..]
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+        .collect();
+    let nprop = names.len();
+
+    // ASCII with an extra property "confidence" and a face element after the vertices.
+    let mut ascii =
+        String::from("ply\nformat ascii 1.0\ncomment made by a test\nelement vertex 5\n");
+    for n in &names {
+        ascii += &format!("property float {n}\n");
+    }
+    ascii += "property uchar confidence\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n";
+    for row in values.chunks_exact(nprop) {
+        let vals: Vec<String> = row.iter().map(|v| format!("{v:?}")).collect();
+        ascii += &format!("{} 7\n", vals.join(" "));
+    }
+    ascii += "3 0 1 2\n";
+    let (a, info) = parse_ply(ascii.as_bytes(), Path::new("a.ply")).unwrap();
+    assert_eq!(a, base);
+    assert_eq!(info.ignored_properties, vec!["confidence".to_string()]);
+    assert_eq!(info.ignored_elements, vec![("face".to_string(), 1)]);
+
+    // Big-endian doubles, properties in reverse order.
+    let mut be = String::from("ply\nformat binary_big_endian 1.0\nelement vertex 5\n");
+    for n in names.iter().rev() {
+        be += &format!("property double {n}\n");
+    }
+    be += "end_header\n";
+    let mut bytes = be.into_bytes();
+    for row in values.chunks_exact(nprop) {
+        for v in row.iter().rev() {
+            bytes.extend_from_slice(&(*v as f64).to_be_bytes());
+        }
+    }
+    let (b, _) = parse_ply(&bytes, Path::new("be.ply")).unwrap();
+    assert_eq!(b, base);
+}
+
+#[test]
+fn malformed_ply_files_are_clear_errors() {
+    let g = random_scene(3, 3, 1, 0.01, 0.5);
+    let bin = ply_bytes(&g).unwrap();
+    let p = Path::new("scene.ply");
+    let check = |data: &[u8], needle: &str| {
+        let err = parse_ply(data, p).unwrap_err();
+        let msg = err.to_string();
+        assert!(
+            msg.starts_with("scene.ply: ") && msg.contains(needle),
+            "{msg}"
+        );
+    };
+    check(&bin[..bin.len() - 1], "truncated");
+    check(b"hello", "not a PLY file");
+    check(
+        b"ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\nend_header\n",
+        "missing",
+    );
+    // Replace text in the header only, keeping the binary body intact.
+    let edit = |from: &str, to: &str| {
+        let end = bin.windows(10).position(|w| w == b"end_header").unwrap();
+        let head = std::str::from_utf8(&bin[..end]).unwrap().replace(from, to);
+        [head.as_bytes(), &bin[end..]].concat()
+    };
+    check(&edit("f_rest_44", "f_rest_99"), "SH degree");
+    check(
+        &edit("element vertex 3", "element vertex 99999999999"),
+        "truncated",
+    );
+    check(
+        &edit("binary_little_endian", "binary_middle_endian"),
+        "unknown PLY format",
+    );
+    check(
+        &edit(
+            "property float opacity",
+            "property float opacity\nproperty float opacity",
+        ),
+        "twice",
+    );
+    let err = read_ply(Path::new("/nonexistent/x.ply")).unwrap_err();
+    assert_eq!(err.kind, ErrorKind::Io);
+    assert!(err.to_string().contains("/nonexistent/x.ply"));
+}
