@@ -1,1 +1,112 @@
-fn main() {}
+//! Forward-rasterizer throughput: `cargo bench --bench forward [-- --quick]`.
+//!
+//! Reports, per scene size × resolution × thread count, the median wall time per frame of
+//! each stage (project, bin, composite) and the blend throughput in Gaussian-pixel
+//! evaluations per second (the pairs the composite kernel evaluates, counted exactly).
+//! Scenes are `unseen::scene::random_scene` (seeded) seen by `default_camera`.
+
+use std::time::Instant;
+use unseen::raster::composite::{Kernel, Want, composite};
+use unseen::raster::project::project;
+use unseen::raster::tile::bin;
+use unseen::raster::{RenderOptions, RenderPlan, RenderReport};
+use unseen::scene::{default_camera, random_scene};
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn main() {
+    let quick = std::env::args().any(|a| a == "--quick");
+    let sizes: &[usize] = if quick {
+        &[10_000, 100_000]
+    } else {
+        &[10_000, 100_000, 1_000_000]
+    };
+    let resolutions: &[(u32, u32)] = &[(256, 256), (1024, 768)];
+    let kernels: &[(&str, Kernel)] = &[("auto", Kernel::Auto), ("scalar", Kernel::Scalar)];
+    println!(
+        "{:>9} {:>9} {:>3} {:>6} {:>9} {:>9} {:>11} {:>9} {:>12} {:>10}",
+        "gaussians",
+        "image",
+        "thr",
+        "kernel",
+        "project",
+        "bin",
+        "composite",
+        "frame",
+        "pairs",
+        "Gpairs/s"
+    );
+    for &n in sizes {
+        let scene = random_scene(n, 3, 7, 0.003, 0.03);
+        for &(w, h) in resolutions {
+            let cam = default_camera(w, h);
+            let opts = RenderOptions::default();
+            let plan = RenderPlan::new(&scene, &opts);
+            let want = Want {
+                rgb: true,
+                alpha: false,
+                depth: false,
+                expected_depth: false,
+                backward_state: false,
+            };
+            for threads in [1usize, 2] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                for &(kname, kernel) in kernels {
+                    if kernel == Kernel::Scalar && (threads != 1 || n > 100_000) {
+                        continue; // the reference kernel once per size, for the speed-up figure
+                    }
+                    let reps = if n >= 1_000_000 { 3 } else { 7 };
+                    let (mut tp, mut tb, mut tc) = (Vec::new(), Vec::new(), Vec::new());
+                    let mut pairs = 0;
+                    pool.install(|| {
+                        for _ in 0..reps {
+                            let mut rep = RenderReport::default();
+                            let t0 = Instant::now();
+                            let p = project(&scene, &cam, &plan, &opts, &mut rep);
+                            let t1 = Instant::now();
+                            let b = bin(&p, w as usize, h as usize);
+                            let t2 = Instant::now();
+                            let out = composite(
+                                w as usize,
+                                h as usize,
+                                &p,
+                                &b,
+                                &plan,
+                                opts.background,
+                                want,
+                                kernel,
+                                &mut rep,
+                            );
+                            let t3 = Instant::now();
+                            std::hint::black_box(out);
+                            tp.push((t1 - t0).as_secs_f64());
+                            tb.push((t2 - t1).as_secs_f64());
+                            tc.push((t3 - t2).as_secs_f64());
+                            pairs = rep.pairs_evaluated;
+                        }
+                    });
+                    let (p, b, c) = (median(tp), median(tb), median(tc));
+                    println!(
+                        "{:>9} {:>9} {:>3} {:>6} {:>7.2}ms {:>7.2}ms {:>9.2}ms {:>7.2}ms {:>12} {:>10.3}",
+                        n,
+                        format!("{w}x{h}"),
+                        threads,
+                        kname,
+                        p * 1e3,
+                        b * 1e3,
+                        c * 1e3,
+                        (p + b + c) * 1e3,
+                        pairs,
+                        pairs as f64 / c / 1e9
+                    );
+                }
+            }
+        }
+    }
+}

@@ -36,7 +36,10 @@ pub fn exp(x: f32) -> f32 {
     // both comparisons, stays NaN and propagates through the arithmetic below.
     let x = if x < -87.0 { -87.0 } else { x };
     let x = if x > 88.0 { 88.0 } else { x };
-    let k = (x * LOG2_E + ROUND_MAGIC) - ROUND_MAGIC;
+    // v = 1.5·2^23 + k exactly, so k is both `v − 1.5·2^23` (as a float) and the low bits of
+    // v's representation (as an integer): no float-to-int conversion, which vectorizes.
+    let v = x * LOG2_E + ROUND_MAGIC;
+    let k = v - ROUND_MAGIC;
     let r = (x - k * LN2_HI) - k * LN2_LO;
     let z = r * r;
     let p = ((((1.987_569_1e-4 * r + 1.398_199_9e-3) * r + 8.333_452e-3) * r + 4.166_579_6e-2) * r
@@ -44,10 +47,43 @@ pub fn exp(x: f32) -> f32 {
         * r
         + 0.5;
     let y = (p * z + r) + 1.0;
-    // 2^k with k in [-126, 127]: exact power of two assembled in the exponent field.
-    // `k` is integral here, so the cast is exact (NaN casts to 0 and y is already NaN).
-    let scale = f32::from_bits(((k as i32 + 127) as u32) << 23);
+    // 2^k for k in [-126, 127], assembled in the exponent field: bits(v) = 0x4B40_0000 + k.
+    let scale = f32::from_bits(v.to_bits().wrapping_sub(0x4B40_0000 - 127) << 23);
     y * scale
+}
+
+/// [`exp`] on 8 lanes with AVX2 intrinsics: the same IEEE operations in the same order
+/// (no FMA), so every lane equals the scalar result bit for bit (test
+/// `exp_avx2_matches_scalar_bitwise`).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+pub unsafe fn exp_avx2(x: std::arch::x86_64::__m256) -> std::arch::x86_64::__m256 {
+    use std::arch::x86_64::*;
+    let c = |v: f32| _mm256_set1_ps(v);
+    // `max_ps(a, b)` is `a > b ? a : b` and returns `b` when unordered, so with the constant
+    // first these are exactly the scalar selects, NaN kept.
+    let x = _mm256_max_ps(c(-87.0), x);
+    let x = _mm256_min_ps(c(88.0), x);
+    let v = _mm256_add_ps(_mm256_mul_ps(x, c(LOG2_E)), c(ROUND_MAGIC));
+    let k = _mm256_sub_ps(v, c(ROUND_MAGIC));
+    let r = _mm256_sub_ps(
+        _mm256_sub_ps(x, _mm256_mul_ps(k, c(LN2_HI))),
+        _mm256_mul_ps(k, c(LN2_LO)),
+    );
+    let z = _mm256_mul_ps(r, r);
+    let mut p = _mm256_add_ps(_mm256_mul_ps(c(1.987_569_1e-4), r), c(1.398_199_9e-3));
+    p = _mm256_add_ps(_mm256_mul_ps(p, r), c(8.333_452e-3));
+    p = _mm256_add_ps(_mm256_mul_ps(p, r), c(4.166_579_6e-2));
+    p = _mm256_add_ps(_mm256_mul_ps(p, r), c(1.666_666_5e-1));
+    p = _mm256_add_ps(_mm256_mul_ps(p, r), c(0.5));
+    let y = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(p, z), r), c(1.0));
+    let bits = _mm256_sub_epi32(_mm256_castps_si256(v), _mm256_set1_epi32(0x4B40_0000 - 127));
+    let scale = _mm256_castsi256_ps(_mm256_slli_epi32::<23>(bits));
+    _mm256_mul_ps(y, scale)
 }
 
 /// Natural logarithm for positive normal `f32`, platform-independent, no FMA.
@@ -144,6 +180,35 @@ mod tests {
         assert_eq!(ln(1.0), 0.0);
         assert_eq!(ln(0.0), f32::NEG_INFINITY);
         assert!(ln(-1.0).is_nan());
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn exp_avx2_matches_scalar_bitwise() {
+        use std::arch::x86_64::*;
+        if !std::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        // Every f32 in [-100, 100] with stride 61 in the bit pattern, plus special values.
+        let mut xs: Vec<f32> = vec![f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 0.0, -0.0];
+        let (lo, hi) = (100f32.to_bits(), (-100f32).to_bits());
+        xs.extend((0..lo).step_by(61).map(f32::from_bits));
+        xs.extend(((1u32 << 31)..hi).step_by(61).map(f32::from_bits));
+        for chunk in xs.chunks_exact(8) {
+            let mut out = [0f32; 8];
+            // SAFETY: AVX2 is available (checked above).
+            unsafe {
+                let v = exp_avx2(_mm256_loadu_ps(chunk.as_ptr()));
+                _mm256_storeu_ps(out.as_mut_ptr(), v);
+            }
+            for (x, o) in chunk.iter().zip(out) {
+                let want = exp(*x);
+                assert!(
+                    o.to_bits() == want.to_bits() || (o.is_nan() && want.is_nan()),
+                    "exp({x})"
+                );
+            }
+        }
     }
 
     #[test]

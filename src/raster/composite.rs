@@ -12,12 +12,15 @@
 //! `exp` is [`crate::math::fastexp::exp`]; clamping σ at 30 keeps `o·exp(−σ)` out of
 //! denormals and changes nothing, since `exp(−30) < 1/255`.
 //!
-//! The blend of one splat over one tile row (16 pixels) is written once, lane by lane, in
-//! [`blend_row`]. It is compiled three ways that give the same bits: as is (baseline
-//! x86-64 / any target), inside an `avx2` function chosen at run time (LLVM vectorizes the
-//! 16 lanes as two 8-wide vectors), and pixel by pixel ([`Kernel::Scalar`], the reference
-//! the others are tested against). Neither path contracts to FMA, so every lane performs
-//! the same IEEE operations as the scalar code.
+//! Loop order: per tile, the tile's splats are gathered once into a contiguous list with the
+//! rows each can reach; then each group of 8 pixels (half a tile row) walks the list front
+//! to back with its state in registers, until all 8 pixels have stopped. Pixels are
+//! independent, so the order in which groups run does not change any result.
+//!
+//! The per-pixel arithmetic is written once in scalar Rust ([`blend_lane`], the reference
+//! form, [`Kernel::Scalar`]) and once with AVX2 intrinsics, operation for operation (same
+//! order, no FMA, selects for branches), chosen at run time. Both give the same bits
+//! (tests `simd_and_scalar_kernels_are_bit_identical`, `exp_avx2_matches_scalar_bitwise`).
 
 use super::RenderReport;
 use super::plan::RenderPlan;
@@ -35,8 +38,6 @@ pub const SIGMA_CLAMP: f32 = 30.0;
 /// Floor of alpha in `ED = D / max(alpha, ·)` (gsplat).
 pub const EXPECTED_DEPTH_EPS: f32 = 1e-10;
 
-const LANES: usize = TILE_SIZE;
-
 /// Which compiled form of the blend kernel runs. All give identical bits.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Kernel {
@@ -47,33 +48,51 @@ pub enum Kernel {
     Scalar,
 }
 
-/// Blend state of one tile, structure of arrays by row.
-#[derive(Clone)]
-struct TileState {
-    t: [[f32; LANES]; TILE_SIZE],
-    r: [[f32; LANES]; TILE_SIZE],
-    g: [[f32; LANES]; TILE_SIZE],
-    b: [[f32; LANES]; TILE_SIZE],
-    d: [[f32; LANES]; TILE_SIZE],
-    n: [[u32; LANES]; TILE_SIZE],
-    active: [[u32; LANES]; TILE_SIZE],
+/// Pixels per SIMD group (one AVX2 register of f32).
+const GROUP: usize = 8;
+
+/// A splat as one tile sees it: its data, the tile rows `[row_lo, row_hi)` it can reach and
+/// its position in the tile's list plus one (what `n_contrib` records).
+#[derive(Clone, Copy, Debug)]
+struct TileSplat {
+    s: Splat,
+    row_lo: u32,
+    row_hi: u32,
+    pos1: u32,
 }
 
-impl TileState {
-    fn new() -> Self {
-        TileState {
-            t: [[1.0; LANES]; TILE_SIZE],
-            r: [[0.0; LANES]; TILE_SIZE],
-            g: [[0.0; LANES]; TILE_SIZE],
-            b: [[0.0; LANES]; TILE_SIZE],
-            d: [[0.0; LANES]; TILE_SIZE],
-            n: [[0; LANES]; TILE_SIZE],
-            active: [[0; LANES]; TILE_SIZE],
+/// Blend state of a group of 8 pixels.
+#[derive(Clone, Copy)]
+struct Group {
+    t: [f32; GROUP],
+    r: [f32; GROUP],
+    g: [f32; GROUP],
+    b: [f32; GROUP],
+    d: [f32; GROUP],
+    n: [u32; GROUP],
+    /// `u32::MAX` while the pixel blends, 0 once it stopped (or lies outside the image).
+    active: [u32; GROUP],
+}
+
+impl Group {
+    fn new(valid_lanes: usize) -> Group {
+        let mut active = [0; GROUP];
+        for a in active.iter_mut().take(valid_lanes) {
+            *a = u32::MAX;
+        }
+        Group {
+            t: [1.0; GROUP],
+            r: [0.0; GROUP],
+            g: [0.0; GROUP],
+            b: [0.0; GROUP],
+            d: [0.0; GROUP],
+            n: [0; GROUP],
+            active,
         }
     }
 }
 
-/// Blend one splat into one pixel. The single definition of the per-pixel arithmetic.
+/// Blend one splat into one pixel. The single scalar definition of the per-pixel arithmetic.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn blend_lane<const DEPTH: bool, const TRACK: bool>(
@@ -116,77 +135,148 @@ fn blend_lane<const DEPTH: bool, const TRACK: bool>(
     *active = if stop { 0 } else { *active };
 }
 
-/// Blend one splat into one tile row; returns whether any pixel of the row is still active.
-#[inline(always)]
-fn blend_row<const DEPTH: bool, const TRACK: bool>(
-    s: &Splat,
-    px: &[f32; LANES],
+/// Walk the tile's list for one group, lane by lane (the reference form, and the fallback
+/// without AVX2). Returns the Gaussian-pixel evaluations (8 per splat visited).
+#[inline(never)]
+fn blend_group_lanes<const DEPTH: bool, const TRACK: bool>(
+    list: &[TileSplat],
+    px: &[f32; GROUP],
     py: f32,
-    pos1: u32,
-    st: &mut TileState,
-    row: usize,
-) -> bool {
-    let dy = s.mean[1] - py;
-    let (t, r, g, b) = (
-        &mut st.t[row],
-        &mut st.r[row],
-        &mut st.g[row],
-        &mut st.b[row],
-    );
-    let (d, n, act) = (&mut st.d[row], &mut st.n[row], &mut st.active[row]);
-    let mut any = 0u32;
-    for l in 0..LANES {
-        let dx = s.mean[0] - px[l];
-        blend_lane::<DEPTH, TRACK>(
-            s,
-            dx,
-            dy,
-            pos1,
-            &mut t[l],
-            &mut r[l],
-            &mut g[l],
-            &mut b[l],
-            &mut d[l],
-            &mut n[l],
-            &mut act[l],
-        );
-        any |= act[l];
+    row: u32,
+    st: &mut Group,
+) -> u64 {
+    let mut pairs = 0;
+    for ts in list {
+        if row < ts.row_lo || row >= ts.row_hi {
+            continue;
+        }
+        if st.active.iter().all(|&a| a == 0) {
+            break;
+        }
+        pairs += GROUP as u64;
+        let dy = ts.s.mean[1] - py;
+        #[allow(clippy::needless_range_loop)] // `l` indexes seven state arrays
+        for l in 0..GROUP {
+            let dx = ts.s.mean[0] - px[l];
+            blend_lane::<DEPTH, TRACK>(
+                &ts.s,
+                dx,
+                dy,
+                ts.pos1,
+                &mut st.t[l],
+                &mut st.r[l],
+                &mut st.g[l],
+                &mut st.b[l],
+                &mut st.d[l],
+                &mut st.n[l],
+                &mut st.active[l],
+            );
+        }
     }
-    any != 0
+    pairs
 }
 
-/// The reference form: one pixel at a time.
-#[inline(never)]
-fn blend_row_scalar<const DEPTH: bool, const TRACK: bool>(
-    s: &Splat,
-    px: &[f32; LANES],
-    py: f32,
-    pos1: u32,
-    st: &mut TileState,
-    row: usize,
-) -> bool {
-    let dy = s.mean[1] - py;
-    let mut any = false;
-    for l in 0..LANES {
-        // black_box keeps LLVM from re-vectorizing this loop.
-        let l = std::hint::black_box(l);
-        let dx = s.mean[0] - px[l];
-        blend_lane::<DEPTH, TRACK>(
-            s,
-            dx,
-            dy,
-            pos1,
-            &mut st.t[row][l],
-            &mut st.r[row][l],
-            &mut st.g[row][l],
-            &mut st.b[row][l],
-            &mut st.d[row][l],
-            &mut st.n[row][l],
-            &mut st.active[row][l],
-        );
-        any |= st.active[row][l] != 0;
+/// [`blend_group_lanes`] with AVX2 intrinsics: [`blend_lane`]'s operations one for one,
+/// the group's state held in registers for the whole walk.
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::{
+        ALPHA_THRESHOLD, GROUP, Group, MAX_ALPHA, SIGMA_CLAMP, TRANSMITTANCE_STOP, TileSplat,
+    };
+    use crate::math::fastexp::exp_avx2;
+    use std::arch::x86_64::*;
+
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn blend_group<const DEPTH: bool, const TRACK: bool>(
+        list: &[TileSplat],
+        px: &[f32; GROUP],
+        py: f32,
+        row: u32,
+        st: &mut Group,
+    ) -> u64 {
+        let c = |x: f32| _mm256_set1_ps(x);
+        // SAFETY: every array below holds exactly 8 elements (GROUP).
+        let (pxv, mut t, mut r, mut g, mut b, mut d, mut n, mut act) = unsafe {
+            (
+                _mm256_loadu_ps(px.as_ptr()),
+                _mm256_loadu_ps(st.t.as_ptr()),
+                _mm256_loadu_ps(st.r.as_ptr()),
+                _mm256_loadu_ps(st.g.as_ptr()),
+                _mm256_loadu_ps(st.b.as_ptr()),
+                _mm256_loadu_ps(st.d.as_ptr()),
+                _mm256_loadu_si256(st.n.as_ptr() as *const __m256i),
+                _mm256_castsi256_ps(_mm256_loadu_si256(st.active.as_ptr() as *const __m256i)),
+            )
+        };
+        let mut pairs = 0;
+        for ts in list {
+            if row < ts.row_lo || row >= ts.row_hi {
+                continue;
+            }
+            if _mm256_movemask_ps(act) == 0 {
+                break;
+            }
+            pairs += GROUP as u64;
+            let s = &ts.s;
+            let dy = s.mean[1] - py;
+            // (C·dy)·dy and dy are the same in every lane: computed once in scalar.
+            let cdd = c(s.conic[2] * dy * dy);
+            let dx = _mm256_sub_ps(c(s.mean[0]), pxv);
+            let sum = _mm256_add_ps(_mm256_mul_ps(_mm256_mul_ps(c(s.conic[0]), dx), dx), cdd);
+            let sigma = _mm256_add_ps(
+                _mm256_mul_ps(c(0.5), sum),
+                _mm256_mul_ps(_mm256_mul_ps(c(s.conic[1]), dx), c(dy)),
+            );
+            let lt = _mm256_cmp_ps::<_CMP_LT_OQ>(sigma, c(SIGMA_CLAMP));
+            let clamped = _mm256_blendv_ps(c(SIGMA_CLAMP), sigma, lt);
+            // SAFETY: this function runs only on CPUs with AVX2.
+            let e = unsafe { exp_avx2(_mm256_xor_ps(clamped, c(-0.0))) };
+            let a = _mm256_mul_ps(c(s.opacity), e);
+            let alpha = _mm256_min_ps(a, c(MAX_ALPHA));
+            let nt = _mm256_mul_ps(t, _mm256_sub_ps(c(1.0), alpha));
+            let valid = _mm256_and_ps(
+                act,
+                _mm256_and_ps(
+                    _mm256_cmp_ps::<_CMP_GE_OQ>(sigma, c(0.0)),
+                    _mm256_cmp_ps::<_CMP_GE_OQ>(alpha, c(ALPHA_THRESHOLD)),
+                ),
+            );
+            let stop = _mm256_and_ps(
+                valid,
+                _mm256_cmp_ps::<_CMP_LE_OQ>(nt, c(TRANSMITTANCE_STOP)),
+            );
+            let blend = _mm256_andnot_ps(stop, valid);
+            let w = _mm256_mul_ps(alpha, t);
+            r = _mm256_blendv_ps(r, _mm256_add_ps(r, _mm256_mul_ps(c(s.color[0]), w)), blend);
+            g = _mm256_blendv_ps(g, _mm256_add_ps(g, _mm256_mul_ps(c(s.color[1]), w)), blend);
+            b = _mm256_blendv_ps(b, _mm256_add_ps(b, _mm256_mul_ps(c(s.color[2]), w)), blend);
+            if DEPTH {
+                d = _mm256_blendv_ps(d, _mm256_add_ps(d, _mm256_mul_ps(c(s.depth), w)), blend);
+            }
+            if TRACK {
+                let pos = _mm256_set1_epi32(ts.pos1 as i32);
+                n = _mm256_blendv_epi8(n, pos, _mm256_castps_si256(blend));
+            }
+            t = _mm256_blendv_ps(t, nt, blend);
+            act = _mm256_andnot_ps(stop, act);
+        }
+        // SAFETY: as above, 8-element arrays.
+        unsafe {
+            _mm256_storeu_ps(st.t.as_mut_ptr(), t);
+            _mm256_storeu_ps(st.r.as_mut_ptr(), r);
+            _mm256_storeu_ps(st.g.as_mut_ptr(), g);
+            _mm256_storeu_ps(st.b.as_mut_ptr(), b);
+            _mm256_storeu_ps(st.d.as_mut_ptr(), d);
+            _mm256_storeu_si256(st.n.as_mut_ptr() as *mut __m256i, n);
+            _mm256_storeu_si256(
+                st.active.as_mut_ptr() as *mut __m256i,
+                _mm256_castps_si256(act),
+            );
+        }
+        pairs
     }
-    any
 }
 
 /// Outputs of one band of 16 image rows.
@@ -201,9 +291,9 @@ struct BandOut {
     pairs: u64,
 }
 
-/// What to write, fixed for a whole render.
+/// Which images to write, fixed for a whole render (a subset of what the plan computes).
 #[derive(Clone, Copy)]
-pub(crate) struct Want {
+pub struct Want {
     pub rgb: bool,
     pub alpha: bool,
     pub depth: bool,
@@ -213,7 +303,7 @@ pub(crate) struct Want {
 
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn band_impl<const DEPTH: bool, const TRACK: bool, const SCALAR: bool>(
+fn band_impl<const DEPTH: bool, const TRACK: bool, const AVX2: bool>(
     ty: usize,
     width: usize,
     height: usize,
@@ -259,100 +349,85 @@ fn band_impl<const DEPTH: bool, const TRACK: bool, const SCALAR: bool>(
         },
         pairs: 0,
     };
-    let mut st = TileState::new();
+    // Reused for every tile of the band: no allocation once it has grown.
+    let mut list: Vec<TileSplat> = Vec::new();
     for tx in 0..bins.tiles_x {
         let x0 = tx * TILE_SIZE;
         let cols = TILE_SIZE.min(width - x0);
-        // Reset the state; pixels outside the image start inactive.
-        st.t = [[1.0; LANES]; TILE_SIZE];
-        st.r = [[0.0; LANES]; TILE_SIZE];
-        st.g = [[0.0; LANES]; TILE_SIZE];
-        st.b = [[0.0; LANES]; TILE_SIZE];
-        if DEPTH {
-            st.d = [[0.0; LANES]; TILE_SIZE];
-        }
-        if TRACK {
-            st.n = [[0; LANES]; TILE_SIZE];
-        }
-        let mut alive = [false; TILE_SIZE];
-        for (row, a) in st.active.iter_mut().enumerate() {
-            for (l, v) in a.iter_mut().enumerate() {
-                *v = if row < rows && l < cols { 1 } else { 0 };
-            }
-            alive[row] = row < rows && cols > 0;
-        }
-        let mut alive_rows = rows;
-        let mut px = [0f32; LANES];
-        for (l, v) in px.iter_mut().enumerate() {
-            *v = (x0 + l) as f32 + 0.5;
-        }
-        let list = bins.tile(ty * bins.tiles_x + tx);
-        for (pos, &gid) in list.iter().enumerate() {
-            let s = &p.splats[gid as usize];
-            let (r0, r1) = if plan.cull_rows {
+        list.clear();
+        for (pos, &gid) in bins.tile(ty * bins.tiles_x + tx).iter().enumerate() {
+            let s = p.splats[gid as usize];
+            let (lo, hi) = if plan.cull_rows {
                 // Rows beyond radius + 1 px have α < 1/255 (SPEC.md §5.4).
                 let ry = p.radii[gid as usize][1] as f32 + 1.0;
                 let lo = ((s.mean[1] - ry).floor() - y0 as f32).max(0.0);
                 let hi = ((s.mean[1] + ry).ceil() - y0 as f32 + 1.0).min(rows as f32);
-                (lo as usize, if hi > lo { hi as usize } else { lo as usize })
+                (lo as u32, if hi > lo { hi as u32 } else { lo as u32 })
             } else {
-                (0, rows)
+                (0, rows as u32)
             };
-            let pos1 = pos as u32 + 1;
-            #[allow(clippy::needless_range_loop)] // `row` indexes the tile state too
-            for row in r0..r1 {
-                if !alive[row] {
-                    continue;
-                }
-                out.pairs += LANES as u64;
-                let py = (y0 + row) as f32 + 0.5;
-                let still = if SCALAR {
-                    blend_row_scalar::<DEPTH, TRACK>(s, &px, py, pos1, &mut st, row)
-                } else {
-                    blend_row::<DEPTH, TRACK>(s, &px, py, pos1, &mut st, row)
-                };
-                if !still {
-                    alive[row] = false;
-                    alive_rows -= 1;
-                }
-            }
-            if alive_rows == 0 {
-                break;
+            if lo < hi {
+                list.push(TileSplat {
+                    s,
+                    row_lo: lo,
+                    row_hi: hi,
+                    pos1: pos as u32 + 1,
+                });
             }
         }
-        // Write the tile's pixels into the band.
         for row in 0..rows {
-            for l in 0..cols {
-                let i = row * width + x0 + l;
-                let t = st.t[row][l];
-                if want.rgb {
-                    let c = [st.r[row][l], st.g[row][l], st.b[row][l]];
-                    for k in 0..3 {
-                        out.rgb[i * 3 + k] = if plan.apply_background {
-                            c[k] + t * background[k]
-                        } else {
-                            c[k]
-                        };
+            let py = (y0 + row) as f32 + 0.5;
+            for gx in (0..cols).step_by(GROUP) {
+                let lanes = GROUP.min(cols - gx);
+                let mut px = [0f32; GROUP];
+                for (l, v) in px.iter_mut().enumerate() {
+                    *v = (x0 + gx + l) as f32 + 0.5;
+                }
+                let mut st = Group::new(lanes);
+                #[cfg(target_arch = "x86_64")]
+                let pairs = if AVX2 {
+                    // SAFETY: AVX2 == true only inside `band_avx2`, entered after detection.
+                    unsafe {
+                        avx2::blend_group::<DEPTH, TRACK>(&list, &px, py, row as u32, &mut st)
                     }
-                }
-                let alpha = 1.0 - t;
-                if want.alpha {
-                    out.alpha[i] = alpha;
-                }
-                if want.depth {
-                    out.depth[i] = st.d[row][l];
-                }
-                if want.expected_depth {
-                    let den = if alpha > EXPECTED_DEPTH_EPS {
-                        alpha
-                    } else {
-                        EXPECTED_DEPTH_EPS
-                    };
-                    out.expected_depth[i] = st.d[row][l] / den;
-                }
-                if want.backward_state {
-                    out.final_t[i] = t;
-                    out.n_contrib[i] = st.n[row][l];
+                } else {
+                    blend_group_lanes::<DEPTH, TRACK>(&list, &px, py, row as u32, &mut st)
+                };
+                #[cfg(not(target_arch = "x86_64"))]
+                let pairs = blend_group_lanes::<DEPTH, TRACK>(&list, &px, py, row as u32, &mut st);
+                out.pairs += pairs;
+                for l in 0..lanes {
+                    let i = row * width + x0 + gx + l;
+                    let t = st.t[l];
+                    if want.rgb {
+                        let c = [st.r[l], st.g[l], st.b[l]];
+                        for k in 0..3 {
+                            out.rgb[i * 3 + k] = if plan.apply_background {
+                                c[k] + t * background[k]
+                            } else {
+                                c[k]
+                            };
+                        }
+                    }
+                    let alpha = 1.0 - t;
+                    if want.alpha {
+                        out.alpha[i] = alpha;
+                    }
+                    if want.depth {
+                        out.depth[i] = st.d[l];
+                    }
+                    if want.expected_depth {
+                        let den = if alpha > EXPECTED_DEPTH_EPS {
+                            alpha
+                        } else {
+                            EXPECTED_DEPTH_EPS
+                        };
+                        out.expected_depth[i] = st.d[l] / den;
+                    }
+                    if want.backward_state {
+                        out.final_t[i] = t;
+                        out.n_contrib[i] = st.n[l];
+                    }
                 }
             }
         }
@@ -373,7 +448,7 @@ unsafe fn band_avx2<const DEPTH: bool, const TRACK: bool>(
     background: [f32; 3],
     want: Want,
 ) -> BandOut {
-    band_impl::<DEPTH, TRACK, false>(ty, width, height, p, bins, plan, background, want)
+    band_impl::<DEPTH, TRACK, true>(ty, width, height, p, bins, plan, background, want)
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -388,11 +463,8 @@ fn band<const DEPTH: bool, const TRACK: bool>(
     want: Want,
     kernel: Kernel,
 ) -> BandOut {
-    if kernel == Kernel::Scalar {
-        return band_impl::<DEPTH, TRACK, true>(ty, width, height, p, bins, plan, background, want);
-    }
     #[cfg(target_arch = "x86_64")]
-    if std::is_x86_feature_detected!("avx2") {
+    if kernel == Kernel::Auto && std::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU supports AVX2 (checked just above).
         return unsafe {
             band_avx2::<DEPTH, TRACK>(ty, width, height, p, bins, plan, background, want)
@@ -415,7 +487,7 @@ pub struct CompositeOut {
 /// Blend all tiles. Parallel over bands of 16 rows; each band's pixels are computed by one
 /// task in a fixed order, so the output does not depend on the thread count.
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn composite(
+pub fn composite(
     width: usize,
     height: usize,
     p: &Projected,
