@@ -17,7 +17,8 @@
 //!    cull if both radii are 0 or the box `mean2d ± r` misses the image.
 //! 8. Colour: `dir = (μ − C)/|μ − C|`, `rgb = max(Σ_k coeff_k·Y_k(dir) + 0.5, 0)`.
 //!
-//! A Gaussian with a non-finite parameter (among those the plan uses) is skipped and counted.
+//! A Gaussian with a non-finite parameter (among those the plan uses), or whose camera-space
+//! mean or colour overflows f32, is skipped and counted as `non_finite`.
 
 use super::plan::RenderPlan;
 use super::{RenderOptions, RenderReport};
@@ -185,6 +186,9 @@ pub fn project_one(
     let x = dot3(r[0], mean) + cam.t_cw[0];
     let y = dot3(r[1], mean) + cam.t_cw[1];
     let z = dot3(r[2], mean) + cam.t_cw[2];
+    if !(x.is_finite() && y.is_finite() && z.is_finite()) {
+        return Err(Cull::NonFinite); // finite but huge means overflow here
+    }
     if z < NEAR_PLANE {
         return Err(Cull::Near);
     }
@@ -294,6 +298,9 @@ pub fn project_one(
         }
         let v = acc + 0.5;
         *out = if v > 0.0 { v } else { 0.0 };
+    }
+    if !color.iter().all(|c| c.is_finite()) {
+        return Err(Cull::NonFinite); // finite but huge SH coefficients overflow here
     }
     let splat = Splat {
         mean: mean2d,

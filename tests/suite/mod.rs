@@ -1,3 +1,4 @@
+mod cli;
 mod common;
 mod golden_drjit;
 mod mitsuba_crosscheck;

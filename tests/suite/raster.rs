@@ -155,7 +155,11 @@ fn hard_cases_produce_finite_outputs() {
     g.push([-1.7, -1.7, 3.0], [-2.0; 3], q, 1.0, [0.5; 3], &rest); // corners
     g.push([1.7, 1.7, 3.0], [-2.0; 3], q, 1.0, [0.5; 3], &rest);
     g.push([0.0, 0.0, 3.0], [-30.0, 5.0, 0.0], q, 3.0, [0.5; 3], &rest); // needle
-    let n_good = g.len();
+    g.push([3e38, 3e38, 3e38], [0.0; 3], q, 1.0, [0.5; 3], &rest); // beyond the far plane
+    let huge = vec![f32::MAX; rest.len()];
+    g.push([0.0, 0.0, 3.0], [-1.0; 3], q, 1.0, [f32::MAX; 3], &huge); // colour overflows
+    let n_overflow = 1;
+    let n_good = g.len() - n_overflow; // includes the far one
     let bad = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY];
     let mut n_bad = 0;
     for &b in &bad {
@@ -184,7 +188,7 @@ fn hard_cases_produce_finite_outputs() {
             };
             let r = render(&g, &cam, &opts).unwrap();
             assert_all_finite(&r, &format!("{w}x{h}"));
-            assert_eq!(r.report.non_finite, n_bad as u64, "{w}x{h}");
+            assert_eq!(r.report.non_finite, (n_bad + n_overflow) as u64, "{w}x{h}");
             // The zero quaternion, plus (for wide images) the 1e6-scale Gaussian at z = 0.02
             // whose 2D covariance determinant overflows f32: both are skipped as degenerate.
             assert!(
@@ -199,7 +203,7 @@ fn hard_cases_produce_finite_outputs() {
                 + r.report.off_screen
                 + r.report.behind_near_plane
                 + r.report.beyond_far_plane;
-            assert_eq!(counted as usize, n_good + n_bad);
+            assert_eq!(counted as usize, n_good + n_overflow + n_bad);
         }
     }
 }
