@@ -1,6 +1,6 @@
 //! Renders against the independent Dr.Jit float64 reference
 //! (`reference_data/generate/make_raster_goldens.py`).
-use super::common::reference;
+use super::common::{case_dirs, reference};
 use unseen::camera::inria::read_cameras_json;
 use unseen::gaussian::ply::read_ply;
 use unseen::io::image::read_exr;
@@ -43,17 +43,8 @@ fn compare(got: &[f32], want: &[f32], amb: &[f32], ch: usize, atol: f64, rtol: f
 
 #[test]
 fn drjit_forward_goldens() {
-    let root = reference("drjit/raster");
-    let mut cases: Vec<_> = std::fs::read_dir(&root)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .collect();
-    cases.sort();
-    assert!(
-        cases.len() >= 5,
-        "expected at least 5 golden cases in {}",
-        root.display()
-    );
+    let cases = case_dirs("drjit/raster");
+    assert!(cases.len() >= 5, "expected at least 5 golden cases");
     let mut failures = Vec::new();
     for dir in cases {
         let meta: serde_json::Value =
@@ -136,10 +127,8 @@ fn drjit_forward_goldens() {
 /// script wrote: f_rest channel-major in the file, coefficient-major in memory.
 #[test]
 fn drjit_ply_values_load_exactly() {
-    let root = reference("drjit/raster");
     let mut degrees = Vec::new();
-    for e in std::fs::read_dir(&root).unwrap() {
-        let dir = e.unwrap().path();
+    for dir in case_dirs("drjit/raster") {
         let head: serde_json::Value =
             serde_json::from_slice(&std::fs::read(dir.join("params_head.json")).unwrap()).unwrap();
         let (g, info) = read_ply(&dir.join("scene.ply")).unwrap();

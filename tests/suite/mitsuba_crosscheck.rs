@@ -5,7 +5,7 @@
 //! densities down to its extent-4 shell while we drop α < 1/255, and it colours by the ray
 //! direction instead of the direction to the mean. On small Gaussians near the axis these
 //! differ by a few 1e-3 at the splat edges (tolerances below).
-use super::common::reference;
+use super::common::case_dirs;
 use unseen::camera::inria::read_cameras_json;
 use unseen::gaussian::ply::read_ply;
 use unseen::io::image::read_exr;
@@ -25,12 +25,7 @@ const MITSUBA_OUTLIER_FRACTION: f64 = 0.005;
 
 #[test]
 fn mitsuba_ellipsoids_crosscheck() {
-    let root = reference("mitsuba/ellipsoids");
-    let mut cases: Vec<_> = std::fs::read_dir(&root)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .collect();
-    cases.sort();
+    let cases = case_dirs("mitsuba/ellipsoids");
     assert!(cases.len() >= 2);
     for dir in cases {
         let (scene, _) = read_ply(&dir.join("scene.ply")).unwrap();
