@@ -13,8 +13,8 @@
 //! denormals and changes nothing, since `exp(−30) < 1/255`.
 //!
 //! Loop order: per tile, the tile's splats are gathered once into a contiguous list with the
-//! rows each can reach; then each group of 8 pixels (half a tile row) walks the list front
-//! to back with its state in registers, until all 8 pixels have stopped. Pixels are
+//! rows each can reach; then each tile row (16 pixels, two AVX2 registers) walks the list
+//! front to back with its state in registers, until all 16 pixels have stopped. Pixels are
 //! independent, so the order in which groups run does not change any result.
 //!
 //! The per-pixel arithmetic is written once in scalar Rust ([`blend_lane`], the reference
@@ -48,8 +48,10 @@ pub enum Kernel {
     Scalar,
 }
 
-/// Pixels per SIMD group (one AVX2 register of f32).
-const GROUP: usize = 8;
+/// Pixels walked together: one tile row (two AVX2 registers of f32).
+const GROUP: usize = TILE_SIZE;
+/// Splats gathered from a tile's list at a time (gsplat loads a block's worth, 256).
+const BATCH: usize = 256;
 
 /// A splat as one tile sees it: its data, the tile rows `[row_lo, row_hi)` it can reach and
 /// its position in the tile's list plus one (what `n_contrib` records).
@@ -61,7 +63,7 @@ struct TileSplat {
     pos1: u32,
 }
 
-/// Blend state of a group of 8 pixels.
+/// Blend state of a group of pixels (one tile row).
 #[derive(Clone, Copy)]
 struct Group {
     t: [f32; GROUP],
@@ -136,7 +138,7 @@ fn blend_lane<const DEPTH: bool, const TRACK: bool>(
 }
 
 /// Walk the tile's list for one group, lane by lane (the reference form, and the fallback
-/// without AVX2). Returns the Gaussian-pixel evaluations (8 per splat visited).
+/// without AVX2). Returns the Gaussian-pixel evaluations (16 per splat visited).
 #[inline(never)]
 fn blend_group_lanes<const DEPTH: bool, const TRACK: bool>(
     list: &[TileSplat],
@@ -186,6 +188,9 @@ mod avx2 {
     use crate::math::fastexp::exp_avx2;
     use std::arch::x86_64::*;
 
+    /// Registers per group: 16 pixels are two 8-lane halves.
+    const H: usize = super::GROUP / 8;
+
     /// # Safety
     /// The CPU must support AVX2.
     #[target_feature(enable = "avx2")]
@@ -197,83 +202,99 @@ mod avx2 {
         st: &mut Group,
     ) -> u64 {
         let c = |x: f32| _mm256_set1_ps(x);
-        // SAFETY: every array below holds exactly 8 elements (GROUP).
-        let (pxv, mut t, mut r, mut g, mut b, mut d, mut n, mut act) = unsafe {
-            (
-                _mm256_loadu_ps(px.as_ptr()),
-                _mm256_loadu_ps(st.t.as_ptr()),
-                _mm256_loadu_ps(st.r.as_ptr()),
-                _mm256_loadu_ps(st.g.as_ptr()),
-                _mm256_loadu_ps(st.b.as_ptr()),
-                _mm256_loadu_ps(st.d.as_ptr()),
-                _mm256_loadu_si256(st.n.as_ptr() as *const __m256i),
-                _mm256_castsi256_ps(_mm256_loadu_si256(st.active.as_ptr() as *const __m256i)),
-            )
-        };
+        let zero = _mm256_setzero_ps();
+        let (mut pxv, mut t, mut r, mut g, mut b, mut d) = (
+            [zero; H], [zero; H], [zero; H], [zero; H], [zero; H], [zero; H],
+        );
+        let (mut n, mut act) = ([_mm256_setzero_si256(); H], [zero; H]);
+        for h in 0..H {
+            let o = 8 * h;
+            // SAFETY: o + 8 <= GROUP, the length of every array read here.
+            unsafe {
+                pxv[h] = _mm256_loadu_ps(px.as_ptr().add(o));
+                t[h] = _mm256_loadu_ps(st.t.as_ptr().add(o));
+                r[h] = _mm256_loadu_ps(st.r.as_ptr().add(o));
+                g[h] = _mm256_loadu_ps(st.g.as_ptr().add(o));
+                b[h] = _mm256_loadu_ps(st.b.as_ptr().add(o));
+                d[h] = _mm256_loadu_ps(st.d.as_ptr().add(o));
+                n[h] = _mm256_loadu_si256(st.n.as_ptr().add(o) as *const __m256i);
+                act[h] = _mm256_castsi256_ps(_mm256_loadu_si256(
+                    st.active.as_ptr().add(o) as *const __m256i
+                ));
+            }
+        }
         let mut pairs = 0;
         for ts in list {
             if row < ts.row_lo || row >= ts.row_hi {
                 continue;
             }
-            if _mm256_movemask_ps(act) == 0 {
+            if _mm256_movemask_ps(_mm256_or_ps(act[0], act[1])) == 0 {
                 break;
             }
             pairs += GROUP as u64;
             let s = &ts.s;
             let dy = s.mean[1] - py;
             // (C·dy)·dy and dy are the same in every lane: computed once in scalar.
-            let cdd = c(s.conic[2] * dy * dy);
-            let dx = _mm256_sub_ps(c(s.mean[0]), pxv);
-            let sum = _mm256_add_ps(_mm256_mul_ps(_mm256_mul_ps(c(s.conic[0]), dx), dx), cdd);
-            let sigma = _mm256_add_ps(
-                _mm256_mul_ps(c(0.5), sum),
-                _mm256_mul_ps(_mm256_mul_ps(c(s.conic[1]), dx), c(dy)),
-            );
-            let lt = _mm256_cmp_ps::<_CMP_LT_OQ>(sigma, c(SIGMA_CLAMP));
-            let clamped = _mm256_blendv_ps(c(SIGMA_CLAMP), sigma, lt);
-            // SAFETY: this function runs only on CPUs with AVX2.
-            let e = unsafe { exp_avx2(_mm256_xor_ps(clamped, c(-0.0))) };
-            let a = _mm256_mul_ps(c(s.opacity), e);
-            let alpha = _mm256_min_ps(a, c(MAX_ALPHA));
-            let nt = _mm256_mul_ps(t, _mm256_sub_ps(c(1.0), alpha));
-            let valid = _mm256_and_ps(
-                act,
-                _mm256_and_ps(
-                    _mm256_cmp_ps::<_CMP_GE_OQ>(sigma, c(0.0)),
-                    _mm256_cmp_ps::<_CMP_GE_OQ>(alpha, c(ALPHA_THRESHOLD)),
-                ),
-            );
-            let stop = _mm256_and_ps(
-                valid,
-                _mm256_cmp_ps::<_CMP_LE_OQ>(nt, c(TRANSMITTANCE_STOP)),
-            );
-            let blend = _mm256_andnot_ps(stop, valid);
-            let w = _mm256_mul_ps(alpha, t);
-            r = _mm256_blendv_ps(r, _mm256_add_ps(r, _mm256_mul_ps(c(s.color[0]), w)), blend);
-            g = _mm256_blendv_ps(g, _mm256_add_ps(g, _mm256_mul_ps(c(s.color[1]), w)), blend);
-            b = _mm256_blendv_ps(b, _mm256_add_ps(b, _mm256_mul_ps(c(s.color[2]), w)), blend);
-            if DEPTH {
-                d = _mm256_blendv_ps(d, _mm256_add_ps(d, _mm256_mul_ps(c(s.depth), w)), blend);
+            let (cdd, dyv) = (c(s.conic[2] * dy * dy), c(dy));
+            let (mx, ca, cb, op) = (c(s.mean[0]), c(s.conic[0]), c(s.conic[1]), c(s.opacity));
+            let pos = _mm256_set1_epi32(ts.pos1 as i32);
+            for h in 0..H {
+                let dx = _mm256_sub_ps(mx, pxv[h]);
+                let sum = _mm256_add_ps(_mm256_mul_ps(_mm256_mul_ps(ca, dx), dx), cdd);
+                let sigma = _mm256_add_ps(
+                    _mm256_mul_ps(c(0.5), sum),
+                    _mm256_mul_ps(_mm256_mul_ps(cb, dx), dyv),
+                );
+                // `min_ps(a, b)` is `a < b ? a : b` (b when unordered): the scalar select.
+                let clamped = _mm256_min_ps(sigma, c(SIGMA_CLAMP));
+                // SAFETY: this function runs only on CPUs with AVX2.
+                let e = unsafe { exp_avx2(_mm256_xor_ps(clamped, c(-0.0))) };
+                let alpha = _mm256_min_ps(_mm256_mul_ps(op, e), c(MAX_ALPHA));
+                let nt = _mm256_mul_ps(t[h], _mm256_sub_ps(c(1.0), alpha));
+                let valid = _mm256_and_ps(
+                    act[h],
+                    _mm256_and_ps(
+                        _mm256_cmp_ps::<_CMP_GE_OQ>(sigma, zero),
+                        _mm256_cmp_ps::<_CMP_GE_OQ>(alpha, c(ALPHA_THRESHOLD)),
+                    ),
+                );
+                let stop = _mm256_and_ps(
+                    valid,
+                    _mm256_cmp_ps::<_CMP_LE_OQ>(nt, c(TRANSMITTANCE_STOP)),
+                );
+                let blend = _mm256_andnot_ps(stop, valid);
+                let w = _mm256_mul_ps(alpha, t[h]);
+                let acc = |v: __m256, k: f32| {
+                    _mm256_blendv_ps(v, _mm256_add_ps(v, _mm256_mul_ps(c(k), w)), blend)
+                };
+                r[h] = acc(r[h], s.color[0]);
+                g[h] = acc(g[h], s.color[1]);
+                b[h] = acc(b[h], s.color[2]);
+                if DEPTH {
+                    d[h] = acc(d[h], s.depth);
+                }
+                if TRACK {
+                    n[h] = _mm256_blendv_epi8(n[h], pos, _mm256_castps_si256(blend));
+                }
+                t[h] = _mm256_blendv_ps(t[h], nt, blend);
+                act[h] = _mm256_andnot_ps(stop, act[h]);
             }
-            if TRACK {
-                let pos = _mm256_set1_epi32(ts.pos1 as i32);
-                n = _mm256_blendv_epi8(n, pos, _mm256_castps_si256(blend));
-            }
-            t = _mm256_blendv_ps(t, nt, blend);
-            act = _mm256_andnot_ps(stop, act);
         }
-        // SAFETY: as above, 8-element arrays.
-        unsafe {
-            _mm256_storeu_ps(st.t.as_mut_ptr(), t);
-            _mm256_storeu_ps(st.r.as_mut_ptr(), r);
-            _mm256_storeu_ps(st.g.as_mut_ptr(), g);
-            _mm256_storeu_ps(st.b.as_mut_ptr(), b);
-            _mm256_storeu_ps(st.d.as_mut_ptr(), d);
-            _mm256_storeu_si256(st.n.as_mut_ptr() as *mut __m256i, n);
-            _mm256_storeu_si256(
-                st.active.as_mut_ptr() as *mut __m256i,
-                _mm256_castps_si256(act),
-            );
+        for h in 0..H {
+            let o = 8 * h;
+            // SAFETY: as above.
+            unsafe {
+                _mm256_storeu_ps(st.t.as_mut_ptr().add(o), t[h]);
+                _mm256_storeu_ps(st.r.as_mut_ptr().add(o), r[h]);
+                _mm256_storeu_ps(st.g.as_mut_ptr().add(o), g[h]);
+                _mm256_storeu_ps(st.b.as_mut_ptr().add(o), b[h]);
+                _mm256_storeu_ps(st.d.as_mut_ptr().add(o), d[h]);
+                _mm256_storeu_si256(st.n.as_mut_ptr().add(o) as *mut __m256i, n[h]);
+                _mm256_storeu_si256(
+                    st.active.as_mut_ptr().add(o) as *mut __m256i,
+                    _mm256_castps_si256(act[h]),
+                );
+            }
         }
         pairs
     }
@@ -349,85 +370,103 @@ fn band_impl<const DEPTH: bool, const TRACK: bool, const AVX2: bool>(
         },
         pairs: 0,
     };
-    // Reused for every tile of the band: no allocation once it has grown.
-    let mut list: Vec<TileSplat> = Vec::new();
+    // Reused for every tile of the band: no allocation in the loop.
+    let mut batch: Vec<TileSplat> = Vec::with_capacity(BATCH);
+    let mut groups = [Group::new(0); TILE_SIZE];
     for tx in 0..bins.tiles_x {
         let x0 = tx * TILE_SIZE;
         let cols = TILE_SIZE.min(width - x0);
-        list.clear();
-        for (pos, &gid) in bins.tile(ty * bins.tiles_x + tx).iter().enumerate() {
-            let s = p.splats[gid as usize];
-            let (lo, hi) = if plan.cull_rows {
-                // Rows beyond radius + 1 px have α < 1/255 (SPEC.md §5.4).
-                let ry = p.radii[gid as usize][1] as f32 + 1.0;
-                let lo = ((s.mean[1] - ry).floor() - y0 as f32).max(0.0);
-                let hi = ((s.mean[1] + ry).ceil() - y0 as f32 + 1.0).min(rows as f32);
-                (lo as u32, if hi > lo { hi as u32 } else { lo as u32 })
-            } else {
-                (0, rows as u32)
-            };
-            if lo < hi {
-                list.push(TileSplat {
-                    s,
-                    row_lo: lo,
-                    row_hi: hi,
-                    pos1: pos as u32 + 1,
-                });
-            }
+        let lanes = cols;
+        let mut px = [0f32; GROUP];
+        for (l, v) in px.iter_mut().enumerate() {
+            *v = (x0 + l) as f32 + 0.5;
         }
-        for row in 0..rows {
-            let py = (y0 + row) as f32 + 0.5;
-            for gx in (0..cols).step_by(GROUP) {
-                let lanes = GROUP.min(cols - gx);
-                let mut px = [0f32; GROUP];
-                for (l, v) in px.iter_mut().enumerate() {
-                    *v = (x0 + gx + l) as f32 + 0.5;
+        for g in groups.iter_mut().take(rows) {
+            *g = Group::new(lanes);
+        }
+        let mut alive = [false; TILE_SIZE];
+        alive[..rows].fill(lanes > 0);
+        // Gather the tile's list a batch at a time, like gsplat's shared-memory batches: rows
+        // usually stop long before the end of a long list, so most splats are never loaded.
+        let list = bins.tile(ty * bins.tiles_x + tx);
+        for (bi, chunk) in list.chunks(BATCH).enumerate() {
+            if !alive.iter().any(|&a| a) {
+                break;
+            }
+            batch.clear();
+            for (k, &gid) in chunk.iter().enumerate() {
+                let s = p.splats[gid as usize];
+                let (lo, hi) = if plan.cull_rows {
+                    // Rows beyond radius + 1 px have α < 1/255 (SPEC.md §5.4).
+                    let ry = p.radii[gid as usize][1] as f32 + 1.0;
+                    let lo = ((s.mean[1] - ry).floor() - y0 as f32).max(0.0);
+                    let hi = ((s.mean[1] + ry).ceil() - y0 as f32 + 1.0).min(rows as f32);
+                    (lo as u32, if hi > lo { hi as u32 } else { lo as u32 })
+                } else {
+                    (0, rows as u32)
+                };
+                if lo < hi {
+                    let pos1 = (bi * BATCH + k) as u32 + 1;
+                    batch.push(TileSplat {
+                        s,
+                        row_lo: lo,
+                        row_hi: hi,
+                        pos1,
+                    });
                 }
-                let mut st = Group::new(lanes);
+            }
+            for row in 0..rows {
+                if !alive[row] {
+                    continue;
+                }
+                let py = (y0 + row) as f32 + 0.5;
+                let st = &mut groups[row];
                 #[cfg(target_arch = "x86_64")]
                 let pairs = if AVX2 {
                     // SAFETY: AVX2 == true only inside `band_avx2`, entered after detection.
-                    unsafe {
-                        avx2::blend_group::<DEPTH, TRACK>(&list, &px, py, row as u32, &mut st)
-                    }
+                    unsafe { avx2::blend_group::<DEPTH, TRACK>(&batch, &px, py, row as u32, st) }
                 } else {
-                    blend_group_lanes::<DEPTH, TRACK>(&list, &px, py, row as u32, &mut st)
+                    blend_group_lanes::<DEPTH, TRACK>(&batch, &px, py, row as u32, st)
                 };
                 #[cfg(not(target_arch = "x86_64"))]
-                let pairs = blend_group_lanes::<DEPTH, TRACK>(&list, &px, py, row as u32, &mut st);
+                let pairs = blend_group_lanes::<DEPTH, TRACK>(&batch, &px, py, row as u32, st);
                 out.pairs += pairs;
-                for l in 0..lanes {
-                    let i = row * width + x0 + gx + l;
-                    let t = st.t[l];
-                    if want.rgb {
-                        let c = [st.r[l], st.g[l], st.b[l]];
-                        for k in 0..3 {
-                            out.rgb[i * 3 + k] = if plan.apply_background {
-                                c[k] + t * background[k]
-                            } else {
-                                c[k]
-                            };
-                        }
-                    }
-                    let alpha = 1.0 - t;
-                    if want.alpha {
-                        out.alpha[i] = alpha;
-                    }
-                    if want.depth {
-                        out.depth[i] = st.d[l];
-                    }
-                    if want.expected_depth {
-                        let den = if alpha > EXPECTED_DEPTH_EPS {
-                            alpha
+                alive[row] = st.active.iter().any(|&a| a != 0);
+            }
+        }
+        // Write the tile's pixels into the band.
+        for (row, st) in groups.iter().enumerate().take(rows) {
+            for l in 0..lanes {
+                let i = row * width + x0 + l;
+                let t = st.t[l];
+                if want.rgb {
+                    let c = [st.r[l], st.g[l], st.b[l]];
+                    for k in 0..3 {
+                        out.rgb[i * 3 + k] = if plan.apply_background {
+                            c[k] + t * background[k]
                         } else {
-                            EXPECTED_DEPTH_EPS
+                            c[k]
                         };
-                        out.expected_depth[i] = st.d[l] / den;
                     }
-                    if want.backward_state {
-                        out.final_t[i] = t;
-                        out.n_contrib[i] = st.n[l];
-                    }
+                }
+                let alpha = 1.0 - t;
+                if want.alpha {
+                    out.alpha[i] = alpha;
+                }
+                if want.depth {
+                    out.depth[i] = st.d[l];
+                }
+                if want.expected_depth {
+                    let den = if alpha > EXPECTED_DEPTH_EPS {
+                        alpha
+                    } else {
+                        EXPECTED_DEPTH_EPS
+                    };
+                    out.expected_depth[i] = st.d[l] / den;
+                }
+                if want.backward_state {
+                    out.final_t[i] = t;
+                    out.n_contrib[i] = st.n[l];
                 }
             }
         }

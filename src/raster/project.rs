@@ -328,35 +328,42 @@ pub fn project(
     report: &mut RenderReport,
 ) -> Projected {
     let cam = CameraF32::new(cam);
-    let results: Vec<Result<(Splat, [i32; 2]), Cull>> = (0..g.len())
-        .into_par_iter()
-        .with_min_len(4096)
-        .map(|i| project_one(g, i, &cam, plan, opts.antialiased))
-        .collect();
+    let n = g.len();
     let mut out = Projected {
-        splats: Vec::with_capacity(g.len()),
-        radii: Vec::with_capacity(g.len()),
+        splats: vec![Splat::default(); n],
+        radii: vec![[0, 0]; n],
     };
-    for r in results {
-        match r {
-            Ok((s, rad)) => {
-                out.splats.push(s);
-                out.radii.push(rad);
-                report.visible += 1;
-            }
-            Err(c) => {
-                out.splats.push(Splat::default());
-                out.radii.push([0, 0]);
-                match c {
-                    Cull::NonFinite => report.non_finite += 1,
-                    Cull::Near => report.behind_near_plane += 1,
-                    Cull::Far => report.beyond_far_plane += 1,
-                    Cull::Degenerate => report.degenerate += 1,
-                    Cull::LowOpacity => report.low_opacity += 1,
-                    Cull::OffScreen => report.off_screen += 1,
+    // Fixed chunks, written in place; per-chunk cull counts are integers, so their sum does
+    // not depend on how chunks map to threads.
+    const CHUNK: usize = 4096;
+    let counts: Vec<[u64; 7]> = out
+        .splats
+        .par_chunks_mut(CHUNK)
+        .zip(out.radii.par_chunks_mut(CHUNK))
+        .enumerate()
+        .map(|(ci, (splats, radii))| {
+            let mut c = [0u64; 7];
+            for (k, (s, r)) in splats.iter_mut().zip(radii.iter_mut()).enumerate() {
+                match project_one(g, ci * CHUNK + k, &cam, plan, opts.antialiased) {
+                    Ok((splat, rad)) => {
+                        *s = splat;
+                        *r = rad;
+                        c[0] += 1;
+                    }
+                    Err(cull) => c[1 + cull as usize] += 1,
                 }
             }
-        }
+            c
+        })
+        .collect();
+    for c in counts {
+        report.visible += c[0];
+        report.non_finite += c[1 + Cull::NonFinite as usize];
+        report.behind_near_plane += c[1 + Cull::Near as usize];
+        report.beyond_far_plane += c[1 + Cull::Far as usize];
+        report.degenerate += c[1 + Cull::Degenerate as usize];
+        report.low_opacity += c[1 + Cull::LowOpacity as usize];
+        report.off_screen += c[1 + Cull::OffScreen as usize];
     }
     out
 }

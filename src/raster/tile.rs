@@ -54,24 +54,23 @@ pub fn tile_rect(mean: [f32; 2], radii: [i32; 2], tiles_x: usize, tiles_y: usize
 pub fn bin(p: &Projected, width: usize, height: usize) -> TileBins {
     let tiles_x = width.div_ceil(TILE_SIZE);
     let tiles_y = height.div_ceil(TILE_SIZE);
-    // Sort key: depth bits (z > 0, so the IEEE bits order like the values) then index.
-    let mut order: Vec<u64> = p
+    // Sort key: depth bits (z > 0, so the IEEE bits order like the values) then index. The
+    // tile rectangle travels with the key, computed here in index order (sequential reads),
+    // so nothing below touches the splats again.
+    let mut order: Vec<(u64, [usize; 4])> = p
         .radii
         .par_iter()
         .enumerate()
+        .with_min_len(4096)
         .filter(|(_, r)| r[0] > 0 || r[1] > 0)
-        .map(|(i, _)| ((p.splats[i].depth.to_bits() as u64) << 32) | i as u64)
-        .collect();
-    order.par_sort_unstable();
-    let rects: Vec<[usize; 4]> = order
-        .par_iter()
-        .map(|&k| {
-            let i = (k & 0xffff_ffff) as usize;
-            tile_rect(p.splats[i].mean, p.radii[i], tiles_x, tiles_y)
+        .map(|(i, &r)| {
+            let key = ((p.splats[i].depth.to_bits() as u64) << 32) | i as u64;
+            (key, tile_rect(p.splats[i].mean, r, tiles_x, tiles_y))
         })
         .collect();
+    order.par_sort_unstable_by_key(|e| e.0);
     let mut counts = vec![0usize; tiles_x * tiles_y + 1];
-    for r in &rects {
+    for (_, r) in &order {
         for ty in r[2]..r[3] {
             for c in &mut counts[ty * tiles_x + r[0]..ty * tiles_x + r[1]] {
                 *c += 1;
@@ -87,7 +86,7 @@ pub fn bin(p: &Projected, width: usize, height: usize) -> TileBins {
     }
     let mut cursor = offsets.clone();
     let mut ids = vec![0u32; acc];
-    for (&k, r) in order.iter().zip(&rects) {
+    for &(k, r) in &order {
         let i = (k & 0xffff_ffff) as u32;
         for ty in r[2]..r[3] {
             for tx in r[0]..r[1] {
