@@ -63,6 +63,26 @@ struct TileSplat {
     pos1: u32,
 }
 
+/// The rows `[lo, hi)` of a tile starting at image row `y0` (with `rows` rows) that splat
+/// `gid` can reach: all rows, or with `cull_rows` those within `ry + 1` pixels of its centre
+/// (beyond, α < 1/255: SPEC.md §5.4). Shared by the forward and backward passes.
+pub(crate) fn splat_rows(
+    p: &Projected,
+    gid: usize,
+    y0: usize,
+    rows: usize,
+    cull_rows: bool,
+) -> (u32, u32) {
+    if !cull_rows {
+        return (0, rows as u32);
+    }
+    let my = p.splats[gid].mean[1];
+    let ry = p.radii[gid][1] as f32 + 1.0;
+    let lo = ((my - ry).floor() - y0 as f32).max(0.0);
+    let hi = ((my + ry).ceil() - y0 as f32 + 1.0).min(rows as f32);
+    (lo as u32, if hi > lo { hi as u32 } else { lo as u32 })
+}
+
 /// Blend state of a group of pixels (one tile row).
 #[derive(Clone, Copy)]
 struct Group {
@@ -396,15 +416,7 @@ fn band_impl<const DEPTH: bool, const TRACK: bool, const AVX2: bool>(
             batch.clear();
             for (k, &gid) in chunk.iter().enumerate() {
                 let s = p.splats[gid as usize];
-                let (lo, hi) = if plan.cull_rows {
-                    // Rows beyond radius + 1 px have α < 1/255 (SPEC.md §5.4).
-                    let ry = p.radii[gid as usize][1] as f32 + 1.0;
-                    let lo = ((s.mean[1] - ry).floor() - y0 as f32).max(0.0);
-                    let hi = ((s.mean[1] + ry).ceil() - y0 as f32 + 1.0).min(rows as f32);
-                    (lo as u32, if hi > lo { hi as u32 } else { lo as u32 })
-                } else {
-                    (0, rows as u32)
-                };
+                let (lo, hi) = splat_rows(p, gid as usize, y0, rows, plan.cull_rows);
                 if lo < hi {
                     let pos1 = (bi * BATCH + k) as u32 + 1;
                     batch.push(TileSplat {

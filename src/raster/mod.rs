@@ -5,6 +5,7 @@
 //! gsplat's (SPEC.md §4–5); every stage is a pure function of its inputs and gives the same
 //! bits for any thread count and any SIMD path.
 
+pub mod backward;
 pub mod composite;
 pub mod plan;
 pub mod project;
@@ -109,6 +110,16 @@ pub fn render_with_plan(
     opts: &RenderOptions,
     plan: &RenderPlan,
 ) -> Result<Render> {
+    Ok(render_staged(scene, cam, opts, plan)?.0)
+}
+
+/// Render and also return the projected splats and tile lists (the backward needs them).
+pub fn render_staged(
+    scene: &Gaussians,
+    cam: &Camera,
+    opts: &RenderOptions,
+    plan: &RenderPlan,
+) -> Result<(Render, project::Projected, tile::TileBins)> {
     check_options(scene, opts)?;
     cam.validate()?;
     let (w, h) = (cam.width as usize, cam.height as usize);
@@ -135,7 +146,7 @@ pub fn render_with_plan(
         opts.kernel,
         &mut report,
     );
-    Ok(Render {
+    let render = Render {
         width: w,
         height: h,
         rgb: out.rgb,
@@ -146,5 +157,6 @@ pub fn render_with_plan(
         n_contrib: out.n_contrib,
         plan: Some(*plan),
         report,
-    })
+    };
+    Ok((render, projected, bins))
 }

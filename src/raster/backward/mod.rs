@@ -1,0 +1,127 @@
+//! The backward pass: gradients of a loss on the rendered images with respect to the raw
+//! Gaussian parameters and the background. Mirrors the forward file for file:
+//! [`composite`] (per-pixel reverse walk, gsplat's formulation) and [`project`] (the
+//! projection chain). Deterministic: no atomics, fixed reduction order (SPEC.md §6).
+
+pub mod composite;
+pub mod project;
+
+pub use composite::{PixelGrads, SplatGrad};
+pub use project::{GradGroups, Gradients};
+
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::gaussian::Gaussians;
+use crate::raster::project::{CameraF32, Projected};
+use crate::raster::tile::TileBins;
+use crate::raster::{Render, RenderOptions, RenderPlan};
+
+/// Upstream gradients of the loss with respect to the rendered images (planar, row-major,
+/// `rgb` interleaved). Absent images contribute nothing.
+#[derive(Clone, Debug, Default)]
+pub struct ImageGrads {
+    pub rgb: Option<Vec<f32>>,
+    pub alpha: Option<Vec<f32>>,
+    pub depth: Option<Vec<f32>>,
+    pub expected_depth: Option<Vec<f32>>,
+}
+
+/// What the forward kept for the backward: the render (with `backward_state`), the
+/// projected splats and the tile lists.
+pub struct ForwardState {
+    pub render: Render,
+    pub projected: Projected,
+    pub bins: TileBins,
+    pub plan: RenderPlan,
+}
+
+/// Forward render that keeps what the backward needs.
+pub fn render_for_backward(
+    scene: &Gaussians,
+    cam: &Camera,
+    opts: &RenderOptions,
+) -> Result<ForwardState> {
+    if opts.antialiased {
+        return Err(Error::invalid(
+            "the backward pass of the antialiased mode is not implemented",
+        ));
+    }
+    let mut o = opts.clone();
+    o.outputs.backward_state = true;
+    // ED's gradient needs D itself.
+    o.outputs.depth |= o.outputs.expected_depth;
+    let plan = RenderPlan::new(scene, &o);
+    let (render, projected, bins) = crate::raster::render_staged(scene, cam, &o, &plan)?;
+    Ok(ForwardState {
+        render,
+        projected,
+        bins,
+        plan,
+    })
+}
+
+/// Gradients of the raw parameters for the upstream image gradients `v`.
+pub fn backward(
+    scene: &Gaussians,
+    cam: &Camera,
+    opts: &RenderOptions,
+    fwd: &ForwardState,
+    v: &ImageGrads,
+    groups: &GradGroups,
+) -> Result<(Gradients, u64)> {
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    let npix = w * h;
+    for (name, img, ch) in [
+        ("rgb", &v.rgb, 3),
+        ("alpha", &v.alpha, 1),
+        ("depth", &v.depth, 1),
+        ("expected_depth", &v.expected_depth, 1),
+    ] {
+        if let Some(img) = img {
+            if img.len() != npix * ch {
+                return Err(Error::invalid(format!(
+                    "{name} gradient has {} values, the {w}x{h} image needs {}",
+                    img.len(),
+                    npix * ch
+                )));
+            }
+        }
+    }
+    let r = &fwd.render;
+    let (Some(final_t), Some(n_contrib)) = (&r.final_t, &r.n_contrib) else {
+        return Err(Error::invalid(
+            "the forward render lacks the backward state",
+        ));
+    };
+    if v.expected_depth.is_some() && r.depth.is_none() {
+        return Err(Error::invalid(
+            "expected-depth gradients need the forward depth output",
+        ));
+    }
+    let depth = r.depth.as_deref();
+    let pg = PixelGrads {
+        v_rgb: v.rgb.as_deref(),
+        v_alpha: v.alpha.as_deref(),
+        v_depth: v.depth.as_deref(),
+        v_expected_depth: v.expected_depth.as_deref(),
+        final_t,
+        n_contrib,
+        depth,
+    };
+    let cg = composite::composite_backward(
+        w,
+        h,
+        &fwd.projected,
+        &fwd.bins,
+        fwd.plan.cull_rows,
+        opts.background,
+        &pg,
+    );
+    let camf = CameraF32::new(cam);
+    let mut grads =
+        project::project_backward(scene, &camf, &fwd.projected, &fwd.plan, groups, &cg.splats);
+    if groups.background {
+        grads.background = cg.background;
+    }
+    Ok((grads, cg.pairs))
+}

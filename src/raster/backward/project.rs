@@ -1,0 +1,429 @@
+//! Backward of the projection (mirrors `raster::project`): from splat gradients to the raw
+//! parameters. Per Gaussian and independent, so parallel and deterministic. In f32, except
+//! the SH direction derivative, which uses the f64 forward-mode basis (`sh_basis_grad`).
+//!
+//! Chain (forward in `raster::project`):
+//! `conic = Σ2d⁻¹` → `v_Σ2d = −Σ2d⁻¹·G·Σ2d⁻¹` with `G = [[vA, vB/2], [vB/2, vC]]`;
+//! `Σ2d = J·Σc·Jᵀ (+0.3 I)` → `v_Σc = Jᵀ·V·J`, `v_J = 2·V·J·Σc`;
+//! `Σc = W·Σ·Wᵀ` → `v_Σ = Wᵀ·v_Σc·W`; `Σ = M·Mᵀ` → `v_M = 2·v_Σ·M`;
+//! `M = R·diag(s)` → `v_R = v_M·diag(s)`, `v_s_j = Σ_i v_M_ij·R_ij`, `v_log_s = v_s·s`;
+//! `R(q̂)` → `v_q̂`; `q̂ = q/|q|` → `v_q = (v_q̂ − q̂(q̂·v_q̂))/|q|`;
+//! `J(t)` with the clamp: a clamped `x/z` makes `tx = z·lim`, so its gradient goes to z;
+//! `mean2d(t)`; `t = W·μ + t_w` → `v_μ = Wᵀ·v_t` plus the SH direction term;
+//! `o = sigmoid(l)` → `v_l = v_o·o·(1 − o)`;
+//! `c = max(Σ coeff·Y + 0.5, 0)` → coefficient gradients `Y·v_c` where the clamp is open.
+
+use super::composite::SplatGrad;
+use crate::gaussian::Gaussians;
+use crate::math::fastexp::{exp, sigmoid};
+use crate::math::sh::{MAX_SH_COEFFS, num_coeffs, sh_basis, sh_basis_grad};
+use crate::raster::plan::RenderPlan;
+use crate::raster::project::{CameraF32, EPS2D, JACOBIAN_GUARD, Projected, quat_to_rotmat};
+
+/// Which raw parameter groups need gradients. Skipped groups come back as zeros and cost
+/// nothing: SH-only requests skip the whole geometric chain.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GradGroups {
+    pub means: bool,
+    pub log_scales: bool,
+    pub quats: bool,
+    pub opacities: bool,
+    pub sh_dc: bool,
+    pub sh_rest: bool,
+    pub background: bool,
+}
+
+impl GradGroups {
+    pub const ALL: GradGroups = GradGroups {
+        means: true,
+        log_scales: true,
+        quats: true,
+        opacities: true,
+        sh_dc: true,
+        sh_rest: true,
+        background: true,
+    };
+    /// Only the higher SH coefficients (what the QA-Mask fine-tune trains).
+    pub const SH_REST: GradGroups = GradGroups {
+        means: false,
+        log_scales: false,
+        quats: false,
+        opacities: false,
+        sh_dc: false,
+        sh_rest: true,
+        background: false,
+    };
+    /// Does any group need the screen-space (mean2d / conic / opacity) gradients?
+    pub fn geometry(&self) -> bool {
+        self.means || self.log_scales || self.quats || self.opacities
+    }
+}
+
+/// Gradients of the raw parameters, in the layout of [`Gaussians`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Gradients {
+    pub means: Vec<[f32; 3]>,
+    pub log_scales: Vec<[f32; 3]>,
+    pub quats: Vec<[f32; 4]>,
+    pub opacity_logits: Vec<f32>,
+    pub sh_dc: Vec<[f32; 3]>,
+    /// `(N, K−1, 3)` like [`Gaussians::sh_rest`].
+    pub sh_rest: Vec<f32>,
+    pub background: [f32; 3],
+    /// dL/d mean2d in pixels (what the splat gradients say), per Gaussian.
+    pub means2d: Vec<[f32; 2]>,
+    /// dL/d mean2d in INRIA's NDC units (`pixels × (W/2, H/2)`), for densification.
+    pub means2d_ndc: Vec<[f32; 2]>,
+}
+
+type M3 = [[f32; 3]; 3];
+
+fn mul(a: &M3, b: &M3) -> M3 {
+    let mut o = [[0f32; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            o[i][j] = (a[i][0] * b[0][j] + a[i][1] * b[1][j]) + a[i][2] * b[2][j];
+        }
+    }
+    o
+}
+
+fn tr(a: &M3) -> M3 {
+    [
+        [a[0][0], a[1][0], a[2][0]],
+        [a[0][1], a[1][1], a[2][1]],
+        [a[0][2], a[1][2], a[2][2]],
+    ]
+}
+
+/// One Gaussian's backward. `sg` is its accumulated splat gradient.
+#[allow(clippy::too_many_arguments)]
+fn backward_one(
+    g: &Gaussians,
+    i: usize,
+    cam: &CameraF32,
+    plan: &RenderPlan,
+    groups: &GradGroups,
+    sg: &SplatGrad,
+    out_mean: &mut [f32; 3],
+    out_ls: &mut [f32; 3],
+    out_q: &mut [f32; 4],
+    out_op: &mut f32,
+    out_dc: &mut [f32; 3],
+    out_rest: &mut [f32],
+) {
+    let mean = g.means[i];
+    let r = &cam.r_cw;
+    let d = [
+        mean[0] - cam.center[0],
+        mean[1] - cam.center[1],
+        mean[2] - cam.center[2],
+    ];
+    let len = ((d[0] * d[0] + d[1] * d[1]) + d[2] * d[2]).sqrt();
+    let dir = [d[0] / len, d[1] / len, d[2] / len];
+    let k_used = num_coeffs(plan.sh_degree) - 1;
+    let rest = g.rest(i);
+    // Colour: which channels are open (Σ + 0.5 > 0), recomputed as the forward did.
+    let mut basis = [0f32; MAX_SH_COEFFS];
+    let inv_len = 1.0 / ((d[0] * d[0] + d[1] * d[1]) + d[2] * d[2]).sqrt();
+    sh_basis(
+        plan.sh_degree,
+        d[0] * inv_len,
+        d[1] * inv_len,
+        d[2] * inv_len,
+        &mut basis,
+    );
+    let dc = g.sh_dc[i];
+    let mut v_sh = [0f32; 3];
+    for ch in 0..3 {
+        let mut acc = basis[0] * dc[ch];
+        for k in 0..k_used {
+            acc += basis[k + 1] * rest[k * 3 + ch];
+        }
+        v_sh[ch] = if acc + 0.5 > 0.0 { sg.color[ch] } else { 0.0 };
+    }
+    if groups.sh_dc {
+        for ch in 0..3 {
+            out_dc[ch] = basis[0] * v_sh[ch];
+        }
+    }
+    if groups.sh_rest {
+        for k in 0..k_used {
+            for ch in 0..3 {
+                out_rest[k * 3 + ch] = basis[k + 1] * v_sh[ch];
+            }
+        }
+    }
+    if !groups.geometry() {
+        return;
+    }
+    // Recompute the forward quantities the chain needs (same order as `project_one`).
+    let x = (r[0][0] * mean[0] + r[0][1] * mean[1]) + r[0][2] * mean[2] + cam.t_cw[0];
+    let y = (r[1][0] * mean[0] + r[1][1] * mean[1]) + r[1][2] * mean[2] + cam.t_cw[1];
+    let z = (r[2][0] * mean[0] + r[2][1] * mean[1]) + r[2][2] * mean[2] + cam.t_cw[2];
+    let q = g.quats[i];
+    let qn = ((q[0] * q[0] + q[1] * q[1]) + (q[2] * q[2] + q[3] * q[3])).sqrt();
+    let inv_qn = 1.0 / qn;
+    let qh = [q[0] * inv_qn, q[1] * inv_qn, q[2] * inv_qn, q[3] * inv_qn];
+    let rot = quat_to_rotmat(qh);
+    let ls = g.log_scales[i];
+    let s = [exp(ls[0]), exp(ls[1]), exp(ls[2])];
+    let mut m = [[0f32; 3]; 3];
+    for a in 0..3 {
+        for b in 0..3 {
+            m[a][b] = rot[a][b] * s[b];
+        }
+    }
+    let sigma = mul(&m, &tr(&m));
+    let sigma_c = mul(&mul(r, &sigma), &tr(r));
+    let (w, h) = (cam.width as f32, cam.height as f32);
+    let (tan_fovx, tan_fovy) = (0.5 * w / cam.fx, 0.5 * h / cam.fy);
+    let lim_x_pos = (w - cam.cx) / cam.fx + JACOBIAN_GUARD * tan_fovx;
+    let lim_x_neg = cam.cx / cam.fx + JACOBIAN_GUARD * tan_fovx;
+    let lim_y_pos = (h - cam.cy) / cam.fy + JACOBIAN_GUARD * tan_fovy;
+    let lim_y_neg = cam.cy / cam.fy + JACOBIAN_GUARD * tan_fovy;
+    let rz = 1.0 / z;
+    let rz2 = rz * rz;
+    let (xz, yz) = (x * rz, y * rz);
+    let x_clamped = xz < -lim_x_neg || xz > lim_x_pos;
+    let y_clamped = yz < -lim_y_neg || yz > lim_y_pos;
+    let tx = z * xz.clamp(-lim_x_neg, lim_x_pos);
+    let ty = z * yz.clamp(-lim_y_neg, lim_y_pos);
+    let j = [
+        [cam.fx * rz, 0.0, -cam.fx * tx * rz2],
+        [0.0, cam.fy * rz, -cam.fy * ty * rz2],
+    ];
+    let mut js = [[0f32; 3]; 2];
+    for a in 0..2 {
+        for b in 0..3 {
+            js[a][b] =
+                (j[a][0] * sigma_c[0][b] + j[a][1] * sigma_c[1][b]) + j[a][2] * sigma_c[2][b];
+        }
+    }
+    let cov = |a: usize, b: usize| (js[a][0] * j[b][0] + js[a][1] * j[b][1]) + js[a][2] * j[b][2];
+    let (a_, b_, c_) = (cov(0, 0) + EPS2D, cov(0, 1), cov(1, 1) + EPS2D);
+    let inv_det = 1.0 / (a_ * c_ - b_ * b_);
+    let ci = [[c_ * inv_det, -b_ * inv_det], [-b_ * inv_det, a_ * inv_det]];
+    // v_Σ2d = −Σ⁻¹·G·Σ⁻¹ with G the symmetric gradient of the conic.
+    let gm = [
+        [sg.conic[0], 0.5 * sg.conic[1]],
+        [0.5 * sg.conic[1], sg.conic[2]],
+    ];
+    let mut tmp = [[0f32; 2]; 2];
+    for a in 0..2 {
+        for b in 0..2 {
+            tmp[a][b] = ci[a][0] * gm[0][b] + ci[a][1] * gm[1][b];
+        }
+    }
+    let mut v_cov = [[0f32; 2]; 2];
+    for a in 0..2 {
+        for b in 0..2 {
+            v_cov[a][b] = -(tmp[a][0] * ci[0][b] + tmp[a][1] * ci[1][b]);
+        }
+    }
+    // v_Σc = Jᵀ·V·J and v_J = 2·V·J·Σc (V symmetric, Σc symmetric).
+    let mut vj = [[0f32; 3]; 2]; // V·J
+    for a in 0..2 {
+        for b in 0..3 {
+            vj[a][b] = v_cov[a][0] * j[0][b] + v_cov[a][1] * j[1][b];
+        }
+    }
+    let mut v_sigma_c = [[0f32; 3]; 3];
+    for a in 0..3 {
+        for b in 0..3 {
+            v_sigma_c[a][b] = j[0][a] * vj[0][b] + j[1][a] * vj[1][b];
+        }
+    }
+    let mut v_j = [[0f32; 3]; 2];
+    for a in 0..2 {
+        for b in 0..3 {
+            v_j[a][b] = 2.0
+                * ((vj[a][0] * sigma_c[0][b] + vj[a][1] * sigma_c[1][b])
+                    + vj[a][2] * sigma_c[2][b]);
+        }
+    }
+    // Camera-space mean.
+    let v_m2d = sg.mean2d;
+    let mut v_t = [
+        v_m2d[0] * cam.fx * rz,
+        v_m2d[1] * cam.fy * rz,
+        -(v_m2d[0] * cam.fx * x + v_m2d[1] * cam.fy * y) * rz2 + sg.depth,
+    ];
+    let v_tx = v_j[0][2] * (-cam.fx * rz2);
+    let v_ty = v_j[1][2] * (-cam.fy * rz2);
+    v_t[2] += v_j[0][0] * (-cam.fx * rz2)
+        + v_j[1][1] * (-cam.fy * rz2)
+        + v_j[0][2] * (2.0 * cam.fx * tx * rz2 * rz)
+        + v_j[1][2] * (2.0 * cam.fy * ty * rz2 * rz);
+    if x_clamped {
+        v_t[2] += v_tx * (tx * rz);
+    } else {
+        v_t[0] += v_tx;
+    }
+    if y_clamped {
+        v_t[2] += v_ty * (ty * rz);
+    } else {
+        v_t[1] += v_ty;
+    }
+    if groups.means {
+        let mut v_mu = [0f32; 3];
+        for (a, v) in v_mu.iter_mut().enumerate() {
+            *v = (r[0][a] * v_t[0] + r[1][a] * v_t[1]) + r[2][a] * v_t[2];
+        }
+        // The colour depends on the mean through dir = (μ − C)/|μ − C|.
+        if v_sh.iter().any(|&v| v != 0.0) && plan.sh_degree > 0 {
+            let mut vals = [0f64; MAX_SH_COEFFS];
+            let mut grads = [[0f64; 3]; MAX_SH_COEFFS];
+            sh_basis_grad(plan.sh_degree, dir.map(|v| v as f64), &mut vals, &mut grads);
+            let mut v_dir = [0f64; 3];
+            for k in 1..=k_used {
+                for ch in 0..3 {
+                    let coef = rest[(k - 1) * 3 + ch] as f64 * v_sh[ch] as f64;
+                    for a in 0..3 {
+                        v_dir[a] += coef * grads[k][a];
+                    }
+                }
+            }
+            let dd =
+                (dir[0] as f64 * v_dir[0] + dir[1] as f64 * v_dir[1]) + dir[2] as f64 * v_dir[2];
+            for a in 0..3 {
+                v_mu[a] += ((v_dir[a] - dir[a] as f64 * dd) / len as f64) as f32;
+            }
+        }
+        *out_mean = v_mu;
+    }
+    if groups.opacities {
+        let o = sigmoid(g.opacity_logits[i]);
+        *out_op = sg.opacity * o * (1.0 - o);
+    }
+    if groups.log_scales || groups.quats {
+        // v_Σ = Wᵀ·v_Σc·W, v_M = 2·v_Σ·M.
+        let v_sigma = mul(&mul(&tr(r), &v_sigma_c), r);
+        let v_m = mul(&v_sigma, &m).map(|row| row.map(|v| 2.0 * v));
+        if groups.log_scales {
+            for b in 0..3 {
+                let v_s = (v_m[0][b] * rot[0][b] + v_m[1][b] * rot[1][b]) + v_m[2][b] * rot[2][b];
+                out_ls[b] = v_s * s[b];
+            }
+        }
+        if groups.quats {
+            let mut vr = [[0f32; 3]; 3];
+            for a in 0..3 {
+                for b in 0..3 {
+                    vr[a][b] = v_m[a][b] * s[b];
+                }
+            }
+            let [w_, x_, y_, z_] = qh;
+            let vq = [
+                2.0 * (-z_ * vr[0][1] + y_ * vr[0][2] + z_ * vr[1][0]
+                    - x_ * vr[1][2]
+                    - y_ * vr[2][0]
+                    + x_ * vr[2][1]),
+                2.0 * (y_ * vr[0][1] + z_ * vr[0][2] + y_ * vr[1][0]
+                    - 2.0 * x_ * vr[1][1]
+                    - w_ * vr[1][2]
+                    + z_ * vr[2][0]
+                    + w_ * vr[2][1]
+                    - 2.0 * x_ * vr[2][2]),
+                2.0 * (-2.0 * y_ * vr[0][0]
+                    + x_ * vr[0][1]
+                    + w_ * vr[0][2]
+                    + x_ * vr[1][0]
+                    + z_ * vr[1][2]
+                    - w_ * vr[2][0]
+                    + z_ * vr[2][1]
+                    - 2.0 * y_ * vr[2][2]),
+                2.0 * (-2.0 * z_ * vr[0][0] - w_ * vr[0][1] + x_ * vr[0][2] + w_ * vr[1][0]
+                    - 2.0 * z_ * vr[1][1]
+                    + y_ * vr[1][2]
+                    + x_ * vr[2][0]
+                    + y_ * vr[2][1]),
+            ];
+            let dot = (qh[0] * vq[0] + qh[1] * vq[1]) + (qh[2] * vq[2] + qh[3] * vq[3]);
+            for k in 0..4 {
+                out_q[k] = (vq[k] - qh[k] * dot) * inv_qn;
+            }
+        }
+    }
+}
+
+/// Backward of [`crate::raster::project::project`] for every Gaussian with a non-zero splat
+/// gradient (culled Gaussians get exactly zero).
+pub fn project_backward(
+    g: &Gaussians,
+    cam: &CameraF32,
+    p: &Projected,
+    plan: &RenderPlan,
+    groups: &GradGroups,
+    splat_grads: &[crate::raster::backward::composite::SplatGrad],
+) -> Gradients {
+    use rayon::prelude::*;
+    let n = g.len();
+    let k1 = g.rest_per_channel();
+    let mut out = Gradients {
+        means: Vec::with_capacity(n),
+        log_scales: Vec::with_capacity(n),
+        quats: Vec::with_capacity(n),
+        opacity_logits: Vec::with_capacity(n),
+        sh_dc: Vec::with_capacity(n),
+        sh_rest: Vec::with_capacity(n * k1 * 3),
+        background: [0.0; 3],
+        means2d: splat_grads.iter().map(|s| s.mean2d).collect(),
+        means2d_ndc: splat_grads
+            .iter()
+            .map(|s| {
+                [
+                    s.mean2d[0] * 0.5 * cam.width as f32,
+                    s.mean2d[1] * 0.5 * cam.height as f32,
+                ]
+            })
+            .collect(),
+    };
+    // Fixed chunks of Gaussians, computed in parallel and concatenated in order.
+    const CHUNK: usize = 1024;
+    let chunks: Vec<Gradients> = (0..n.div_ceil(CHUNK))
+        .into_par_iter()
+        .map(|ci| {
+            let range = ci * CHUNK..((ci + 1) * CHUNK).min(n);
+            let m = range.len();
+            let mut c = Gradients {
+                means: vec![[0.0; 3]; m],
+                log_scales: vec![[0.0; 3]; m],
+                quats: vec![[0.0; 4]; m],
+                opacity_logits: vec![0.0; m],
+                sh_dc: vec![[0.0; 3]; m],
+                sh_rest: vec![0.0; m * k1 * 3],
+                ..Default::default()
+            };
+            for (k, i) in range.enumerate() {
+                if p.radii[i] == [0, 0] {
+                    continue;
+                }
+                backward_one(
+                    g,
+                    i,
+                    cam,
+                    plan,
+                    groups,
+                    &splat_grads[i],
+                    &mut c.means[k],
+                    &mut c.log_scales[k],
+                    &mut c.quats[k],
+                    &mut c.opacity_logits[k],
+                    &mut c.sh_dc[k],
+                    &mut c.sh_rest[k * k1 * 3..(k + 1) * k1 * 3],
+                );
+            }
+            c
+        })
+        .collect();
+    for c in chunks {
+        out.means.extend_from_slice(&c.means);
+        out.log_scales.extend_from_slice(&c.log_scales);
+        out.quats.extend_from_slice(&c.quats);
+        out.opacity_logits.extend_from_slice(&c.opacity_logits);
+        out.sh_dc.extend_from_slice(&c.sh_dc);
+        out.sh_rest.extend_from_slice(&c.sh_rest);
+    }
+    out
+}
