@@ -16,6 +16,7 @@ pub mod error;
 pub mod gaussian;
 pub mod io;
 pub mod math;
+pub mod oracle;
 pub mod raster;
 pub mod scene;
 

@@ -54,6 +54,54 @@ enum Command {
         #[arg(long, value_delimiter = ',', default_value = "rgb")]
         outputs: Vec<String>,
     },
+    /// Dump every intermediate (and, for backward, every gradient) of one render as .npy
+    /// files with a manifest.json, for comparing a GPU port array by array.
+    Oracle {
+        #[command(subcommand)]
+        pass: OraclePass,
+    },
+}
+
+#[derive(clap::Args)]
+struct OracleScene {
+    /// Scene in INRIA 3DGS PLY layout.
+    #[arg(long)]
+    scene: PathBuf,
+    /// Cameras (INRIA cameras.json).
+    #[arg(long)]
+    cameras: PathBuf,
+    /// The camera's img_name (default: the first camera).
+    #[arg(long)]
+    camera: Option<String>,
+    /// Output folder.
+    #[arg(long)]
+    out: PathBuf,
+    /// Background colour, linear.
+    #[arg(long, default_value = "0,0,0", value_parser = parse_rgb)]
+    background: [f32; 3],
+}
+
+#[derive(Subcommand)]
+enum OraclePass {
+    /// Intermediates and outputs of the forward pass.
+    Forward {
+        #[command(flatten)]
+        common: OracleScene,
+    },
+    /// Also the loss against a target image and the gradients of every raw parameter.
+    Backward {
+        #[command(flatten)]
+        common: OracleScene,
+        /// Target image (PNG, the camera's size), scaled to [0, 1].
+        #[arg(long)]
+        target: PathBuf,
+        /// l1 (mean absolute difference) or l2 (mean squared difference).
+        #[arg(long, default_value = "l1")]
+        loss: String,
+        /// Depth target (EXR, channel Y): adds the mean |D − target| over finite pixels.
+        #[arg(long)]
+        depth_target: Option<PathBuf>,
+    },
 }
 
 fn parse_rgb(s: &str) -> std::result::Result<[f32; 3], String> {
@@ -195,8 +243,83 @@ fn run_render(job: &Job) -> Result<Vec<PathBuf>> {
     Ok(written)
 }
 
+fn run_oracle(c: &OracleScene, targets: Option<(&Path, &str, Option<&Path>)>) -> Result<()> {
+    use unseen::oracle::{Loss, Targets, dump};
+    let (scene, _) = ply::read_ply(&c.scene)?;
+    let cams = inria::read_cameras_json(&c.cameras)?;
+    let cam = match &c.camera {
+        Some(name) => cams.iter().find(|k| &k.name == name),
+        None => cams.first(),
+    }
+    .ok_or_else(|| Error::invalid("no such camera (or the file has none)").at(&c.cameras))?;
+    let opts = RenderOptions {
+        background: c.background,
+        ..RenderOptions::default()
+    };
+    let Some((target, loss, depth)) = targets else {
+        dump(&scene, cam, &opts, None, &c.out)?;
+        println!(
+            "wrote the forward oracle of camera '{}' into {}",
+            cam.name,
+            c.out.display()
+        );
+        return Ok(());
+    };
+    let img = unseen::io::image::read_png(target)?;
+    if (img.width, img.height) != (cam.width as usize, cam.height as usize) || img.channels != 3 {
+        return Err(Error::invalid(format!(
+            "target is {}x{} with {} channel(s), camera '{}' needs {}x{} RGB",
+            img.width, img.height, img.channels, cam.name, cam.width, cam.height
+        ))
+        .at(target));
+    }
+    let loss = match loss {
+        "l1" => Loss::L1,
+        "l2" => Loss::L2,
+        "l1-dssim" => {
+            return Err(Error::invalid(
+                "loss l1-dssim needs SSIM, which arrives with the training issue; use l1 or l2",
+            ));
+        }
+        other => return Err(Error::invalid(format!("unknown loss '{other}' (l1 or l2)"))),
+    };
+    let depth_img = match depth {
+        Some(p) => Some(unseen::io::image::read_exr(p, &["Y"])?),
+        None => None,
+    };
+    if let (Some(d), Some(p)) = (&depth_img, depth) {
+        if (d.width, d.height) != (cam.width as usize, cam.height as usize) {
+            return Err(Error::invalid("depth target size differs from the camera's").at(p));
+        }
+    }
+    let t = Targets {
+        rgb: &img.data,
+        loss,
+        depth: depth_img.as_ref().map(|d| d.data.as_slice()),
+    };
+    dump(&scene, cam, &opts, Some(&t), &c.out)?;
+    println!(
+        "wrote the backward oracle of camera '{}' into {}",
+        cam.name,
+        c.out.display()
+    );
+    Ok(())
+}
+
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
+        Command::Oracle {
+            pass: OraclePass::Forward { common },
+        } => run_oracle(&common, None),
+        Command::Oracle {
+            pass:
+                OraclePass::Backward {
+                    common,
+                    target,
+                    loss,
+                    depth_target,
+                },
+        } => run_oracle(&common, Some((&target, &loss, depth_target.as_deref()))),
         Command::Demo { out } => {
             let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("reference_data/demo");
             let scene = dir.join("scene.ply");

@@ -3,5 +3,6 @@ mod common;
 mod golden_drjit;
 mod gradients;
 mod mitsuba_crosscheck;
+mod oracle;
 mod raster;
 mod readers;

@@ -1,0 +1,246 @@
+//! `unseen oracle`: every intermediate and gradient of one render as `.npy` files plus a
+//! `manifest.json`, so a GPU port can be diffed against this crate array by array.
+//! The file list is in SPEC.md §12.
+
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::gaussian::Gaussians;
+use crate::io::npy::{NpyElement, write_npy};
+use crate::io::write_text;
+use crate::raster::backward::{GradGroups, ImageGrads, backward, render_for_backward};
+use crate::raster::{Outputs, RenderOptions};
+use serde::Serialize;
+use sha2::{Digest, Sha256};
+use std::path::Path;
+
+/// The conventions version of SPEC.md (bumped when a number a port must match changes).
+pub const CONVENTIONS_VERSION: u32 = 1;
+
+/// Image losses the oracle can differentiate.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Loss {
+    /// Mean absolute difference over all pixels and channels.
+    L1,
+    /// Mean squared difference over all pixels and channels.
+    L2,
+}
+
+#[derive(Serialize)]
+struct Entry {
+    name: String,
+    file: String,
+    shape: Vec<usize>,
+    dtype: String,
+    sha256: String,
+}
+
+#[derive(Serialize)]
+struct Manifest {
+    crate_version: &'static str,
+    conventions_version: u32,
+    command: String,
+    camera: String,
+    width: u32,
+    height: u32,
+    gaussians: usize,
+    sh_degree: u32,
+    background: [f32; 3],
+    arrays: Vec<Entry>,
+}
+
+struct Writer<'a> {
+    dir: &'a Path,
+    entries: Vec<Entry>,
+}
+
+impl Writer<'_> {
+    fn put<T: NpyElement>(&mut self, name: &str, data: &[T], shape: &[usize]) -> Result<()> {
+        let file = format!("{name}.npy");
+        let bytes = write_npy(&self.dir.join(&file), data, shape)?;
+        let sha256 = Sha256::digest(&bytes)
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect();
+        self.entries.push(Entry {
+            name: name.to_string(),
+            file,
+            shape: shape.to_vec(),
+            dtype: T::DTYPE.descr().to_string(),
+            sha256,
+        });
+        Ok(())
+    }
+}
+
+fn flat<const N: usize>(v: &[[f32; N]]) -> Vec<f32> {
+    v.iter().flatten().copied().collect()
+}
+
+/// Optional loss targets for the backward dump.
+pub struct Targets<'a> {
+    /// RGB target in [0, 1], interleaved, the camera's size.
+    pub rgb: &'a [f32],
+    pub loss: Loss,
+    /// Accumulated-depth target (adds the mean |D − D_target| over finite target pixels).
+    pub depth: Option<&'a [f32]>,
+}
+
+/// Render, optionally differentiate, and dump everything into `dir`.
+pub fn dump(
+    scene: &Gaussians,
+    cam: &Camera,
+    opts: &RenderOptions,
+    targets: Option<&Targets>,
+    dir: &Path,
+) -> Result<()> {
+    crate::io::create_dir_all(dir)?;
+    let opts = RenderOptions {
+        outputs: Outputs::ALL,
+        ..opts.clone()
+    };
+    let fwd = render_for_backward(scene, cam, &opts)?;
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    let n = scene.len();
+    let mut wr = Writer {
+        dir,
+        entries: Vec::new(),
+    };
+    let p = &fwd.projected;
+    wr.put(
+        "means2d",
+        &p.splats.iter().flat_map(|s| s.mean).collect::<Vec<f32>>(),
+        &[n, 2],
+    )?;
+    wr.put(
+        "conics",
+        &p.splats.iter().flat_map(|s| s.conic).collect::<Vec<f32>>(),
+        &[n, 3],
+    )?;
+    wr.put(
+        "depths",
+        &p.splats.iter().map(|s| s.depth).collect::<Vec<f32>>(),
+        &[n],
+    )?;
+    wr.put(
+        "opacities",
+        &p.splats.iter().map(|s| s.opacity).collect::<Vec<f32>>(),
+        &[n],
+    )?;
+    wr.put(
+        "colors",
+        &p.splats.iter().flat_map(|s| s.color).collect::<Vec<f32>>(),
+        &[n, 3],
+    )?;
+    wr.put(
+        "radii",
+        &p.radii.iter().flatten().copied().collect::<Vec<i32>>(),
+        &[n, 2],
+    )?;
+    let offsets: Vec<u64> = fwd.bins.offsets.iter().map(|&o| o as u64).collect();
+    wr.put("tile_offsets", &offsets, &[offsets.len()])?;
+    wr.put("tile_ids", &fwd.bins.ids, &[fwd.bins.ids.len()])?;
+    let r = &fwd.render;
+    let img = |v: &Option<Vec<f32>>| v.clone().unwrap_or_default();
+    wr.put("rgb", &img(&r.rgb), &[h, w, 3])?;
+    wr.put("alpha", &img(&r.alpha), &[h, w])?;
+    wr.put("depth", &img(&r.depth), &[h, w])?;
+    wr.put("expected_depth", &img(&r.expected_depth), &[h, w])?;
+    wr.put("final_t", &img(&r.final_t), &[h, w])?;
+    wr.put(
+        "n_contrib",
+        r.n_contrib.as_deref().unwrap_or_default(),
+        &[h, w],
+    )?;
+    let command = if let Some(t) = targets {
+        let rgb = r.rgb.as_ref().expect("rgb requested");
+        if t.rgb.len() != rgb.len() {
+            return Err(Error::invalid(format!(
+                "the target has {} values, the {w}x{h} render has {}",
+                t.rgb.len(),
+                rgb.len()
+            )));
+        }
+        let count = rgb.len() as f64;
+        let (mut loss, mut v_rgb) = (0f64, vec![0f32; rgb.len()]);
+        for ((v, &x), &y) in v_rgb.iter_mut().zip(rgb).zip(t.rgb) {
+            let d = x - y;
+            match t.loss {
+                Loss::L1 => {
+                    loss += d.abs() as f64;
+                    *v = if d > 0.0 {
+                        1.0
+                    } else if d < 0.0 {
+                        -1.0
+                    } else {
+                        0.0
+                    } / count as f32;
+                }
+                Loss::L2 => {
+                    loss += (d as f64) * (d as f64);
+                    *v = 2.0 * d / count as f32;
+                }
+            }
+        }
+        loss /= count;
+        let mut v = ImageGrads {
+            rgb: Some(v_rgb),
+            ..Default::default()
+        };
+        if let Some(dt) = t.depth {
+            let d = r.depth.as_ref().expect("depth requested");
+            if dt.len() != d.len() {
+                return Err(Error::invalid(
+                    "the depth target does not match the camera size",
+                ));
+            }
+            let valid = dt.iter().filter(|x| x.is_finite()).count().max(1) as f64;
+            let mut v_d = vec![0f32; d.len()];
+            let mut dl = 0f64;
+            for ((g, &x), &y) in v_d.iter_mut().zip(d).zip(dt) {
+                if y.is_finite() {
+                    let e = x - y;
+                    dl += e.abs() as f64;
+                    *g = if e > 0.0 {
+                        1.0
+                    } else if e < 0.0 {
+                        -1.0
+                    } else {
+                        0.0
+                    } / valid as f32;
+                }
+            }
+            loss += dl / valid;
+            v.depth = Some(v_d);
+        }
+        let (g, _) = backward(scene, cam, &opts, &fwd, &v, &GradGroups::ALL)?;
+        let k1 = scene.rest_per_channel();
+        wr.put("loss", &[loss as f32], &[])?;
+        wr.put("v_rgb", v.rgb.as_deref().unwrap_or_default(), &[h, w, 3])?;
+        wr.put("grad_means", &flat(&g.means), &[n, 3])?;
+        wr.put("grad_log_scales", &flat(&g.log_scales), &[n, 3])?;
+        wr.put("grad_quats", &flat(&g.quats), &[n, 4])?;
+        wr.put("grad_opacity_logits", &g.opacity_logits, &[n])?;
+        wr.put("grad_sh_dc", &flat(&g.sh_dc), &[n, 3])?;
+        wr.put("grad_sh_rest", &g.sh_rest, &[n, k1, 3])?;
+        wr.put("grad_background", &g.background, &[3])?;
+        wr.put("grad_means2d", &flat(&g.means2d), &[n, 2])?;
+        wr.put("grad_means2d_ndc", &flat(&g.means2d_ndc), &[n, 2])?;
+        "backward"
+    } else {
+        "forward"
+    };
+    let manifest = Manifest {
+        crate_version: env!("CARGO_PKG_VERSION"),
+        conventions_version: CONVENTIONS_VERSION,
+        command: command.to_string(),
+        camera: cam.name.clone(),
+        width: cam.width,
+        height: cam.height,
+        gaussians: n,
+        sh_degree: scene.sh_degree,
+        background: opts.background,
+        arrays: wr.entries,
+    };
+    let text = serde_json::to_string_pretty(&manifest).expect("manifest serializes");
+    write_text(&dir.join("manifest.json"), &text)
+}
