@@ -53,21 +53,35 @@ def transpose(a):
     return [[a[j][i] for j in range(3)] for i in range(3)]
 
 
-def project(scene, cam):
-    """Vectorized over Gaussians: mean2d, conic, opacity, colour, depth, visible."""
-    F = lambda a: Float64(np.ascontiguousarray(a, dtype=np.float64))
-    mx, my, mz = (F(scene["means"][:, k]) for k in range(3))
+def leaves(scene, F):
+    """The raw parameters as Dr.Jit arrays of type F, one array per component."""
+    arr = lambda a: F(np.ascontiguousarray(a, dtype=np.float64))
+    k1 = scene["sh_rest"].shape[1]
+    return dict(
+        means=[arr(scene["means"][:, k]) for k in range(3)],
+        log_scales=[arr(scene["log_scales"][:, k]) for k in range(3)],
+        quats=[arr(scene["quats"][:, k]) for k in range(4)],
+        opacity_logits=[arr(scene["opacity_logits"])],
+        sh_dc=[arr(scene["sh_dc"][:, c]) for c in range(3)],
+        sh_rest=[[arr(scene["sh_rest"][:, j, c]) for c in range(3)] for j in range(k1)],
+    )
+
+
+def project(scene, cam, P=None, Array3=Array3f64):
+    """Vectorized over Gaussians: mean2d, conic, opacity, colour, depth, visible.
+    P: the parameters from `leaves` (default: plain float64 arrays of `scene`)."""
+    P = P if P is not None else leaves(scene, Float64)
+    mx, my, mz = P["means"]
     R = [[float(v) for v in row] for row in cam["R_cw"]]
     t = [float(v) for v in cam["t_cw"]]
     x = R[0][0] * mx + R[0][1] * my + R[0][2] * mz + t[0]
     y = R[1][0] * mx + R[1][1] * my + R[1][2] * mz + t[1]
     z = R[2][0] * mx + R[2][1] * my + R[2][2] * mz + t[2]
-    q = [F(scene["quats"][:, k]) for k in range(4)]
-    rot = quat_to_rot(*q)
-    s = [dr.exp(F(scene["log_scales"][:, k])) for k in range(3)]
+    rot = quat_to_rot(*P["quats"])
+    s = [dr.exp(v) for v in P["log_scales"]]
     m = [[rot[i][j] * s[j] for j in range(3)] for i in range(3)]
     sigma = matmul(m, transpose(m))
-    W = [[Float64(R[i][j]) for j in range(3)] for i in range(3)]
+    W = [[R[i][j] for j in range(3)] for i in range(3)]
     sc = matmul(matmul(W, sigma), transpose(W))
     # Python floats: numpy scalars would turn Dr.Jit arrays into numpy object arrays.
     fx, fy, cx, cy = (float(cam[k]) for k in ("fx", "fy", "cx", "cy"))
@@ -78,33 +92,38 @@ def project(scene, cam):
     zs = dr.select(z > NEAR, z, 1.0)
     tx = zs * dr.clip(x / zs, -limxn, limxp)
     ty = zs * dr.clip(y / zs, -limyn, limyp)
-    J = [[fx / zs, Float64(0.0), -fx * tx / (zs * zs)], [Float64(0.0), fy / zs, -fy * ty / (zs * zs)]]
+    J = [[fx / zs, 0.0, -fx * tx / (zs * zs)], [0.0, fy / zs, -fy * ty / (zs * zs)]]
     JS = [[J[a][0] * sc[0][b] + J[a][1] * sc[1][b] + J[a][2] * sc[2][b] for b in range(3)] for a in range(2)]
     cov = lambda a, b: JS[a][0] * J[b][0] + JS[a][1] * J[b][1] + JS[a][2] * J[b][2]
     a_, b_, c_ = cov(0, 0) + EPS2D, cov(0, 1), cov(1, 1) + EPS2D
     det = a_ * c_ - b_ * b_
     conic = [c_ / det, -b_ / det, a_ / det]
     mean2d = [fx * x / zs + cx, fy * y / zs + cy]
-    opacity = 1.0 / (1.0 + dr.exp(-F(scene["opacity_logits"])))
+    opacity = 1.0 / (1.0 + dr.exp(-P["opacity_logits"][0]))
     # colour from Dr.Jit's own SH basis
     c = [float(v) for v in cam["center"]]
     dx, dy, dz = mx - c[0], my - c[1], mz - c[2]
-    d = dr.normalize(Array3f64(dx, dy, dz))
+    d = dr.normalize(Array3(dx, dy, dz))
     basis = dr.sh_eval(d, scene["sh_degree"])
     cols = []
     for ch in range(3):
-        acc = basis[0] * F(scene["sh_dc"][:, ch])
+        acc = basis[0] * P["sh_dc"][ch]
         for k in range(1, len(basis)):
-            acc += basis[k] * F(scene["sh_rest"][:, k - 1, ch])
+            acc += basis[k] * P["sh_rest"][k - 1][ch]
         cols.append(dr.maximum(acc + 0.5, 0.0))
     visible = (z >= NEAR) & (z <= FAR) & (det > 0) & (opacity >= ALPHA_MIN)
     return dict(mean2d=mean2d, conic=conic, opacity=opacity, color=cols, depth=z, visible=visible)
 
 
-def render(scene, cam, background):
-    p = project(scene, cam)
-    vis = np.array(p["visible"])
-    depth = np.array(p["depth"])
+def render(scene, cam, background, P=None, ns=None):
+    """ns: a namespace with Float64, UInt32, Bool, Array3f64 (default: drjit.llvm).
+    Returns numpy images, or with `P` (AD leaves) the Dr.Jit arrays rgb (3), alpha, D."""
+    import drjit.llvm as llvm
+    ns = ns or llvm
+    Float64, UInt32, Bool = ns.Float64, ns.UInt32, ns.Bool
+    p = project(scene, cam, P, ns.Array3f64)
+    vis = np.array(dr.detach(p["visible"]))
+    depth = np.array(dr.detach(p["depth"]))
     idx = np.nonzero(vis)[0]
     order = idx[np.lexsort((idx, depth[idx]))]  # depth, then index
     w, h = cam["width"], cam["height"]
@@ -141,6 +160,8 @@ def render(scene, cam, background):
         T = dr.select(blend, nT, T)
         done |= stop
         dr.eval(T, C, D, done, amb)
+    if P is not None:
+        return [C[ch] + T * background[ch] for ch in range(3)], 1 - T, D, np.array(amb), len(order)
     rgb = np.stack([np.array(C[ch]) + np.array(T) * background[ch] for ch in range(3)], -1)
     alpha = 1 - np.array(T)
     Dn = np.array(D)
