@@ -1,0 +1,78 @@
+//! Backward-pass throughput: `cargo bench --bench backward [-- --quick]`.
+//!
+//! Per resolution × threads × gradient groups: median forward and backward wall time per
+//! iteration, and the backward's Gaussian-pixel pairs per second (pairs walked back to front,
+//! counted exactly by the backward).
+
+use std::time::Instant;
+use unseen::raster::RenderOptions;
+use unseen::raster::backward::{GradGroups, ImageGrads, backward, render_for_backward};
+use unseen::scene::{Uniform, default_camera, random_scene};
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn main() {
+    let quick = std::env::args().any(|a| a == "--quick");
+    let n = 100_000;
+    let scene = random_scene(n, 3, 7, 0.003, 0.03);
+    println!(
+        "{:>9} {:>9} {:>3} {:>8} {:>10} {:>10} {:>12} {:>10}",
+        "gaussians", "image", "thr", "groups", "forward", "backward", "pairs", "Mpairs/s"
+    );
+    let resolutions: &[(u32, u32)] = if quick {
+        &[(256, 256)]
+    } else {
+        &[(256, 256), (1024, 768)]
+    };
+    for &(w, h) in resolutions {
+        let cam = default_camera(w, h);
+        let opts = RenderOptions::default();
+        let mut u = Uniform::new(3);
+        let v = ImageGrads {
+            rgb: Some(
+                (0..(w * h * 3) as usize)
+                    .map(|_| u.range(-1.0, 1.0))
+                    .collect(),
+            ),
+            ..Default::default()
+        };
+        for threads in [1usize, 2] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            for (gname, groups) in [("full", GradGroups::ALL), ("sh_rest", GradGroups::SH_REST)] {
+                let (mut tf, mut tb) = (Vec::new(), Vec::new());
+                let mut pairs = 0;
+                pool.install(|| {
+                    for _ in 0..5 {
+                        let t0 = Instant::now();
+                        let fwd = render_for_backward(&scene, &cam, &opts).unwrap();
+                        let t1 = Instant::now();
+                        let (g, p) = backward(&scene, &cam, &opts, &fwd, &v, &groups).unwrap();
+                        let t2 = Instant::now();
+                        std::hint::black_box(g);
+                        tf.push((t1 - t0).as_secs_f64());
+                        tb.push((t2 - t1).as_secs_f64());
+                        pairs = p;
+                    }
+                });
+                let (f, b) = (median(tf), median(tb));
+                println!(
+                    "{:>9} {:>9} {:>3} {:>8} {:>8.1}ms {:>8.1}ms {:>12} {:>10.1}",
+                    n,
+                    format!("{w}x{h}"),
+                    threads,
+                    gname,
+                    f * 1e3,
+                    b * 1e3,
+                    pairs,
+                    pairs as f64 / b / 1e6
+                );
+            }
+        }
+    }
+}
