@@ -116,6 +116,8 @@ pub fn backward(
         fwd.plan.cull_rows,
         opts.background,
         &pg,
+        groups.geometry(),
+        opts.kernel,
     );
     let camf = CameraF32::new(cam);
     let mut grads =
