@@ -106,7 +106,9 @@ pub fn write_exr(path: &Path, img: &ImageF32) -> Result<()> {
     );
     let image = Image::from_layer(layer);
     let tmp = temp_sibling(path);
-    let r = image.write().to_file(&tmp);
+    // Sequential writing: the parallel writer may order blocks by completion, so the bytes
+    // would depend on the thread count.
+    let r = image.write().non_parallel().to_file(&tmp);
     match r
         .map_err(|e| e.to_string())
         .and_then(|_| std::fs::rename(&tmp, path).map_err(|e| e.to_string()))

@@ -106,3 +106,46 @@ fn cli_errors_name_the_file() {
         assert!(!err.contains("panicked"), "{err}");
     }
 }
+
+/// `RAYON_NUM_THREADS` = 1, 2, 7: the written files are byte-identical.
+#[test]
+fn cli_outputs_do_not_depend_on_rayon_num_threads() {
+    let demo = reference("demo");
+    let mut previous: Option<Vec<Vec<u8>>> = None;
+    for threads in ["1", "2", "7"] {
+        let out = out_dir(&format!("threads-{threads}"));
+        let st = unseen()
+            .env("RAYON_NUM_THREADS", threads)
+            .args([
+                "render",
+                demo.join("scene.ply").to_str().unwrap(),
+                "--cameras",
+            ])
+            .arg(demo.join("cameras.json"))
+            .args([
+                "--outputs",
+                "rgb,alpha,depth,expected_depth",
+                "--background",
+                "0.1,0.2,0.3",
+                "--out",
+            ])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(st.status.success());
+        let mut names: Vec<_> = std::fs::read_dir(&out)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .collect();
+        names.sort();
+        assert_eq!(names.len(), 8 * 5);
+        let bytes: Vec<Vec<u8>> = names.iter().map(|p| std::fs::read(p).unwrap()).collect();
+        if let Some(prev) = &previous {
+            assert!(
+                prev == &bytes,
+                "RAYON_NUM_THREADS={threads} changed the output"
+            );
+        }
+        previous = Some(bytes);
+    }
+}

@@ -245,8 +245,7 @@ fn row_lanes<const GEOMETRY: bool>(
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
     use super::{
-        ALPHA_THRESHOLD, LANES, MAX_ALPHA, NC, RECOVER_EPS, RowState, SIGMA_CLAMP, Splat,
-        SplatGrad,
+        ALPHA_THRESHOLD, LANES, MAX_ALPHA, NC, RECOVER_EPS, RowState, SIGMA_CLAMP, Splat, SplatGrad,
     };
     use crate::math::fastexp::exp_avx2;
     use std::arch::x86_64::*;
