@@ -1,6 +1,7 @@
 mod cli;
 mod common;
 mod golden_drjit;
+mod golden_grad;
 mod gradients;
 mod mitsuba_crosscheck;
 mod oracle;
