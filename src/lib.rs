@@ -19,5 +19,6 @@ pub mod math;
 pub mod oracle;
 pub mod raster;
 pub mod scene;
+pub mod train;
 
 pub use error::{Error, ErrorKind, Result};

@@ -23,7 +23,12 @@ pub enum Loss {
     L1,
     /// Mean squared difference over all pixels and channels.
     L2,
+    /// INRIA's `(1 − λ)·L1 + λ·(1 − SSIM)` with λ = [`LAMBDA_DSSIM`].
+    L1DSsim,
 }
+
+/// Weight of the D-SSIM term (INRIA `lambda_dssim`).
+pub const LAMBDA_DSSIM: f32 = 0.2;
 
 #[derive(Serialize)]
 struct Entry {
@@ -165,7 +170,7 @@ pub fn dump(
         for ((v, &x), &y) in v_rgb.iter_mut().zip(rgb).zip(t.rgb) {
             let d = x - y;
             match t.loss {
-                Loss::L1 => {
+                Loss::L1 | Loss::L1DSsim => {
                     loss += d.abs() as f64;
                     *v = if d > 0.0 {
                         1.0
@@ -182,6 +187,14 @@ pub fn dump(
             }
         }
         loss /= count;
+        if t.loss == Loss::L1DSsim {
+            let lam = LAMBDA_DSSIM;
+            let (s, g) = crate::train::ssim::ssim(rgb, t.rgb, w, h, 3, true);
+            loss = (1.0 - lam as f64) * loss + lam as f64 * (1.0 - s);
+            for (v, gs) in v_rgb.iter_mut().zip(g.expect("gradient requested")) {
+                *v = (1.0 - lam) * *v - lam * gs;
+            }
+        }
         let mut v = ImageGrads {
             rgb: Some(v_rgb),
             ..Default::default()

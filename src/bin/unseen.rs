@@ -95,7 +95,8 @@ enum OraclePass {
         /// Target image (PNG, the camera's size), scaled to [0, 1].
         #[arg(long)]
         target: PathBuf,
-        /// l1 (mean absolute difference) or l2 (mean squared difference).
+        /// l1 (mean absolute difference), l2 (mean squared difference) or l1-dssim
+        /// (0.8·L1 + 0.2·(1 − SSIM), INRIA's training loss).
         #[arg(long, default_value = "l1")]
         loss: String,
         /// Depth target (EXR, channel Y): adds the mean |D − target| over finite pixels.
@@ -276,12 +277,12 @@ fn run_oracle(c: &OracleScene, targets: Option<(&Path, &str, Option<&Path>)>) ->
     let loss = match loss {
         "l1" => Loss::L1,
         "l2" => Loss::L2,
-        "l1-dssim" => {
-            return Err(Error::invalid(
-                "loss l1-dssim needs SSIM, which arrives with the training issue; use l1 or l2",
-            ));
+        "l1-dssim" => Loss::L1DSsim,
+        other => {
+            return Err(Error::invalid(format!(
+                "unknown loss '{other}' (l1, l2 or l1-dssim)"
+            )));
         }
-        other => return Err(Error::invalid(format!("unknown loss '{other}' (l1 or l2)"))),
     };
     let depth_img = match depth {
         Some(p) => Some(unseen::io::image::read_exr(p, &["Y"])?),

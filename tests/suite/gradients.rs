@@ -515,26 +515,43 @@ fn gradient_hard_cases() {
             && gr.sh_dc[outside] == [0.0; 3]
     );
 
-    // One opaque Gaussian (o = 1, α clamped to 0.99 at the centre) in front of another.
+    // α at the clamp: o = 0.999 and a scale so large that o·exp(−σ) > 0.99 at every pixel.
+    // Its opacity gets exactly no gradient (sigmoid' is far from 0 here, so a zero proves
+    // the clamp cut it), while its colour does.
     let mut g = Gaussians::new(0).unwrap();
+    let logit = (0.999f32 / 0.001).ln();
     g.push(
         [0.0, 0.0, 3.0],
-        [0.5f32.ln(); 3],
+        [100f32.ln(); 3],
         [1.0, 0.0, 0.0, 0.0],
-        100.0,
+        logit,
         [0.3; 3],
         &[],
     );
+    g.push(
+        [0.0, 0.0, 5.0],
+        [100f32.ln(); 3],
+        [1.0, 0.0, 0.0, 0.0],
+        0.0,
+        [0.1; 3],
+        &[],
+    );
+    let small = default_camera(16, 12);
     let opts = RenderOptions::default();
-    let fwd = render_for_backward(&g, &cam, &opts).unwrap();
+    let fwd = render_for_backward(&g, &small, &opts).unwrap();
     let v = ImageGrads {
-        rgb: Some(vec![1.0; 64 * 48 * 3]),
+        rgb: Some(vec![1.0; 16 * 12 * 3]),
         ..Default::default()
     };
-    let (gr, _) = backward(&g, &cam, &opts, &fwd, &v, &GradGroups::ALL).unwrap();
-    // sigmoid'(100) is 0 in f32 anyway; the splat-level opacity gradient must come only
-    // from pixels off the clamp, so compare with a render of those pixels alone.
-    assert_eq!(gr.opacity_logits[0], 0.0);
+    let (gr, _) = backward(&g, &small, &opts, &fwd, &v, &GradGroups::ALL).unwrap();
+    assert_eq!(
+        gr.opacity_logits[0], 0.0,
+        "no gradient through the 0.99 clamp"
+    );
+    assert!(
+        gr.opacity_logits[1] != 0.0,
+        "the Gaussian behind is not clamped"
+    );
     assert!(gr.sh_dc[0].iter().all(|v| v.is_finite() && *v > 0.0));
 }
 

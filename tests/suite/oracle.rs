@@ -89,3 +89,48 @@ fn oracle_backward_dump_is_complete_and_consistent() {
     let (gshape, _) = read_npy_f32(&dump.join("grad_sh_rest.npy")).unwrap();
     assert_eq!(gshape, vec![7075, 3, 3]);
 }
+
+/// `l1-dssim` is INRIA's 0.8·L1 + 0.2·(1 − SSIM), and its image gradient is the same mix.
+#[test]
+fn oracle_l1_dssim_loss() {
+    use unseen::oracle::{Loss, Targets, dump};
+    use unseen::raster::{Outputs, RenderOptions, render};
+    use unseen::scene::{default_camera, random_scene};
+    let scene = random_scene(400, 1, 4, 0.01, 0.2);
+    let cam = default_camera(40, 30);
+    let target: Vec<f32> = (0..40 * 30 * 3)
+        .map(|i| ((i * 37) % 101) as f32 / 100.0)
+        .collect();
+    let dir = std::env::temp_dir().join(format!("unseen-oracle-ssim-{}", std::process::id()));
+    let t = Targets {
+        rgb: &target,
+        loss: Loss::L1DSsim,
+        depth: None,
+    };
+    dump(&scene, &cam, &RenderOptions::default(), Some(&t), &dir).unwrap();
+    let rgb = render(
+        &scene,
+        &cam,
+        &RenderOptions {
+            outputs: Outputs::RGB,
+            ..Default::default()
+        },
+    )
+    .unwrap()
+    .rgb
+    .unwrap();
+    let l1 = rgb
+        .iter()
+        .zip(&target)
+        .map(|(a, b)| (a - b).abs() as f64)
+        .sum::<f64>()
+        / rgb.len() as f64;
+    let (s, _) = unseen::train::ssim::ssim(&rgb, &target, 40, 30, 3, false);
+    let want = 0.8 * l1 + 0.2 * (1.0 - s);
+    let (_, loss) = read_npy_f32(&dir.join("loss.npy")).unwrap();
+    assert!(
+        (loss[0] as f64 - want).abs() < 1e-6,
+        "{} vs {want}",
+        loss[0]
+    );
+}
