@@ -1,12 +1,15 @@
 //! Backward-pass throughput: `cargo bench --bench backward [-- --quick]`.
 //!
 //! Per resolution × threads × gradient groups: median forward and backward wall time per
-//! iteration, and the backward's Gaussian-pixel pairs per second (pairs walked back to front,
-//! counted exactly by the backward).
+//! iteration (the backward split into the blend walk and the projection chain), and the
+//! backward's Gaussian-pixel pairs per second (pairs walked back to front, counted exactly).
 
 use std::time::Instant;
 use unseen::raster::RenderOptions;
-use unseen::raster::backward::{GradGroups, ImageGrads, backward, render_for_backward};
+use unseen::raster::backward::composite::{PixelGrads, composite_backward};
+use unseen::raster::backward::project::project_backward;
+use unseen::raster::backward::{GradGroups, ImageGrads, render_for_backward};
+use unseen::raster::project::CameraF32;
 use unseen::scene::{Uniform, default_camera, random_scene};
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -19,8 +22,17 @@ fn main() {
     let n = 100_000;
     let scene = random_scene(n, 3, 7, 0.003, 0.03);
     println!(
-        "{:>9} {:>9} {:>3} {:>8} {:>10} {:>10} {:>12} {:>10}",
-        "gaussians", "image", "thr", "groups", "forward", "backward", "pairs", "Mpairs/s"
+        "{:>9} {:>9} {:>3} {:>8} {:>10} {:>10} {:>10} {:>10} {:>12} {:>10}",
+        "gaussians",
+        "image",
+        "thr",
+        "groups",
+        "forward",
+        "bwd-blend",
+        "bwd-proj",
+        "backward",
+        "pairs",
+        "Mpairs/s"
     );
     let resolutions: &[(u32, u32)] = if quick {
         &[(256, 256)]
@@ -45,29 +57,62 @@ fn main() {
                 .build()
                 .unwrap();
             for (gname, groups) in [("full", GradGroups::ALL), ("sh_rest", GradGroups::SH_REST)] {
-                let (mut tf, mut tb) = (Vec::new(), Vec::new());
+                let (mut tf, mut tc, mut tp) = (Vec::new(), Vec::new(), Vec::new());
                 let mut pairs = 0;
                 pool.install(|| {
                     for _ in 0..5 {
                         let t0 = Instant::now();
                         let fwd = render_for_backward(&scene, &cam, &opts).unwrap();
                         let t1 = Instant::now();
-                        let (g, p) = backward(&scene, &cam, &opts, &fwd, &v, &groups).unwrap();
+                        let r = &fwd.render;
+                        let pg = PixelGrads {
+                            v_rgb: v.rgb.as_deref(),
+                            v_alpha: None,
+                            v_depth: None,
+                            v_expected_depth: None,
+                            final_t: r.final_t.as_deref().unwrap(),
+                            n_contrib: r.n_contrib.as_deref().unwrap(),
+                            depth: None,
+                        };
+                        let cg = composite_backward(
+                            w as usize,
+                            h as usize,
+                            &fwd.projected,
+                            &fwd.bins,
+                            fwd.plan.cull_rows,
+                            opts.background,
+                            &pg,
+                            groups.geometry(),
+                            opts.kernel,
+                        );
                         let t2 = Instant::now();
+                        let g = project_backward(
+                            &scene,
+                            &CameraF32::new(&cam),
+                            &fwd.projected,
+                            &fwd.plan,
+                            &groups,
+                            &cg.splats,
+                        );
+                        let t3 = Instant::now();
                         std::hint::black_box(g);
                         tf.push((t1 - t0).as_secs_f64());
-                        tb.push((t2 - t1).as_secs_f64());
-                        pairs = p;
+                        tc.push((t2 - t1).as_secs_f64());
+                        tp.push((t3 - t2).as_secs_f64());
+                        pairs = cg.pairs;
                     }
                 });
-                let (f, b) = (median(tf), median(tb));
+                let (f, c, p) = (median(tf), median(tc), median(tp));
+                let b = c + p;
                 println!(
-                    "{:>9} {:>9} {:>3} {:>8} {:>8.1}ms {:>8.1}ms {:>12} {:>10.1}",
+                    "{:>9} {:>9} {:>3} {:>8} {:>8.1}ms {:>8.1}ms {:>8.1}ms {:>8.1}ms {:>12} {:>10.1}",
                     n,
                     format!("{w}x{h}"),
                     threads,
                     gname,
                     f * 1e3,
+                    c * 1e3,
+                    p * 1e3,
                     b * 1e3,
                     pairs,
                     pairs as f64 / b / 1e6

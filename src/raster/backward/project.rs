@@ -361,12 +361,12 @@ pub fn project_backward(
     let n = g.len();
     let k1 = g.rest_per_channel();
     let mut out = Gradients {
-        means: Vec::with_capacity(n),
-        log_scales: Vec::with_capacity(n),
-        quats: Vec::with_capacity(n),
-        opacity_logits: Vec::with_capacity(n),
-        sh_dc: Vec::with_capacity(n),
-        sh_rest: Vec::with_capacity(n * k1 * 3),
+        means: vec![[0.0; 3]; n],
+        log_scales: vec![[0.0; 3]; n],
+        quats: vec![[0.0; 4]; n],
+        opacity_logits: vec![0.0; n],
+        sh_dc: vec![[0.0; 3]; n],
+        sh_rest: vec![0.0; n * k1 * 3],
         background: [0.0; 3],
         means2d: splat_grads.iter().map(|s| s.mean2d).collect(),
         means2d_ndc: splat_grads
@@ -379,26 +379,31 @@ pub fn project_backward(
             })
             .collect(),
     };
-    // Fixed chunks of Gaussians, computed in parallel and concatenated in order.
+    // Fixed chunks of Gaussians written in place. Degree 0 has no rest coefficients: a
+    // placeholder of one value per Gaussian keeps the chunks aligned.
     const CHUNK: usize = 1024;
-    let chunks: Vec<Gradients> = (0..n.div_ceil(CHUNK))
-        .into_par_iter()
-        .map(|ci| {
-            let range = ci * CHUNK..((ci + 1) * CHUNK).min(n);
-            let m = range.len();
-            let mut c = Gradients {
-                means: vec![[0.0; 3]; m],
-                log_scales: vec![[0.0; 3]; m],
-                quats: vec![[0.0; 4]; m],
-                opacity_logits: vec![0.0; m],
-                sh_dc: vec![[0.0; 3]; m],
-                sh_rest: vec![0.0; m * k1 * 3],
-                ..Default::default()
-            };
-            for (k, i) in range.enumerate() {
+    let rest_per = (k1 * 3).max(1);
+    let mut placeholder = if k1 == 0 { vec![0f32; n] } else { Vec::new() };
+    let rest: &mut [f32] = if k1 == 0 {
+        &mut placeholder
+    } else {
+        &mut out.sh_rest
+    };
+    out.means
+        .par_chunks_mut(CHUNK)
+        .zip(out.log_scales.par_chunks_mut(CHUNK))
+        .zip(out.quats.par_chunks_mut(CHUNK))
+        .zip(out.opacity_logits.par_chunks_mut(CHUNK))
+        .zip(out.sh_dc.par_chunks_mut(CHUNK))
+        .zip(rest.par_chunks_mut(CHUNK * rest_per))
+        .enumerate()
+        .for_each(|(ci, (((((mc, lc), qc), oc), dc), rc))| {
+            for k in 0..mc.len() {
+                let i = ci * CHUNK + k;
                 if p.radii[i] == [0, 0] {
                     continue;
                 }
+                let r = &mut rc[k * rest_per..k * rest_per + k1 * 3];
                 backward_one(
                     g,
                     i,
@@ -406,24 +411,14 @@ pub fn project_backward(
                     plan,
                     groups,
                     &splat_grads[i],
-                    &mut c.means[k],
-                    &mut c.log_scales[k],
-                    &mut c.quats[k],
-                    &mut c.opacity_logits[k],
-                    &mut c.sh_dc[k],
-                    &mut c.sh_rest[k * k1 * 3..(k + 1) * k1 * 3],
+                    &mut mc[k],
+                    &mut lc[k],
+                    &mut qc[k],
+                    &mut oc[k],
+                    &mut dc[k],
+                    r,
                 );
             }
-            c
-        })
-        .collect();
-    for c in chunks {
-        out.means.extend_from_slice(&c.means);
-        out.log_scales.extend_from_slice(&c.log_scales);
-        out.quats.extend_from_slice(&c.quats);
-        out.opacity_logits.extend_from_slice(&c.opacity_logits);
-        out.sh_dc.extend_from_slice(&c.sh_dc);
-        out.sh_rest.extend_from_slice(&c.sh_rest);
-    }
+        });
     out
 }
