@@ -312,7 +312,11 @@ mod avx2 {
             let cdd = c(s.conic[2] * dy * dy);
             let dyv = c(dy);
             let posv = _mm256_set1_epi32(pos as i32);
-            let mut cv = [[zero; 2]; NC];
+            // First σ, α and the blend mask of both halves; a splat that blends no pixel of
+            // the row changes nothing (its contributions are +0.0 and no state moves), so
+            // skipping it is exact — and common, splats being narrower than a tile.
+            let (mut dxs, mut es, mut as_, mut alphas, mut valids) =
+                ([zero; 2], [zero; 2], [zero; 2], [zero; 2], [zero; 2]);
             for h in 0..2 {
                 let active = _mm256_castsi256_ps(_mm256_cmpgt_epi32(n[h], posv));
                 let dx = _mm256_sub_ps(c(s.mean[0]), pxv[h]);
@@ -326,13 +330,21 @@ mod avx2 {
                 let e = unsafe { exp_avx2(_mm256_xor_ps(clamped, c(-0.0))) };
                 let a = _mm256_mul_ps(c(s.opacity), e);
                 let alpha = _mm256_min_ps(a, c(MAX_ALPHA));
-                let valid = _mm256_and_ps(
+                valids[h] = _mm256_and_ps(
                     active,
                     _mm256_and_ps(
                         _mm256_cmp_ps::<_CMP_GE_OQ>(sigma, zero),
                         _mm256_cmp_ps::<_CMP_GE_OQ>(alpha, c(ALPHA_THRESHOLD)),
                     ),
                 );
+                (dxs[h], es[h], as_[h], alphas[h]) = (dx, e, a, alpha);
+            }
+            if _mm256_movemask_ps(_mm256_or_ps(valids[0], valids[1])) == 0 {
+                continue;
+            }
+            let mut cv = [[zero; 2]; NC];
+            for h in 0..2 {
+                let (dx, e, a, alpha, valid) = (dxs[h], es[h], as_[h], alphas[h], valids[h]);
                 let one_minus = _mm256_sub_ps(c(1.0), alpha);
                 // `max_ps(a, b)` is `a > b ? a : b`: the scalar select with the operands so.
                 let den = _mm256_max_ps(one_minus, c(RECOVER_EPS));
