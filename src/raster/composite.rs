@@ -53,13 +53,11 @@ const GROUP: usize = TILE_SIZE;
 /// Splats gathered from a tile's list at a time (gsplat loads a block's worth, 256).
 const BATCH: usize = 256;
 
-/// A splat as one tile sees it: its data, the tile rows `[row_lo, row_hi)` it can reach and
-/// its position in the tile's list plus one (what `n_contrib` records).
+/// A splat as one tile sees it: its data and its position in the tile's list plus one
+/// (what `n_contrib` records).
 #[derive(Clone, Copy, Debug)]
 struct TileSplat {
     s: Splat,
-    row_lo: u32,
-    row_hi: u32,
     pos1: u32,
 }
 
@@ -162,16 +160,14 @@ fn blend_lane<const DEPTH: bool, const TRACK: bool>(
 #[inline(never)]
 fn blend_group_lanes<const DEPTH: bool, const TRACK: bool>(
     list: &[TileSplat],
+    idx: &[u16],
     px: &[f32; GROUP],
     py: f32,
-    row: u32,
     st: &mut Group,
 ) -> u64 {
     let mut pairs = 0;
-    for ts in list {
-        if row < ts.row_lo || row >= ts.row_hi {
-            continue;
-        }
+    for &k in idx {
+        let ts = &list[k as usize];
         if st.active.iter().all(|&a| a == 0) {
             break;
         }
@@ -216,9 +212,9 @@ mod avx2 {
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn blend_group<const DEPTH: bool, const TRACK: bool>(
         list: &[TileSplat],
+        idx: &[u16],
         px: &[f32; GROUP],
         py: f32,
-        row: u32,
         st: &mut Group,
     ) -> u64 {
         let c = |x: f32| _mm256_set1_ps(x);
@@ -244,10 +240,8 @@ mod avx2 {
             }
         }
         let mut pairs = 0;
-        for ts in list {
-            if row < ts.row_lo || row >= ts.row_hi {
-                continue;
-            }
+        for &k in idx {
+            let ts = &list[k as usize];
             if _mm256_movemask_ps(_mm256_or_ps(act[0], act[1])) == 0 {
                 break;
             }
@@ -258,6 +252,9 @@ mod avx2 {
             let (cdd, dyv) = (c(s.conic[2] * dy * dy), c(dy));
             let (mx, ca, cb, op) = (c(s.mean[0]), c(s.conic[0]), c(s.conic[1]), c(s.opacity));
             let pos = _mm256_set1_epi32(ts.pos1 as i32);
+            // σ, α and the mask of both halves first; a splat that is valid for no pixel of
+            // the row changes no state, so skipping the rest is exact (and common).
+            let (mut alphas, mut valids) = ([zero; H], [zero; H]);
             for h in 0..H {
                 let dx = _mm256_sub_ps(mx, pxv[h]);
                 let sum = _mm256_add_ps(_mm256_mul_ps(_mm256_mul_ps(ca, dx), dx), cdd);
@@ -269,15 +266,21 @@ mod avx2 {
                 let clamped = _mm256_min_ps(sigma, c(SIGMA_CLAMP));
                 // SAFETY: this function runs only on CPUs with AVX2.
                 let e = unsafe { exp_avx2(_mm256_xor_ps(clamped, c(-0.0))) };
-                let alpha = _mm256_min_ps(_mm256_mul_ps(op, e), c(MAX_ALPHA));
-                let nt = _mm256_mul_ps(t[h], _mm256_sub_ps(c(1.0), alpha));
-                let valid = _mm256_and_ps(
+                alphas[h] = _mm256_min_ps(_mm256_mul_ps(op, e), c(MAX_ALPHA));
+                valids[h] = _mm256_and_ps(
                     act[h],
                     _mm256_and_ps(
                         _mm256_cmp_ps::<_CMP_GE_OQ>(sigma, zero),
-                        _mm256_cmp_ps::<_CMP_GE_OQ>(alpha, c(ALPHA_THRESHOLD)),
+                        _mm256_cmp_ps::<_CMP_GE_OQ>(alphas[h], c(ALPHA_THRESHOLD)),
                     ),
                 );
+            }
+            if _mm256_movemask_ps(_mm256_or_ps(valids[0], valids[1])) == 0 {
+                continue;
+            }
+            for h in 0..H {
+                let (alpha, valid) = (alphas[h], valids[h]);
+                let nt = _mm256_mul_ps(t[h], _mm256_sub_ps(c(1.0), alpha));
                 let stop = _mm256_and_ps(
                     valid,
                     _mm256_cmp_ps::<_CMP_LE_OQ>(nt, c(TRANSMITTANCE_STOP)),
@@ -392,6 +395,9 @@ fn band_impl<const DEPTH: bool, const TRACK: bool, const AVX2: bool>(
     };
     // Reused for every tile of the band: no allocation in the loop.
     let mut batch: Vec<TileSplat> = Vec::with_capacity(BATCH);
+    // Per tile row, the batch positions of the splats that can reach it, front to back:
+    // each row walks only those (no data-dependent skipping in the kernel).
+    let mut rows_idx: [Vec<u16>; TILE_SIZE] = std::array::from_fn(|_| Vec::with_capacity(BATCH));
     let mut groups = [Group::new(0); TILE_SIZE];
     for tx in 0..bins.tiles_x {
         let x0 = tx * TILE_SIZE;
@@ -414,17 +420,18 @@ fn band_impl<const DEPTH: bool, const TRACK: bool, const AVX2: bool>(
                 break;
             }
             batch.clear();
+            for r in rows_idx.iter_mut() {
+                r.clear();
+            }
             for (k, &gid) in chunk.iter().enumerate() {
                 let s = p.splats[gid as usize];
                 let (lo, hi) = splat_rows(p, gid as usize, y0, rows, plan.cull_rows);
                 if lo < hi {
                     let pos1 = (bi * BATCH + k) as u32 + 1;
-                    batch.push(TileSplat {
-                        s,
-                        row_lo: lo,
-                        row_hi: hi,
-                        pos1,
-                    });
+                    for r in &mut rows_idx[lo as usize..hi as usize] {
+                        r.push(batch.len() as u16);
+                    }
+                    batch.push(TileSplat { s, pos1 });
                 }
             }
             for row in 0..rows {
@@ -436,12 +443,14 @@ fn band_impl<const DEPTH: bool, const TRACK: bool, const AVX2: bool>(
                 #[cfg(target_arch = "x86_64")]
                 let pairs = if AVX2 {
                     // SAFETY: AVX2 == true only inside `band_avx2`, entered after detection.
-                    unsafe { avx2::blend_group::<DEPTH, TRACK>(&batch, &px, py, row as u32, st) }
+                    unsafe {
+                        avx2::blend_group::<DEPTH, TRACK>(&batch, &rows_idx[row], &px, py, st)
+                    }
                 } else {
-                    blend_group_lanes::<DEPTH, TRACK>(&batch, &px, py, row as u32, st)
+                    blend_group_lanes::<DEPTH, TRACK>(&batch, &rows_idx[row], &px, py, st)
                 };
                 #[cfg(not(target_arch = "x86_64"))]
-                let pairs = blend_group_lanes::<DEPTH, TRACK>(&batch, &px, py, row as u32, st);
+                let pairs = blend_group_lanes::<DEPTH, TRACK>(&batch, &rows_idx[row], &px, py, st);
                 out.pairs += pairs;
                 alive[row] = st.active.iter().any(|&a| a != 0);
             }
