@@ -112,6 +112,32 @@ impl Group {
     }
 }
 
+/// A splat evaluated at one pixel offset `d = mean − p`.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SplatAlpha {
+    pub sigma: f32,
+    /// `exp(−min(σ, 30))`.
+    pub e: f32,
+    /// `o·e` before the 0.99 clamp.
+    pub a: f32,
+    pub alpha: f32,
+}
+
+/// σ and α of a splat at offset `(dx, dy)`: the one scalar definition shared by the forward
+/// and backward passes (the AVX2 kernels mirror it operation for operation).
+#[inline(always)]
+pub(crate) fn splat_alpha(s: &Splat, dx: f32, dy: f32) -> SplatAlpha {
+    let sigma = 0.5 * (s.conic[0] * dx * dx + s.conic[2] * dy * dy) + s.conic[1] * dx * dy;
+    let e = exp(-(if sigma < SIGMA_CLAMP {
+        sigma
+    } else {
+        SIGMA_CLAMP
+    }));
+    let a = s.opacity * e;
+    let alpha = if a < MAX_ALPHA { a } else { MAX_ALPHA };
+    SplatAlpha { sigma, e, a, alpha }
+}
+
 /// Blend one splat into one pixel. The single scalar definition of the per-pixel arithmetic.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
@@ -128,14 +154,7 @@ fn blend_lane<const DEPTH: bool, const TRACK: bool>(
     n: &mut u32,
     active: &mut u32,
 ) {
-    let sigma = 0.5 * (s.conic[0] * dx * dx + s.conic[2] * dy * dy) + s.conic[1] * dx * dy;
-    let e = exp(-(if sigma < SIGMA_CLAMP {
-        sigma
-    } else {
-        SIGMA_CLAMP
-    }));
-    let a = s.opacity * e;
-    let alpha = if a < MAX_ALPHA { a } else { MAX_ALPHA };
+    let SplatAlpha { sigma, alpha, .. } = splat_alpha(s, dx, dy);
     let t0 = *t;
     let nt = t0 * (1.0 - alpha);
     let valid = (*active != 0) & (sigma >= 0.0) & (alpha >= ALPHA_THRESHOLD);

@@ -161,26 +161,33 @@ fn all_finite(v: &[f32]) -> bool {
     v.iter().all(|x| x.is_finite())
 }
 
-/// Project one Gaussian.
-pub fn project_one(
-    g: &Gaussians,
-    i: usize,
-    cam: &CameraF32,
-    plan: &RenderPlan,
-    antialiased: bool,
-) -> Result<(Splat, [i32; 2]), Cull> {
+/// The projection's intermediate values for one Gaussian, steps 1–5 of the module docs up to
+/// the undilated 2D covariance. The backward pass recomputes them with this same function.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Geometry {
+    /// Camera-space mean.
+    pub t: [f32; 3],
+    /// Normalized quaternion and `1/|q|`.
+    pub qh: [f32; 4],
+    pub inv_qn: f32,
+    pub rot: [[f32; 3]; 3],
+    pub s: [f32; 3],
+    /// `M = R·diag(s)`.
+    pub m: [[f32; 3]; 3],
+    pub sigma_c: [[f32; 3]; 3],
+    pub rz: f32,
+    /// Clamped `tx`, `ty` and whether the clamp was active.
+    pub tx: f32,
+    pub ty: f32,
+    pub x_clamped: bool,
+    pub y_clamped: bool,
+    pub j: [[f32; 3]; 2],
+    /// `J·Σc·Jᵀ` as `(a, b, c)`, before the dilation.
+    pub cov: [f32; 3],
+}
+
+pub(crate) fn geometry(g: &Gaussians, i: usize, cam: &CameraF32) -> Result<Geometry, Cull> {
     let mean = g.means[i];
-    let k_used = num_coeffs(plan.sh_degree) - 1;
-    let rest = &g.rest(i)[..k_used * 3];
-    if !(all_finite(&mean)
-        && all_finite(&g.log_scales[i])
-        && all_finite(&g.quats[i])
-        && g.opacity_logits[i].is_finite()
-        && all_finite(&g.sh_dc[i])
-        && all_finite(rest))
-    {
-        return Err(Cull::NonFinite);
-    }
     // 1. Camera space.
     let r = &cam.r_cw;
     let x = dot3(r[0], mean) + cam.t_cw[0];
@@ -202,7 +209,8 @@ pub fn project_one(
         return Err(Cull::Degenerate);
     }
     let inv_qn = 1.0 / qn2.sqrt();
-    let rot = quat_to_rotmat([q[0] * inv_qn, q[1] * inv_qn, q[2] * inv_qn, q[3] * inv_qn]);
+    let qh = [q[0] * inv_qn, q[1] * inv_qn, q[2] * inv_qn, q[3] * inv_qn];
+    let rot = quat_to_rotmat(qh);
     let ls = g.log_scales[i];
     let s = [exp(ls[0]), exp(ls[1]), exp(ls[2])];
     let mut m = [[0f32; 3]; 3];
@@ -224,8 +232,9 @@ pub fn project_one(
     let lim_y_neg = cam.cy / cam.fy + JACOBIAN_GUARD * tan_fovy;
     let rz = 1.0 / z;
     let rz2 = rz * rz;
-    let tx = z * clamp(x * rz, -lim_x_neg, lim_x_pos);
-    let ty = z * clamp(y * rz, -lim_y_neg, lim_y_pos);
+    let (xz, yz) = (x * rz, y * rz);
+    let tx = z * clamp(xz, -lim_x_neg, lim_x_pos);
+    let ty = z * clamp(yz, -lim_y_neg, lim_y_pos);
     let j = [
         [cam.fx * rz, 0.0, -cam.fx * tx * rz2],
         [0.0, cam.fy * rz, -cam.fy * ty * rz2],
@@ -240,6 +249,84 @@ pub fn project_one(
     }
     let cov = |a: usize, b: usize| (js[a][0] * j[b][0] + js[a][1] * j[b][1]) + js[a][2] * j[b][2];
     let (a0, b, c0) = (cov(0, 0), cov(0, 1), cov(1, 1));
+    Ok(Geometry {
+        t: [x, y, z],
+        qh,
+        inv_qn,
+        rot,
+        s,
+        m,
+        sigma_c,
+        rz,
+        tx,
+        ty,
+        x_clamped: xz < -lim_x_neg || xz > lim_x_pos,
+        y_clamped: yz < -lim_y_neg || yz > lim_y_pos,
+        j,
+        cov: [a0, b, c0],
+    })
+}
+
+/// SH colour sums `Σ_k coeff_k·Y_k(dir) + 0.5` per channel (before the clamp at 0) and the
+/// basis, `dir = (μ − C)/|μ − C|`. Shared by the forward and backward passes.
+pub(crate) fn sh_color(
+    g: &Gaussians,
+    i: usize,
+    cam: &CameraF32,
+    degree: u32,
+) -> ([f32; 3], [f32; MAX_SH_COEFFS]) {
+    let mean = g.means[i];
+    let d = [
+        mean[0] - cam.center[0],
+        mean[1] - cam.center[1],
+        mean[2] - cam.center[2],
+    ];
+    let inv_len = 1.0 / dot3(d, d).sqrt();
+    let mut basis = [0f32; MAX_SH_COEFFS];
+    sh_basis(
+        degree,
+        d[0] * inv_len,
+        d[1] * inv_len,
+        d[2] * inv_len,
+        &mut basis,
+    );
+    let (dc, rest) = (g.sh_dc[i], g.rest(i));
+    let k_used = num_coeffs(degree) - 1;
+    let mut out = [0f32; 3];
+    for (ch, o) in out.iter_mut().enumerate() {
+        let mut acc = basis[0] * dc[ch];
+        for k in 0..k_used {
+            acc += basis[k + 1] * rest[k * 3 + ch];
+        }
+        *o = acc + 0.5;
+    }
+    (out, basis)
+}
+
+/// Project one Gaussian.
+pub fn project_one(
+    g: &Gaussians,
+    i: usize,
+    cam: &CameraF32,
+    plan: &RenderPlan,
+    antialiased: bool,
+) -> Result<(Splat, [i32; 2]), Cull> {
+    let mean = g.means[i];
+    let k_used = num_coeffs(plan.sh_degree) - 1;
+    let rest = &g.rest(i)[..k_used * 3];
+    if !(all_finite(&mean)
+        && all_finite(&g.log_scales[i])
+        && all_finite(&g.quats[i])
+        && g.opacity_logits[i].is_finite()
+        && all_finite(&g.sh_dc[i])
+        && all_finite(rest))
+    {
+        return Err(Cull::NonFinite);
+    }
+    let geo = geometry(g, i, cam)?;
+    let [x, y, z] = geo.t;
+    let (w, h) = (cam.width as f32, cam.height as f32);
+    let (rz, [a0, b, c0]) = (geo.rz, geo.cov);
     let det_orig = a0 * c0 - b * b;
     let (a, c) = (a0 + EPS2D, c0 + EPS2D);
     let det = a * c - b * b;
@@ -275,30 +362,8 @@ pub fn project_one(
         return Err(Cull::OffScreen);
     }
     // 8. Colour.
-    let d = [
-        mean[0] - cam.center[0],
-        mean[1] - cam.center[1],
-        mean[2] - cam.center[2],
-    ];
-    let inv_len = 1.0 / dot3(d, d).sqrt();
-    let mut basis = [0f32; MAX_SH_COEFFS];
-    sh_basis(
-        plan.sh_degree,
-        d[0] * inv_len,
-        d[1] * inv_len,
-        d[2] * inv_len,
-        &mut basis,
-    );
-    let dc = g.sh_dc[i];
-    let mut color = [0f32; 3];
-    for (ch, out) in color.iter_mut().enumerate() {
-        let mut acc = basis[0] * dc[ch];
-        for k in 0..k_used {
-            acc += basis[k + 1] * rest[k * 3 + ch];
-        }
-        let v = acc + 0.5;
-        *out = if v > 0.0 { v } else { 0.0 };
-    }
+    let (raw, _) = sh_color(g, i, cam, plan.sh_degree);
+    let color = raw.map(|v| if v > 0.0 { v } else { 0.0 });
     if !color.iter().all(|c| c.is_finite()) {
         return Err(Cull::NonFinite); // finite but huge SH coefficients overflow here
     }

@@ -21,9 +21,10 @@
 //! the tile's per-entry accumulators; the per-intersection results are then summed per
 //! Gaussian in tile order. No atomics, no dependence on the thread count.
 
-use crate::math::fastexp::exp;
 use crate::raster::composite::Kernel;
-use crate::raster::composite::{EXPECTED_DEPTH_EPS, MAX_ALPHA, SIGMA_CLAMP, splat_rows};
+use crate::raster::composite::{
+    EXPECTED_DEPTH_EPS, MAX_ALPHA, SIGMA_CLAMP, SplatAlpha, splat_alpha, splat_rows,
+};
 use crate::raster::project::{ALPHA_THRESHOLD, Projected, Splat};
 use crate::raster::tile::{TILE_SIZE, TileBins};
 use rayon::prelude::*;
@@ -132,14 +133,7 @@ fn lane<const GEOMETRY: bool>(
 ) {
     let dx = s.mean[0] - px;
     let dy = s.mean[1] - py;
-    let sigma = 0.5 * (s.conic[0] * dx * dx + s.conic[2] * dy * dy) + s.conic[1] * dx * dy;
-    let e = exp(-(if sigma < SIGMA_CLAMP {
-        sigma
-    } else {
-        SIGMA_CLAMP
-    }));
-    let a = s.opacity * e;
-    let alpha = if a < MAX_ALPHA { a } else { MAX_ALPHA };
+    let SplatAlpha { sigma, e, a, alpha } = splat_alpha(s, dx, dy);
     let valid = (pos < st.n[l]) & (sigma >= 0.0) & (alpha >= ALPHA_THRESHOLD);
     let one_minus = 1.0 - alpha;
     let ra = 1.0

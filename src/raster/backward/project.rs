@@ -15,10 +15,10 @@
 
 use super::composite::SplatGrad;
 use crate::gaussian::Gaussians;
-use crate::math::fastexp::{exp, sigmoid};
-use crate::math::sh::{MAX_SH_COEFFS, num_coeffs, sh_basis, sh_basis_grad};
+use crate::math::fastexp::sigmoid;
+use crate::math::sh::{MAX_SH_COEFFS, num_coeffs, sh_basis_grad};
 use crate::raster::plan::RenderPlan;
-use crate::raster::project::{CameraF32, EPS2D, JACOBIAN_GUARD, Projected, quat_to_rotmat};
+use crate::raster::project::{CameraF32, EPS2D, Geometry, Projected, geometry, sh_color};
 
 /// Which raw parameter groups need gradients. Skipped groups come back as zeros and cost
 /// nothing: SH-only requests skip the whole geometric chain.
@@ -112,36 +112,12 @@ fn backward_one(
     out_dc: &mut [f32; 3],
     out_rest: &mut [f32],
 ) {
-    let mean = g.means[i];
     let r = &cam.r_cw;
-    let d = [
-        mean[0] - cam.center[0],
-        mean[1] - cam.center[1],
-        mean[2] - cam.center[2],
-    ];
-    let len = ((d[0] * d[0] + d[1] * d[1]) + d[2] * d[2]).sqrt();
-    let dir = [d[0] / len, d[1] / len, d[2] / len];
     let k_used = num_coeffs(plan.sh_degree) - 1;
     let rest = g.rest(i);
     // Colour: which channels are open (Σ + 0.5 > 0), recomputed as the forward did.
-    let mut basis = [0f32; MAX_SH_COEFFS];
-    let inv_len = 1.0 / ((d[0] * d[0] + d[1] * d[1]) + d[2] * d[2]).sqrt();
-    sh_basis(
-        plan.sh_degree,
-        d[0] * inv_len,
-        d[1] * inv_len,
-        d[2] * inv_len,
-        &mut basis,
-    );
-    let dc = g.sh_dc[i];
-    let mut v_sh = [0f32; 3];
-    for ch in 0..3 {
-        let mut acc = basis[0] * dc[ch];
-        for k in 0..k_used {
-            acc += basis[k + 1] * rest[k * 3 + ch];
-        }
-        v_sh[ch] = if acc + 0.5 > 0.0 { sg.color[ch] } else { 0.0 };
-    }
+    let (raw, basis) = sh_color(g, i, cam, plan.sh_degree);
+    let v_sh: [f32; 3] = std::array::from_fn(|ch| if raw[ch] > 0.0 { sg.color[ch] } else { 0.0 });
     if groups.sh_dc {
         for ch in 0..3 {
             out_dc[ch] = basis[0] * v_sh[ch];
@@ -157,51 +133,28 @@ fn backward_one(
     if !groups.geometry() {
         return;
     }
-    // Recompute the forward quantities the chain needs (same order as `project_one`).
-    let x = (r[0][0] * mean[0] + r[0][1] * mean[1]) + r[0][2] * mean[2] + cam.t_cw[0];
-    let y = (r[1][0] * mean[0] + r[1][1] * mean[1]) + r[1][2] * mean[2] + cam.t_cw[1];
-    let z = (r[2][0] * mean[0] + r[2][1] * mean[1]) + r[2][2] * mean[2] + cam.t_cw[2];
-    let q = g.quats[i];
-    let qn = ((q[0] * q[0] + q[1] * q[1]) + (q[2] * q[2] + q[3] * q[3])).sqrt();
-    let inv_qn = 1.0 / qn;
-    let qh = [q[0] * inv_qn, q[1] * inv_qn, q[2] * inv_qn, q[3] * inv_qn];
-    let rot = quat_to_rotmat(qh);
-    let ls = g.log_scales[i];
-    let s = [exp(ls[0]), exp(ls[1]), exp(ls[2])];
-    let mut m = [[0f32; 3]; 3];
-    for a in 0..3 {
-        for b in 0..3 {
-            m[a][b] = rot[a][b] * s[b];
-        }
-    }
-    let sigma = mul(&m, &tr(&m));
-    let sigma_c = mul(&mul(r, &sigma), &tr(r));
-    let (w, h) = (cam.width as f32, cam.height as f32);
-    let (tan_fovx, tan_fovy) = (0.5 * w / cam.fx, 0.5 * h / cam.fy);
-    let lim_x_pos = (w - cam.cx) / cam.fx + JACOBIAN_GUARD * tan_fovx;
-    let lim_x_neg = cam.cx / cam.fx + JACOBIAN_GUARD * tan_fovx;
-    let lim_y_pos = (h - cam.cy) / cam.fy + JACOBIAN_GUARD * tan_fovy;
-    let lim_y_neg = cam.cy / cam.fy + JACOBIAN_GUARD * tan_fovy;
-    let rz = 1.0 / z;
+    // The forward quantities the chain needs, recomputed by the forward's own code.
+    let Ok(geo) = geometry(g, i, cam) else {
+        return; // culled in the forward too (radii are checked by the caller)
+    };
+    let Geometry {
+        t: [x, y, _],
+        qh,
+        inv_qn,
+        rot,
+        s,
+        m,
+        sigma_c,
+        rz,
+        tx,
+        ty,
+        x_clamped,
+        y_clamped,
+        j,
+        cov,
+    } = geo;
     let rz2 = rz * rz;
-    let (xz, yz) = (x * rz, y * rz);
-    let x_clamped = xz < -lim_x_neg || xz > lim_x_pos;
-    let y_clamped = yz < -lim_y_neg || yz > lim_y_pos;
-    let tx = z * xz.clamp(-lim_x_neg, lim_x_pos);
-    let ty = z * yz.clamp(-lim_y_neg, lim_y_pos);
-    let j = [
-        [cam.fx * rz, 0.0, -cam.fx * tx * rz2],
-        [0.0, cam.fy * rz, -cam.fy * ty * rz2],
-    ];
-    let mut js = [[0f32; 3]; 2];
-    for a in 0..2 {
-        for b in 0..3 {
-            js[a][b] =
-                (j[a][0] * sigma_c[0][b] + j[a][1] * sigma_c[1][b]) + j[a][2] * sigma_c[2][b];
-        }
-    }
-    let cov = |a: usize, b: usize| (js[a][0] * j[b][0] + js[a][1] * j[b][1]) + js[a][2] * j[b][2];
-    let (a_, b_, c_) = (cov(0, 0) + EPS2D, cov(0, 1), cov(1, 1) + EPS2D);
+    let (a_, b_, c_) = (cov[0] + EPS2D, cov[1], cov[2] + EPS2D);
     let inv_det = 1.0 / (a_ * c_ - b_ * b_);
     let ci = [[c_ * inv_det, -b_ * inv_det], [-b_ * inv_det, a_ * inv_det]];
     // v_Σ2d = −Σ⁻¹·G·Σ⁻¹ with G the symmetric gradient of the conic.
@@ -272,6 +225,10 @@ fn backward_one(
         }
         // The colour depends on the mean through dir = (μ − C)/|μ − C|.
         if v_sh.iter().any(|&v| v != 0.0) && plan.sh_degree > 0 {
+            let mean = g.means[i];
+            let d: [f32; 3] = std::array::from_fn(|a| mean[a] - cam.center[a]);
+            let len = ((d[0] * d[0] + d[1] * d[1]) + d[2] * d[2]).sqrt();
+            let dir = d.map(|v| v / len);
             let mut vals = [0f64; MAX_SH_COEFFS];
             let mut grads = [[0f64; 3]; MAX_SH_COEFFS];
             sh_basis_grad(plan.sh_degree, dir.map(|v| v as f64), &mut vals, &mut grads);
