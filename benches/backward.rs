@@ -3,10 +3,13 @@
 //! Per resolution × threads × gradient groups: median forward and backward wall time per
 //! iteration (the backward split into the blend walk and the projection chain), and the
 //! backward's Gaussian-pixel pairs per second (pairs walked back to front, counted exactly).
+//! `frozen` rows: SH-only iterations replayed from a `FrozenBlend` record (forward column =
+//! replayed render, backward column = replayed SH backward; the pairs are the full walk's).
 
 use std::time::Instant;
 use unseen::raster::RenderOptions;
 use unseen::raster::backward::composite::{PixelGrads, composite_backward};
+use unseen::raster::backward::frozen::FrozenBlend;
 use unseen::raster::backward::project::project_backward;
 use unseen::raster::backward::{GradGroups, ImageGrads, render_for_backward};
 use unseen::raster::project::CameraF32;
@@ -117,6 +120,39 @@ fn main() {
                     pairs,
                     pairs as f64 / b / 1e6
                 );
+                if groups == GradGroups::SH_REST {
+                    // Frozen geometry: record once, then replay forward and backward.
+                    let (mut rf, mut rb) = (Vec::new(), Vec::new());
+                    pool.install(|| {
+                        let frozen = FrozenBlend::record(&scene, &cam, &opts).unwrap();
+                        for _ in 0..5 {
+                            let t0 = Instant::now();
+                            let rgb = frozen.render_rgb(&scene);
+                            let t1 = Instant::now();
+                            let g = frozen
+                                .backward_sh(&scene, v.rgb.as_deref().unwrap(), &groups)
+                                .unwrap();
+                            let t2 = Instant::now();
+                            std::hint::black_box((rgb, g));
+                            rf.push((t1 - t0).as_secs_f64());
+                            rb.push((t2 - t1).as_secs_f64());
+                        }
+                    });
+                    let (a, b) = (median(rf), median(rb));
+                    println!(
+                        "{:>9} {:>9} {:>3} {:>8} {:>8.1}ms {:>10} {:>10} {:>8.1}ms {:>12} {:>10.1}",
+                        n,
+                        format!("{w}x{h}"),
+                        threads,
+                        "frozen",
+                        a * 1e3,
+                        "",
+                        "",
+                        b * 1e3,
+                        pairs,
+                        pairs as f64 / b / 1e6
+                    );
+                }
             }
         }
     }

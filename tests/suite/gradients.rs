@@ -585,3 +585,57 @@ fn backward_simd_and_scalar_are_bit_identical() {
         assert!(a == b && pa == pb, "{groups:?}");
     }
 }
+
+/// Frozen geometry: the recorded blend replays the full render and the full SH backward
+/// bit for bit after the SH coefficients change.
+#[test]
+fn frozen_replay_matches_full_render_and_backward() {
+    use unseen::raster::backward::frozen::FrozenBlend;
+    use unseen::raster::render;
+    let cam = default_camera(203, 117);
+    let mut scene = random_scene(20_000, 3, 21, 0.003, 0.3);
+    for bg in [[0.0; 3], [0.3, 0.6, 0.9]] {
+        let opts = RenderOptions {
+            background: bg,
+            ..Default::default()
+        };
+        let frozen = FrozenBlend::record(&scene, &cam, &opts).unwrap();
+        let mut u = Uniform::new(9);
+        for v in scene.sh_rest.iter_mut() {
+            *v += u.range(-0.1, 0.1);
+        }
+        for dc in scene.sh_dc.iter_mut() {
+            dc[1] += u.range(-0.2, 0.2);
+        }
+        let full = render(&scene, &cam, &opts).unwrap().rgb.unwrap();
+        assert!(
+            frozen.render_rgb(&scene) == full,
+            "replayed render differs (bg {bg:?})"
+        );
+        let npix = (cam.width * cam.height) as usize;
+        let v = ImageGrads {
+            rgb: Some((0..npix * 3).map(|_| u.range(-1.0, 1.0)).collect()),
+            ..Default::default()
+        };
+        let groups = GradGroups {
+            sh_dc: true,
+            background: true,
+            ..GradGroups::SH_REST
+        };
+        let fwd = render_for_backward(&scene, &cam, &opts).unwrap();
+        let (want, _) = backward(&scene, &cam, &opts, &fwd, &v, &groups).unwrap();
+        let got = frozen
+            .backward_sh(&scene, v.rgb.as_ref().unwrap(), &groups)
+            .unwrap();
+        assert!(
+            got.sh_rest == want.sh_rest && got.sh_dc == want.sh_dc,
+            "SH gradients differ (bg {bg:?})"
+        );
+        assert_eq!(got.background, want.background);
+        assert!(
+            frozen
+                .backward_sh(&scene, v.rgb.as_ref().unwrap(), &GradGroups::ALL)
+                .is_err()
+        );
+    }
+}

@@ -108,7 +108,7 @@ struct RowState {
 /// The sum of 16 lanes in the fixed tree order the AVX2 reduction uses:
 /// `lane i + lane i+8`, then `+4`, then `+2`, then `+1`.
 #[inline(always)]
-fn sum16(v: &[f32; LANES]) -> f32 {
+pub(crate) fn sum16(v: &[f32; LANES]) -> f32 {
     let mut h = [0f32; 8];
     for i in 0..8 {
         h[i] = v[i] + v[i + 8];

@@ -4,6 +4,7 @@
 //! projection chain). Deterministic: no atomics, fixed reduction order (SPEC.md §6).
 
 pub mod composite;
+pub mod frozen;
 pub mod project;
 
 pub use composite::{PixelGrads, SplatGrad};

@@ -1,0 +1,310 @@
+//! Frozen geometry: when only the SH colours train (the QA-Mask fine-tune), every splat's
+//! α at every pixel is fixed, so the blend weights can be recorded once per camera and
+//! replayed. Forward: `C = Σ c·w` with the forward's own `w = α·T`, in blend order; backward:
+//! per recorded row visit, `hsum16(fac·v_rgb)` with the backward's own `fac = α·T` (recovered
+//! transmittance), in the backward's visit order. Both replays give the same bits as the
+//! full passes (tests `frozen_replay_*`), at a fraction of the cost: no σ, no exp, no
+//! transmittance recurrence.
+//!
+//! A lane that did not blend stores `fac = 0`: its term `0·v` is ±0 where the full pass adds
+//! a masked +0.0, and since the accumulators are never −0.0 (SPEC.md §5.8) the sums agree.
+
+use super::composite::{SplatGrad, sum16};
+use super::project::{GradGroups, Gradients, project_backward};
+use super::{ForwardState, render_for_backward};
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::gaussian::Gaussians;
+use crate::raster::composite::{TRANSMITTANCE_STOP, splat_alpha, splat_rows};
+use crate::raster::project::{ALPHA_THRESHOLD, CameraF32, sh_color};
+use crate::raster::tile::TILE_SIZE;
+use crate::raster::{Outputs, RenderOptions};
+use rayon::prelude::*;
+
+const LANES: usize = TILE_SIZE;
+
+/// Recorded blend weights of one camera.
+pub struct FrozenBlend {
+    fwd: ForwardState,
+    cam: CameraF32,
+    background: [f32; 3],
+    /// Per pixel `pix_start[i]..pix_start[i+1]` into `blend_gid`/`blend_w`, front to back.
+    pix_start: Vec<u32>,
+    blend_gid: Vec<u32>,
+    blend_w: Vec<f32>,
+    /// Backward visits per band (`band_start[b]..band_start[b+1]`), in walk order: the
+    /// intersection index (into `bins.ids`) and the 16 lanes' `fac`.
+    band_start: Vec<usize>,
+    visit_k: Vec<u32>,
+    /// First pixel of the visited row segment and its width (lanes beyond are 0).
+    visit_pix: Vec<(u32, u8)>,
+    visit_fac: Vec<[f32; LANES]>,
+}
+
+impl FrozenBlend {
+    /// Render once and record the weights. The geometry (everything but SH) must not change
+    /// while the record is used.
+    pub fn record(scene: &Gaussians, cam: &Camera, opts: &RenderOptions) -> Result<FrozenBlend> {
+        let opts = RenderOptions {
+            outputs: Outputs {
+                rgb: true,
+                ..Outputs::RGB
+            },
+            ..opts.clone()
+        };
+        let fwd = render_for_backward(scene, cam, &opts)?;
+        let (w, h) = (cam.width as usize, cam.height as usize);
+        let (p, bins) = (&fwd.projected, &fwd.bins);
+        let final_t = fwd.render.final_t.as_ref().expect("backward state");
+        let n_contrib = fwd.render.n_contrib.as_ref().expect("backward state");
+        let cull = fwd.plan.cull_rows;
+        // Forward weights: each pixel walks its tile list exactly as the blend does.
+        let per_pixel: Vec<Vec<(u32, f32)>> = (0..w * h)
+            .into_par_iter()
+            .with_min_len(256)
+            .map(|i| {
+                let (x, y) = (i % w, i / w);
+                let (tx, ty) = (x / TILE_SIZE, y / TILE_SIZE);
+                let y0 = ty * TILE_SIZE;
+                let rows = TILE_SIZE.min(h - y0);
+                let ids = bins.tile(ty * bins.tiles_x + tx);
+                let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
+                let mut t = 1.0f32;
+                let mut out = Vec::new();
+                for &gid in &ids[..n_contrib[i] as usize] {
+                    let (lo, hi) = splat_rows(p, gid as usize, y0, rows, cull);
+                    if ((y - y0) as u32) < lo || ((y - y0) as u32) >= hi {
+                        continue;
+                    }
+                    let s = &p.splats[gid as usize];
+                    let sa = splat_alpha(s, s.mean[0] - px, s.mean[1] - py);
+                    if !(sa.sigma >= 0.0 && sa.alpha >= ALPHA_THRESHOLD) {
+                        continue;
+                    }
+                    let nt = t * (1.0 - sa.alpha);
+                    debug_assert!(nt > TRANSMITTANCE_STOP);
+                    out.push((gid, sa.alpha * t));
+                    t = nt;
+                }
+                out
+            })
+            .collect();
+        let mut pix_start = Vec::with_capacity(w * h + 1);
+        let (mut blend_gid, mut blend_w) = (Vec::new(), Vec::new());
+        pix_start.push(0);
+        for list in per_pixel {
+            for (g, wt) in list {
+                blend_gid.push(g);
+                blend_w.push(wt);
+            }
+            pix_start.push(blend_gid.len() as u32);
+        }
+        // Backward visits: each tile row walks back to front exactly as the backward does.
+        type BandVisits = (Vec<u32>, Vec<(u32, u8)>, Vec<[f32; LANES]>);
+        let bands: Vec<BandVisits> = (0..bins.tiles_y)
+            .into_par_iter()
+            .map(|ty| {
+                let y0 = ty * TILE_SIZE;
+                let rows = TILE_SIZE.min(h - y0);
+                let (mut ks, mut pix, mut facs) = (Vec::new(), Vec::new(), Vec::new());
+                for tx in 0..bins.tiles_x {
+                    let t = ty * bins.tiles_x + tx;
+                    let (x0, cols) = (tx * TILE_SIZE, TILE_SIZE.min(w - tx * TILE_SIZE));
+                    let ids = bins.tile(t);
+                    for row in 0..rows {
+                        let mut tt = [0f32; LANES];
+                        let mut n = [0u32; LANES];
+                        for l in 0..cols {
+                            let i = (y0 + row) * w + x0 + l;
+                            tt[l] = final_t[i];
+                            n[l] = n_contrib[i];
+                        }
+                        let max_n = n.iter().copied().max().unwrap_or(0) as usize;
+                        let py = (y0 + row) as f32 + 0.5;
+                        for pos in (0..max_n).rev() {
+                            let gid = ids[pos] as usize;
+                            let (lo, hi) = splat_rows(p, gid, y0, rows, cull);
+                            if (row as u32) < lo || (row as u32) >= hi {
+                                continue;
+                            }
+                            let s = &p.splats[gid];
+                            let mut fac = [0f32; LANES];
+                            let mut any = false;
+                            for l in 0..LANES {
+                                let px = (x0 + l) as f32 + 0.5;
+                                let sa = splat_alpha(s, s.mean[0] - px, s.mean[1] - py);
+                                let valid = ((pos as u32) < n[l])
+                                    & (sa.sigma >= 0.0)
+                                    & (sa.alpha >= ALPHA_THRESHOLD);
+                                if valid {
+                                    let one_minus = 1.0 - sa.alpha;
+                                    let ra = 1.0
+                                        / if one_minus > super::composite::RECOVER_EPS {
+                                            one_minus
+                                        } else {
+                                            super::composite::RECOVER_EPS
+                                        };
+                                    let tn = tt[l] * ra;
+                                    fac[l] = sa.alpha * tn;
+                                    tt[l] = tn;
+                                    any = true;
+                                }
+                            }
+                            if any {
+                                ks.push((bins.offsets[t] + pos) as u32);
+                                pix.push((((y0 + row) * w + x0) as u32, cols as u8));
+                                facs.push(fac);
+                            }
+                        }
+                    }
+                }
+                (ks, pix, facs)
+            })
+            .collect();
+        let mut band_start = vec![0];
+        let (mut visit_k, mut visit_pix, mut visit_fac) = (Vec::new(), Vec::new(), Vec::new());
+        for (ks, pix, facs) in bands {
+            visit_k.extend(ks);
+            visit_pix.extend(pix);
+            visit_fac.extend(facs);
+            band_start.push(visit_k.len());
+        }
+        Ok(FrozenBlend {
+            cam: CameraF32::new(cam),
+            background: opts.background,
+            fwd,
+            pix_start,
+            blend_gid,
+            blend_w,
+            band_start,
+            visit_k,
+            visit_pix,
+            visit_fac,
+        })
+    }
+
+    /// Splat colours from the scene's current SH coefficients (geometry unchanged).
+    fn colors(&self, scene: &Gaussians) -> Vec<[f32; 3]> {
+        let p = &self.fwd.projected;
+        (0..scene.len())
+            .into_par_iter()
+            .with_min_len(1024)
+            .map(|i| {
+                if p.radii[i] == [0, 0] {
+                    return [0.0; 3];
+                }
+                let (raw, _) = sh_color(scene, i, &self.cam, self.fwd.plan.sh_degree);
+                raw.map(|v| if v > 0.0 { v } else { 0.0 })
+            })
+            .collect()
+    }
+
+    /// The RGB render for the scene's current SH: the same bits as a full render.
+    pub fn render_rgb(&self, scene: &Gaussians) -> Vec<f32> {
+        let colors = self.colors(scene);
+        let final_t = self.fwd.render.final_t.as_ref().expect("backward state");
+        let (bg, apply) = (self.background, self.fwd.plan.apply_background);
+        (0..final_t.len())
+            .into_par_iter()
+            .with_min_len(256)
+            .flat_map_iter(|i| {
+                let mut c = [0f32; 3];
+                for k in self.pix_start[i] as usize..self.pix_start[i + 1] as usize {
+                    let (col, w) = (colors[self.blend_gid[k] as usize], self.blend_w[k]);
+                    for ch in 0..3 {
+                        c[ch] += col[ch] * w;
+                    }
+                }
+                let t = final_t[i];
+                (0..3).map(move |ch| if apply { c[ch] + t * bg[ch] } else { c[ch] })
+            })
+            .collect()
+    }
+
+    /// SH (and background) gradients for `v_rgb`: the same bits as the full backward with
+    /// these groups. Geometry groups are refused.
+    pub fn backward_sh(
+        &self,
+        scene: &Gaussians,
+        v_rgb: &[f32],
+        groups: &GradGroups,
+    ) -> Result<Gradients> {
+        if groups.geometry() {
+            return Err(Error::invalid(
+                "a frozen-geometry record gives only SH and background gradients",
+            ));
+        }
+        let final_t = self.fwd.render.final_t.as_ref().expect("backward state");
+        if v_rgb.len() != final_t.len() * 3 {
+            return Err(Error::invalid(
+                "rgb gradient size differs from the recorded camera",
+            ));
+        }
+        let bins = &self.fwd.bins;
+        let (w, h) = (self.cam.width as usize, self.cam.height as usize);
+        // Per band, in the full backward's orders: background in (tile, row, pixel) order,
+        // then the visits into the band's intersection range.
+        let parts: Vec<(Vec<[f32; 3]>, [f64; 3])> = (0..bins.tiles_y)
+            .into_par_iter()
+            .map(|ty| {
+                let first = bins.offsets[ty * bins.tiles_x];
+                let last = bins.offsets[(ty + 1) * bins.tiles_x];
+                let y0 = ty * TILE_SIZE;
+                let rows = TILE_SIZE.min(h - y0);
+                let mut bg = [0f64; 3];
+                for tx in 0..bins.tiles_x {
+                    let (x0, cols) = (tx * TILE_SIZE, TILE_SIZE.min(w - tx * TILE_SIZE));
+                    for row in 0..rows {
+                        for l in 0..cols {
+                            let i = (y0 + row) * w + x0 + l;
+                            for (ch, b) in bg.iter_mut().enumerate() {
+                                *b += (final_t[i] * v_rgb[3 * i + ch]) as f64;
+                            }
+                        }
+                    }
+                }
+                let mut inter = vec![[0f32; 3]; last - first];
+                for v in self.band_start[ty]..self.band_start[ty + 1] {
+                    let (i0, cols) = self.visit_pix[v];
+                    let fac = &self.visit_fac[v];
+                    let acc = &mut inter[self.visit_k[v] as usize - first];
+                    for (ch, a) in acc.iter_mut().enumerate() {
+                        let mut lanes = [0f32; LANES];
+                        for l in 0..cols as usize {
+                            lanes[l] = fac[l] * v_rgb[3 * (i0 as usize + l) + ch];
+                        }
+                        *a += sum16(&lanes);
+                    }
+                }
+                (inter, bg)
+            })
+            .collect();
+        let mut splats = vec![SplatGrad::default(); scene.len()];
+        let mut bg = [0f64; 3];
+        let mut k = 0;
+        for (inter, b) in &parts {
+            for c in inter {
+                let g = &mut splats[bins.ids[k] as usize].color;
+                for ch in 0..3 {
+                    g[ch] += c[ch];
+                }
+                k += 1;
+            }
+            for ch in 0..3 {
+                bg[ch] += b[ch];
+            }
+        }
+        let mut grads = project_backward(
+            scene,
+            &self.cam,
+            &self.fwd.projected,
+            &self.fwd.plan,
+            groups,
+            &splats,
+        );
+        if groups.background {
+            grads.background = bg.map(|v| v as f32);
+        }
+        Ok(grads)
+    }
+}
