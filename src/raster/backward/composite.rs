@@ -118,6 +118,22 @@ pub(crate) fn sum16(v: &[f32; LANES]) -> f32 {
     m[0] + m[1]
 }
 
+/// Step the recovered transmittance back over a splat of opacity `alpha`: returns
+/// `ra = 1/max(1e-6, 1 − α)`, the transmittance in front of the splat `T·ra`, and the splat's
+/// weight `fac = α·T·ra`. Shared by the backward walk and the frozen-geometry record.
+#[inline(always)]
+pub(crate) fn recover(t_behind: f32, alpha: f32) -> (f32, f32, f32) {
+    let one_minus = 1.0 - alpha;
+    let ra = 1.0
+        / if one_minus > RECOVER_EPS {
+            one_minus
+        } else {
+            RECOVER_EPS
+        };
+    let t = t_behind * ra;
+    (ra, t, alpha * t)
+}
+
 /// One lane of one splat, back to front: updates the lane state, writes the lane's
 /// contributions (0 where nothing flows). The single scalar definition of the arithmetic.
 #[inline(always)]
@@ -135,15 +151,7 @@ fn lane<const GEOMETRY: bool>(
     let dy = s.mean[1] - py;
     let SplatAlpha { sigma, e, a, alpha } = splat_alpha(s, dx, dy);
     let valid = (pos < st.n[l]) & (sigma >= 0.0) & (alpha >= ALPHA_THRESHOLD);
-    let one_minus = 1.0 - alpha;
-    let ra = 1.0
-        / if one_minus > RECOVER_EPS {
-            one_minus
-        } else {
-            RECOVER_EPS
-        };
-    let t = st.t[l] * ra;
-    let fac = alpha * t;
+    let (ra, t, fac) = recover(st.t[l], alpha);
     for k in 0..3 {
         c[k][l] = if valid { fac * st.v[k][l] } else { 0.0 };
     }

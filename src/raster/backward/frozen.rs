@@ -9,7 +9,7 @@
 //! A lane that did not blend stores `fac = 0`: its term `0·v` is ±0 where the full pass adds
 //! a masked +0.0, and since the accumulators are never −0.0 (SPEC.md §5.8) the sums agree.
 
-use super::composite::{SplatGrad, sum16};
+use super::composite::{SplatGrad, recover, sum16};
 use super::project::{GradGroups, Gradients, project_backward};
 use super::{ForwardState, render_for_backward};
 use crate::camera::Camera;
@@ -137,15 +137,8 @@ impl FrozenBlend {
                                     & (sa.sigma >= 0.0)
                                     & (sa.alpha >= ALPHA_THRESHOLD);
                                 if valid {
-                                    let one_minus = 1.0 - sa.alpha;
-                                    let ra = 1.0
-                                        / if one_minus > super::composite::RECOVER_EPS {
-                                            one_minus
-                                        } else {
-                                            super::composite::RECOVER_EPS
-                                        };
-                                    let tn = tt[l] * ra;
-                                    fac[l] = sa.alpha * tn;
+                                    let (_, tn, f) = recover(tt[l], sa.alpha);
+                                    fac[l] = f;
                                     tt[l] = tn;
                                     any = true;
                                 }
