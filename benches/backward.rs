@@ -127,7 +127,7 @@ fn main() {
                         let frozen = FrozenBlend::record(&scene, &cam, &opts).unwrap();
                         for _ in 0..5 {
                             let t0 = Instant::now();
-                            let rgb = frozen.render_rgb(&scene);
+                            let rgb = frozen.render_rgb(&scene).unwrap();
                             let t1 = Instant::now();
                             let g = frozen
                                 .backward_sh(&scene, v.rgb.as_deref().unwrap(), &groups)

@@ -609,7 +609,7 @@ fn frozen_replay_matches_full_render_and_backward() {
         }
         let full = render(&scene, &cam, &opts).unwrap().rgb.unwrap();
         assert!(
-            frozen.render_rgb(&scene) == full,
+            frozen.render_rgb(&scene).unwrap() == full,
             "replayed render differs (bg {bg:?})"
         );
         let npix = (cam.width * cam.height) as usize;

@@ -25,6 +25,8 @@ const LANES: usize = TILE_SIZE;
 
 /// Recorded blend weights of one camera.
 pub struct FrozenBlend {
+    /// The geometry the record was made with; every replay checks the scene still has it.
+    geometry: Gaussians,
     fwd: ForwardState,
     cam: CameraF32,
     background: [f32; 3],
@@ -162,7 +164,16 @@ impl FrozenBlend {
             visit_fac.extend(facs);
             band_start.push(visit_k.len());
         }
+        let geometry = Gaussians {
+            means: scene.means.clone(),
+            log_scales: scene.log_scales.clone(),
+            quats: scene.quats.clone(),
+            opacity_logits: scene.opacity_logits.clone(),
+            sh_degree: scene.sh_degree,
+            ..Default::default()
+        };
         Ok(FrozenBlend {
+            geometry,
             cam: CameraF32::new(cam),
             background: opts.background,
             fwd,
@@ -174,6 +185,26 @@ impl FrozenBlend {
             visit_pix,
             visit_fac,
         })
+    }
+
+    /// The replay is valid only for the recorded geometry: compare it bit for bit (a few MB
+    /// of memory comparison, far cheaper than the replay).
+    fn check(&self, scene: &Gaussians) -> Result<()> {
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<u32>>();
+        let g = &self.geometry;
+        let same = scene.len() == g.len()
+            && scene.sh_degree == g.sh_degree
+            && bits(scene.means.as_flattened()) == bits(g.means.as_flattened())
+            && bits(scene.log_scales.as_flattened()) == bits(g.log_scales.as_flattened())
+            && bits(scene.quats.as_flattened()) == bits(g.quats.as_flattened())
+            && bits(&scene.opacity_logits) == bits(&g.opacity_logits);
+        if same {
+            Ok(())
+        } else {
+            Err(Error::invalid(
+                "the scene's geometry changed since the frozen blend was recorded; record it again",
+            ))
+        }
     }
 
     /// Splat colours from the scene's current SH coefficients (geometry unchanged).
@@ -193,11 +224,12 @@ impl FrozenBlend {
     }
 
     /// The RGB render for the scene's current SH: the same bits as a full render.
-    pub fn render_rgb(&self, scene: &Gaussians) -> Vec<f32> {
+    pub fn render_rgb(&self, scene: &Gaussians) -> Result<Vec<f32>> {
+        self.check(scene)?;
         let colors = self.colors(scene);
         let final_t = self.fwd.render.final_t.as_ref().expect("backward state");
         let (bg, apply) = (self.background, self.fwd.plan.apply_background);
-        (0..final_t.len())
+        Ok((0..final_t.len())
             .into_par_iter()
             .with_min_len(256)
             .flat_map_iter(|i| {
@@ -211,7 +243,7 @@ impl FrozenBlend {
                 let t = final_t[i];
                 (0..3).map(move |ch| if apply { c[ch] + t * bg[ch] } else { c[ch] })
             })
-            .collect()
+            .collect())
     }
 
     /// SH (and background) gradients for `v_rgb`: the same bits as the full backward with
