@@ -187,17 +187,6 @@ pub fn sh_basis_grad(degree: u32, dir: [f64; 3], values: &mut [f64], grads: &mut
     }
 }
 
-/// Colour of one channel: `sum_k coeff[k] · Y_k`, summed in `k` order, in f32.
-/// `coeffs[0]` is the DC term. The caller adds 0.5 and clamps at 0 (3DGS convention).
-#[inline]
-pub fn sh_dot(basis: &[f32], coeffs: impl Iterator<Item = f32>) -> f32 {
-    let mut acc = 0.0f32;
-    for (b, c) in basis.iter().zip(coeffs) {
-        acc += b * c;
-    }
-    acc
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

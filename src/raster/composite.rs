@@ -421,16 +421,15 @@ fn band_impl<const DEPTH: bool, const TRACK: bool, const AVX2: bool>(
     for tx in 0..bins.tiles_x {
         let x0 = tx * TILE_SIZE;
         let cols = TILE_SIZE.min(width - x0);
-        let lanes = cols;
         let mut px = [0f32; GROUP];
         for (l, v) in px.iter_mut().enumerate() {
             *v = (x0 + l) as f32 + 0.5;
         }
         for g in groups.iter_mut().take(rows) {
-            *g = Group::new(lanes);
+            *g = Group::new(cols);
         }
         let mut alive = [false; TILE_SIZE];
-        alive[..rows].fill(lanes > 0);
+        alive[..rows].fill(cols > 0);
         // Gather the tile's list a batch at a time, like gsplat's shared-memory batches: rows
         // usually stop long before the end of a long list, so most splats are never loaded.
         let list = bins.tile(ty * bins.tiles_x + tx);
@@ -476,7 +475,7 @@ fn band_impl<const DEPTH: bool, const TRACK: bool, const AVX2: bool>(
         }
         // Write the tile's pixels into the band.
         for (row, st) in groups.iter().enumerate().take(rows) {
-            for l in 0..lanes {
+            for l in 0..cols {
                 let i = row * width + x0 + l;
                 let t = st.t[l];
                 if want.rgb {
