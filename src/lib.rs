@@ -12,7 +12,9 @@
 //! [`io`] (atomic writes, PNG, EXR), [`scene`] (procedural scenes for demos, tests, benches).
 
 pub mod camera;
+pub mod dataset;
 pub mod error;
+pub mod eval;
 pub mod gaussian;
 pub mod io;
 pub mod math;

@@ -3,14 +3,14 @@
 //! The file list is in SPEC.md §12.
 
 use crate::camera::Camera;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::gaussian::Gaussians;
 use crate::io::npy::{NpyElement, write_npy};
 use crate::io::write_text;
 use crate::raster::backward::{GradGroups, ImageGrads, backward, render_for_backward};
 use crate::raster::{Outputs, RenderOptions};
+use crate::train::loss::{LossInput, LossWeights, image_loss};
 use serde::Serialize;
-use sha2::{Digest, Sha256};
 use std::path::Path;
 
 /// The conventions version of SPEC.md (bumped when a number a port must match changes).
@@ -23,12 +23,9 @@ pub enum Loss {
     L1,
     /// Mean squared difference over all pixels and channels.
     L2,
-    /// INRIA's `(1 − λ)·L1 + λ·(1 − SSIM)` with λ = [`LAMBDA_DSSIM`].
+    /// INRIA's `0.8·L1 + 0.2·(1 − SSIM)` ([`LossWeights::INRIA`]).
     L1DSsim,
 }
-
-/// Weight of the D-SSIM term (INRIA `lambda_dssim`).
-pub const LAMBDA_DSSIM: f32 = 0.2;
 
 #[derive(Serialize)]
 struct Entry {
@@ -62,10 +59,7 @@ impl Writer<'_> {
     fn put<T: NpyElement>(&mut self, name: &str, data: &[T], shape: &[usize]) -> Result<()> {
         let file = format!("{name}.npy");
         let bytes = write_npy(&self.dir.join(&file), data, shape)?;
-        let sha256 = Sha256::digest(&bytes)
-            .iter()
-            .map(|b| format!("{b:02x}"))
-            .collect();
+        let sha256 = crate::io::sha256_hex(&bytes);
         self.entries.push(Entry {
             name: name.to_string(),
             file,
@@ -86,7 +80,8 @@ pub struct Targets<'a> {
     /// RGB target in [0, 1], interleaved, the camera's size.
     pub rgb: &'a [f32],
     pub loss: Loss,
-    /// Accumulated-depth target (adds the mean |D − D_target| over finite target pixels).
+    /// Accumulated-depth target (adds the mean |D − D_target| over finite, positive target
+    /// pixels).
     pub depth: Option<&'a [f32]>,
 }
 
@@ -158,73 +153,32 @@ pub fn dump(
     )?;
     let command = if let Some(t) = targets {
         let rgb = r.rgb.as_ref().expect("rgb requested");
-        if t.rgb.len() != rgb.len() {
-            return Err(Error::invalid(format!(
-                "the target has {} values, the {w}x{h} render has {}",
-                t.rgb.len(),
-                rgb.len()
-            )));
-        }
-        let count = rgb.len() as f64;
-        let (mut loss, mut v_rgb) = (0f64, vec![0f32; rgb.len()]);
-        for ((v, &x), &y) in v_rgb.iter_mut().zip(rgb).zip(t.rgb) {
-            let d = x - y;
-            match t.loss {
-                Loss::L1 | Loss::L1DSsim => {
-                    loss += d.abs() as f64;
-                    *v = if d > 0.0 {
-                        1.0
-                    } else if d < 0.0 {
-                        -1.0
-                    } else {
-                        0.0
-                    } / count as f32;
-                }
-                Loss::L2 => {
-                    loss += (d as f64) * (d as f64);
-                    *v = 2.0 * d / count as f32;
-                }
-            }
-        }
-        loss /= count;
-        if t.loss == Loss::L1DSsim {
-            let lam = LAMBDA_DSSIM;
-            let (s, g) = crate::train::ssim::ssim(rgb, t.rgb, w, h, 3, true);
-            loss = (1.0 - lam as f64) * loss + lam as f64 * (1.0 - s);
-            for (v, gs) in v_rgb.iter_mut().zip(g.expect("gradient requested")) {
-                *v = (1.0 - lam) * *v - lam * gs;
-            }
-        }
-        let mut v = ImageGrads {
-            rgb: Some(v_rgb),
+        let weights = match t.loss {
+            Loss::L1 => LossWeights::L1,
+            Loss::L2 => LossWeights::L2,
+            Loss::L1DSsim => LossWeights::INRIA,
+        };
+        let out = image_loss(
+            &LossInput {
+                width: w,
+                height: h,
+                rgb,
+                target_rgb: t.rgb,
+                depth: t.depth.and(r.depth.as_deref()),
+                target_depth: t.depth,
+                mask: None,
+            },
+            &LossWeights {
+                depth: 1.0,
+                ..weights
+            },
+        )?;
+        let loss = out.terms.total;
+        let v = ImageGrads {
+            rgb: Some(out.grad_rgb),
+            depth: out.grad_depth,
             ..Default::default()
         };
-        if let Some(dt) = t.depth {
-            let d = r.depth.as_ref().expect("depth requested");
-            if dt.len() != d.len() {
-                return Err(Error::invalid(
-                    "the depth target does not match the camera size",
-                ));
-            }
-            let valid = dt.iter().filter(|x| x.is_finite()).count().max(1) as f64;
-            let mut v_d = vec![0f32; d.len()];
-            let mut dl = 0f64;
-            for ((g, &x), &y) in v_d.iter_mut().zip(d).zip(dt) {
-                if y.is_finite() {
-                    let e = x - y;
-                    dl += e.abs() as f64;
-                    *g = if e > 0.0 {
-                        1.0
-                    } else if e < 0.0 {
-                        -1.0
-                    } else {
-                        0.0
-                    } / valid as f32;
-                }
-            }
-            loss += dl / valid;
-            v.depth = Some(v_d);
-        }
         let (g, _) = backward(scene, cam, &opts, &fwd, &v, &GradGroups::ALL)?;
         let k1 = scene.rest_per_channel();
         wr.put("loss", &[loss as f32], &[])?;

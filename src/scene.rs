@@ -22,6 +22,30 @@ impl Uniform {
     pub fn range(&mut self, lo: f32, hi: f32) -> f32 {
         lo + (hi - lo) * self.unit()
     }
+    /// A standard normal sample (Marsaglia's polar method in f32 with the crate's own `ln`,
+    /// so the value does not depend on the platform's libm; the second sample of each
+    /// accepted pair is discarded to keep one draw per call).
+    pub fn normal(&mut self) -> f32 {
+        loop {
+            let u = 2.0 * self.unit() - 1.0;
+            let v = 2.0 * self.unit() - 1.0;
+            let s = u * u + v * v;
+            if s > 0.0 && s < 1.0 {
+                return u * (-2.0 * crate::math::fastexp::ln(s) / s).sqrt();
+            }
+        }
+    }
+    /// Uniform integer in `0..n` (`n > 0`), by rejection, without modulo bias.
+    pub fn below(&mut self, n: u32) -> u32 {
+        assert!(n > 0);
+        let zone = u32::MAX - (u32::MAX - n + 1) % n;
+        loop {
+            let x = self.0.next_u32();
+            if x <= zone {
+                return x % n;
+            }
+        }
+    }
 }
 
 /// `n` random Gaussians in a box `[-1,1]×[-0.75,0.75]×[2,6]` in front of [`default_camera`],

@@ -6,10 +6,15 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 use unseen::camera::{Camera, inria};
+use unseen::dataset::Split;
 use unseen::error::{Error, Result};
+use unseen::eval::{EvalReport, evaluate};
 use unseen::gaussian::ply;
+use unseen::io::file_stem;
 use unseen::io::image::{ImageF32, write_exr, write_png};
 use unseen::raster::{Outputs, RenderOptions, render};
+use unseen::train::run::{load_dataset, read_config, read_run_scene, train_run};
+use unseen::train::trainer::{Progress, TrainConfig};
 
 #[derive(Parser)]
 #[command(
@@ -24,8 +29,12 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Render the bundled scene from all its cameras into ./demo-out/.
+    /// Train on the train half of the bundled `lounge` scene (a short preset), evaluate on
+    /// its test views and on the held-out half, write demo-out/report.md.
     Demo {
+        /// Iterations of the short preset.
+        #[arg(long, default_value_t = DEMO_ITERATIONS)]
+        iterations: u32,
         /// Output folder.
         #[arg(long, default_value = "demo-out")]
         out: PathBuf,
@@ -53,6 +62,43 @@ enum Command {
         /// expected_depth (ED = D / alpha).
         #[arg(long, value_delimiter = ',', default_value = "rgb")]
         outputs: Vec<String>,
+    },
+    /// Train 3D Gaussians on a dataset (unseen scene, COLMAP or transforms.json directory)
+    /// with INRIA's recipe; writes INRIA's output layout into --out.
+    Train {
+        /// Dataset directory.
+        dataset: PathBuf,
+        /// Run directory (created).
+        #[arg(long)]
+        out: PathBuf,
+        /// Iterations (default 30000).
+        #[arg(long)]
+        iterations: Option<u32>,
+        /// Seed of every random choice (default 0).
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Integer image downscale factor (INRIA -r; default 1).
+        #[arg(long)]
+        resolution: Option<u32>,
+        /// Largest SH degree (default 3).
+        #[arg(long)]
+        sh_degree: Option<u32>,
+        /// A JSON TrainConfig; any field left out keeps its default (SPEC.md §14).
+        /// Flags override it.
+        #[arg(long)]
+        config: Option<PathBuf>,
+    },
+    /// PSNR / SSIM of a run's latest PLY on a split of a dataset; writes RUN/eval.json and
+    /// render|ground-truth images into RUN/eval/<split>/.
+    Eval {
+        /// Run directory written by `unseen train`.
+        run: PathBuf,
+        /// Dataset directory.
+        #[arg(long)]
+        dataset: PathBuf,
+        /// train, test (INRIA's every-8th hold-out) or heldout (the unseen half).
+        #[arg(long, default_value = "test")]
+        split: Split,
     },
     /// Dump every intermediate (and, for backward, every gradient) of one render as .npy
     /// files with a manifest.json, for comparing a GPU port array by array.
@@ -139,23 +185,6 @@ fn parse_outputs(names: &[String]) -> Result<Outputs> {
         }
     }
     Ok(o)
-}
-
-/// A file-name-safe version of a camera name.
-fn file_stem(name: &str) -> String {
-    let stem = Path::new(name)
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned());
-    stem.unwrap_or_else(|| name.to_string())
-        .chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || "-_.".contains(c) {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect()
 }
 
 struct Job<'a> {
@@ -307,6 +336,132 @@ fn run_oracle(c: &OracleScene, targets: Option<(&Path, &str, Option<&Path>)>) ->
     Ok(())
 }
 
+/// Iterations of the demo's short training preset.
+const DEMO_ITERATIONS: u32 = 3000;
+
+fn train_with_bar(
+    dataset: &Path,
+    out: &Path,
+    cfg: &TrainConfig,
+) -> Result<unseen::train::run::RunSummary> {
+    let bar = ProgressBar::new(cfg.iterations as u64);
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{bar:30} {pos}/{len} {msg} [{elapsed_precise}<{eta_precise}, {per_sec}]",
+        )
+        .expect("valid template"),
+    );
+    let mut on_progress = |p: &Progress| {
+        if p.iteration % 10 == 0 || p.iteration == p.iterations {
+            bar.set_position(p.iteration as u64);
+            bar.set_message(format!(
+                "loss {:.4} PSNR {:.2} dB, {} Gaussians",
+                p.loss_ema, p.psnr_ema, p.gaussians
+            ));
+        }
+    };
+    let s = train_run(dataset, out, cfg, &mut on_progress);
+    bar.finish_and_clear();
+    s
+}
+
+/// Evaluate a run's latest PLY and merge the report into RUN/eval.json.
+fn eval_run(run: &Path, dataset: &Path, split: Split) -> Result<EvalReport> {
+    let cfg = read_config(run)?;
+    let data = load_dataset(dataset, &cfg)?;
+    let (_, g) = read_run_scene(run)?;
+    let name = match split {
+        Split::Train => "train",
+        Split::Test => "test",
+        Split::Heldout => "heldout",
+    };
+    let report = evaluate(
+        &g,
+        &data,
+        split,
+        cfg.background,
+        Some(&run.join("eval").join(name)),
+    )?;
+    let path = run.join("eval.json");
+    let mut all: serde_json::Map<String, serde_json::Value> = std::fs::read(&path)
+        .ok()
+        .and_then(|b| serde_json::from_slice(&b).ok())
+        .unwrap_or_default();
+    all.insert(
+        name.into(),
+        serde_json::to_value(&report).expect("serializes"),
+    );
+    let text = serde_json::to_string_pretty(&all).expect("serializes");
+    unseen::io::write_text(&path, &text)?;
+    Ok(report)
+}
+
+/// The demo: train on the train half of the bundled lounge scene, evaluate in and out of
+/// distribution, write a report.
+fn run_demo(iterations: u32, out: &Path) -> Result<()> {
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("reference_data/scenes/lounge");
+    let run = out.join("run");
+    let cfg = TrainConfig {
+        iterations,
+        save_iterations: vec![],
+        ..TrainConfig::default()
+    };
+    println!(
+        "demo: training {} iterations on the train half of {}",
+        iterations,
+        scene.display()
+    );
+    let s = train_with_bar(&scene, &run, &cfg)?;
+    let test = eval_run(&run, &scene, Split::Test)?;
+    let held = eval_run(&run, &scene, Split::Heldout)?;
+    let mut md = String::from("# unseen demo\n\n");
+    md += &format!(
+        "Trained {} iterations on the `train` half of the bundled Mitsuba scene `lounge` \
+         (160x120) in {:.1} s on this machine ({:.1} it/s), {} Gaussians at the end, peak \
+         memory {}.\n\n",
+        s.iterations,
+        s.wall_seconds,
+        s.iterations_per_second,
+        s.gaussians,
+        s.peak_memory_bytes
+            .map_or("unknown".into(), |b| format!("{:.0} MB", b as f64 / 1e6))
+    );
+    md += &format!(
+        "| split | views | mean PSNR (dB) | mean SSIM |\n|---|---|---|---|\n\
+         | test (in distribution) | {} | {:.2} | {:.4} |\n\
+         | heldout (the unseen half) | {} | {:.2} | {:.4} |\n\n",
+        test.views.len(),
+        test.mean_psnr,
+        test.mean_ssim,
+        held.views.len(),
+        held.mean_psnr,
+        held.mean_ssim
+    );
+    md += "The gap between the two rows is what scene extrapolation has to close. \
+           Side by side (render | ground truth):\n\n";
+    for (name, r) in [("test", &test), ("heldout", &held)] {
+        md += &format!("## {name}\n\n");
+        for v in r.views.iter().take(4) {
+            md += &format!(
+                "![{0}](run/eval/{name}/{1}.png) {0}: {2:.2} dB\n\n",
+                v.name,
+                unseen::io::file_stem(&v.name),
+                v.psnr
+            );
+        }
+    }
+    unseen::io::write_text(&out.join("report.md"), &md)?;
+    println!(
+        "demo: test {:.2} dB / SSIM {:.4}, heldout {:.2} dB / SSIM {:.4}; report in {}",
+        test.mean_psnr,
+        test.mean_ssim,
+        held.mean_psnr,
+        held.mean_ssim,
+        out.join("report.md").display()
+    );
+    Ok(())
+}
+
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Oracle {
@@ -321,34 +476,56 @@ fn run(cli: Cli) -> Result<()> {
                     depth_target,
                 },
         } => run_oracle(&common, Some((&target, &loss, depth_target.as_deref()))),
-        Command::Demo { out } => {
-            let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("reference_data/demo");
-            let scene = dir.join("scene.ply");
-            let cameras = inria::read_cameras_json(&dir.join("cameras.json"))?;
-            let opts = RenderOptions {
-                outputs: Outputs {
-                    alpha: true,
-                    expected_depth: true,
-                    ..Outputs::RGB
-                },
-                ..RenderOptions::default()
+        Command::Demo { iterations, out } => run_demo(iterations, &out),
+        Command::Train {
+            dataset,
+            out,
+            iterations,
+            seed,
+            resolution,
+            sh_degree,
+            config,
+        } => {
+            let mut cfg = match config {
+                Some(p) => {
+                    let text = std::fs::read(&p).map_err(|e| Error::io(&p, e))?;
+                    serde_json::from_slice::<TrainConfig>(&text)
+                        .map_err(|e| Error::parse(&p, format!("invalid train config: {e}")))?
+                }
+                None => TrainConfig::default(),
             };
-            let exr = opts.outputs;
-            let files = run_render(&Job {
-                scene_path: &scene,
-                cameras,
-                out: &out,
-                opts,
-                exr,
-            })?;
-            println!(
-                "demo: rendered the bundled scene ({}) into {}:",
-                scene.display(),
-                out.display()
-            );
-            for f in files {
-                println!("  {}", f.display());
+            if let Some(v) = iterations {
+                cfg.iterations = v;
             }
+            if let Some(v) = seed {
+                cfg.seed = v;
+            }
+            if let Some(v) = resolution {
+                cfg.resolution = v;
+            }
+            if let Some(v) = sh_degree {
+                cfg.sh_degree = v;
+            }
+            let s = train_with_bar(&dataset, &out, &cfg)?;
+            println!(
+                "trained {} iterations in {:.1} s ({:.1} it/s, {:.3} G pairs/s), {} Gaussians: {}",
+                s.iterations,
+                s.wall_seconds,
+                s.iterations_per_second,
+                s.pairs_per_second * 1e-9,
+                s.gaussians,
+                s.ply.display()
+            );
+            Ok(())
+        }
+        Command::Eval {
+            run,
+            dataset,
+            split,
+        } => {
+            let r = eval_run(&run, &dataset, split)?;
+            print!("{}", r.table());
+            println!("wrote {}", run.join("eval.json").display());
             Ok(())
         }
         Command::Render {

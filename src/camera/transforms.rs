@@ -57,7 +57,7 @@ pub fn read_transforms_json(path: &Path) -> Result<Vec<Camera>> {
         let get = |k: &str| num(f, k).or_else(|| num(&root, k));
         let (w, h) = match (get("w"), get("h")) {
             (Some(w), Some(h)) => (w as u32, h as u32),
-            _ => image_size(&dir.join(file)).map_err(|e| e.at(path))?,
+            _ => image_size(&frame_image_path(dir, file)).map_err(|e| e.at(path))?,
         };
         let (fx, fy) = match (get("fl_x"), get("fl_y"), get("camera_angle_x")) {
             (Some(fx), fy, _) => (fx, fy.unwrap_or(fx)),
@@ -81,20 +81,24 @@ pub fn read_transforms_json(path: &Path) -> Result<Vec<Camera>> {
     Ok(cams)
 }
 
-fn image_size(file: &Path) -> Result<(u32, u32)> {
-    let candidates: Vec<PathBuf> = if file.extension().is_some() {
-        vec![file.to_path_buf()]
+/// The image file of a frame's `file_path` (relative to the JSON's folder): as written when
+/// it has an extension, else with `.png` appended (NeRF-synthetic), else as written.
+pub fn frame_image_path(dir: &Path, file_path: &str) -> PathBuf {
+    let file = dir.join(file_path);
+    if file.extension().is_some() || !file.with_extension("png").exists() {
+        file
     } else {
-        vec![file.with_extension("png"), file.to_path_buf()]
-    };
-    for c in &candidates {
-        if c.exists() {
-            return image::image_dimensions(c)
-                .map_err(|e| Error::parse(c, format!("cannot read image size: {e}")));
-        }
+        file.with_extension("png")
+    }
+}
+
+fn image_size(file: &Path) -> Result<(u32, u32)> {
+    if file.exists() {
+        return image::image_dimensions(file)
+            .map_err(|e| Error::parse(file, format!("cannot read image size: {e}")));
     }
     Err(Error::invalid(format!(
         "no w/h in transforms.json and image {} not found",
-        candidates[0].display()
+        file.display()
     )))
 }

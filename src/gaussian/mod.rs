@@ -131,3 +131,105 @@ impl Gaussians {
         best
     }
 }
+
+/// One parameter array of [`Gaussians`] (an optimizer parameter group).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Param {
+    Means,
+    ShDc,
+    ShRest,
+    OpacityLogits,
+    LogScales,
+    Quats,
+}
+
+impl Param {
+    /// INRIA's optimizer order (`xyz`, `f_dc`, `f_rest`, `opacity`, `scaling`, `rotation`).
+    pub const ALL: [Param; 6] = [
+        Param::Means,
+        Param::ShDc,
+        Param::ShRest,
+        Param::OpacityLogits,
+        Param::LogScales,
+        Param::Quats,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Param::Means => "means",
+            Param::ShDc => "sh_dc",
+            Param::ShRest => "sh_rest",
+            Param::OpacityLogits => "opacity_logits",
+            Param::LogScales => "log_scales",
+            Param::Quats => "quats",
+        }
+    }
+}
+
+impl Gaussians {
+    /// The flat `f32` values of one parameter array.
+    pub fn param(&self, p: Param) -> &[f32] {
+        match p {
+            Param::Means => self.means.as_flattened(),
+            Param::ShDc => self.sh_dc.as_flattened(),
+            Param::ShRest => &self.sh_rest,
+            Param::OpacityLogits => &self.opacity_logits,
+            Param::LogScales => self.log_scales.as_flattened(),
+            Param::Quats => self.quats.as_flattened(),
+        }
+    }
+
+    pub fn param_mut(&mut self, p: Param) -> &mut [f32] {
+        match p {
+            Param::Means => self.means.as_flattened_mut(),
+            Param::ShDc => self.sh_dc.as_flattened_mut(),
+            Param::ShRest => &mut self.sh_rest,
+            Param::OpacityLogits => &mut self.opacity_logits,
+            Param::LogScales => self.log_scales.as_flattened_mut(),
+            Param::Quats => self.quats.as_flattened_mut(),
+        }
+    }
+
+    /// `n` Gaussians with every parameter 0 (the layout of optimizer moments).
+    pub fn zeros(n: usize, sh_degree: u32) -> Result<Self> {
+        let mut g = Gaussians::new(sh_degree)?;
+        let k1 = g.rest_per_channel();
+        g.means = vec![[0.0; 3]; n];
+        g.log_scales = vec![[0.0; 3]; n];
+        g.quats = vec![[0.0; 4]; n];
+        g.opacity_logits = vec![0.0; n];
+        g.sh_dc = vec![[0.0; 3]; n];
+        g.sh_rest = vec![0.0; n * k1 * 3];
+        Ok(g)
+    }
+
+    /// The Gaussians at `indices`, in that order (indices may repeat).
+    pub fn select(&self, indices: &[usize]) -> Gaussians {
+        let r = self.rest_per_channel() * 3;
+        let mut sh_rest = Vec::with_capacity(indices.len() * r);
+        for &i in indices {
+            sh_rest.extend_from_slice(&self.sh_rest[i * r..(i + 1) * r]);
+        }
+        Gaussians {
+            means: indices.iter().map(|&i| self.means[i]).collect(),
+            log_scales: indices.iter().map(|&i| self.log_scales[i]).collect(),
+            quats: indices.iter().map(|&i| self.quats[i]).collect(),
+            opacity_logits: indices.iter().map(|&i| self.opacity_logits[i]).collect(),
+            sh_dc: indices.iter().map(|&i| self.sh_dc[i]).collect(),
+            sh_rest,
+            sh_degree: self.sh_degree,
+        }
+    }
+
+    /// Append `other` (same SH degree) after the last Gaussian.
+    pub fn append(&mut self, other: &Gaussians) {
+        assert_eq!(self.sh_degree, other.sh_degree, "SH degree of appended set");
+        self.means.extend_from_slice(&other.means);
+        self.log_scales.extend_from_slice(&other.log_scales);
+        self.quats.extend_from_slice(&other.quats);
+        self.opacity_logits.extend_from_slice(&other.opacity_logits);
+        self.sh_dc.extend_from_slice(&other.sh_dc);
+        self.sh_rest.extend_from_slice(&other.sh_rest);
+    }
+}

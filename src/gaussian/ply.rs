@@ -475,6 +475,116 @@ pub fn parse_ply(data: &[u8], path: &Path) -> Result<(Gaussians, PlyInfo)> {
     Ok((g, info))
 }
 
+/// A coloured point cloud (COLMAP's `points3D`, INRIA's `points3d.ply`, our datasets'
+/// `points3D.ply`). Colours are in `[0, 1]`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PointCloud {
+    pub xyz: Vec<[f32; 3]>,
+    pub rgb: Vec<[f32; 3]>,
+}
+
+/// Read the `vertex` element of a PLY point cloud: `x y z` (any scalar type) and, when
+/// present, `red green blue` (integers scaled by 1/255, floats taken as they are; absent
+/// colours are 0.5 grey). Other properties and elements are skipped.
+pub fn read_point_cloud(path: &Path) -> Result<PointCloud> {
+    let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    parse_point_cloud(&data, path)
+}
+
+pub fn parse_point_cloud(data: &[u8], path: &Path) -> Result<PointCloud> {
+    let header = parse_header(data, path)?;
+    let err = |m: String| Error::parse(path, m);
+    let vi = header
+        .elements
+        .iter()
+        .position(|e| e.name == "vertex")
+        .ok_or_else(|| err("no 'vertex' element".into()))?;
+    let vertex = &header.elements[vi];
+    let names = ["x", "y", "z", "red", "green", "blue"];
+    let slots: Vec<Option<usize>> = vertex
+        .props
+        .iter()
+        .map(|p| {
+            names
+                .iter()
+                .position(|n| *n == p.name)
+                .filter(|_| p.list_count.is_none())
+        })
+        .collect();
+    for (k, n) in names.iter().enumerate().take(3) {
+        if !slots.contains(&Some(k)) {
+            return Err(err(format!("vertex property '{n}' is missing")));
+        }
+    }
+    let has_color = (3..6).all(|k| slots.contains(&Some(k)));
+    let mut body = Body {
+        data,
+        pos: header.body_start,
+        format: header.format,
+        path,
+    };
+    for e in &header.elements[..vi] {
+        body.skip_element(e)?;
+    }
+    let row_min: usize = match header.format {
+        Format::Ascii => 2 * vertex.props.len(),
+        _ => vertex
+            .props
+            .iter()
+            .map(|p| p.list_count.unwrap_or(p.ty).size())
+            .sum(),
+    };
+    if row_min
+        .checked_mul(vertex.count)
+        .is_none_or(|need| need > data.len() - body.pos)
+    {
+        return Err(err(format!(
+            "file is truncated: {} vertices announced",
+            vertex.count
+        )));
+    }
+    let mut pc = PointCloud::default();
+    for v in 0..vertex.count {
+        let mut vals = [0.5f64; 6];
+        for (p, slot) in vertex.props.iter().zip(&slots) {
+            if let Some(ct) = p.list_count {
+                let len = body.value(ct, &p.name)?;
+                if !(0.0..=1e9).contains(&len) {
+                    return Err(err(format!(
+                        "vertex {v}: invalid list length in '{}'",
+                        p.name
+                    )));
+                }
+                for _ in 0..len as usize {
+                    body.value(p.ty, &p.name)?;
+                }
+                continue;
+            }
+            let x = body.value(p.ty, &p.name)?;
+            if let Some(k) = *slot {
+                vals[k] = if k >= 3 && matches!(p.ty, Scalar::F32 | Scalar::F64) {
+                    x
+                } else if k >= 3 {
+                    x / 255.0
+                } else {
+                    x
+                };
+            }
+        }
+        let xyz = [vals[0] as f32, vals[1] as f32, vals[2] as f32];
+        if !xyz.iter().all(|c| c.is_finite()) {
+            return Err(err(format!("vertex {v} has a non-finite position {xyz:?}")));
+        }
+        pc.xyz.push(xyz);
+        pc.rgb.push(if has_color {
+            [vals[3] as f32, vals[4] as f32, vals[5] as f32]
+        } else {
+            [0.5; 3]
+        });
+    }
+    Ok(pc)
+}
+
 /// The PLY bytes of `g` in INRIA's binary little-endian layout.
 pub fn ply_bytes(g: &Gaussians) -> Result<Vec<u8>> {
     g.validate()?;

@@ -76,6 +76,68 @@ pub fn read_png(path: &Path) -> Result<ImageF32> {
     )
 }
 
+/// Read an 8- or 16-bit image as RGB floats in `[0, 1]`: gray is replicated, and an alpha
+/// channel is composited over `background` (`rgb·a + bg·(1 − a)`, INRIA's handling of
+/// NeRF-synthetic RGBA images).
+pub fn read_rgb(path: &Path, background: [f32; 3]) -> Result<ImageF32> {
+    let img =
+        image::open(path).map_err(|e| UError::parse(path, format!("cannot read image: {e}")))?;
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let has_alpha = img.color().has_alpha();
+    let rgba: Vec<f32> = if img.color().bytes_per_pixel() / img.color().channel_count() > 1 {
+        let v = img.into_rgba16().into_raw();
+        v.into_iter().map(|x| x as f32 / 65535.0).collect()
+    } else {
+        let v = img.into_rgba8().into_raw();
+        v.into_iter().map(|x| x as f32 / 255.0).collect()
+    };
+    let mut data = Vec::with_capacity(w * h * 3);
+    for px in rgba.chunks_exact(4) {
+        let a = if has_alpha { px[3] } else { 1.0 };
+        for c in 0..3 {
+            data.push(if has_alpha {
+                px[c] * a + background[c] * (1.0 - a)
+            } else {
+                px[c]
+            });
+        }
+    }
+    ImageF32::new(w, h, 3, data)
+}
+
+/// Downscale by an integer `factor` with a box filter (the mean of each `factor × factor`
+/// block, summed in row-major order in f32); a remainder at the right and bottom is
+/// cropped.
+pub fn downscale(img: &ImageF32, factor: usize) -> ImageF32 {
+    assert!(factor >= 1);
+    if factor == 1 {
+        return img.clone();
+    }
+    let (w, h, c) = (img.width / factor, img.height / factor, img.channels);
+    let inv = 1.0 / (factor * factor) as f32;
+    let mut data = vec![0f32; w * h * c];
+    for y in 0..h {
+        for x in 0..w {
+            for ch in 0..c {
+                let mut s = 0f32;
+                for dy in 0..factor {
+                    for dx in 0..factor {
+                        let p = (y * factor + dy) * img.width + x * factor + dx;
+                        s += img.data[p * c + ch];
+                    }
+                }
+                data[(y * w + x) * c + ch] = s * inv;
+            }
+        }
+    }
+    ImageF32 {
+        width: w,
+        height: h,
+        channels: c,
+        data,
+    }
+}
+
 /// Write a float EXR (ZIP compression). Channel names: 1 → `Y`, 3 → `R G B`,
 /// 4 → `R G B A`; other counts are named `C0, C1, ...`.
 pub fn write_exr(path: &Path, img: &ImageF32) -> Result<()> {

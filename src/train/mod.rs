@@ -1,4 +1,10 @@
-//! Training building blocks. For now: SSIM and its gradient (`ssim`), used by the oracle's
-//! `l1-dssim` loss; the optimizer and densification arrive with the training issue.
+//! Training (SPEC.md §13–14): losses ([`loss`], [`ssim`]), Adam ([`adam`]), adaptive
+//! density control ([`densify`]), the loop ([`trainer`]) and the run directory ([`run`]).
 
+pub mod adam;
+pub mod densify;
+pub mod knn;
+pub mod loss;
+pub mod run;
 pub mod ssim;
+pub mod trainer;

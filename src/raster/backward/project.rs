@@ -14,7 +14,7 @@
 //! `c = max(Σ coeff·Y + 0.5, 0)` → coefficient gradients `Y·v_c` where the clamp is open.
 
 use super::composite::SplatGrad;
-use crate::gaussian::Gaussians;
+use crate::gaussian::{Gaussians, Param};
 use crate::math::fastexp::sigmoid;
 use crate::math::sh::{MAX_SH_COEFFS, num_coeffs, sh_basis_grad};
 use crate::raster::plan::RenderPlan;
@@ -378,4 +378,18 @@ pub fn project_backward(
             }
         });
     out
+}
+
+impl Gradients {
+    /// The flat gradient of one parameter array (the layout of [`Gaussians::param`]).
+    pub fn param(&self, p: Param) -> &[f32] {
+        match p {
+            Param::Means => self.means.as_flattened(),
+            Param::ShDc => self.sh_dc.as_flattened(),
+            Param::ShRest => &self.sh_rest,
+            Param::OpacityLogits => &self.opacity_logits,
+            Param::LogScales => self.log_scales.as_flattened(),
+            Param::Quats => self.quats.as_flattened(),
+        }
+    }
 }

@@ -1,0 +1,102 @@
+//! Evaluation of a trained scene on a dataset split (SPEC.md §14.7): PSNR and SSIM per view
+//! and their means, as INRIA's `metrics.py` computes them — the render is clamped to
+//! `[0, 1]`, PSNR from the mean squared error over all values, SSIM with the training
+//! window (§13).
+
+use crate::dataset::{Dataset, Split};
+use crate::error::Result;
+use crate::gaussian::Gaussians;
+use crate::io::create_dir_all;
+use crate::io::image::{ImageF32, write_png};
+use crate::raster::{RenderOptions, render};
+use crate::train::loss::psnr;
+use crate::train::ssim::ssim;
+use std::path::Path;
+
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ViewMetrics {
+    pub name: String,
+    pub psnr: f64,
+    pub ssim: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct EvalReport {
+    pub split: Split,
+    pub views: Vec<ViewMetrics>,
+    pub mean_psnr: f64,
+    pub mean_ssim: f64,
+}
+
+impl EvalReport {
+    /// A Markdown table of the per-view figures and the mean.
+    pub fn table(&self) -> String {
+        let mut s = String::from("| view | PSNR (dB) | SSIM |\n|---|---|---|\n");
+        for v in &self.views {
+            s += &format!("| {} | {:.2} | {:.4} |\n", v.name, v.psnr, v.ssim);
+        }
+        s += &format!(
+            "| **mean** | **{:.2}** | **{:.4}** |\n",
+            self.mean_psnr, self.mean_ssim
+        );
+        s
+    }
+}
+
+/// Render every view of `split`, score it, and when `out` is given write
+/// `out/<name>.png` with the render (left) beside the ground truth (right).
+pub fn evaluate(
+    g: &Gaussians,
+    data: &Dataset,
+    split: Split,
+    background: [f32; 3],
+    out: Option<&Path>,
+) -> Result<EvalReport> {
+    if let Some(o) = out {
+        create_dir_all(o)?;
+    }
+    let opts = RenderOptions {
+        background,
+        ..RenderOptions::default()
+    };
+    let mut views = Vec::new();
+    for &i in data.split(split) {
+        let v = &data.views[i];
+        let r = render(g, &v.camera, &opts)?;
+        let rgb: Vec<f32> = r
+            .rgb
+            .expect("rgb")
+            .iter()
+            .map(|x| x.clamp(0.0, 1.0))
+            .collect();
+        let gt = &v.image.data;
+        let (w, h) = (v.image.width, v.image.height);
+        let p = psnr(&rgb, gt);
+        let (s, _) = ssim(&rgb, gt, w, h, 3, false);
+        if let Some(o) = out {
+            let mut both = vec![0f32; 2 * w * h * 3];
+            for y in 0..h {
+                let row = &mut both[y * 2 * w * 3..(y + 1) * 2 * w * 3];
+                row[..w * 3].copy_from_slice(&rgb[y * w * 3..(y + 1) * w * 3]);
+                row[w * 3..].copy_from_slice(&gt[y * w * 3..(y + 1) * w * 3]);
+            }
+            let name = crate::io::file_stem(&v.camera.name);
+            write_png(
+                &o.join(format!("{name}.png")),
+                &ImageF32::new(2 * w, h, 3, both)?,
+            )?;
+        }
+        views.push(ViewMetrics {
+            name: v.camera.name.clone(),
+            psnr: p,
+            ssim: s,
+        });
+    }
+    let n = views.len().max(1) as f64;
+    Ok(EvalReport {
+        split,
+        mean_psnr: views.iter().map(|v| v.psnr).sum::<f64>() / n,
+        mean_ssim: views.iter().map(|v| v.ssim).sum::<f64>() / n,
+        views,
+    })
+}

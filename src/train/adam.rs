@@ -1,0 +1,168 @@
+//! Adam with one parameter group per Gaussian parameter array (SPEC.md §14.2).
+//!
+//! Per element, in this order and in f32 without fused multiply-add (PyTorch's `Adam`,
+//! `foreach=False`, written out):
+//!
+//! ```text
+//! t  ← t + 1                      (per group; skipped steps do not count)
+//! m  ← β1·m + (1 − β1)·g
+//! v  ← β2·v + (1 − β2)·g·g
+//! p  ← p − (lr / (1 − β1ᵗ)) · m / (√v / √(1 − β2ᵗ) + ε)
+//! ```
+//!
+//! `β1ᵗ`, `β2ᵗ` are running f64 products (no `powi`, whose rounding is platform-defined);
+//! the two scalars are rounded to f32 once per step. The moments live in two [`Gaussians`]
+//! of the same layout as the parameters, so densification selects and appends them with
+//! the same index lists (INRIA: new Gaussians start with zero moments, pruned ones drop
+//! theirs, the step count is kept).
+
+use crate::error::Result;
+use crate::gaussian::{Gaussians, Param};
+use rayon::prelude::*;
+
+/// Adam's constants (INRIA: PyTorch defaults with `eps = 1e-15`).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct AdamConfig {
+    pub beta1: f32,
+    pub beta2: f32,
+    pub eps: f32,
+}
+
+impl Default for AdamConfig {
+    fn default() -> Self {
+        AdamConfig {
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-15,
+        }
+    }
+}
+
+/// Elements per parallel chunk: a fixed partition, so results never depend on the thread
+/// count (the update is element-wise anyway).
+const CHUNK: usize = 1 << 14;
+
+/// Step count and bias-correction products of one group.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct GroupStep {
+    pub t: u64,
+    beta1_pow: f64,
+    beta2_pow: f64,
+}
+
+/// The optimizer state for a set of Gaussians.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Adam {
+    pub config: AdamConfig,
+    /// First and second moments, laid out like the parameters.
+    pub m: Gaussians,
+    pub v: Gaussians,
+    /// One per [`Param::ALL`] entry.
+    pub steps: [GroupStep; 6],
+}
+
+fn group_index(p: Param) -> usize {
+    Param::ALL.iter().position(|&q| q == p).expect("listed")
+}
+
+impl Adam {
+    pub fn new(config: AdamConfig, params: &Gaussians) -> Result<Self> {
+        let z = Gaussians::zeros(params.len(), params.sh_degree)?;
+        Ok(Adam {
+            config,
+            m: z.clone(),
+            v: z,
+            steps: [GroupStep {
+                t: 0,
+                beta1_pow: 1.0,
+                beta2_pow: 1.0,
+            }; 6],
+        })
+    }
+
+    /// Number of steps taken by group `p`.
+    pub fn step_count(&self, p: Param) -> u64 {
+        self.steps[group_index(p)].t
+    }
+
+    /// One Adam step of group `p` with learning rate `lr`.
+    pub fn step(&mut self, params: &mut Gaussians, p: Param, grad: &[f32], lr: f32) {
+        let c = self.config;
+        let s = &mut self.steps[group_index(p)];
+        s.t += 1;
+        s.beta1_pow *= c.beta1 as f64;
+        s.beta2_pow *= c.beta2 as f64;
+        let step_size = (lr as f64 / (1.0 - s.beta1_pow)) as f32;
+        let bc2_sqrt = (1.0 - s.beta2_pow).sqrt() as f32;
+        let (b1, b2, eps) = (c.beta1, c.beta2, c.eps);
+        let (ob1, ob2) = (1.0 - b1, 1.0 - b2);
+        let x = params.param_mut(p);
+        let m = self.m.param_mut(p);
+        let v = self.v.param_mut(p);
+        assert_eq!(x.len(), grad.len(), "gradient length of {}", p.name());
+        assert_eq!(x.len(), m.len(), "moment length of {}", p.name());
+        x.par_chunks_mut(CHUNK)
+            .zip(m.par_chunks_mut(CHUNK))
+            .zip(v.par_chunks_mut(CHUNK))
+            .zip(grad.par_chunks(CHUNK))
+            .for_each(|(((x, m), v), g)| {
+                for i in 0..x.len() {
+                    let gi = g[i];
+                    m[i] = b1 * m[i] + ob1 * gi;
+                    v[i] = b2 * v[i] + ob2 * (gi * gi);
+                    let denom = v[i].sqrt() / bc2_sqrt + eps;
+                    x[i] -= step_size * (m[i] / denom);
+                }
+            });
+    }
+
+    /// Zero both moments of group `p` (INRIA's `replace_tensor_to_optimizer`, used by the
+    /// opacity reset).
+    pub fn reset_moments(&mut self, p: Param) {
+        self.m.param_mut(p).fill(0.0);
+        self.v.param_mut(p).fill(0.0);
+    }
+
+    /// Keep the moments of the Gaussians at `indices` (in that order).
+    pub fn select(&mut self, indices: &[usize]) {
+        self.m = self.m.select(indices);
+        self.v = self.v.select(indices);
+    }
+
+    /// Append zero moments for `n` new Gaussians.
+    pub fn extend_zeros(&mut self, n: usize) -> Result<()> {
+        let z = Gaussians::zeros(n, self.m.sh_degree)?;
+        self.m.append(&z);
+        self.v.append(&z);
+        Ok(())
+    }
+}
+
+/// INRIA's `get_expon_lr_func` without delay: log-linear from `init` to `final_` over
+/// `max_steps`, constant after. Evaluated in f32 with the crate's own `exp`/`ln`, so the
+/// rate does not depend on the platform's libm.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ExpSchedule {
+    pub init: f32,
+    #[serde(rename = "final")]
+    pub final_: f32,
+    pub max_steps: u32,
+}
+
+impl ExpSchedule {
+    pub fn at(&self, step: u32) -> f32 {
+        use crate::math::fastexp::{exp, ln};
+        if self.init == self.final_ {
+            return self.init;
+        }
+        if self.init <= 0.0 || self.final_ <= 0.0 {
+            return 0.0;
+        }
+        let t = if self.max_steps == 0 {
+            1.0
+        } else {
+            (step as f32 / self.max_steps as f32).clamp(0.0, 1.0)
+        };
+        exp(ln(self.init) * (1.0 - t) + ln(self.final_) * t)
+    }
+}

@@ -1,0 +1,439 @@
+//! The 3DGS training loop, INRIA's recipe (SPEC.md §14): initialization from a point
+//! cloud, random training view per iteration (a shuffled stack), L1 + D-SSIM (+ depth)
+//! loss, Adam with per-group learning rates and the log-linear position schedule,
+//! densification and pruning, SH degree +1 every 1000 iterations.
+//!
+//! Per iteration, in INRIA's order: learning-rate update; SH degree step; pick a view;
+//! render; loss; backward; densification statistics; densify/prune and opacity reset;
+//! Adam step. As in INRIA's code, an iteration that densifies replaces every parameter
+//! tensor, whose new copies carry no gradient, so no Adam step happens there; an opacity
+//! reset alone skips the opacity step.
+
+use crate::dataset::{Dataset, View};
+use crate::error::{Error, Result};
+use crate::gaussian::{Gaussians, Param};
+use crate::math::fastexp::ln;
+use crate::math::sh::{SH_C0, num_coeffs};
+use crate::raster::backward::{GradGroups, ImageGrads, backward, render_for_backward};
+use crate::raster::{Outputs, RenderOptions};
+use crate::scene::Uniform;
+use crate::train::adam::{Adam, AdamConfig, ExpSchedule};
+use crate::train::densify::{
+    DensifyConfig, DensifyReport, DensifyStats, densify_and_prune, reset_opacity,
+};
+use crate::train::knn::mean_sq_dist_3nn;
+use crate::train::loss::{LossInput, LossTerms, LossWeights, image_loss, psnr};
+
+/// Learning rates (INRIA `OptimizationParams`; opacity as in the 2024 update).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct LearningRates {
+    /// Position rate at iteration 0 and at `position_max_steps`, before the extent scale.
+    pub position_init: f32,
+    pub position_final: f32,
+    pub position_max_steps: u32,
+    pub sh_dc: f32,
+    pub sh_rest: f32,
+    pub opacity: f32,
+    pub scaling: f32,
+    pub rotation: f32,
+}
+
+impl Default for LearningRates {
+    fn default() -> Self {
+        LearningRates {
+            position_init: 1.6e-4,
+            position_final: 1.6e-6,
+            position_max_steps: 30_000,
+            sh_dc: 2.5e-3,
+            sh_rest: 2.5e-3 / 20.0,
+            opacity: 0.025,
+            scaling: 5e-3,
+            rotation: 1e-3,
+        }
+    }
+}
+
+/// Everything that decides a training run (serialized into the run directory).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct TrainConfig {
+    pub iterations: u32,
+    pub seed: u64,
+    /// Largest SH degree trained (INRIA `sh_degree`).
+    pub sh_degree: u32,
+    /// The active degree grows by one every this many iterations (INRIA: 1000).
+    pub sh_increase_interval: u32,
+    pub lr: LearningRates,
+    pub adam: AdamConfig,
+    /// Parameter groups that never receive a step.
+    pub frozen: Vec<Param>,
+    /// Densification and pruning; `None` disables both.
+    pub densify: Option<DensifyConfig>,
+    pub loss: LossWeights,
+    /// Render background (INRIA: black unless `--white_background`).
+    pub background: [f32; 3],
+    /// Random initial points when the dataset has no point cloud (INRIA: 100 000 in
+    /// `[-1.3, 1.3]³`).
+    pub random_init_points: usize,
+    /// Iterations at which the PLY is saved (the last iteration is always saved).
+    pub save_iterations: Vec<u32>,
+    /// Dataset loading: integer downscale and INRIA's test hold-out.
+    pub resolution: u32,
+    pub test_every: u32,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        TrainConfig {
+            iterations: 30_000,
+            seed: 0,
+            sh_degree: 3,
+            sh_increase_interval: 1000,
+            lr: LearningRates::default(),
+            adam: AdamConfig::default(),
+            frozen: Vec::new(),
+            densify: Some(DensifyConfig::default()),
+            loss: LossWeights::INRIA,
+            background: [0.0; 3],
+            random_init_points: 100_000,
+            save_iterations: vec![7_000, 30_000],
+            resolution: 1,
+            test_every: 8,
+        }
+    }
+}
+
+impl TrainConfig {
+    pub fn validate(&self) -> Result<()> {
+        if self.sh_degree > crate::math::sh::MAX_SH_DEGREE {
+            return Err(Error::invalid(format!("SH degree {} > 5", self.sh_degree)));
+        }
+        if self.resolution == 0 {
+            return Err(Error::invalid("resolution factor must be at least 1"));
+        }
+        let w = &self.loss;
+        for (n, v) in [
+            ("l1", w.l1),
+            ("l2", w.l2),
+            ("dssim", w.dssim),
+            ("depth", w.depth),
+        ] {
+            if !v.is_finite() || v < 0.0 {
+                return Err(Error::invalid(format!(
+                    "loss weight {n} = {v} must be finite and >= 0"
+                )));
+            }
+        }
+        if !self.background.iter().all(|v| v.is_finite()) {
+            return Err(Error::invalid("background must be finite"));
+        }
+        Ok(())
+    }
+}
+
+/// INRIA's `create_from_pcd`: means at the points, DC from the colour, zero rest, scale
+/// `sqrt(max(mean 3-NN squared distance, 1e-7))` on every axis, identity rotation,
+/// opacity 0.1.
+pub fn init_from_points(xyz: &[[f32; 3]], rgb: &[[f32; 3]], sh_degree: u32) -> Result<Gaussians> {
+    if xyz.is_empty() {
+        return Err(Error::invalid(
+            "cannot initialize from an empty point cloud",
+        ));
+    }
+    let d2 = mean_sq_dist_3nn(xyz);
+    let mut g = Gaussians::new(sh_degree)?;
+    let rest = vec![0f32; (num_coeffs(sh_degree) - 1) * 3];
+    let op = ln(0.1 / (1.0 - 0.1));
+    let c0 = SH_C0 as f32;
+    for i in 0..xyz.len() {
+        let s = ln(d2[i].max(1e-7).sqrt());
+        let dc = rgb[i].map(|c| (c - 0.5) / c0);
+        g.push(xyz[i], [s; 3], [1.0, 0.0, 0.0, 0.0], op, dc, &rest);
+    }
+    Ok(g)
+}
+
+/// Progress of one iteration, for a progress bar or a log.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Progress {
+    pub iteration: u32,
+    pub iterations: u32,
+    pub loss: f64,
+    /// Exponential moving average of the loss (INRIA: 0.4·new + 0.6·old).
+    pub loss_ema: f64,
+    pub psnr_ema: f64,
+    pub gaussians: usize,
+    pub pairs: u64,
+    pub densify: Option<DensifyReport>,
+}
+
+/// Training state: parameters, optimizer, statistics, generator.
+pub struct Trainer<'a> {
+    pub config: TrainConfig,
+    pub dataset: &'a Dataset,
+    pub gaussians: Gaussians,
+    pub adam: Adam,
+    pub stats: DensifyStats,
+    pub iteration: u32,
+    pub active_sh_degree: u32,
+    pub extent: f32,
+    rng: Uniform,
+    stack: Vec<usize>,
+    loss_ema: f64,
+    psnr_ema: f64,
+}
+
+/// Seed of a stage's generator: the run seed mixed with the stage name (FNV-1a), so
+/// stages draw independent streams (DESIGN.md §4).
+pub fn stage_seed(seed: u64, stage: &str) -> u64 {
+    let mut h = 0xcbf2_9ce4_8422_2325u64 ^ seed;
+    for b in stage.bytes() {
+        h ^= b as u64;
+        h = h.wrapping_mul(0x0100_0000_01b3);
+    }
+    h
+}
+
+impl<'a> Trainer<'a> {
+    /// Start from the dataset's point cloud (or INRIA's random cube).
+    pub fn new(dataset: &'a Dataset, config: TrainConfig) -> Result<Self> {
+        config.validate()?;
+        let g = match &dataset.points {
+            Some(p) if !p.xyz.is_empty() => init_from_points(&p.xyz, &p.rgb, config.sh_degree)?,
+            _ => {
+                let mut u = Uniform::new(stage_seed(config.seed, "random-init"));
+                let n = config.random_init_points.max(1);
+                let xyz: Vec<[f32; 3]> =
+                    (0..n).map(|_| [0; 3].map(|_| u.range(-1.3, 1.3))).collect();
+                // INRIA: SH = random / 255, colour = SH·C0 + 0.5.
+                let rgb: Vec<[f32; 3]> = (0..n)
+                    .map(|_| [0; 3].map(|_| u.unit() / 255.0 * SH_C0 as f32 + 0.5))
+                    .collect();
+                init_from_points(&xyz, &rgb, config.sh_degree)?
+            }
+        };
+        Self::from_gaussians(dataset, config, g, 0)
+    }
+
+    /// Continue from given Gaussians (fine-tuning); `active_sh_degree` starts at
+    /// `initial_sh_degree`.
+    pub fn from_gaussians(
+        dataset: &'a Dataset,
+        config: TrainConfig,
+        gaussians: Gaussians,
+        initial_sh_degree: u32,
+    ) -> Result<Self> {
+        config.validate()?;
+        gaussians.validate()?;
+        if gaussians.sh_degree != config.sh_degree {
+            return Err(Error::invalid(format!(
+                "the scene has SH degree {} but the config trains degree {}",
+                gaussians.sh_degree, config.sh_degree
+            )));
+        }
+        let adam = Adam::new(config.adam, &gaussians)?;
+        let stats = DensifyStats::new(gaussians.len());
+        let rng = Uniform::new(stage_seed(config.seed, "train"));
+        let extent = dataset.scene_extent();
+        Ok(Trainer {
+            active_sh_degree: initial_sh_degree.min(config.sh_degree),
+            config,
+            dataset,
+            gaussians,
+            adam,
+            stats,
+            iteration: 0,
+            extent,
+            rng,
+            stack: Vec::new(),
+            loss_ema: 0.0,
+            psnr_ema: 0.0,
+        })
+    }
+
+    fn lr(&self, p: Param, it: u32) -> f32 {
+        let l = &self.config.lr;
+        match p {
+            Param::Means => ExpSchedule {
+                init: l.position_init * self.extent,
+                final_: l.position_final * self.extent,
+                max_steps: l.position_max_steps,
+            }
+            .at(it),
+            Param::ShDc => l.sh_dc,
+            Param::ShRest => l.sh_rest,
+            Param::OpacityLogits => l.opacity,
+            Param::LogScales => l.scaling,
+            Param::Quats => l.rotation,
+        }
+    }
+
+    fn groups(&self) -> GradGroups {
+        let on = |p| !self.config.frozen.contains(&p);
+        GradGroups {
+            means: on(Param::Means),
+            log_scales: on(Param::LogScales),
+            quats: on(Param::Quats),
+            opacities: on(Param::OpacityLogits),
+            sh_dc: on(Param::ShDc),
+            sh_rest: on(Param::ShRest),
+            background: false,
+        }
+    }
+
+    /// INRIA's view stack: refilled with every training view when empty, one removed at a
+    /// uniformly drawn position per iteration.
+    fn next_view(&mut self) -> usize {
+        if self.stack.is_empty() {
+            self.stack = self.dataset.train.clone();
+        }
+        let k = self.rng.below(self.stack.len() as u32) as usize;
+        self.stack.remove(k)
+    }
+
+    /// Render options for a view at the current state.
+    pub fn render_options(&self, depth: bool) -> RenderOptions {
+        RenderOptions {
+            background: self.config.background,
+            sh_degree: Some(self.active_sh_degree),
+            outputs: Outputs {
+                rgb: true,
+                expected_depth: depth,
+                ..Outputs::default()
+            },
+            ..RenderOptions::default()
+        }
+    }
+
+    /// One iteration on view `view` with an optional per-pixel loss weight.
+    pub fn step_on(&mut self, vi: usize, mask: Option<&[f32]>) -> Result<Progress> {
+        self.iteration += 1;
+        let it = self.iteration;
+        if self.config.sh_increase_interval > 0
+            && it % self.config.sh_increase_interval == 0
+            && self.active_sh_degree < self.config.sh_degree
+        {
+            self.active_sh_degree += 1;
+        }
+        let view: &View = &self.dataset.views[vi];
+        let use_depth = self.config.loss.depth > 0.0 && view.depth.is_some();
+        let opts = self.render_options(use_depth);
+        let cam = &view.camera;
+        let fwd = render_for_backward(&self.gaussians, cam, &opts)?;
+        let rgb = fwd.render.rgb.as_deref().expect("rgb rendered");
+        let out = image_loss(
+            &LossInput {
+                width: cam.width as usize,
+                height: cam.height as usize,
+                rgb,
+                target_rgb: &view.image.data,
+                depth: if use_depth {
+                    fwd.render.expected_depth.as_deref()
+                } else {
+                    None
+                },
+                target_depth: if use_depth {
+                    view.depth.as_deref()
+                } else {
+                    None
+                },
+                mask,
+            },
+            &self.config.loss,
+        )
+        .map_err(|e| Error::invalid(format!("view '{}': {}", cam.name, e.message)))?;
+        let p = psnr(rgb, &view.image.data);
+        let v = ImageGrads {
+            rgb: Some(out.grad_rgb),
+            expected_depth: out.grad_depth,
+            ..Default::default()
+        };
+        let groups = self.groups();
+        let (grads, pairs) = backward(&self.gaussians, cam, &opts, &fwd, &v, &groups)?;
+
+        let mut densified = None;
+        let mut reset = false;
+        if let Some(d) = self.config.densify {
+            if it < d.until_iter && groups.geometry() {
+                self.stats
+                    .add_view(&grads.means2d_ndc, &fwd.projected.radii);
+                if it > d.from_iter && d.interval > 0 && it % d.interval == 0 {
+                    let world_prune = it > d.opacity_reset_interval;
+                    densified = Some(densify_and_prune(
+                        &mut self.gaussians,
+                        &mut self.adam,
+                        &mut self.stats,
+                        &d,
+                        self.extent,
+                        world_prune,
+                        &mut self.rng,
+                    )?);
+                }
+                if d.opacity_reset_interval > 0 && it % d.opacity_reset_interval == 0 {
+                    reset_opacity(&mut self.gaussians, &mut self.adam, d.opacity_reset_value);
+                    reset = true;
+                }
+            }
+        }
+        if densified.is_none() {
+            for param in Param::ALL {
+                if self.config.frozen.contains(&param) || (reset && param == Param::OpacityLogits) {
+                    continue;
+                }
+                let lr = self.lr(param, it);
+                self.adam
+                    .step(&mut self.gaussians, param, grads.param(param), lr);
+            }
+        }
+        let t = out.terms;
+        self.loss_ema = if it == 1 {
+            t.total
+        } else {
+            0.4 * t.total + 0.6 * self.loss_ema
+        };
+        let pf = if p.is_finite() { p } else { 100.0 };
+        self.psnr_ema = if it == 1 {
+            pf
+        } else {
+            0.4 * pf + 0.6 * self.psnr_ema
+        };
+        Ok(Progress {
+            iteration: it,
+            iterations: self.config.iterations,
+            loss: t.total,
+            loss_ema: self.loss_ema,
+            psnr_ema: self.psnr_ema,
+            gaussians: self.gaussians.len(),
+            pairs,
+            densify: densified,
+        })
+    }
+
+    /// One iteration on the next view of the stack.
+    pub fn step(&mut self) -> Result<Progress> {
+        let vi = self.next_view();
+        self.step_on(vi, None)
+    }
+
+    /// Run to `config.iterations`, calling `on_progress` after every iteration and
+    /// `on_save` at the save iterations and at the end.
+    pub fn run(
+        &mut self,
+        on_progress: &mut dyn FnMut(&Progress),
+        on_save: &mut dyn FnMut(u32, &Gaussians) -> Result<()>,
+    ) -> Result<LossTerms> {
+        let mut last = LossTerms::default();
+        while self.iteration < self.config.iterations {
+            let p = self.step()?;
+            last.total = p.loss;
+            on_progress(&p);
+            if self.config.save_iterations.contains(&self.iteration)
+                || self.iteration == self.config.iterations
+            {
+                on_save(self.iteration, &self.gaussians)?;
+            }
+        }
+        Ok(last)
+    }
+}
