@@ -284,7 +284,10 @@ mod tests {
             // The depth error m·(d − t) is an f32 product: its rounding (~1e-7 relative)
             // shows in the quotient, hence the relative bound.
             let g = gd[p] as f64;
-            assert!((fd - g).abs() < 1e-9 + 1e-3 * g.abs(), "depth {p}: {fd} vs {g}");
+            assert!(
+                (fd - g).abs() < 1e-9 + 1e-3 * g.abs(),
+                "depth {p}: {fd} vs {g}"
+            );
         }
     }
 

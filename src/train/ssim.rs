@@ -26,35 +26,60 @@ fn kernel() -> [f64; SSIM_WINDOW] {
     k.map(|v| v / s)
 }
 
-/// Separable Gaussian blur of a planar `w × h` image with zero padding.
+/// Rows per parallel task of the blur: a fixed partition, and every output value is
+/// computed by one task in the same order, so the result does not depend on the thread
+/// count.
+const ROWS_PER_TASK: usize = 8;
+
+/// One output value of the 1D window at `i` over `src` (`n` samples, `stride` apart):
+/// taps in ascending order, out-of-range taps skipped (zero padding).
+#[inline(always)]
+fn tap(src: &[f64], i: usize, n: usize, stride: usize, k: &[f64; SSIM_WINDOW]) -> f64 {
+    let r = SSIM_WINDOW / 2;
+    let mut acc = 0.0;
+    if i >= r && i + r < n {
+        let base = (i - r) * stride;
+        for (t, kv) in k.iter().enumerate() {
+            acc += kv * src[base + t * stride];
+        }
+    } else {
+        for (t, kv) in k.iter().enumerate() {
+            let j = i as isize + t as isize - r as isize;
+            if j >= 0 && (j as usize) < n {
+                acc += kv * src[j as usize * stride];
+            }
+        }
+    }
+    acc
+}
+
+/// Separable Gaussian blur of a planar `w × h` image with zero padding: horizontal pass,
+/// then vertical.
 fn blur(img: &[f64], w: usize, h: usize, k: &[f64; SSIM_WINDOW]) -> Vec<f64> {
-    let r = SSIM_WINDOW as isize / 2;
+    use rayon::prelude::*;
     let mut tmp = vec![0.0; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            let mut acc = 0.0;
-            for (t, kv) in k.iter().enumerate() {
-                let xx = x as isize + t as isize - r;
-                if xx >= 0 && (xx as usize) < w {
-                    acc += kv * img[y * w + xx as usize];
+    tmp.par_chunks_mut(w * ROWS_PER_TASK)
+        .enumerate()
+        .for_each(|(c, rows)| {
+            for (ry, row) in rows.chunks_mut(w).enumerate() {
+                let y = c * ROWS_PER_TASK + ry;
+                let src = &img[y * w..(y + 1) * w];
+                for (x, o) in row.iter_mut().enumerate() {
+                    *o = tap(src, x, w, 1, k);
                 }
             }
-            tmp[y * w + x] = acc;
-        }
-    }
+        });
     let mut out = vec![0.0; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            let mut acc = 0.0;
-            for (t, kv) in k.iter().enumerate() {
-                let yy = y as isize + t as isize - r;
-                if yy >= 0 && (yy as usize) < h {
-                    acc += kv * tmp[yy as usize * w + x];
+    out.par_chunks_mut(w * ROWS_PER_TASK)
+        .enumerate()
+        .for_each(|(c, rows)| {
+            for (ry, row) in rows.chunks_mut(w).enumerate() {
+                let y = c * ROWS_PER_TASK + ry;
+                for (x, o) in row.iter_mut().enumerate() {
+                    *o = tap(&tmp[x..], y, h, w, k);
                 }
             }
-            out[y * w + x] = acc;
-        }
-    }
+        });
     out
 }
 

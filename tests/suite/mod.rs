@@ -7,3 +7,4 @@ mod mitsuba_crosscheck;
 mod oracle;
 mod raster;
 mod readers;
+mod training;

@@ -1,0 +1,318 @@
+//! Training: SSIM vs OpenCV/NumPy, Adam by hand, densification counts, datasets, the
+//! thread-count determinism of a whole run, and a regression floor on a bundled scene.
+
+use super::common::{case_dirs, reference, with_threads};
+use unseen::dataset::{self, LoadOptions, Split};
+use unseen::gaussian::{Gaussians, Param};
+use unseen::io::npy::read_npy_f32;
+use unseen::scene::Uniform;
+use unseen::train::adam::{Adam, AdamConfig, ExpSchedule};
+use unseen::train::densify::{DensifyConfig, DensifyStats, densify_and_prune, reset_opacity};
+use unseen::train::ssim::ssim;
+use unseen::train::trainer::{TrainConfig, Trainer};
+
+/// SSIM goldens (reference_data/opencv/ssim): value within 1e-5 (SPEC.md §8: the f64
+/// computation agrees to ~1e-12; the bound is the f32 tolerance), gradient within
+/// 1e-5 of the gradient's largest magnitude (our gradient is rounded to f32, ~6e-8
+/// relative; a wrong term would be off by ~1e-1 of the scale).
+#[test]
+fn ssim_matches_opencv_numpy_goldens() {
+    let cases = case_dirs("opencv/ssim");
+    assert!(cases.len() >= 5);
+    for dir in cases {
+        let (shape, x) = read_npy_f32(&dir.join("x.npy")).unwrap();
+        let (_, y) = read_npy_f32(&dir.join("y.npy")).unwrap();
+        let (_, g_ref) = read_npy_f32(&dir.join("grad.npy")).unwrap();
+        let meta: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.join("meta.json")).unwrap()).unwrap();
+        let want = meta["ssim"].as_f64().unwrap();
+        let (h, w) = (shape[0], shape[1]);
+        let (s, g) = ssim(&x, &y, w, h, 3, true);
+        assert!((s - want).abs() < 1e-5, "{}: {s} vs {want}", dir.display());
+        assert!(
+            (s - want).abs() < 1e-10,
+            "{}: f64 agreement {s} vs {want}",
+            dir.display()
+        );
+        let g = g.unwrap();
+        let scale = g_ref.iter().fold(0f32, |m, v| m.max(v.abs()));
+        let worst = g
+            .iter()
+            .zip(&g_ref)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0f32, f32::max);
+        assert!(
+            worst <= 1e-5 * scale,
+            "{}: gradient off by {worst} (scale {scale})",
+            dir.display()
+        );
+    }
+}
+
+/// Adam against a sequence computed by hand (in f64, then compared at f32 precision).
+#[test]
+fn adam_follows_the_hand_computed_sequence() {
+    let mut g = Gaussians::new(0).unwrap();
+    g.push(
+        [1.0, -2.0, 0.5],
+        [0.0; 3],
+        [1.0, 0.0, 0.0, 0.0],
+        0.0,
+        [0.0; 3],
+        &[],
+    );
+    let cfg = AdamConfig::default();
+    let mut adam = Adam::new(cfg, &g).unwrap();
+    let grads: [[f32; 3]; 3] = [[0.5, -1.0, 0.0], [0.25, 2.0, -1e-3], [-1.0, 0.0, 1e-3]];
+    let lr = 0.01f64;
+    let (mut p, mut m, mut v) = ([1.0f64, -2.0, 0.5], [0.0f64; 3], [0.0f64; 3]);
+    for (t, gr) in grads.iter().enumerate() {
+        adam.step(&mut g, Param::Means, gr, lr as f32);
+        let t = (t + 1) as i32;
+        for i in 0..3 {
+            let gi = gr[i] as f64;
+            m[i] = 0.9 * m[i] + 0.1 * gi;
+            v[i] = 0.999 * v[i] + 0.001 * gi * gi;
+            let mhat = m[i] / (1.0 - 0.9f64.powi(t));
+            let denom = v[i].sqrt() / (1.0 - 0.999f64.powi(t)).sqrt() + 1e-15;
+            p[i] -= lr * mhat / denom;
+            let got = g.means[0][i] as f64;
+            assert!(
+                (got - p[i]).abs() < 1e-6,
+                "step {t} axis {i}: {got} vs {}",
+                p[i]
+            );
+        }
+    }
+    // First step moves every coordinate with a non-zero gradient by exactly lr.
+    assert_eq!(adam.step_count(Param::Means), 3);
+    assert_eq!(adam.step_count(Param::ShDc), 0);
+    // The position schedule is log-linear: geometric mean halfway.
+    let s = ExpSchedule {
+        init: 1.6e-4,
+        final_: 1.6e-6,
+        max_steps: 30_000,
+    };
+    assert!((s.at(0) - 1.6e-4).abs() < 1e-10);
+    assert!((s.at(15_000) - 1.6e-5).abs() < 1e-10, "{}", s.at(15_000));
+    assert!((s.at(30_000) - 1.6e-6).abs() < 1e-12);
+    assert_eq!(s.at(40_000), s.at(30_000));
+}
+
+/// A constructed scene with known gradient statistics: 2 small hot Gaussians are cloned,
+/// 3 large hot ones split in two (originals removed), 1 transparent one pruned, 1 huge one
+/// pruned by the world-space test; the split samples keep the parent's statistics.
+#[test]
+fn densification_clones_splits_and_prunes_as_inria() {
+    let extent = 2.0f32;
+    let mut g = Gaussians::new(1).unwrap();
+    let rest = [0.1f32; 9];
+    let op = |p: f32| (p / (1.0 - p)).ln();
+    // index: (log max scale, opacity, grad)
+    let spec: [(f32, f32, f32); 8] = [
+        ((0.005f32).ln(), 0.5, 5e-4),  // 0 small, hot  -> clone
+        ((0.01f32).ln(), 0.5, 2.5e-4), // 1 small (0.01 <= 0.02), hot -> clone
+        ((0.1f32).ln(), 0.5, 3e-4),    // 2 large, hot -> split
+        ((0.05f32).ln(), 0.5, 1e-3),   // 3 large, hot -> split
+        ((0.15f32).ln(), 0.5, 2.5e-4), // 4 large, hot -> split
+        ((0.1f32).ln(), 0.5, 1e-4),    // 5 large, cold -> stays
+        ((0.01f32).ln(), 0.004, 0.0),  // 6 transparent -> pruned
+        ((0.5f32).ln(), 0.5, 0.0),     // 7 huge (> 0.1·extent) -> pruned (world test)
+    ];
+    for (i, &(ls, o, _)) in spec.iter().enumerate() {
+        g.push(
+            [i as f32, 0.0, 0.0],
+            [ls, ls - 1.0, ls - 2.0],
+            [0.9, 0.1, 0.2, 0.3],
+            op(o),
+            [0.1, 0.2, 0.3],
+            &rest,
+        );
+    }
+    let mut adam = Adam::new(AdamConfig::default(), &g).unwrap();
+    // Non-zero moments so we can see which survive.
+    for (i, m) in adam.m.opacity_logits.iter_mut().enumerate() {
+        *m = i as f32 + 1.0;
+    }
+    let mut stats = DensifyStats::new(g.len());
+    for (i, s) in spec.iter().enumerate() {
+        // Two views; the mean gradient is s.2.
+        stats.add_view(
+            &(0..g.len())
+                .map(|j| {
+                    if j == i {
+                        [s.2 * 0.6, s.2 * 0.8]
+                    } else {
+                        [0.0; 2]
+                    }
+                })
+                .collect::<Vec<_>>(),
+            &vec![[3, 2]; g.len()],
+        );
+    }
+    // grad_accum[i] = |(0.6, 0.8)·s| = s; count = 8 for everyone -> divide.
+    for c in stats.count.iter_mut() {
+        *c = 1;
+    }
+    let mut rng = Uniform::new(3);
+    let cfg = DensifyConfig::default();
+    let r = densify_and_prune(&mut g, &mut adam, &mut stats, &cfg, extent, true, &mut rng).unwrap();
+    assert_eq!((r.cloned, r.split, r.pruned), (2, 3, 2), "{r:?}");
+    assert_eq!((r.before, r.after), (8, 8 - 3 - 2 + 2 + 6));
+    // Survivors in order: 0, 1, 5 (originals), clones of 0, 1, then 2×3 split samples.
+    let xs: Vec<f32> = g.means.iter().take(5).map(|m| m[0]).collect();
+    assert_eq!(xs, [0.0, 1.0, 5.0, 0.0, 1.0]);
+    assert_eq!(&adam.m.opacity_logits[..3], &[1.0, 2.0, 6.0]);
+    assert!(
+        adam.m.opacity_logits[3..].iter().all(|&m| m == 0.0),
+        "new moments are zero"
+    );
+    let shrink = (1.6f32).ln();
+    for (k, parent) in [2usize, 3, 4, 2, 3, 4].iter().enumerate() {
+        let c = &g.log_scales[5 + k];
+        let want = spec[*parent].0 - shrink;
+        assert!((c[0] - want).abs() < 1e-5, "split scale {k}");
+        // Samples lie within a few parent sigmas of the parent mean.
+        let d = g.means[5 + k][0] - *parent as f32;
+        assert!(
+            d.abs() < 5.0 * spec[*parent].0.exp(),
+            "sample {k} off by {d}"
+        );
+        assert_eq!(g.sh_dc[5 + k], [0.1, 0.2, 0.3]);
+    }
+    assert_eq!(stats.count, vec![0; g.len()], "statistics reset");
+    // Opacity reset caps every opacity at 0.01 and zeroes its moments.
+    adam.m.opacity_logits.fill(1.0);
+    reset_opacity(&mut g, &mut adam, 0.01);
+    for &o in &g.opacity_logits {
+        assert!(1.0 / (1.0 + (-o).exp()) <= 0.010_000_1);
+    }
+    assert!(adam.m.opacity_logits.iter().all(|&m| m == 0.0));
+}
+
+fn lounge(resolution: u32) -> dataset::Dataset {
+    dataset::load(
+        &reference("scenes/lounge"),
+        &LoadOptions {
+            resolution,
+            ..LoadOptions::default()
+        },
+    )
+    .unwrap()
+}
+
+/// The bundled scene loads with its split, depth, points and the INRIA hold-out.
+#[test]
+fn bundled_scenes_load_with_split_depth_and_points() {
+    for name in ["lounge", "gallery"] {
+        let d = dataset::load(
+            &reference(&format!("scenes/{name}")),
+            &LoadOptions::default(),
+        )
+        .unwrap();
+        assert_eq!(d.views.len(), 72, "{name}");
+        assert_eq!(d.train.len() + d.test.len(), 36);
+        assert_eq!(d.test.len(), 5, "every 8th of the 36 train-half views");
+        assert_eq!(d.heldout.len(), 36);
+        for &i in d.split(Split::Heldout) {
+            assert!(d.views[i].camera.name.starts_with("heldout"));
+        }
+        let pts = d.points.as_ref().unwrap();
+        assert!(pts.xyz.len() > 1000);
+        let v = &d.views[0];
+        assert_eq!((v.image.width, v.image.height), (160, 120));
+        let depth = v.depth.as_ref().unwrap();
+        assert!(
+            depth.iter().all(|z| z.is_finite() && *z > 0.0 && *z < 10.0),
+            "closed room"
+        );
+    }
+    let (full, half) = (lounge(1), lounge(2));
+    assert_eq!(
+        (half.views[0].image.width, half.views[0].image.height),
+        (80, 60)
+    );
+    assert_eq!(half.views[0].camera.fx * 2.0, full.views[0].camera.fx);
+}
+
+/// Every sparse point of a bundled scene lies on a surface seen by some train camera: it
+/// reprojects into at least one train view at the depth that view's map gives (within
+/// 2 %), which checks the Mitsuba → OpenCV camera conversion and the depth convention.
+#[test]
+fn bundled_points_reproject_onto_the_depth_maps() {
+    let d = lounge(1);
+    let pts = d.points.as_ref().unwrap();
+    let mut ok = 0;
+    for p in pts.xyz.iter().step_by(7) {
+        let pw = glam::DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+        let hit = d.train.iter().chain(&d.test).any(|&i| {
+            let v = &d.views[i];
+            let c = &v.camera;
+            let q = c.camera_from_world_point(pw);
+            if q.z <= 0.0 {
+                return false;
+            }
+            let (u, w) = (c.fx * q.x / q.z + c.cx, c.fy * q.y / q.z + c.cy);
+            if u < 0.0 || w < 0.0 || u >= c.width as f64 || w >= c.height as f64 {
+                return false;
+            }
+            let z = v.depth.as_ref().unwrap()[w as usize * c.width as usize + u as usize] as f64;
+            (z - q.z).abs() < 0.02 * q.z
+        });
+        ok += hit as usize;
+    }
+    let n = pts.xyz.iter().step_by(7).count();
+    assert_eq!(ok, n, "{ok} of {n} points reproject onto a depth map");
+}
+
+fn short_config(iterations: u32) -> TrainConfig {
+    TrainConfig {
+        iterations,
+        densify: Some(DensifyConfig {
+            from_iter: 100,
+            interval: 100,
+            opacity_reset_interval: 250,
+            ..DensifyConfig::default()
+        }),
+        save_iterations: vec![],
+        ..TrainConfig::default()
+    }
+}
+
+/// 300 iterations with two densification steps and an opacity reset give the same PLY
+/// bytes on 1 and 2 threads.
+#[test]
+fn training_is_bit_identical_across_thread_counts() {
+    let d = lounge(2);
+    let run = |threads| {
+        with_threads(threads, || {
+            let mut t = Trainer::new(&d, short_config(300)).unwrap();
+            let mut densified = 0;
+            while t.iteration < 300 {
+                densified += t.step().unwrap().densify.is_some() as u32;
+            }
+            assert_eq!(densified, 2);
+            unseen::gaussian::ply::ply_bytes(&t.gaussians).unwrap()
+        })
+    };
+    let a = run(1);
+    let b = run(2);
+    assert!(a == b, "PLY bytes differ between 1 and 2 threads");
+}
+
+/// Regression floor: 700 iterations on the lounge train half at 80×60 lower the loss and
+/// reach 24 dB mean PSNR on the in-distribution test views (measured 26.3 dB when set;
+/// a guard against breakage, not a benchmark).
+#[test]
+fn short_training_beats_the_psnr_floor() {
+    let d = lounge(2);
+    let mut t = Trainer::new(&d, short_config(700)).unwrap();
+    let first = t.step().unwrap().loss;
+    let mut last = 0.0;
+    while t.iteration < 700 {
+        last = t.step().unwrap().loss_ema;
+    }
+    assert!(last < 0.5 * first, "loss {first} -> {last}");
+    let r = unseen::eval::evaluate(&t.gaussians, &d, Split::Test, [0.0; 3], None).unwrap();
+    assert!(r.mean_psnr > 24.0, "test PSNR {:.2} dB", r.mean_psnr);
+}
