@@ -99,6 +99,9 @@ enum Command {
         /// train, test (INRIA's every-8th hold-out) or heldout (the unseen half).
         #[arg(long, default_value = "test")]
         split: Split,
+        /// Saved iteration to evaluate (default: the latest).
+        #[arg(long)]
+        iteration: Option<u32>,
     },
     /// Dump every intermediate (and, for backward, every gradient) of one render as .npy
     /// files with a manifest.json, for comparing a GPU port array by array.
@@ -366,31 +369,38 @@ fn train_with_bar(
 }
 
 /// Evaluate a run's latest PLY and merge the report into RUN/eval.json.
-fn eval_run(run: &Path, dataset: &Path, split: Split) -> Result<EvalReport> {
+fn eval_run(
+    run: &Path,
+    dataset: &Path,
+    split: Split,
+    iteration: Option<u32>,
+) -> Result<EvalReport> {
     let cfg = read_config(run)?;
     let data = load_dataset(dataset, &cfg)?;
-    let (_, g) = read_run_scene(run)?;
-    let name = match split {
+    let (it, g) = read_run_scene(run, iteration)?;
+    let split_name = match split {
         Split::Train => "train",
         Split::Test => "test",
         Split::Heldout => "heldout",
+    };
+    let name = if iteration.is_some() {
+        format!("{split_name}_iteration_{it}")
+    } else {
+        split_name.to_string()
     };
     let report = evaluate(
         &g,
         &data,
         split,
         cfg.background,
-        Some(&run.join("eval").join(name)),
+        Some(&run.join("eval").join(&name)),
     )?;
     let path = run.join("eval.json");
     let mut all: serde_json::Map<String, serde_json::Value> = std::fs::read(&path)
         .ok()
         .and_then(|b| serde_json::from_slice(&b).ok())
         .unwrap_or_default();
-    all.insert(
-        name.into(),
-        serde_json::to_value(&report).expect("serializes"),
-    );
+    all.insert(name, serde_json::to_value(&report).expect("serializes"));
     let text = serde_json::to_string_pretty(&all).expect("serializes");
     unseen::io::write_text(&path, &text)?;
     Ok(report)
@@ -412,8 +422,8 @@ fn run_demo(iterations: u32, out: &Path) -> Result<()> {
         scene.display()
     );
     let s = train_with_bar(&scene, &run, &cfg)?;
-    let test = eval_run(&run, &scene, Split::Test)?;
-    let held = eval_run(&run, &scene, Split::Heldout)?;
+    let test = eval_run(&run, &scene, Split::Test, None)?;
+    let held = eval_run(&run, &scene, Split::Heldout, None)?;
     let mut md = String::from("# unseen demo\n\n");
     md += &format!(
         "Trained {} iterations on the `train` half of the bundled Mitsuba scene `lounge` \
@@ -522,8 +532,9 @@ fn run(cli: Cli) -> Result<()> {
             run,
             dataset,
             split,
+            iteration,
         } => {
-            let r = eval_run(&run, &dataset, split)?;
+            let r = eval_run(&run, &dataset, split, iteration)?;
             print!("{}", r.table());
             println!("wrote {}", run.join("eval.json").display());
             Ok(())

@@ -84,6 +84,8 @@ pub struct RunSummary {
     pub peak_memory_bytes: Option<u64>,
     pub final_loss_ema: f64,
     pub final_psnr_ema: f64,
+    /// `(iteration, seconds since the start)` of every saved PLY.
+    pub saves: Vec<(u32, f64)>,
     /// `(iteration, loss EMA, PSNR EMA, Gaussians)` every 100 iterations.
     pub curve: Vec<(u32, f64, f64, usize)>,
     pub ply: PathBuf,
@@ -120,13 +122,15 @@ pub fn train_run(
     let cams: Vec<_> = data.views.iter().map(|v| v.camera.clone()).collect();
     write_text(&run.join("cameras.json"), &cameras_json_string(&cams))?;
 
+    let start = Instant::now();
     let mut trainer = Trainer::new(&data, config.clone())?;
     let mut files: Vec<(PathBuf, String)> = Vec::new();
     let mut curve = Vec::new();
     let mut pairs = 0u64;
     let mut last = Progress::default();
-    let start = Instant::now();
+    let mut saves = Vec::new();
     let mut save = |it: u32, g: &Gaussians| -> Result<()> {
+        saves.push((it, start.elapsed().as_secs_f64()));
         let p = ply_path(run, it);
         create_dir_all(p.parent().expect("has a parent"))?;
         let bytes = ply_bytes(g)?;
@@ -179,6 +183,7 @@ pub fn train_run(
         peak_memory_bytes: peak_memory_bytes(),
         final_loss_ema: last.loss_ema,
         final_psnr_ema: last.psnr_ema,
+        saves,
         curve,
         ply,
     };
@@ -189,8 +194,11 @@ pub fn train_run(
     Ok(summary)
 }
 
-/// The Gaussians of a run's latest iteration.
-pub fn read_run_scene(run: &Path) -> Result<(u32, Gaussians)> {
-    let (it, p) = latest_ply(run)?;
+/// The Gaussians of a run at `iteration` (default: the latest saved one).
+pub fn read_run_scene(run: &Path, iteration: Option<u32>) -> Result<(u32, Gaussians)> {
+    let (it, p) = match iteration {
+        Some(n) => (n, ply_path(run, n)),
+        None => latest_ply(run)?,
+    };
     Ok((it, read_ply(&p)?.0))
 }

@@ -149,3 +149,114 @@ fn cli_outputs_do_not_depend_on_rayon_num_threads() {
         previous = Some(bytes);
     }
 }
+
+/// `unseen train` writes INRIA's layout with a manifest whose hashes match the files, and
+/// `unseen eval` scores the run; `unseen demo` runs end to end on a tiny preset.
+#[test]
+fn cli_train_eval_and_demo() {
+    let scene = reference("scenes/lounge");
+    let run = out_dir("train");
+    let st = unseen()
+        .arg("train")
+        .arg(&scene)
+        .arg("--out")
+        .arg(&run)
+        .args(["--iterations", "30", "--resolution", "4", "--seed", "7"])
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let ply = run.join("point_cloud/iteration_30/point_cloud.ply");
+    let (g, _) = unseen::gaussian::ply::read_ply(&ply).unwrap();
+    assert!(g.len() > 1000);
+    let cams = unseen::camera::inria::read_cameras_json(&run.join("cameras.json")).unwrap();
+    assert_eq!((cams.len(), cams[0].width), (72, 40));
+    let manifest: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!(manifest["seed"], 7);
+    let files = manifest["files"].as_array().unwrap();
+    assert_eq!(files.len(), 3);
+    for f in files {
+        let bytes = std::fs::read(run.join(f["path"].as_str().unwrap())).unwrap();
+        assert_eq!(
+            f["sha256"].as_str().unwrap(),
+            unseen::io::sha256_hex(&bytes)
+        );
+    }
+    let cfg: unseen::train::trainer::TrainConfig =
+        serde_json::from_slice(&std::fs::read(run.join("config.json")).unwrap()).unwrap();
+    assert_eq!((cfg.iterations, cfg.resolution), (30, 4));
+
+    let st = unseen()
+        .arg("eval")
+        .arg(&run)
+        .arg("--dataset")
+        .arg(&scene)
+        .args(["--split", "heldout"])
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let eval: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run.join("eval.json")).unwrap()).unwrap();
+    assert_eq!(eval["heldout"]["views"].as_array().unwrap().len(), 36);
+    let side = read_png(&run.join("eval/heldout/heldout_000.png")).unwrap();
+    assert_eq!((side.width, side.height), (80, 30));
+
+    let demo = out_dir("demo");
+    let st = unseen()
+        .args(["demo", "--iterations", "20", "--out"])
+        .arg(&demo)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let report = std::fs::read_to_string(demo.join("report.md")).unwrap();
+    assert!(report.contains("heldout (the unseen half)"), "{report}");
+}
+
+/// A directory that is no dataset, and a broken config, are one clear error line.
+#[test]
+fn cli_train_rejects_bad_input() {
+    let run = out_dir("bad-train");
+    let st = unseen()
+        .arg("train")
+        .arg(reference("drjit"))
+        .arg("--out")
+        .arg(&run)
+        .output()
+        .unwrap();
+    assert!(!st.status.success());
+    let err = String::from_utf8_lossy(&st.stderr);
+    assert!(err.contains("is not a dataset"), "{err}");
+    let cfg = out_dir("bad-config.json");
+    std::fs::write(&cfg, "{\"iterations\": \"many\"}").unwrap();
+    let st = unseen()
+        .arg("train")
+        .arg(reference("scenes/lounge"))
+        .arg("--out")
+        .arg(&run)
+        .arg("--config")
+        .arg(&cfg)
+        .output()
+        .unwrap();
+    assert!(!st.status.success());
+    let err = String::from_utf8_lossy(&st.stderr);
+    assert!(
+        err.contains("bad-config.json") && err.contains("invalid train config"),
+        "{err}"
+    );
+    assert!(
+        !run.join("point_cloud").exists(),
+        "nothing written on bad input"
+    );
+}
