@@ -316,3 +316,133 @@ fn short_training_beats_the_psnr_floor() {
     let r = unseen::eval::evaluate(&t.gaussians, &d, Split::Test, [0.0; 3], None).unwrap();
     assert!(r.mean_psnr > 24.0, "test PSNR {:.2} dB", r.mean_psnr);
 }
+
+fn temp_dir(name: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("unseen-ds-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// A COLMAP directory (the pycolmap model + images we write) loads with its points, sorted
+/// views, a 2× downscale that averages 2×2 blocks, and INRIA's every-8th test view; a
+/// missing or wrong-sized image is an error naming the file.
+#[test]
+fn colmap_dataset_loads_with_downscale_and_clear_errors() {
+    let d = temp_dir("colmap");
+    let sparse = d.join("sparse/0");
+    std::fs::create_dir_all(&sparse).unwrap();
+    for f in ["cameras.bin", "images.bin", "points3D.bin"] {
+        std::fs::copy(
+            reference("colmap/pinhole/sparse_bin").join(f),
+            sparse.join(f),
+        )
+        .unwrap();
+    }
+    let model = unseen::camera::colmap::read_colmap_model(&sparse).unwrap();
+    std::fs::create_dir_all(d.join("images")).unwrap();
+    for (k, c) in model.cameras.iter().enumerate() {
+        let img = image::RgbImage::from_fn(c.width, c.height, |x, y| {
+            image::Rgb([(x * 2 + k as u32) as u8, (y * 2) as u8, 200])
+        });
+        img.save(d.join("images").join(&c.name)).unwrap();
+    }
+    let ds = dataset::load(
+        &d,
+        &LoadOptions {
+            resolution: 2,
+            ..LoadOptions::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(ds.layout, dataset::Layout::Colmap);
+    assert_eq!(ds.views.len(), model.cameras.len());
+    assert_eq!(ds.points.as_ref().unwrap().xyz.len(), model.points.len());
+    assert_eq!(
+        ds.test,
+        vec![0, 8]
+            .into_iter()
+            .filter(|&i| i < ds.views.len())
+            .collect::<Vec<_>>()
+    );
+    let v = &ds.views[0];
+    let c0 = &model.cameras[0];
+    assert_eq!(
+        (v.camera.width, v.camera.height),
+        (c0.width / 2, c0.height / 2)
+    );
+    assert_eq!(v.camera.cx, c0.cx / 2.0);
+    // Pixel (1, 1) of the half-size image averages source x in {2, 3}: red (4+6)/2 = 5.
+    let px = &v.image.data[(v.image.width + 1) * 3..(v.image.width + 1) * 3 + 3];
+    assert_eq!(px, &[5.0 / 255.0, 5.0 / 255.0, 200.0 / 255.0]);
+    // Wrong size.
+    let name = &model.cameras[1].name;
+    image::RgbImage::new(10, 10)
+        .save(d.join("images").join(name))
+        .unwrap();
+    let e = dataset::load(&d, &LoadOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains(name.as_str()) && e.contains("10x10"), "{e}");
+    std::fs::remove_file(d.join("images").join(name)).unwrap();
+    let e = dataset::load(&d, &LoadOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains(name.as_str()), "{e}");
+}
+
+/// NeRF-synthetic layout: RGBA images composited over the background, the test list from
+/// transforms_test.json, random initialization when there is no point cloud.
+#[test]
+fn transforms_dataset_composites_alpha_and_uses_its_test_list() {
+    let d = temp_dir("transforms");
+    for split in ["train", "test"] {
+        std::fs::create_dir_all(d.join(split)).unwrap();
+        let mut frames = Vec::new();
+        for k in 0..3 {
+            let img = image::RgbaImage::from_fn(8, 6, |x, _| {
+                image::Rgba([255, 0, 0, if x < 4 { 255 } else { 0 }])
+            });
+            img.save(d.join(split).join(format!("r_{k}.png"))).unwrap();
+            frames.push(format!(
+                r#"{{"file_path": "./{split}/r_{k}", "transform_matrix": [[1,0,0,{k}],[0,1,0,0],[0,0,1,4],[0,0,0,1]]}}"#
+            ));
+        }
+        std::fs::write(
+            d.join(format!("transforms_{split}.json")),
+            format!(
+                r#"{{"camera_angle_x": 0.69, "frames": [{}]}}"#,
+                frames.join(",")
+            ),
+        )
+        .unwrap();
+    }
+    let ds = dataset::load(
+        &d,
+        &LoadOptions {
+            background: [1.0, 1.0, 1.0],
+            ..LoadOptions::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(ds.layout, dataset::Layout::Transforms);
+    assert_eq!((ds.train.len(), ds.test.len()), (3, 3));
+    for &i in &ds.test {
+        assert!(ds.views[i].camera.name.contains("test"));
+    }
+    let img = &ds.views[0].image.data;
+    assert_eq!(&img[..3], &[1.0, 0.0, 0.0], "opaque pixel");
+    assert_eq!(
+        &img[5 * 3..6 * 3],
+        &[1.0, 1.0, 1.0],
+        "transparent pixel shows the background"
+    );
+    assert!(ds.points.is_none());
+    let cfg = TrainConfig {
+        random_init_points: 500,
+        ..TrainConfig::default()
+    };
+    let t = Trainer::new(&ds, cfg).unwrap();
+    assert_eq!(t.gaussians.len(), 500);
+    assert!(t.gaussians.means.iter().flatten().all(|v| v.abs() <= 1.3));
+}
