@@ -1,0 +1,115 @@
+//! Training-iteration cost on a bundled scene: `cargo bench --bench train [-- --quick]`.
+//!
+//! Trains `lounge` (160×120) for a warm-up (densification grows the scene), then reports,
+//! for 1 and 2 threads: whole iterations per second (`Trainer::step`, densification
+//! included) and the median wall time of each stage of one iteration on the warmed-up
+//! state — forward render with backward state, loss (L1 + D-SSIM with gradient), backward,
+//! Adam over all six groups — and the forward blend throughput in Gaussian-pixel pairs/s.
+
+use std::path::Path;
+use std::time::Instant;
+use unseen::dataset::{self, LoadOptions};
+use unseen::gaussian::Param;
+use unseen::raster::backward::{GradGroups, ImageGrads, backward, render_for_backward};
+use unseen::train::loss::{LossInput, LossWeights, image_loss};
+use unseen::train::trainer::{TrainConfig, Trainer};
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn main() {
+    let quick = std::env::args().any(|a| a == "--quick");
+    let warmup = if quick { 300 } else { 3000 };
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("reference_data/scenes/lounge");
+    let data = dataset::load(&root, &LoadOptions::default()).unwrap();
+    println!(
+        "{:>3} {:>9} {:>8} {:>9} {:>8} {:>9} {:>8} {:>9} {:>10}",
+        "thr", "gaussians", "it/s", "forward", "loss", "backward", "adam", "iter(ms)", "Mpairs/s"
+    );
+    for threads in [1usize, 2] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let cfg = TrainConfig {
+                iterations: u32::MAX,
+                save_iterations: vec![],
+                ..TrainConfig::default()
+            };
+            let mut t = Trainer::new(&data, cfg).unwrap();
+            for _ in 0..warmup {
+                t.step().unwrap();
+            }
+            let reps = if quick { 50 } else { 200 };
+            let t0 = Instant::now();
+            for _ in 0..reps {
+                t.step().unwrap();
+            }
+            let its = reps as f64 / t0.elapsed().as_secs_f64();
+            let (mut tf, mut tl, mut tb, mut ta, mut pairs) =
+                (Vec::new(), Vec::new(), Vec::new(), Vec::new(), 0u64);
+            for k in 0..if quick { 5 } else { 20 } {
+                let view = &data.views[data.train[k % data.train.len()]];
+                let opts = t.render_options(false);
+                let s0 = Instant::now();
+                let fwd = render_for_backward(&t.gaussians, &view.camera, &opts).unwrap();
+                let s1 = Instant::now();
+                let out = image_loss(
+                    &LossInput {
+                        width: 160,
+                        height: 120,
+                        rgb: fwd.render.rgb.as_deref().unwrap(),
+                        target_rgb: &view.image.data,
+                        depth: None,
+                        target_depth: None,
+                        mask: None,
+                    },
+                    &LossWeights::INRIA,
+                )
+                .unwrap();
+                let s2 = Instant::now();
+                let v = ImageGrads {
+                    rgb: Some(out.grad_rgb),
+                    ..Default::default()
+                };
+                let (g, _) = backward(
+                    &t.gaussians,
+                    &view.camera,
+                    &opts,
+                    &fwd,
+                    &v,
+                    &GradGroups::ALL,
+                )
+                .unwrap();
+                let s3 = Instant::now();
+                let (mut scene, mut adam) = (t.gaussians.clone(), t.adam.clone());
+                let s4 = Instant::now();
+                for p in Param::ALL {
+                    adam.step(&mut scene, p, g.param(p), 1e-3);
+                }
+                let s5 = Instant::now();
+                pairs = fwd.render.report.pairs_evaluated;
+                tf.push((s1 - s0).as_secs_f64());
+                tl.push((s2 - s1).as_secs_f64());
+                tb.push((s3 - s2).as_secs_f64());
+                ta.push((s5 - s4).as_secs_f64());
+            }
+            let f = median(tf);
+            println!(
+                "{:>3} {:>9} {:>8.1} {:>7.2}ms {:>6.2}ms {:>7.2}ms {:>6.2}ms {:>9.2} {:>10.1}",
+                threads,
+                t.gaussians.len(),
+                its,
+                f * 1e3,
+                median(tl) * 1e3,
+                median(tb) * 1e3,
+                median(ta) * 1e3,
+                1e3 / its,
+                pairs as f64 / f * 1e-6
+            );
+        });
+    }
+}
