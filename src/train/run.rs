@@ -5,6 +5,7 @@
 //! RUN/point_cloud/iteration_N/point_cloud.ply   at each save iteration and the last
 //! RUN/cameras.json                              every view of the dataset (INRIA layout)
 //! RUN/config.json                               the TrainConfig (INRIA's cfg_args, as JSON)
+//! RUN/cfg_args                                  INRIA's Namespace line, for its viewers
 //! RUN/manifest.json                             sha256 of every output, seed, config
 //! RUN/train_stats.json                          wall time, it/s, peak memory, loss curve
 //! ```
@@ -107,6 +108,26 @@ struct Manifest<'a> {
     files: Vec<FileEntry>,
 }
 
+/// INRIA's `cfg_args` (the `ModelParams` namespace its SIBR viewer and render scripts read).
+fn cfg_args(dataset_dir: &Path, run: &Path, c: &TrainConfig) -> String {
+    let bg = c.background == [1.0; 3];
+    format!(
+        "Namespace(sh_degree={}, source_path='{}', model_path='{}', images='images', \
+         depths='', resolution={}, white_background={}, train_test_exp=False, \
+         data_device='cuda', eval={})",
+        c.sh_degree,
+        dataset_dir.display(),
+        run.display(),
+        if c.resolution == 1 {
+            -1
+        } else {
+            c.resolution as i64
+        },
+        if bg { "True" } else { "False" },
+        if c.test_every > 0 { "True" } else { "False" },
+    )
+}
+
 /// Train on `dataset_dir` into `run`; `on_progress` sees every iteration.
 pub fn train_run(
     dataset_dir: &Path,
@@ -119,6 +140,7 @@ pub fn train_run(
     create_dir_all(run)?;
     let config_text = serde_json::to_string_pretty(config).expect("config serializes");
     write_text(&run.join("config.json"), &config_text)?;
+    write_text(&run.join("cfg_args"), &cfg_args(dataset_dir, run, config))?;
     let cams: Vec<_> = data.views.iter().map(|v| v.camera.clone()).collect();
     write_text(&run.join("cameras.json"), &cameras_json_string(&cams))?;
 
@@ -151,7 +173,7 @@ pub fn train_run(
     )?;
     let wall = start.elapsed().as_secs_f64();
     let ply = files.last().map(|f| f.0.clone()).unwrap_or_default();
-    for name in ["config.json", "cameras.json"] {
+    for name in ["config.json", "cfg_args", "cameras.json"] {
         let p = run.join(name);
         let bytes = std::fs::read(&p).map_err(|e| Error::io(&p, e))?;
         files.push((p, sha256_hex(&bytes)));

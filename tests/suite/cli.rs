@@ -178,7 +178,12 @@ fn cli_train_eval_and_demo() {
         serde_json::from_slice(&std::fs::read(run.join("manifest.json")).unwrap()).unwrap();
     assert_eq!(manifest["seed"], 7);
     let files = manifest["files"].as_array().unwrap();
-    assert_eq!(files.len(), 3);
+    assert_eq!(files.len(), 4);
+    let args = std::fs::read_to_string(run.join("cfg_args")).unwrap();
+    assert!(
+        args.starts_with("Namespace(sh_degree=3, source_path="),
+        "{args}"
+    );
     for f in files {
         let bytes = std::fs::read(run.join(f["path"].as_str().unwrap())).unwrap();
         assert_eq!(
