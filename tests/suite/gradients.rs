@@ -260,6 +260,34 @@ fn loss64(out: &[Vec<f64>; 4], w: &Weights) -> f64 {
 }
 
 /// Analytic gradients vs central differences of the f64 twin, every parameter.
+/// All-zero SH bands: a forward-only render may skip them, the backward must not (their
+/// coefficients' gradients are not zero; a skipped band would never start to train).
+#[test]
+fn gradients_of_all_zero_sh_bands_are_computed() {
+    let cam = default_camera(24, 18);
+    let mut g = smooth_scene(3, 6);
+    g.sh_rest.fill(0.0);
+    check_fd(&g, &cam, [0.1, 0.2, 0.3], false, 6);
+    let fwd = render_for_backward(&g, &cam, &RenderOptions::default()).unwrap();
+    let v = ImageGrads {
+        rgb: Some(vec![1.0; (cam.width * cam.height * 3) as usize]),
+        ..Default::default()
+    };
+    let (gr, _) = backward(
+        &g,
+        &cam,
+        &RenderOptions::default(),
+        &fwd,
+        &v,
+        &GradGroups::ALL,
+    )
+    .unwrap();
+    assert!(
+        gr.sh_rest.iter().any(|&x| x != 0.0),
+        "zero bands got no gradient"
+    );
+}
+
 fn check_fd(g: &Gaussians, cam: &Camera, bg: [f32; 3], with_depth: bool, seed: u64) {
     let npix = (cam.width * cam.height) as usize;
     let mut u = Uniform::new(seed);
