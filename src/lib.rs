@@ -19,6 +19,7 @@ pub mod gaussian;
 pub mod io;
 pub mod math;
 pub mod oracle;
+pub mod qamask;
 pub mod raster;
 pub mod scene;
 pub mod train;

@@ -5,6 +5,7 @@ mod golden_grad;
 mod gradients;
 mod mitsuba_crosscheck;
 mod oracle;
+mod qamask;
 mod raster;
 mod readers;
 mod training;

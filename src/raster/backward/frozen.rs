@@ -20,13 +20,15 @@ use crate::raster::project::{ALPHA_THRESHOLD, CameraF32, sh_color};
 use crate::raster::tile::TILE_SIZE;
 use crate::raster::{Outputs, RenderOptions};
 use rayon::prelude::*;
+use std::sync::Arc;
 
 const LANES: usize = TILE_SIZE;
 
 /// Recorded blend weights of one camera.
 pub struct FrozenBlend {
-    /// The geometry the record was made with; every replay checks the scene still has it.
-    geometry: Gaussians,
+    /// The geometry the record was made with (no SH); every replay checks the scene still
+    /// has it. Shared between the records of one scene ([`FrozenBlend::record_shared`]).
+    geometry: Arc<Gaussians>,
     fwd: ForwardState,
     cam: CameraF32,
     background: [f32; 3],
@@ -43,10 +45,50 @@ pub struct FrozenBlend {
     visit_fac: Vec<[f32; LANES]>,
 }
 
+/// The geometric parameters of `scene` (means, scales, rotations, opacities; no SH).
+pub fn geometry_of(scene: &Gaussians) -> Gaussians {
+    Gaussians {
+        means: scene.means.clone(),
+        log_scales: scene.log_scales.clone(),
+        quats: scene.quats.clone(),
+        opacity_logits: scene.opacity_logits.clone(),
+        sh_degree: scene.sh_degree,
+        ..Default::default()
+    }
+}
+
+/// Bitwise equality of the geometric parameters.
+fn same_geometry(scene: &Gaussians, g: &Gaussians) -> bool {
+    fn eq(a: &[f32], b: &[f32]) -> bool {
+        a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
+    }
+    scene.sh_degree == g.sh_degree
+        && eq(scene.means.as_flattened(), g.means.as_flattened())
+        && eq(scene.log_scales.as_flattened(), g.log_scales.as_flattened())
+        && eq(scene.quats.as_flattened(), g.quats.as_flattened())
+        && eq(&scene.opacity_logits, &g.opacity_logits)
+}
+
 impl FrozenBlend {
     /// Render once and record the weights. The geometry (everything but SH) must not change
     /// while the record is used.
     pub fn record(scene: &Gaussians, cam: &Camera, opts: &RenderOptions) -> Result<FrozenBlend> {
+        Self::record_shared(scene, cam, opts, Arc::new(geometry_of(scene)))
+    }
+
+    /// [`FrozenBlend::record`] with a geometry snapshot ([`geometry_of`]) shared by every
+    /// camera's record, so many records cost one copy of the geometry.
+    pub fn record_shared(
+        scene: &Gaussians,
+        cam: &Camera,
+        opts: &RenderOptions,
+        geometry: Arc<Gaussians>,
+    ) -> Result<FrozenBlend> {
+        if !same_geometry(scene, &geometry) {
+            return Err(Error::invalid(
+                "the geometry snapshot does not match the scene being recorded",
+            ));
+        }
         let opts = RenderOptions {
             outputs: Outputs {
                 rgb: true,
@@ -164,14 +206,6 @@ impl FrozenBlend {
             visit_fac.extend(facs);
             band_start.push(visit_k.len());
         }
-        let geometry = Gaussians {
-            means: scene.means.clone(),
-            log_scales: scene.log_scales.clone(),
-            quats: scene.quats.clone(),
-            opacity_logits: scene.opacity_logits.clone(),
-            sh_degree: scene.sh_degree,
-            ..Default::default()
-        };
         Ok(FrozenBlend {
             geometry,
             cam: CameraF32::new(cam),
@@ -190,15 +224,7 @@ impl FrozenBlend {
     /// The replay is valid only for the recorded geometry: compare it bit for bit (a few MB
     /// of memory comparison, far cheaper than the replay).
     fn check(&self, scene: &Gaussians) -> Result<()> {
-        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<u32>>();
-        let g = &self.geometry;
-        let same = scene.len() == g.len()
-            && scene.sh_degree == g.sh_degree
-            && bits(scene.means.as_flattened()) == bits(g.means.as_flattened())
-            && bits(scene.log_scales.as_flattened()) == bits(g.log_scales.as_flattened())
-            && bits(scene.quats.as_flattened()) == bits(g.quats.as_flattened())
-            && bits(&scene.opacity_logits) == bits(&g.opacity_logits);
-        if same {
+        if same_geometry(scene, &self.geometry) {
             Ok(())
         } else {
             Err(Error::invalid(
