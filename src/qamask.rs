@@ -18,7 +18,9 @@
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
+use crate::gaussian::ply::{ply_bytes, read_ply};
 use crate::gaussian::{Gaussians, Param};
+use crate::io::{create_dir_all, sha256_hex, write_atomic, write_text};
 use crate::math::fastexp::exp;
 use crate::math::sh::{SH_C0, num_coeffs};
 use crate::raster::backward::GradGroups;
@@ -29,6 +31,8 @@ use crate::train::adam::{Adam, AdamConfig};
 use crate::train::loss::{LossInput, LossWeights, image_loss};
 use crate::train::trainer::stage_seed;
 use rayon::prelude::*;
+use std::io::Write;
+use std::path::Path;
 use std::sync::Arc;
 
 /// Settings of the QA-Mask fine-tune.
@@ -207,6 +211,102 @@ pub fn fine_tune(
         });
     }
     Ok(loss)
+}
+
+/// A QA-Mask directory: `DIR/point_cloud.ply` (the fine-tuned mask scene),
+/// `DIR/qa_mask.json` (its [`QaMaskConfig`]), `DIR/manifest.json` (sha256 of both).
+pub fn write_mask_dir(dir: &Path, scene: &Gaussians, cfg: &QaMaskConfig) -> Result<()> {
+    create_dir_all(dir)?;
+    let ply = ply_bytes(scene)?;
+    let ply_path = dir.join("point_cloud.ply");
+    write_atomic(&ply_path, |w| w.write_all(&ply))?;
+    let text = serde_json::to_string_pretty(cfg).expect("config serializes");
+    write_text(&dir.join("qa_mask.json"), &text)?;
+    let manifest = serde_json::json!({
+        "crate_version": env!("CARGO_PKG_VERSION"),
+        "command": "qa-mask",
+        "config": cfg,
+        "files": [
+            {"path": "point_cloud.ply", "sha256": sha256_hex(&ply)},
+            {"path": "qa_mask.json", "sha256": sha256_hex(text.as_bytes())},
+        ],
+    });
+    write_text(
+        &dir.join("manifest.json"),
+        &serde_json::to_string_pretty(&manifest).expect("manifest serializes"),
+    )
+}
+
+/// Read a QA-Mask directory written by [`write_mask_dir`].
+pub fn read_mask_dir(dir: &Path) -> Result<(Gaussians, QaMaskConfig)> {
+    let p = dir.join("qa_mask.json");
+    let text = std::fs::read(&p).map_err(|e| Error::io(&p, e))?;
+    let cfg: QaMaskConfig = serde_json::from_slice(&text)
+        .map_err(|e| Error::parse(&p, format!("invalid QA-Mask config: {e}")))?;
+    cfg.validate().map_err(|e| e.at(&p))?;
+    let (g, _) = read_ply(&dir.join("point_cloud.ply"))?;
+    if g.sh_degree != cfg.sh_degree {
+        return Err(Error::invalid(format!(
+            "the mask scene has SH degree {} but qa_mask.json says {}",
+            g.sh_degree, cfg.sh_degree
+        ))
+        .at(&p));
+    }
+    Ok((g, cfg))
+}
+
+/// A colour by name (`red`, `green`, `blue`, `black`, `white`, `yellow`, `cyan`,
+/// `magenta`) or as `#rrggbb`.
+pub fn parse_color(s: &str) -> Result<[f32; 3]> {
+    let named = match s {
+        "red" => Some([1.0, 0.0, 0.0]),
+        "green" => Some([0.0, 1.0, 0.0]),
+        "blue" => Some([0.0, 0.0, 1.0]),
+        "black" => Some([0.0; 3]),
+        "white" => Some([1.0; 3]),
+        "yellow" => Some([1.0, 1.0, 0.0]),
+        "cyan" => Some([0.0, 1.0, 1.0]),
+        "magenta" => Some([1.0, 0.0, 1.0]),
+        _ => None,
+    };
+    if let Some(c) = named {
+        return Ok(c);
+    }
+    let hex = s.strip_prefix('#').filter(|h| h.len() == 6 && h.is_ascii());
+    if let Some(h) = hex {
+        let byte = |k: usize| u8::from_str_radix(&h[2 * k..2 * k + 2], 16).ok();
+        if let (Some(r), Some(g), Some(b)) = (byte(0), byte(1), byte(2)) {
+            return Ok([r, g, b].map(|v| v as f32 / 255.0));
+        }
+    }
+    Err(Error::invalid(format!(
+        "unknown colour '{s}' (a name such as red or black, or #rrggbb)"
+    )))
+}
+
+/// A heat map of a mask in `[0, 1]` for viewing (piecewise linear through black, dark
+/// blue, magenta, orange, pale yellow — an inferno-like ramp).
+pub fn heat_map(mask: &[f32]) -> Vec<f32> {
+    const STOPS: [[f32; 3]; 5] = [
+        [0.0, 0.0, 0.02],
+        [0.2, 0.05, 0.45],
+        [0.7, 0.15, 0.45],
+        [0.98, 0.55, 0.05],
+        [0.99, 1.0, 0.65],
+    ];
+    mask.iter()
+        .flat_map(|&m| {
+            let x = if m.is_finite() {
+                m.clamp(0.0, 1.0)
+            } else {
+                0.0
+            } * 4.0;
+            let k = (x as usize).min(3);
+            let f = x - k as f32;
+            let (a, b) = (STOPS[k], STOPS[k + 1]);
+            [0, 1, 2].map(|c| a[c] + (b[c] - a[c]) * f)
+        })
+        .collect()
 }
 
 /// Baseline: the opacity map, `1 − alpha` (holes and thin coverage are "bad").

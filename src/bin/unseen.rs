@@ -12,8 +12,15 @@ use unseen::eval::{EvalReport, evaluate};
 use unseen::gaussian::ply;
 use unseen::io::file_stem;
 use unseen::io::image::{ImageF32, write_exr, write_png};
+use unseen::qamask::{
+    QaMaskConfig, fine_tune, heat_map, mask_scene, opacity_mask, parse_color, read_mask_dir,
+    render_qa_mask, scale_mask, write_mask_dir,
+};
 use unseen::raster::{Outputs, RenderOptions, render};
-use unseen::train::run::{load_dataset, read_config, read_run_scene, train_run};
+use unseen::train::loss::LossWeights;
+use unseen::train::run::{
+    Init, MaskSource, load_dataset, read_config, read_run_scene, read_train_views, train_run,
+};
 use unseen::train::trainer::{Progress, TrainConfig};
 
 #[derive(Parser)]
@@ -42,7 +49,7 @@ enum Command {
     /// Render a 3DGS PLY from cameras in INRIA cameras.json layout.
     Render {
         /// Scene in INRIA 3DGS PLY layout.
-        scene: PathBuf,
+        scene: Option<PathBuf>,
         /// Cameras (INRIA cameras.json).
         #[arg(long)]
         cameras: PathBuf,
@@ -62,6 +69,11 @@ enum Command {
         /// expected_depth (ED = D / alpha).
         #[arg(long, value_delimiter = ',', default_value = "rgb")]
         outputs: Vec<String>,
+        /// Render masks instead of images: a QA-Mask directory (then SCENE may be omitted),
+        /// or `opacity` / `scale` (baselines of SCENE). Writes <name>.mask.exr (float) and
+        /// <name>.mask.png (heat map).
+        #[arg(long)]
+        mask: Option<String>,
     },
     /// Train 3D Gaussians on a dataset (unseen scene, COLMAP or transforms.json directory)
     /// with INRIA's recipe; writes INRIA's output layout into --out.
@@ -87,6 +99,40 @@ enum Command {
         /// Flags override it.
         #[arg(long)]
         config: Option<PathBuf>,
+        /// Fine-tune the latest scene of this run instead of starting from the point cloud.
+        #[arg(long)]
+        init: Option<PathBuf>,
+        /// Per-pixel loss weights for fine-tuning (needs --init): none, opacity (1 − alpha
+        /// of the initial scene) or qa (needs --mask-dir). With a mask the loss is the
+        /// paper's Eq. 7 (λ = 0.7, 0.2, 0.1).
+        #[arg(long, default_value = "none")]
+        mask: String,
+        /// QA-Mask directory written by `unseen qa-mask`.
+        #[arg(long)]
+        mask_dir: Option<PathBuf>,
+    },
+    /// Quality-Aware Mask of a trained run (paper §3.4): base colour, black targets, only
+    /// higher SH fine-tuned on the run's training views; writes the mask scene into --out.
+    QaMask {
+        /// Run directory written by `unseen train`.
+        run: PathBuf,
+        /// Output directory (point_cloud.ply, qa_mask.json, manifest.json).
+        #[arg(long)]
+        out: PathBuf,
+        /// SH degree of the mask scene (paper: 5).
+        #[arg(long, default_value_t = 5)]
+        sh_degree: u32,
+        /// Fine-tune iterations (paper: 20000).
+        #[arg(long, default_value_t = 20_000)]
+        iterations: u32,
+        /// Base and target colours: names (red, green, blue, black, white, ...) or #rrggbb.
+        #[arg(long, default_value = "red,black")]
+        colors: String,
+        /// Learning rate of the higher SH coefficients (INRIA's f_rest rate by default).
+        #[arg(long)]
+        lr: Option<f32>,
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
     },
     /// PSNR / SSIM of a run's latest PLY on a split of a dataset; writes RUN/eval.json and
     /// render|ground-truth images into RUN/eval/<split>/.
@@ -339,6 +385,46 @@ fn run_oracle(c: &OracleScene, targets: Option<(&Path, &str, Option<&Path>)>) ->
     Ok(())
 }
 
+/// Render masks (QA-Mask directory, or a baseline of `scene`) for `cams` into `out`.
+fn render_masks(scene: Option<&Path>, source: &str, cams: &[Camera], out: &Path) -> Result<usize> {
+    unseen::io::create_dir_all(out)?;
+    let load = || -> Result<unseen::gaussian::Gaussians> {
+        let p = scene.ok_or_else(|| Error::invalid(format!("--mask {source} needs SCENE.ply")))?;
+        Ok(ply::read_ply(p)?.0)
+    };
+    enum Src {
+        Qa(unseen::gaussian::Gaussians, QaMaskConfig),
+        Opacity(unseen::gaussian::Gaussians),
+        Scale(unseen::gaussian::Gaussians),
+    }
+    let src = match source {
+        "opacity" => Src::Opacity(load()?),
+        "scale" => Src::Scale(load()?),
+        dir => {
+            let (g, c) = read_mask_dir(Path::new(dir))?;
+            Src::Qa(g, c)
+        }
+    };
+    for cam in cams {
+        let m = match &src {
+            Src::Qa(g, c) => render_qa_mask(g, cam, c)?,
+            Src::Opacity(g) => opacity_mask(g, cam)?,
+            Src::Scale(g) => scale_mask(g, cam)?,
+        };
+        let (w, h) = (cam.width as usize, cam.height as usize);
+        let stem = file_stem(&cam.name);
+        write_exr(
+            &out.join(format!("{stem}.mask.exr")),
+            &ImageF32::new(w, h, 1, m.clone())?,
+        )?;
+        write_png(
+            &out.join(format!("{stem}.mask.png")),
+            &ImageF32::new(w, h, 3, heat_map(&m))?,
+        )?;
+    }
+    Ok(cams.len())
+}
+
 /// Iterations of the demo's short training preset.
 const DEMO_ITERATIONS: u32 = 3000;
 
@@ -346,6 +432,7 @@ fn train_with_bar(
     dataset: &Path,
     out: &Path,
     cfg: &TrainConfig,
+    init: Option<&Init>,
 ) -> Result<unseen::train::run::RunSummary> {
     let bar = ProgressBar::new(cfg.iterations as u64);
     bar.set_style(
@@ -363,7 +450,7 @@ fn train_with_bar(
             ));
         }
     };
-    let s = train_run(dataset, out, cfg, &mut on_progress);
+    let s = train_run(dataset, out, cfg, init, &mut on_progress);
     bar.finish_and_clear();
     s
 }
@@ -421,7 +508,7 @@ fn run_demo(iterations: u32, out: &Path) -> Result<()> {
         iterations,
         scene.display()
     );
-    let s = train_with_bar(&scene, &run, &cfg)?;
+    let s = train_with_bar(&scene, &run, &cfg, None)?;
     let test = eval_run(&run, &scene, Split::Test, None)?;
     let held = eval_run(&run, &scene, Split::Heldout, None)?;
     let mut md = String::from("# unseen demo\n\n");
@@ -495,6 +582,9 @@ fn run(cli: Cli) -> Result<()> {
             resolution,
             sh_degree,
             config,
+            init,
+            mask,
+            mask_dir,
         } => {
             let mut cfg = match config {
                 Some(p) => {
@@ -516,7 +606,42 @@ fn run(cli: Cli) -> Result<()> {
             if let Some(v) = sh_degree {
                 cfg.sh_degree = v;
             }
-            let s = train_with_bar(&dataset, &out, &cfg)?;
+            let init = match init {
+                None if mask != "none" => {
+                    return Err(Error::invalid(
+                        "--mask needs --init RUN (it weights a fine-tune)",
+                    ));
+                }
+                None => None,
+                Some(run) => {
+                    let (_, scene) = read_run_scene(&run, None)?;
+                    let source = match mask.as_str() {
+                        "none" => MaskSource::None,
+                        "opacity" => MaskSource::Opacity,
+                        "qa" => {
+                            let Some(dir) = &mask_dir else {
+                                return Err(Error::invalid("--mask qa needs --mask-dir DIR"));
+                            };
+                            let (g, c) = read_mask_dir(dir)?;
+                            MaskSource::Qa(Box::new((g, c)))
+                        }
+                        m => {
+                            return Err(Error::invalid(format!(
+                                "unknown --mask '{m}' (none, opacity or qa)"
+                            )));
+                        }
+                    };
+                    if !matches!(source, MaskSource::None) {
+                        cfg.loss = LossWeights::PAPER;
+                    }
+                    cfg.sh_degree = scene.sh_degree;
+                    Some(Init {
+                        scene,
+                        mask: source,
+                    })
+                }
+            };
+            let s = train_with_bar(&dataset, &out, &cfg, init.as_ref())?;
             println!(
                 "trained {} iterations in {:.1} s ({:.1} it/s, {:.3} G pairs/s), {} Gaussians: {}",
                 s.iterations,
@@ -525,6 +650,63 @@ fn run(cli: Cli) -> Result<()> {
                 s.pairs_per_second * 1e-9,
                 s.gaussians,
                 s.ply.display()
+            );
+            Ok(())
+        }
+        Command::QaMask {
+            run,
+            out,
+            sh_degree,
+            iterations,
+            colors,
+            lr,
+            seed,
+        } => {
+            let (base, target) = colors
+                .split_once(',')
+                .ok_or_else(|| Error::invalid(format!("--colors '{colors}' is not BASE,TARGET")))?;
+            let mut cfg = QaMaskConfig {
+                sh_degree,
+                iterations,
+                base_color: parse_color(base)?,
+                target_color: parse_color(target)?,
+                seed,
+                ..QaMaskConfig::default()
+            };
+            if let Some(lr) = lr {
+                cfg.lr_sh_rest = lr;
+            }
+            let (it, trained) = read_run_scene(&run, None)?;
+            let names = read_train_views(&run)?;
+            let all = inria::read_cameras_json(&run.join("cameras.json"))?;
+            let views: Vec<Camera> = all
+                .into_iter()
+                .filter(|c| names.contains(&c.name))
+                .collect();
+            let mut scene = mask_scene(&trained, &cfg)?;
+            let bar = ProgressBar::new(iterations as u64);
+            bar.set_style(
+                ProgressStyle::with_template(
+                    "{bar:30} {pos}/{len} {msg} [{elapsed_precise}<{eta_precise}]",
+                )
+                .expect("valid template"),
+            );
+            let t0 = Instant::now();
+            let loss = fine_tune(&mut scene, &views, &cfg, &mut |p| {
+                if p.iteration % 50 == 0 || p.iteration == p.iterations {
+                    bar.set_position(p.iteration as u64);
+                    bar.set_message(format!("loss {:.5}", p.loss));
+                }
+            })?;
+            bar.finish_and_clear();
+            write_mask_dir(&out, &scene, &cfg)?;
+            println!(
+                "QA-Mask of {} (iteration {it}): {} views, {} iterations in {:.1} s, last loss {loss:.5}; wrote {}",
+                run.display(),
+                views.len(),
+                iterations,
+                t0.elapsed().as_secs_f64(),
+                out.display()
             );
             Ok(())
         }
@@ -547,6 +729,7 @@ fn run(cli: Cli) -> Result<()> {
             sh_degree,
             background,
             outputs,
+            mask,
         } => {
             let mut cams = inria::read_cameras_json(&cameras)?;
             if let Some(name) = camera {
@@ -555,6 +738,14 @@ fn run(cli: Cli) -> Result<()> {
                     return Err(Error::invalid(format!("no camera named '{name}'")).at(&cameras));
                 }
             }
+            if let Some(m) = mask {
+                let n = render_masks(scene.as_deref(), &m, &cams, &out)?;
+                println!("wrote {n} mask(s) into {}", out.display());
+                return Ok(());
+            }
+            let Some(scene) = scene else {
+                return Err(Error::invalid("render needs a SCENE.ply (or --mask DIR)"));
+            };
             let exr = parse_outputs(&outputs)?;
             let exr = Outputs {
                 rgb: outputs.iter().any(|o| o == "rgb"),

@@ -20,6 +20,7 @@ use crate::error::{Error, Result};
 use crate::gaussian::Gaussians;
 use crate::gaussian::ply::{ply_bytes, read_ply};
 use crate::io::{create_dir_all, peak_memory_bytes, sha256_hex, write_atomic, write_text};
+use crate::qamask::{QaMaskConfig, opacity_mask, render_qa_mask};
 use crate::train::trainer::{Progress, TrainConfig, Trainer};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -105,7 +106,28 @@ struct Manifest<'a> {
     dataset: String,
     seed: u64,
     config: &'a TrainConfig,
+    /// Names of the views trained on (the QA-Mask fine-tune uses their cameras).
+    train_views: Vec<String>,
     files: Vec<FileEntry>,
+}
+
+/// The names of the views a run trained on (`manifest.json`'s `train_views`).
+pub fn read_train_views(run: &Path) -> Result<Vec<String>> {
+    let p = run.join("manifest.json");
+    let text = std::fs::read(&p).map_err(|e| Error::io(&p, e))?;
+    let v: serde_json::Value = serde_json::from_slice(&text)
+        .map_err(|e| Error::parse(&p, format!("invalid JSON: {e}")))?;
+    let list = v
+        .get("train_views")
+        .and_then(|x| x.as_array())
+        .ok_or_else(|| Error::parse(&p, "no \"train_views\" list"))?;
+    list.iter()
+        .map(|x| {
+            x.as_str()
+                .map(str::to_string)
+                .ok_or_else(|| Error::parse(&p, "\"train_views\" holds a non-string"))
+        })
+        .collect()
 }
 
 /// INRIA's `cfg_args` (the `ModelParams` namespace its SIBR viewer and render scripts read).
@@ -128,11 +150,30 @@ fn cfg_args(dataset_dir: &Path, run: &Path, c: &TrainConfig) -> String {
     )
 }
 
-/// Train on `dataset_dir` into `run`; `on_progress` sees every iteration.
+/// Per-pixel loss weights for fine-tuning (paper Eq. 7), fixed for the whole run.
+#[derive(Clone, Debug)]
+pub enum MaskSource {
+    None,
+    /// `1 − alpha` of the initial scene at each view.
+    Opacity,
+    /// A fine-tuned QA-Mask scene and its config ([`crate::qamask::read_mask_dir`]).
+    Qa(Box<(Gaussians, QaMaskConfig)>),
+}
+
+/// Start from an existing scene instead of the dataset's point cloud.
+#[derive(Clone, Debug)]
+pub struct Init {
+    pub scene: Gaussians,
+    pub mask: MaskSource,
+}
+
+/// Train on `dataset_dir` into `run` (from `init` when given); `on_progress` sees every
+/// iteration.
 pub fn train_run(
     dataset_dir: &Path,
     run: &Path,
     config: &TrainConfig,
+    init: Option<&Init>,
     on_progress: &mut dyn FnMut(&Progress),
 ) -> Result<RunSummary> {
     config.validate()?;
@@ -145,7 +186,26 @@ pub fn train_run(
     write_text(&run.join("cameras.json"), &cameras_json_string(&cams))?;
 
     let start = Instant::now();
-    let mut trainer = Trainer::new(&data, config.clone())?;
+    let mut trainer = match init {
+        None => Trainer::new(&data, config.clone())?,
+        Some(i) => {
+            let deg = i.scene.sh_degree;
+            let mut t = Trainer::from_gaussians(&data, config.clone(), i.scene.clone(), deg)?;
+            let mask = |cam: &crate::camera::Camera| -> Result<Option<Vec<f32>>> {
+                Ok(match &i.mask {
+                    MaskSource::None => None,
+                    MaskSource::Opacity => Some(opacity_mask(&i.scene, cam)?),
+                    MaskSource::Qa(q) => Some(render_qa_mask(&q.0, cam, &q.1)?),
+                })
+            };
+            let mut masks = vec![None; data.views.len()];
+            for &vi in &data.train {
+                masks[vi] = mask(&data.views[vi].camera)?;
+            }
+            t.masks = masks;
+            t
+        }
+    };
     let mut files: Vec<(PathBuf, String)> = Vec::new();
     let mut curve = Vec::new();
     let mut pairs = 0u64;
@@ -184,6 +244,11 @@ pub fn train_run(
         dataset: dataset_dir.display().to_string(),
         seed: config.seed,
         config,
+        train_views: data
+            .train
+            .iter()
+            .map(|&i| data.views[i].camera.name.clone())
+            .collect(),
         files: files
             .iter()
             .map(|(p, h)| FileEntry {

@@ -178,6 +178,8 @@ pub struct Trainer<'a> {
     pub iteration: u32,
     pub active_sh_degree: u32,
     pub extent: f32,
+    /// Per-view loss weights `M` (paper Eq. 7), indexed like `dataset.views`; empty = none.
+    pub masks: Vec<Option<Vec<f32>>>,
     rng: Uniform,
     stack: Vec<usize>,
     loss_ema: f64,
@@ -245,6 +247,7 @@ impl<'a> Trainer<'a> {
             stats,
             iteration: 0,
             extent,
+            masks: Vec::new(),
             rng,
             stack: Vec::new(),
             loss_ema: 0.0,
@@ -410,10 +413,15 @@ impl<'a> Trainer<'a> {
         })
     }
 
-    /// One iteration on the next view of the stack.
+    /// One iteration on the next view of the stack (with its mask, if any).
     pub fn step(&mut self) -> Result<Progress> {
         let vi = self.next_view();
-        self.step_on(vi, None)
+        let mask = self.masks.get_mut(vi).and_then(Option::take);
+        let r = self.step_on(vi, mask.as_deref());
+        if let Some(m) = mask {
+            self.masks[vi] = Some(m);
+        }
+        r
     }
 
     /// Run to `config.iterations`, calling `on_progress` after every iteration and

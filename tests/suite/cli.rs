@@ -265,3 +265,100 @@ fn cli_train_rejects_bad_input() {
         "nothing written on bad input"
     );
 }
+
+/// `unseen qa-mask`, `unseen render --mask` (QA and a baseline) and a masked fine-tune
+/// `unseen train --init RUN --mask qa` on a tiny run.
+#[test]
+fn cli_qa_mask_render_mask_and_masked_fine_tune() {
+    let scene = reference("scenes/lounge");
+    let run = out_dir("qa-run");
+    let ok = |st: std::process::Output| {
+        assert!(
+            st.status.success(),
+            "{}",
+            String::from_utf8_lossy(&st.stderr)
+        );
+    };
+    ok(unseen()
+        .arg("train")
+        .arg(&scene)
+        .arg("--out")
+        .arg(&run)
+        .args(["--iterations", "20", "--resolution", "4"])
+        .output()
+        .unwrap());
+    let qa = out_dir("qa-dir");
+    ok(unseen()
+        .arg("qa-mask")
+        .arg(&run)
+        .arg("--out")
+        .arg(&qa)
+        .args([
+            "--sh-degree",
+            "3",
+            "--iterations",
+            "30",
+            "--colors",
+            "green,#000000",
+        ])
+        .output()
+        .unwrap());
+    let (g, cfg) = unseen::qamask::read_mask_dir(&qa).unwrap();
+    assert_eq!(
+        (g.sh_degree, cfg.base_color, cfg.iterations),
+        (3, [0.0, 1.0, 0.0], 30)
+    );
+    let masks = out_dir("qa-masks");
+    ok(unseen()
+        .arg("render")
+        .arg("--cameras")
+        .arg(run.join("cameras.json"))
+        .args(["--camera", "heldout_004", "--mask"])
+        .arg(&qa)
+        .arg("--out")
+        .arg(&masks)
+        .output()
+        .unwrap());
+    let m = read_exr(&masks.join("heldout_004.mask.exr"), &["Y"]).unwrap();
+    assert_eq!((m.width, m.height), (40, 30));
+    assert!(m.data.iter().all(|v| (0.0..=1.0).contains(v)));
+    let heat = read_png(&masks.join("heldout_004.mask.png")).unwrap();
+    assert_eq!(heat.channels, 3);
+    ok(unseen()
+        .arg("render")
+        .arg(run.join("point_cloud/iteration_20/point_cloud.ply"))
+        .arg("--cameras")
+        .arg(run.join("cameras.json"))
+        .args(["--camera", "train_001", "--mask", "opacity", "--out"])
+        .arg(&masks)
+        .output()
+        .unwrap());
+    assert!(masks.join("train_001.mask.exr").is_file());
+    let tuned = out_dir("qa-tuned");
+    ok(unseen()
+        .arg("train")
+        .arg(&scene)
+        .arg("--out")
+        .arg(&tuned)
+        .arg("--init")
+        .arg(&run)
+        .args(["--mask", "qa", "--mask-dir"])
+        .arg(&qa)
+        .args(["--iterations", "10", "--resolution", "4"])
+        .output()
+        .unwrap());
+    let cfg: unseen::train::trainer::TrainConfig =
+        serde_json::from_slice(&std::fs::read(tuned.join("config.json")).unwrap()).unwrap();
+    assert_eq!(cfg.loss, unseen::train::loss::LossWeights::PAPER);
+    // A mask without a run to fine-tune is refused.
+    let st = unseen()
+        .arg("train")
+        .arg(&scene)
+        .arg("--out")
+        .arg(out_dir("qa-bad"))
+        .args(["--mask", "opacity"])
+        .output()
+        .unwrap();
+    assert!(!st.status.success());
+    assert!(String::from_utf8_lossy(&st.stderr).contains("--init"));
+}
