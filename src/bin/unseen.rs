@@ -441,7 +441,20 @@ fn train_with_bar(
         )
         .expect("valid template"),
     );
+    let t0 = Instant::now();
     let mut on_progress = |p: &Progress| {
+        // Without a terminal the bar is hidden: a log line every 1000 iterations instead.
+        if bar.is_hidden() && (p.iteration % 1000 == 0 || p.iteration == p.iterations) {
+            eprintln!(
+                "iteration {}/{}: loss {:.4}, PSNR {:.2} dB, {} Gaussians, {:.1} s",
+                p.iteration,
+                p.iterations,
+                p.loss_ema,
+                p.psnr_ema,
+                p.gaussians,
+                t0.elapsed().as_secs_f64()
+            );
+        }
         if p.iteration % 10 == 0 || p.iteration == p.iterations {
             bar.set_position(p.iteration as u64);
             bar.set_message(format!(
