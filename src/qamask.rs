@@ -436,6 +436,131 @@ pub fn pixel_error(rgb: &[f32], gt: &[f32]) -> Vec<f32> {
         .collect()
 }
 
+/// Pixels whose mean absolute RGB error exceeds this are "badly reconstructed" in the
+/// audit (SPEC.md §15.2).
+pub const BAD_PIXEL_ERROR: f32 = 0.1;
+
+/// One mask's figures in [`audit`].
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct AuditRow {
+    /// `qa-<degree>`, `opacity` or `scale`.
+    pub mask: String,
+    pub auroc: f64,
+    pub spearman: f64,
+    /// Mean mask value over the held-out and over the in-distribution test views.
+    pub mean_heldout: f64,
+    pub mean_test: f64,
+    /// Fine-tune wall time (0 for the baselines).
+    pub seconds: f64,
+}
+
+/// The measured check of the paper's claim on one scene.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct AuditReport {
+    pub bad_pixel_error: f32,
+    /// Fraction of held-out pixels that are bad.
+    pub bad_fraction: f64,
+    pub heldout_pixels: usize,
+    pub rows: Vec<AuditRow>,
+}
+
+impl AuditReport {
+    pub fn table(&self) -> String {
+        let mut s = format!(
+            "bad pixel: error > {} ({:.1} % of {} held-out pixels)\n\n\
+             | mask | AUROC | Spearman | mean (heldout) | mean (test) | fine-tune s |\n\
+             |---|---|---|---|---|---|\n",
+            self.bad_pixel_error,
+            100.0 * self.bad_fraction,
+            self.heldout_pixels
+        );
+        for r in &self.rows {
+            s += &format!(
+                "| {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.1} |\n",
+                r.mask, r.auroc, r.spearman, r.mean_heldout, r.mean_test, r.seconds
+            );
+        }
+        s
+    }
+}
+
+fn mean(v: &[f32]) -> f64 {
+    v.iter().map(|&x| x as f64).sum::<f64>() / v.len().max(1) as f64
+}
+
+/// Score QA-Mask (one fine-tune per config) and the baselines against the true error of
+/// `trained` on the held-out views of `data` (fine-tuning on its train views).
+pub fn audit(
+    trained: &Gaussians,
+    data: &crate::dataset::Dataset,
+    configs: &[QaMaskConfig],
+    on_progress: &mut dyn FnMut(&str, &FineTuneProgress),
+) -> Result<AuditReport> {
+    use crate::dataset::Split;
+    if data.heldout.is_empty() {
+        return Err(Error::invalid(
+            "the audit needs a dataset with held-out views",
+        ));
+    }
+    let mut err = Vec::new();
+    for &i in &data.heldout {
+        let v = &data.views[i];
+        let r = render(trained, &v.camera, &RenderOptions::default())?;
+        err.extend(pixel_error(&r.rgb.expect("rgb"), &v.image.data));
+    }
+    let bad: Vec<bool> = err.iter().map(|&e| e > BAD_PIXEL_ERROR).collect();
+    let score = |f: &dyn Fn(&Camera) -> Result<Vec<f32>>, s: Split| -> Result<Vec<f32>> {
+        let mut out = Vec::new();
+        for &i in data.split(s) {
+            out.extend(f(&data.views[i].camera)?);
+        }
+        Ok(out)
+    };
+    let row =
+        |name: String, f: &dyn Fn(&Camera) -> Result<Vec<f32>>, secs: f64| -> Result<AuditRow> {
+            let held = score(f, Split::Heldout)?;
+            let test = score(f, Split::Test)?;
+            Ok(AuditRow {
+                mask: name,
+                auroc: auroc(&held, &bad).unwrap_or(f64::NAN),
+                spearman: spearman(&held, &err).unwrap_or(f64::NAN),
+                mean_heldout: mean(&held),
+                mean_test: mean(&test),
+                seconds: secs,
+            })
+        };
+    let train: Vec<Camera> = data
+        .train
+        .iter()
+        .map(|&i| data.views[i].camera.clone())
+        .collect();
+    let mut rows = Vec::new();
+    for cfg in configs {
+        let name = format!("qa-{}", cfg.sh_degree);
+        let mut s = mask_scene(trained, cfg)?;
+        let t0 = std::time::Instant::now();
+        fine_tune(&mut s, &train, cfg, &mut |p| on_progress(&name, p))?;
+        let secs = t0.elapsed().as_secs_f64();
+        rows.push(row(name, &|c: &Camera| render_qa_mask(&s, c, cfg), secs)?);
+    }
+    rows.push(row(
+        "opacity".into(),
+        &|c: &Camera| opacity_mask(trained, c),
+        0.0,
+    )?);
+    rows.push(row(
+        "scale".into(),
+        &|c: &Camera| scale_mask(trained, c),
+        0.0,
+    )?);
+    Ok(AuditReport {
+        bad_pixel_error: BAD_PIXEL_ERROR,
+        bad_fraction: bad.iter().filter(|&&b| b).count() as f64 / bad.len().max(1) as f64,
+        heldout_pixels: bad.len(),
+        rows,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -350,6 +350,19 @@ fn cli_qa_mask_render_mask_and_masked_fine_tune() {
     let cfg: unseen::train::trainer::TrainConfig =
         serde_json::from_slice(&std::fs::read(tuned.join("config.json")).unwrap()).unwrap();
     assert_eq!(cfg.loss, unseen::train::loss::LossWeights::PAPER);
+    let audit = out_dir("qa-audit.json");
+    ok(unseen()
+        .arg("mask-audit")
+        .arg(&run)
+        .arg("--dataset")
+        .arg(&scene)
+        .args(["--degrees", "3", "--iterations", "10", "--out"])
+        .arg(&audit)
+        .output()
+        .unwrap());
+    let a: serde_json::Value = serde_json::from_slice(&std::fs::read(&audit).unwrap()).unwrap();
+    assert_eq!(a["report"]["rows"].as_array().unwrap().len(), 3);
+    assert_eq!(a["report"]["heldout_pixels"], 36 * 40 * 30);
     // A mask without a run to fine-tune is refused.
     let st = unseen()
         .arg("train")

@@ -5,16 +5,10 @@ use super::common::{reference, with_threads};
 use unseen::camera::Camera;
 use unseen::dataset::{self, Dataset, LoadOptions, Split};
 use unseen::gaussian::Gaussians;
-use unseen::qamask::{
-    QaMaskConfig, auroc, fine_tune, mask_scene, opacity_mask, pixel_error, render_qa_mask,
-    scale_mask, spearman,
-};
+use unseen::qamask::{QaMaskConfig, audit, fine_tune, mask_scene, render_qa_mask};
 use unseen::raster::{RenderOptions, render};
 use unseen::train::densify::DensifyConfig;
 use unseen::train::trainer::{TrainConfig, Trainer};
-
-/// Pixels whose mean absolute RGB error exceeds this are "badly reconstructed" (SPEC.md §15).
-const BAD_PIXEL_ERROR: f32 = 0.1;
 
 /// The lounge train half at 80×60 and a 700-iteration model of it, made once for all tests
 /// of this file (training is deterministic, so sharing changes nothing).
@@ -187,41 +181,19 @@ fn qa_mask_colour_pair_does_not_matter() {
 #[test]
 fn qa_mask_detects_badly_reconstructed_pixels() {
     let (d, g) = fixture();
-    let cfg = short_cfg(1500, 3);
-    let mut s = mask_scene(g, &cfg).unwrap();
-    fine_tune(&mut s, &cams(d, Split::Train), &cfg, &mut |_| {}).unwrap();
-    let (mut score, mut op, mut sc, mut err) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let mut held_mean = 0.0;
-    for &i in &d.heldout {
-        let v = &d.views[i];
-        let m = render_qa_mask(&s, &v.camera, &cfg).unwrap();
-        held_mean += m.iter().sum::<f32>() as f64 / m.len() as f64;
-        score.extend(m);
-        op.extend(opacity_mask(g, &v.camera).unwrap());
-        sc.extend(scale_mask(g, &v.camera).unwrap());
-        let r = render(g, &v.camera, &RenderOptions::default()).unwrap();
-        err.extend(pixel_error(&r.rgb.unwrap(), &v.image.data));
-    }
-    held_mean /= d.heldout.len() as f64;
-    let mut test_mean = 0.0;
-    for &i in &d.test {
-        let m = render_qa_mask(&s, &d.views[i].camera, &cfg).unwrap();
-        test_mean += m.iter().sum::<f32>() as f64 / m.len() as f64;
-    }
-    test_mean /= d.test.len() as f64;
-    let bad: Vec<bool> = err.iter().map(|&e| e > BAD_PIXEL_ERROR).collect();
-    let a = auroc(&score, &bad).unwrap();
-    let rho = spearman(&score, &err).unwrap();
-    eprintln!(
-        "qa auroc {a:.3} rho {rho:.3}; opacity auroc {:.3}; scale auroc {:.3}; mask mean test {test_mean:.3} heldout {held_mean:.3}; bad fraction {:.3}",
-        auroc(&op, &bad).unwrap(),
-        auroc(&sc, &bad).unwrap(),
-        bad.iter().filter(|&&b| b).count() as f64 / bad.len() as f64
-    );
-    assert!(a > 0.6, "QA-Mask AUROC {a:.3}");
-    assert!(rho > 0.15, "QA-Mask Spearman {rho:.3}");
+    let report = audit(g, d, &[short_cfg(1500, 3)], &mut |_, _| {}).unwrap();
+    eprintln!("{}", report.table());
+    let qa = &report.rows[0];
+    assert_eq!(qa.mask, "qa-3");
+    assert!(qa.auroc > 0.6, "QA-Mask AUROC {:.3}", qa.auroc);
+    assert!(qa.spearman > 0.15, "QA-Mask Spearman {:.3}", qa.spearman);
     assert!(
-        test_mean < 0.5 * held_mean,
-        "mask mean: test {test_mean:.3}, heldout {held_mean:.3}"
+        qa.mean_test < 0.5 * qa.mean_heldout,
+        "mask mean: test {:.3}, heldout {:.3}",
+        qa.mean_test,
+        qa.mean_heldout
     );
+    let names: Vec<&str> = report.rows.iter().map(|r| r.mask.as_str()).collect();
+    assert_eq!(names, ["qa-3", "opacity", "scale"]);
+    assert!(report.bad_fraction > 0.0 && report.bad_fraction < 1.0);
 }
