@@ -26,61 +26,83 @@ fn kernel() -> [f64; SSIM_WINDOW] {
     k.map(|v| v / s)
 }
 
-/// Rows per parallel task of the blur: a fixed partition, and every output value is
-/// computed by one task in the same order, so the result does not depend on the thread
-/// count.
-const ROWS_PER_TASK: usize = 8;
+/// Separable Gaussian blur with zero padding of `n` planes of `w × h` values stored one
+/// after the other: horizontal pass, then vertical. Every output value is
+/// `Σ_t k[t]·v[t]` over the in-range taps in ascending `t`, accumulated from 0 — the loops
+/// run over `x` innermost so they vectorize without changing any element's order of
+/// operations (separate multiply and add, never fused), so the AVX2 build of the same code,
+/// chosen at run time, gives the same bits. Planes are independent parallel tasks (a fixed
+/// partition).
+fn blur_planes(src: &[f64], w: usize, h: usize, k: &[f64; SSIM_WINDOW]) -> Vec<f64> {
+    use rayon::prelude::*;
+    let n = w * h;
+    let mut out = vec![0.0; src.len()];
+    #[cfg(target_arch = "x86_64")]
+    let avx2 = std::arch::is_x86_feature_detected!("avx2");
+    out.par_chunks_mut(n)
+        .zip(src.par_chunks(n))
+        .for_each(|(dst, plane)| {
+            let mut tmp = vec![0.0; n];
+            #[cfg(target_arch = "x86_64")]
+            if avx2 {
+                // SAFETY: AVX2 was detected at run time.
+                unsafe { blur_plane_avx2(dst, plane, &mut tmp, w, h, k) };
+                return;
+            }
+            blur_plane(dst, plane, &mut tmp, w, h, k);
+        });
+    out
+}
 
-/// One output value of the 1D window at `i` over `src` (`n` samples, `stride` apart):
-/// taps in ascending order, out-of-range taps skipped (zero padding).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn blur_plane_avx2(
+    dst: &mut [f64],
+    plane: &[f64],
+    tmp: &mut [f64],
+    w: usize,
+    h: usize,
+    k: &[f64; SSIM_WINDOW],
+) {
+    blur_plane(dst, plane, tmp, w, h, k)
+}
+
 #[inline(always)]
-fn tap(src: &[f64], i: usize, n: usize, stride: usize, k: &[f64; SSIM_WINDOW]) -> f64 {
-    let r = SSIM_WINDOW / 2;
-    let mut acc = 0.0;
-    if i >= r && i + r < n {
-        let base = (i - r) * stride;
-        for (t, kv) in k.iter().enumerate() {
-            acc += kv * src[base + t * stride];
-        }
-    } else {
-        for (t, kv) in k.iter().enumerate() {
-            let j = i as isize + t as isize - r as isize;
-            if j >= 0 && (j as usize) < n {
-                acc += kv * src[j as usize * stride];
+fn blur_plane(
+    dst: &mut [f64],
+    plane: &[f64],
+    tmp: &mut [f64],
+    w: usize,
+    h: usize,
+    k: &[f64; SSIM_WINDOW],
+) {
+    let r = (SSIM_WINDOW / 2) as isize;
+    for (row_out, row_in) in tmp.chunks_exact_mut(w).zip(plane.chunks_exact(w)) {
+        for (t, &kv) in k.iter().enumerate() {
+            let off = t as isize - r;
+            let lo = (-off).max(0) as usize;
+            let hi = (w as isize - off).clamp(0, w as isize) as usize;
+            if lo >= hi {
+                continue;
+            }
+            let src_row = &row_in[(lo as isize + off) as usize..(hi as isize + off) as usize];
+            for (o, &v) in row_out[lo..hi].iter_mut().zip(src_row) {
+                *o += kv * v;
             }
         }
     }
-    acc
-}
-
-/// Separable Gaussian blur of a planar `w × h` image with zero padding: horizontal pass,
-/// then vertical.
-fn blur(img: &[f64], w: usize, h: usize, k: &[f64; SSIM_WINDOW]) -> Vec<f64> {
-    use rayon::prelude::*;
-    let mut tmp = vec![0.0; w * h];
-    tmp.par_chunks_mut(w * ROWS_PER_TASK)
-        .enumerate()
-        .for_each(|(c, rows)| {
-            for (ry, row) in rows.chunks_mut(w).enumerate() {
-                let y = c * ROWS_PER_TASK + ry;
-                let src = &img[y * w..(y + 1) * w];
-                for (x, o) in row.iter_mut().enumerate() {
-                    *o = tap(src, x, w, 1, k);
-                }
+    for (y, row_out) in dst.chunks_exact_mut(w).enumerate() {
+        for (t, &kv) in k.iter().enumerate() {
+            let yy = y as isize + t as isize - r;
+            if yy < 0 || yy >= h as isize {
+                continue;
             }
-        });
-    let mut out = vec![0.0; w * h];
-    out.par_chunks_mut(w * ROWS_PER_TASK)
-        .enumerate()
-        .for_each(|(c, rows)| {
-            for (ry, row) in rows.chunks_mut(w).enumerate() {
-                let y = c * ROWS_PER_TASK + ry;
-                for (x, o) in row.iter_mut().enumerate() {
-                    *o = tap(&tmp[x..], y, h, w, k);
-                }
+            let src_row = &tmp[yy as usize * w..(yy as usize + 1) * w];
+            for (o, &v) in row_out.iter_mut().zip(src_row) {
+                *o += kv * v;
             }
-        });
-    out
+        }
+    }
 }
 
 /// Mean SSIM of `x` against `y` (interleaved, `c` channels) and, if `grad`, dSSIM/dx.
@@ -95,49 +117,71 @@ pub fn ssim(
     assert_eq!(x.len(), w * h * c);
     assert_eq!(y.len(), w * h * c);
     let k = kernel();
-    let n = (w * h * c) as f64;
-    let mut total = 0.0;
-    let mut g = grad.then(|| vec![0f32; x.len()]);
+    let np = w * h;
+    let n = (np * c) as f64;
+    // Planes, channel by channel: x, y, x², y², x·y.
+    let mut planes = vec![0.0; 5 * c * np];
     for ch in 0..c {
-        let xs: Vec<f64> = (0..w * h).map(|p| x[p * c + ch] as f64).collect();
-        let ys: Vec<f64> = (0..w * h).map(|p| y[p * c + ch] as f64).collect();
-        let prod = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(u, v)| u * v).collect::<Vec<f64>>();
-        let (mx, my) = (blur(&xs, w, h, &k), blur(&ys, w, h, &k));
-        let exx = blur(&prod(&xs, &xs), w, h, &k);
-        let eyy = blur(&prod(&ys, &ys), w, h, &k);
-        let exy = blur(&prod(&xs, &ys), w, h, &k);
-        let (mut d_mu, mut d_exx, mut d_exy) =
-            (vec![0.0; w * h], vec![0.0; w * h], vec![0.0; w * h]);
-        for p in 0..w * h {
+        let base = 5 * ch * np;
+        for p in 0..np {
+            let (a, b) = (x[p * c + ch] as f64, y[p * c + ch] as f64);
+            planes[base + p] = a;
+            planes[base + np + p] = b;
+            planes[base + 2 * np + p] = a * a;
+            planes[base + 3 * np + p] = b * b;
+            planes[base + 4 * np + p] = a * b;
+        }
+    }
+    let blurred = blur_planes(&planes, w, h, &k);
+    // Per channel: the SSIM map's sum (in pixel order) and, for the gradient, the three
+    // derivative planes dS/dμx, dS/dE_xx, dS/dE_xy.
+    let mut total = 0.0;
+    let mut deriv = if grad {
+        vec![0.0; 3 * c * np]
+    } else {
+        Vec::new()
+    };
+    for ch in 0..c {
+        let b = &blurred[5 * ch * np..5 * (ch + 1) * np];
+        let (mx, my, exx, eyy, exy) = (
+            &b[..np],
+            &b[np..2 * np],
+            &b[2 * np..3 * np],
+            &b[3 * np..4 * np],
+            &b[4 * np..],
+        );
+        for p in 0..np {
             let (ux, uy) = (mx[p], my[p]);
             let (sxx, syy, sxy) = (exx[p] - ux * ux, eyy[p] - uy * uy, exy[p] - ux * uy);
             let a1 = 2.0 * ux * uy + SSIM_C1;
             let a2 = 2.0 * sxy + SSIM_C2;
             let b1 = ux * ux + uy * uy + SSIM_C1;
             let b2 = sxx + syy + SSIM_C2;
-            let s = a1 * a2 / (b1 * b2);
-            total += s;
+            total += a1 * a2 / (b1 * b2);
             if grad {
                 let ds_dsxx = -a1 * a2 / (b1 * b2 * b2);
                 let ds_dsxy = 2.0 * a1 / (b1 * b2);
-                d_exx[p] = ds_dsxx;
-                d_exy[p] = ds_dsxy;
-                d_mu[p] = 2.0 * uy * a2 / (b1 * b2) - 2.0 * ux * a1 * a2 / (b1 * b1 * b2)
+                let d = &mut deriv[3 * ch * np..3 * (ch + 1) * np];
+                d[p] = 2.0 * uy * a2 / (b1 * b2) - 2.0 * ux * a1 * a2 / (b1 * b1 * b2)
                     + ds_dsxx * (-2.0 * ux)
                     + ds_dsxy * (-uy);
-            }
-        }
-        if let Some(g) = g.as_mut() {
-            let (bm, bxx, bxy) = (
-                blur(&d_mu, w, h, &k),
-                blur(&d_exx, w, h, &k),
-                blur(&d_exy, w, h, &k),
-            );
-            for p in 0..w * h {
-                g[p * c + ch] = ((bm[p] + 2.0 * xs[p] * bxx[p] + ys[p] * bxy[p]) / n) as f32;
+                d[np + p] = ds_dsxx;
+                d[2 * np + p] = ds_dsxy;
             }
         }
     }
+    let g = grad.then(|| {
+        let bd = blur_planes(&deriv, w, h, &k);
+        let mut g = vec![0f32; x.len()];
+        for ch in 0..c {
+            let d = &bd[3 * ch * np..3 * (ch + 1) * np];
+            for p in 0..np {
+                let (xs, ys) = (x[p * c + ch] as f64, y[p * c + ch] as f64);
+                g[p * c + ch] = ((d[p] + 2.0 * xs * d[np + p] + ys * d[2 * np + p]) / n) as f32;
+            }
+        }
+        g
+    });
     (total / n, g)
 }
 
@@ -145,6 +189,55 @@ pub fn ssim(
 mod tests {
     use super::*;
     use crate::scene::Uniform;
+
+    /// The separable, vectorized blur equals a direct 2D window sum (f64, any order) to
+    /// rounding, including the zero-padded borders.
+    #[test]
+    fn separable_blur_matches_direct_2d_window() {
+        let (w, h) = (23, 17);
+        let mut u = Uniform::new(4);
+        let img: Vec<f64> = (0..2 * w * h).map(|_| u.unit() as f64).collect();
+        let k = kernel();
+        let fast = blur_planes(&img, w, h, &k);
+        for p in 0..2 {
+            for y in 0..h {
+                for x in 0..w {
+                    let mut acc = 0.0;
+                    for (ty, ky) in k.iter().enumerate() {
+                        for (tx, kx) in k.iter().enumerate() {
+                            let (yy, xx) =
+                                (y as isize + ty as isize - 5, x as isize + tx as isize - 5);
+                            if (0..h as isize).contains(&yy) && (0..w as isize).contains(&xx) {
+                                acc += ky * kx * img[p * w * h + yy as usize * w + xx as usize];
+                            }
+                        }
+                    }
+                    let got = fast[p * w * h + y * w + x];
+                    assert!((got - acc).abs() < 1e-14, "({p},{x},{y}): {got} vs {acc}");
+                }
+            }
+        }
+    }
+
+    /// The AVX2 build of the blur gives the bits of the generic build.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn avx2_blur_is_bit_identical() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        let (w, h) = (37, 29);
+        let mut u = Uniform::new(8);
+        let img: Vec<f64> = (0..w * h).map(|_| u.unit() as f64 * 3.0 - 1.0).collect();
+        let k = kernel();
+        let (mut a, mut b, mut t) = (vec![0.0; w * h], vec![0.0; w * h], vec![0.0; w * h]);
+        blur_plane(&mut a, &img, &mut t, w, h, &k);
+        t.fill(0.0);
+        // SAFETY: AVX2 detected above.
+        unsafe { blur_plane_avx2(&mut b, &img, &mut t, w, h, &k) };
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&a), bits(&b));
+    }
 
     #[test]
     fn ssim_of_an_image_with_itself_is_one() {
