@@ -201,7 +201,61 @@ struct Body<'a> {
     path: &'a Path,
 }
 
+/// The body positioned at the first row of element `vi`, after checking that the file can
+/// hold the announced rows: every row takes at least `row_min` bytes (binary: the scalar
+/// sizes and list counts; ASCII: one digit and one separator per property), so a lying
+/// count is an error before anything is allocated.
+fn vertex_body<'a>(data: &'a [u8], path: &'a Path, header: &Header, vi: usize) -> Result<Body<'a>> {
+    let mut body = Body {
+        data,
+        pos: header.body_start,
+        format: header.format,
+        path,
+    };
+    for e in &header.elements[..vi] {
+        body.skip_element(e)?;
+    }
+    let e = &header.elements[vi];
+    let row_min: usize = match header.format {
+        Format::Ascii => 2 * e.props.len(),
+        _ => e
+            .props
+            .iter()
+            .map(|p| p.list_count.unwrap_or(p.ty).size())
+            .sum(),
+    };
+    let left = data.len() - body.pos;
+    if row_min.checked_mul(e.count).is_none_or(|need| need > left) {
+        return Err(Error::parse(
+            path,
+            format!(
+                "file is truncated: {} {} rows need at least {row_min} bytes each, {left} bytes left",
+                e.count, e.name
+            ),
+        ));
+    }
+    Ok(body)
+}
+
 impl Body<'_> {
+    /// The next value of a scalar property, or `None` after skipping a list property.
+    fn scalar_or_skip_list(&mut self, p: &Property, row: usize) -> Result<Option<f64>> {
+        let Some(ct) = p.list_count else {
+            return self.value(p.ty, &p.name).map(Some);
+        };
+        let len = self.value(ct, &p.name)?;
+        if !(0.0..=1e9).contains(&len) {
+            return Err(Error::parse(
+                self.path,
+                format!("row {row}: invalid list length in '{}'", p.name),
+            ));
+        }
+        for _ in 0..len as usize {
+            self.value(p.ty, &p.name)?;
+        }
+        Ok(None)
+    }
+
     fn value(&mut self, ty: Scalar, what: &str) -> Result<f64> {
         match self.format {
             Format::Ascii => {
@@ -391,36 +445,7 @@ pub fn parse_ply(data: &[u8], path: &Path) -> Result<(Gaussians, PlyInfo)> {
         return Err(err(format!("vertex property '{name}' is missing")));
     }
 
-    let mut body = Body {
-        data,
-        pos: header.body_start,
-        format: header.format,
-        path,
-    };
-    for e in &header.elements[..vi] {
-        body.skip_element(e)?;
-    }
-    // Guard the allocation against a lying count before reading anything: every vertex
-    // takes at least `row_min` bytes (binary: the scalar sizes and list counts; ASCII: one
-    // digit and one separator per property).
-    let row_min: usize = match header.format {
-        Format::Ascii => 2 * vertex.props.len(),
-        _ => vertex
-            .props
-            .iter()
-            .map(|p| p.list_count.unwrap_or(p.ty).size())
-            .sum(),
-    };
-    let left = data.len() - body.pos;
-    if row_min
-        .checked_mul(vertex.count)
-        .is_none_or(|need| need > left)
-    {
-        return Err(err(format!(
-            "file is truncated: {} vertices need at least {row_min} bytes each, {left} bytes left",
-            vertex.count
-        )));
-    }
+    let mut body = vertex_body(data, path, &header, vi)?;
 
     let mut g = Gaussians::new(degree)?;
     let n = vertex.count;
@@ -433,23 +458,13 @@ pub fn parse_ply(data: &[u8], path: &Path) -> Result<(Gaussians, PlyInfo)> {
         let mut sc = [0f32; 3];
         let mut rot = [0f32; 4];
         for (p, slot) in vertex.props.iter().zip(&slots) {
-            if let Some(ct) = p.list_count {
-                let len = body.value(ct, &p.name)?;
-                if !(0.0..=1e9).contains(&len) {
-                    return Err(err(format!(
-                        "vertex {v}: invalid list length in '{}'",
-                        p.name
-                    )));
-                }
-                for _ in 0..len as usize {
-                    body.value(p.ty, &p.name)?;
-                }
-                continue;
-            }
-            let x = body
-                .value(p.ty, &p.name)
+            let Some(x) = body
+                .scalar_or_skip_list(p, v)
                 .map_err(|e| Error::parse(path, format!("vertex {v} of {n}: {}", e.message)))?
-                as f32;
+            else {
+                continue;
+            };
+            let x = x as f32;
             match *slot {
                 Slot::Mean(k) => mean[k] = x,
                 Slot::Dc(k) => dc[k] = x,
@@ -517,58 +532,17 @@ pub fn parse_point_cloud(data: &[u8], path: &Path) -> Result<PointCloud> {
         }
     }
     let has_color = (3..6).all(|k| slots.contains(&Some(k)));
-    let mut body = Body {
-        data,
-        pos: header.body_start,
-        format: header.format,
-        path,
-    };
-    for e in &header.elements[..vi] {
-        body.skip_element(e)?;
-    }
-    let row_min: usize = match header.format {
-        Format::Ascii => 2 * vertex.props.len(),
-        _ => vertex
-            .props
-            .iter()
-            .map(|p| p.list_count.unwrap_or(p.ty).size())
-            .sum(),
-    };
-    if row_min
-        .checked_mul(vertex.count)
-        .is_none_or(|need| need > data.len() - body.pos)
-    {
-        return Err(err(format!(
-            "file is truncated: {} vertices announced",
-            vertex.count
-        )));
-    }
+    let mut body = vertex_body(data, path, &header, vi)?;
     let mut pc = PointCloud::default();
     for v in 0..vertex.count {
         let mut vals = [0.5f64; 6];
         for (p, slot) in vertex.props.iter().zip(&slots) {
-            if let Some(ct) = p.list_count {
-                let len = body.value(ct, &p.name)?;
-                if !(0.0..=1e9).contains(&len) {
-                    return Err(err(format!(
-                        "vertex {v}: invalid list length in '{}'",
-                        p.name
-                    )));
-                }
-                for _ in 0..len as usize {
-                    body.value(p.ty, &p.name)?;
-                }
+            let Some(x) = body.scalar_or_skip_list(p, v)? else {
                 continue;
-            }
-            let x = body.value(p.ty, &p.name)?;
+            };
             if let Some(k) = *slot {
-                vals[k] = if k >= 3 && matches!(p.ty, Scalar::F32 | Scalar::F64) {
-                    x
-                } else if k >= 3 {
-                    x / 255.0
-                } else {
-                    x
-                };
+                let integer_colour = k >= 3 && !matches!(p.ty, Scalar::F32 | Scalar::F64);
+                vals[k] = if integer_colour { x / 255.0 } else { x };
             }
         }
         let xyz = [vals[0] as f32, vals[1] as f32, vals[2] as f32];

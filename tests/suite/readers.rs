@@ -278,3 +278,37 @@ fn malformed_ply_files_are_clear_errors() {
     assert_eq!(err.kind, ErrorKind::Io);
     assert!(err.to_string().contains("/nonexistent/x.ply"));
 }
+
+/// Point clouds: float or uchar colours, no colours, and clear errors for a missing
+/// coordinate, a truncated body and a non-finite position.
+#[test]
+fn point_cloud_ply_reading() {
+    use unseen::gaussian::ply::parse_point_cloud;
+    let p = Path::new("points.ply");
+    let ascii = b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n\
+property float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n\
+1 2 3 255 0 51\n-1 0.5 2 0 255 0\n";
+    let pc = parse_point_cloud(ascii, p).unwrap();
+    assert_eq!(pc.xyz, vec![[1.0, 2.0, 3.0], [-1.0, 0.5, 2.0]]);
+    assert_eq!(pc.rgb[0], [1.0, 0.0, 0.2]);
+    let no_colour =
+        b"ply\nformat ascii 1.0\nelement vertex 1\nproperty double x\nproperty double y\n\
+property double z\nend_header\n1 2 3\n";
+    assert_eq!(parse_point_cloud(no_colour, p).unwrap().rgb, vec![[0.5; 3]]);
+    let no_z = b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nend_header\n1 2\n";
+    let e = parse_point_cloud(no_z, p).unwrap_err().to_string();
+    assert!(
+        e.contains("points.ply") && e.contains("'z' is missing"),
+        "{e}"
+    );
+    let mut bin = b"ply\nformat binary_little_endian 1.0\nelement vertex 1000\nproperty float x\n\
+property float y\nproperty float z\nend_header\n"
+        .to_vec();
+    bin.extend_from_slice(&[0u8; 12]);
+    let e = parse_point_cloud(&bin, p).unwrap_err().to_string();
+    assert!(e.contains("truncated"), "{e}");
+    let nan = b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n\
+property float z\nend_header\nnan 0 1\n";
+    let e = parse_point_cloud(nan, p).unwrap_err().to_string();
+    assert!(e.contains("non-finite"), "{e}");
+}
