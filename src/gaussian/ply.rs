@@ -307,21 +307,9 @@ impl Body<'_> {
             self.pos += row * e.count;
             return Ok(());
         }
-        for _ in 0..e.count {
+        for row in 0..e.count {
             for p in &e.props {
-                let n = match p.list_count {
-                    Some(ct) => self.value(ct, &p.name)?,
-                    None => 1.0,
-                };
-                if !(0.0..=1e9).contains(&n) {
-                    return Err(Error::parse(
-                        self.path,
-                        format!("invalid list length in '{}'", p.name),
-                    ));
-                }
-                for _ in 0..n as usize {
-                    self.value(p.ty, &p.name)?;
-                }
+                self.scalar_or_skip_list(p, row)?;
             }
         }
         Ok(())

@@ -33,3 +33,22 @@ pub fn case_dirs(rel: &str) -> Vec<PathBuf> {
     cases.sort();
     cases
 }
+
+/// The short training preset of the training and QA-Mask tests: INRIA's recipe with
+/// densification from iteration 100 every 100, an opacity reset at 250, SH degree +1 every
+/// 200 iterations, nothing saved.
+pub fn short_train_config(iterations: u32) -> unseen::train::trainer::TrainConfig {
+    use unseen::train::densify::DensifyConfig;
+    unseen::train::trainer::TrainConfig {
+        iterations,
+        sh_increase_interval: 200,
+        densify: Some(DensifyConfig {
+            from_iter: 100,
+            interval: 100,
+            opacity_reset_interval: 250,
+            ..DensifyConfig::default()
+        }),
+        save_iterations: vec![],
+        ..Default::default()
+    }
+}

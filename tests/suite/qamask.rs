@@ -1,14 +1,13 @@
 //! QA-Mask: what the fine-tune may change, determinism, holes, and a short-preset check of
 //! the paper's claim (the mask finds badly reconstructed pixels of the unseen half).
 
-use super::common::{reference, with_threads};
+use super::common::{reference, short_train_config, with_threads};
 use unseen::camera::Camera;
 use unseen::dataset::{self, Dataset, LoadOptions, Split};
 use unseen::gaussian::Gaussians;
 use unseen::qamask::{QaMaskConfig, audit, fine_tune, mask_scene, render_qa_mask};
 use unseen::raster::{RenderOptions, render};
-use unseen::train::densify::DensifyConfig;
-use unseen::train::trainer::{TrainConfig, Trainer};
+use unseen::train::trainer::Trainer;
 
 /// The lounge train half at 80×60 and a 700-iteration model of it, made once for all tests
 /// of this file (training is deterministic, so sharing changes nothing).
@@ -33,19 +32,7 @@ fn lounge_half() -> Dataset {
 }
 
 fn trained(d: &Dataset) -> Gaussians {
-    let cfg = TrainConfig {
-        iterations: 700,
-        sh_increase_interval: 200,
-        densify: Some(DensifyConfig {
-            from_iter: 100,
-            interval: 100,
-            opacity_reset_interval: 250,
-            ..DensifyConfig::default()
-        }),
-        save_iterations: vec![],
-        ..TrainConfig::default()
-    };
-    let mut t = Trainer::new(d, cfg).unwrap();
+    let mut t = Trainer::new(d, short_train_config(700)).unwrap();
     while t.iteration < 700 {
         t.step().unwrap();
     }

@@ -1,7 +1,7 @@
 //! Training: SSIM vs OpenCV/NumPy, Adam by hand, densification counts, datasets, the
 //! thread-count determinism of a whole run, and a regression floor on a bundled scene.
 
-use super::common::{case_dirs, reference, with_threads};
+use super::common::{case_dirs, reference, short_train_config, with_threads};
 use unseen::dataset::{self, LoadOptions, Split};
 use unseen::gaussian::{Gaussians, Param};
 use unseen::io::npy::read_npy_f32;
@@ -265,21 +265,6 @@ fn bundled_points_reproject_onto_the_depth_maps() {
     assert_eq!(ok, n, "{ok} of {n} points reproject onto a depth map");
 }
 
-fn short_config(iterations: u32) -> TrainConfig {
-    TrainConfig {
-        iterations,
-        sh_increase_interval: 200,
-        densify: Some(DensifyConfig {
-            from_iter: 100,
-            interval: 100,
-            opacity_reset_interval: 250,
-            ..DensifyConfig::default()
-        }),
-        save_iterations: vec![],
-        ..TrainConfig::default()
-    }
-}
-
 /// 300 iterations with two densification steps and an opacity reset give the same PLY
 /// bytes on 1 and 2 threads.
 #[test]
@@ -287,7 +272,7 @@ fn training_is_bit_identical_across_thread_counts() {
     let d = lounge(2);
     let run = |threads| {
         with_threads(threads, || {
-            let mut t = Trainer::new(&d, short_config(300)).unwrap();
+            let mut t = Trainer::new(&d, short_train_config(300)).unwrap();
             let mut densified = 0;
             while t.iteration < 300 {
                 densified += t.step().unwrap().densify.is_some() as u32;
@@ -307,7 +292,7 @@ fn training_is_bit_identical_across_thread_counts() {
 #[test]
 fn short_training_beats_the_psnr_floor() {
     let d = lounge(2);
-    let mut t = Trainer::new(&d, short_config(700)).unwrap();
+    let mut t = Trainer::new(&d, short_train_config(700)).unwrap();
     let first = t.step().unwrap().loss;
     let mut last = 0.0;
     while t.iteration < 700 {
