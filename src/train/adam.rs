@@ -106,12 +106,13 @@ impl Adam {
             .zip(v.par_chunks_mut(CHUNK))
             .zip(grad.par_chunks(CHUNK))
             .for_each(|(((x, m), v), g)| {
-                for i in 0..x.len() {
-                    let gi = g[i];
-                    m[i] = b1 * m[i] + ob1 * gi;
-                    v[i] = b2 * v[i] + ob2 * (gi * gi);
-                    let denom = v[i].sqrt() / bc2_sqrt + eps;
-                    x[i] -= step_size * (m[i] / denom);
+                // Zipped slices (no index checks) so the loop vectorizes; every lane does
+                // the same IEEE operations, so the bits do not change.
+                for (((x, m), v), &g) in x.iter_mut().zip(m.iter_mut()).zip(v.iter_mut()).zip(g) {
+                    *m = b1 * *m + ob1 * g;
+                    *v = b2 * *v + ob2 * (g * g);
+                    let denom = v.sqrt() / bc2_sqrt + eps;
+                    *x -= step_size * (*m / denom);
                 }
             });
     }
