@@ -373,7 +373,11 @@ impl<'a> Trainer<'a> {
                         &mut self.rng,
                     )?);
                 }
-                if d.opacity_reset_interval > 0 && it % d.opacity_reset_interval == 0 {
+                // INRIA also resets once at `from_iter` when training on white.
+                let white_start = self.config.background == [1.0; 3] && it == d.from_iter;
+                if (d.opacity_reset_interval > 0 && it % d.opacity_reset_interval == 0)
+                    || white_start
+                {
                     reset_opacity(&mut self.gaussians, &mut self.adam, d.opacity_reset_value);
                     reset = true;
                 }
