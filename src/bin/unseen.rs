@@ -727,6 +727,15 @@ fn run(cli: Cli) -> Result<()> {
             );
             let t0 = Instant::now();
             let loss = fine_tune(&mut scene, &views, &cfg, &mut |p| {
+                if bar.is_hidden() && p.iteration % 2000 == 0 {
+                    eprintln!(
+                        "iteration {}/{}: loss {:.5}, {:.1} s",
+                        p.iteration,
+                        p.iterations,
+                        p.loss,
+                        t0.elapsed().as_secs_f64()
+                    );
+                }
                 if p.iteration % 50 == 0 || p.iteration == p.iterations {
                     bar.set_position(p.iteration as u64);
                     bar.set_message(format!("loss {:.5}", p.loss));
@@ -766,7 +775,17 @@ fn run(cli: Cli) -> Result<()> {
                 .collect();
             let bar = ProgressBar::new((iterations as u64) * configs.len() as u64);
             let mut done = 0u64;
+            let t0 = Instant::now();
             let report = unseen::qamask::audit(&trained, &data, &configs, &mut |name, p| {
+                if bar.is_hidden() && p.iteration % 2000 == 0 {
+                    eprintln!(
+                        "{name}: iteration {}/{}, loss {:.5}, {:.1} s",
+                        p.iteration,
+                        p.iterations,
+                        p.loss,
+                        t0.elapsed().as_secs_f64()
+                    );
+                }
                 if p.iteration % 50 == 0 {
                     bar.set_position(done + p.iteration as u64);
                     bar.set_message(format!("{name} loss {:.5}", p.loss));
