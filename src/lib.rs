@@ -12,6 +12,7 @@
 //! [`io`] (atomic writes, PNG, EXR), [`scene`] (procedural scenes for demos, tests, benches).
 
 pub mod camera;
+pub mod collide;
 pub mod dataset;
 pub mod error;
 pub mod eval;

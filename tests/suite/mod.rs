@@ -1,4 +1,5 @@
 mod cli;
+mod collide;
 mod common;
 mod golden_drjit;
 mod golden_grad;

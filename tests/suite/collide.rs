@@ -1,0 +1,250 @@
+//! GJK against an independent exact oracle: the separating-axis test for two frustums
+//! (5 + 5 face normals — near/far share one — and the cross products of their 6 + 6 edge
+//! directions), on seeded random pairs and hand-made degenerate cases.
+
+use glam::{DMat3, DVec3};
+use unseen::collide::gjk::{ConvexHull, Proximity, TOUCH_REL, proximity};
+use unseen::scene::Uniform;
+
+/// A frustum: 8 corners (near 0–3, far 4–7, same order) and its centre.
+struct Frustum {
+    v: [DVec3; 8],
+}
+
+impl Frustum {
+    fn new(center: DVec3, rot: DMat3, tan_x: f64, tan_y: f64, near: f64, far: f64) -> Self {
+        let c =
+            |z: f64, sx: f64, sy: f64| center + rot * DVec3::new(sx * tan_x * z, sy * tan_y * z, z);
+        let s = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)];
+        let mut v = [DVec3::ZERO; 8];
+        for (k, (sx, sy)) in s.iter().enumerate() {
+            v[k] = c(near, *sx, *sy);
+            v[4 + k] = c(far, *sx, *sy);
+        }
+        Frustum { v }
+    }
+    fn hull(&self) -> ConvexHull {
+        ConvexHull::new(self.v.to_vec()).unwrap()
+    }
+    /// Face normals (not normalized): near/far, and the four sides.
+    fn normals(&self) -> Vec<DVec3> {
+        let v = &self.v;
+        let mut n = vec![(v[1] - v[0]).cross(v[3] - v[0])];
+        for k in 0..4 {
+            let (a, b) = (k, (k + 1) % 4);
+            n.push((v[b] - v[a]).cross(v[4 + a] - v[a]));
+        }
+        n
+    }
+    fn edges(&self) -> Vec<DVec3> {
+        let v = &self.v;
+        let mut e = vec![v[1] - v[0], v[3] - v[0]];
+        for k in 0..4 {
+            e.push(v[4 + k] - v[k]);
+        }
+        e
+    }
+}
+
+/// The SAT answer: the largest normalized gap over all axes (> 0: separated by at least
+/// that much; ≤ 0: overlapping, the value being minus the smallest penetration).
+fn sat_gap(a: &Frustum, b: &Frustum) -> f64 {
+    let mut axes = a.normals();
+    axes.extend(b.normals());
+    for ea in a.edges() {
+        for eb in b.edges() {
+            axes.push(ea.cross(eb));
+        }
+    }
+    let mut best = f64::NEG_INFINITY;
+    for ax in axes {
+        let len = ax.length();
+        if len < 1e-12 * a.v[0].length().max(1.0) || !len.is_finite() {
+            continue;
+        }
+        let n = ax / len;
+        let proj = |f: &Frustum| {
+            f.v.iter()
+                .map(|p| p.dot(n))
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| {
+                    (lo.min(x), hi.max(x))
+                })
+        };
+        let ((alo, ahi), (blo, bhi)) = (proj(a), proj(b));
+        best = best.max((blo - ahi).max(alo - bhi));
+    }
+    best
+}
+
+fn random_rotation(u: &mut Uniform) -> DMat3 {
+    let q = glam::DQuat::from_xyzw(
+        u.normal() as f64,
+        u.normal() as f64,
+        u.normal() as f64,
+        u.normal() as f64,
+    )
+    .normalize();
+    DMat3::from_quat(q)
+}
+
+fn log_uniform(u: &mut Uniform, lo: f64, hi: f64) -> f64 {
+    (lo.ln() + (hi.ln() - lo.ln()) * u.unit() as f64).exp()
+}
+
+fn random_frustum(u: &mut Uniform, center: DVec3) -> Frustum {
+    let near = log_uniform(u, 1e-3, 1e2);
+    let far = near * log_uniform(u, 1.0001, 1e3);
+    let (fx, fy) = (u.range(0.2, 2.6) as f64, u.range(0.2, 2.6) as f64);
+    Frustum::new(
+        center,
+        random_rotation(u),
+        (fx / 2.0).tan(),
+        (fy / 2.0).tan(),
+        near,
+        far,
+    )
+}
+
+fn query(a: &Frustum, b: &Frustum) -> Proximity {
+    proximity(&a.hull(), &b.hull()).expect("GJK converges")
+}
+
+/// ≥ 100 000 seeded random pairs: GJK and SAT agree on intersect/separated except within
+/// the touching band, and GJK's distance is never below SAT's gap (SAT's best axis gap is
+/// a lower bound of the distance).
+#[test]
+fn gjk_agrees_with_separating_axes_on_random_frustum_pairs() {
+    let mut u = Uniform::new(2024);
+    let (mut agree, mut sep, mut inter, mut band) = (0, 0, 0, 0);
+    for _ in 0..100_000 {
+        let a = random_frustum(&mut u, DVec3::ZERO);
+        let far = (a.v[4] - a.v[0]).length().max(1e-3);
+        let off = DVec3::new(
+            u.range(-1.0, 1.0) as f64,
+            u.range(-1.0, 1.0) as f64,
+            u.range(-1.0, 1.0) as f64,
+        ) * far
+            * 0.8;
+        let b = random_frustum(&mut u, off);
+        let p = query(&a, &b);
+        let gap = sat_gap(&a, &b);
+        let scale =
+            a.v.iter()
+                .chain(&b.v)
+                .map(|v| v.abs().max_element())
+                .fold(0.0, f64::max);
+        // The band: both answers are within 100 touching tolerances of contact.
+        if gap.abs() <= 100.0 * TOUCH_REL * scale {
+            band += 1;
+            continue;
+        }
+        if gap > 0.0 {
+            assert!(
+                !p.intersect,
+                "SAT separates by {gap}, GJK says intersect ({p:?})\nA {:?}\nB {:?}",
+                a.v, b.v
+            );
+            assert!(
+                p.distance >= gap * (1.0 - 1e-9),
+                "distance {} < SAT gap {gap}",
+                p.distance
+            );
+            sep += 1;
+        } else {
+            assert!(
+                p.intersect,
+                "SAT overlaps by {}, GJK says distance {}",
+                -gap, p.distance
+            );
+            inter += 1;
+        }
+        agree += 1;
+    }
+    assert!(
+        sep > 10_000 && inter > 10_000,
+        "both outcomes exercised: {sep} / {inter}"
+    );
+    eprintln!("separated {sep}, intersecting {inter}, touching band {band}");
+    assert!(band < 100, "{band} pairs in the touching band");
+    assert_eq!(agree + band, 100_000);
+}
+
+/// Hand-made cases at the edges.
+#[test]
+fn gjk_degenerate_and_touching_cases() {
+    let id = DMat3::IDENTITY;
+    let f = Frustum::new(DVec3::ZERO, id, 0.5, 0.4, 1.0, 10.0);
+    // Identical.
+    assert!(query(&f, &f).intersect);
+    // One inside the other.
+    let inner = Frustum::new(DVec3::new(0.0, 0.0, 2.0), id, 0.1, 0.1, 1.0, 3.0);
+    assert!(query(&f, &inner).intersect);
+    assert!(query(&inner, &f).intersect);
+    // Sharing a face: a frustum of the same shape continuing beyond the far plane (same
+    // apex, near = 10): the two touch along the far face.
+    let next = Frustum::new(DVec3::ZERO, id, 0.5, 0.4, 10.0, 20.0);
+    let p = query(&f, &next);
+    assert!(p.intersect && p.distance <= p.touch_eps, "{p:?}");
+    // Touching at a vertex: a box corner placed exactly on a far corner.
+    let corner = f.v[6];
+    let tiny = ConvexHull::new(vec![corner, corner + DVec3::ONE, corner + DVec3::X]).unwrap();
+    assert!(proximity(&f.hull(), &tiny).unwrap().intersect);
+    // Touching along an edge: a segment through a near edge, outside otherwise.
+    let e0 = f.v[0] - DVec3::new(0.0, 0.0, 0.0);
+    let seg = ConvexHull::new(vec![
+        e0 + DVec3::new(-1.0, 0.0, 0.0),
+        f.v[1] + DVec3::new(1.0, 0.0, 0.0),
+    ])
+    .unwrap();
+    assert!(proximity(&f.hull(), &seg).unwrap().intersect);
+    // Just apart: shifted past the far plane by 1e-6.
+    let apart = Frustum::new(DVec3::new(0.0, 0.0, 1e-6), id, 0.5, 0.4, 10.0, 20.0);
+    let p = query(&f, &apart);
+    assert!(!p.intersect && (p.distance - 1e-6).abs() < 1e-12, "{p:?}");
+    // Zero thickness (near = far): a rectangle.
+    let flat = Frustum::new(DVec3::new(0.0, 0.0, 0.0), id, 0.5, 0.4, 5.0, 5.0);
+    assert!(query(&f, &flat).intersect);
+    let flat_far = Frustum::new(DVec3::new(0.0, 0.0, 20.0), id, 0.5, 0.4, 5.0, 5.0);
+    let p = query(&f, &flat_far);
+    assert!(!p.intersect && (p.distance - 15.0).abs() < 1e-9, "{p:?}");
+    // Nearly parallel faces: a second frustum rotated by 1e-9 rad beside the first.
+    let side = Frustum::new(
+        DVec3::new(12.0, 0.0, 0.0),
+        DMat3::from_rotation_y(1e-9),
+        0.5,
+        0.4,
+        1.0,
+        10.0,
+    );
+    let p = query(&f, &side);
+    assert_eq!(p.intersect, sat_gap(&f, &side) <= 0.0, "{p:?}");
+    // Scales 1e6 and 1e-6: the same configuration scaled gives the same answer.
+    for s in [1e6, 1e-6] {
+        let a = Frustum::new(DVec3::ZERO, id, 0.5, 0.4, s, 10.0 * s);
+        let b = Frustum::new(
+            DVec3::new(0.0, 0.0, 0.5 * s),
+            id,
+            0.5,
+            0.4,
+            10.0 * s,
+            20.0 * s,
+        );
+        let p = query(&a, &b);
+        assert!(
+            !p.intersect && ((p.distance / s) - 0.5).abs() < 1e-9,
+            "scale {s}: {p:?}"
+        );
+        let c = Frustum::new(
+            DVec3::new(0.0, 0.0, -0.5 * s),
+            id,
+            0.5,
+            0.4,
+            10.0 * s,
+            20.0 * s,
+        );
+        assert!(query(&a, &c).intersect, "scale {s}");
+    }
+    // Bad input is an error, not a panic.
+    assert!(ConvexHull::new(vec![]).is_err());
+    assert!(ConvexHull::new(vec![DVec3::new(f64::NAN, 0.0, 0.0)]).is_err());
+}
