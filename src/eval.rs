@@ -52,6 +52,12 @@ pub fn evaluate(
     background: [f32; 3],
     out: Option<&Path>,
 ) -> Result<EvalReport> {
+    if data.split(split).is_empty() {
+        return Err(crate::error::Error::invalid(format!(
+            "dataset {} has no {split:?} views",
+            data.root.display()
+        )));
+    }
     if let Some(o) = out {
         create_dir_all(o)?;
     }
