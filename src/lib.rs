@@ -24,5 +24,6 @@ pub mod qamask;
 pub mod raster;
 pub mod scene;
 pub mod train;
+pub mod warp;
 
 pub use error::{Error, ErrorKind, Result};

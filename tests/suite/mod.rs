@@ -1,3 +1,4 @@
+mod align;
 mod cli;
 mod collide;
 mod common;
