@@ -185,7 +185,8 @@ pub fn ransac(frames: &[Frame], space: Space, cfg: &RansacConfig) -> Result<Alig
         return Err(Error::invalid("RANSAC drew no usable sample"));
     };
     let inl: Vec<(f64, f64)> = p.iter().copied().filter(|q| inlier(s, t, q)).collect();
-    let (s, t) = fit(&inl).or_else(|_| Ok::<_, Error>((s, t)))?;
+    // Inliers with equal estimates cannot be refitted: keep the sampled model.
+    let (s, t) = fit(&inl).unwrap_or((s, t));
     let inl: Vec<(f64, f64)> = p.iter().copied().filter(|q| inlier(s, t, q)).collect();
     Ok(finish(&inl, s, t, inl.len(), n))
 }
