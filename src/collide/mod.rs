@@ -2,3 +2,4 @@
 //! our own GJK on support maps ([`gjk`]).
 
 pub mod gjk;
+pub mod independent;

@@ -248,3 +248,62 @@ fn gjk_degenerate_and_touching_cases() {
     assert!(ConvexHull::new(vec![]).is_err());
     assert!(ConvexHull::new(vec![DVec3::new(f64::NAN, 0.0, 0.0)]).is_err());
 }
+
+/// 40 cameras on a ring looking outwards with random yaw: the greedy set is conflict-free
+/// and maximal against the collision graph (checked pair by pair with GJK), deterministic,
+/// and the trajectory visits every chosen view once, starting at the first, and closes.
+#[test]
+fn independent_views_are_maximal_conflict_free_and_toured() {
+    use unseen::collide::independent::select;
+    let mut u = Uniform::new(11);
+    let (mut hulls, mut centers) = (Vec::new(), Vec::new());
+    for k in 0..40 {
+        let a = k as f64 / 40.0 * std::f64::consts::TAU + u.range(-0.2, 0.2) as f64;
+        let c = DVec3::new(3.0 * a.cos(), 0.0, 3.0 * a.sin());
+        // Looking outwards: camera z along the ring's normal, y down.
+        let z = DVec3::new(a.cos(), 0.0, a.sin());
+        let y = DVec3::NEG_Y;
+        let rot = DMat3::from_cols(y.cross(z), y, z);
+        let f = Frustum::new(c, rot, 0.4, 0.3, 2.0, u.range(3.0, 8.0) as f64);
+        hulls.push(f.hull());
+        centers.push(c);
+    }
+    let s = select(&hulls, &centers, None).unwrap();
+    assert_eq!(s, select(&hulls, &centers, None).unwrap(), "deterministic");
+    let collide = |i: usize, j: usize| proximity(&hulls[i], &hulls[j]).unwrap().intersect;
+    for (a, &i) in s.independent.iter().enumerate() {
+        for &j in &s.independent[a + 1..] {
+            assert!(!collide(i, j), "chosen {i} and {j} collide");
+        }
+    }
+    for v in 0..40 {
+        if !s.independent.contains(&v) {
+            assert!(
+                s.independent.iter().any(|&i| collide(i, v)),
+                "{v} could be added"
+            );
+        }
+    }
+    for &(i, j) in &s.edges {
+        assert!(i < j && collide(i, j));
+    }
+    assert!(
+        s.independent.len() > 2 && s.independent.len() < 40,
+        "{:?}",
+        s.independent
+    );
+    let mut tour = s.trajectory.clone();
+    assert_eq!(tour[0], s.independent[0]);
+    tour.sort_unstable();
+    let mut chosen = s.independent.clone();
+    chosen.sort_unstable();
+    assert_eq!(tour, chosen, "each chosen view once");
+    assert_eq!(s.gaps.len(), s.trajectory.len());
+    assert_eq!(s.gaps.last().unwrap().1, s.trajectory[0], "closed");
+    // A custom order changes the greedy pick; bad orders are errors.
+    let rev: Vec<usize> = (0..40).rev().collect();
+    let r = select(&hulls, &centers, Some(&rev)).unwrap();
+    assert_eq!(r.independent[0], 39);
+    assert!(select(&hulls, &centers, Some(&[0, 0])).is_err());
+    assert!(select(&hulls, &centers[..3], None).is_err());
+}

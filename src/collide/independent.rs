@@ -1,0 +1,110 @@
+//! Independent camera views (paper §3.3.1, SPEC.md §16.2): the collision graph of the
+//! candidate views' inpainted-region frustums, a maximal independent set chosen greedily
+//! in the caller's order, and a closed nearest-neighbour trajectory through it.
+
+use super::gjk::{ConvexHull, proximity};
+use crate::error::{Error, Result};
+use glam::DVec3;
+
+/// The result of the selection, all indices into the candidate list.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Selection {
+    /// Colliding pairs `(i, j)`, `i < j`, in lexicographic order.
+    pub edges: Vec<(usize, usize)>,
+    /// The independent views, in the greedy order.
+    pub independent: Vec<usize>,
+    /// The independent views in trajectory order (starts at `independent[0]`; the tour
+    /// closes back to it).
+    pub trajectory: Vec<usize>,
+    /// Consecutive trajectory neighbours (including the closing pair): the gaps the
+    /// dependent views fill.
+    pub gaps: Vec<(usize, usize)>,
+}
+
+/// The collision graph: `edges[i]` lists the candidates whose frustum collides with `i`'s
+/// (touching counts, §16.1).
+pub fn collision_graph(frustums: &[ConvexHull]) -> Result<Vec<(usize, usize)>> {
+    let mut edges = Vec::new();
+    for i in 0..frustums.len() {
+        for j in i + 1..frustums.len() {
+            let p = proximity(&frustums[i], &frustums[j])
+                .map_err(|e| Error::invalid(format!("views {i} and {j}: {}", e.message)))?;
+            if p.intersect {
+                edges.push((i, j));
+            }
+        }
+    }
+    Ok(edges)
+}
+
+/// Select independent views. `order` is the greedy order (default: `0..n`); `centers` are
+/// the camera centres for the trajectory.
+pub fn select(
+    frustums: &[ConvexHull],
+    centers: &[DVec3],
+    order: Option<&[usize]>,
+) -> Result<Selection> {
+    let n = frustums.len();
+    if centers.len() != n {
+        return Err(Error::invalid(format!(
+            "{n} frustums but {} camera centres",
+            centers.len()
+        )));
+    }
+    let default: Vec<usize> = (0..n).collect();
+    let order = order.unwrap_or(&default);
+    let mut seen = vec![false; n];
+    for &i in order {
+        if i >= n || std::mem::replace(&mut seen[i], true) {
+            return Err(Error::invalid(format!(
+                "the order lists view {i} twice or out of range"
+            )));
+        }
+    }
+    let edges = collision_graph(frustums)?;
+    let mut adj = vec![Vec::new(); n];
+    for &(i, j) in &edges {
+        adj[i].push(j);
+        adj[j].push(i);
+    }
+    let mut chosen = vec![false; n];
+    let mut independent = Vec::new();
+    for &i in order {
+        if !adj[i].iter().any(|&j| chosen[j]) {
+            chosen[i] = true;
+            independent.push(i);
+        }
+    }
+    // Closed nearest-neighbour tour from the first chosen view (ties: lower index).
+    let mut trajectory = Vec::with_capacity(independent.len());
+    let mut left: Vec<usize> = independent.clone();
+    left.sort_unstable();
+    if let Some(&start) = independent.first() {
+        left.retain(|&v| v != start);
+        trajectory.push(start);
+        let mut cur = start;
+        while !left.is_empty() {
+            let (k, _) = left
+                .iter()
+                .enumerate()
+                .map(|(k, &v)| (k, (centers[v] - centers[cur]).length_squared()))
+                .fold((0, f64::INFINITY), |b, x| if x.1 < b.1 { x } else { b });
+            cur = left.remove(k);
+            trajectory.push(cur);
+        }
+    }
+    let m = trajectory.len();
+    let gaps = if m < 2 {
+        Vec::new()
+    } else {
+        (0..m)
+            .map(|k| (trajectory[k], trajectory[(k + 1) % m]))
+            .collect()
+    };
+    Ok(Selection {
+        edges,
+        independent,
+        trajectory,
+        gaps,
+    })
+}
