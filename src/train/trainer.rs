@@ -358,7 +358,12 @@ impl<'a> Trainer<'a> {
         let mut densified = None;
         let mut reset = false;
         if let Some(d) = self.config.densify {
-            if it < d.until_iter && groups.geometry() {
+            // Nothing after the last iteration could recover from a reset or use a
+            // densification, so the last iteration does neither (INRIA's defaults, 7000 and
+            // 30000 iterations, never end on one; a 3000-iteration run would otherwise save
+            // Gaussians whose opacity was just capped at 0.01).
+            let last = it == self.config.iterations;
+            if it < d.until_iter && groups.geometry() && !last {
                 self.stats
                     .add_view(&grads.means2d_ndc, &fwd.projected.radii);
                 if it > d.from_iter && d.interval > 0 && it % d.interval == 0 {

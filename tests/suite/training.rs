@@ -272,7 +272,7 @@ fn training_is_bit_identical_across_thread_counts() {
     let d = lounge(2);
     let run = |threads| {
         with_threads(threads, || {
-            let mut t = Trainer::new(&d, short_train_config(300)).unwrap();
+            let mut t = Trainer::new(&d, short_train_config(400)).unwrap();
             let mut densified = 0;
             while t.iteration < 300 {
                 densified += t.step().unwrap().densify.is_some() as u32;
@@ -440,4 +440,27 @@ fn transforms_dataset_composites_alpha_and_uses_its_test_list() {
     let t = Trainer::new(&ds, cfg).unwrap();
     assert_eq!(t.gaussians.len(), 500);
     assert!(t.gaussians.means.iter().flatten().all(|v| v.abs() <= 1.3));
+}
+
+/// A run that ends on an opacity-reset iteration keeps its opacities (the reset at the
+/// very end could never be recovered from).
+#[test]
+fn last_iteration_neither_densifies_nor_resets() {
+    let d = lounge(4);
+    let mut cfg = short_train_config(250);
+    cfg.densify.as_mut().unwrap().opacity_reset_interval = 250;
+    let mut t = Trainer::new(&d, cfg).unwrap();
+    let mut last = None;
+    while t.iteration < 250 {
+        last = Some(t.step().unwrap());
+    }
+    assert!(
+        last.unwrap().densify.is_none(),
+        "no densification on the last iteration"
+    );
+    let cap = (0.01f32 / 0.99).ln();
+    assert!(
+        t.gaussians.opacity_logits.iter().any(|&o| o > cap + 1.0),
+        "opacities were reset"
+    );
 }
