@@ -23,8 +23,7 @@ use crate::gaussian::{Gaussians, Param};
 use crate::io::{create_dir_all, sha256_hex, write_atomic, write_text};
 use crate::math::fastexp::exp;
 use crate::math::sh::{SH_C0, num_coeffs};
-use crate::raster::backward::GradGroups;
-use crate::raster::backward::frozen::{FrozenBlend, geometry_of};
+use crate::raster::backward::frozen::{FrozenBlend, FrozenWork, geometry_of};
 use crate::raster::{Outputs, RenderOptions, render};
 use crate::scene::Uniform;
 use crate::train::adam::{Adam, AdamConfig};
@@ -181,6 +180,7 @@ pub fn fine_tune(
     let mut adam = Adam::new(cfg.adam, scene)?;
     let mut rng = Uniform::new(stage_seed(cfg.seed, "qa-mask"));
     let mut stack: Vec<usize> = Vec::new();
+    let (mut work, mut rgb) = (FrozenWork::default(), Vec::new());
     let mut loss = 0.0;
     for it in 1..=cfg.iterations {
         if stack.is_empty() {
@@ -188,7 +188,8 @@ pub fn fine_tune(
         }
         let vi = stack.remove(rng.below(stack.len() as u32) as usize);
         let cam = &views[vi];
-        let rgb = records[vi].render_rgb(scene)?;
+        let rec = &records[vi];
+        rec.render_rgb_with(scene, &mut work, &mut rgb)?;
         let out = image_loss(
             &LossInput {
                 width: cam.width as usize,
@@ -201,8 +202,12 @@ pub fn fine_tune(
             },
             &cfg.loss,
         )?;
-        let g = records[vi].backward_sh(scene, &out.grad_rgb, &GradGroups::SH_REST)?;
-        adam.step(scene, Param::ShRest, g.param(Param::ShRest), cfg.lr_sh_rest);
+        rec.color_backward(&out.grad_rgb, &mut work)?;
+        // The SH-rest gradient is made chunk by chunk inside the Adam step: the full
+        // (N, K−1, 3) gradient array is never written.
+        adam.step_with(scene, Param::ShRest, cfg.lr_sh_rest, &|first, g| {
+            rec.sh_rest_grad(&work, first, g)
+        });
         loss = out.terms.total;
         on_progress(&FineTuneProgress {
             iteration: it,

@@ -267,14 +267,13 @@ pub(crate) fn geometry(g: &Gaussians, i: usize, cam: &CameraF32) -> Result<Geome
     })
 }
 
-/// SH colour sums `Σ_k coeff_k·Y_k(dir) + 0.5` per channel (before the clamp at 0) and the
-/// basis, `dir = (μ − C)/|μ − C|`. Shared by the forward and backward passes.
-pub(crate) fn sh_color(
+/// The SH basis (up to `degree`) at Gaussian `i`'s view direction `(μ − C)/|μ − C|`.
+pub(crate) fn sh_view_basis(
     g: &Gaussians,
     i: usize,
     cam: &CameraF32,
     degree: u32,
-) -> ([f32; 3], [f32; MAX_SH_COEFFS]) {
+) -> [f32; MAX_SH_COEFFS] {
     let mean = g.means[i];
     let d = [
         mean[0] - cam.center[0],
@@ -290,6 +289,18 @@ pub(crate) fn sh_color(
         d[2] * inv_len,
         &mut basis,
     );
+    basis
+}
+
+/// SH colour sums `Σ_k coeff_k·Y_k(dir) + 0.5` per channel (before the clamp at 0) and the
+/// basis, `dir = (μ − C)/|μ − C|`. Shared by the forward and backward passes.
+pub(crate) fn sh_color(
+    g: &Gaussians,
+    i: usize,
+    cam: &CameraF32,
+    degree: u32,
+) -> ([f32; 3], [f32; MAX_SH_COEFFS]) {
+    let basis = sh_view_basis(g, i, cam, degree);
     let (dc, rest) = (g.sh_dc[i], g.rest(i));
     let k_used = num_coeffs(degree) - 1;
     let mut out = [0f32; 3];

@@ -38,9 +38,9 @@ impl Default for AdamConfig {
     }
 }
 
-/// Elements per parallel chunk: a fixed partition, so results never depend on the thread
-/// count (the update is element-wise anyway).
-const CHUNK: usize = 1 << 14;
+/// Gaussians per parallel chunk: a fixed partition, so results never depend on the thread
+/// count (the update is element-wise anyway), and a chunk's gradient buffer stays in L2.
+const CHUNK_ROWS: usize = 256;
 
 /// Step count and bias-correction products of one group.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -87,6 +87,29 @@ impl Adam {
 
     /// One Adam step of group `p` with learning rate `lr`.
     pub fn step(&mut self, params: &mut Gaussians, p: Param, grad: &[f32], lr: f32) {
+        assert_eq!(
+            params.param_mut(p).len(),
+            grad.len(),
+            "gradient length of {}",
+            p.name()
+        );
+        self.step_with(params, p, lr, &|first, out: &mut [f32]| {
+            out.copy_from_slice(&grad[first..first + out.len()]);
+        });
+    }
+
+    /// [`Adam::step`] with the gradient produced chunk by chunk: `grad(first, out)` fills
+    /// `out` with the gradient of elements `first..first + out.len()` of the group (chunks
+    /// hold whole Gaussians). A caller that can compute its gradient per Gaussian (the
+    /// QA-Mask fine-tune) never materializes the full gradient array; the bits are those
+    /// of [`Adam::step`] with the same gradient.
+    pub fn step_with(
+        &mut self,
+        params: &mut Gaussians,
+        p: Param,
+        lr: f32,
+        grad: &(dyn Fn(usize, &mut [f32]) + Sync),
+    ) {
         let c = self.config;
         let s = &mut self.steps[group_index(p)];
         s.t += 1;
@@ -96,25 +119,33 @@ impl Adam {
         let bc2_sqrt = (1.0 - s.beta2_pow).sqrt() as f32;
         let (b1, b2, eps) = (c.beta1, c.beta2, c.eps);
         let (ob1, ob2) = (1.0 - b1, 1.0 - b2);
+        let row = (params.param(p).len() / params.len().max(1)).max(1);
+        let chunk = row * CHUNK_ROWS;
         let x = params.param_mut(p);
         let m = self.m.param_mut(p);
         let v = self.v.param_mut(p);
-        assert_eq!(x.len(), grad.len(), "gradient length of {}", p.name());
         assert_eq!(x.len(), m.len(), "moment length of {}", p.name());
-        x.par_chunks_mut(CHUNK)
-            .zip(m.par_chunks_mut(CHUNK))
-            .zip(v.par_chunks_mut(CHUNK))
-            .zip(grad.par_chunks(CHUNK))
-            .for_each(|(((x, m), v), g)| {
-                // Zipped slices (no index checks) so the loop vectorizes; every lane does
-                // the same IEEE operations, so the bits do not change.
-                for (((x, m), v), &g) in x.iter_mut().zip(m.iter_mut()).zip(v.iter_mut()).zip(g) {
-                    *m = b1 * *m + ob1 * g;
-                    *v = b2 * *v + ob2 * (g * g);
-                    let denom = v.sqrt() / bc2_sqrt + eps;
-                    *x -= step_size * (*m / denom);
-                }
-            });
+        x.par_chunks_mut(chunk)
+            .zip(m.par_chunks_mut(chunk))
+            .zip(v.par_chunks_mut(chunk))
+            .enumerate()
+            .for_each_init(
+                || vec![0f32; chunk],
+                |buf, (ci, ((x, m), v))| {
+                    let g = &mut buf[..x.len()];
+                    grad(ci * chunk, g);
+                    // Zipped slices (no index checks) so the loop vectorizes; every lane
+                    // does the same IEEE operations, so the bits do not change.
+                    for (((x, m), v), &g) in
+                        x.iter_mut().zip(m.iter_mut()).zip(v.iter_mut()).zip(&*g)
+                    {
+                        *m = b1 * *m + ob1 * g;
+                        *v = b2 * *v + ob2 * (g * g);
+                        let denom = v.sqrt() / bc2_sqrt + eps;
+                        *x -= step_size * (*m / denom);
+                    }
+                },
+            );
     }
 
     /// Zero both moments of group `p` (INRIA's `replace_tensor_to_optimizer`, used by the

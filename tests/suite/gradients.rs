@@ -1,6 +1,6 @@
 //! Backward pass: central finite differences of an f64 twin of the forward (used only by
 //! these tests), determinism, frozen groups and hard cases.
-use super::common::with_threads;
+use super::common::{bits, with_threads};
 use unseen::camera::Camera;
 use unseen::gaussian::Gaussians;
 use unseen::math::sh::{num_coeffs, sh_basis};
@@ -618,8 +618,10 @@ fn backward_simd_and_scalar_are_bit_identical() {
 /// bit for bit after the SH coefficients change.
 #[test]
 fn frozen_replay_matches_full_render_and_backward() {
-    use unseen::raster::backward::frozen::FrozenBlend;
+    use unseen::gaussian::Param;
+    use unseen::raster::backward::frozen::{FrozenBlend, FrozenWork};
     use unseen::raster::render;
+    use unseen::train::adam::{Adam, AdamConfig};
     let cam = default_camera(203, 117);
     let mut scene = random_scene(20_000, 3, 21, 0.003, 0.3);
     for bg in [[0.0; 3], [0.3, 0.6, 0.9]] {
@@ -665,5 +667,28 @@ fn frozen_replay_matches_full_render_and_backward() {
                 .backward_sh(&scene, v.rgb.as_ref().unwrap(), &GradGroups::ALL)
                 .is_err()
         );
+        // The fused path of the QA-Mask fine-tune (reused work buffers, the SH-rest
+        // gradient made per chunk inside the Adam step) gives the same bits.
+        let (mut ws, mut rgb) = (FrozenWork::default(), vec![7.0; 5]);
+        frozen.render_rgb_with(&scene, &mut ws, &mut rgb).unwrap();
+        assert!(bits(&rgb) == bits(&full), "fused render differs");
+        frozen
+            .color_backward(v.rgb.as_ref().unwrap(), &mut ws)
+            .unwrap();
+        assert_eq!(ws.background_grad(), want.background);
+        let (mut a, mut b) = (scene.clone(), scene.clone());
+        let mut adam_a = Adam::new(AdamConfig::default(), &a).unwrap();
+        let mut adam_b = adam_a.clone();
+        for _ in 0..2 {
+            adam_a.step(&mut a, Param::ShRest, &want.sh_rest, 1e-3);
+            adam_b.step_with(&mut b, Param::ShRest, 1e-3, &|first, g| {
+                frozen.sh_rest_grad(&ws, first, g)
+            });
+        }
+        assert!(
+            bits(&a.sh_rest) == bits(&b.sh_rest),
+            "fused Adam step differs"
+        );
+        assert!(bits(&adam_a.v.sh_rest) == bits(&adam_b.v.sh_rest));
     }
 }

@@ -15,17 +15,21 @@ use super::{ForwardState, render_for_backward};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gaussian::Gaussians;
+use crate::math::sh::num_coeffs;
 use crate::raster::composite::{TRANSMITTANCE_STOP, splat_alpha, splat_rows};
-use crate::raster::project::{ALPHA_THRESHOLD, CameraF32, sh_color};
+use crate::raster::project::{ALPHA_THRESHOLD, CameraF32, sh_color, sh_view_basis};
 use crate::raster::tile::TILE_SIZE;
 use crate::raster::{Outputs, RenderOptions};
 use rayon::prelude::*;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 const LANES: usize = TILE_SIZE;
 
 /// Recorded blend weights of one camera.
 pub struct FrozenBlend {
+    /// Unique per record ([`FrozenWork`] checks it).
+    id: u64,
     /// The geometry the record was made with (no SH); every replay checks the scene still
     /// has it. Shared between the records of one scene ([`FrozenBlend::record_shared`]).
     geometry: Arc<Gaussians>,
@@ -207,6 +211,7 @@ impl FrozenBlend {
             band_start.push(visit_k.len());
         }
         Ok(FrozenBlend {
+            id: NEXT_RECORD.fetch_add(1, Ordering::Relaxed),
             geometry,
             cam: CameraF32::new(cam),
             background: opts.background,
@@ -233,32 +238,54 @@ impl FrozenBlend {
         }
     }
 
-    /// Splat colours from the scene's current SH coefficients (geometry unchanged).
-    fn colors(&self, scene: &Gaussians) -> Vec<[f32; 3]> {
+    /// Per-Gaussian SH sums (before the clamp) and colours (after it) for the scene's
+    /// current SH, into `ws`.
+    fn colors(&self, scene: &Gaussians, ws: &mut FrozenWork) {
         let p = &self.fwd.projected;
-        (0..scene.len())
-            .into_par_iter()
+        let degree = self.fwd.plan.sh_degree;
+        ws.raw.resize(scene.len(), [0.0; 3]);
+        ws.colors.resize(scene.len(), [0.0; 3]);
+        ws.raw
+            .par_iter_mut()
+            .zip(ws.colors.par_iter_mut())
+            .enumerate()
             .with_min_len(1024)
-            .map(|i| {
+            .for_each(|(i, (raw, col))| {
                 if p.radii[i] == [0, 0] {
-                    return [0.0; 3];
+                    (*raw, *col) = ([0.0; 3], [0.0; 3]);
+                    return;
                 }
-                let (raw, _) = sh_color(scene, i, &self.cam, self.fwd.plan.sh_degree);
-                raw.map(|v| if v > 0.0 { v } else { 0.0 })
-            })
-            .collect()
+                *raw = sh_color(scene, i, &self.cam, degree).0;
+                *col = raw.map(|v| if v > 0.0 { v } else { 0.0 });
+            });
+        ws.record = self.id;
     }
 
     /// The RGB render for the scene's current SH: the same bits as a full render.
     pub fn render_rgb(&self, scene: &Gaussians) -> Result<Vec<f32>> {
+        let mut rgb = Vec::new();
+        self.render_rgb_with(scene, &mut FrozenWork::default(), &mut rgb)?;
+        Ok(rgb)
+    }
+
+    /// [`FrozenBlend::render_rgb`] into `rgb`, keeping in `ws` what the backward of this
+    /// render needs (the SH sums, so the clamp is the render's, as autograd would have it).
+    pub fn render_rgb_with(
+        &self,
+        scene: &Gaussians,
+        ws: &mut FrozenWork,
+        rgb: &mut Vec<f32>,
+    ) -> Result<()> {
         self.check(scene)?;
-        let colors = self.colors(scene);
+        self.colors(scene, ws);
         let final_t = self.fwd.render.final_t.as_ref().expect("backward state");
         let (bg, apply) = (self.background, self.fwd.plan.apply_background);
-        Ok((0..final_t.len())
-            .into_par_iter()
+        let colors = &ws.colors;
+        rgb.resize(final_t.len() * 3, 0.0);
+        rgb.par_chunks_mut(3)
+            .enumerate()
             .with_min_len(256)
-            .flat_map_iter(|i| {
+            .for_each(|(i, out)| {
                 let mut c = [0f32; 3];
                 for k in self.pix_start[i] as usize..self.pix_start[i + 1] as usize {
                     let (col, w) = (colors[self.blend_gid[k] as usize], self.blend_w[k]);
@@ -267,9 +294,114 @@ impl FrozenBlend {
                     }
                 }
                 let t = final_t[i];
-                (0..3).map(move |ch| if apply { c[ch] + t * bg[ch] } else { c[ch] })
-            })
-            .collect())
+                for ch in 0..3 {
+                    out[ch] = if apply { c[ch] + t * bg[ch] } else { c[ch] };
+                }
+            });
+        Ok(())
+    }
+
+    /// Backward of the blend for `v_rgb`: per-Gaussian gradients of the (clamped) splat
+    /// colours and the background gradient, into `ws`; the same bits as the full
+    /// backward's splat colour gradients.
+    pub fn color_backward(&self, v_rgb: &[f32], ws: &mut FrozenWork) -> Result<()> {
+        let final_t = self.fwd.render.final_t.as_ref().expect("backward state");
+        if v_rgb.len() != final_t.len() * 3 {
+            return Err(Error::invalid(
+                "rgb gradient size differs from the recorded camera",
+            ));
+        }
+        let bins = &self.fwd.bins;
+        let (w, h) = (self.cam.width as usize, self.cam.height as usize);
+        ws.bands.resize_with(bins.tiles_y, Default::default);
+        // Per band, in the full backward's orders: background in (tile, row, pixel) order,
+        // then the visits into the band's intersection range.
+        ws.bands
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(ty, (inter, bg))| {
+                let first = bins.offsets[ty * bins.tiles_x];
+                let last = bins.offsets[(ty + 1) * bins.tiles_x];
+                let y0 = ty * TILE_SIZE;
+                let rows = TILE_SIZE.min(h - y0);
+                *bg = [0f64; 3];
+                for tx in 0..bins.tiles_x {
+                    let (x0, cols) = (tx * TILE_SIZE, TILE_SIZE.min(w - tx * TILE_SIZE));
+                    for row in 0..rows {
+                        for l in 0..cols {
+                            let i = (y0 + row) * w + x0 + l;
+                            for (ch, b) in bg.iter_mut().enumerate() {
+                                *b += (final_t[i] * v_rgb[3 * i + ch]) as f64;
+                            }
+                        }
+                    }
+                }
+                inter.clear();
+                inter.resize(last - first, [0f32; 3]);
+                for v in self.band_start[ty]..self.band_start[ty + 1] {
+                    let (i0, cols) = self.visit_pix[v];
+                    let fac = &self.visit_fac[v];
+                    let acc = &mut inter[self.visit_k[v] as usize - first];
+                    for (ch, a) in acc.iter_mut().enumerate() {
+                        let mut lanes = [0f32; LANES];
+                        for l in 0..cols as usize {
+                            lanes[l] = fac[l] * v_rgb[3 * (i0 as usize + l) + ch];
+                        }
+                        *a += sum16(&lanes);
+                    }
+                }
+            });
+        ws.v_color.clear();
+        ws.v_color.resize(self.geometry.len(), [0.0; 3]);
+        let mut bg = [0f64; 3];
+        let mut k = 0;
+        for (inter, b) in &ws.bands {
+            for c in inter {
+                let g = &mut ws.v_color[bins.ids[k] as usize];
+                for ch in 0..3 {
+                    g[ch] += c[ch];
+                }
+                k += 1;
+            }
+            for ch in 0..3 {
+                bg[ch] += b[ch];
+            }
+        }
+        ws.background = bg.map(|v| v as f32);
+        Ok(())
+    }
+
+    /// The SH-rest gradient of Gaussians `first/row ..` (`row = (K−1)·3` values each) into
+    /// `out` (whole Gaussians), from the render and blend backward recorded in `ws` ([`render_rgb_with`],
+    /// [`color_backward`]); the same bits as the full backward. Made to be called per
+    /// chunk by [`crate::train::adam::Adam::step_with`].
+    ///
+    /// [`render_rgb_with`]: FrozenBlend::render_rgb_with
+    /// [`color_backward`]: FrozenBlend::color_backward
+    pub fn sh_rest_grad(&self, ws: &FrozenWork, first: usize, out: &mut [f32]) {
+        let g = &*self.geometry;
+        assert_eq!(
+            ws.record, self.id,
+            "the work buffers belong to another record"
+        );
+        let k_used = num_coeffs(self.fwd.plan.sh_degree) - 1;
+        let row = g.rest_per_channel() * 3;
+        let p = &self.fwd.projected;
+        for (j, o) in out.chunks_exact_mut(row).enumerate() {
+            let i = first / row + j;
+            o.fill(0.0);
+            if p.radii[i] == [0, 0] {
+                continue;
+            }
+            let basis = sh_view_basis(g, i, &self.cam, self.fwd.plan.sh_degree);
+            let (raw, vc) = (ws.raw[i], ws.v_color[i]);
+            let v_sh: [f32; 3] = std::array::from_fn(|ch| if raw[ch] > 0.0 { vc[ch] } else { 0.0 });
+            for k in 0..k_used {
+                for ch in 0..3 {
+                    o[k * 3 + ch] = basis[k + 1] * v_sh[ch];
+                }
+            }
+        }
     }
 
     /// SH (and background) gradients for `v_rgb`: the same bits as the full backward with
@@ -285,66 +417,17 @@ impl FrozenBlend {
                 "a frozen-geometry record gives only SH and background gradients",
             ));
         }
-        let final_t = self.fwd.render.final_t.as_ref().expect("backward state");
-        if v_rgb.len() != final_t.len() * 3 {
-            return Err(Error::invalid(
-                "rgb gradient size differs from the recorded camera",
-            ));
-        }
-        let bins = &self.fwd.bins;
-        let (w, h) = (self.cam.width as usize, self.cam.height as usize);
-        // Per band, in the full backward's orders: background in (tile, row, pixel) order,
-        // then the visits into the band's intersection range.
-        let parts: Vec<(Vec<[f32; 3]>, [f64; 3])> = (0..bins.tiles_y)
-            .into_par_iter()
-            .map(|ty| {
-                let first = bins.offsets[ty * bins.tiles_x];
-                let last = bins.offsets[(ty + 1) * bins.tiles_x];
-                let y0 = ty * TILE_SIZE;
-                let rows = TILE_SIZE.min(h - y0);
-                let mut bg = [0f64; 3];
-                for tx in 0..bins.tiles_x {
-                    let (x0, cols) = (tx * TILE_SIZE, TILE_SIZE.min(w - tx * TILE_SIZE));
-                    for row in 0..rows {
-                        for l in 0..cols {
-                            let i = (y0 + row) * w + x0 + l;
-                            for (ch, b) in bg.iter_mut().enumerate() {
-                                *b += (final_t[i] * v_rgb[3 * i + ch]) as f64;
-                            }
-                        }
-                    }
-                }
-                let mut inter = vec![[0f32; 3]; last - first];
-                for v in self.band_start[ty]..self.band_start[ty + 1] {
-                    let (i0, cols) = self.visit_pix[v];
-                    let fac = &self.visit_fac[v];
-                    let acc = &mut inter[self.visit_k[v] as usize - first];
-                    for (ch, a) in acc.iter_mut().enumerate() {
-                        let mut lanes = [0f32; LANES];
-                        for l in 0..cols as usize {
-                            lanes[l] = fac[l] * v_rgb[3 * (i0 as usize + l) + ch];
-                        }
-                        *a += sum16(&lanes);
-                    }
-                }
-                (inter, bg)
+        self.check(scene)?;
+        let mut ws = FrozenWork::default();
+        self.color_backward(v_rgb, &mut ws)?;
+        let splats: Vec<SplatGrad> = ws
+            .v_color
+            .iter()
+            .map(|&color| SplatGrad {
+                color,
+                ..SplatGrad::default()
             })
             .collect();
-        let mut splats = vec![SplatGrad::default(); scene.len()];
-        let mut bg = [0f64; 3];
-        let mut k = 0;
-        for (inter, b) in &parts {
-            for c in inter {
-                let g = &mut splats[bins.ids[k] as usize].color;
-                for ch in 0..3 {
-                    g[ch] += c[ch];
-                }
-                k += 1;
-            }
-            for ch in 0..3 {
-                bg[ch] += b[ch];
-            }
-        }
         let mut grads = project_backward(
             scene,
             &self.cam,
@@ -354,8 +437,31 @@ impl FrozenBlend {
             &splats,
         );
         if groups.background {
-            grads.background = bg.map(|v| v as f32);
+            grads.background = ws.background;
         }
         Ok(grads)
     }
 }
+
+/// Reusable buffers of one frozen-blend iteration (render, blend backward, SH gradient):
+/// after the first iteration nothing is allocated.
+#[derive(Default)]
+pub struct FrozenWork {
+    /// The record whose render filled `raw`/`colors` (0: none).
+    record: u64,
+    raw: Vec<[f32; 3]>,
+    colors: Vec<[f32; 3]>,
+    v_color: Vec<[f32; 3]>,
+    background: [f32; 3],
+    bands: Vec<(Vec<[f32; 3]>, [f64; 3])>,
+}
+
+impl FrozenWork {
+    /// The background gradient of the last [`FrozenBlend::color_backward`].
+    pub fn background_grad(&self) -> [f32; 3] {
+        self.background
+    }
+}
+
+/// Record identities (never 0), so a work buffer is never used with another record.
+static NEXT_RECORD: AtomicU64 = AtomicU64::new(1);
