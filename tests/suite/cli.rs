@@ -375,3 +375,202 @@ fn cli_qa_mask_render_mask_and_masked_fine_tune() {
     assert!(!st.status.success());
     assert!(String::from_utf8_lossy(&st.stderr).contains("--init"));
 }
+
+/// `unseen warp`, `unseen collide` and `unseen views`: outputs equal the library's,
+/// formats as documented, bad input is one clear error line naming the file.
+#[test]
+fn cli_warp_collide_and_views() {
+    use unseen::camera::inria::read_cameras_json;
+    use unseen::warp::dibr::{WarpOptions, warp};
+    let root = reference("scenes/lounge");
+    let out = out_dir("geometry");
+    std::fs::create_dir_all(&out).unwrap();
+    // warp
+    let (a, b) = ("heldout_025", "heldout_033");
+    let st = unseen()
+        .arg("warp")
+        .arg("--image")
+        .arg(root.join(format!("images/{a}.png")))
+        .arg("--depth")
+        .arg(root.join(format!("depth/{a}.exr")))
+        .args(["--from", a, "--to", b, "--cameras"])
+        .arg(root.join("cameras.json"))
+        .args(["--close-cracks", "1", "--out"])
+        .arg(out.join("warp"))
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let cams = read_cameras_json(&root.join("cameras.json")).unwrap();
+    let cam = |n: &str| cams.iter().find(|c| c.name == n).unwrap();
+    let want = warp(
+        &read_png(&root.join(format!("images/{a}.png"))).unwrap(),
+        &read_exr(&root.join(format!("depth/{a}.exr")), &["Y"])
+            .unwrap()
+            .data,
+        cam(a),
+        cam(b),
+        &WarpOptions {
+            close_cracks: 1,
+            ..WarpOptions::default()
+        },
+    )
+    .unwrap();
+    let png = read_png(&out.join("warp/warped.png")).unwrap();
+    for (p, e) in png.data.iter().zip(&want.image.data) {
+        assert_eq!(*p, unseen::io::image::to_u8(*e) as f32 / 255.0);
+    }
+    assert_eq!(
+        read_exr(&out.join("warp/depth.exr"), &["Y"]).unwrap().data,
+        want.depth
+    );
+    let holes = read_png(&out.join("warp/holes.png")).unwrap();
+    assert_eq!(
+        holes.data.iter().map(|&v| v > 0.5).collect::<Vec<_>>(),
+        want.holes
+    );
+    let st = unseen()
+        .arg("warp")
+        .arg("--image")
+        .arg(root.join(format!("images/{a}.png")))
+        .arg("--depth")
+        .arg(root.join("missing.exr"))
+        .args(["--from", a, "--to", b, "--cameras"])
+        .arg(root.join("cameras.json"))
+        .arg("--out")
+        .arg(out.join("warp-bad"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&st.stderr);
+    assert!(!st.status.success() && err.contains("missing.exr"), "{err}");
+    assert!(!out.join("warp-bad").exists(), "no partial output");
+
+    // collide
+    let cube = |name: &str, o: f64| {
+        let p = out.join(name);
+        let v: Vec<[f64; 3]> = (0..8)
+            .map(|k| {
+                [
+                    o + (k & 1) as f64,
+                    ((k >> 1) & 1) as f64,
+                    ((k >> 2) & 1) as f64,
+                ]
+            })
+            .collect();
+        std::fs::write(&p, serde_json::json!({ "vertices": v }).to_string()).unwrap();
+        p
+    };
+    let (c0, c1, c3) = (
+        cube("c0.json", 0.0),
+        cube("c1.json", 0.5),
+        cube("c3.json", 3.0),
+    );
+    let run = |x: &PathBuf, y: &PathBuf| {
+        let o = unseen()
+            .arg("collide")
+            .arg(x)
+            .arg(y)
+            .arg("--json")
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        serde_json::from_slice::<serde_json::Value>(&o.stdout).unwrap()
+    };
+    assert_eq!(run(&c0, &c1)["intersect"], true);
+    let far = run(&c0, &c3);
+    assert_eq!(far["intersect"], false);
+    assert!((far["distance"].as_f64().unwrap() - 2.0).abs() < 1e-12);
+    let text = unseen().arg("collide").arg(&c0).arg(&c3).output().unwrap();
+    assert!(String::from_utf8_lossy(&text.stdout).starts_with("separated"));
+    let bad = out.join("bad.json");
+    std::fs::write(&bad, r#"{"vertices": [[0, 0, "x"]]}"#).unwrap();
+    let o = unseen().arg("collide").arg(&c0).arg(&bad).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("bad.json"), "{err}");
+
+    // views: three candidates with a block mask each and ranges (one averaged).
+    let masks = out.join("masks");
+    std::fs::create_dir_all(&masks).unwrap();
+    let names = ["heldout_000", "heldout_001", "heldout_002"];
+    for n in names {
+        let c = cam(n);
+        let (w, h) = (c.width as usize, c.height as usize);
+        let m: Vec<f32> = (0..w * h)
+            .map(|i| {
+                if (i % w) > w / 2 && (i / w) < h / 2 {
+                    1.0
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        unseen::io::image::write_png(
+            &masks.join(format!("{n}.png")),
+            &unseen::io::image::ImageF32::new(w, h, 1, m).unwrap(),
+        )
+        .unwrap();
+    }
+    let ranges = out.join("ranges.json");
+    std::fs::write(
+        &ranges,
+        r#"{"heldout_000": [1.0, 3.0], "heldout_001": [[1.0, 2.0], [2.0, 4.0]], "heldout_002": [0.5, 6.0]}"#,
+    )
+    .unwrap();
+    let st = unseen()
+        .args(["views", "--cameras"])
+        .arg(root.join("cameras.json"))
+        .args(["--candidates", &names.join(","), "--masks"])
+        .arg(&masks)
+        .arg("--depth-ranges")
+        .arg(&ranges)
+        .args(["--outline", "hull", "--out"])
+        .arg(out.join("views"))
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("views/views.json")).unwrap())
+            .unwrap();
+    assert_eq!(
+        v["frustums"][1]["depth_range"],
+        serde_json::json!([1.5, 3.0])
+    );
+    let indep = v["independent"].as_array().unwrap();
+    assert_eq!(indep[0], "heldout_000");
+    assert_eq!(v["trajectory"].as_array().unwrap().len(), indep.len());
+    for pair in v["collisions"].as_array().unwrap() {
+        let (x, y) = (&pair[0], &pair[1]);
+        assert!(!(indep.contains(x) && indep.contains(y)), "{pair}");
+    }
+    let (models, _) = tobj::load_obj(
+        out.join("views/frustums.obj"),
+        &tobj::LoadOptions::default(),
+    )
+    .unwrap();
+    assert_eq!(models.len(), 3);
+    std::fs::remove_file(masks.join("heldout_001.png")).unwrap();
+    let st = unseen()
+        .args(["views", "--cameras"])
+        .arg(root.join("cameras.json"))
+        .args(["--candidates", &names.join(","), "--masks"])
+        .arg(&masks)
+        .arg("--depth-ranges")
+        .arg(&ranges)
+        .arg("--out")
+        .arg(out.join("views-bad"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&st.stderr);
+    assert!(
+        !st.status.success() && err.contains("heldout_001.png"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}

@@ -307,3 +307,150 @@ fn independent_views_are_maximal_conflict_free_and_toured() {
     assert!(select(&hulls, &centers, Some(&[0, 0])).is_err());
     assert!(select(&hulls, &centers[..3], None).is_err());
 }
+
+mod frustums {
+    use super::super::common::reference;
+    use glam::DVec3;
+    use unseen::camera::inria::read_cameras_json;
+    use unseen::collide::frustum::{
+        Outline, Polyhedron, depth_range, mean_range, obj_text, region_frustum,
+    };
+    use unseen::io::image::read_exr;
+
+    /// Outward Newell normals: the largest signed distance of `p` outside any face plane
+    /// (≤ 0 inside), relative to the polyhedron's size.
+    fn outside(poly: &Polyhedron, p: DVec3) -> f64 {
+        let scale = poly
+            .vertices
+            .iter()
+            .map(|v| v.abs().max_element())
+            .fold(0.0, f64::max);
+        poly.faces
+            .iter()
+            .map(|f| {
+                let mut n = DVec3::ZERO;
+                for k in 0..f.len() {
+                    let (a, b) = (poly.vertices[f[k]], poly.vertices[f[(k + 1) % f.len()]]);
+                    n += a.cross(b);
+                }
+                n.normalize().dot(p - poly.vertices[f[0]]) / scale
+            })
+            .fold(f64::NEG_INFINITY, f64::max)
+    }
+
+    /// A blob mask on a real view: every masked pixel's 3D point (Mitsuba depth) lies in
+    /// the frustum built from the mask and the masked depth range, for both outlines; the
+    /// hull frustum lies inside the bounding-box one; corners reproject exactly.
+    #[test]
+    fn region_frustum_encloses_the_masked_geometry() {
+        let root = reference("scenes/lounge");
+        let cams = read_cameras_json(&root.join("cameras.json")).unwrap();
+        let cam = &cams[5];
+        let depth = read_exr(&root.join(format!("depth/{}.exr", cam.name)), &["Y"])
+            .unwrap()
+            .data;
+        let (w, h) = (cam.width as usize, cam.height as usize);
+        // An L-shaped region plus a diagonal stroke: the hull is much tighter than the box.
+        let mask: Vec<bool> = (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as i64, (i / w) as i64);
+                ((20..50).contains(&x) && (30..100).contains(&y))
+                    || ((20..120).contains(&x) && (80..100).contains(&y))
+                    || ((x - y - 10).abs() < 3 && (60..110).contains(&x))
+            })
+            .collect();
+        let range = depth_range(&depth, &mask).unwrap();
+        assert!(range[0] > 0.0 && range[0] < range[1]);
+        let bbox = region_frustum(cam, &mask, range, Outline::BoundingBox).unwrap();
+        let hull = region_frustum(cam, &mask, range, Outline::Hull).unwrap();
+        assert_eq!(bbox.vertices.len(), 8);
+        assert_eq!(bbox.faces.len(), 6);
+        assert!(hull.vertices.len() > 8);
+        for (i, &m) in mask.iter().enumerate() {
+            if !m {
+                continue;
+            }
+            let (x, y) = ((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
+            let z = depth[i] as f64;
+            let d = DVec3::new((x - cam.cx) / cam.fx, (y - cam.cy) / cam.fy, 1.0);
+            let p = cam.center + cam.world_from_camera_rotation * (d * z);
+            assert!(
+                outside(&bbox, p) < 1e-12,
+                "pixel {i} outside the box frustum"
+            );
+            assert!(
+                outside(&hull, p) < 1e-12,
+                "pixel {i} outside the hull frustum"
+            );
+        }
+        for &v in &hull.vertices {
+            assert!(
+                outside(&bbox, v) < 1e-12,
+                "hull vertex outside the box frustum"
+            );
+        }
+        // Corners: (20, 30) at the near plane.
+        let q = cam.camera_from_world_point(bbox.vertices[0]);
+        let (u, v) = (cam.fx * q.x / q.z + cam.cx, cam.fy * q.y / q.z + cam.cy);
+        assert!((q.z - range[0]).abs() < 1e-12 * range[0]);
+        assert!(
+            (u - 20.0).abs() < 1e-9 && (v - 30.0).abs() < 1e-9,
+            "{u} {v}"
+        );
+        // Eq. 4 averages; bad input is a clear error.
+        assert_eq!(mean_range(&[[1.0, 3.0], [2.0, 5.0]]).unwrap(), [1.5, 4.0]);
+        assert!(mean_range(&[]).is_err());
+        let none = vec![false; w * h];
+        let e = region_frustum(cam, &none, range, Outline::Hull).unwrap_err();
+        assert!(e.to_string().contains("empty"), "{e}");
+        let e = region_frustum(cam, &mask, [2.0, 1.0], Outline::Hull).unwrap_err();
+        assert!(e.to_string().contains("near"), "{e}");
+        assert!(region_frustum(cam, &mask[1..], range, Outline::Hull).is_err());
+        assert!(depth_range(&depth, &none).is_err());
+        // Zero thickness (near = far) is a valid, flat frustum.
+        let flat = region_frustum(cam, &mask, [2.0, 2.0], Outline::BoundingBox).unwrap();
+        assert_eq!(flat.vertices[..4], flat.vertices[4..]);
+        let f = flat.hull().unwrap();
+        assert!(unseen::collide::gjk::proximity(&f, &f).unwrap().intersect);
+    }
+
+    /// OBJ export reads back with tobj: the same faces with the same corners (tobj parses
+    /// f32; our text is the f64 shortest round-trip form), one model per frustum.
+    #[test]
+    fn frustum_obj_reads_back_with_tobj() {
+        let root = reference("scenes/gallery");
+        let cams = read_cameras_json(&root.join("cameras.json")).unwrap();
+        let polys: Vec<Polyhedron> = cams[..3]
+            .iter()
+            .map(|cam| {
+                let n = (cam.width * cam.height) as usize;
+                let mask: Vec<bool> = (0..n).map(|i| (i * 7919) % 97 < 3).collect();
+                region_frustum(cam, &mask, [0.5, 4.0], Outline::Hull).unwrap()
+            })
+            .collect();
+        let text = obj_text(&polys);
+        let (models, _) =
+            tobj::load_obj_buf(&mut text.as_bytes(), &tobj::LoadOptions::default(), |_| {
+                Err(tobj::LoadError::OpenFileFailed)
+            })
+            .unwrap();
+        assert_eq!(models.len(), 3);
+        for (m, p) in models.iter().zip(&polys) {
+            assert_eq!(m.name, p.name);
+            // tobj renumbers vertices in order of first use: compare face by face.
+            let pos = &m.mesh.positions;
+            assert_eq!(m.mesh.face_arities.len(), p.faces.len());
+            let mut at = 0;
+            for (face, &arity) in p.faces.iter().zip(&m.mesh.face_arities) {
+                assert_eq!(face.len(), arity as usize);
+                for &vi in face {
+                    let k = m.mesh.indices[at] as usize;
+                    for c in 0..3 {
+                        assert_eq!(pos[3 * k + c], p.vertices[vi][c] as f32);
+                    }
+                    at += 1;
+                }
+            }
+        }
+    }
+}

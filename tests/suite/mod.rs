@@ -2,6 +2,7 @@ mod align;
 mod cli;
 mod collide;
 mod common;
+mod dibr;
 mod golden_drjit;
 mod golden_grad;
 mod gradients;

@@ -1,5 +1,7 @@
 //! The `unseen` command line. Errors are one sentence on stderr and a non-zero exit.
 
+mod geometry;
+
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
@@ -46,6 +48,13 @@ enum Command {
         #[arg(long, default_value = "demo-out")]
         out: PathBuf,
     },
+    /// Forward-warp an image with its depth from one camera to another (DIBR).
+    Warp(geometry::WarpArgs),
+    /// Do two convex polyhedra intersect? (GJK; exit 0 either way.)
+    Collide(geometry::CollideArgs),
+    /// Independent views: frustums of the candidates' inpainted regions, their collision
+    /// graph, a maximal independent set and its closed trajectory.
+    Views(geometry::ViewsArgs),
     /// Render a 3DGS PLY from cameras in INRIA cameras.json layout.
     Render {
         /// Scene in INRIA 3DGS PLY layout.
@@ -608,6 +617,9 @@ fn run(cli: Cli) -> Result<()> {
                 },
         } => run_oracle(&common, Some((&target, &loss, depth_target.as_deref()))),
         Command::Demo { iterations, out } => run_demo(iterations, &out),
+        Command::Warp(a) => geometry::run_warp(&a),
+        Command::Collide(a) => geometry::run_collide(&a),
+        Command::Views(a) => geometry::run_views(&a),
         Command::Train {
             dataset,
             out,

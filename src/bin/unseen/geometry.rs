@@ -1,0 +1,281 @@
+//! Geometry commands: `unseen warp`, `unseen collide`, `unseen views` (SPEC.md §11, §16,
+//! §18).
+
+use clap::Args;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use unseen::camera::{Camera, inria};
+use unseen::collide::frustum::{Outline, Polyhedron, mean_range, region_frustum, write_obj};
+use unseen::collide::gjk::{ConvexHull, proximity};
+use unseen::collide::independent::select;
+use unseen::error::{Error, Result};
+use unseen::io::image::{ImageF32, read_exr, read_png, write_exr, write_png};
+use unseen::io::{create_dir_all, write_text};
+use unseen::warp::dibr::{Footprint, WarpOptions, warp};
+
+#[derive(Args)]
+pub struct WarpArgs {
+    /// Source image (PNG, 8-bit gray or RGB).
+    #[arg(long)]
+    image: PathBuf,
+    /// Source depth (EXR, camera z, channel Y; 0/NaN/Inf = invalid).
+    #[arg(long)]
+    depth: PathBuf,
+    /// Source camera name.
+    #[arg(long)]
+    from: String,
+    /// Target camera name.
+    #[arg(long)]
+    to: String,
+    /// Cameras (INRIA cameras.json).
+    #[arg(long)]
+    cameras: PathBuf,
+    /// Output folder: warped.png, depth.exr, holes.png, warp.json.
+    #[arg(long)]
+    out: PathBuf,
+    #[arg(long, value_enum, default_value = "nearest")]
+    footprint: FootprintArg,
+    /// Crack closing radius (0 = off).
+    #[arg(long, default_value_t = 0)]
+    close_cracks: u32,
+    /// Hole growing radius (0 = off).
+    #[arg(long, default_value_t = 0)]
+    grow_holes: u32,
+    /// Relative depth band of one surface.
+    #[arg(long, default_value_t = WarpOptions::default().depth_tolerance)]
+    depth_tolerance: f32,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub enum FootprintArg {
+    Nearest,
+    Bilinear,
+}
+
+#[derive(Args)]
+pub struct CollideArgs {
+    /// First polyhedron: {"vertices": [[x, y, z], ...]} (their convex hull).
+    a: PathBuf,
+    /// Second polyhedron, same format.
+    b: PathBuf,
+    /// Print one JSON line {"intersect": bool, "distance": D}.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Args)]
+pub struct ViewsArgs {
+    /// Cameras (INRIA cameras.json).
+    #[arg(long)]
+    cameras: PathBuf,
+    /// Candidate view names, comma-separated, in the greedy order.
+    #[arg(long, value_delimiter = ',', required = true)]
+    candidates: Vec<String>,
+    /// Folder of inpainting masks `<name>.png` (non-zero = inpainted).
+    #[arg(long)]
+    masks: PathBuf,
+    /// JSON {"<name>": [Dmin, Dmax]} or {"<name>": [[Dmin, Dmax], ...]} (one range per
+    /// inpainting; averaged as paper Eq. 4).
+    #[arg(long)]
+    depth_ranges: PathBuf,
+    /// Frustum outline: the mask's bounding box (the paper) or its convex hull.
+    #[arg(long, value_enum, default_value = "bounding-box")]
+    outline: OutlineArg,
+    /// Output folder: views.json, frustums.obj.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub enum OutlineArg {
+    BoundingBox,
+    Hull,
+}
+
+fn camera<'a>(cams: &'a [Camera], name: &str, file: &Path) -> Result<&'a Camera> {
+    cams.iter()
+        .find(|c| c.name == name)
+        .ok_or_else(|| Error::invalid(format!("no camera named '{name}'")).at(file))
+}
+
+pub fn run_warp(a: &WarpArgs) -> Result<()> {
+    let cams = inria::read_cameras_json(&a.cameras)?;
+    let (from, to) = (
+        camera(&cams, &a.from, &a.cameras)?,
+        camera(&cams, &a.to, &a.cameras)?,
+    );
+    let image = read_png(&a.image)?;
+    let depth = read_exr(&a.depth, &["Y"])?;
+    if (depth.width, depth.height) != (image.width, image.height) {
+        return Err(Error::invalid(format!(
+            "depth is {}x{} but the image is {}x{}",
+            depth.width, depth.height, image.width, image.height
+        ))
+        .at(&a.depth));
+    }
+    let opts = WarpOptions {
+        footprint: match a.footprint {
+            FootprintArg::Nearest => Footprint::Nearest,
+            FootprintArg::Bilinear => Footprint::Bilinear,
+        },
+        depth_tolerance: a.depth_tolerance,
+        close_cracks: a.close_cracks,
+        grow_holes: a.grow_holes,
+    };
+    let w = warp(&image, &depth.data, from, to, &opts).map_err(|e| e.at(&a.image))?;
+    let (tw, th) = (to.width as usize, to.height as usize);
+    create_dir_all(&a.out)?;
+    write_png(&a.out.join("warped.png"), &w.image)?;
+    write_exr(
+        &a.out.join("depth.exr"),
+        &ImageF32::new(tw, th, 1, w.depth.clone())?,
+    )?;
+    let holes = w.holes.iter().map(|&h| if h { 1.0 } else { 0.0 }).collect();
+    write_png(&a.out.join("holes.png"), &ImageF32::new(tw, th, 1, holes)?)?;
+    let json = serde_json::json!({ "from": a.from, "to": a.to, "options": opts, "stats": w.stats });
+    write_text(&a.out.join("warp.json"), &format!("{json:#}\n"))?;
+    println!(
+        "warped {} -> {}: {} hole pixels of {} ({} invalid source depths, {} cracks filled)",
+        a.from,
+        a.to,
+        w.holes.iter().filter(|&&h| h).count(),
+        tw * th,
+        w.stats.invalid_depth,
+        w.stats.cracks_filled
+    );
+    Ok(())
+}
+
+fn read_hull(path: &Path) -> Result<ConvexHull> {
+    #[derive(serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct File {
+        vertices: Vec<[f64; 3]>,
+    }
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let f: File = serde_json::from_str(&text).map_err(|e| Error::parse(path, format!("{e}")))?;
+    ConvexHull::new(f.vertices.iter().map(|&v| v.into()).collect()).map_err(|e| e.at(path))
+}
+
+pub fn run_collide(a: &CollideArgs) -> Result<()> {
+    let (ha, hb) = (read_hull(&a.a)?, read_hull(&a.b)?);
+    let p = proximity(&ha, &hb)?;
+    if a.json {
+        println!(
+            "{}",
+            serde_json::json!({"intersect": p.intersect, "distance": p.distance})
+        );
+    } else {
+        println!(
+            "{} (distance {:e}, touching counts as intersecting below {:e}; {} GJK iterations)",
+            if p.intersect {
+                "intersect"
+            } else {
+                "separated"
+            },
+            p.distance,
+            p.touch_eps,
+            p.iterations
+        );
+    }
+    Ok(())
+}
+
+fn read_ranges(path: &Path) -> Result<BTreeMap<String, [f64; 2]>> {
+    #[derive(serde::Deserialize)]
+    #[serde(untagged)]
+    enum Ranges {
+        One([f64; 2]),
+        Many(Vec<[f64; 2]>),
+    }
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let raw: BTreeMap<String, Ranges> = serde_json::from_str(&text).map_err(|e| {
+        Error::parse(
+            path,
+            format!(
+                "{e} (expected {{\"name\": [Dmin, Dmax]}} or {{\"name\": [[Dmin, Dmax], ...]}})"
+            ),
+        )
+    })?;
+    raw.into_iter()
+        .map(|(k, v)| {
+            let r = match v {
+                Ranges::One(r) => r,
+                Ranges::Many(rs) => mean_range(&rs).map_err(|e| e.at(path))?,
+            };
+            Ok((k, r))
+        })
+        .collect()
+}
+
+pub fn run_views(a: &ViewsArgs) -> Result<()> {
+    let cams = inria::read_cameras_json(&a.cameras)?;
+    let ranges = read_ranges(&a.depth_ranges)?;
+    let outline = match a.outline {
+        OutlineArg::BoundingBox => Outline::BoundingBox,
+        OutlineArg::Hull => Outline::Hull,
+    };
+    let mut polys: Vec<Polyhedron> = Vec::new();
+    let mut centers = Vec::new();
+    for name in &a.candidates {
+        let cam = camera(&cams, name, &a.cameras)?;
+        let path = a.masks.join(format!("{name}.png"));
+        let m = read_png(&path)?;
+        if (m.width, m.height) != (cam.width as usize, cam.height as usize) {
+            return Err(Error::invalid(format!(
+                "mask is {}x{} but camera '{name}' is {}x{}",
+                m.width, m.height, cam.width, cam.height
+            ))
+            .at(&path));
+        }
+        let mask: Vec<bool> = m
+            .data
+            .chunks(m.channels)
+            .map(|c| c.iter().any(|&v| v > 0.0))
+            .collect();
+        let range = *ranges.get(name).ok_or_else(|| {
+            Error::invalid(format!("no depth range for '{name}'")).at(&a.depth_ranges)
+        })?;
+        polys.push(region_frustum(cam, &mask, range, outline).map_err(|e| e.at(&path))?);
+        centers.push(cam.center);
+    }
+    let hulls: Vec<ConvexHull> = polys.iter().map(|p| p.hull()).collect::<Result<_>>()?;
+    let sel = select(&hulls, &centers, None)?;
+    let names =
+        |v: &[usize]| -> Vec<&str> { v.iter().map(|&i| a.candidates[i].as_str()).collect() };
+    let pairs = |v: &[(usize, usize)]| -> Vec<[&str; 2]> {
+        v.iter()
+            .map(|&(i, j)| [a.candidates[i].as_str(), a.candidates[j].as_str()])
+            .collect()
+    };
+    let frustums: Vec<serde_json::Value> = polys
+        .iter()
+        .map(|p| {
+            serde_json::json!({
+                "name": p.name,
+                "vertices": p.vertices.iter().map(|v| [v.x, v.y, v.z]).collect::<Vec<_>>(),
+                "depth_range": ranges[&p.name],
+            })
+        })
+        .collect();
+    let json = serde_json::json!({
+        "candidates": a.candidates,
+        "outline": match outline { Outline::BoundingBox => "bounding_box", Outline::Hull => "hull" },
+        "collisions": pairs(&sel.edges),
+        "independent": names(&sel.independent),
+        "trajectory": names(&sel.trajectory),
+        "gaps": pairs(&sel.gaps),
+        "frustums": frustums,
+    });
+    create_dir_all(&a.out)?;
+    write_text(&a.out.join("views.json"), &format!("{json:#}\n"))?;
+    write_obj(&a.out.join("frustums.obj"), &polys)?;
+    println!(
+        "{} candidates, {} collisions, {} independent: {}",
+        a.candidates.len(),
+        sel.edges.len(),
+        sel.independent.len(),
+        names(&sel.trajectory).join(" -> ")
+    );
+    Ok(())
+}
