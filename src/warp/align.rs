@@ -10,6 +10,7 @@
 
 use crate::error::{Error, Result};
 use crate::scene::Uniform;
+use rayon::prelude::*;
 
 /// Where the linear model holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -161,7 +162,12 @@ pub fn ransac(frames: &[Frame], space: Space, cfg: &RansacConfig) -> Result<Alig
         }
         let s = (b.1 - a.1) / (b.0 - a.0);
         let t = a.1 - s * a.0;
-        let count = p.iter().filter(|q| inlier(s, t, q)).count();
+        // An integer count: the same for any thread count.
+        let count = p
+            .par_iter()
+            .with_min_len(1 << 14)
+            .filter(|q| inlier(s, t, q))
+            .count();
         if best.is_none_or(|bb| count > bb.0) {
             best = Some((count, s, t));
             if let Some(conf) = cfg.confidence {
