@@ -19,6 +19,7 @@ pub mod eval;
 pub mod gaussian;
 pub mod io;
 pub mod math;
+pub mod models;
 pub mod oracle;
 pub mod qamask;
 pub mod raster;

@@ -11,4 +11,5 @@ mod oracle;
 mod qamask;
 mod raster;
 mod readers;
+mod telea;
 mod training;
