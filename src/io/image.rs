@@ -138,6 +138,98 @@ pub fn downscale(img: &ImageF32, factor: usize) -> ImageF32 {
     }
 }
 
+/// Interpolation of [`resize`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Filter {
+    /// Bilinear with half-pixel centres (OpenCV `INTER_LINEAR`, PyTorch
+    /// `align_corners=False`).
+    Bilinear,
+    /// Bicubic, Keys `a = −0.75` (OpenCV `INTER_CUBIC`), half-pixel centres, edge pixels
+    /// replicated.
+    Bicubic,
+}
+
+/// Per output coordinate: the first source index and the tap weights (2 or 4 taps),
+/// source indices clamped to the image (f32, as OpenCV's float path).
+fn taps(src: usize, dst: usize, filter: Filter) -> Vec<([usize; 4], [f32; 4])> {
+    let scale = src as f64 / dst as f64;
+    (0..dst)
+        .map(|d| {
+            let f = (d as f64 + 0.5) * scale - 0.5;
+            let i = f.floor();
+            let t = (f - i) as f32;
+            let i = i as i64;
+            let clamp = |k: i64| k.clamp(0, src as i64 - 1) as usize;
+            match filter {
+                Filter::Bilinear => {
+                    // OpenCV: left of the first centre / right of the last one is the
+                    // edge pixel itself.
+                    let (i, t) = if i < 0 {
+                        (0, 0.0)
+                    } else if i >= src as i64 - 1 {
+                        (src as i64 - 1, 0.0)
+                    } else {
+                        (i, t)
+                    };
+                    ([clamp(i), clamp(i + 1), 0, 0], [1.0 - t, t, 0.0, 0.0])
+                }
+                Filter::Bicubic => {
+                    const A: f32 = -0.75;
+                    let w0 =
+                        ((A * (t + 1.0) - 5.0 * A) * (t + 1.0) + 8.0 * A) * (t + 1.0) - 4.0 * A;
+                    let w1 = ((A + 2.0) * t - (A + 3.0)) * t * t + 1.0;
+                    let w2 = ((A + 2.0) * (1.0 - t) - (A + 3.0)) * (1.0 - t) * (1.0 - t) + 1.0;
+                    let w3 = 1.0 - w0 - w1 - w2;
+                    (
+                        [clamp(i - 1), clamp(i), clamp(i + 1), clamp(i + 2)],
+                        [w0, w1, w2, w3],
+                    )
+                }
+            }
+        })
+        .collect()
+}
+
+/// Resize to `width × height`: separable, horizontal pass then vertical, in f32.
+pub fn resize(img: &ImageF32, width: usize, height: usize, filter: Filter) -> Result<ImageF32> {
+    if width == 0 || height == 0 || img.width == 0 || img.height == 0 {
+        return Err(UError::invalid("resize needs non-empty images"));
+    }
+    let c = img.channels;
+    let n = match filter {
+        Filter::Bilinear => 2,
+        Filter::Bicubic => 4,
+    };
+    let tx = taps(img.width, width, filter);
+    let ty = taps(img.height, height, filter);
+    let mut rows = vec![0f32; img.height * width * c];
+    for y in 0..img.height {
+        for (x, (ix, wx)) in tx.iter().enumerate() {
+            for ch in 0..c {
+                let mut v = 0f32;
+                for k in 0..n {
+                    v += img.data[(y * img.width + ix[k]) * c + ch] * wx[k];
+                }
+                rows[(y * width + x) * c + ch] = v;
+            }
+        }
+    }
+    let mut data = vec![0f32; width * height * c];
+    for (y, (iy, wy)) in ty.iter().enumerate() {
+        for x in 0..width {
+            for ch in 0..c {
+                let mut v = 0f32;
+                for k in 0..n {
+                    v += rows[(iy[k] * width + x) * c + ch] * wy[k];
+                }
+                data[(y * width + x) * c + ch] = v;
+            }
+        }
+    }
+    ImageF32::new(width, height, c, data)
+}
+
 /// Write a float EXR (ZIP compression). Channel names: 1 → `Y`, 3 → `R G B`,
 /// 4 → `R G B A`; other counts are named `C0, C1, ...`.
 pub fn write_exr(path: &Path, img: &ImageF32) -> Result<()> {

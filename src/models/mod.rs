@@ -1,4 +1,169 @@
-//! Model slots (SPEC.md §19): inpainting, depth, video and artifact removal, each with a
-//! deterministic classical default.
+//! Model slots (SPEC.md §19): the generative and estimation models the pipeline calls, as
+//! traits, each with a deterministic classical default so the pipeline runs with no
+//! weights, and a generic ONNX adapter ([`onnx`], the only module importing tract) for
+//! real models.
+//!
+//! | slot | trait | defaults | ONNX |
+//! |---|---|---|---|
+//! | inpainting | [`Inpainter`] | `telea` | `onnx:CARD.json` |
+//! | depth | [`DepthEstimator`] | `depth-fill` | `onnx:CARD.json` |
+//! | video depth | [`VideoDepthEstimator`] | `depth-fill` per frame | `onnx:CARD.json` per frame |
+//! | video | [`VideoGenerator`] | `morph` | — |
+//! | artifact removal | [`ArtifactFixer`] | `identity`, `bilateral` | `onnx:CARD.json` |
+//!
+//! Images are [`ImageF32`] in `[0, 1]` (any channel count unless a slot says otherwise);
+//! masks are row-major `bool`, true = to be generated.
 
+pub mod classical;
+pub mod morph;
+pub mod onnx;
 pub mod telea;
+
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::io::image::ImageF32;
+use std::path::Path;
+
+/// What a depth map holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DepthKind {
+    /// Camera depth (metric or relative): larger is farther.
+    Depth,
+    /// Inverse depth up to scale and shift: larger is nearer (Depth Anything).
+    Disparity,
+}
+
+impl DepthKind {
+    /// The alignment space that makes this map linear in the target (SPEC.md §17).
+    pub fn space(self) -> crate::warp::align::Space {
+        match self {
+            DepthKind::Depth => crate::warp::align::Space::Depth,
+            DepthKind::Disparity => crate::warp::align::Space::Disparity,
+        }
+    }
+}
+
+/// An estimated depth map.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DepthMap {
+    pub width: usize,
+    pub height: usize,
+    pub kind: DepthKind,
+    pub values: Vec<f32>,
+}
+
+/// Known depth that an estimator may use (the warped metric depth of the paper's step 2):
+/// values ≤ 0 or not finite are unknown, as are the pixels under `mask`.
+#[derive(Clone, Copy, Debug)]
+pub struct DepthHint<'a> {
+    pub depth: &'a [f32],
+    pub mask: Option<&'a [bool]>,
+}
+
+/// Image + mask → image with the masked region generated.
+pub trait Inpainter: Send + Sync {
+    fn name(&self) -> &str;
+    fn inpaint(&self, image: &ImageF32, mask: &[bool]) -> Result<ImageF32>;
+}
+
+/// Image → relative depth or disparity. `hint` is what the caller knows; learned models
+/// ignore it, the classical default needs it.
+pub trait DepthEstimator: Send + Sync {
+    fn name(&self) -> &str;
+    fn estimate(&self, image: &ImageF32, hint: Option<DepthHint>) -> Result<DepthMap>;
+}
+
+/// Frames → per-frame relative depth (one scale for the clip when the model is
+/// consistent; the pipeline aligns all frames with one RANSAC, §17).
+pub trait VideoDepthEstimator: Send + Sync {
+    fn name(&self) -> &str;
+    fn estimate(&self, frames: &[ImageF32], hints: Option<&[DepthHint]>) -> Result<Vec<DepthMap>>;
+}
+
+/// One end of a generated clip.
+#[derive(Clone, Copy, Debug)]
+pub struct Keyframe<'a> {
+    pub image: &'a ImageF32,
+    pub camera: &'a Camera,
+    /// Camera-z depth of `image`, when known.
+    pub depth: Option<&'a [f32]>,
+}
+
+/// A generated clip: `frames[0]` and `frames[n − 1]` are the given end frames.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Video {
+    pub frames: Vec<ImageF32>,
+    pub cameras: Vec<Camera>,
+    /// Per-frame camera-z depth, when the generator knows it.
+    pub depths: Option<Vec<Vec<f32>>>,
+    /// Per-frame pixels the generator invented (no end frame saw them), when it knows.
+    pub invented: Option<Vec<Vec<bool>>>,
+}
+
+/// Start and end frames (with cameras and depths when known) → `n` frames.
+pub trait VideoGenerator: Send + Sync {
+    fn name(&self) -> &str;
+    fn generate(&self, start: Keyframe, end: Keyframe, n: usize) -> Result<Video>;
+}
+
+/// A render (and optionally a reference view) → the render with artifacts removed.
+pub trait ArtifactFixer: Send + Sync {
+    fn name(&self) -> &str;
+    fn fix(&self, render: &ImageF32, reference: Option<&ImageF32>) -> Result<ImageF32>;
+}
+
+/// `onnx:CARD.json` → the card path.
+fn onnx_card(name: &str) -> Option<&Path> {
+    name.strip_prefix("onnx:").map(Path::new)
+}
+
+fn unknown(slot: &str, name: &str, known: &str) -> Error {
+    Error::invalid(format!(
+        "unknown {slot} '{name}' (known: {known}, or onnx:CARD.json)"
+    ))
+}
+
+/// The inpainter called `name`: `telea` (radius 3) or `onnx:CARD.json`.
+pub fn inpainter(name: &str) -> Result<Box<dyn Inpainter>> {
+    if let Some(card) = onnx_card(name) {
+        return Ok(Box::new(onnx::OnnxInpainter::load(card)?));
+    }
+    match name {
+        "telea" => Ok(Box::new(classical::Telea::default())),
+        _ => Err(unknown("inpainter", name, "telea")),
+    }
+}
+
+/// The depth estimator called `name`: `depth-fill` or `onnx:CARD.json`.
+pub fn depth_estimator(name: &str) -> Result<Box<dyn DepthEstimator>> {
+    if let Some(card) = onnx_card(name) {
+        return Ok(Box::new(onnx::OnnxDepth::load(card)?));
+    }
+    match name {
+        "depth-fill" => Ok(Box::new(classical::DepthFill::default())),
+        _ => Err(unknown("depth estimator", name, "depth-fill")),
+    }
+}
+
+/// The artifact fixer called `name`: `identity`, `bilateral` or `onnx:CARD.json`.
+pub fn artifact_fixer(name: &str) -> Result<Box<dyn ArtifactFixer>> {
+    if let Some(card) = onnx_card(name) {
+        return Ok(Box::new(onnx::OnnxFixer::load(card)?));
+    }
+    match name {
+        "identity" => Ok(Box::new(classical::Identity)),
+        "bilateral" => Ok(Box::new(classical::Bilateral::default())),
+        _ => Err(unknown("artifact fixer", name, "identity, bilateral")),
+    }
+}
+
+/// The video generator called `name`: `morph`.
+pub fn video_generator(name: &str) -> Result<Box<dyn VideoGenerator>> {
+    match name {
+        "morph" => Ok(Box::new(morph::Morph::default())),
+        _ => Err(Error::invalid(format!(
+            "unknown video generator '{name}' (known: morph)"
+        ))),
+    }
+}

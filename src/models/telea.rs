@@ -402,3 +402,52 @@ fn neighbours(i: usize, j: usize) -> [(usize, usize); 4] {
         (i, j + 1),
     ]
 }
+
+/// Float inpainting of values on an arbitrary scale. Telea's gradient term adds up to `√2`
+/// *value units* (OpenCV designed it for 8-bit levels), so float data is first mapped
+/// linearly to `[0, span]` (`span` = 255 makes `[0, 1]` images behave like 8-bit ones;
+/// depth uses 10⁴), inpainted, and mapped back. Pixels outside the mask keep their input
+/// bits exactly.
+pub fn inpaint_float(
+    values: &[f32],
+    width: usize,
+    height: usize,
+    channels: usize,
+    mask: &[bool],
+    radius: f64,
+    span: f32,
+) -> Result<Vec<f32>> {
+    if !(span > 0.0 && span.is_finite()) {
+        return Err(Error::invalid(format!("span {span} must be positive")));
+    }
+    let known = values
+        .chunks(channels.max(1))
+        .zip(mask)
+        .filter(|(_, m)| !**m)
+        .flat_map(|(v, _)| v.iter().copied());
+    let (lo, hi) = known.fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), v| {
+        (a.min(v), b.max(v))
+    });
+    if !(lo.is_finite() && hi.is_finite()) {
+        return Err(Error::invalid("inpainting needs finite known values"));
+    }
+    let scale = if hi > lo { span / (hi - lo) } else { 1.0 };
+    let mapped: Vec<f32> = values
+        .chunks(channels.max(1))
+        .zip(mask)
+        .flat_map(|(v, &m)| {
+            v.iter()
+                .map(move |&x| if m { 0.0 } else { (x - lo) * scale })
+        })
+        .collect();
+    let filled = inpaint(&mapped, width, height, channels, mask, radius)?;
+    let mut out = values.to_vec();
+    for (p, &m) in mask.iter().enumerate() {
+        if m {
+            for c in 0..channels {
+                out[p * channels + c] = filled[p * channels + c] / scale + lo;
+            }
+        }
+    }
+    Ok(out)
+}

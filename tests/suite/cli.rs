@@ -574,3 +574,90 @@ fn cli_warp_collide_and_views() {
     );
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// `unseen inpaint` reproduces cv2.inpaint's PNG (a golden case) and `unseen depth`
+/// extends a known depth; bad input names the file.
+#[test]
+fn cli_inpaint_and_depth() {
+    let out = out_dir("models");
+    std::fs::create_dir_all(&out).unwrap();
+    let case = reference("opencv/telea/rgb_render_scribble_r3");
+    let st = unseen()
+        .arg("inpaint")
+        .arg(case.join("input.png"))
+        .arg(case.join("mask.png"))
+        .arg("--out")
+        .arg(out.join("filled.png"))
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let got = read_png(&out.join("filled.png")).unwrap();
+    let want = read_png(&case.join("expected.png")).unwrap();
+    assert_eq!(got.data, want.data, "CLI output = cv2.inpaint");
+    let st = unseen()
+        .arg("inpaint")
+        .arg(case.join("input.png"))
+        .arg(reference("opencv/telea/gray_frame_r1/mask.png"))
+        .arg("--out")
+        .arg(out.join("bad.png"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&st.stderr);
+    assert!(!st.status.success() && err.contains("mask.png"), "{err}");
+    assert!(!out.join("bad.png").exists());
+    // depth-fill from a Mitsuba depth with a hole.
+    let root = reference("scenes/lounge");
+    let mask: Vec<f32> = (0..160 * 120)
+        .map(|i| {
+            if (40..80).contains(&(i % 160)) && (30..70).contains(&(i / 160)) {
+                1.0
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    unseen::io::image::write_png(
+        &out.join("hole.png"),
+        &unseen::io::image::ImageF32::new(160, 120, 1, mask.clone()).unwrap(),
+    )
+    .unwrap();
+    let st = unseen()
+        .arg("depth")
+        .arg(root.join("images/train_004.png"))
+        .arg("--hint")
+        .arg(root.join("depth/train_004.exr"))
+        .arg("--hint-mask")
+        .arg(out.join("hole.png"))
+        .arg("--out")
+        .arg(out.join("d.exr"))
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let d = read_exr(&out.join("d.exr"), &["Y"]).unwrap();
+    let gt = read_exr(&root.join("depth/train_004.exr"), &["Y"]).unwrap();
+    for (p, &m) in mask.iter().enumerate() {
+        if m == 0.0 {
+            assert_eq!(d.data[p], gt.data[p]);
+        } else {
+            assert!(d.data[p] > 0.0 && d.data[p].is_finite());
+        }
+    }
+    let st = unseen()
+        .arg("depth")
+        .arg(root.join("images/train_004.png"))
+        .arg("--out")
+        .arg(out.join("d2.exr"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&st.stderr);
+    assert!(!st.status.success() && err.contains("hint"), "{err}");
+    let _ = std::fs::remove_dir_all(&out);
+}

@@ -7,6 +7,8 @@ mod golden_drjit;
 mod golden_grad;
 mod gradients;
 mod mitsuba_crosscheck;
+mod models;
+mod onnx;
 mod oracle;
 mod qamask;
 mod raster;

@@ -1,6 +1,7 @@
 //! The `unseen` command line. Errors are one sentence on stderr and a non-zero exit.
 
 mod geometry;
+mod models;
 
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -50,6 +51,10 @@ enum Command {
     },
     /// Forward-warp an image with its depth from one camera to another (DIBR).
     Warp(geometry::WarpArgs),
+    /// Inpaint the non-zero pixels of MASK in IMAGE (Telea by default, as cv2.inpaint).
+    Inpaint(models::InpaintArgs),
+    /// Estimate depth of an image (depth-fill from a known depth, or an ONNX model).
+    Depth(models::DepthArgs),
     /// Do two convex polyhedra intersect? (GJK; exit 0 either way.)
     Collide(geometry::CollideArgs),
     /// Independent views: frustums of the candidates' inpainted regions, their collision
@@ -618,6 +623,8 @@ fn run(cli: Cli) -> Result<()> {
         } => run_oracle(&common, Some((&target, &loss, depth_target.as_deref()))),
         Command::Demo { iterations, out } => run_demo(iterations, &out),
         Command::Warp(a) => geometry::run_warp(&a),
+        Command::Inpaint(a) => models::run_inpaint(&a),
+        Command::Depth(a) => models::run_depth(&a),
         Command::Collide(a) => geometry::run_collide(&a),
         Command::Views(a) => geometry::run_views(&a),
         Command::Train {
