@@ -146,6 +146,18 @@ pub fn depth_estimator(name: &str) -> Result<Box<dyn DepthEstimator>> {
     }
 }
 
+/// The video depth estimator called `name`: `depth-fill` (per frame, needs hints) or
+/// `onnx:CARD.json` (an image model run per frame).
+pub fn video_depth_estimator(name: &str) -> Result<Box<dyn VideoDepthEstimator>> {
+    if let Some(card) = onnx_card(name) {
+        return Ok(Box::new(onnx::OnnxDepth::load(card)?));
+    }
+    match name {
+        "depth-fill" => Ok(Box::new(classical::DepthFill::default())),
+        _ => Err(unknown("video depth estimator", name, "depth-fill")),
+    }
+}
+
 /// The artifact fixer called `name`: `identity`, `bilateral` or `onnx:CARD.json`.
 pub fn artifact_fixer(name: &str) -> Result<Box<dyn ArtifactFixer>> {
     if let Some(card) = onnx_card(name) {

@@ -6,7 +6,9 @@
 //! [`OnnxDepth`], [`OnnxFixer`]); nothing is downloaded. tract runs single-threaded here, so
 //! results do not depend on the rayon thread count.
 
-use super::{ArtifactFixer, DepthEstimator, DepthHint, DepthKind, DepthMap, Inpainter};
+use super::{
+    ArtifactFixer, DepthEstimator, DepthHint, DepthKind, DepthMap, Inpainter, VideoDepthEstimator,
+};
 use crate::error::{Error, Result};
 use crate::io::image::{Filter, ImageF32, resize};
 use std::collections::HashMap;
@@ -492,6 +494,20 @@ impl DepthEstimator for OnnxDepth {
             },
             values: d.data,
         })
+    }
+}
+
+/// Frame by frame (an image model has no temporal consistency; the pipeline's
+/// multi-frame RANSAC gives the clip one scale and shift, SPEC.md §17).
+impl VideoDepthEstimator for OnnxDepth {
+    fn name(&self) -> &str {
+        "onnx"
+    }
+    fn estimate(&self, frames: &[ImageF32], _hints: Option<&[DepthHint]>) -> Result<Vec<DepthMap>> {
+        frames
+            .iter()
+            .map(|f| DepthEstimator::estimate(self, f, None))
+            .collect()
     }
 }
 

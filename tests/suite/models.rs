@@ -193,4 +193,19 @@ fn classical_slots_and_registry() {
         assert!(e.to_string().contains("unknown"), "{e}");
     }
     assert!(video_generator("morph").is_ok());
+    // Video depth: per frame, the same maps as the image estimator.
+    let vd = unseen::models::video_depth_estimator("depth-fill").unwrap();
+    let h1 = DepthHint {
+        depth: &hint,
+        mask: Some(&mask),
+    };
+    let maps = vd
+        .estimate(&[img.clone(), img.clone()], Some(&[h1, h1]))
+        .unwrap();
+    assert_eq!(maps.len(), 2);
+    assert_eq!(maps[1], d);
+    assert!(
+        vd.estimate(std::slice::from_ref(&img), Some(&[h1, h1]))
+            .is_err()
+    );
 }
