@@ -173,3 +173,34 @@ fn onnx_resize_half_pixel_agrees_off_the_low_edge() {
     println!("resize_half: interior {inner:e}, first row/column {edge:e}");
     assert!(inner <= ONNX_TOL, "{inner:e}");
 }
+
+/// `io::image::resize` against `cv2.resize` (float32, INTER_LINEAR / INTER_CUBIC, up and
+/// down; `reference_data/opencv/resize/`): within `RESIZE_TOL` (f32 rounding: OpenCV's
+/// float path sums the same taps in the same order but rounds its weights differently).
+#[test]
+fn resize_matches_opencv() {
+    const RESIZE_TOL: f32 = 1e-5;
+    for dir in super::common::case_dirs("opencv/resize") {
+        #[derive(serde::Deserialize)]
+        struct Case {
+            filter: unseen::io::image::Filter,
+            width: usize,
+            height: usize,
+        }
+        let c: Case =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("case.json")).unwrap()).unwrap();
+        let (s, data) = read_npy_f32(&dir.join("input.npy")).unwrap();
+        let (ws, want) = read_npy_f32(&dir.join("expected.npy")).unwrap();
+        let img = ImageF32::new(s[1], s[0], s[2], data).unwrap();
+        let got = unseen::io::image::resize(&img, c.width, c.height, c.filter).unwrap();
+        assert_eq!((got.height, got.width, got.channels), (ws[0], ws[1], ws[2]));
+        let err = got
+            .data
+            .iter()
+            .zip(&want)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0f32, f32::max);
+        println!("{}: max error {err:e}", dir.display());
+        assert!(err <= RESIZE_TOL, "{}: {err:e}", dir.display());
+    }
+}
