@@ -161,10 +161,10 @@ fn qa_mask_colour_pair_does_not_matter() {
 
 /// The claim on a short preset: on the held-out half, QA-Mask ranks badly reconstructed
 /// pixels above well reconstructed ones (AUROC clearly above 0.5), and the in-distribution
-/// test views get lower mask values than the held-out views. Measured when set: AUROC
-/// 0.662, Spearman 0.219, mask mean 0.155 (test) vs 0.987 (heldout); the baselines reach
-/// AUROC 0.974 (opacity) and 0.953 (scale) here, because 93 % of held-out pixels are bad
-/// and most of them are holes.
+/// test views get lower mask values than the held-out views. Measured (session 3): AUROC
+/// 0.653, Spearman 0.190, mask mean 0.152 (test) vs 0.980 (heldout); the baselines reach
+/// AUROC 0.975 (opacity) and 0.944 (scale) here, because 92 % of held-out pixels are bad
+/// and most of them are holes. Full-scale figures: `reference_data/audit/`.
 #[test]
 fn qa_mask_detects_badly_reconstructed_pixels() {
     let (d, g) = fixture();
