@@ -12,7 +12,6 @@ Run: DRJIT_LIBLLVM_PATH=/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1 python make_mo
 import json
 import os
 import sys
-import tempfile
 
 import numpy as np
 
@@ -72,13 +71,7 @@ def main():
     with open(os.path.join(HERE, "..", "scenes", "lounge", "cameras.json")) as f:
         cams = {c["img_name"]: c for c in json.load(f)}
     a, b = cams[PAIR[0]], cams[PAIR[1]]
-    rng = np.random.Generator(np.random.PCG64(11))
-    with tempfile.TemporaryDirectory() as tmp:
-        shell, objs = ms.lounge(tmp, rng)
-        d = {"type": "scene", **shell}
-        for k, (shape, _) in enumerate(objs):
-            d[f"obj{k}"] = shape
-        scene = mi.load_dict(d)
+    scene, _, _ = ms.build_scene("lounge")
     out = ensure_dir(os.path.join(HERE, "..", "mitsuba", "morph", f"{PAIR[0]}__{PAIR[1]}"))
     qa, qb = quat(np.array(a["rotation"])), quat(np.array(b["rotation"]))
     frames = []

@@ -286,43 +286,54 @@ def write_points_ply(path, xyz, rgb8):
         f.write(rec.tobytes())
 
 
-def make_scene(name, builder, seed):
-    rng = np.random.Generator(np.random.PCG64(seed))
+SEEDS = {"lounge": 11, "gallery": 12}
+
+
+def build_scene(name):
+    """The Mitsuba scene `name` (textures are loaded, so the temporary folder may go), its
+    object boxes, and the generator positioned after the scene was built (the cameras come
+    next). make_dibr_goldens.py and make_morph_goldens.py rebuild the scenes with it."""
+    builder = {"lounge": lounge, "gallery": gallery}[name]
+    rng = np.random.Generator(np.random.PCG64(SEEDS[name]))
     with tempfile.TemporaryDirectory() as tmp:
         shell, objs = builder(tmp, rng)
         d = {"type": "scene", **shell}
         for k, (shape, _) in enumerate(objs):
             d[f"obj{k}"] = shape
         scene = mi.load_dict(d)
-        boxes = [b for _, b in objs]
-        cams = make_cameras(rng, boxes)
-        out = ensure_dir(os.path.join(OUT, name))
-        ensure_dir(os.path.join(out, "images"))
-        ensure_dir(os.path.join(out, "depth"))
-        path_int = mi.load_dict({"type": "path", "max_depth": 5})
-        depth_int = mi.load_dict({"type": "aov", "aovs": "dd.y:depth"})
-        pts, cols = [], []
-        for k, cam in enumerate(cams):
-            img = mi.render(scene, sensor=sensor(cam, {"type": "independent", "sample_count": SPP}),
-                            integrator=path_int, spp=SPP, seed=k)
-            bmp = mi.Bitmap(img).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.UInt8, srgb_gamma=True)
-            bmp.write(os.path.join(out, "images", cam["name"] + ".png"))
-            dist = np.array(mi.render(scene, sensor=sensor(cam, {"type": "stratified", "sample_count": 1, "jitter": False}),
-                                      integrator=depth_int, spp=1))[:, :, 0]
-            hit = dist > 0
-            z = np.where(hit, dist * ray_to_z(cam) + NEAR_CLIP, 0.0).astype(np.float32)
-            mi.Bitmap(z[:, :, None]).write(os.path.join(out, "depth", cam["name"] + ".exr"))
-            if cam["name"].startswith("train"):
-                rgb8 = np.array(bmp)
-                ys = rng.integers(0, H, POINTS_PER_VIEW)
-                xs = rng.integers(0, W, POINTS_PER_VIEW)
-                for y, x in zip(ys, xs):
-                    if z[y, x] <= 0:
-                        continue
-                    pc = np.array([(x + 0.5 - cam["cx"]) / cam["fx"], (y + 0.5 - cam["cy"]) / cam["fy"], 1.0]) * z[y, x]
-                    pts.append(cam["R_wc"] @ pc + cam["center"])
-                    cols.append(rgb8[y, x])
-            print(f"{name}: {k + 1}/{len(cams)} {cam['name']}", flush=True)
+    return scene, [b for _, b in objs], rng
+
+
+def make_scene(name):
+    scene, boxes, rng = build_scene(name)
+    cams = make_cameras(rng, boxes)
+    out = ensure_dir(os.path.join(OUT, name))
+    ensure_dir(os.path.join(out, "images"))
+    ensure_dir(os.path.join(out, "depth"))
+    path_int = mi.load_dict({"type": "path", "max_depth": 5})
+    depth_int = mi.load_dict({"type": "aov", "aovs": "dd.y:depth"})
+    pts, cols = [], []
+    for k, cam in enumerate(cams):
+        img = mi.render(scene, sensor=sensor(cam, {"type": "independent", "sample_count": SPP}),
+                        integrator=path_int, spp=SPP, seed=k)
+        bmp = mi.Bitmap(img).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.UInt8, srgb_gamma=True)
+        bmp.write(os.path.join(out, "images", cam["name"] + ".png"))
+        dist = np.array(mi.render(scene, sensor=sensor(cam, {"type": "stratified", "sample_count": 1, "jitter": False}),
+                                  integrator=depth_int, spp=1))[:, :, 0]
+        hit = dist > 0
+        z = np.where(hit, dist * ray_to_z(cam) + NEAR_CLIP, 0.0).astype(np.float32)
+        mi.Bitmap(z[:, :, None]).write(os.path.join(out, "depth", cam["name"] + ".exr"))
+        if cam["name"].startswith("train"):
+            rgb8 = np.array(bmp)
+            ys = rng.integers(0, H, POINTS_PER_VIEW)
+            xs = rng.integers(0, W, POINTS_PER_VIEW)
+            for y, x in zip(ys, xs):
+                if z[y, x] <= 0:
+                    continue
+                pc = np.array([(x + 0.5 - cam["cx"]) / cam["fx"], (y + 0.5 - cam["cy"]) / cam["fy"], 1.0]) * z[y, x]
+                pts.append(cam["R_wc"] @ pc + cam["center"])
+                cols.append(rgb8[y, x])
+        print(f"{name}: {k + 1}/{len(cams)} {cam['name']}", flush=True)
     write_cameras_json(os.path.join(out, "cameras.json"), cams)
     write_points_ply(os.path.join(out, "points3D.ply"), np.array(pts), np.array(cols, np.uint8))
     split = {"train": [c["name"] for c in cams if c["name"].startswith("train")],
@@ -332,7 +343,7 @@ def make_scene(name, builder, seed):
         json.dump(split, f, indent=1)
     with open(os.path.join(out, "meta.json"), "w") as f:
         json.dump(dict(scene=name, cameras=len(cams), width=W, height=H, fov_x_deg=FOV_X_DEG, spp=SPP,
-                       seed=seed, points=len(pts),
+                       seed=SEEDS[name], points=len(pts),
                        tool=f"mitsuba {mi.__version__} llvm_ad_rgb, path (max_depth 5), box filter; "
                             "depth: aov dd.y:depth at pixel centres converted to camera z",
                        generator="reference_data/generate/make_scenes.py"), f, indent=1)
@@ -340,10 +351,9 @@ def make_scene(name, builder, seed):
 
 def main():
     which = sys.argv[1:] or ["lounge", "gallery"]
-    if "lounge" in which:
-        make_scene("lounge", lounge, 11)
-    if "gallery" in which:
-        make_scene("gallery", gallery, 12)
+    for name in ("lounge", "gallery"):
+        if name in which:
+            make_scene(name)
 
 
 if __name__ == "__main__":

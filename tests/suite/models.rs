@@ -12,7 +12,7 @@ use unseen::models::{
 };
 
 /// Floor of the PSNR of morph's intermediate frames against Mitsuba on the pixels an end
-/// frame saw (measured 30.7–32.2 dB on lounge heldout_025 → heldout_033, n = 5, 0.2–0.8 %
+/// frame saw (measured 30.6–32.2 dB on lounge heldout_025 → heldout_033, n = 5, 0.2–0.8 %
 /// invented): ~2 dB under the worst frame, for the same reasons as the DIBR floor (§18:
 /// path-tracing noise, view-dependent shading, box-filtered pixels).
 const MORPH_PSNR_FLOOR_DB: f64 = 28.5;
