@@ -20,7 +20,7 @@ use crate::camera::inria::read_cameras_json;
 use crate::camera::transforms::{frame_image_path, read_transforms_json};
 use crate::error::{Error, Result};
 use crate::gaussian::ply::{PointCloud, read_point_cloud};
-use crate::io::image::{ImageF32, downscale, read_exr, read_rgb};
+use crate::io::image::{ImageF32, downscale, read_depth, read_rgb};
 use std::path::{Path, PathBuf};
 
 /// Which layout a dataset directory uses.
@@ -207,17 +207,7 @@ fn load_view(
         .at(image_path));
     }
     let depth = match depth_path {
-        Some(p) if p.is_file() => {
-            let d = read_exr(p, &["Y"])?;
-            if d.width != img.width || d.height != img.height {
-                return Err(Error::invalid(format!(
-                    "depth is {}x{} but the image is {}x{}",
-                    d.width, d.height, img.width, img.height
-                ))
-                .at(p));
-            }
-            Some(d.data)
-        }
+        Some(p) if p.is_file() => Some(read_depth(p, img.width, img.height)?),
         _ => None,
     };
     let f = opts.resolution as usize;

@@ -279,6 +279,20 @@ pub fn write_exr(path: &Path, img: &ImageF32) -> Result<()> {
     }
 }
 
+/// Read a depth map (EXR channel `Y`) that must be `width × height` (the size of the image
+/// it belongs to); a size mismatch is an error naming the file.
+pub fn read_depth(path: &Path, width: usize, height: usize) -> Result<Vec<f32>> {
+    let d = read_exr(path, &["Y"])?;
+    if (d.width, d.height) != (width, height) {
+        return Err(UError::invalid(format!(
+            "depth is {}x{} but the image is {width}x{height}",
+            d.width, d.height
+        ))
+        .at(path));
+    }
+    Ok(d.data)
+}
+
 /// Read the first layer of an EXR as float channels, in the order of `names`
 /// (e.g. `["R","G","B"]` or `["Y"]`). Missing channels are an error naming them.
 pub fn read_exr(path: &Path, names: &[&str]) -> Result<ImageF32> {

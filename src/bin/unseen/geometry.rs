@@ -9,7 +9,7 @@ use unseen::collide::frustum::{Outline, Polyhedron, mean_range, region_frustum, 
 use unseen::collide::gjk::{ConvexHull, proximity};
 use unseen::collide::independent::select;
 use unseen::error::{Error, Result};
-use unseen::io::image::{ImageF32, read_exr, read_png, write_exr, write_png};
+use unseen::io::image::{ImageF32, read_depth, read_png, write_exr, write_png};
 use unseen::io::{create_dir_all, write_text};
 use unseen::warp::dibr::{Footprint, WarpOptions, warp};
 
@@ -105,14 +105,7 @@ pub fn run_warp(a: &WarpArgs) -> Result<()> {
         camera(&cams, &a.to, &a.cameras)?,
     );
     let image = read_png(&a.image)?;
-    let depth = read_exr(&a.depth, &["Y"])?;
-    if (depth.width, depth.height) != (image.width, image.height) {
-        return Err(Error::invalid(format!(
-            "depth is {}x{} but the image is {}x{}",
-            depth.width, depth.height, image.width, image.height
-        ))
-        .at(&a.depth));
-    }
+    let depth = read_depth(&a.depth, image.width, image.height)?;
     let opts = WarpOptions {
         footprint: match a.footprint {
             FootprintArg::Nearest => Footprint::Nearest,
@@ -122,7 +115,7 @@ pub fn run_warp(a: &WarpArgs) -> Result<()> {
         close_cracks: a.close_cracks,
         grow_holes: a.grow_holes,
     };
-    let w = warp(&image, &depth.data, from, to, &opts).map_err(|e| e.at(&a.image))?;
+    let w = warp(&image, &depth, from, to, &opts).map_err(|e| e.at(&a.image))?;
     let (tw, th) = (to.width as usize, to.height as usize);
     create_dir_all(&a.out)?;
     write_png(&a.out.join("warped.png"), &w.image)?;

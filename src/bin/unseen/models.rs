@@ -3,7 +3,7 @@
 use clap::Args;
 use std::path::PathBuf;
 use unseen::error::{Error, Result};
-use unseen::io::image::{ImageF32, read_exr, read_png, to_u8, write_exr, write_png};
+use unseen::io::image::{ImageF32, read_depth, read_png, to_u8, write_exr, write_png};
 use unseen::models::{DepthHint, depth_estimator, inpainter};
 
 #[derive(Args)]
@@ -96,17 +96,7 @@ pub fn run_depth(a: &DepthArgs) -> Result<()> {
     let img = read_png(&a.image)?;
     let est = depth_estimator(&a.method)?;
     let hint = match &a.hint {
-        Some(p) => {
-            let d = read_exr(p, &["Y"])?;
-            if (d.width, d.height) != (img.width, img.height) {
-                return Err(Error::invalid(format!(
-                    "depth is {}x{} but the image is {}x{}",
-                    d.width, d.height, img.width, img.height
-                ))
-                .at(p));
-            }
-            Some(d.data)
-        }
+        Some(p) => Some(read_depth(p, img.width, img.height)?),
         None => None,
     };
     let mask = match &a.hint_mask {
