@@ -156,7 +156,7 @@ fn detect(root: &Path) -> Result<Layout> {
 
 /// Scale a camera's intrinsics for an integer downscale (the image is cropped to
 /// `floor(size / factor)`, so the principal point scales without offset).
-fn downscale_camera(cam: &Camera, f: u32) -> Camera {
+pub fn downscale_camera(cam: &Camera, f: u32) -> Camera {
     let mut c = cam.clone();
     let fl = f as f64;
     c.width = cam.width / f;

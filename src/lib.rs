@@ -21,6 +21,7 @@ pub mod io;
 pub mod math;
 pub mod models;
 pub mod oracle;
+pub mod pipeline;
 pub mod qamask;
 pub mod raster;
 pub mod scene;

@@ -75,11 +75,23 @@ pub fn select(
             independent.push(i);
         }
     }
-    // Closed nearest-neighbour tour from the first chosen view (ties: lower index).
-    let mut trajectory = Vec::with_capacity(independent.len());
-    let mut left: Vec<usize> = independent.clone();
+    let (trajectory, gaps) = closed_tour(&independent, centers);
+    Ok(Selection {
+        edges,
+        independent,
+        trajectory,
+        gaps,
+    })
+}
+
+/// The closed nearest-neighbour tour through `views` (indices into `centers`), starting at
+/// `views[0]`, ties to the lower index, and its gaps: consecutive pairs including the
+/// closing one (none for fewer than 2 views).
+pub fn closed_tour(views: &[usize], centers: &[DVec3]) -> (Vec<usize>, Vec<(usize, usize)>) {
+    let mut trajectory = Vec::with_capacity(views.len());
+    let mut left: Vec<usize> = views.to_vec();
     left.sort_unstable();
-    if let Some(&start) = independent.first() {
+    if let Some(&start) = views.first() {
         left.retain(|&v| v != start);
         trajectory.push(start);
         let mut cur = start;
@@ -101,10 +113,5 @@ pub fn select(
             .map(|k| (trajectory[k], trajectory[(k + 1) % m]))
             .collect()
     };
-    Ok(Selection {
-        edges,
-        independent,
-        trajectory,
-        gaps,
-    })
+    (trajectory, gaps)
 }

@@ -4,6 +4,7 @@
 //! the destination folder, synced, then renamed over the destination.
 
 pub mod image;
+pub mod manifest;
 pub mod npy;
 
 use crate::error::{Error, Result};

@@ -114,6 +114,27 @@ pub fn ssim(
     c: usize,
     grad: bool,
 ) -> (f64, Option<Vec<f32>>) {
+    ssim_impl(x, y, w, h, c, grad, None)
+}
+
+/// The SSIM map: per pixel, the mean over channels of the windowed SSIM that [`ssim`]
+/// averages (so `ssim` is the mean of this map over all pixels, up to summation order).
+/// For scores over a pixel subset (existing / extrapolated pixels, SPEC.md §20.7).
+pub fn ssim_map(x: &[f32], y: &[f32], w: usize, h: usize, c: usize) -> Vec<f64> {
+    let mut map = vec![0.0; w * h];
+    ssim_impl(x, y, w, h, c, false, Some(&mut map));
+    map
+}
+
+fn ssim_impl(
+    x: &[f32],
+    y: &[f32],
+    w: usize,
+    h: usize,
+    c: usize,
+    grad: bool,
+    mut map: Option<&mut [f64]>,
+) -> (f64, Option<Vec<f32>>) {
     assert_eq!(x.len(), w * h * c);
     assert_eq!(y.len(), w * h * c);
     let k = kernel();
@@ -157,7 +178,11 @@ pub fn ssim(
             let a2 = 2.0 * sxy + SSIM_C2;
             let b1 = ux * ux + uy * uy + SSIM_C1;
             let b2 = sxx + syy + SSIM_C2;
-            total += a1 * a2 / (b1 * b2);
+            let v = a1 * a2 / (b1 * b2);
+            total += v;
+            if let Some(m) = map.as_deref_mut() {
+                m[p] += v / c as f64;
+            }
             if grad {
                 let ds_dsxx = -a1 * a2 / (b1 * b2 * b2);
                 let ds_dsxy = 2.0 * a1 / (b1 * b2);

@@ -2,6 +2,7 @@
 
 mod geometry;
 mod models;
+mod pipeline;
 
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -39,16 +40,16 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Train on the train half of the bundled `lounge` scene (a short preset), evaluate on
-    /// its test views and on the held-out half, write demo-out/report.md.
-    Demo {
-        /// Iterations of the short preset.
-        #[arg(long, default_value_t = DEMO_ITERATIONS)]
-        iterations: u32,
-        /// Output folder.
-        #[arg(long, default_value = "demo-out")]
-        out: PathBuf,
-    },
+    /// The main job on a bundled room: train the original scene on its train half, then
+    /// extrapolate it into the held-out half with the quick pipeline; writes
+    /// demo-out/report.md.
+    Demo(pipeline::DemoArgs),
+    /// The paper's pipeline on a trained run: independent views, stage 1, stage 2,
+    /// interpolation; a resumable run directory with per-step manifests.
+    Extrapolate(pipeline::ExtrapolateArgs),
+    /// Compare two extrapolation runs step by step (the GPU port's check); exit 1 on
+    /// divergence beyond the tolerance.
+    Compare(pipeline::CompareArgs),
     /// Forward-warp an image with its depth from one camera to another (DIBR).
     Warp(geometry::WarpArgs),
     /// Inpaint the non-zero pixels of MASK in IMAGE (Telea by default, as cv2.inpaint).
@@ -460,9 +461,6 @@ fn render_masks(scene: Option<&Path>, source: &str, cams: &[Camera], out: &Path)
     Ok(cams.len())
 }
 
-/// Iterations of the demo's short training preset.
-const DEMO_ITERATIONS: u32 = 3000;
-
 fn train_with_bar(
     dataset: &Path,
     out: &Path,
@@ -541,72 +539,6 @@ fn eval_run(
     Ok(report)
 }
 
-/// The demo: train on the train half of the bundled lounge scene, evaluate in and out of
-/// distribution, write a report.
-fn run_demo(iterations: u32, out: &Path) -> Result<()> {
-    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("reference_data/scenes/lounge");
-    let run = out.join("run");
-    let cfg = TrainConfig {
-        iterations,
-        save_iterations: vec![],
-        ..TrainConfig::default()
-    };
-    println!(
-        "demo: training {} iterations on the train half of {}",
-        iterations,
-        scene.display()
-    );
-    let s = train_with_bar(&scene, &run, &cfg, None)?;
-    let test = eval_run(&run, &scene, Split::Test, None)?;
-    let held = eval_run(&run, &scene, Split::Heldout, None)?;
-    let mut md = String::from("# unseen demo\n\n");
-    md += &format!(
-        "Trained {} iterations on the `train` half of the bundled Mitsuba scene `lounge` \
-         (160x120) in {:.1} s on this machine ({:.1} it/s), {} Gaussians at the end, peak \
-         memory {}.\n\n",
-        s.iterations,
-        s.wall_seconds,
-        s.iterations_per_second,
-        s.gaussians,
-        s.peak_memory_bytes
-            .map_or("unknown".into(), |b| format!("{:.0} MB", b as f64 / 1e6))
-    );
-    md += &format!(
-        "| split | views | mean PSNR (dB) | mean SSIM |\n|---|---|---|---|\n\
-         | test (in distribution) | {} | {:.2} | {:.4} |\n\
-         | heldout (the unseen half) | {} | {:.2} | {:.4} |\n\n",
-        test.views.len(),
-        test.mean_psnr,
-        test.mean_ssim,
-        held.views.len(),
-        held.mean_psnr,
-        held.mean_ssim
-    );
-    md += "The gap between the two rows is what scene extrapolation has to close. \
-           Side by side (render | ground truth):\n\n";
-    for (name, r) in [("test", &test), ("heldout", &held)] {
-        md += &format!("## {name}\n\n");
-        for v in r.views.iter().take(4) {
-            md += &format!(
-                "![{0}](run/eval/{name}/{1}.png) {0}: {2:.2} dB\n\n",
-                v.name,
-                unseen::io::file_stem(&v.name),
-                v.psnr
-            );
-        }
-    }
-    unseen::io::write_text(&out.join("report.md"), &md)?;
-    println!(
-        "demo: test {:.2} dB / SSIM {:.4}, heldout {:.2} dB / SSIM {:.4}; report in {}",
-        test.mean_psnr,
-        test.mean_ssim,
-        held.mean_psnr,
-        held.mean_ssim,
-        out.join("report.md").display()
-    );
-    Ok(())
-}
-
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Oracle {
@@ -621,7 +553,15 @@ fn run(cli: Cli) -> Result<()> {
                     depth_target,
                 },
         } => run_oracle(&common, Some((&target, &loss, depth_target.as_deref()))),
-        Command::Demo { iterations, out } => run_demo(iterations, &out),
+        Command::Demo(a) => pipeline::run_demo(&a),
+        Command::Extrapolate(a) => pipeline::run_extrapolate(&a),
+        Command::Compare(a) => {
+            if pipeline::run_compare(&a)? {
+                Ok(())
+            } else {
+                Err(Error::invalid("the runs diverge"))
+            }
+        }
         Command::Warp(a) => geometry::run_warp(&a),
         Command::Inpaint(a) => models::run_inpaint(&a),
         Command::Depth(a) => models::run_depth(&a),

@@ -1,0 +1,352 @@
+//! `unseen extrapolate`, `unseen compare` and `unseen demo`: thin shells over
+//! `unseen::pipeline` that draw its events.
+
+use clap::{Args, ValueEnum};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::Instant;
+use unseen::error::{Error, Result};
+use unseen::pipeline::compare::compare;
+use unseen::pipeline::{
+    self, Event, Inconsistency, Inputs, MaskSource, PipelineConfig, SlotNames, load_inputs,
+};
+use unseen::train::run::train_run;
+use unseen::train::trainer::TrainConfig;
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum Preset {
+    Quick,
+    Paper,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum Generator {
+    /// The classical slots (Telea, depth-fill, morph, identity) unless --config names others.
+    Classical,
+    /// The labelled ground-truth generator (needs the candidates' truth in the dataset).
+    Truth,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum Level {
+    None,
+    Low,
+    High,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum MaskArg {
+    Qa,
+    Opacity,
+    None,
+}
+
+#[derive(Args)]
+pub struct ExtrapolateArgs {
+    /// Run directory of `unseen train` (the original scene).
+    run: PathBuf,
+    /// Candidate extrapolation cameras (INRIA cameras.json layout).
+    #[arg(long)]
+    views: PathBuf,
+    /// Output run directory.
+    #[arg(long)]
+    out: PathBuf,
+    #[arg(long, value_enum, default_value = "quick")]
+    preset: Preset,
+    /// A JSON PipelineConfig over the preset (any subset of fields).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Continue a run: verified steps are skipped, the rest recomputed.
+    #[arg(long)]
+    resume: bool,
+    /// Worker threads (default: all cores); results are the same bits for any count.
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Evaluation cameras (cameras.json) with truth in the dataset: metrics per stage.
+    #[arg(long)]
+    eval: Option<PathBuf>,
+    /// Dataset directory (default: the one recorded in RUN/manifest.json).
+    #[arg(long)]
+    dataset: Option<PathBuf>,
+    #[command(flatten)]
+    knobs: Knobs,
+}
+
+/// Switches over the preset (each ablation of the paper is one of them).
+#[derive(Args)]
+pub struct Knobs {
+    #[arg(long, value_enum)]
+    generator: Option<Generator>,
+    /// Inconsistency of the ground-truth generator.
+    #[arg(long, value_enum)]
+    inconsistency: Option<Level>,
+    #[arg(long, value_enum)]
+    mask: Option<MaskArg>,
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Ablations.
+    #[arg(long)]
+    no_depth_supervision: bool,
+    #[arg(long)]
+    no_propagation: bool,
+    #[arg(long)]
+    no_independent_detection: bool,
+    #[arg(long)]
+    no_interpolation: bool,
+}
+
+impl Knobs {
+    fn apply(&self, c: &mut PipelineConfig) -> Result<()> {
+        if let Some(g) = self.generator {
+            c.slots = match g {
+                Generator::Classical => SlotNames::default(),
+                Generator::Truth => SlotNames::truth(),
+            };
+        }
+        if let Some(l) = self.inconsistency {
+            c.inconsistency = Inconsistency::by_name(match l {
+                Level::None => "none",
+                Level::Low => "low",
+                Level::High => "high",
+            })?;
+        }
+        if let Some(m) = self.mask {
+            c.mask_source = match m {
+                MaskArg::Qa => MaskSource::Qa,
+                MaskArg::Opacity => MaskSource::Opacity,
+                MaskArg::None => MaskSource::None,
+            };
+        }
+        if let Some(s) = self.seed {
+            c.seed = s;
+        }
+        c.depth_supervision &= !self.no_depth_supervision;
+        c.propagation &= !self.no_propagation;
+        c.independent_detection &= !self.no_independent_detection;
+        c.interpolation &= !self.no_interpolation;
+        Ok(())
+    }
+}
+
+fn config_from(preset: Preset, file: Option<&Path>, knobs: &Knobs) -> Result<PipelineConfig> {
+    let base = match preset {
+        Preset::Quick => PipelineConfig::quick(),
+        Preset::Paper => PipelineConfig::paper(),
+    };
+    let mut c = match file {
+        None => base,
+        Some(p) => {
+            let text = std::fs::read(p).map_err(|e| Error::io(p, e))?;
+            let mut v = serde_json::to_value(&base).expect("serializes");
+            let over: serde_json::Value = serde_json::from_slice(&text)
+                .map_err(|e| Error::parse(p, format!("invalid JSON: {e}")))?;
+            merge(&mut v, over);
+            serde_json::from_value(v)
+                .map_err(|e| Error::parse(p, format!("invalid pipeline config: {e}")))?
+        }
+    };
+    knobs.apply(&mut c)?;
+    c.validate()?;
+    Ok(c)
+}
+
+fn merge(base: &mut serde_json::Value, over: serde_json::Value) {
+    match (base, over) {
+        (serde_json::Value::Object(b), serde_json::Value::Object(o)) => {
+            for (k, v) in o {
+                merge(b.entry(k).or_insert(serde_json::Value::Null), v);
+            }
+        }
+        (b, o) => *b = o,
+    }
+}
+
+/// Draw pipeline events: one bar for the current iteration-driven step, a line per step.
+pub fn drawer() -> impl Fn(Event) + Sync {
+    let bar = Mutex::new(None::<(String, ProgressBar)>);
+    let t0 = Instant::now();
+    move |e: Event| {
+        let mut b = bar.lock().expect("bar lock");
+        match e {
+            Event::Stage { name } => eprintln!("== {name}"),
+            Event::StepStarted { step } => eprintln!("   {step} ..."),
+            Event::StepFinished { step, seconds } => {
+                if let Some((_, pb)) = b.take() {
+                    pb.finish_and_clear();
+                }
+                eprintln!(
+                    "   {step} done in {seconds:.1} s ({:.0} s total)",
+                    t0.elapsed().as_secs_f64()
+                );
+            }
+            Event::StepSkipped { step } => eprintln!("   {step}: verified, skipped"),
+            Event::Iterations {
+                step,
+                done,
+                total,
+                loss,
+            } => {
+                if b.as_ref().is_none_or(|(s, _)| *s != step) {
+                    if let Some((_, pb)) = b.take() {
+                        pb.finish_and_clear();
+                    }
+                    let pb = ProgressBar::new(total as u64);
+                    pb.set_style(
+                        ProgressStyle::with_template("   {bar:30} {pos}/{len} {msg}")
+                            .expect("template"),
+                    );
+                    *b = Some((step.clone(), pb));
+                }
+                let (_, pb) = b.as_ref().expect("set");
+                pb.set_position(done as u64);
+                pb.set_message(format!("{step} loss {loss:.4}"));
+                if pb.is_hidden() && (done % 500 == 0 || done == total) {
+                    eprintln!("   {step}: {done}/{total}, loss {loss:.4}");
+                }
+            }
+            Event::Note(s) => eprintln!("   {s}"),
+        }
+    }
+}
+
+fn with_threads<T: Send>(threads: Option<usize>, f: impl FnOnce() -> T + Send) -> Result<T> {
+    match threads {
+        None => Ok(f()),
+        Some(n) => {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(n.max(1))
+                .build()
+                .map_err(|e| Error::invalid(format!("cannot start {n} threads: {e}")))?;
+            Ok(pool.install(f))
+        }
+    }
+}
+
+pub fn run_extrapolate(a: &ExtrapolateArgs) -> Result<()> {
+    let cfg = config_from(a.preset, a.config.as_deref(), &a.knobs)?;
+    let inputs = load_inputs(&a.run, &a.views, a.eval.as_deref(), a.dataset.as_deref())?;
+    let draw = drawer();
+    let out = with_threads(a.threads, || {
+        pipeline::run(&cfg, &inputs, &a.out, a.resume, &draw)
+    })??;
+    if let Some(m) = &out.metrics {
+        print!("{}", m.table());
+    }
+    println!("extrapolated scene: {}", out.scene.display());
+    Ok(())
+}
+
+#[derive(Args)]
+pub struct CompareArgs {
+    a: PathBuf,
+    b: PathBuf,
+    /// Largest absolute difference of a float artifact that still counts as agreeing.
+    #[arg(long, default_value_t = 0.0)]
+    tolerance: f64,
+    /// Also write the full comparison as JSON.
+    #[arg(long)]
+    json: Option<PathBuf>,
+}
+
+/// Returns whether the runs agree within the tolerance.
+pub fn run_compare(a: &CompareArgs) -> Result<bool> {
+    let c = compare(&a.a, &a.b, a.tolerance)?;
+    print!("{}", c.table());
+    if let Some(p) = &a.json {
+        unseen::io::write_text(p, &serde_json::to_string_pretty(&c).expect("serializes"))?;
+    }
+    match &c.first_divergent {
+        None => {
+            println!(
+                "identical{}",
+                if c.steps.iter().all(|s| s.identical) {
+                    ""
+                } else {
+                    " within the tolerance"
+                }
+            );
+            Ok(true)
+        }
+        Some(s) => {
+            println!("first divergent step: {s}");
+            Ok(false)
+        }
+    }
+}
+
+#[derive(Args)]
+pub struct DemoArgs {
+    /// Output folder.
+    #[arg(long, default_value = "demo-out")]
+    out: PathBuf,
+    /// Bundled room.
+    #[arg(long, default_value = "lounge")]
+    scene: String,
+    /// Iterations of the original scene's training (at half resolution).
+    #[arg(long, default_value_t = 1500)]
+    iterations: u32,
+    #[command(flatten)]
+    knobs: Knobs,
+    /// Continue an interrupted demo.
+    #[arg(long)]
+    resume: bool,
+}
+
+/// The demo: train the original scene on the train half of a bundled room, extrapolate it
+/// with the quick preset into the held-out half, report.
+pub fn run_demo(a: &DemoArgs) -> Result<()> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("reference_data/scenes");
+    let scene = root.join(&a.scene);
+    if !scene.is_dir() {
+        return Err(Error::invalid(format!("no bundled scene '{}'", a.scene)).at(&root));
+    }
+    let cfg = config_from(Preset::Quick, None, &a.knobs)?;
+    let run = a.out.join("original");
+    let ply_done = unseen::train::run::latest_ply(&run).is_ok() && a.resume;
+    if !ply_done {
+        if a.out.join("extrapolate").is_dir() && !a.resume {
+            return Err(Error::invalid(
+                "the output folder holds a demo already (pass --resume or remove it)",
+            )
+            .at(&a.out));
+        }
+        let tc = TrainConfig {
+            iterations: a.iterations,
+            resolution: 2,
+            save_iterations: vec![],
+            ..TrainConfig::default()
+        };
+        eprintln!(
+            "== original scene: {} iterations on the train half of {} at 80x60",
+            a.iterations,
+            scene.display()
+        );
+        let bar = ProgressBar::new(a.iterations as u64);
+        bar.set_style(ProgressStyle::with_template("   {bar:30} {pos}/{len} {msg}").expect("t"));
+        train_run(&scene, &run, &tc, None, &mut |p| {
+            if p.iteration % 10 == 0 {
+                bar.set_position(p.iteration as u64);
+                bar.set_message(format!("PSNR {:.2} dB", p.psnr_ema));
+            }
+        })?;
+        bar.finish_and_clear();
+    }
+    let inputs: Inputs = load_inputs(
+        &run,
+        &scene.join("candidates.json"),
+        Some(&scene.join("evaluation.json")),
+        Some(&scene),
+    )?;
+    let draw = drawer();
+    let t0 = Instant::now();
+    let ex = a.out.join("extrapolate");
+    let outcome = pipeline::run(&cfg, &inputs, &ex, a.resume, &draw)?;
+    let report = pipeline::report::markdown(&cfg, &ex, &outcome, t0.elapsed().as_secs_f64())?;
+    unseen::io::write_text(&a.out.join("report.md"), &report)?;
+    if let Some(m) = &outcome.metrics {
+        print!("{}", m.table());
+    }
+    println!("demo: report in {}", a.out.join("report.md").display());
+    Ok(())
+}

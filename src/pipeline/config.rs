@@ -1,0 +1,350 @@
+//! Everything that decides an extrapolation run, in one serializable struct (SPEC.md §20.1).
+//! Each ablation of the paper is one independent switch.
+
+use crate::error::{Error, Result};
+use crate::train::densify::DensifyConfig;
+use crate::train::loss::LossWeights;
+use crate::warp::align::Space;
+
+/// Where the per-pixel weights of the generated supervision come from (paper Eq. 7).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MaskSource {
+    /// The QA-Mask of the scene being updated (the paper).
+    Qa,
+    /// `1 − alpha` of the scene being updated (the baseline of paper Table 3).
+    Opacity,
+    /// All ones (ablation "w/o QA-Mask").
+    None,
+}
+
+/// Which generators fill the slots.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct SlotNames {
+    /// `telea`, `onnx:CARD.json`, or `truth` (the labelled ground-truth generator).
+    pub inpaint: String,
+    /// `depth-fill`, `onnx:CARD.json` or `truth`.
+    pub depth: String,
+    /// `morph` or `truth` (morph between stored truths).
+    pub video: String,
+    /// `depth-fill`, `onnx:CARD.json` or `truth` (the truth video's own depths).
+    pub video_depth: String,
+    /// `identity`, `bilateral`, `onnx:CARD.json` or `truth`.
+    pub fixer: String,
+}
+
+impl Default for SlotNames {
+    fn default() -> Self {
+        SlotNames {
+            inpaint: "telea".into(),
+            depth: "depth-fill".into(),
+            video: "morph".into(),
+            video_depth: "depth-fill".into(),
+            fixer: "identity".into(),
+        }
+    }
+}
+
+impl SlotNames {
+    /// Every slot from the ground-truth generator.
+    pub fn truth() -> Self {
+        SlotNames {
+            inpaint: "truth".into(),
+            depth: "truth".into(),
+            video: "truth".into(),
+            video_depth: "truth".into(),
+            fixer: "truth".into(),
+        }
+    }
+
+    /// True when any slot is the ground-truth generator.
+    pub fn uses_truth(&self) -> bool {
+        [
+            &self.inpaint,
+            &self.depth,
+            &self.video,
+            &self.video_depth,
+            &self.fixer,
+        ]
+        .iter()
+        .any(|s| s.as_str() == "truth")
+    }
+}
+
+/// The ground-truth generator's controlled inconsistency (SPEC.md §20.6).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct Inconsistency {
+    /// Per-view colour gain drawn from `1 ± gain` per channel.
+    pub gain: f32,
+    /// Per-view colour offset drawn from `± offset` per channel.
+    pub offset: f32,
+    /// Gaussian blur standard deviation in pixels (0 = none).
+    pub blur_sigma_px: f32,
+    /// Misalignment: the image is resampled at a shift of this length (pixels) in a
+    /// per-view random direction.
+    pub shift_px: f32,
+    /// Hallucinated patches per image: squares of a random flat colour.
+    pub patches: u32,
+    /// Side of a patch as a fraction of the image's shorter side.
+    pub patch_size: f32,
+}
+
+impl Default for Inconsistency {
+    fn default() -> Self {
+        Inconsistency::NONE
+    }
+}
+
+impl Inconsistency {
+    pub const NONE: Inconsistency = Inconsistency {
+        gain: 0.0,
+        offset: 0.0,
+        blur_sigma_px: 0.0,
+        shift_px: 0.0,
+        patches: 0,
+        patch_size: 0.0,
+    };
+    pub const LOW: Inconsistency = Inconsistency {
+        gain: 0.03,
+        offset: 0.01,
+        blur_sigma_px: 0.5,
+        shift_px: 0.25,
+        patches: 0,
+        patch_size: 0.0,
+    };
+    pub const HIGH: Inconsistency = Inconsistency {
+        gain: 0.10,
+        offset: 0.03,
+        blur_sigma_px: 1.0,
+        shift_px: 1.0,
+        patches: 2,
+        patch_size: 0.1,
+    };
+
+    /// `none`, `low` or `high`.
+    pub fn by_name(name: &str) -> Result<Inconsistency> {
+        match name {
+            "none" | "0" => Ok(Self::NONE),
+            "low" => Ok(Self::LOW),
+            "high" => Ok(Self::HIGH),
+            _ => Err(Error::invalid(format!(
+                "unknown inconsistency level '{name}' (none, low or high)"
+            ))),
+        }
+    }
+
+    pub fn is_none(&self) -> bool {
+        *self == Self::NONE
+    }
+}
+
+/// One reconstruction (stage 1, stage 2, interpolation).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct ReconConfig {
+    pub iterations: u32,
+    /// Densification during the fine-tune; `None` keeps the Gaussian count.
+    pub densify: Option<DensifyConfig>,
+}
+
+impl Default for ReconConfig {
+    fn default() -> Self {
+        ReconConfig {
+            iterations: 30_000,
+            densify: Some(DensifyConfig::default()),
+        }
+    }
+}
+
+/// The whole pipeline.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct PipelineConfig {
+    /// `quick` or `paper` (informative: the fields are what counts).
+    pub preset: String,
+    /// Seed of every random choice; each stage draws from `stage_seed(seed, name)`.
+    pub seed: u64,
+    pub slots: SlotNames,
+    /// Degradation of the ground-truth generator (ignored by the other slots).
+    pub inconsistency: Inconsistency,
+
+    // ---- independent view detection (§3.2)
+    /// A candidate pixel is to be inpainted when the scene's alpha there is below this.
+    pub coverage_alpha: f32,
+    /// Inpaintings per candidate (`n` of Eq. 4).
+    pub inpaintings: u32,
+    /// Off: the same number of views, evenly spaced along the candidate list (ablation).
+    pub independent_detection: bool,
+
+    // ---- stage 1 (§3.3.1)
+    /// Training views per independent view that start a video (paper: 3).
+    pub video_sources: u32,
+    /// Frames per generated clip, both end frames included.
+    pub video_frames: u32,
+    /// Alignment space of estimated depth (Eq. 2, 5; SPEC.md §20.3): `None` = the
+    /// estimator's own kind (depth maps in depth, disparity maps in disparity).
+    pub align_space: Option<Space>,
+    pub ransac_threshold: f64,
+    pub ransac_iterations: u32,
+    /// Every `k`-th pixel (in x and y) of an inpainted region becomes a new point.
+    pub init_stride: u32,
+    /// DIBR propagation of inpainted independent views to the dependent views (ablation).
+    pub propagation: bool,
+
+    // ---- losses (Eq. 7)
+    pub mask_source: MaskSource,
+    /// λ1, λ2, λ3 of Eq. 7 (the depth weight is used only with `depth_supervision`).
+    pub loss: LossWeights,
+    pub depth_supervision: bool,
+    /// QA-Mask fine-tune (§3.4) of the scene each reconstruction starts from.
+    pub qa_sh_degree: u32,
+    pub qa_iterations: u32,
+
+    // ---- reconstructions
+    pub stage1: ReconConfig,
+    pub stage2: ReconConfig,
+    /// Interpolation by video reuse and the fixer (§3.3.3); off skips the stage.
+    pub interpolation: bool,
+    pub interpolate: ReconConfig,
+}
+
+impl Default for PipelineConfig {
+    fn default() -> Self {
+        PipelineConfig::paper()
+    }
+}
+
+impl PipelineConfig {
+    /// The paper's settings (§4 "Implementation details"): 30 000 iterations per stage,
+    /// QA-Mask SH 5 with 20 000 iterations, λ = 0.7 / 0.2 / 0.1.
+    pub fn paper() -> Self {
+        PipelineConfig {
+            preset: "paper".into(),
+            seed: 0,
+            slots: SlotNames::default(),
+            inconsistency: Inconsistency::NONE,
+            coverage_alpha: 0.5,
+            inpaintings: 3,
+            independent_detection: true,
+            video_sources: 3,
+            video_frames: 16,
+            align_space: None,
+            ransac_threshold: 0.05,
+            ransac_iterations: 1000,
+            init_stride: 2,
+            propagation: true,
+            mask_source: MaskSource::Qa,
+            loss: LossWeights::PAPER,
+            depth_supervision: true,
+            qa_sh_degree: 5,
+            qa_iterations: 20_000,
+            stage1: ReconConfig::default(),
+            stage2: ReconConfig::default(),
+            interpolation: true,
+            interpolate: ReconConfig::default(),
+        }
+    }
+
+    /// The demo's settings: the whole pipeline on a bundled room in minutes on 2 cores.
+    pub fn quick() -> Self {
+        let recon = |iterations| ReconConfig {
+            iterations,
+            densify: Some(DensifyConfig {
+                from_iter: 100,
+                interval: 100,
+                until_iter: iterations.saturating_sub(100),
+                opacity_reset_interval: 0,
+                ..DensifyConfig::default()
+            }),
+        };
+        PipelineConfig {
+            preset: "quick".into(),
+            inpaintings: 1,
+            video_frames: 5,
+            qa_iterations: 300,
+            stage1: recon(600),
+            stage2: recon(600),
+            interpolate: recon(400),
+            ..PipelineConfig::paper()
+        }
+    }
+
+    /// `quick` or `paper`.
+    pub fn preset(name: &str) -> Result<Self> {
+        match name {
+            "quick" => Ok(Self::quick()),
+            "paper" => Ok(Self::paper()),
+            _ => Err(Error::invalid(format!(
+                "unknown preset '{name}' (quick or paper)"
+            ))),
+        }
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: String| Err(Error::invalid(m));
+        if !(self.coverage_alpha > 0.0 && self.coverage_alpha <= 1.0) {
+            return bad(format!(
+                "coverage_alpha must be in (0, 1], got {}",
+                self.coverage_alpha
+            ));
+        }
+        if self.inpaintings == 0 || self.video_sources == 0 {
+            return bad("inpaintings and video_sources must be at least 1".into());
+        }
+        if self.video_frames < 2 {
+            return bad(format!(
+                "video_frames must be at least 2 (the end frames), got {}",
+                self.video_frames
+            ));
+        }
+        if self.init_stride == 0 {
+            return bad("init_stride must be at least 1".into());
+        }
+        if !(self.ransac_threshold > 0.0 && self.ransac_threshold.is_finite()) {
+            return bad("ransac_threshold must be positive".into());
+        }
+        if self.qa_sh_degree == 0 || self.qa_sh_degree > crate::math::sh::MAX_SH_DEGREE {
+            return bad(format!(
+                "qa_sh_degree must be 1..=5, got {}",
+                self.qa_sh_degree
+            ));
+        }
+        for (n, v) in [
+            ("l1", self.loss.l1),
+            ("l2", self.loss.l2),
+            ("dssim", self.loss.dssim),
+            ("depth", self.loss.depth),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return bad(format!("loss weight {n} = {v} must be finite and >= 0"));
+            }
+        }
+        let i = &self.inconsistency;
+        if ![i.gain, i.offset, i.blur_sigma_px, i.shift_px, i.patch_size]
+            .iter()
+            .all(|v| v.is_finite() && *v >= 0.0)
+            || i.patch_size > 1.0
+            || i.blur_sigma_px > 8.0
+        {
+            return bad(
+                "inconsistency values must be finite, >= 0, blur <= 8 px, patch_size <= 1".into(),
+            );
+        }
+        Ok(())
+    }
+
+    /// The loss of every reconstruction: Eq. 7's weights, the depth term only with depth
+    /// supervision.
+    pub fn recon_loss(&self) -> LossWeights {
+        LossWeights {
+            depth: if self.depth_supervision {
+                self.loss.depth
+            } else {
+                0.0
+            },
+            ..self.loss
+        }
+    }
+}

@@ -1,0 +1,338 @@
+//! Evaluation built into the pipeline (SPEC.md §20.7): on the evaluation poses (never given
+//! to any stage), PSNR and SSIM of each stage's scene on *existing* pixels (the truth's
+//! surface point is seen by some training camera) and on *extrapolated* pixels (the
+//! rest), and PSNR / SSIM on the in-distribution test views of the training half (did the
+//! original scene degrade?).
+
+use super::rundir::{RunDir, StepDone};
+use super::{Event, Inputs, load_mask, read_json, save_mask, stem};
+use crate::camera::Camera;
+use crate::error::Result;
+use crate::gaussian::Gaussians;
+use crate::io::image::{ImageF32, write_png};
+use crate::raster::{RenderOptions, render};
+use crate::train::ssim::ssim_map;
+use glam::DVec3;
+
+/// Relative depth band of the visibility test: a training camera sees a surface point when
+/// its own depth at the point's pixel is within this fraction of the point's depth.
+pub const VISIBILITY_DEPTH_TOLERANCE: f64 = 0.02;
+
+/// NaN (a class with no pixel) as JSON `null`, and back.
+mod nan_null {
+    use serde::{Deserialize, Deserializer, Serializer};
+    pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+        if v.is_finite() {
+            s.serialize_f64(*v)
+        } else {
+            s.serialize_none()
+        }
+    }
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+    }
+}
+
+/// Metrics of one scene (`null` in JSON where a class has no pixel).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Row {
+    pub scene: String,
+    #[serde(with = "nan_null")]
+    pub psnr_all: f64,
+    #[serde(with = "nan_null")]
+    pub psnr_existing: f64,
+    #[serde(with = "nan_null")]
+    pub psnr_extrapolated: f64,
+    #[serde(with = "nan_null")]
+    pub ssim_all: f64,
+    #[serde(with = "nan_null")]
+    pub ssim_existing: f64,
+    #[serde(with = "nan_null")]
+    pub ssim_extrapolated: f64,
+    /// Mean over the training half's test views.
+    #[serde(with = "nan_null")]
+    pub psnr_train_half: f64,
+    #[serde(with = "nan_null")]
+    pub ssim_train_half: f64,
+    pub gaussians: usize,
+}
+
+/// The metric table, one row per stage.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Summary {
+    pub evaluation_views: usize,
+    pub existing_fraction: f64,
+    pub rows: Vec<Row>,
+}
+
+impl Summary {
+    pub fn table(&self) -> String {
+        let mut s = String::from(
+            "| scene | PSNR existing | PSNR extrapolated | PSNR all | SSIM existing | SSIM extrapolated | train-half PSNR | Gaussians |\n|---|---|---|---|---|---|---|---|\n",
+        );
+        for r in &self.rows {
+            s += &format!(
+                "| {} | {:.2} | {:.2} | {:.2} | {:.4} | {:.4} | {:.2} | {} |\n",
+                r.scene,
+                r.psnr_existing,
+                r.psnr_extrapolated,
+                r.psnr_all,
+                r.ssim_existing,
+                r.ssim_extrapolated,
+                r.psnr_train_half,
+                r.gaussians
+            );
+        }
+        s
+    }
+
+    pub fn row(&self, scene: &str) -> Option<&Row> {
+        self.rows.iter().find(|r| r.scene == scene)
+    }
+}
+
+/// Pixels of `cam` (with truth depth `depth`) whose surface point some training camera
+/// sees: the point projects inside its image and its own depth there agrees within
+/// [`VISIBILITY_DEPTH_TOLERANCE`]. Pixels without truth depth are not existing.
+pub fn existing_pixels(cam: &Camera, depth: &[f32], train: &[(&Camera, &[f32])]) -> Vec<bool> {
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    let r = cam.world_from_camera_rotation;
+    let mut out = vec![false; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let z = depth[y * w + x] as f64;
+            if !(z.is_finite() && z > 0.0) {
+                continue;
+            }
+            let pc = DVec3::new(
+                ((x as f64 + 0.5) - cam.cx) / cam.fx * z,
+                ((y as f64 + 0.5) - cam.cy) / cam.fy * z,
+                z,
+            );
+            let pw = r * pc + cam.center;
+            out[y * w + x] = train.iter().any(|(t, td)| {
+                let q = t.camera_from_world_point(pw);
+                if q.z <= 0.0 {
+                    return false;
+                }
+                let u = t.fx * q.x / q.z + t.cx;
+                let v = t.fy * q.y / q.z + t.cy;
+                if !(u >= 0.0 && v >= 0.0 && u < t.width as f64 && v < t.height as f64) {
+                    return false;
+                }
+                let d = td[v as usize * t.width as usize + u as usize] as f64;
+                d > 0.0 && (d - q.z).abs() <= VISIBILITY_DEPTH_TOLERANCE * q.z
+            });
+        }
+    }
+    out
+}
+
+/// PSNR over the pixels where `sel` holds (all channels); NaN when none.
+pub fn psnr_on(x: &[f32], y: &[f32], sel: &[bool]) -> f64 {
+    let (mut s, mut n) = (0f64, 0usize);
+    for (p, &m) in sel.iter().enumerate() {
+        if m {
+            for c in 0..3 {
+                let d = (x[p * 3 + c].clamp(0.0, 1.0) - y[p * 3 + c].clamp(0.0, 1.0)) as f64;
+                s += d * d;
+            }
+            n += 3;
+        }
+    }
+    if n == 0 {
+        return f64::NAN;
+    }
+    -10.0 * (s / n as f64).log10()
+}
+
+fn mean_on(map: &[f64], sel: &[bool]) -> f64 {
+    let (mut s, mut n) = (0f64, 0usize);
+    for (v, &m) in map.iter().zip(sel) {
+        if m {
+            s += v;
+            n += 1;
+        }
+    }
+    if n == 0 { f64::NAN } else { s / n as f64 }
+}
+
+/// Evaluate `scenes` (`None` = the original scene; else a reconstruction step).
+pub fn run(
+    inputs: &Inputs,
+    scenes: &[(String, Option<StepDone>)],
+    dir: &RunDir,
+    on_event: &(dyn Fn(Event) + Sync),
+) -> Result<(Summary, Vec<StepDone>)> {
+    let data = &inputs.data;
+    let names: Vec<&str> = inputs
+        .evaluation
+        .iter()
+        .map(|&i| data.views[i].camera.name.as_str())
+        .collect();
+    let key = serde_json::json!({
+        "evaluation": names,
+        "train": data.train.iter().map(|&i| &data.views[i].camera.name).collect::<Vec<_>>(),
+        "tolerance": VISIBILITY_DEPTH_TOLERANCE,
+    });
+    let masks = dir.step("eval/masks", key, on_event, |w| {
+        let train: Vec<(&Camera, &[f32])> = data
+            .train
+            .iter()
+            .filter_map(|&i| {
+                let v = &data.views[i];
+                v.depth.as_deref().map(|d| (&v.camera, d))
+            })
+            .collect();
+        for &i in &inputs.evaluation {
+            let v = &data.views[i];
+            let d = v.depth.as_deref().expect("checked by load_inputs");
+            let m = existing_pixels(&v.camera, d, &train);
+            save_mask(
+                w,
+                &stem(&v.camera.name),
+                &m,
+                v.camera.width as usize,
+                v.camera.height as usize,
+            )?;
+        }
+        Ok(())
+    })?;
+    let existing: Vec<Vec<bool>> = inputs
+        .evaluation
+        .iter()
+        .map(|&i| load_mask(&masks.dir, &stem(&data.views[i].camera.name)))
+        .collect::<Result<_>>()?;
+    let mut steps = vec![masks.clone()];
+    let mut rows = Vec::new();
+    for (name, step) in scenes {
+        let (scene, digest): (Gaussians, String) = match step {
+            None => (inputs.scene.clone(), inputs.scene_sha256.clone()),
+            Some(s) => (super::recon::scene_of(s)?, s.digest.clone()),
+        };
+        let key = serde_json::json!({"scene": digest, "masks": masks.digest});
+        let st = dir.step(&format!("eval/{name}"), key, on_event, |w| {
+            let row = score(inputs, &scene, name, &existing, w)?;
+            w.json("metrics.json", &row)?;
+            Ok(())
+        })?;
+        rows.push(read_json::<Row>(&st.dir.join("metrics.json"))?);
+        steps.push(st);
+    }
+    let total: usize = existing.iter().map(|m| m.len()).sum();
+    let ex: usize = existing
+        .iter()
+        .map(|m| m.iter().filter(|&&b| b).count())
+        .sum();
+    let summary = Summary {
+        evaluation_views: inputs.evaluation.len(),
+        existing_fraction: ex as f64 / total.max(1) as f64,
+        rows,
+    };
+    let text = serde_json::to_string_pretty(&summary).expect("serializes") + "\n";
+    crate::io::write_text(&dir.root.join("eval").join("summary.json"), &text)?;
+    Ok((summary, steps))
+}
+
+fn score(
+    inputs: &Inputs,
+    scene: &Gaussians,
+    name: &str,
+    existing: &[Vec<bool>],
+    w: &mut super::rundir::StepWriter,
+) -> Result<Row> {
+    let data = &inputs.data;
+    let opts = RenderOptions {
+        background: inputs.background,
+        ..RenderOptions::default()
+    };
+    // Pool squared errors and SSIM values over all evaluation pixels of each class.
+    let (mut se, mut n) = ([0f64; 3], [0usize; 3]);
+    let (mut ss, mut sn) = ([0f64; 3], [0usize; 3]);
+    for (k, &i) in inputs.evaluation.iter().enumerate() {
+        let v = &data.views[i];
+        let (wd, ht) = (v.image.width, v.image.height);
+        let rgb: Vec<f32> = render(scene, &v.camera, &opts)?
+            .rgb
+            .expect("rgb")
+            .iter()
+            .map(|x| x.clamp(0.0, 1.0))
+            .collect();
+        let map = ssim_map(&rgb, &v.image.data, wd, ht, 3);
+        for p in 0..wd * ht {
+            let class = if existing[k][p] { 1 } else { 2 };
+            for cls in [0, class] {
+                for c in 0..3 {
+                    let d = (rgb[p * 3 + c] - v.image.data[p * 3 + c].clamp(0.0, 1.0)) as f64;
+                    se[cls] += d * d;
+                }
+                n[cls] += 3;
+                ss[cls] += map[p];
+                sn[cls] += 1;
+            }
+        }
+        if k < 4 {
+            let mut both = vec![0f32; 2 * wd * ht * 3];
+            for y in 0..ht {
+                let row = &mut both[y * 2 * wd * 3..(y + 1) * 2 * wd * 3];
+                row[..wd * 3].copy_from_slice(&rgb[y * wd * 3..(y + 1) * wd * 3]);
+                row[wd * 3..].copy_from_slice(&v.image.data[y * wd * 3..(y + 1) * wd * 3]);
+            }
+            let img = ImageF32::new(2 * wd, ht, 3, both)?;
+            w.put(&format!("{}.png", stem(&v.camera.name)), |p| {
+                write_png(p, &img)
+            })?;
+        }
+    }
+    let psnr = |k: usize| {
+        if n[k] == 0 {
+            f64::NAN
+        } else {
+            -10.0 * (se[k] / n[k] as f64).log10()
+        }
+    };
+    let ssim = |k: usize| {
+        if sn[k] == 0 {
+            f64::NAN
+        } else {
+            ss[k] / sn[k] as f64
+        }
+    };
+    let (mut tp, mut ts) = (0f64, 0f64);
+    for &i in &data.test {
+        let v = &data.views[i];
+        let rgb: Vec<f32> = render(scene, &v.camera, &opts)?
+            .rgb
+            .expect("rgb")
+            .iter()
+            .map(|x| x.clamp(0.0, 1.0))
+            .collect();
+        let all = vec![true; v.image.width * v.image.height];
+        tp += psnr_on(&rgb, &v.image.data, &all);
+        ts += mean_on(
+            &ssim_map(&rgb, &v.image.data, v.image.width, v.image.height, 3),
+            &all,
+        );
+    }
+    let nt = data.test.len().max(1) as f64;
+    Ok(Row {
+        scene: name.into(),
+        psnr_all: psnr(0),
+        psnr_existing: psnr(1),
+        psnr_extrapolated: psnr(2),
+        ssim_all: ssim(0),
+        ssim_existing: ssim(1),
+        ssim_extrapolated: ssim(2),
+        psnr_train_half: if data.test.is_empty() {
+            f64::NAN
+        } else {
+            tp / nt
+        },
+        ssim_train_half: if data.test.is_empty() {
+            f64::NAN
+        } else {
+            ts / nt
+        },
+        gaussians: scene.len(),
+    })
+}

@@ -1,0 +1,454 @@
+//! Slot wiring (SPEC.md §20.6): the pipeline asks for inpaintings, depths, videos, video
+//! depths and fixed renders *at a camera*, and each slot answers either with a model of
+//! [`crate::models`] (classical default or ONNX card) or with the labelled **ground-truth
+//! generator**.
+//!
+//! The ground-truth generator is an upper bound and the instrument of the audit, never a
+//! default: it holds the truth of the *candidate* views only (the evaluation poses never
+//! reach it) and of the trajectory cameras interpolated between two candidates (the `morph`
+//! of their truths); any other pose is an error. Its outputs can be degraded by a seeded
+//! [`Inconsistency`] — colour gain and offset, blur, sub-pixel misalignment, hallucinated
+//! patches — the controlled variable of the paper's mechanism claims.
+
+use super::config::{Inconsistency, SlotNames};
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::io::image::ImageF32;
+use crate::math::fastexp::exp;
+use crate::models::morph::Morph;
+use crate::models::{
+    self, ArtifactFixer, DepthEstimator, DepthHint, DepthKind, DepthMap, Inpainter, Keyframe,
+    Video, VideoDepthEstimator, VideoGenerator,
+};
+use crate::scene::Uniform;
+use crate::train::trainer::stage_seed;
+use std::collections::BTreeMap;
+
+/// Truth at one pose: image and camera-z depth.
+#[derive(Clone, Debug)]
+pub struct Truth {
+    pub camera: Camera,
+    pub image: ImageF32,
+    pub depth: Vec<f32>,
+}
+
+/// The ground-truth generator's store.
+#[derive(Clone, Debug)]
+pub struct GroundTruth {
+    poses: BTreeMap<String, Truth>,
+    inconsistency: Inconsistency,
+    seed: u64,
+}
+
+impl GroundTruth {
+    /// The truth of the candidate views (nothing else may be given).
+    pub fn new(candidates: Vec<Truth>, inconsistency: Inconsistency, seed: u64) -> Self {
+        GroundTruth {
+            poses: candidates
+                .into_iter()
+                .map(|t| (t.camera.name.clone(), t))
+                .collect(),
+            inconsistency,
+            seed,
+        }
+    }
+
+    /// Add the truth of `cam` (between candidates `a` and `b`, at the middle of the
+    /// trajectory gap): the middle frame of the `morph` of their truths.
+    pub fn add_between(&mut self, cam: &Camera, a: &str, b: &str) -> Result<()> {
+        let (ta, tb) = (self.get(a)?, self.get(b)?);
+        let v = Morph::default().generate(
+            Keyframe {
+                image: &ta.image,
+                camera: &ta.camera,
+                depth: Some(&ta.depth),
+            },
+            Keyframe {
+                image: &tb.image,
+                camera: &tb.camera,
+                depth: Some(&tb.depth),
+            },
+            3,
+        )?;
+        let depth = v.depths.expect("morph gives depths").swap_remove(1);
+        let t = Truth {
+            camera: cam.clone(),
+            image: v.frames[1].clone(),
+            depth,
+        };
+        self.poses.insert(cam.name.clone(), t);
+        Ok(())
+    }
+
+    pub fn get(&self, name: &str) -> Result<&Truth> {
+        self.poses.get(name).ok_or_else(|| {
+            Error::invalid(format!(
+                "the ground-truth generator has no truth at '{name}' (only candidate poses and the trajectory cameras between them)"
+            ))
+        })
+    }
+
+    /// `img` degraded by the inconsistency, seeded by `key`.
+    pub fn degrade(&self, img: &ImageF32, key: &str) -> ImageF32 {
+        degrade(
+            img,
+            &self.inconsistency,
+            stage_seed(self.seed, &format!("truth:{key}")),
+        )
+    }
+}
+
+/// Apply `inc` to `img` (channels 1 or 3), deterministically from `seed`: shift
+/// (bilinear, clamped to the border), blur (separable Gaussian, radius ⌈3σ⌉, clamped),
+/// gain and offset per channel, then the patches; values clamped to `[0, 1]`.
+pub fn degrade(img: &ImageF32, inc: &Inconsistency, seed: u64) -> ImageF32 {
+    if inc.is_none() {
+        return img.clone();
+    }
+    let mut u = Uniform::new(seed);
+    let (w, h, c) = (img.width, img.height, img.channels);
+    let mut data = img.data.clone();
+    if inc.shift_px > 0.0 {
+        let a = u.range(0.0, std::f32::consts::TAU);
+        let (dx, dy) = (inc.shift_px * a.cos(), inc.shift_px * a.sin());
+        let src = data.clone();
+        let at = |x: isize, y: isize, ch: usize| {
+            let xx = x.clamp(0, w as isize - 1) as usize;
+            let yy = y.clamp(0, h as isize - 1) as usize;
+            src[(yy * w + xx) * c + ch]
+        };
+        for y in 0..h {
+            for x in 0..w {
+                let (sx, sy) = (x as f32 + dx, y as f32 + dy);
+                let (x0, y0) = (sx.floor(), sy.floor());
+                let (fx, fy) = (sx - x0, sy - y0);
+                let (x0, y0) = (x0 as isize, y0 as isize);
+                for ch in 0..c {
+                    let top = at(x0, y0, ch) * (1.0 - fx) + at(x0 + 1, y0, ch) * fx;
+                    let bot = at(x0, y0 + 1, ch) * (1.0 - fx) + at(x0 + 1, y0 + 1, ch) * fx;
+                    data[(y * w + x) * c + ch] = top * (1.0 - fy) + bot * fy;
+                }
+            }
+        }
+    }
+    if inc.blur_sigma_px > 0.0 {
+        let s = inc.blur_sigma_px;
+        let r = (3.0 * s).ceil() as isize;
+        let k: Vec<f32> = (-r..=r)
+            .map(|i| exp(-((i * i) as f32) / (2.0 * s * s)))
+            .collect();
+        let sum: f32 = k.iter().sum();
+        let k: Vec<f32> = k.iter().map(|v| v / sum).collect();
+        for horizontal in [true, false] {
+            let src = data.clone();
+            for y in 0..h as isize {
+                for x in 0..w as isize {
+                    for ch in 0..c {
+                        let mut acc = 0f32;
+                        for (t, &kv) in k.iter().enumerate() {
+                            let o = t as isize - r;
+                            let (xx, yy) = if horizontal {
+                                ((x + o).clamp(0, w as isize - 1), y)
+                            } else {
+                                (x, (y + o).clamp(0, h as isize - 1))
+                            };
+                            acc += kv * src[(yy as usize * w + xx as usize) * c + ch];
+                        }
+                        data[(y as usize * w + x as usize) * c + ch] = acc;
+                    }
+                }
+            }
+        }
+    }
+    let gains: Vec<f32> = (0..c).map(|_| 1.0 + u.range(-inc.gain, inc.gain)).collect();
+    let offsets: Vec<f32> = (0..c).map(|_| u.range(-inc.offset, inc.offset)).collect();
+    for px in data.chunks_exact_mut(c) {
+        for ch in 0..c {
+            px[ch] = px[ch] * gains[ch] + offsets[ch];
+        }
+    }
+    let side = ((w.min(h) as f32 * inc.patch_size).round() as usize).max(1);
+    for _ in 0..inc.patches {
+        let x0 = u.below((w.saturating_sub(side) + 1) as u32) as usize;
+        let y0 = u.below((h.saturating_sub(side) + 1) as u32) as usize;
+        let colour: Vec<f32> = (0..c).map(|_| u.unit()).collect();
+        for y in y0..(y0 + side).min(h) {
+            for x in x0..(x0 + side).min(w) {
+                data[(y * w + x) * c..(y * w + x + 1) * c].copy_from_slice(&colour);
+            }
+        }
+    }
+    for v in &mut data {
+        *v = v.clamp(0.0, 1.0);
+    }
+    ImageF32 {
+        width: w,
+        height: h,
+        channels: c,
+        data,
+    }
+}
+
+enum Slot<T: ?Sized> {
+    Model(Box<T>),
+    Truth,
+}
+
+/// The five slots of the pipeline.
+pub struct Generators {
+    inpaint: Slot<dyn Inpainter>,
+    depth: Slot<dyn DepthEstimator>,
+    video: Slot<dyn VideoGenerator>,
+    video_depth: Slot<dyn VideoDepthEstimator>,
+    fixer: Slot<dyn ArtifactFixer>,
+    pub truth: Option<GroundTruth>,
+}
+
+impl Generators {
+    /// Build the slots by name; `truth` must be given when any slot is `truth`.
+    pub fn new(names: &SlotNames, truth: Option<GroundTruth>) -> Result<Generators> {
+        if names.uses_truth() && truth.is_none() {
+            return Err(Error::invalid(
+                "the ground-truth generator needs a dataset with the candidate views' images and depths",
+            ));
+        }
+        if names.video_depth == "truth" && names.video != "truth" {
+            return Err(Error::invalid(
+                "video_depth 'truth' is the truth video's own depth: it needs video 'truth'",
+            ));
+        }
+        let is_truth = |s: &str| s == "truth";
+        Ok(Generators {
+            inpaint: if is_truth(&names.inpaint) {
+                Slot::Truth
+            } else {
+                Slot::Model(models::inpainter(&names.inpaint)?)
+            },
+            depth: if is_truth(&names.depth) {
+                Slot::Truth
+            } else {
+                Slot::Model(models::depth_estimator(&names.depth)?)
+            },
+            video: if is_truth(&names.video) {
+                Slot::Truth
+            } else {
+                Slot::Model(models::video_generator(&names.video)?)
+            },
+            video_depth: if is_truth(&names.video_depth) {
+                Slot::Truth
+            } else {
+                Slot::Model(models::video_depth_estimator(&names.video_depth)?)
+            },
+            fixer: if is_truth(&names.fixer) {
+                Slot::Truth
+            } else {
+                Slot::Model(models::artifact_fixer(&names.fixer)?)
+            },
+            truth,
+        })
+    }
+
+    fn gt(&self) -> &GroundTruth {
+        self.truth.as_ref().expect("checked in new")
+    }
+
+    /// Inpaint `mask` of `image` seen from `cam`; `key` names this inpainting (its seed).
+    pub fn inpaint(
+        &self,
+        cam: &Camera,
+        image: &ImageF32,
+        mask: &[bool],
+        key: &str,
+    ) -> Result<ImageF32> {
+        let out = match &self.inpaint {
+            Slot::Model(m) => m.inpaint(image, mask)?,
+            Slot::Truth => {
+                let t = self.gt().get(&cam.name)?;
+                let g = self.gt().degrade(&t.image, key);
+                let mut out = image.clone();
+                for (p, &m) in mask.iter().enumerate() {
+                    if m {
+                        let c = out.channels;
+                        out.data[p * c..(p + 1) * c].copy_from_slice(&g.data[p * c..(p + 1) * c]);
+                    }
+                }
+                out
+            }
+        };
+        check_image(&out, image, "inpainting", &cam.name)?;
+        Ok(out)
+    }
+
+    /// Depth of `image` at `cam` (`hint`: the known metric depth).
+    pub fn depth(&self, cam: &Camera, image: &ImageF32, hint: DepthHint) -> Result<DepthMap> {
+        let d = match &self.depth {
+            Slot::Model(m) => m.estimate(image, Some(hint))?,
+            Slot::Truth => DepthMap {
+                width: image.width,
+                height: image.height,
+                kind: DepthKind::Depth,
+                values: self.gt().get(&cam.name)?.depth.clone(),
+            },
+        };
+        check_depth(&d, image, &cam.name)?;
+        Ok(d)
+    }
+
+    /// A clip of `n` frames from `start` to `end`.
+    pub fn video(&self, start: Keyframe, end: Keyframe, n: usize) -> Result<Video> {
+        let v = match &self.video {
+            Slot::Model(m) => m.generate(start, end, n)?,
+            Slot::Truth => {
+                // Start: a training view or a trajectory keyframe; its truth is its image
+                // when it is a training view, the stored truth otherwise.
+                let gt = self.gt();
+                let key = |k: &Keyframe| -> Result<(ImageF32, Vec<f32>)> {
+                    match gt.get(&k.camera.name) {
+                        Ok(t) => Ok((t.image.clone(), t.depth.clone())),
+                        Err(e) => match k.depth {
+                            Some(d) => Ok((k.image.clone(), d.to_vec())),
+                            None => Err(e),
+                        },
+                    }
+                };
+                let (ia, da) = key(&start)?;
+                let (ib, db) = key(&end)?;
+                let mut v = Morph::default().generate(
+                    Keyframe {
+                        image: &ia,
+                        camera: start.camera,
+                        depth: Some(&da),
+                    },
+                    Keyframe {
+                        image: &ib,
+                        camera: end.camera,
+                        depth: Some(&db),
+                    },
+                    n,
+                )?;
+                let last = v.frames.len() - 1;
+                for (k, f) in v.frames.iter_mut().enumerate() {
+                    if k == 0 {
+                        *f = start.image.clone();
+                    } else if k == last {
+                        *f = end.image.clone();
+                    } else {
+                        *f = gt.degrade(f, &v.cameras[k].name);
+                    }
+                }
+                v
+            }
+        };
+        if v.frames.len() != n || v.cameras.len() != n {
+            return Err(Error::invalid(format!(
+                "the video slot returned {} frames for {n}",
+                v.frames.len()
+            )));
+        }
+        for f in &v.frames {
+            check_image(f, start.image, "video frame", &start.camera.name)?;
+        }
+        Ok(v)
+    }
+
+    /// Per-frame depth of a clip (`hints`: the known metric depth of each frame).
+    pub fn video_depth(&self, video: &Video, hints: &[DepthHint]) -> Result<Vec<DepthMap>> {
+        let maps = match &self.video_depth {
+            Slot::Model(m) => m.estimate(&video.frames, Some(hints))?,
+            Slot::Truth => {
+                let depths = video.depths.as_ref().ok_or_else(|| {
+                    Error::invalid("the truth video has no depths (video slot is not 'truth')")
+                })?;
+                depths
+                    .iter()
+                    .zip(&video.frames)
+                    .map(|(d, f)| DepthMap {
+                        width: f.width,
+                        height: f.height,
+                        kind: DepthKind::Depth,
+                        values: d.clone(),
+                    })
+                    .collect()
+            }
+        };
+        if maps.len() != video.frames.len() {
+            return Err(Error::invalid(format!(
+                "the video depth slot returned {} maps for {} frames",
+                maps.len(),
+                video.frames.len()
+            )));
+        }
+        for (m, f) in maps.iter().zip(&video.frames) {
+            check_depth(m, f, "video frame")?;
+        }
+        Ok(maps)
+    }
+
+    /// The fixer's output for a render at `cam`; `truth_between`: the two trajectory
+    /// keyframes the pose lies between and its frame `k` of `n` (for the truth slot).
+    pub fn fix(
+        &self,
+        cam: &Camera,
+        render: &ImageF32,
+        between: Option<(&Camera, &Camera, usize, usize)>,
+    ) -> Result<ImageF32> {
+        let out = match &self.fixer {
+            Slot::Model(m) => m.fix(render, None)?,
+            Slot::Truth => {
+                let gt = self.gt();
+                let img = match gt.get(&cam.name) {
+                    Ok(t) => t.image.clone(),
+                    Err(e) => {
+                        let Some((a, b, k, n)) = between else {
+                            return Err(e);
+                        };
+                        let (ta, tb) = (gt.get(&a.name)?, gt.get(&b.name)?);
+                        let v = Morph::default().generate(
+                            Keyframe {
+                                image: &ta.image,
+                                camera: &ta.camera,
+                                depth: Some(&ta.depth),
+                            },
+                            Keyframe {
+                                image: &tb.image,
+                                camera: &tb.camera,
+                                depth: Some(&tb.depth),
+                            },
+                            n,
+                        )?;
+                        v.frames[k].clone()
+                    }
+                };
+                gt.degrade(&img, &format!("fix:{}", cam.name))
+            }
+        };
+        check_image(&out, render, "fixer output", &cam.name)?;
+        Ok(out)
+    }
+}
+
+/// A slot's image must have the input's size and finite values.
+fn check_image(out: &ImageF32, like: &ImageF32, what: &str, view: &str) -> Result<()> {
+    if (out.width, out.height, out.channels) != (like.width, like.height, like.channels) {
+        return Err(Error::invalid(format!(
+            "view '{view}': the {what} is {}x{}x{} but {}x{}x{} was expected",
+            out.width, out.height, out.channels, like.width, like.height, like.channels
+        )));
+    }
+    if out.data.iter().any(|v| !v.is_finite()) {
+        return Err(Error::invalid(format!(
+            "view '{view}': the {what} holds NaN or infinite values"
+        )));
+    }
+    Ok(())
+}
+
+fn check_depth(d: &DepthMap, like: &ImageF32, view: &str) -> Result<()> {
+    if (d.width, d.height) != (like.width, like.height) || d.values.len() != d.width * d.height {
+        return Err(Error::invalid(format!(
+            "view '{view}': the depth slot returned a {}x{} map for a {}x{} image",
+            d.width, d.height, like.width, like.height
+        )));
+    }
+    Ok(())
+}

@@ -1,0 +1,156 @@
+//! Interpolation by video reuse (paper §3.3.3, SPEC.md §20.5).
+//!
+//! Step `interpolate/fixer`: render the stage-2 scene at every trajectory keyframe and at
+//! every intermediate pose of the stage-2 clips and pass each render through the fixer
+//! slot. Step `interpolate/recon`: the stage-2 scene fine-tuned on the original views,
+//! the trajectory keyframes, the intermediate frames of every clip of both stages (the
+//! reused videos) and the fixer outputs, weighted by the mask of the stage-2 scene.
+//!
+//! Deviation: the paper adds the fixer outputs "on the fly" during the final training; we
+//! fix the renders of the stage-2 scene once, before it (SPEC.md §20.5 says why).
+
+use super::generators::Generators;
+use super::recon::{self, Supervision, reconstruct};
+use super::rundir::{RunDir, StepDone};
+use super::stage1::{Stage1, independent_supervision, load_video, video_supervision};
+use super::stage2::{Stage2, keyframes, neighbour_pairs};
+use super::views::{Views, render_rgba};
+use super::{Event, Inputs, PipelineConfig, load_image, save_image, stem};
+use crate::error::Result;
+
+pub struct Interpolation {
+    pub steps: Vec<StepDone>,
+    pub fixer: StepDone,
+    pub recon: StepDone,
+}
+
+#[allow(clippy::too_many_arguments)]
+pub fn run(
+    config: &PipelineConfig,
+    inputs: &Inputs,
+    gens: &Generators,
+    views: &Views,
+    s1: &Stage1,
+    s2: &Stage2,
+    dir: &RunDir,
+    on_event: &(dyn Fn(Event) + Sync),
+) -> Result<Interpolation> {
+    let mut steps = Vec::new();
+    let s2_scene = recon::scene_of(&s2.recon)?;
+    let keys = keyframes(views, s1, s2.dependent.as_ref())?;
+    let pairs = neighbour_pairs(keys.len());
+    let fkey = serde_json::json!({
+        "stage2": s2.recon.digest,
+        "videos": s2.videos.digest,
+        "slots": config.slots,
+        "inconsistency": config.inconsistency,
+        "seed": config.seed,
+    });
+    let fixer = dir.step("interpolate/fixer", fkey, on_event, |w| {
+        let mut names = Vec::new();
+        for k in &keys {
+            let (rgb, _, _) = render_rgba(&s2_scene, &k.camera, inputs.background)?;
+            let fixed = gens.fix(&k.camera, &rgb, None)?;
+            save_image(w, &format!("{}/render", stem(&k.camera.name)), &rgb)?;
+            save_image(w, &format!("{}/fixed", stem(&k.camera.name)), &fixed)?;
+            names.push(k.camera.name.clone());
+        }
+        for (p, &(a, b)) in pairs.iter().enumerate() {
+            let v = load_video(&s2.videos.dir.join(format!("video_{p}")))?;
+            let n = v.cameras.len();
+            for j in 1..n.saturating_sub(1) {
+                let cam = &v.cameras[j];
+                let (rgb, _, _) = render_rgba(&s2_scene, cam, inputs.background)?;
+                let fixed = gens.fix(cam, &rgb, Some((&keys[a].camera, &keys[b].camera, j, n)))?;
+                save_image(w, &format!("{}/render", stem(&cam.name)), &rgb)?;
+                save_image(w, &format!("{}/fixed", stem(&cam.name)), &fixed)?;
+                names.push(cam.name.clone());
+            }
+        }
+        let cams: Vec<crate::camera::Camera> = keys
+            .iter()
+            .map(|k| k.camera.clone())
+            .chain(pairs.iter().enumerate().flat_map(|(p, _)| {
+                load_video(&s2.videos.dir.join(format!("video_{p}")))
+                    .map(|v| {
+                        let n = v.cameras.len();
+                        v.cameras[1..n.saturating_sub(1)].to_vec()
+                    })
+                    .unwrap_or_default()
+            }))
+            .collect();
+        let text = crate::camera::inria::cameras_json_string(&cams);
+        w.put("cameras.json", |p| crate::io::write_text(p, &text))?;
+        Ok(())
+    })?;
+    steps.push(fixer.clone());
+    let (weights, qa) = recon::weights(
+        config,
+        inputs,
+        &s2_scene,
+        &s2.recon.digest,
+        "stage2",
+        dir,
+        on_event,
+    )?;
+    steps.extend(qa.clone());
+    let rkey = serde_json::json!({
+        "stage2": s2.recon.digest,
+        "fixer": fixer.digest,
+        "stage1_views": s1.views.iter().map(|s| &s.digest).collect::<Vec<_>>(),
+        "videos": s2.videos.digest,
+        "qa": qa.as_ref().map(|s| &s.digest),
+        "mask_source": config.mask_source,
+        "loss": config.recon_loss(),
+        "recon": config.interpolate,
+        "seed": config.seed,
+    });
+    let recon_step = dir.step("interpolate/recon", rkey, on_event, |w| {
+        let mut generated: Vec<Supervision> = Vec::new();
+        for (name, s) in views.plan.independent.iter().zip(&s1.views) {
+            // The inpainted view itself is a keyframe below; keep its clips' frames.
+            let sup = independent_supervision(views.camera(name)?, &s.dir)?;
+            generated.extend(sup.into_iter().skip(1));
+        }
+        for k in 0..pairs.len() {
+            generated.extend(video_supervision(
+                &s2.videos.dir.join(format!("video_{k}")),
+            )?);
+        }
+        for k in &keys {
+            generated.push(Supervision {
+                camera: k.camera.clone(),
+                image: k.image.clone(),
+                depth: Some(k.depth.clone()),
+                coverage: None,
+            });
+        }
+        let cams = crate::camera::inria::read_cameras_json(&fixer.dir.join("cameras.json"))?;
+        for c in cams {
+            generated.push(Supervision {
+                image: load_image(&fixer.dir.join(stem(&c.name)), "fixed")?,
+                camera: c,
+                depth: None,
+                coverage: None,
+            });
+        }
+        reconstruct(
+            config,
+            &config.interpolate,
+            inputs,
+            s2_scene.clone(),
+            &generated,
+            &weights,
+            "interpolate",
+            w,
+            on_event,
+        )?;
+        Ok(())
+    })?;
+    steps.push(recon_step.clone());
+    Ok(Interpolation {
+        steps,
+        fixer,
+        recon: recon_step,
+    })
+}

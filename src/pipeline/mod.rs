@@ -1,0 +1,428 @@
+//! The paper's system (SPEC.md §20): from a trained scene and candidate extrapolation views
+//! to an extrapolated scene, one module per stage —
+//!
+//! | stage | module | paper |
+//! |---|---|---|
+//! | independent view detection | [`views`] | §3.2 |
+//! | parallel generation on independent views, DIBR propagation, reconstruction | [`stage1`] | §3.3.1 |
+//! | residual completion on dependent views | [`stage2`] | §3.3.2 |
+//! | interpolation by video reuse and the fixer | [`interpolate`] | §3.3.3 |
+//!
+//! with [`recon`] (the QA-Mask-weighted reconstruction every stage ends with), [`evaluate`]
+//! (existing / extrapolated PSNR and SSIM on evaluation poses), [`generators`] (slots and
+//! the ground-truth generator) and [`rundir`] (the resumable, content-addressed run
+//! directory). Nothing below this module imports it. Progress arrives as [`Event`]s, so
+//! a command line only draws them.
+
+pub mod compare;
+pub mod config;
+pub mod evaluate;
+pub mod generators;
+pub mod interpolate;
+pub mod recon;
+pub mod report;
+pub mod rundir;
+pub mod stage1;
+pub mod stage2;
+pub mod views;
+
+pub use config::{Inconsistency, MaskSource, PipelineConfig, ReconConfig, SlotNames};
+
+use crate::camera::Camera;
+use crate::camera::inria::read_cameras_json;
+use crate::dataset::{Dataset, downscale_camera};
+use crate::error::{Error, Result};
+use crate::gaussian::Gaussians;
+use crate::gaussian::ply::{ply_bytes, read_ply};
+use crate::io::image::{ImageF32, read_exr, read_png, write_exr, write_png};
+use crate::io::{sha256_hex, write_atomic};
+use crate::train::run::{latest_ply, load_dataset, read_config, read_train_views};
+use generators::{Generators, GroundTruth, Truth};
+use rundir::{RunDir, StepDone, StepWriter};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// Progress of a run, for a progress display or a log.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Event {
+    /// A stage (views, stage1, stage2, interpolate, eval) begins.
+    Stage {
+        name: String,
+    },
+    StepStarted {
+        step: String,
+    },
+    StepFinished {
+        step: String,
+        seconds: f64,
+    },
+    /// Verified on disk (`--resume`).
+    StepSkipped {
+        step: String,
+    },
+    /// Iterations of a reconstruction or QA-Mask fine-tune.
+    Iterations {
+        step: String,
+        done: u32,
+        total: u32,
+        loss: f64,
+    },
+    /// A line worth showing.
+    Note(String),
+}
+
+/// What the pipeline starts from.
+pub struct Inputs {
+    /// The `unseen train` run (the original scene).
+    pub run: PathBuf,
+    pub scene: Gaussians,
+    /// sha256 of the scene's PLY bytes.
+    pub scene_sha256: String,
+    /// The run's dataset at its resolution; `train` lists the run's training views.
+    pub data: Dataset,
+    /// Candidate extrapolation cameras at the run's resolution.
+    pub candidates: Vec<Camera>,
+    /// sha256 of the candidates' cameras.json bytes.
+    pub candidates_sha256: String,
+    /// Evaluation poses (indices into `data.views`, with truth); may be empty.
+    pub evaluation: Vec<usize>,
+    pub background: [f32; 3],
+}
+
+/// Load a run, its dataset (from the run's manifest unless `dataset` is given), the
+/// candidate cameras and, optionally, the evaluation cameras (their truth must be in the
+/// dataset).
+pub fn load_inputs(
+    run: &Path,
+    candidates: &Path,
+    evaluation: Option<&Path>,
+    dataset: Option<&Path>,
+) -> Result<Inputs> {
+    let cfg = read_config(run)?;
+    let (_, ply) = latest_ply(run)?;
+    let bytes = std::fs::read(&ply).map_err(|e| Error::io(&ply, e))?;
+    let scene_sha256 = sha256_hex(&bytes);
+    let (scene, _) = read_ply(&ply)?;
+    if scene.is_empty() {
+        return Err(Error::invalid("the scene has no Gaussians").at(&ply));
+    }
+    let data_dir = match dataset {
+        Some(d) => d.to_path_buf(),
+        None => {
+            let m = run.join("manifest.json");
+            let text = std::fs::read(&m).map_err(|e| Error::io(&m, e))?;
+            let v: serde_json::Value = serde_json::from_slice(&text)
+                .map_err(|e| Error::parse(&m, format!("invalid JSON: {e}")))?;
+            PathBuf::from(
+                v.get("dataset")
+                    .and_then(|d| d.as_str())
+                    .ok_or_else(|| Error::parse(&m, "no \"dataset\" path (pass --dataset)"))?,
+            )
+        }
+    };
+    let mut data = load_dataset(&data_dir, &cfg)?;
+    let names = read_train_views(run)?;
+    let train: Vec<usize> = names
+        .iter()
+        .map(|n| {
+            data.views
+                .iter()
+                .position(|v| &v.camera.name == n)
+                .ok_or_else(|| {
+                    Error::invalid(format!(
+                        "training view '{n}' of the run is not in the dataset"
+                    ))
+                    .at(&data_dir)
+                })
+        })
+        .collect::<Result<_>>()?;
+    data.train = train;
+    let cand_bytes = std::fs::read(candidates).map_err(|e| Error::io(candidates, e))?;
+    let cands: Vec<Camera> = read_cameras_json(candidates)?
+        .iter()
+        .map(|c| downscale_camera(c, cfg.resolution))
+        .collect();
+    if cands.is_empty() {
+        return Err(Error::invalid("the view list is empty").at(candidates));
+    }
+    for (i, c) in cands.iter().enumerate() {
+        if cands[..i].iter().any(|d| d.name == c.name) {
+            return Err(
+                Error::invalid(format!("candidate '{}' is listed twice", c.name)).at(candidates),
+            );
+        }
+        c.validate().map_err(|e| e.at(candidates))?;
+        if let Some(&t) = data.train.iter().find(|&&t| {
+            let tc = &data.views[t].camera;
+            (tc.center - c.center).length() < 1e-9
+                && tc
+                    .world_from_camera_rotation
+                    .abs_diff_eq(c.world_from_camera_rotation, 1e-9)
+        }) {
+            return Err(Error::invalid(format!(
+                "candidate '{}' has the pose of training view '{}': nothing to extrapolate there",
+                c.name, data.views[t].camera.name
+            ))
+            .at(candidates));
+        }
+    }
+    let mut eval_idx = Vec::new();
+    if let Some(e) = evaluation {
+        for c in read_cameras_json(e)? {
+            let i = data
+                .views
+                .iter()
+                .position(|v| v.camera.name == c.name)
+                .ok_or_else(|| {
+                    Error::invalid(format!(
+                        "evaluation view '{}' has no ground truth in the dataset",
+                        c.name
+                    ))
+                    .at(e)
+                })?;
+            if cands.iter().any(|k| k.name == c.name) || data.train.contains(&i) {
+                return Err(Error::invalid(format!(
+                    "evaluation view '{}' is also a candidate or training view",
+                    c.name
+                ))
+                .at(e));
+            }
+            if data.views[i].depth.is_none() {
+                return Err(Error::invalid(format!(
+                    "evaluation view '{}' has no ground-truth depth (needed to split existing and extrapolated pixels)",
+                    c.name
+                ))
+                .at(e));
+            }
+            eval_idx.push(i);
+        }
+    }
+    Ok(Inputs {
+        run: run.to_path_buf(),
+        scene,
+        scene_sha256,
+        data,
+        candidates: cands,
+        candidates_sha256: sha256_hex(&cand_bytes),
+        evaluation: eval_idx,
+        background: cfg.background,
+    })
+}
+
+/// The truth of the candidate views, from the dataset (for the ground-truth generator).
+pub fn candidate_truth(inputs: &Inputs) -> Result<Vec<Truth>> {
+    inputs
+        .candidates
+        .iter()
+        .map(|c| {
+            let v = inputs
+                .data
+                .views
+                .iter()
+                .find(|v| v.camera.name == c.name)
+                .ok_or_else(|| {
+                    Error::invalid(format!(
+                        "the ground-truth generator needs candidate '{}' in the dataset",
+                        c.name
+                    ))
+                })?;
+            let depth = v.depth.clone().ok_or_else(|| {
+                Error::invalid(format!(
+                    "the ground-truth generator needs the depth of candidate '{}'",
+                    c.name
+                ))
+            })?;
+            Ok(Truth {
+                camera: c.clone(),
+                image: v.image.clone(),
+                depth,
+            })
+        })
+        .collect()
+}
+
+/// What a finished run produced.
+#[derive(Clone, Debug)]
+pub struct Outcome {
+    pub steps: Vec<StepDone>,
+    /// The final scene's PLY.
+    pub scene: PathBuf,
+    /// `eval/summary.json`'s table, when evaluation poses were given.
+    pub metrics: Option<evaluate::Summary>,
+}
+
+/// Run the whole pipeline into `out` (resuming a previous run with `resume`).
+pub fn run(
+    config: &PipelineConfig,
+    inputs: &Inputs,
+    out: &Path,
+    resume: bool,
+    on_event: &(dyn Fn(Event) + Sync),
+) -> Result<Outcome> {
+    config.validate()?;
+    let dir = RunDir::open(out, resume)?;
+    let config_text = serde_json::to_string_pretty(config).expect("config serializes") + "\n";
+    crate::io::write_text(&out.join("config.json"), &config_text)?;
+    let truth = if config.slots.uses_truth() {
+        Some(GroundTruth::new(
+            candidate_truth(inputs)?,
+            config.inconsistency,
+            config.seed,
+        ))
+    } else {
+        None
+    };
+    let mut gens = Generators::new(&config.slots, truth)?;
+    let mut steps = Vec::new();
+
+    on_event(Event::Stage {
+        name: "views".into(),
+    });
+    let views = views::run(config, inputs, &gens, &dir, on_event)?;
+    steps.push(views.step.clone());
+    if let Some(gt) = gens.truth.as_mut() {
+        for g in &views.plan.gap_cameras {
+            gt.add_between(&g.camera, &g.between[0], &g.between[1])?;
+        }
+    }
+
+    on_event(Event::Stage {
+        name: "stage1".into(),
+    });
+    let s1 = stage1::run(config, inputs, &gens, &views, &dir, on_event)?;
+    steps.extend(s1.steps.iter().cloned());
+
+    on_event(Event::Stage {
+        name: "stage2".into(),
+    });
+    let s2 = stage2::run(config, inputs, &gens, &views, &s1, &dir, on_event)?;
+    steps.extend(s2.steps.iter().cloned());
+
+    let mut last = s2.recon.clone();
+    let mut scenes = vec![
+        ("original".to_string(), None),
+        ("stage1".to_string(), Some(s1.recon.clone())),
+        ("stage2".to_string(), Some(s2.recon.clone())),
+    ];
+    if config.interpolation {
+        on_event(Event::Stage {
+            name: "interpolate".into(),
+        });
+        let ip = interpolate::run(config, inputs, &gens, &views, &s1, &s2, &dir, on_event)?;
+        steps.extend(ip.steps.iter().cloned());
+        last = ip.recon.clone();
+        scenes.push(("interpolate".to_string(), Some(ip.recon)));
+    }
+
+    let metrics = if inputs.evaluation.is_empty() {
+        None
+    } else {
+        on_event(Event::Stage {
+            name: "eval".into(),
+        });
+        let (summary, st) = evaluate::run(inputs, &scenes, &dir, on_event)?;
+        steps.extend(st);
+        Some(summary)
+    };
+    Ok(Outcome {
+        steps,
+        scene: last.dir.join("scene.ply"),
+        metrics,
+    })
+}
+
+// ---------------------------------------------------------------- artifact files
+
+/// `stem.exr` (exact floats, read downstream) and `stem.png` (for people).
+pub(crate) fn save_image(w: &mut StepWriter, stem: &str, img: &ImageF32) -> Result<()> {
+    w.put(&format!("{stem}.exr"), |p| write_exr(p, img))?;
+    w.put(&format!("{stem}.png"), |p| write_png(p, img))?;
+    Ok(())
+}
+
+pub(crate) fn load_image(dir: &Path, stem: &str) -> Result<ImageF32> {
+    read_exr(&dir.join(format!("{stem}.exr")), &["R", "G", "B"])
+}
+
+/// `stem.depth.exr` (camera z, channel Y).
+pub(crate) fn save_depth(
+    w: &mut StepWriter,
+    stem: &str,
+    depth: &[f32],
+    width: usize,
+    height: usize,
+) -> Result<()> {
+    let img = ImageF32::new(width, height, 1, depth.to_vec())?;
+    w.put(&format!("{stem}.depth.exr"), |p| write_exr(p, &img))?;
+    Ok(())
+}
+
+pub(crate) fn load_depth(dir: &Path, stem: &str, width: usize, height: usize) -> Result<Vec<f32>> {
+    crate::io::image::read_depth(&dir.join(format!("{stem}.depth.exr")), width, height)
+}
+
+/// `stem.mask.png` (white = true; 8-bit, exact for booleans).
+pub(crate) fn save_mask(
+    w: &mut StepWriter,
+    stem: &str,
+    mask: &[bool],
+    width: usize,
+    height: usize,
+) -> Result<()> {
+    let img = ImageF32::new(
+        width,
+        height,
+        1,
+        mask.iter().map(|&m| if m { 1.0 } else { 0.0 }).collect(),
+    )?;
+    w.put(&format!("{stem}.mask.png"), |p| write_png(p, &img))?;
+    Ok(())
+}
+
+pub(crate) fn load_mask(dir: &Path, stem: &str) -> Result<Vec<bool>> {
+    let img = read_png(&dir.join(format!("{stem}.mask.png")))?;
+    Ok(img.data.chunks(img.channels).map(|c| c[0] > 0.5).collect())
+}
+
+/// `rel` as an INRIA PLY.
+pub(crate) fn save_scene(w: &mut StepWriter, rel: &str, g: &Gaussians) -> Result<()> {
+    let bytes = ply_bytes(g)?;
+    w.put(rel, |p| write_atomic(p, |f| f.write_all(&bytes)))?;
+    Ok(())
+}
+
+pub(crate) fn load_scene(dir: &Path, rel: &str) -> Result<Gaussians> {
+    Ok(read_ply(&dir.join(rel))?.0)
+}
+
+pub(crate) fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
+    let b = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    serde_json::from_slice(&b).map_err(|e| Error::parse(path, format!("invalid JSON: {e}")))
+}
+
+/// A file-name-safe stem for a camera name.
+pub(crate) fn stem(name: &str) -> String {
+    crate::io::file_stem(name)
+}
+
+/// The pose distance used to pick "the closest training cameras" (SPEC.md §20.2):
+/// centre distance in units of the scene extent plus `1 − cos` of the angle between the
+/// viewing directions, so a camera at the same place looking the other way is far.
+pub fn pose_distance(a: &Camera, b: &Camera, extent: f64) -> f64 {
+    let za = a.world_from_camera_rotation.z_axis;
+    let zb = b.world_from_camera_rotation.z_axis;
+    (a.center - b.center).length() / extent.max(1e-12) + (1.0 - za.dot(zb))
+}
+
+/// The `k` training views of `data` closest to `cam` by [`pose_distance`] (ties: the
+/// lower view index), nearest first.
+pub fn nearest_training(data: &Dataset, cam: &Camera, k: usize) -> Vec<usize> {
+    let extent = data.scene_extent() as f64;
+    let mut d: Vec<(f64, usize)> = data
+        .train
+        .iter()
+        .map(|&i| (pose_distance(&data.views[i].camera, cam, extent), i))
+        .collect();
+    d.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+    d.into_iter().take(k).map(|(_, i)| i).collect()
+}

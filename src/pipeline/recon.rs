@@ -1,0 +1,251 @@
+//! The reconstruction every stage ends with (SPEC.md §20.5): fine-tune a scene on the
+//! original training views (full weight, their depth) plus generated views weighted per
+//! pixel by the mask of the scene being updated (paper Eq. 7) and, where a generated
+//! view only partly holds content (DIBR propagation), by its coverage.
+//!
+//! The weights apply to the *generated* supervision only: a mask computed on the original
+//! scene is ≈ 0 on the original views, so weighting them would silence the data the scene
+//! came from (the issue's §6).
+
+use super::config::{MaskSource, PipelineConfig, ReconConfig};
+use super::rundir::{RunDir, StepDone, StepWriter};
+use super::{Event, Inputs, load_scene, save_image, save_scene, stem};
+use crate::camera::Camera;
+use crate::dataset::{Dataset, View};
+use crate::error::{Error, Result};
+use crate::gaussian::Gaussians;
+use crate::io::image::ImageF32;
+use crate::qamask::{
+    QaMaskConfig, fine_tune, mask_scene, opacity_mask, read_mask_dir, render_qa_mask,
+    write_mask_dir,
+};
+use crate::train::trainer::{TrainConfig, Trainer, init_from_points, stage_seed};
+
+/// One generated view for a reconstruction.
+#[derive(Clone, Debug)]
+pub struct Supervision {
+    pub camera: Camera,
+    pub image: ImageF32,
+    /// Metric camera-z depth (0 = unknown), supervised when depth supervision is on.
+    pub depth: Option<Vec<f32>>,
+    /// Pixels that hold generated content (`None`: all).
+    pub coverage: Option<Vec<bool>>,
+}
+
+/// The mask that weights generated views in a reconstruction of `scene`.
+pub enum Weights {
+    Qa(Box<(Gaussians, QaMaskConfig)>),
+    Opacity(Gaussians),
+    None,
+}
+
+impl Weights {
+    /// The per-pixel weight at `cam` (`None` = all ones).
+    pub fn at(&self, cam: &Camera) -> Result<Option<Vec<f32>>> {
+        Ok(match self {
+            Weights::Qa(q) => Some(render_qa_mask(&q.0, cam, &q.1)?),
+            Weights::Opacity(g) => Some(opacity_mask(g, cam)?),
+            Weights::None => None,
+        })
+    }
+}
+
+/// The QA-Mask settings of a pipeline.
+pub fn qa_config(config: &PipelineConfig) -> QaMaskConfig {
+    QaMaskConfig {
+        sh_degree: config.qa_sh_degree,
+        iterations: config.qa_iterations,
+        seed: config.seed,
+        ..QaMaskConfig::default()
+    }
+}
+
+/// The weights for a reconstruction of the scene in `scene_step/scene_file`: the QA-Mask
+/// is fine-tuned in its own step `qa/<name>` (shared by every variant with the same scene
+/// and QA settings).
+pub fn weights(
+    config: &PipelineConfig,
+    inputs: &Inputs,
+    scene: &Gaussians,
+    scene_digest: &str,
+    name: &str,
+    dir: &RunDir,
+    on_event: &(dyn Fn(Event) + Sync),
+) -> Result<(Weights, Option<StepDone>)> {
+    match config.mask_source {
+        MaskSource::None => Ok((Weights::None, None)),
+        MaskSource::Opacity => Ok((Weights::Opacity(scene.clone()), None)),
+        MaskSource::Qa => {
+            let qa = qa_config(config);
+            let step_name = format!("qa/{name}");
+            let key = serde_json::json!({"scene": scene_digest, "qa": qa});
+            let views: Vec<Camera> = inputs.data.train_cameras();
+            let step = dir.step(&step_name, key, on_event, |w| {
+                let mut g = mask_scene(scene, &qa)?;
+                fine_tune(&mut g, &views, &qa, &mut |p| {
+                    if p.iteration % 50 == 0 || p.iteration == p.iterations {
+                        on_event(Event::Iterations {
+                            step: step_name.clone(),
+                            done: p.iteration,
+                            total: p.iterations,
+                            loss: p.loss,
+                        });
+                    }
+                })?;
+                let d = w.dir().to_path_buf();
+                write_mask_dir(&d, &g, &qa)?;
+                for f in ["point_cloud.ply", "qa_mask.json"] {
+                    w.put(f, |_| Ok(()))?;
+                }
+                Ok(())
+            })?;
+            let (g, c) = read_mask_dir(&step.dir)?;
+            Ok((Weights::Qa(Box::new((g, c))), Some(step)))
+        }
+    }
+}
+
+/// New Gaussians from coloured points (INRIA's point-cloud initialization) at `sh_degree`.
+pub fn gaussians_from_points(
+    xyz: &[[f32; 3]],
+    rgb: &[[f32; 3]],
+    sh_degree: u32,
+) -> Result<Option<Gaussians>> {
+    if xyz.is_empty() {
+        return Ok(None);
+    }
+    Ok(Some(init_from_points(xyz, rgb, sh_degree)?))
+}
+
+/// Fine-tune `init` on the original training views and `generated`, write `scene.ply`
+/// and the weight maps' heat images into `w`; returns the scene.
+#[allow(clippy::too_many_arguments)]
+pub fn reconstruct(
+    config: &PipelineConfig,
+    recon: &ReconConfig,
+    inputs: &Inputs,
+    init: Gaussians,
+    generated: &[Supervision],
+    weights: &Weights,
+    stage: &str,
+    w: &mut StepWriter,
+    on_event: &(dyn Fn(Event) + Sync),
+) -> Result<Gaussians> {
+    let mut views: Vec<View> = inputs
+        .data
+        .train
+        .iter()
+        .map(|&i| inputs.data.views[i].clone())
+        .collect();
+    let n_orig = views.len();
+    let mut masks: Vec<Option<Vec<f32>>> = vec![None; n_orig];
+    let mut summary = Vec::new();
+    for g in generated {
+        let n = (g.camera.width * g.camera.height) as usize;
+        if g.image.data.len() != n * 3 {
+            return Err(Error::invalid(format!(
+                "generated view '{}' is not an RGB image of its camera's size",
+                g.camera.name
+            )));
+        }
+        let mut m = weights.at(&g.camera)?;
+        if let Some(cov) = &g.coverage {
+            let m = m.get_or_insert_with(|| vec![1.0; n]);
+            for (v, &c) in m.iter_mut().zip(cov) {
+                if !c {
+                    *v = 0.0;
+                }
+            }
+        }
+        let mean = m
+            .as_ref()
+            .map_or(1.0, |m| m.iter().map(|&v| v as f64).sum::<f64>() / n as f64);
+        if let Some(m) = &m {
+            let heat = ImageF32::new(
+                g.camera.width as usize,
+                g.camera.height as usize,
+                3,
+                crate::qamask::heat_map(m),
+            )?;
+            w.put(&format!("weights/{}.png", stem(&g.camera.name)), |p| {
+                crate::io::image::write_png(p, &heat)
+            })?;
+        }
+        summary.push(serde_json::json!({
+            "view": g.camera.name,
+            "mean_weight": mean,
+            "depth": g.depth.is_some() && config.depth_supervision,
+        }));
+        masks.push(m);
+        views.push(View {
+            camera: g.camera.clone(),
+            image: g.image.clone(),
+            depth: if config.depth_supervision {
+                g.depth.clone()
+            } else {
+                None
+            },
+        });
+    }
+    let data = Dataset {
+        root: inputs.data.root.clone(),
+        layout: inputs.data.layout,
+        train: (0..views.len()).collect(),
+        views,
+        points: None,
+        test: Vec::new(),
+        heldout: Vec::new(),
+    };
+    let cfg = TrainConfig {
+        iterations: recon.iterations,
+        seed: stage_seed(config.seed, stage),
+        sh_degree: init.sh_degree,
+        densify: recon.densify,
+        loss: config.recon_loss(),
+        background: inputs.background,
+        save_iterations: Vec::new(),
+        ..TrainConfig::default()
+    };
+    let deg = init.sh_degree;
+    let mut trainer = Trainer::from_gaussians(&data, cfg, init, deg)?;
+    trainer.masks = masks;
+    let step = stage.to_string();
+    trainer.run(
+        &mut |p| {
+            if p.iteration % 50 == 0 || p.iteration == p.iterations {
+                on_event(Event::Iterations {
+                    step: step.clone(),
+                    done: p.iteration,
+                    total: p.iterations,
+                    loss: p.loss_ema,
+                });
+            }
+        },
+        &mut |_, _| Ok(()),
+    )?;
+    let g = trainer.gaussians;
+    save_scene(w, "scene.ply", &g)?;
+    w.json(
+        "supervision.json",
+        &serde_json::json!({
+            "original_views": n_orig,
+            "generated": summary,
+            "iterations": recon.iterations,
+            "gaussians": g.len(),
+        }),
+    )?;
+    Ok(g)
+}
+
+/// The scene of a finished reconstruction step.
+pub fn scene_of(step: &StepDone) -> Result<Gaussians> {
+    load_scene(&step.dir, "scene.ply")
+}
+
+/// Save the images of `views` (for people and for a GPU port's diff).
+pub fn save_supervision(w: &mut StepWriter, views: &[Supervision]) -> Result<()> {
+    for v in views {
+        save_image(w, &format!("inputs/{}", stem(&v.camera.name)), &v.image)?;
+    }
+    Ok(())
+}

@@ -1,0 +1,121 @@
+//! `report.md` of a run (the demo's page): the plan, per-stage pictures, the metric table
+//! and the time of every step.
+
+use super::config::PipelineConfig;
+use super::views::Plan;
+use super::{Outcome, read_json, stem};
+use crate::error::Result;
+use std::path::Path;
+
+/// The report of the run in `run` (links relative to the report's folder, the run's
+/// parent); `wall` is this invocation's time.
+pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -> Result<String> {
+    let prefix = run
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let plan: Plan = read_json(&run.join("views").join("plan.json"))?;
+    let mut md = String::from("# unseen: scene extrapolation\n\n");
+    md += &format!(
+        "Preset `{}`, slots: inpaint `{}`, depth `{}`, video `{}`, video depth `{}`, fixer `{}`{}; \
+         mask `{:?}`, depth supervision {}, DIBR propagation {}, independent view detection {}, \
+         interpolation {}. The whole configuration is `{prefix}/config.json`.\n\n",
+        config.preset,
+        config.slots.inpaint,
+        config.slots.depth,
+        config.slots.video,
+        config.slots.video_depth,
+        config.slots.fixer,
+        if config.slots.uses_truth() {
+            format!(
+                " (**ground-truth generator**: an upper bound, inconsistency {:?})",
+                config.inconsistency
+            )
+        } else {
+            String::new()
+        },
+        config.mask_source,
+        config.depth_supervision,
+        config.propagation,
+        config.independent_detection,
+        config.interpolation,
+    );
+    if let Some(m) = &out.metrics {
+        md += &format!(
+            "## Metrics\n\nOn {} evaluation poses never given to the pipeline ({:.1} % of their \
+             pixels show surfaces a training camera saw: *existing*; the rest *extrapolated*), \
+             and on the training half's test views:\n\n{}\n",
+            m.evaluation_views,
+            100.0 * m.existing_fraction,
+            m.table()
+        );
+    }
+    md += &format!(
+        "## Independent views (§3.2)\n\n{} candidates, {} already covered, {} frustum \
+         collisions; independent: {}; closed trajectory: {}. Frustums of the inpainted \
+         regions: `{prefix}/views/frustums.obj` (open it in a mesh viewer).\n\n",
+        plan.candidates.len(),
+        plan.covered.len(),
+        plan.collisions.len(),
+        plan.independent.join(", "),
+        plan.trajectory.join(" → "),
+    );
+    md += "| candidate | render | inpainting mask | inpainting |\n|---|---|---|---|\n";
+    for c in plan.candidates.iter().filter(|c| c.masked > 0).take(6) {
+        let s = stem(&c.name);
+        md += &format!(
+            "| {0} | ![]({1}/views/{s}/render.png) | ![]({1}/views/{s}/inpaint.mask.png) | ![]({1}/views/{s}/inpaint_0.png) |\n",
+            c.name, prefix
+        );
+    }
+    md += "\n## Stage 1 and 2 (§3.3)\n\n| view | kind | image | weights (QA-Mask heat map) |\n|---|---|---|---|\n";
+    for name in plan.trajectory.iter().take(8) {
+        let s = stem(name);
+        let independent = plan.independent.contains(name);
+        let img = if independent {
+            format!("{prefix}/stage1/{s}/inpaint.png")
+        } else {
+            format!("{prefix}/stage2/dependent/{s}/inpaint.png")
+        };
+        let stage = if independent { "stage1" } else { "stage2" };
+        md += &format!(
+            "| {name} | {} | ![]({img}) | ![]({prefix}/{stage}/recon/weights/{s}.png) |\n",
+            if independent {
+                "independent"
+            } else {
+                "dependent"
+            }
+        );
+    }
+    md += &format!(
+        "\nDIBR propagation to the dependent views: `{prefix}/stage1/propagate/<view>/warped.png`.\n\n"
+    );
+    if let Some(m) = &out.metrics {
+        md += "## Evaluation views (render | truth)\n\n";
+        for r in &m.rows {
+            md += &format!("**{}**\n\n", r.scene);
+            let dir = run.join("eval").join(&r.scene);
+            let mut pngs: Vec<String> = std::fs::read_dir(&dir)
+                .map(|d| {
+                    d.flatten()
+                        .map(|e| e.file_name().to_string_lossy().into_owned())
+                        .filter(|n| n.ends_with(".png"))
+                        .collect()
+                })
+                .unwrap_or_default();
+            pngs.sort();
+            for p in pngs.iter().take(2) {
+                md += &format!("![]({prefix}/eval/{}/{p}) ", r.scene);
+            }
+            md += "\n\n";
+        }
+    }
+    let timings: std::collections::BTreeMap<String, f64> =
+        read_json(&run.join("timings.json")).unwrap_or_default();
+    md += "## Time per step (2 cores)\n\n| step | seconds |\n|---|---|\n";
+    for (k, v) in &timings {
+        md += &format!("| {k} | {v:.1} |\n");
+    }
+    md += &format!("\nThis invocation: {wall:.1} s.\n");
+    Ok(md)
+}

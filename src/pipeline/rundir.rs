@@ -1,0 +1,194 @@
+//! The run directory of `unseen extrapolate` (SPEC.md §20.8): one folder per step, each
+//! closed by a `manifest.json` written last, so a step is done exactly when its manifest
+//! exists, its `inputs_sha256` equals what the step would be computed from now, and every
+//! listed file still has its sha256. `--resume` skips such steps and recomputes the others
+//! from scratch (their folder is removed first); a run killed at any moment therefore
+//! resumes to the same bits as an uninterrupted run.
+//!
+//! A step's inputs are its own settings and the manifests' digests of the steps it reads,
+//! so a change anywhere upstream invalidates everything downstream, and two variants of a
+//! run that share a step's inputs share its digest (content addressing).
+
+use super::Event;
+use crate::error::{Error, Result};
+use crate::io::manifest::{FileEntry, Manifest};
+use crate::io::{create_dir_all, sha256_hex, write_text};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::Instant;
+
+/// An open run directory.
+pub struct RunDir {
+    pub root: PathBuf,
+    resume: bool,
+    timings: Mutex<BTreeMap<String, f64>>,
+}
+
+/// What a finished (or verified) step hands downstream.
+#[derive(Clone, Debug)]
+pub struct StepDone {
+    pub name: String,
+    pub dir: PathBuf,
+    /// sha256 of the step's manifest bytes: the key of everything it wrote.
+    pub digest: String,
+    pub skipped: bool,
+}
+
+impl RunDir {
+    /// Open `root` for a new run (it must not exist or be empty) or, with `resume`, for
+    /// continuing one.
+    pub fn open(root: &Path, resume: bool) -> Result<RunDir> {
+        if root.is_file() {
+            return Err(Error::invalid("the output path is a file").at(root));
+        }
+        if !resume && root.is_dir() {
+            let mut entries = std::fs::read_dir(root).map_err(|e| Error::io(root, e))?;
+            if entries.next().is_some() {
+                return Err(Error::invalid(
+                    "the output folder exists and is not empty (pass --resume to continue that run)",
+                )
+                .at(root));
+            }
+        }
+        create_dir_all(root)?;
+        let tpath = root.join("timings.json");
+        let timings = std::fs::read(&tpath)
+            .ok()
+            .and_then(|b| serde_json::from_slice(&b).ok())
+            .unwrap_or_default();
+        Ok(RunDir {
+            root: root.to_path_buf(),
+            resume,
+            timings: Mutex::new(timings),
+        })
+    }
+
+    /// Run step `name` (a relative folder, e.g. `stage1/view_x`) from `inputs` unless a
+    /// verified result exists; `compute` writes its files through the [`StepWriter`].
+    pub fn step(
+        &self,
+        name: &str,
+        inputs: serde_json::Value,
+        on_event: &(dyn Fn(Event) + Sync),
+        compute: impl FnOnce(&mut StepWriter) -> Result<()>,
+    ) -> Result<StepDone> {
+        let dir = self.root.join(name);
+        let inputs_text = serde_json::to_string(&inputs).expect("inputs serialize");
+        let inputs_sha256 = sha256_hex(inputs_text.as_bytes());
+        let mpath = dir.join("manifest.json");
+        if self.resume {
+            if let Some(digest) = verified(&dir, &inputs_sha256) {
+                on_event(Event::StepSkipped { step: name.into() });
+                return Ok(StepDone {
+                    name: name.into(),
+                    dir,
+                    digest,
+                    skipped: true,
+                });
+            }
+        }
+        if dir.exists() {
+            std::fs::remove_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+        }
+        create_dir_all(&dir)?;
+        on_event(Event::StepStarted { step: name.into() });
+        let t0 = Instant::now();
+        let mut w = StepWriter {
+            dir: dir.clone(),
+            files: Vec::new(),
+        };
+        compute(&mut w).map_err(|e| {
+            if e.message.starts_with(&format!("step {name}")) {
+                e
+            } else {
+                Error {
+                    message: format!("step {name}: {}", e.message),
+                    ..e
+                }
+            }
+        })?;
+        let mut files = w.files;
+        files.sort_by(|a, b| a.path.cmp(&b.path));
+        let manifest = Manifest {
+            crate_version: env!("CARGO_PKG_VERSION").into(),
+            command: "extrapolate".into(),
+            step: name.into(),
+            inputs,
+            inputs_sha256,
+            files,
+        };
+        let text = serde_json::to_string_pretty(&manifest).expect("manifest serializes");
+        write_text(&mpath, &text)?;
+        let secs = t0.elapsed().as_secs_f64();
+        {
+            let mut t = self.timings.lock().expect("timings lock");
+            t.insert(name.into(), secs);
+            let s = serde_json::to_string_pretty(&*t).expect("timings serialize");
+            write_text(&self.root.join("timings.json"), &s)?;
+        }
+        on_event(Event::StepFinished {
+            step: name.into(),
+            seconds: secs,
+        });
+        Ok(StepDone {
+            name: name.into(),
+            dir,
+            digest: sha256_hex(text.as_bytes()),
+            skipped: false,
+        })
+    }
+
+    /// Seconds per step measured so far (this run and, with `--resume`, earlier ones).
+    pub fn timings(&self) -> BTreeMap<String, f64> {
+        self.timings.lock().expect("timings lock").clone()
+    }
+}
+
+/// The manifest digest when `dir` holds a complete step with these inputs.
+fn verified(dir: &Path, inputs_sha256: &str) -> Option<String> {
+    let bytes = std::fs::read(dir.join("manifest.json")).ok()?;
+    let m: Manifest = serde_json::from_slice(&bytes).ok()?;
+    if m.inputs_sha256 != inputs_sha256 {
+        return None;
+    }
+    for f in &m.files {
+        let b = std::fs::read(dir.join(&f.path)).ok()?;
+        if sha256_hex(&b) != f.sha256 {
+            return None;
+        }
+    }
+    Some(sha256_hex(&bytes))
+}
+
+/// Writes a step's files (atomically) and records their hashes.
+pub struct StepWriter {
+    dir: PathBuf,
+    files: Vec<FileEntry>,
+}
+
+impl StepWriter {
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// Write `rel` with `write(path)` (which must write atomically), then hash it.
+    pub fn put(&mut self, rel: &str, write: impl FnOnce(&Path) -> Result<()>) -> Result<PathBuf> {
+        let p = self.dir.join(rel);
+        if let Some(parent) = p.parent() {
+            create_dir_all(parent)?;
+        }
+        write(&p)?;
+        let b = std::fs::read(&p).map_err(|e| Error::io(&p, e))?;
+        self.files.push(FileEntry {
+            path: rel.into(),
+            sha256: sha256_hex(&b),
+        });
+        Ok(p)
+    }
+
+    pub fn json<T: serde::Serialize>(&mut self, rel: &str, v: &T) -> Result<PathBuf> {
+        let text = serde_json::to_string_pretty(v).expect("serializes") + "\n";
+        self.put(rel, |p| write_text(p, &text))
+    }
+}

@@ -1,0 +1,256 @@
+//! Stage 2 (paper §3.3.2, SPEC.md §20.4): residual completion on the dependent views.
+//!
+//! Step `stage2/dependent`: render the stage-1 scene at every dependent view; inpaint its
+//! warp mask (what DIBR propagation did not cover; without propagation, the pixels the
+//! stage-1 scene leaves below `coverage_alpha`); its depth from the depth slot, aligned by
+//! least squares to the stage-1 render's expected depth where alpha > 0.5.
+//! Step `stage2/videos`: a clip between every two neighbours of the closed trajectory.
+//! Step `stage2/recon`: the stage-1 scene fine-tuned on the original views, every
+//! trajectory keyframe and the clips' intermediate frames, weighted by the mask of the
+//! stage-1 scene.
+
+use super::generators::Generators;
+use super::recon::{self, Supervision, reconstruct};
+use super::rundir::{RunDir, StepDone};
+use super::stage1::{Stage1, load_video, save_video, video_supervision};
+use super::views::{Views, apply_alignment, render_rgba};
+use super::{
+    Event, Inputs, PipelineConfig, load_depth, load_image, load_mask, save_depth, save_image,
+    save_mask, stem,
+};
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::io::image::ImageF32;
+use crate::models::{DepthHint, Keyframe};
+use crate::warp::align::{Frame, least_squares};
+use std::path::PathBuf;
+
+pub struct Stage2 {
+    pub steps: Vec<StepDone>,
+    pub dependent: Option<StepDone>,
+    pub videos: StepDone,
+    pub recon: StepDone,
+}
+
+/// A trajectory keyframe: camera, image and metric depth.
+pub struct Keyview {
+    pub camera: Camera,
+    pub image: ImageF32,
+    pub depth: Vec<f32>,
+}
+
+/// The closed trajectory's keyframes, in order: independent views from stage 1, dependent
+/// views from `stage2/dependent`.
+pub fn keyframes(views: &Views, s1: &Stage1, dependent: Option<&StepDone>) -> Result<Vec<Keyview>> {
+    views
+        .plan
+        .trajectory
+        .iter()
+        .map(|name| {
+            let cam = views.camera(name)?.clone();
+            let (wd, ht) = (cam.width as usize, cam.height as usize);
+            let dir: PathBuf = match views.plan.independent.iter().position(|n| n == name) {
+                Some(k) => s1.views[k].dir.clone(),
+                None => dependent
+                    .ok_or_else(|| Error::invalid("no dependent step"))?
+                    .dir
+                    .join(stem(name)),
+            };
+            Ok(Keyview {
+                image: load_image(&dir, "inpaint")?,
+                depth: load_depth(&dir, "inpaint", wd, ht)?,
+                camera: cam,
+            })
+        })
+        .collect()
+}
+
+/// Neighbour pairs of the closed trajectory (one pair for two views, none for one).
+pub fn neighbour_pairs(n: usize) -> Vec<(usize, usize)> {
+    match n {
+        0 | 1 => Vec::new(),
+        2 => vec![(0, 1)],
+        _ => (0..n).map(|k| (k, (k + 1) % n)).collect(),
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+pub fn run(
+    config: &PipelineConfig,
+    inputs: &Inputs,
+    gens: &Generators,
+    views: &Views,
+    s1: &Stage1,
+    dir: &RunDir,
+    on_event: &(dyn Fn(Event) + Sync),
+) -> Result<Stage2> {
+    let mut steps = Vec::new();
+    let s1_scene = recon::scene_of(&s1.recon)?;
+    let dependent = if views.plan.dependent.is_empty() {
+        None
+    } else {
+        let key = serde_json::json!({
+            "views": views.step.digest,
+            "stage1": s1.recon.digest,
+            "propagate": s1.propagate.as_ref().map(|s| &s.digest),
+            "slots": config.slots,
+            "inconsistency": config.inconsistency,
+            "coverage_alpha": config.coverage_alpha,
+            "align_space": config.align_space,
+            "seed": config.seed,
+        });
+        let step = dir.step("stage2/dependent", key, on_event, |w| {
+            for dep in &views.plan.dependent {
+                let cam = views.camera(&dep.name)?;
+                let (wd, ht) = (cam.width as usize, cam.height as usize);
+                let (rgb, alpha, ed) = render_rgba(&s1_scene, cam, inputs.background)?;
+                let mask: Vec<bool> = match &s1.propagate {
+                    Some(p) => load_mask(&p.dir.join(stem(&dep.name)), "covered")?
+                        .iter()
+                        .map(|&c| !c)
+                        .collect(),
+                    None => alpha.iter().map(|&a| a < config.coverage_alpha).collect(),
+                };
+                let ip = if mask.iter().any(|&m| m) {
+                    gens.inpaint(cam, &rgb, &mask, &format!("stage2:{}", dep.name))?
+                } else {
+                    rgb.clone()
+                };
+                let known: Vec<f32> = ed
+                    .iter()
+                    .zip(&alpha)
+                    .map(|(&d, &a)| if a > 0.5 { d } else { 0.0 })
+                    .collect();
+                let est = gens.depth(
+                    cam,
+                    &ip,
+                    DepthHint {
+                        depth: &known,
+                        mask: None,
+                    },
+                )?;
+                let space = config.align_space.unwrap_or(est.kind.space());
+                let a = least_squares(
+                    &[Frame {
+                        estimate: &est.values,
+                        depth: &known,
+                    }],
+                    space,
+                )
+                .map_err(|e| {
+                    Error::invalid(format!(
+                        "dependent view '{}': cannot align its depth to the stage-1 scene ({})",
+                        dep.name, e.message
+                    ))
+                })?;
+                let d = apply_alignment(&est, &a, space);
+                let s = stem(&dep.name);
+                save_image(w, &format!("{s}/render"), &rgb)?;
+                save_mask(w, &format!("{s}/inpaint"), &mask, wd, ht)?;
+                save_image(w, &format!("{s}/inpaint"), &ip)?;
+                save_depth(w, &format!("{s}/inpaint"), &d, wd, ht)?;
+            }
+            Ok(())
+        })?;
+        steps.push(step.clone());
+        Some(step)
+    };
+    let keys = keyframes(views, s1, dependent.as_ref())?;
+    let pairs = neighbour_pairs(keys.len());
+    let vkey = serde_json::json!({
+        "views": views.step.digest,
+        "stage1": s1.views.iter().map(|s| &s.digest).collect::<Vec<_>>(),
+        "dependent": dependent.as_ref().map(|s| &s.digest),
+        "slots": config.slots,
+        "inconsistency": config.inconsistency,
+        "video_frames": config.video_frames,
+        "seed": config.seed,
+    });
+    let videos = dir.step("stage2/videos", vkey, on_event, |w| {
+        for (k, &(a, b)) in pairs.iter().enumerate() {
+            let (ka, kb) = (&keys[a], &keys[b]);
+            let v = gens.video(
+                Keyframe {
+                    image: &ka.image,
+                    camera: &ka.camera,
+                    depth: Some(&ka.depth),
+                },
+                Keyframe {
+                    image: &kb.image,
+                    camera: &kb.camera,
+                    depth: Some(&kb.depth),
+                },
+                config.video_frames as usize,
+            )?;
+            save_video(
+                w,
+                &format!("video_{k}"),
+                &v.frames,
+                &v.cameras,
+                v.depths.as_deref(),
+            )?;
+        }
+        w.json(
+            "videos.json",
+            &serde_json::json!({
+                "pairs": pairs.iter().map(|&(a, b)| [&keys[a].camera.name, &keys[b].camera.name]).collect::<Vec<_>>(),
+            }),
+        )?;
+        Ok(())
+    })?;
+    steps.push(videos.clone());
+    let (weights, qa) = recon::weights(
+        config,
+        inputs,
+        &s1_scene,
+        &s1.recon.digest,
+        "stage1",
+        dir,
+        on_event,
+    )?;
+    steps.extend(qa.clone());
+    let rkey = serde_json::json!({
+        "stage1": s1.recon.digest,
+        "videos": videos.digest,
+        "dependent": dependent.as_ref().map(|s| &s.digest),
+        "qa": qa.as_ref().map(|s| &s.digest),
+        "mask_source": config.mask_source,
+        "loss": config.recon_loss(),
+        "recon": config.stage2,
+        "seed": config.seed,
+    });
+    let recon_step = dir.step("stage2/recon", rkey, on_event, |w| {
+        let mut generated: Vec<Supervision> = keys
+            .iter()
+            .map(|k| Supervision {
+                camera: k.camera.clone(),
+                image: k.image.clone(),
+                depth: Some(k.depth.clone()),
+                coverage: None,
+            })
+            .collect();
+        for k in 0..pairs.len() {
+            generated.extend(video_supervision(&videos.dir.join(format!("video_{k}")))?);
+        }
+        reconstruct(
+            config,
+            &config.stage2,
+            inputs,
+            s1_scene.clone(),
+            &generated,
+            &weights,
+            "stage2",
+            w,
+            on_event,
+        )?;
+        Ok(())
+    })?;
+    steps.push(recon_step.clone());
+    let _ = load_video;
+    Ok(Stage2 {
+        steps,
+        dependent,
+        videos,
+        recon: recon_step,
+    })
+}

@@ -1,0 +1,516 @@
+//! Independent camera view detection (paper §3.2, SPEC.md §20.2), one step `views/`:
+//!
+//! 1. per candidate: render the scene; inpainting mask `M` = alpha < `coverage_alpha`;
+//!    `n` inpaintings (the inpaint slot, one key each) and their depths `R` (depth slot);
+//! 2. the closest training camera `P` ([`super::pose_distance`]); its depth DIBR-warped to
+//!    the candidate; least squares `s, t` of `R` against it (Eq. 2) in the alignment
+//!    space; `D = (s·R + t)` on `M` (Eq. 3; `1/(s·R + t)` in disparity space);
+//! 3. per inpainting the range of `D` on `M`, their mean (Eq. 4), the frustum of `M`'s
+//!    bounding box between those depths;
+//! 4. GJK collision graph, greedy maximal independent set in candidate order, closed
+//!    nearest-neighbour trajectory; without detection (ablation) the same number of
+//!    views evenly spaced along the candidate list.
+//!
+//! Dependent views: every other candidate with something to inpaint, assigned to the
+//! trajectory gap whose segment (between the two independent camera centres) is nearest
+//! to its centre, ordered along the gap by the segment parameter. A gap with no dependent
+//! view gets a camera interpolated half-way ([`crate::models::morph::interpolate_camera`]).
+
+use super::generators::Generators;
+use super::rundir::{RunDir, StepDone};
+use super::{
+    Event, Inputs, PipelineConfig, load_depth, load_image, load_mask, nearest_training, read_json,
+    save_depth, save_image, save_mask, stem,
+};
+use crate::camera::Camera;
+use crate::camera::inria::{cameras_json_string, read_cameras_json};
+use crate::collide::frustum::{
+    Outline, Polyhedron, depth_range, mean_range, region_frustum, write_obj,
+};
+use crate::collide::gjk::ConvexHull;
+use crate::collide::independent::{closed_tour, select};
+use crate::error::{Error, Result};
+use crate::io::image::ImageF32;
+use crate::io::write_text;
+use crate::models::morph::interpolate_camera;
+use crate::models::{DepthHint, DepthMap};
+use crate::raster::{Outputs, RenderOptions, render};
+use crate::warp::align::{Alignment, Frame, Space, least_squares};
+use crate::warp::dibr::{WarpOptions, warp};
+use glam::DVec3;
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+/// Fewest known-depth pixels a candidate must share with its reference training view.
+pub const MIN_ALIGN_PIXELS: usize = 16;
+
+/// One candidate's record.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Candidate {
+    pub name: String,
+    /// Pixels to inpaint.
+    pub masked: usize,
+    /// The closest training view and the alignment of each inpainting's depth to its warp.
+    pub nearest_training: Option<String>,
+    pub space: Option<Space>,
+    pub alignments: Vec<[f64; 2]>,
+    pub ranges: Vec<[f64; 2]>,
+    /// Eq. 4.
+    pub range: Option<[f64; 2]>,
+}
+
+/// A dependent view: a candidate left out of the independent set, or a camera made for
+/// an empty gap.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Dependent {
+    pub name: String,
+    /// The gap's two independent views.
+    pub between: [String; 2],
+    /// Position along the gap's segment, `[0, 1]`.
+    pub t: f64,
+    /// True for an interpolated camera (no candidate in the gap).
+    pub interpolated: bool,
+}
+
+/// The result of detection (`views/plan.json`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Plan {
+    pub candidates: Vec<Candidate>,
+    /// Candidates the scene already covers (nothing to inpaint): left out.
+    pub covered: Vec<String>,
+    pub collisions: Vec<[String; 2]>,
+    pub detection: bool,
+    pub independent: Vec<String>,
+    /// The independent views in tour order.
+    pub tour: Vec<String>,
+    pub dependent: Vec<Dependent>,
+    /// The closed trajectory through every independent and dependent view.
+    pub trajectory: Vec<String>,
+    #[serde(skip)]
+    pub gap_cameras: Vec<GapCamera>,
+}
+
+/// An interpolated camera and the two independent views it lies between.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GapCamera {
+    pub camera: Camera,
+    pub between: [String; 2],
+}
+
+/// Detection's output, as read back from disk.
+pub struct Views {
+    pub step: StepDone,
+    pub plan: Plan,
+    /// Candidate and interpolated cameras by name.
+    pub cameras: BTreeMap<String, Camera>,
+}
+
+impl Views {
+    pub fn camera(&self, name: &str) -> Result<&Camera> {
+        self.cameras
+            .get(name)
+            .ok_or_else(|| Error::invalid(format!("no camera named '{name}' in the plan")))
+    }
+
+    /// Inpainting `j` of an independent candidate and its aligned depth.
+    pub fn inpainting(&self, name: &str, j: usize) -> Result<(ImageF32, Vec<f32>)> {
+        let cam = self.camera(name)?;
+        let dir = self.step.dir.join(stem(name));
+        Ok((
+            load_image(&dir, &format!("inpaint_{j}"))?,
+            load_depth(
+                &dir,
+                &format!("inpaint_{j}"),
+                cam.width as usize,
+                cam.height as usize,
+            )?,
+        ))
+    }
+
+    /// The inpainting mask of a candidate.
+    pub fn mask(&self, name: &str) -> Result<Vec<bool>> {
+        load_mask(&self.step.dir.join(stem(name)), "inpaint")
+    }
+}
+
+/// Aligned metric depth from an estimate: `s·R + t`, or its inverse in disparity space;
+/// non-positive or non-finite results are 0 (unknown).
+pub fn apply_alignment(est: &DepthMap, a: &Alignment, space: Space) -> Vec<f32> {
+    est.values
+        .iter()
+        .map(|&r| {
+            let m = a.scale * r as f64 + a.offset;
+            let d = match space {
+                Space::Depth => m,
+                Space::Disparity => 1.0 / m,
+            };
+            if d.is_finite() && d > 0.0 {
+                d as f32
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// The metric depth of a training view: the dataset's, else the scene's expected depth.
+pub fn training_depth(inputs: &Inputs, vi: usize) -> Result<Vec<f32>> {
+    let v = &inputs.data.views[vi];
+    if let Some(d) = &v.depth {
+        return Ok(d.clone());
+    }
+    let r = render(
+        &inputs.scene,
+        &v.camera,
+        &RenderOptions {
+            background: inputs.background,
+            outputs: Outputs {
+                rgb: false,
+                alpha: true,
+                expected_depth: true,
+                ..Outputs::default()
+            },
+            ..RenderOptions::default()
+        },
+    )?;
+    let a = r.alpha.expect("alpha");
+    Ok(r.expected_depth
+        .expect("expected depth")
+        .iter()
+        .zip(&a)
+        .map(|(&d, &al)| if al > 0.5 { d } else { 0.0 })
+        .collect())
+}
+
+/// Warp a metric depth map from one camera to another (nearest, crack closing 1).
+pub fn warp_depth(depth: &[f32], from: &Camera, to: &Camera) -> Result<Vec<f32>> {
+    let img = ImageF32::new(from.width as usize, from.height as usize, 1, depth.to_vec())?;
+    let w = warp(
+        &img,
+        depth,
+        from,
+        to,
+        &WarpOptions {
+            close_cracks: 1,
+            ..WarpOptions::default()
+        },
+    )?;
+    Ok(w.depth)
+}
+
+/// Render RGB and alpha.
+pub fn render_rgba(
+    scene: &crate::gaussian::Gaussians,
+    cam: &Camera,
+    background: [f32; 3],
+) -> Result<(ImageF32, Vec<f32>, Vec<f32>)> {
+    let r = render(
+        scene,
+        cam,
+        &RenderOptions {
+            background,
+            outputs: Outputs {
+                rgb: true,
+                alpha: true,
+                expected_depth: true,
+                ..Outputs::default()
+            },
+            ..RenderOptions::default()
+        },
+    )?;
+    let (w, h) = (r.width, r.height);
+    Ok((
+        ImageF32::new(w, h, 3, r.rgb.expect("rgb"))?,
+        r.alpha.expect("alpha"),
+        r.expected_depth.expect("expected depth"),
+    ))
+}
+
+/// Run detection (or verify it on disk).
+pub fn run(
+    config: &PipelineConfig,
+    inputs: &Inputs,
+    gens: &Generators,
+    dir: &RunDir,
+    on_event: &(dyn Fn(Event) + Sync),
+) -> Result<Views> {
+    let key = serde_json::json!({
+        "scene": inputs.scene_sha256,
+        "candidates": inputs.candidates_sha256,
+        "slots": config.slots,
+        "inconsistency": config.inconsistency,
+        "coverage_alpha": config.coverage_alpha,
+        "inpaintings": config.inpaintings,
+        "align_space": config.align_space,
+        "independent_detection": config.independent_detection,
+        "seed": config.seed,
+    });
+    let step = dir.step("views", key, on_event, |w| {
+        let mut records = Vec::new();
+        let mut polys: Vec<Polyhedron> = Vec::new();
+        let mut active: Vec<usize> = Vec::new();
+        let mut covered = Vec::new();
+        for (ci, cam) in inputs.candidates.iter().enumerate() {
+            let s = stem(&cam.name);
+            let (wd, ht) = (cam.width as usize, cam.height as usize);
+            let (rgb, alpha, ed) = render_rgba(&inputs.scene, cam, inputs.background)?;
+            let mask: Vec<bool> = alpha.iter().map(|&a| a < config.coverage_alpha).collect();
+            save_image(w, &format!("{s}/render"), &rgb)?;
+            save_mask(w, &format!("{s}/inpaint"), &mask, wd, ht)?;
+            let masked = mask.iter().filter(|&&m| m).count();
+            let mut rec = Candidate {
+                name: cam.name.clone(),
+                masked,
+                nearest_training: None,
+                space: None,
+                alignments: Vec::new(),
+                ranges: Vec::new(),
+                range: None,
+            };
+            if masked == 0 {
+                covered.push(cam.name.clone());
+                records.push(rec);
+                continue;
+            }
+            // Eq. 2's target: the depth of the closest training view (by pose distance)
+            // that shares at least MIN_ALIGN_PIXELS with the candidate, warped here; where
+            // it leaves a hole, the scene's own expected depth where the scene is opaque.
+            let need = MIN_ALIGN_PIXELS.max(wd * ht / 100);
+            let mut found = None;
+            for p in nearest_training(&inputs.data, cam, inputs.data.train.len()) {
+                let pcam = &inputs.data.views[p].camera;
+                let mut warped = warp_depth(&training_depth(inputs, p)?, pcam, cam)?;
+                for (k, d) in warped.iter_mut().enumerate() {
+                    if *d <= 0.0 && alpha[k] >= 0.5 {
+                        *d = ed[k];
+                    }
+                }
+                if warped.iter().filter(|&&d| d > 0.0).count() >= need {
+                    found = Some((pcam, warped));
+                    break;
+                }
+            }
+            // Without any reference (the candidate shares no surface with the training
+            // views or the scene), a metric estimate is used as it is (identity alignment)
+            // and anything else is an error.
+            let (reference, warped) = match found {
+                Some((pcam, w)) => (Some(pcam.name.clone()), w),
+                None => (None, vec![0f32; wd * ht]),
+            };
+            rec.nearest_training = reference.clone();
+            for j in 0..config.inpaintings as usize {
+                let ip = gens.inpaint(cam, &rgb, &mask, &format!("views:{}:{j}", cam.name))?;
+                let est = gens
+                    .depth(
+                        cam,
+                        &ip,
+                        DepthHint {
+                            depth: &warped,
+                            mask: None,
+                        },
+                    )
+                    .map_err(|e| {
+                        Error::invalid(format!("candidate '{}': {}", cam.name, e.message))
+                    })?;
+                let space = config.align_space.unwrap_or(est.kind.space());
+                let a = match &reference {
+                    Some(r) => least_squares(
+                        &[Frame {
+                            estimate: &est.values,
+                            depth: &warped,
+                        }],
+                        space,
+                    )
+                    .map_err(|e| {
+                        Error::invalid(format!(
+                            "candidate '{}': cannot align its depth to training view '{r}' ({})",
+                            cam.name, e.message
+                        ))
+                    })?,
+                    None if space == Space::Depth => Alignment {
+                        scale: 1.0,
+                        offset: 0.0,
+                        inliers: 0,
+                        valid: 0,
+                        residual_mean: 0.0,
+                        residual_max: 0.0,
+                    },
+                    None => {
+                        return Err(Error::invalid(format!(
+                            "candidate '{}': no training view shares {need} pixels of known depth with it, nor does the scene cover them, so its {space:?} estimate cannot be aligned; is the view behind or outside the scene?",
+                            cam.name
+                        )));
+                    }
+                };
+                let d = apply_alignment(&est, &a, space);
+                let range = depth_range(&d, &mask).map_err(|e| {
+                    Error::invalid(format!(
+                        "candidate '{}', inpainting {j}: {} after alignment",
+                        cam.name, e.message
+                    ))
+                })?;
+                save_image(w, &format!("{s}/inpaint_{j}"), &ip)?;
+                save_depth(w, &format!("{s}/inpaint_{j}"), &d, wd, ht)?;
+                rec.space = Some(space);
+                rec.alignments.push([a.scale, a.offset]);
+                rec.ranges.push(range);
+            }
+            let range = mean_range(&rec.ranges)?;
+            rec.range = Some(range);
+            polys.push(region_frustum(cam, &mask, range, Outline::BoundingBox)?);
+            active.push(ci);
+            records.push(rec);
+        }
+        if active.is_empty() {
+            return Err(Error::invalid(
+                "the scene already covers every candidate view: nothing to extrapolate",
+            ));
+        }
+        let name = |i: usize| inputs.candidates[i].name.clone();
+        let hulls: Vec<ConvexHull> = polys.iter().map(|p| p.hull()).collect::<Result<_>>()?;
+        let centers: Vec<DVec3> = active.iter().map(|&i| inputs.candidates[i].center).collect();
+        let sel = select(&hulls, &centers, None)?;
+        let (independent, tour) = if config.independent_detection {
+            (sel.independent.clone(), sel.trajectory.clone())
+        } else {
+            let (k, m) = (sel.independent.len(), active.len());
+            let even: Vec<usize> = (0..k).map(|j| j * m / k).collect();
+            let (t, _) = closed_tour(&even, &centers);
+            (even, t)
+        };
+        let (dependent, gap_cams) = assign_dependents(&active, &independent, &tour, &centers, |i| {
+            &inputs.candidates[active[i]]
+        })?;
+        let mut trajectory = Vec::new();
+        for &t in &tour {
+            trajectory.push(name(active[t]));
+            let mut here: Vec<&Dependent> = dependent
+                .iter()
+                .filter(|d| d.between[0] == name(active[t]))
+                .collect();
+            here.sort_by(|a, b| a.t.total_cmp(&b.t));
+            trajectory.extend(here.iter().map(|d| d.name.clone()));
+        }
+        let plan = Plan {
+            candidates: records,
+            covered,
+            collisions: sel
+                .edges
+                .iter()
+                .map(|&(i, j)| [name(active[i]), name(active[j])])
+                .collect(),
+            detection: config.independent_detection,
+            independent: independent.iter().map(|&i| name(active[i])).collect(),
+            tour: tour.iter().map(|&i| name(active[i])).collect(),
+            dependent,
+            trajectory,
+            gap_cameras: Vec::new(),
+        };
+        w.json("plan.json", &plan)?;
+        let mut cams: Vec<Camera> = inputs.candidates.clone();
+        cams.extend(gap_cams.iter().map(|g| g.camera.clone()));
+        let text = cameras_json_string(&cams);
+        w.put("cameras.json", |p| write_text(p, &text))?;
+        w.put("frustums.obj", |p| write_obj(p, &polys))?;
+        Ok(())
+    })?;
+    load(step)
+}
+
+/// Read a finished `views/` step.
+pub fn load(step: StepDone) -> Result<Views> {
+    let mut plan: Plan = read_json(&step.dir.join("plan.json"))?;
+    let cams = read_cameras_json(&step.dir.join("cameras.json"))?;
+    let cameras: BTreeMap<String, Camera> = cams.into_iter().map(|c| (c.name.clone(), c)).collect();
+    plan.gap_cameras = plan
+        .dependent
+        .iter()
+        .filter(|d| d.interpolated)
+        .map(|d| {
+            Ok(GapCamera {
+                camera: cameras
+                    .get(&d.name)
+                    .cloned()
+                    .ok_or_else(|| Error::invalid(format!("no camera '{}'", d.name)))?,
+                between: d.between.clone(),
+            })
+        })
+        .collect::<Result<_>>()?;
+    let _: PathBuf = step.dir.clone();
+    Ok(Views {
+        step,
+        plan,
+        cameras,
+    })
+}
+
+/// Dependent views by gap, and the cameras made for empty gaps. Indices are into
+/// `active` (the candidates with something to inpaint).
+fn assign_dependents<'c>(
+    active: &[usize],
+    independent: &[usize],
+    tour: &[usize],
+    centers: &[DVec3],
+    cam: impl Fn(usize) -> &'c Camera,
+) -> Result<(Vec<Dependent>, Vec<GapCamera>)> {
+    let m = tour.len();
+    // Gaps: consecutive tour pairs, closed; two views have one gap, one view a
+    // degenerate gap to itself.
+    let gaps: Vec<(usize, usize)> = match m {
+        0 => Vec::new(),
+        1 => vec![(tour[0], tour[0])],
+        2 => vec![(tour[0], tour[1])],
+        _ => (0..m).map(|k| (tour[k], tour[(k + 1) % m])).collect(),
+    };
+    let mut dependent = Vec::new();
+    let mut used = vec![false; gaps.len()];
+    for i in 0..active.len() {
+        if independent.contains(&i) {
+            continue;
+        }
+        let p = centers[i];
+        let mut best = (f64::INFINITY, 0usize, 0.0f64);
+        for (g, &(a, b)) in gaps.iter().enumerate() {
+            let (ca, cb) = (centers[a], centers[b]);
+            let ab = cb - ca;
+            let l2 = ab.length_squared();
+            let t = if l2 > 0.0 {
+                ((p - ca).dot(ab) / l2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let d = (ca + ab * t - p).length();
+            if d < best.0 {
+                best = (d, g, t);
+            }
+        }
+        let (_, g, t) = best;
+        used[g] = true;
+        let (a, b) = gaps[g];
+        dependent.push(Dependent {
+            name: cam(i).name.clone(),
+            between: [cam(a).name.clone(), cam(b).name.clone()],
+            t,
+            interpolated: false,
+        });
+    }
+    let mut gap_cams = Vec::new();
+    for (g, &(a, b)) in gaps.iter().enumerate() {
+        if used[g] || a == b {
+            continue;
+        }
+        let name = format!("gap_{}_{}", cam(a).name, cam(b).name);
+        let c = interpolate_camera(cam(a), cam(b), 0.5, name.clone())?;
+        dependent.push(Dependent {
+            name,
+            between: [cam(a).name.clone(), cam(b).name.clone()],
+            t: 0.5,
+            interpolated: true,
+        });
+        gap_cams.push(GapCamera {
+            camera: c,
+            between: [cam(a).name.clone(), cam(b).name.clone()],
+        });
+    }
+    Ok((dependent, gap_cams))
+}
