@@ -9,7 +9,12 @@
 //!
 //! Modules: [`gaussian`] (parameters, INRIA PLY), [`camera`] (pinhole cameras and readers),
 //! [`math`] (own `exp`, spherical harmonics), [`raster`] (projection, tiles, blending),
-//! [`io`] (atomic writes, PNG, EXR), [`scene`] (procedural scenes for demos, tests, benches).
+//! [`io`] (atomic writes, PNG, EXR, manifests), [`scene`] (procedural scenes for demos,
+//! tests, benches), [`train`] (INRIA's recipe), [`qamask`] (the Quality-Aware Mask),
+//! [`warp`] (DIBR, depth alignment), [`collide`] (frustums, GJK, independent views),
+//! [`models`] (generator slots), [`eval`], [`oracle`] (array dumps), and on top
+//! [`pipeline`]: the paper's system — independent views, stage 1, stage 2, interpolation —
+//! with a resumable run directory and stage-by-stage comparison (SPEC.md §20).
 
 pub mod camera;
 pub mod collide;

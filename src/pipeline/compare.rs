@@ -220,10 +220,14 @@ pub fn compare(a: &Path, b: &Path, tolerance: f64) -> Result<Comparison> {
             .and_then(|x| serde_json::from_slice(&x).ok());
         let mut files = Vec::new();
         for f in &m.files {
-            let same = mb
-                .as_ref()
-                .and_then(|mb| mb.files.iter().find(|g| g.path == f.path))
-                .is_some_and(|g| g.sha256 == f.sha256);
+            // The files themselves, not the manifests' word for them.
+            let same = match (
+                std::fs::read(dir_a.join(&f.path)),
+                std::fs::read(dir_b.join(&f.path)),
+            ) {
+                (Ok(x), Ok(y)) => x == y,
+                _ => false,
+            };
             files.push(if same {
                 FileDiff {
                     path: f.path.clone(),

@@ -52,6 +52,9 @@ impl RunDir {
             }
         }
         create_dir_all(root)?;
+        if resume {
+            remove_stale_temporaries(root)?;
+        }
         let tpath = root.join("timings.json");
         let timings = std::fs::read(&tpath)
             .ok()
@@ -143,6 +146,26 @@ impl RunDir {
     pub fn timings(&self) -> BTreeMap<String, f64> {
         self.timings.lock().expect("timings lock").clone()
     }
+}
+
+/// Remove the `.<name>.tmp-<pid>` files a killed run left (§10), anywhere in the run.
+fn remove_stale_temporaries(dir: &Path) -> Result<()> {
+    for e in std::fs::read_dir(dir)
+        .map_err(|e| Error::io(dir, e))?
+        .flatten()
+    {
+        let p = e.path();
+        if p.is_dir() {
+            remove_stale_temporaries(&p)?;
+        } else if e
+            .file_name()
+            .to_str()
+            .is_some_and(|n| n.starts_with('.') && n.contains(".tmp-"))
+        {
+            std::fs::remove_file(&p).map_err(|err| Error::io(&p, err))?;
+        }
+    }
+    Ok(())
 }
 
 /// The manifest digest when `dir` holds a complete step with these inputs.

@@ -214,19 +214,42 @@ fn cli_train_eval_and_demo() {
     let side = read_png(&run.join("eval/heldout/heldout_000.png")).unwrap();
     assert_eq!((side.width, side.height), (80, 30));
 
+    // The demo with the pipeline shrunk to seconds (its quick preset takes minutes).
     let demo = out_dir("demo");
+    let tiny = demo.with_extension("json");
+    std::fs::write(
+        &tiny,
+        r#"{"slots": {"inpaint": "truth", "depth": "truth", "video": "truth",
+             "video_depth": "truth", "fixer": "truth"},
+            "qa_iterations": 20, "video_frames": 3,
+            "stage1": {"iterations": 30, "densify": null},
+            "stage2": {"iterations": 30, "densify": null},
+            "interpolate": {"iterations": 20, "densify": null}}"#,
+    )
+    .unwrap();
     let st = unseen()
-        .args(["demo", "--iterations", "20", "--out"])
+        .args(["demo", "--iterations", "100", "--config"])
+        .arg(&tiny)
+        .arg("--out")
         .arg(&demo)
         .output()
         .unwrap();
+    let _ = std::fs::remove_file(&tiny);
     assert!(
         st.status.success(),
         "{}",
         String::from_utf8_lossy(&st.stderr)
     );
     let report = std::fs::read_to_string(demo.join("report.md")).unwrap();
-    assert!(report.contains("heldout (the unseen half)"), "{report}");
+    assert!(
+        report.contains("## Metrics") && report.contains("ground-truth generator"),
+        "{report}"
+    );
+    assert!(
+        demo.join("extrapolate/interpolate/recon/scene.ply")
+            .is_file()
+    );
+    let _ = std::fs::remove_dir_all(&demo);
 }
 
 /// A directory that is no dataset, and a broken config, are one clear error line.

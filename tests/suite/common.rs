@@ -52,3 +52,25 @@ pub fn short_train_config(iterations: u32) -> unseen::train::trainer::TrainConfi
         ..Default::default()
     }
 }
+
+/// A fresh folder under the system temp dir, removed when dropped (also when the test
+/// panics: the guard drops during unwinding).
+pub struct TempDir(pub PathBuf);
+
+impl TempDir {
+    pub fn new(name: &str) -> TempDir {
+        let d = std::env::temp_dir().join(format!("unseen-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        TempDir(d)
+    }
+    pub fn path(&self) -> &std::path::Path {
+        &self.0
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}

@@ -10,6 +10,7 @@ mod mitsuba_crosscheck;
 mod models;
 mod onnx;
 mod oracle;
+mod pipeline;
 mod qamask;
 mod raster;
 mod readers;
