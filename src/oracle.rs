@@ -5,12 +5,11 @@
 use crate::camera::Camera;
 use crate::error::Result;
 use crate::gaussian::Gaussians;
+use crate::io::manifest::{FileEntry, Manifest};
 use crate::io::npy::{NpyElement, write_npy};
-use crate::io::write_text;
 use crate::raster::backward::{GradGroups, ImageGrads, backward, render_for_backward};
 use crate::raster::{Outputs, RenderOptions};
 use crate::train::loss::{LossInput, LossWeights, image_loss};
-use serde::Serialize;
 use std::path::Path;
 
 /// The conventions version of SPEC.md (bumped when a number a port must match changes).
@@ -27,45 +26,20 @@ pub enum Loss {
     L1DSsim,
 }
 
-#[derive(Serialize)]
-struct Entry {
-    name: String,
-    file: String,
-    shape: Vec<usize>,
-    dtype: String,
-    sha256: String,
-}
-
-#[derive(Serialize)]
-struct Manifest {
-    crate_version: &'static str,
-    conventions_version: u32,
-    command: String,
-    camera: String,
-    width: u32,
-    height: u32,
-    gaussians: usize,
-    sh_degree: u32,
-    background: [f32; 3],
-    arrays: Vec<Entry>,
-}
-
 struct Writer<'a> {
     dir: &'a Path,
-    entries: Vec<Entry>,
+    entries: Vec<FileEntry>,
 }
 
 impl Writer<'_> {
     fn put<T: NpyElement>(&mut self, name: &str, data: &[T], shape: &[usize]) -> Result<()> {
         let file = format!("{name}.npy");
         let bytes = write_npy(&self.dir.join(&file), data, shape)?;
-        let sha256 = crate::io::sha256_hex(&bytes);
-        self.entries.push(Entry {
-            name: name.to_string(),
-            file,
-            shape: shape.to_vec(),
-            dtype: T::DTYPE.descr().to_string(),
-            sha256,
+        self.entries.push(FileEntry {
+            name: Some(name.to_string()),
+            shape: Some(shape.to_vec()),
+            dtype: Some(T::DTYPE.descr().to_string()),
+            ..FileEntry::new(file, &bytes)
         });
         Ok(())
     }
@@ -196,18 +170,14 @@ pub fn dump(
     } else {
         "forward"
     };
-    let manifest = Manifest {
-        crate_version: env!("CARGO_PKG_VERSION"),
-        conventions_version: CONVENTIONS_VERSION,
-        command: command.to_string(),
-        camera: cam.name.clone(),
-        width: cam.width,
-        height: cam.height,
-        gaussians: n,
-        sh_degree: scene.sh_degree,
-        background: opts.background,
-        arrays: wr.entries,
-    };
-    let text = serde_json::to_string_pretty(&manifest).expect("manifest serializes");
-    write_text(&dir.join("manifest.json"), &text)
+    let inputs = serde_json::json!({
+        "camera": cam.name,
+        "width": cam.width,
+        "height": cam.height,
+        "gaussians": n,
+        "sh_degree": scene.sh_degree,
+        "background": opts.background,
+    });
+    Manifest::new(&format!("oracle {command}"), "", inputs, wr.entries).write(dir)?;
+    Ok(())
 }

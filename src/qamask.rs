@@ -20,7 +20,8 @@ use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gaussian::ply::{ply_bytes, read_ply};
 use crate::gaussian::{Gaussians, Param};
-use crate::io::{create_dir_all, sha256_hex, write_atomic, write_text};
+use crate::io::manifest::{FileEntry, Manifest};
+use crate::io::{create_dir_all, write_atomic, write_text};
 use crate::math::fastexp::exp;
 use crate::math::sh::{SH_C0, num_coeffs};
 use crate::raster::backward::frozen::{FrozenBlend, FrozenWork, geometry_of};
@@ -227,19 +228,17 @@ pub fn write_mask_dir(dir: &Path, scene: &Gaussians, cfg: &QaMaskConfig) -> Resu
     write_atomic(&ply_path, |w| w.write_all(&ply))?;
     let text = serde_json::to_string_pretty(cfg).expect("config serializes");
     write_text(&dir.join("qa_mask.json"), &text)?;
-    let manifest = serde_json::json!({
-        "crate_version": env!("CARGO_PKG_VERSION"),
-        "command": "qa-mask",
-        "config": cfg,
-        "files": [
-            {"path": "point_cloud.ply", "sha256": sha256_hex(&ply)},
-            {"path": "qa_mask.json", "sha256": sha256_hex(text.as_bytes())},
+    Manifest::new(
+        "qa-mask",
+        "",
+        serde_json::json!({ "config": cfg }),
+        vec![
+            FileEntry::new("point_cloud.ply", &ply),
+            FileEntry::new("qa_mask.json", text.as_bytes()),
         ],
-    });
-    write_text(
-        &dir.join("manifest.json"),
-        &serde_json::to_string_pretty(&manifest).expect("manifest serializes"),
     )
+    .write(dir)?;
+    Ok(())
 }
 
 /// Read a QA-Mask directory written by [`write_mask_dir`].

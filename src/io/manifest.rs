@@ -1,24 +1,101 @@
-//! The typed `manifest.json` of a pipeline step (SPEC.md §20.8): crate version, the step,
-//! its inputs (settings and upstream digests) and the sha256 of every file it wrote. No
-//! timings, so equal inputs give equal manifest bytes.
+//! The one `manifest.json` shape (SPEC.md §10): written by `unseen train`, `unseen qa-mask`,
+//! `unseen oracle` and every step of `unseen extrapolate` — crate and conventions version,
+//! the command (and pipeline step), what it was computed from (`inputs`, with the sha256
+//! of their compact JSON), and the sha256 of every file it wrote. No timings, so equal
+//! inputs give equal manifest bytes.
+
+use crate::error::{Error, Result};
+use crate::io::{sha256_hex, write_text};
+use std::path::Path;
 
 /// One written file, relative to the manifest's folder.
 #[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct FileEntry {
     pub path: String,
     pub sha256: String,
+    /// For arrays (`.npy` dumps): the name, shape and NumPy dtype.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shape: Option<Vec<usize>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dtype: Option<String>,
 }
 
-/// A step's manifest.
+impl FileEntry {
+    /// A file and the sha256 of its bytes.
+    pub fn new(path: impl Into<String>, bytes: &[u8]) -> FileEntry {
+        FileEntry {
+            path: path.into(),
+            sha256: sha256_hex(bytes),
+            name: None,
+            shape: None,
+            dtype: None,
+        }
+    }
+}
+
+/// A command's (or pipeline step's) manifest.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Manifest {
     pub crate_version: String,
+    pub conventions_version: u32,
+    /// `train`, `qa-mask`, `oracle forward`, `oracle backward`, `extrapolate`.
     pub command: String,
+    /// The pipeline step (`views`, `stage1/recon`, ...); empty for other commands.
+    #[serde(default)]
     pub step: String,
-    /// What the step was computed from: its settings and the digests of the steps it read.
+    /// What the output was computed from: settings, seeds, and the digests of the
+    /// manifests it read.
     pub inputs: serde_json::Value,
-    /// sha256 of `inputs` serialized compactly (the resume key).
+    /// sha256 of `inputs` serialized compactly (the resume key of a pipeline step).
     pub inputs_sha256: String,
-    /// Sorted by path.
     pub files: Vec<FileEntry>,
+}
+
+impl Manifest {
+    pub fn new(
+        command: &str,
+        step: &str,
+        inputs: serde_json::Value,
+        files: Vec<FileEntry>,
+    ) -> Manifest {
+        Manifest {
+            crate_version: env!("CARGO_PKG_VERSION").into(),
+            conventions_version: crate::oracle::CONVENTIONS_VERSION,
+            command: command.into(),
+            step: step.into(),
+            inputs_sha256: inputs_sha256(&inputs),
+            inputs,
+            files,
+        }
+    }
+
+    /// The manifest's bytes (pretty JSON).
+    pub fn text(&self) -> String {
+        serde_json::to_string_pretty(self).expect("manifest serializes") + "\n"
+    }
+
+    /// Write `dir/manifest.json` atomically; returns the sha256 of its bytes.
+    pub fn write(&self, dir: &Path) -> Result<String> {
+        let text = self.text();
+        write_text(&dir.join("manifest.json"), &text)?;
+        Ok(sha256_hex(text.as_bytes()))
+    }
+
+    /// Read `dir/manifest.json`.
+    pub fn read(dir: &Path) -> Result<Manifest> {
+        let p = dir.join("manifest.json");
+        let b = std::fs::read(&p).map_err(|e| Error::io(&p, e))?;
+        serde_json::from_slice(&b).map_err(|e| Error::parse(&p, format!("invalid manifest: {e}")))
+    }
+}
+
+/// sha256 of a value's compact JSON.
+pub fn inputs_sha256(inputs: &serde_json::Value) -> String {
+    sha256_hex(
+        serde_json::to_string(inputs)
+            .expect("inputs serialize")
+            .as_bytes(),
+    )
 }

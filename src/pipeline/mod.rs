@@ -109,14 +109,17 @@ pub fn load_inputs(
     let data_dir = match dataset {
         Some(d) => d.to_path_buf(),
         None => {
-            let m = run.join("manifest.json");
-            let text = std::fs::read(&m).map_err(|e| Error::io(&m, e))?;
-            let v: serde_json::Value = serde_json::from_slice(&text)
-                .map_err(|e| Error::parse(&m, format!("invalid JSON: {e}")))?;
+            let m = crate::io::manifest::Manifest::read(run)?;
             PathBuf::from(
-                v.get("dataset")
+                m.inputs
+                    .get("dataset")
                     .and_then(|d| d.as_str())
-                    .ok_or_else(|| Error::parse(&m, "no \"dataset\" path (pass --dataset)"))?,
+                    .ok_or_else(|| {
+                        Error::parse(
+                            &run.join("manifest.json"),
+                            "no \"dataset\" path (pass --dataset)",
+                        )
+                    })?,
             )
         }
     };

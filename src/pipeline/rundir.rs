@@ -11,7 +11,7 @@
 
 use super::Event;
 use crate::error::{Error, Result};
-use crate::io::manifest::{FileEntry, Manifest};
+use crate::io::manifest::{FileEntry, Manifest, inputs_sha256};
 use crate::io::{create_dir_all, sha256_hex, write_text};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -77,9 +77,7 @@ impl RunDir {
         compute: impl FnOnce(&mut StepWriter) -> Result<()>,
     ) -> Result<StepDone> {
         let dir = self.root.join(name);
-        let inputs_text = serde_json::to_string(&inputs).expect("inputs serialize");
-        let inputs_sha256 = sha256_hex(inputs_text.as_bytes());
-        let mpath = dir.join("manifest.json");
+        let inputs_sha256 = inputs_sha256(&inputs);
         if self.resume {
             if let Some(digest) = verified(&dir, &inputs_sha256) {
                 on_event(Event::StepSkipped { step: name.into() });
@@ -113,16 +111,7 @@ impl RunDir {
         })?;
         let mut files = w.files;
         files.sort_by(|a, b| a.path.cmp(&b.path));
-        let manifest = Manifest {
-            crate_version: env!("CARGO_PKG_VERSION").into(),
-            command: "extrapolate".into(),
-            step: name.into(),
-            inputs,
-            inputs_sha256,
-            files,
-        };
-        let text = serde_json::to_string_pretty(&manifest).expect("manifest serializes");
-        write_text(&mpath, &text)?;
+        let digest = Manifest::new("extrapolate", name, inputs, files).write(&dir)?;
         let secs = t0.elapsed().as_secs_f64();
         {
             let mut t = self.timings.lock().expect("timings lock");
@@ -137,7 +126,7 @@ impl RunDir {
         Ok(StepDone {
             name: name.into(),
             dir,
-            digest: sha256_hex(text.as_bytes()),
+            digest,
             skipped: false,
         })
     }
@@ -203,10 +192,7 @@ impl StepWriter {
         }
         write(&p)?;
         let b = std::fs::read(&p).map_err(|e| Error::io(&p, e))?;
-        self.files.push(FileEntry {
-            path: rel.into(),
-            sha256: sha256_hex(&b),
-        });
+        self.files.push(FileEntry::new(rel, &b));
         Ok(p)
     }
 

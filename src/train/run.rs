@@ -19,6 +19,7 @@ use crate::dataset::{self, Dataset, LoadOptions};
 use crate::error::{Error, Result};
 use crate::gaussian::Gaussians;
 use crate::gaussian::ply::{ply_bytes, read_ply};
+use crate::io::manifest::{FileEntry, Manifest};
 use crate::io::{create_dir_all, peak_memory_bytes, sha256_hex, write_atomic, write_text};
 use crate::qamask::{QaMaskConfig, opacity_mask, render_qa_mask};
 use crate::train::trainer::{Progress, TrainConfig, Trainer};
@@ -93,30 +94,10 @@ pub struct RunSummary {
     pub ply: PathBuf,
 }
 
-#[derive(serde::Serialize)]
-struct FileEntry {
-    path: String,
-    sha256: String,
-}
-
-#[derive(serde::Serialize)]
-struct Manifest<'a> {
-    crate_version: &'static str,
-    command: &'static str,
-    dataset: String,
-    seed: u64,
-    config: &'a TrainConfig,
-    /// Names of the views trained on (the QA-Mask fine-tune uses their cameras).
-    train_views: Vec<String>,
-    files: Vec<FileEntry>,
-}
-
-/// The names of the views a run trained on (`manifest.json`'s `train_views`).
+/// The names of the views a run trained on (`manifest.json`'s `inputs.train_views`).
 pub fn read_train_views(run: &Path) -> Result<Vec<String>> {
     let p = run.join("manifest.json");
-    let text = std::fs::read(&p).map_err(|e| Error::io(&p, e))?;
-    let v: serde_json::Value = serde_json::from_slice(&text)
-        .map_err(|e| Error::parse(&p, format!("invalid JSON: {e}")))?;
+    let v = Manifest::read(run)?.inputs;
     let list = v
         .get("train_views")
         .and_then(|x| x.as_array())
@@ -238,29 +219,25 @@ pub fn train_run(
         let bytes = std::fs::read(&p).map_err(|e| Error::io(&p, e))?;
         files.push((p, sha256_hex(&bytes)));
     }
-    let manifest = Manifest {
-        crate_version: env!("CARGO_PKG_VERSION"),
-        command: "train",
-        dataset: dataset_dir.display().to_string(),
-        seed: config.seed,
-        config,
-        train_views: data
+    let inputs = serde_json::json!({
+        "dataset": dataset_dir.display().to_string(),
+        "seed": config.seed,
+        "config": config,
+        // The views trained on (the QA-Mask fine-tune and the pipeline use their cameras).
+        "train_views": data
             .train
             .iter()
             .map(|&i| data.views[i].camera.name.clone())
-            .collect(),
-        files: files
-            .iter()
-            .map(|(p, h)| FileEntry {
-                path: p.strip_prefix(run).unwrap_or(p).display().to_string(),
-                sha256: h.clone(),
-            })
-            .collect(),
-    };
-    write_text(
-        &run.join("manifest.json"),
-        &serde_json::to_string_pretty(&manifest).expect("manifest serializes"),
-    )?;
+            .collect::<Vec<_>>(),
+    });
+    let files = files
+        .iter()
+        .map(|(p, h)| FileEntry {
+            sha256: h.clone(),
+            ..FileEntry::new(p.strip_prefix(run).unwrap_or(p).display().to_string(), b"")
+        })
+        .collect();
+    Manifest::new("train", "", inputs, files).write(run)?;
     let summary = RunSummary {
         iterations: trainer.iteration,
         gaussians: trainer.gaussians.len(),

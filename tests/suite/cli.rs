@@ -176,7 +176,7 @@ fn cli_train_eval_and_demo() {
     assert_eq!((cams.len(), cams[0].width), (72, 40));
     let manifest: serde_json::Value =
         serde_json::from_slice(&std::fs::read(run.join("manifest.json")).unwrap()).unwrap();
-    assert_eq!(manifest["seed"], 7);
+    assert_eq!(manifest["inputs"]["seed"], 7);
     let files = manifest["files"].as_array().unwrap();
     assert_eq!(files.len(), 4);
     let args = std::fs::read_to_string(run.join("cfg_args")).unwrap();

@@ -40,7 +40,7 @@ fn oracle_backward_dump_is_complete_and_consistent() {
     let manifest: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dump.join("manifest.json")).unwrap()).unwrap();
     assert_eq!(manifest["conventions_version"], 1);
-    let names: Vec<&str> = manifest["arrays"]
+    let names: Vec<&str> = manifest["files"]
         .as_array()
         .unwrap()
         .iter()
@@ -66,8 +66,8 @@ fn oracle_backward_dump_is_complete_and_consistent() {
     ] {
         assert!(names.contains(&want), "missing {want}");
     }
-    for a in manifest["arrays"].as_array().unwrap() {
-        let bytes = std::fs::read(dump.join(a["file"].as_str().unwrap())).unwrap();
+    for a in manifest["files"].as_array().unwrap() {
+        let bytes = std::fs::read(dump.join(a["path"].as_str().unwrap())).unwrap();
         let hex: String = Sha256::digest(&bytes)
             .iter()
             .map(|b| format!("{b:02x}"))
