@@ -106,3 +106,44 @@ pub fn evaluate(
         views,
     })
 }
+
+/// Evaluate a run's saved scene (`iteration`, default the latest) on a split of
+/// `dataset` (loaded as the run's config says), writing render | truth images into
+/// `RUN/eval/<split>[_iteration_N]/` and merging the report into `RUN/eval.json` under
+/// that name.
+pub fn evaluate_run(
+    run: &Path,
+    dataset: &Path,
+    split: Split,
+    iteration: Option<u32>,
+) -> Result<EvalReport> {
+    use crate::train::run::{load_dataset, read_config, read_run_scene};
+    let cfg = read_config(run)?;
+    let data = load_dataset(dataset, &cfg)?;
+    let (it, g) = read_run_scene(run, iteration)?;
+    let split_name = match split {
+        Split::Train => "train",
+        Split::Test => "test",
+        Split::Heldout => "heldout",
+    };
+    let name = match iteration {
+        Some(_) => format!("{split_name}_iteration_{it}"),
+        None => split_name.to_string(),
+    };
+    let report = evaluate(
+        &g,
+        &data,
+        split,
+        cfg.background,
+        Some(&run.join("eval").join(&name)),
+    )?;
+    let path = run.join("eval.json");
+    let mut all: serde_json::Map<String, serde_json::Value> = std::fs::read(&path)
+        .ok()
+        .and_then(|b| serde_json::from_slice(&b).ok())
+        .unwrap_or_default();
+    all.insert(name, serde_json::to_value(&report).expect("serializes"));
+    let text = serde_json::to_string_pretty(&all).expect("serializes");
+    crate::io::write_text(&path, &text)?;
+    Ok(report)
+}

@@ -18,6 +18,13 @@ use glam::{DMat3, DVec3};
 /// Cameras written with 7–9 significant digits (JSON, COLMAP text) sit around 1e-7.
 pub const ROTATION_TOLERANCE: f64 = 1e-5;
 
+/// The camera called `name` in `cams` (read from `file`, named in the error).
+pub fn find<'a>(cams: &'a [Camera], name: &str, file: &std::path::Path) -> Result<&'a Camera> {
+    cams.iter()
+        .find(|c| c.name == name)
+        .ok_or_else(|| Error::invalid(format!("no camera named '{name}'")).at(file))
+}
+
 /// A pinhole camera (no distortion).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Camera {

@@ -2,7 +2,9 @@
 //! candidate views' inpainted-region frustums, a maximal independent set chosen greedily
 //! in the caller's order, and a closed nearest-neighbour trajectory through it.
 
+use super::frustum::{Outline, Polyhedron, region_frustum};
 use super::gjk::{ConvexHull, proximity};
+use crate::camera::Camera;
 use crate::error::{Error, Result};
 use glam::DVec3;
 
@@ -114,4 +116,37 @@ pub fn closed_tour(views: &[usize], centers: &[DVec3]) -> (Vec<usize>, Vec<(usiz
             .collect()
     };
     (trajectory, gaps)
+}
+
+/// Paper §3.2 steps 3–4 from the candidates' inpainting masks and depth ranges: the
+/// frustum of each region (`outline`), the collision graph, the independent set (greedy in
+/// `order`, default the given order) and the closed tour over the camera centres.
+pub fn select_regions(
+    cams: &[&Camera],
+    masks: &[Vec<bool>],
+    ranges: &[[f64; 2]],
+    outline: Outline,
+    order: Option<&[usize]>,
+) -> Result<(Vec<Polyhedron>, Selection)> {
+    if masks.len() != cams.len() || ranges.len() != cams.len() {
+        return Err(Error::invalid(format!(
+            "{} cameras, {} masks and {} depth ranges",
+            cams.len(),
+            masks.len(),
+            ranges.len()
+        )));
+    }
+    let polys: Vec<Polyhedron> = cams
+        .iter()
+        .zip(masks)
+        .zip(ranges)
+        .map(|((c, m), &r)| {
+            region_frustum(c, m, r, outline)
+                .map_err(|e| Error::invalid(format!("view '{}': {}", c.name, e.message)))
+        })
+        .collect::<Result<_>>()?;
+    let hulls: Vec<ConvexHull> = polys.iter().map(|p| p.hull()).collect::<Result<_>>()?;
+    let centers: Vec<DVec3> = cams.iter().map(|c| c.center).collect();
+    let sel = select(&hulls, &centers, order)?;
+    Ok((polys, sel))
 }

@@ -135,6 +135,19 @@ impl Inconsistency {
         }
     }
 
+    /// `none`, `low`, `high`, or `custom`.
+    pub fn name(&self) -> &'static str {
+        if *self == Self::NONE {
+            "none"
+        } else if *self == Self::LOW {
+            "low"
+        } else if *self == Self::HIGH {
+            "high"
+        } else {
+            "custom"
+        }
+    }
+
     pub fn is_none(&self) -> bool {
         *self == Self::NONE
     }

@@ -260,8 +260,10 @@ impl Generators {
         mask: &[bool],
         key: &str,
     ) -> Result<ImageF32> {
+        let named =
+            |e: Error| Error::invalid(format!("view '{}': inpainting: {}", cam.name, e.message));
         let out = match &self.inpaint {
-            Slot::Model(m) => m.inpaint(image, mask)?,
+            Slot::Model(m) => m.inpaint(image, mask).map_err(named)?,
             Slot::Truth => {
                 let t = self.gt().get(&cam.name)?;
                 let g = self.gt().degrade(&t.image, key);
@@ -282,7 +284,9 @@ impl Generators {
     /// Depth of `image` at `cam` (`hint`: the known metric depth).
     pub fn depth(&self, cam: &Camera, image: &ImageF32, hint: DepthHint) -> Result<DepthMap> {
         let d = match &self.depth {
-            Slot::Model(m) => m.estimate(image, Some(hint))?,
+            Slot::Model(m) => m.estimate(image, Some(hint)).map_err(|e| {
+                Error::invalid(format!("view '{}': depth: {}", cam.name, e.message))
+            })?,
             Slot::Truth => DepthMap {
                 width: image.width,
                 height: image.height,
@@ -393,7 +397,9 @@ impl Generators {
         between: Option<(&Camera, &Camera, usize, usize)>,
     ) -> Result<ImageF32> {
         let out = match &self.fixer {
-            Slot::Model(m) => m.fix(render, None)?,
+            Slot::Model(m) => m.fix(render, None).map_err(|e| {
+                Error::invalid(format!("view '{}': fixer: {}", cam.name, e.message))
+            })?,
             Slot::Truth => {
                 let gt = self.gt();
                 let img = match gt.get(&cam.name) {

@@ -38,6 +38,7 @@ use crate::io::image::{ImageF32, read_exr, read_png, write_exr, write_png};
 use crate::io::{sha256_hex, write_atomic};
 use crate::train::run::{latest_ply, load_dataset, read_config, read_train_views};
 use generators::{Generators, GroundTruth, Truth};
+pub use rundir::Scope;
 use rundir::{RunDir, StepDone, StepWriter};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -248,8 +249,8 @@ pub fn candidate_truth(inputs: &Inputs) -> Result<Vec<Truth>> {
 #[derive(Clone, Debug)]
 pub struct Outcome {
     pub steps: Vec<StepDone>,
-    /// The final scene's PLY.
-    pub scene: PathBuf,
+    /// The final scene's PLY (`None` when a scoped run stopped before it).
+    pub scene: Option<PathBuf>,
     /// `eval/summary.json`'s table, when evaluation poses were given.
     pub metrics: Option<evaluate::Summary>,
 }
@@ -262,8 +263,40 @@ pub fn run(
     resume: bool,
     on_event: &(dyn Fn(Event) + Sync),
 ) -> Result<Outcome> {
+    run_scoped(config, inputs, out, resume, Scope::All, on_event)
+}
+
+/// [`run`] limited to one step (`Scope::Only`: the steps it reads must be done — a batch
+/// engine's worker) or to the steps up to one (`Scope::Until`).
+pub fn run_scoped(
+    config: &PipelineConfig,
+    inputs: &Inputs,
+    out: &Path,
+    resume: bool,
+    scope: Scope,
+    on_event: &(dyn Fn(Event) + Sync),
+) -> Result<Outcome> {
     config.validate()?;
-    let dir = RunDir::open(out, resume)?;
+    let dir = RunDir::open(out, resume, scope)?;
+    match run_in(config, inputs, &dir, on_event) {
+        // Anything after a scoped run's last step (a later step, or a sibling of an
+        // `--only` step that is not needed) ends the run there.
+        Err(_) if dir.scope_finished() => Ok(Outcome {
+            steps: Vec::new(),
+            scene: None,
+            metrics: None,
+        }),
+        r => r,
+    }
+}
+
+fn run_in(
+    config: &PipelineConfig,
+    inputs: &Inputs,
+    dir: &RunDir,
+    on_event: &(dyn Fn(Event) + Sync),
+) -> Result<Outcome> {
+    let out = dir.root.as_path();
     let config_text = serde_json::to_string_pretty(config).expect("config serializes") + "\n";
     crate::io::write_text(&out.join("config.json"), &config_text)?;
     let truth = if config.slots.uses_truth() {
@@ -281,7 +314,7 @@ pub fn run(
     on_event(Event::Stage {
         name: "views".into(),
     });
-    let views = views::run(config, inputs, &gens, &dir, on_event)?;
+    let views = views::run(config, inputs, &gens, dir, on_event)?;
     steps.push(views.step.clone());
     if let Some(gt) = gens.truth.as_mut() {
         for g in &views.plan.gap_cameras {
@@ -292,13 +325,13 @@ pub fn run(
     on_event(Event::Stage {
         name: "stage1".into(),
     });
-    let s1 = stage1::run(config, inputs, &gens, &views, &dir, on_event)?;
+    let s1 = stage1::run(config, inputs, &gens, &views, dir, on_event)?;
     steps.extend(s1.steps.iter().cloned());
 
     on_event(Event::Stage {
         name: "stage2".into(),
     });
-    let s2 = stage2::run(config, inputs, &gens, &views, &s1, &dir, on_event)?;
+    let s2 = stage2::run(config, inputs, &gens, &views, &s1, dir, on_event)?;
     steps.extend(s2.steps.iter().cloned());
 
     let mut last = s2.recon.clone();
@@ -311,7 +344,7 @@ pub fn run(
         on_event(Event::Stage {
             name: "interpolate".into(),
         });
-        let ip = interpolate::run(config, inputs, &gens, &views, &s1, &s2, &dir, on_event)?;
+        let ip = interpolate::run(config, inputs, &gens, &views, &s1, &s2, dir, on_event)?;
         steps.extend(ip.steps.iter().cloned());
         last = ip.recon.clone();
         scenes.push(("interpolate".to_string(), Some(ip.recon)));
@@ -323,13 +356,13 @@ pub fn run(
         on_event(Event::Stage {
             name: "eval".into(),
         });
-        let (summary, st) = evaluate::run(inputs, &scenes, &dir, on_event)?;
+        let (summary, st) = evaluate::run(inputs, &scenes, dir, on_event)?;
         steps.extend(st);
         Some(summary)
     };
     Ok(Outcome {
         steps,
-        scene: last.dir.join("scene.ply"),
+        scene: Some(last.dir.join("scene.ply")),
         metrics,
     })
 }

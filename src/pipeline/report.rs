@@ -28,11 +28,13 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
         config.slots.fixer,
         if config.slots.uses_truth() {
             format!(
-                " (**ground-truth generator**: an upper bound, inconsistency {:?})",
-                config.inconsistency
+                " (**ground-truth generator**: an upper bound, inconsistency {})",
+                config.inconsistency.name()
             )
         } else {
-            String::new()
+            " (the classical defaults unless named otherwise; `--generator truth` gives the \
+             ground-truth upper bound)"
+                .to_string()
         },
         config.mask_source,
         config.depth_supervision,
@@ -53,7 +55,9 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
     md += &format!(
         "## Independent views (§3.2)\n\n{} candidates, {} already covered, {} frustum \
          collisions; independent: {}; closed trajectory: {}. Frustums of the inpainted \
-         regions: `{prefix}/views/frustums.obj` (open it in a mesh viewer).\n\n",
+         regions: `{prefix}/views/frustums.obj` (open it in a mesh viewer); from above (independent \
+         views filled, training cameras grey, the trajectory red):\n\n\
+         ![frustums from above]({prefix}/views/frustums.svg)\n\n",
         plan.candidates.len(),
         plan.covered.len(),
         plan.collisions.len(),

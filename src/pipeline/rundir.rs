@@ -18,12 +18,29 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::time::Instant;
 
+/// Which steps a run computes (SPEC.md §20.8): all, or one step alone (its inputs must be
+/// done: a batch engine's worker), or everything up to one step.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub enum Scope {
+    #[default]
+    All,
+    Only(String),
+    Until(String),
+}
+
 /// An open run directory.
 pub struct RunDir {
     pub root: PathBuf,
     resume: bool,
+    scope: Scope,
+    /// Set once the scope's last step is done: later steps stop the run.
+    finished: std::sync::atomic::AtomicBool,
     timings: Mutex<BTreeMap<String, f64>>,
 }
+
+/// The message of the error that ends a scoped run after its last step (caught by
+/// [`super::run`], never shown).
+pub(crate) const SCOPE_DONE: &str = "the requested steps are done";
 
 /// What a finished (or verified) step hands downstream.
 #[derive(Clone, Debug)]
@@ -38,7 +55,13 @@ pub struct StepDone {
 impl RunDir {
     /// Open `root` for a new run (it must not exist or be empty) or, with `resume`, for
     /// continuing one.
-    pub fn open(root: &Path, resume: bool) -> Result<RunDir> {
+    pub fn open(root: &Path, resume: bool, scope: Scope) -> Result<RunDir> {
+        if scope != Scope::All && !resume && root.is_dir() {
+            return Err(Error::invalid(
+                "--only and --until continue a run directory: pass --resume",
+            )
+            .at(root));
+        }
         if root.is_file() {
             return Err(Error::invalid("the output path is a file").at(root));
         }
@@ -63,6 +86,8 @@ impl RunDir {
         Ok(RunDir {
             root: root.to_path_buf(),
             resume,
+            scope,
+            finished: std::sync::atomic::AtomicBool::new(false),
             timings: Mutex::new(timings),
         })
     }
@@ -76,9 +101,10 @@ impl RunDir {
         on_event: &(dyn Fn(Event) + Sync),
         compute: impl FnOnce(&mut StepWriter) -> Result<()>,
     ) -> Result<StepDone> {
+        use std::sync::atomic::Ordering;
         let dir = self.root.join(name);
         let inputs_sha256 = inputs_sha256(&inputs);
-        if self.resume {
+        if self.resume || self.scope != Scope::All {
             if let Some(digest) = verified(&dir, &inputs_sha256) {
                 on_event(Event::StepSkipped { step: name.into() });
                 return Ok(StepDone {
@@ -87,6 +113,17 @@ impl RunDir {
                     digest,
                     skipped: true,
                 });
+            }
+        }
+        if self.finished.load(Ordering::SeqCst) {
+            return Err(Error::invalid(SCOPE_DONE));
+        }
+        if let Scope::Only(only) = &self.scope {
+            if only != name {
+                return Err(Error::invalid(format!(
+                    "step {name} is not done in this run directory and comes before --only {only} (run up to it first with --until {name}; or is there no step called {only}?)"
+                ))
+                .at(&self.root));
             }
         }
         if dir.exists() {
@@ -123,12 +160,20 @@ impl RunDir {
             step: name.into(),
             seconds: secs,
         });
+        if matches!(&self.scope, Scope::Only(s) | Scope::Until(s) if s == name) {
+            self.finished.store(true, Ordering::SeqCst);
+        }
         Ok(StepDone {
             name: name.into(),
             dir,
             digest,
             skipped: false,
         })
+    }
+
+    /// True once a scoped run's last step is done.
+    pub fn scope_finished(&self) -> bool {
+        self.finished.load(std::sync::atomic::Ordering::SeqCst)
     }
 
     /// Seconds per step measured so far (this run and, with `--resume`, earlier ones).

@@ -137,6 +137,10 @@ pub fn run(
         .independent
         .par_iter()
         .map(|name| independent_view(config, inputs, gens, views, name, dir, on_event))
+        // Every view runs to its end (no short circuit): a batch job's sibling that is
+        // out of scope must not cancel it; the first error in view order is reported.
+        .collect::<Vec<Result<StepDone>>>()
+        .into_iter()
         .collect::<Result<_>>()?;
     let mut steps = per_view.clone();
     let propagate = if config.propagation && !views.plan.dependent.is_empty() {
@@ -273,7 +277,23 @@ fn independent_view(
                     .iter()
                     .map(|c| warp_depth(sd, &sv.camera, c))
                     .collect::<Result<_>>()?;
-                let hints: Vec<DepthHint> = targets
+                // What the caller knows of each frame, for estimators that extend known
+                // depth: the start frame's warped depth, else the end keyframe's (the
+                // inpainting's depth `D` of detection) warped there. Only the former is
+                // Eq. 5's target.
+                let known: Vec<Vec<f32>> = video
+                    .cameras
+                    .iter()
+                    .zip(&targets)
+                    .map(|(c, t)| {
+                        let end = warp_depth(&d0, cam, c)?;
+                        Ok(t.iter()
+                            .zip(&end)
+                            .map(|(&a, &b)| if a > 0.0 { a } else { b })
+                            .collect())
+                    })
+                    .collect::<Result<_>>()?;
+                let hints: Vec<DepthHint> = known
                     .iter()
                     .map(|t| DepthHint {
                         depth: t,

@@ -24,11 +24,8 @@ use super::{
 };
 use crate::camera::Camera;
 use crate::camera::inria::{cameras_json_string, read_cameras_json};
-use crate::collide::frustum::{
-    Outline, Polyhedron, depth_range, mean_range, region_frustum, write_obj,
-};
-use crate::collide::gjk::ConvexHull;
-use crate::collide::independent::{closed_tour, select};
+use crate::collide::frustum::{Outline, Polyhedron, depth_range, mean_range, write_obj};
+use crate::collide::independent::{closed_tour, select_regions};
 use crate::error::{Error, Result};
 use crate::io::image::ImageF32;
 use crate::io::write_text;
@@ -247,8 +244,9 @@ pub fn run(
     });
     let step = dir.step("views", key, on_event, |w| {
         let mut records = Vec::new();
-        let mut polys: Vec<Polyhedron> = Vec::new();
         let mut active: Vec<usize> = Vec::new();
+        let mut masks: Vec<Vec<bool>> = Vec::new();
+        let mut ranges: Vec<[f64; 2]> = Vec::new();
         let mut covered = Vec::new();
         for (ci, cam) in inputs.candidates.iter().enumerate() {
             let s = stem(&cam.name);
@@ -309,9 +307,7 @@ pub fn run(
                             mask: None,
                         },
                     )
-                    .map_err(|e| {
-                        Error::invalid(format!("candidate '{}': {}", cam.name, e.message))
-                    })?;
+?;
                 let space = config.align_space.unwrap_or(est.kind.space());
                 let a = match &reference {
                     Some(r) => least_squares(
@@ -357,7 +353,8 @@ pub fn run(
             }
             let range = mean_range(&rec.ranges)?;
             rec.range = Some(range);
-            polys.push(region_frustum(cam, &mask, range, Outline::BoundingBox)?);
+            masks.push(mask);
+            ranges.push(range);
             active.push(ci);
             records.push(rec);
         }
@@ -367,9 +364,9 @@ pub fn run(
             ));
         }
         let name = |i: usize| inputs.candidates[i].name.clone();
-        let hulls: Vec<ConvexHull> = polys.iter().map(|p| p.hull()).collect::<Result<_>>()?;
-        let centers: Vec<DVec3> = active.iter().map(|&i| inputs.candidates[i].center).collect();
-        let sel = select(&hulls, &centers, None)?;
+        let cams: Vec<&Camera> = active.iter().map(|&i| &inputs.candidates[i]).collect();
+        let (polys, sel) = select_regions(&cams, &masks, &ranges, Outline::BoundingBox, None)?;
+        let centers: Vec<DVec3> = cams.iter().map(|c| c.center).collect();
         let (independent, tour) = if config.independent_detection {
             (sel.independent.clone(), sel.trajectory.clone())
         } else {
@@ -407,11 +404,13 @@ pub fn run(
             gap_cameras: Vec::new(),
         };
         w.json("plan.json", &plan)?;
-        let mut cams: Vec<Camera> = inputs.candidates.clone();
-        cams.extend(gap_cams.iter().map(|g| g.camera.clone()));
-        let text = cameras_json_string(&cams);
+        let mut all: Vec<Camera> = inputs.candidates.clone();
+        all.extend(gap_cams.iter().map(|g| g.camera.clone()));
+        let text = cameras_json_string(&all);
         w.put("cameras.json", |p| write_text(p, &text))?;
         w.put("frustums.obj", |p| write_obj(p, &polys))?;
+        let svg = frustums_svg(&polys, &plan, &cams, &inputs.data.train_cameras());
+        w.put("frustums.svg", |p| write_text(p, &svg))?;
         Ok(())
     })?;
     load(step)
@@ -513,4 +512,116 @@ fn assign_dependents<'c>(
         });
     }
     Ok((dependent, gap_cams))
+}
+
+/// A top-down picture (world x to the right, z down the page; y is up in the bundled
+/// rooms) of the frustums — independent views filled, the others outlined — the training
+/// cameras (grey dots) and the closed trajectory (the line through the camera centres).
+fn frustums_svg(polys: &[Polyhedron], plan: &Plan, cams: &[&Camera], train: &[Camera]) -> String {
+    let pts2 =
+        |p: &Polyhedron| -> Vec<[f64; 2]> { p.vertices.iter().map(|v| [v.x, v.z]).collect() };
+    let mut lo = [f64::INFINITY; 2];
+    let mut hi = [f64::NEG_INFINITY; 2];
+    let mut grow = |q: [f64; 2]| {
+        for k in 0..2 {
+            lo[k] = lo[k].min(q[k]);
+            hi[k] = hi[k].max(q[k]);
+        }
+    };
+    polys.iter().flat_map(pts2).for_each(&mut grow);
+    train.iter().for_each(|c| grow([c.center.x, c.center.z]));
+    let size = 640.0;
+    let span = (hi[0] - lo[0]).max(hi[1] - lo[1]).max(1e-9);
+    let margin = 20.0;
+    let map = |q: [f64; 2]| -> (f64, f64) {
+        (
+            margin + (q[0] - lo[0]) / span * (size - 2.0 * margin),
+            margin + (q[1] - lo[1]) / span * (size - 2.0 * margin),
+        )
+    };
+    let mut svg = format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{size}\" height=\"{size}\" viewBox=\"0 0 {size} {size}\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n"
+    );
+    for p in polys {
+        let hull = hull2(&pts2(p));
+        let d: Vec<String> = hull
+            .iter()
+            .map(|&q| {
+                let (x, y) = map(q);
+                format!("{x:.1},{y:.1}")
+            })
+            .collect();
+        let independent = plan.independent.contains(&p.name);
+        svg += &format!(
+            "<polygon points=\"{}\" fill=\"{}\" fill-opacity=\"0.25\" stroke=\"{}\" stroke-width=\"1\"><title>{}</title></polygon>\n",
+            d.join(" "),
+            if independent { "#1f77b4" } else { "none" },
+            if independent { "#1f77b4" } else { "#999999" },
+            p.name
+        );
+    }
+    for c in train {
+        let (x, y) = map([c.center.x, c.center.z]);
+        svg += &format!("<circle cx=\"{x:.1}\" cy=\"{y:.1}\" r=\"2\" fill=\"#bbbbbb\"/>\n");
+    }
+    let centre = |name: &str| {
+        cams.iter()
+            .find(|c| c.name == name)
+            .map(|c| [c.center.x, c.center.z])
+    };
+    let tour: Vec<String> = plan
+        .trajectory
+        .iter()
+        .chain(plan.trajectory.first())
+        .filter_map(|n| centre(n))
+        .map(|q| {
+            let (x, y) = map(q);
+            format!("{x:.1},{y:.1}")
+        })
+        .collect();
+    svg += &format!(
+        "<polyline points=\"{}\" fill=\"none\" stroke=\"#d62728\" stroke-width=\"1.5\"/>\n",
+        tour.join(" ")
+    );
+    for n in &plan.trajectory {
+        if let Some(q) = centre(n) {
+            let (x, y) = map(q);
+            svg += &format!(
+                "<circle cx=\"{x:.1}\" cy=\"{y:.1}\" r=\"3\" fill=\"#d62728\"/><text x=\"{:.1}\" y=\"{:.1}\" font-size=\"9\" font-family=\"sans-serif\">{n}</text>\n",
+                x + 4.0,
+                y - 4.0
+            );
+        }
+    }
+    svg + "</svg>\n"
+}
+
+/// Convex hull of 2D points (monotone chain), counter-clockwise.
+fn hull2(pts: &[[f64; 2]]) -> Vec<[f64; 2]> {
+    let mut p = pts.to_vec();
+    p.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    p.dedup();
+    if p.len() < 3 {
+        return p;
+    }
+    let cross = |o: [f64; 2], a: [f64; 2], b: [f64; 2]| {
+        (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+    };
+    let mut h: Vec<[f64; 2]> = Vec::new();
+    for pass in 0..2 {
+        let start = h.len();
+        let it: Box<dyn Iterator<Item = &[f64; 2]>> = if pass == 0 {
+            Box::new(p.iter())
+        } else {
+            Box::new(p.iter().rev())
+        };
+        for &q in it {
+            while h.len() >= start + 2 && cross(h[h.len() - 2], h[h.len() - 1], q) <= 0.0 {
+                h.pop();
+            }
+            h.push(q);
+        }
+        h.pop();
+    }
+    h
 }

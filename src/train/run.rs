@@ -21,7 +21,6 @@ use crate::gaussian::Gaussians;
 use crate::gaussian::ply::{ply_bytes, read_ply};
 use crate::io::manifest::{FileEntry, Manifest};
 use crate::io::{create_dir_all, peak_memory_bytes, sha256_hex, write_atomic, write_text};
-use crate::qamask::{QaMaskConfig, opacity_mask, render_qa_mask};
 use crate::train::trainer::{Progress, TrainConfig, Trainer};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -131,21 +130,14 @@ fn cfg_args(dataset_dir: &Path, run: &Path, c: &TrainConfig) -> String {
     )
 }
 
-/// Per-pixel loss weights for fine-tuning (paper Eq. 7), fixed for the whole run.
-#[derive(Clone, Debug)]
-pub enum MaskSource {
-    None,
-    /// `1 − alpha` of the initial scene at each view.
-    Opacity,
-    /// A fine-tuned QA-Mask scene and its config ([`crate::qamask::read_mask_dir`]).
-    Qa(Box<(Gaussians, QaMaskConfig)>),
-}
+/// Per-view loss weights: camera → per-pixel weight map (`None` = all ones).
+pub type ViewWeights<'a> = &'a (dyn Fn(&crate::camera::Camera) -> Result<Option<Vec<f32>>> + Sync);
 
-/// Start from an existing scene instead of the dataset's point cloud.
-#[derive(Clone, Debug)]
-pub struct Init {
+/// Start from an existing scene instead of the dataset's point cloud, with per-pixel loss
+/// weights on the training views (paper Eq. 7; choosing them is the caller's job).
+pub struct Init<'a> {
     pub scene: Gaussians,
-    pub mask: MaskSource,
+    pub weights: Option<ViewWeights<'a>>,
 }
 
 /// Train on `dataset_dir` into `run` (from `init` when given); `on_progress` sees every
@@ -154,7 +146,7 @@ pub fn train_run(
     dataset_dir: &Path,
     run: &Path,
     config: &TrainConfig,
-    init: Option<&Init>,
+    init: Option<&Init<'_>>,
     on_progress: &mut dyn FnMut(&Progress),
 ) -> Result<RunSummary> {
     config.validate()?;
@@ -172,16 +164,11 @@ pub fn train_run(
         Some(i) => {
             let deg = i.scene.sh_degree;
             let mut t = Trainer::from_gaussians(&data, config.clone(), i.scene.clone(), deg)?;
-            let mask = |cam: &crate::camera::Camera| -> Result<Option<Vec<f32>>> {
-                Ok(match &i.mask {
-                    MaskSource::None => None,
-                    MaskSource::Opacity => Some(opacity_mask(&i.scene, cam)?),
-                    MaskSource::Qa(q) => Some(render_qa_mask(&q.0, cam, &q.1)?),
-                })
-            };
             let mut masks = vec![None; data.views.len()];
-            for &vi in &data.train {
-                masks[vi] = mask(&data.views[vi].camera)?;
+            if let Some(w) = i.weights {
+                for &vi in &data.train {
+                    masks[vi] = w(&data.views[vi].camera)?;
+                }
             }
             t.masks = masks;
             t

@@ -104,7 +104,45 @@ impl Default for TrainConfig {
     }
 }
 
+/// Command-line overrides of a [`TrainConfig`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TrainOverrides {
+    pub iterations: Option<u32>,
+    pub seed: Option<u64>,
+    pub resolution: Option<u32>,
+    pub sh_degree: Option<u32>,
+}
+
 impl TrainConfig {
+    /// The defaults, overlaid by the JSON file `path` (any subset of fields), overlaid by
+    /// `flags`.
+    pub fn from_file_and_flags(
+        path: Option<&std::path::Path>,
+        flags: &TrainOverrides,
+    ) -> Result<TrainConfig> {
+        let mut c = match path {
+            Some(p) => {
+                let text = std::fs::read(p).map_err(|e| Error::io(p, e))?;
+                serde_json::from_slice::<TrainConfig>(&text)
+                    .map_err(|e| Error::parse(p, format!("invalid train config: {e}")))?
+            }
+            None => TrainConfig::default(),
+        };
+        if let Some(v) = flags.iterations {
+            c.iterations = v;
+        }
+        if let Some(v) = flags.seed {
+            c.seed = v;
+        }
+        if let Some(v) = flags.resolution {
+            c.resolution = v;
+        }
+        if let Some(v) = flags.sh_degree {
+            c.sh_degree = v;
+        }
+        Ok(c)
+    }
+
     pub fn validate(&self) -> Result<()> {
         if self.sh_degree > crate::math::sh::MAX_SH_DEGREE {
             return Err(Error::invalid(format!("SH degree {} > 5", self.sh_degree)));

@@ -173,7 +173,11 @@ fn cli_train_eval_and_demo() {
     let (g, _) = unseen::gaussian::ply::read_ply(&ply).unwrap();
     assert!(g.len() > 1000);
     let cams = unseen::camera::inria::read_cameras_json(&run.join("cameras.json")).unwrap();
-    assert_eq!((cams.len(), cams[0].width), (72, 40));
+    assert_eq!(
+        (cams.len(), cams[0].width),
+        (96, 40),
+        "72 views and 24 bridge views"
+    );
     let manifest: serde_json::Value =
         serde_json::from_slice(&std::fs::read(run.join("manifest.json")).unwrap()).unwrap();
     assert_eq!(manifest["inputs"]["seed"], 7);

@@ -11,11 +11,13 @@ use unseen::train::run::train_run;
 use unseen::train::trainer::TrainConfig;
 
 /// Extrapolated-pixel PSNR gain of the tiny ground-truth run over the original scene that
-/// the test requires. Measured 10.8 dB when set (7.83 → 18.65 dB); the floor leaves room
-/// for legitimate changes of the recipe while still failing a pipeline that does not
-/// extrapolate (0 dB) — the 8 dB is for the quick preset at 80×60.
-const TINY_EXTRAPOLATED_GAIN_DB: f64 = 6.0;
-/// Largest drop of the training half's PSNR allowed (the 0.5 dB; +1.3 dB measured).
+/// the test requires. Measured 7.2 dB when set (9.03 → 16.23 dB on the 12 evaluation
+/// bridge views; the classical slots give 2.8 dB); the floor leaves room for legitimate
+/// changes of the recipe while failing a pipeline that does not extrapolate, or that
+/// extrapolates no better than the classical slots. The 8 dB is for the quick
+/// preset at 80×60 (SPEC.md §20.10).
+const TINY_EXTRAPOLATED_GAIN_DB: f64 = 5.0;
+/// Largest drop of the training half's PSNR allowed (the 0.5 dB; +1.0 dB measured).
 const TRAIN_HALF_DROP_DB: f64 = 0.5;
 
 fn lounge() -> PathBuf {
@@ -290,7 +292,6 @@ fn bad_pipeline_input_is_one_clear_error() {
     std::fs::copy(run.join("config.json"), bare.join("config.json")).unwrap();
     let e = err(load_inputs(&bare, &cands, None, Some(&lounge())));
     assert!(e.contains("point_cloud"), "{e}");
-    // A candidate that sees nothing of the scene, with a disparity-only depth: named.
     // An output folder that holds something, without --resume; an output path that is a file.
     let inp = inputs(&run);
     let busy = t.path().join("busy");
@@ -301,6 +302,27 @@ fn bad_pipeline_input_is_one_clear_error() {
     let file = t.path().join("file");
     std::fs::write(&file, "x").unwrap();
     assert!(pipeline::run(&tiny_config(), &inp, &file, false, &quiet).is_err());
+    // A candidate outside the room looking away sees nothing to align to: named.
+    let mut away = train0.clone();
+    away["img_name"] = "outside".into();
+    away["position"] = serde_json::json!([40.0, 1.0, 0.0]);
+    // Turned half a turn about the vertical: train_001 looks towards −x, this one to +x.
+    for row in [0, 2] {
+        for k in 0..3 {
+            let v = away["rotation"][row][k].as_f64().unwrap();
+            away["rotation"][row][k] = (-v).into();
+        }
+    }
+    let outside = t.path().join("outside.json");
+    std::fs::write(&outside, serde_json::to_string(&[away]).unwrap()).unwrap();
+    let inp_out = load_inputs(&run, &outside, None, Some(&lounge())).unwrap();
+    let cfg = PipelineConfig {
+        slots: SlotNames::default(),
+        ..tiny_config()
+    };
+    let out = t.path().join("outside-run");
+    let e = pipeline::run(&cfg, &inp_out, &out, false, &quiet).unwrap_err();
+    assert!(e.to_string().contains("'outside'"), "{e}");
     // A slot that fails: an unknown model is named before anything runs.
     let cfg = PipelineConfig {
         slots: SlotNames {
@@ -312,4 +334,74 @@ fn bad_pipeline_input_is_one_clear_error() {
     let out = t.path().join("slot");
     let e = pipeline::run(&cfg, &inp, &out, false, &quiet).unwrap_err();
     assert!(e.to_string().contains("nope"), "{e}");
+}
+
+/// A batch engine's fan-out (SPEC.md §20.8): detection alone, then each independent view's
+/// stage-1 step as its own job, then the rest with `--resume`, gives the bits of one run;
+/// a job whose inputs are not done is a clear error.
+#[test]
+fn per_view_jobs_then_resume_equal_one_run() {
+    use unseen::pipeline::{Scope, run_scoped};
+    let t = TempDir::new("pipeline-batch");
+    let run = tiny_run(t.path());
+    let inp = inputs(&run);
+    let cfg = PipelineConfig {
+        interpolation: false,
+        ..tiny_config()
+    };
+    let whole = t.path().join("whole");
+    pipeline::run(&cfg, &inp, &whole, false, &quiet).unwrap();
+    let out = t.path().join("batch");
+    let o = run_scoped(
+        &cfg,
+        &inp,
+        &out,
+        false,
+        Scope::Until("views".into()),
+        &quiet,
+    )
+    .unwrap();
+    assert!(o.scene.is_none());
+    assert!(!out.join("stage1").exists(), "nothing after views ran");
+    let plan: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("views/plan.json")).unwrap()).unwrap();
+    let independent: Vec<String> = plan["independent"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap().to_string())
+        .collect();
+    assert!(independent.len() >= 2);
+    // A job whose inputs are missing names the step it needs.
+    let e = run_scoped(
+        &cfg,
+        &inp,
+        &out,
+        true,
+        Scope::Only("stage1/recon".into()),
+        &quiet,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains(&format!("stage1/{}", independent[0])), "{e}");
+    // One job per independent view, last first (order does not matter).
+    for v in independent.iter().rev() {
+        let step = format!("stage1/{v}");
+        run_scoped(&cfg, &inp, &out, true, Scope::Only(step.clone()), &quiet).unwrap();
+        assert!(out.join(&step).join("manifest.json").is_file(), "{step}");
+    }
+    assert!(!out.join("stage1/recon").exists());
+    let skipped = std::sync::Mutex::new(Vec::new());
+    pipeline::run(&cfg, &inp, &out, true, &|e| {
+        if let Event::StepSkipped { step } = e {
+            skipped.lock().unwrap().push(step)
+        }
+    })
+    .unwrap();
+    let skipped = skipped.into_inner().unwrap();
+    for v in &independent {
+        assert!(skipped.contains(&format!("stage1/{v}")), "{skipped:?}");
+    }
+    let c = compare(&whole, &out, 0.0).unwrap();
+    assert!(c.steps.iter().all(|s| s.identical), "{}", c.table());
 }

@@ -210,7 +210,11 @@ fn bundled_scenes_load_with_split_depth_and_points() {
             &LoadOptions::default(),
         )
         .unwrap();
-        assert_eq!(d.views.len(), 72, "{name}");
+        assert_eq!(
+            d.views.len(),
+            96,
+            "{name}: 72 views of the two halves, 24 bridge views"
+        );
         assert_eq!(d.train.len() + d.test.len(), 36);
         assert_eq!(d.test.len(), 5, "every 8th of the 36 train-half views");
         assert_eq!(d.heldout.len(), 36);

@@ -4,10 +4,10 @@
 use clap::Args;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use unseen::camera::{Camera, inria};
-use unseen::collide::frustum::{Outline, Polyhedron, mean_range, region_frustum, write_obj};
+use unseen::camera::{find, inria};
+use unseen::collide::frustum::{Outline, mean_range, write_obj};
 use unseen::collide::gjk::{ConvexHull, proximity};
-use unseen::collide::independent::select;
+use unseen::collide::independent::select_regions;
 use unseen::error::{Error, Result};
 use unseen::io::image::{ImageF32, read_depth, read_png, write_exr, write_png};
 use unseen::io::{create_dir_all, write_text};
@@ -92,17 +92,11 @@ pub enum OutlineArg {
     Hull,
 }
 
-fn camera<'a>(cams: &'a [Camera], name: &str, file: &Path) -> Result<&'a Camera> {
-    cams.iter()
-        .find(|c| c.name == name)
-        .ok_or_else(|| Error::invalid(format!("no camera named '{name}'")).at(file))
-}
-
 pub fn run_warp(a: &WarpArgs) -> Result<()> {
     let cams = inria::read_cameras_json(&a.cameras)?;
     let (from, to) = (
-        camera(&cams, &a.from, &a.cameras)?,
-        camera(&cams, &a.to, &a.cameras)?,
+        find(&cams, &a.from, &a.cameras)?,
+        find(&cams, &a.to, &a.cameras)?,
     );
     let image = read_png(&a.image)?;
     let depth = read_depth(&a.depth, image.width, image.height)?;
@@ -208,10 +202,11 @@ pub fn run_views(a: &ViewsArgs) -> Result<()> {
         OutlineArg::BoundingBox => Outline::BoundingBox,
         OutlineArg::Hull => Outline::Hull,
     };
-    let mut polys: Vec<Polyhedron> = Vec::new();
-    let mut centers = Vec::new();
+    let mut cand = Vec::new();
+    let mut masks = Vec::new();
+    let mut rs = Vec::new();
     for name in &a.candidates {
-        let cam = camera(&cams, name, &a.cameras)?;
+        let cam = find(&cams, name, &a.cameras)?;
         let path = a.masks.join(format!("{name}.png"));
         let m = read_png(&path)?;
         if (m.width, m.height) != (cam.width as usize, cam.height as usize) {
@@ -221,19 +216,19 @@ pub fn run_views(a: &ViewsArgs) -> Result<()> {
             ))
             .at(&path));
         }
-        let mask: Vec<bool> = m
-            .data
-            .chunks(m.channels)
-            .map(|c| c.iter().any(|&v| v > 0.0))
-            .collect();
-        let range = *ranges.get(name).ok_or_else(|| {
+        masks.push(
+            m.data
+                .chunks(m.channels)
+                .map(|c| c.iter().any(|&v| v > 0.0))
+                .collect::<Vec<bool>>(),
+        );
+        rs.push(*ranges.get(name).ok_or_else(|| {
             Error::invalid(format!("no depth range for '{name}'")).at(&a.depth_ranges)
-        })?;
-        polys.push(region_frustum(cam, &mask, range, outline).map_err(|e| e.at(&path))?);
-        centers.push(cam.center);
+        })?);
+        cand.push(cam);
     }
-    let hulls: Vec<ConvexHull> = polys.iter().map(|p| p.hull()).collect::<Result<_>>()?;
-    let sel = select(&hulls, &centers, None)?;
+    let (polys, sel) =
+        select_regions(&cand, &masks, &rs, outline, None).map_err(|e| e.at(&a.masks))?;
     let names =
         |v: &[usize]| -> Vec<&str> { v.iter().map(|&i| a.candidates[i].as_str()).collect() };
     let pairs = |v: &[(usize, usize)]| -> Vec<[&str; 2]> {

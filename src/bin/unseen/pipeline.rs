@@ -4,12 +4,11 @@
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
 use std::time::Instant;
 use unseen::error::{Error, Result};
 use unseen::pipeline::compare::compare;
 use unseen::pipeline::{
-    self, Event, Inconsistency, Inputs, MaskSource, PipelineConfig, SlotNames, load_inputs,
+    self, Inconsistency, Inputs, MaskSource, PipelineConfig, Scope, SlotNames, load_inputs,
 };
 use unseen::train::run::train_run;
 use unseen::train::trainer::TrainConfig;
@@ -22,7 +21,8 @@ pub enum Preset {
 
 #[derive(Clone, Copy, ValueEnum)]
 pub enum Generator {
-    /// The classical slots (Telea, depth-fill, morph, identity) unless --config names others.
+    /// The classical slots (Telea, depth-fill, morph, identity; the default) unless
+    /// --config names others.
     Classical,
     /// The labelled ground-truth generator (needs the candidates' truth in the dataset).
     Truth,
@@ -60,6 +60,13 @@ pub struct ExtrapolateArgs {
     /// Continue a run: verified steps are skipped, the rest recomputed.
     #[arg(long)]
     resume: bool,
+    /// Compute only this step (e.g. `stage1/bridge_004`), whose inputs must be done in
+    /// OUT: one job of a batch engine. Implies continuing OUT.
+    #[arg(long, conflicts_with = "until")]
+    only: Option<String>,
+    /// Compute the steps up to and including this one (e.g. `views`), then stop.
+    #[arg(long)]
+    until: Option<String>,
     /// Worker threads (default: all cores); results are the same bits for any count.
     #[arg(long)]
     threads: Option<usize>,
@@ -162,54 +169,6 @@ fn merge(base: &mut serde_json::Value, over: serde_json::Value) {
     }
 }
 
-/// Draw pipeline events: one bar for the current iteration-driven step, a line per step.
-pub fn drawer() -> impl Fn(Event) + Sync {
-    let bar = Mutex::new(None::<(String, ProgressBar)>);
-    let t0 = Instant::now();
-    move |e: Event| {
-        let mut b = bar.lock().expect("bar lock");
-        match e {
-            Event::Stage { name } => eprintln!("== {name}"),
-            Event::StepStarted { step } => eprintln!("   {step} ..."),
-            Event::StepFinished { step, seconds } => {
-                if let Some((_, pb)) = b.take() {
-                    pb.finish_and_clear();
-                }
-                eprintln!(
-                    "   {step} done in {seconds:.1} s ({:.0} s total)",
-                    t0.elapsed().as_secs_f64()
-                );
-            }
-            Event::StepSkipped { step } => eprintln!("   {step}: verified, skipped"),
-            Event::Iterations {
-                step,
-                done,
-                total,
-                loss,
-            } => {
-                if b.as_ref().is_none_or(|(s, _)| *s != step) {
-                    if let Some((_, pb)) = b.take() {
-                        pb.finish_and_clear();
-                    }
-                    let pb = ProgressBar::new(total as u64);
-                    pb.set_style(
-                        ProgressStyle::with_template("   {bar:30} {pos}/{len} {msg}")
-                            .expect("template"),
-                    );
-                    *b = Some((step.clone(), pb));
-                }
-                let (_, pb) = b.as_ref().expect("set");
-                pb.set_position(done as u64);
-                pb.set_message(format!("{step} loss {loss:.4}"));
-                if pb.is_hidden() && (done % 500 == 0 || done == total) {
-                    eprintln!("   {step}: {done}/{total}, loss {loss:.4}");
-                }
-            }
-            Event::Note(s) => eprintln!("   {s}"),
-        }
-    }
-}
-
 fn with_threads<T: Send>(threads: Option<usize>, f: impl FnOnce() -> T + Send) -> Result<T> {
     match threads {
         None => Ok(f()),
@@ -226,14 +185,23 @@ fn with_threads<T: Send>(threads: Option<usize>, f: impl FnOnce() -> T + Send) -
 pub fn run_extrapolate(a: &ExtrapolateArgs) -> Result<()> {
     let cfg = config_from(a.preset, a.config.as_deref(), &a.knobs)?;
     let inputs = load_inputs(&a.run, &a.views, a.eval.as_deref(), a.dataset.as_deref())?;
-    let draw = drawer();
+    let draw = super::progress::drawer();
+    let scope = match (&a.only, &a.until) {
+        (Some(s), _) => Scope::Only(s.clone()),
+        (None, Some(s)) => Scope::Until(s.clone()),
+        (None, None) => Scope::All,
+    };
+    let resume = a.resume || (scope != Scope::All && a.out.is_dir());
     let out = with_threads(a.threads, || {
-        pipeline::run(&cfg, &inputs, &a.out, a.resume, &draw)
+        pipeline::run_scoped(&cfg, &inputs, &a.out, resume, scope, &draw)
     })??;
     if let Some(m) = &out.metrics {
         print!("{}", m.table());
     }
-    println!("extrapolated scene: {}", out.scene.display());
+    match &out.scene {
+        Some(s) => println!("extrapolated scene: {}", s.display()),
+        None => println!("done: the requested steps are in {}", a.out.display()),
+    }
     Ok(())
 }
 
@@ -304,16 +272,7 @@ pub fn run_demo(a: &DemoArgs) -> Result<()> {
     if !scene.is_dir() {
         return Err(Error::invalid(format!("no bundled scene '{}'", a.scene)).at(&root));
     }
-    let mut cfg = config_from(Preset::Quick, a.config.as_deref(), &a.knobs)?;
-    if a.knobs.generator.is_none() && a.config.is_none() {
-        // The bundled rooms' held-out half shares no surface with the train half, so the
-        // classical depth slot has nothing to extend there (SPEC.md §20.7): the demo uses
-        // the labelled ground-truth generator unless told otherwise.
-        cfg.slots = SlotNames::truth();
-        eprintln!(
-            "note: the demo uses the ground-truth generator (an upper bound; --generator classical for the classical slots)"
-        );
-    }
+    let cfg = config_from(Preset::Quick, a.config.as_deref(), &a.knobs)?;
     let run = a.out.join("original");
     let ply_done = unseen::train::run::latest_ply(&run).is_ok() && a.resume;
     if !ply_done {
@@ -350,7 +309,7 @@ pub fn run_demo(a: &DemoArgs) -> Result<()> {
         Some(&scene.join("evaluation.json")),
         Some(&scene),
     )?;
-    let draw = drawer();
+    let draw = super::progress::drawer();
     let t0 = Instant::now();
     let ex = a.out.join("extrapolate");
     let outcome = pipeline::run(&cfg, &inputs, &ex, a.resume, &draw)?;

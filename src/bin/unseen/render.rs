@@ -1,0 +1,380 @@
+//! `unseen render` and `unseen oracle` (SPEC.md §11, §12).
+
+use clap::{Args, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use unseen::camera::{Camera, find, inria};
+use unseen::error::{Error, Result};
+use unseen::gaussian::ply;
+use unseen::io::file_stem;
+use unseen::io::image::{ImageF32, write_exr, write_png};
+use unseen::qamask::{
+    QaMaskConfig, heat_map, opacity_mask, read_mask_dir, render_qa_mask, scale_mask,
+};
+use unseen::raster::{Outputs, RenderOptions, render};
+
+#[derive(Args)]
+pub struct RenderArgs {
+    /// Scene in INRIA 3DGS PLY layout.
+    scene: Option<PathBuf>,
+    /// Cameras (INRIA cameras.json).
+    #[arg(long)]
+    cameras: PathBuf,
+    /// Output folder.
+    #[arg(long)]
+    out: PathBuf,
+    /// Render only the camera with this img_name.
+    #[arg(long)]
+    camera: Option<String>,
+    /// Highest SH degree to evaluate (default: the scene's).
+    #[arg(long)]
+    sh_degree: Option<u32>,
+    /// Background colour, linear, e.g. 0,0,0 or 1,1,1.
+    #[arg(long, default_value = "0,0,0", value_parser = parse_rgb)]
+    background: [f32; 3],
+    /// Float EXR outputs besides the PNG: rgb, alpha, depth (accumulated D),
+    /// expected_depth (ED = D / alpha).
+    #[arg(long, value_delimiter = ',', default_value = "rgb")]
+    outputs: Vec<String>,
+    /// Render masks instead of images: a QA-Mask directory (then SCENE may be omitted),
+    /// or `opacity` / `scale` (baselines of SCENE). Writes <name>.mask.exr (float) and
+    /// <name>.mask.png (heat map).
+    #[arg(long)]
+    mask: Option<String>,
+}
+
+#[derive(Args)]
+pub struct OracleArgs {
+    #[command(subcommand)]
+    pass: OraclePass,
+}
+
+#[derive(clap::Args)]
+pub struct OracleScene {
+    /// Scene in INRIA 3DGS PLY layout.
+    #[arg(long)]
+    scene: PathBuf,
+    /// Cameras (INRIA cameras.json).
+    #[arg(long)]
+    cameras: PathBuf,
+    /// The camera's img_name (default: the first camera).
+    #[arg(long)]
+    camera: Option<String>,
+    /// Output folder.
+    #[arg(long)]
+    out: PathBuf,
+    /// Background colour, linear.
+    #[arg(long, default_value = "0,0,0", value_parser = parse_rgb)]
+    background: [f32; 3],
+}
+
+#[derive(Subcommand)]
+pub enum OraclePass {
+    /// Intermediates and outputs of the forward pass.
+    Forward {
+        #[command(flatten)]
+        common: OracleScene,
+    },
+    /// Also the loss against a target image and the gradients of every raw parameter.
+    Backward {
+        #[command(flatten)]
+        common: OracleScene,
+        /// Target image (PNG, the camera's size), scaled to [0, 1].
+        #[arg(long)]
+        target: PathBuf,
+        /// l1 (mean absolute difference), l2 (mean squared difference) or l1-dssim
+        /// (0.8·L1 + 0.2·(1 − SSIM), INRIA's training loss).
+        #[arg(long, default_value = "l1")]
+        loss: String,
+        /// Depth target (EXR, channel Y): adds the mean |D − target| over finite pixels.
+        #[arg(long)]
+        depth_target: Option<PathBuf>,
+    },
+}
+
+pub fn parse_rgb(s: &str) -> std::result::Result<[f32; 3], String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|t| {
+            t.trim()
+                .parse::<f32>()
+                .map_err(|_| format!("'{t}' is not a number"))
+        })
+        .collect::<std::result::Result<_, _>>()?;
+    match v.as_slice() {
+        [r, g, b] if v.iter().all(|x| x.is_finite()) => Ok([*r, *g, *b]),
+        _ => Err(format!("expected three finite numbers R,G,B, got '{s}'")),
+    }
+}
+
+fn parse_outputs(names: &[String]) -> Result<Outputs> {
+    let mut o = Outputs {
+        rgb: true,
+        ..Outputs::RGB
+    };
+    for n in names {
+        match n.as_str() {
+            "rgb" => o.rgb = true,
+            "alpha" => o.alpha = true,
+            "depth" => o.depth = true,
+            "expected_depth" | "expected-depth" => o.expected_depth = true,
+            other => {
+                return Err(Error::invalid(format!(
+                    "unknown output '{other}' (choose from rgb, alpha, depth, expected_depth)"
+                )));
+            }
+        }
+    }
+    Ok(o)
+}
+
+struct Job<'a> {
+    scene_path: &'a Path,
+    cameras: Vec<Camera>,
+    out: &'a Path,
+    opts: RenderOptions,
+    exr: Outputs,
+}
+
+/// Render every camera; returns the files written.
+fn run_render(job: &Job) -> Result<Vec<PathBuf>> {
+    let t0 = Instant::now();
+    let (scene, info) = ply::read_ply(job.scene_path)?;
+    if !info.ignored_properties.is_empty() {
+        eprintln!(
+            "note: {}: ignored vertex properties: {}",
+            job.scene_path.display(),
+            info.ignored_properties.join(", ")
+        );
+    }
+    eprintln!(
+        "loaded {} Gaussians (SH degree {}) in {:.0} ms",
+        scene.len(),
+        scene.sh_degree,
+        t0.elapsed().as_secs_f64() * 1e3
+    );
+    unseen::io::create_dir_all(job.out)?;
+    let bar = ProgressBar::new(job.cameras.len() as u64);
+    bar.set_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} cameras {msg}").expect("template"),
+    );
+    let mut written = Vec::new();
+    let (mut pairs, mut secs, mut skipped) = (0u64, 0f64, 0u64);
+    for cam in &job.cameras {
+        let t = Instant::now();
+        let r = render(&scene, cam, &job.opts)?;
+        secs += t.elapsed().as_secs_f64();
+        pairs += r.report.pairs_evaluated;
+        skipped += r.report.non_finite + r.report.degenerate;
+        let (w, h) = (r.width, r.height);
+        let stem = job.out.join(file_stem(&cam.name));
+        let rgb = ImageF32::new(w, h, 3, r.rgb.clone().unwrap_or_default())?;
+        let mut put = |suffix: &str, img: &ImageF32, exr: bool| -> Result<()> {
+            let p = stem.with_extension(suffix);
+            if exr {
+                write_exr(&p, img)?
+            } else {
+                write_png(&p, img)?
+            }
+            written.push(p);
+            Ok(())
+        };
+        put("png", &rgb, false)?;
+        if job.exr.rgb {
+            put("rgb.exr", &rgb, true)?;
+        }
+        for (flag, data, suffix) in [
+            (job.exr.alpha, &r.alpha, "alpha.exr"),
+            (job.exr.depth, &r.depth, "depth.exr"),
+            (
+                job.exr.expected_depth,
+                &r.expected_depth,
+                "expected_depth.exr",
+            ),
+        ] {
+            if let (true, Some(d)) = (flag, data) {
+                put(suffix, &ImageF32::new(w, h, 1, d.clone())?, true)?;
+            }
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    eprintln!(
+        "rendered {} camera(s) in {:.1} ms: {:.1} M Gaussian-pixel evaluations, {:.0} M/s{}",
+        job.cameras.len(),
+        secs * 1e3,
+        pairs as f64 / 1e6,
+        pairs as f64 / 1e6 / secs.max(1e-9),
+        if skipped > 0 {
+            format!(", {skipped} Gaussian(s) skipped as non-finite or degenerate")
+        } else {
+            String::new()
+        }
+    );
+    Ok(written)
+}
+
+fn run_oracle(c: &OracleScene, targets: Option<(&Path, &str, Option<&Path>)>) -> Result<()> {
+    use unseen::oracle::{Loss, Targets, dump};
+    let (scene, _) = ply::read_ply(&c.scene)?;
+    let cams = inria::read_cameras_json(&c.cameras)?;
+    let cam = match &c.camera {
+        Some(name) => find(&cams, name, &c.cameras)?,
+        None => cams
+            .first()
+            .ok_or_else(|| Error::invalid("the file has no camera").at(&c.cameras))?,
+    };
+    let opts = RenderOptions {
+        background: c.background,
+        ..RenderOptions::default()
+    };
+    let Some((target, loss, depth)) = targets else {
+        dump(&scene, cam, &opts, None, &c.out)?;
+        println!(
+            "wrote the forward oracle of camera '{}' into {}",
+            cam.name,
+            c.out.display()
+        );
+        return Ok(());
+    };
+    let img = unseen::io::image::read_png(target)?;
+    if (img.width, img.height) != (cam.width as usize, cam.height as usize) || img.channels != 3 {
+        return Err(Error::invalid(format!(
+            "target is {}x{} with {} channel(s), camera '{}' needs {}x{} RGB",
+            img.width, img.height, img.channels, cam.name, cam.width, cam.height
+        ))
+        .at(target));
+    }
+    let loss = match loss {
+        "l1" => Loss::L1,
+        "l2" => Loss::L2,
+        "l1-dssim" => Loss::L1DSsim,
+        other => {
+            return Err(Error::invalid(format!(
+                "unknown loss '{other}' (l1, l2 or l1-dssim)"
+            )));
+        }
+    };
+    let depth_img = match depth {
+        Some(p) => Some(unseen::io::image::read_exr(p, &["Y"])?),
+        None => None,
+    };
+    if let (Some(d), Some(p)) = (&depth_img, depth) {
+        if (d.width, d.height) != (cam.width as usize, cam.height as usize) {
+            return Err(Error::invalid("depth target size differs from the camera's").at(p));
+        }
+    }
+    let t = Targets {
+        rgb: &img.data,
+        loss,
+        depth: depth_img.as_ref().map(|d| d.data.as_slice()),
+    };
+    dump(&scene, cam, &opts, Some(&t), &c.out)?;
+    println!(
+        "wrote the backward oracle of camera '{}' into {}",
+        cam.name,
+        c.out.display()
+    );
+    Ok(())
+}
+
+/// Render masks (QA-Mask directory, or a baseline of `scene`) for `cams` into `out`.
+fn render_masks(scene: Option<&Path>, source: &str, cams: &[Camera], out: &Path) -> Result<usize> {
+    unseen::io::create_dir_all(out)?;
+    let load = || -> Result<unseen::gaussian::Gaussians> {
+        let p = scene.ok_or_else(|| Error::invalid(format!("--mask {source} needs SCENE.ply")))?;
+        Ok(ply::read_ply(p)?.0)
+    };
+    enum Src {
+        Qa(unseen::gaussian::Gaussians, QaMaskConfig),
+        Opacity(unseen::gaussian::Gaussians),
+        Scale(unseen::gaussian::Gaussians),
+    }
+    let src = match source {
+        "opacity" => Src::Opacity(load()?),
+        "scale" => Src::Scale(load()?),
+        dir => {
+            let (g, c) = read_mask_dir(Path::new(dir))?;
+            Src::Qa(g, c)
+        }
+    };
+    for cam in cams {
+        let m = match &src {
+            Src::Qa(g, c) => render_qa_mask(g, cam, c)?,
+            Src::Opacity(g) => opacity_mask(g, cam)?,
+            Src::Scale(g) => scale_mask(g, cam)?,
+        };
+        let (w, h) = (cam.width as usize, cam.height as usize);
+        let stem = file_stem(&cam.name);
+        write_exr(
+            &out.join(format!("{stem}.mask.exr")),
+            &ImageF32::new(w, h, 1, m.clone())?,
+        )?;
+        write_png(
+            &out.join(format!("{stem}.mask.png")),
+            &ImageF32::new(w, h, 3, heat_map(&m))?,
+        )?;
+    }
+    Ok(cams.len())
+}
+
+pub fn run_render_command(a: RenderArgs) -> Result<()> {
+    let RenderArgs {
+        scene,
+        cameras,
+        out,
+        camera,
+        sh_degree,
+        background,
+        outputs,
+        mask,
+    } = a;
+    let mut cams = inria::read_cameras_json(&cameras)?;
+    if let Some(name) = camera {
+        cams.retain(|c| c.name == name);
+        if cams.is_empty() {
+            return Err(Error::invalid(format!("no camera named '{name}'")).at(&cameras));
+        }
+    }
+    if let Some(m) = mask {
+        let n = render_masks(scene.as_deref(), &m, &cams, &out)?;
+        println!("wrote {n} mask(s) into {}", out.display());
+        return Ok(());
+    }
+    let Some(scene) = scene else {
+        return Err(Error::invalid("render needs a SCENE.ply (or --mask DIR)"));
+    };
+    let exr = parse_outputs(&outputs)?;
+    let exr = Outputs {
+        rgb: outputs.iter().any(|o| o == "rgb"),
+        ..exr
+    };
+    let opts = RenderOptions {
+        background,
+        sh_degree,
+        outputs: Outputs { rgb: true, ..exr },
+        ..RenderOptions::default()
+    };
+    let files = run_render(&Job {
+        scene_path: &scene,
+        cameras: cams,
+        out: &out,
+        opts,
+        exr,
+    })?;
+    println!("wrote {} file(s) into {}", files.len(), out.display());
+    Ok(())
+}
+
+pub fn run_oracle_command(a: OracleArgs) -> Result<()> {
+    match a.pass {
+        OraclePass::Forward { common } => run_oracle(&common, None),
+        OraclePass::Backward {
+            common,
+            target,
+            loss,
+            depth_target,
+        } => run_oracle(&common, Some((&target, &loss, depth_target.as_deref()))),
+    }
+}
