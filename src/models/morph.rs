@@ -12,6 +12,9 @@ use crate::io::image::ImageF32;
 use crate::warp::dibr::{WarpOptions, Warped, warp};
 use glam::{DMat3, DQuat};
 
+/// The error of a clip in which some intermediate camera sees neither end frame.
+pub const NO_VISIBLE_END: &str = "neither end frame is visible from an intermediate camera";
+
 /// Settings of [`Morph`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Morph {
@@ -177,9 +180,7 @@ impl Morph {
             }
         }
         if invented.iter().all(|&v| v) {
-            return Err(Error::invalid(
-                "neither end frame is visible from an intermediate camera",
-            ));
+            return Err(Error::invalid(NO_VISIBLE_END));
         }
         let img = inpaint_float(&img, w, h, ch, &invented, self.fill_radius, COLOR_SPAN)?;
         let z = inpaint_float(&z, w, h, 1, &invented, self.fill_radius, DEPTH_SPAN)?;

@@ -98,7 +98,7 @@ fn rank(step: &str) -> (u32, String) {
     (r, step.to_string())
 }
 
-/// Every `manifest.json` under `root` (relative step names).
+/// Every `manifest.json` under `root` (relative step names), in pipeline order.
 fn manifests(root: &Path) -> Result<Vec<(String, Manifest)>> {
     let mut out = Vec::new();
     let mut stack = vec![root.to_path_buf()];
@@ -204,7 +204,18 @@ pub fn compare(a: &Path, b: &Path, tolerance: f64) -> Result<Comparison> {
             return Err(Error::invalid("not a run directory").at(r));
         }
     }
-    let ma = manifests(a)?;
+    // The steps of A's run (`steps.json`, in run order); a folder without it (an
+    // interrupted run) is walked for every manifest.
+    let listed: Option<Vec<String>> = std::fs::read(a.join("steps.json"))
+        .ok()
+        .and_then(|b| serde_json::from_slice(&b).ok());
+    let ma = match listed {
+        Some(names) => names
+            .iter()
+            .map(|n| Ok((n.clone(), Manifest::read(&a.join(n))?)))
+            .collect::<Result<Vec<_>>>()?,
+        None => manifests(a)?,
+    };
     if ma.is_empty() {
         return Err(
             Error::invalid("no step manifests (is this an `unseen extrapolate` run?)").at(a),

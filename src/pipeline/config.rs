@@ -20,7 +20,7 @@ pub enum MaskSource {
 
 /// Which generators fill the slots.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct SlotNames {
     /// `telea`, `onnx:CARD.json`, or `truth` (the labelled ground-truth generator).
     pub inpaint: String,
@@ -74,7 +74,7 @@ impl SlotNames {
 
 /// The ground-truth generator's controlled inconsistency (SPEC.md §20.6).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct Inconsistency {
     /// Per-view colour gain drawn from `1 ± gain` per channel.
     pub gain: f32,
@@ -155,7 +155,7 @@ impl Inconsistency {
 
 /// One reconstruction (stage 1, stage 2, interpolation).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct ReconConfig {
     pub iterations: u32,
     /// Densification during the fine-tune; `None` keeps the Gaussian count.
@@ -173,7 +173,7 @@ impl Default for ReconConfig {
 
 /// The whole pipeline.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct PipelineConfig {
     /// `quick` or `paper` (informative: the fields are what counts).
     pub preset: String,
@@ -346,6 +346,27 @@ impl PipelineConfig {
             );
         }
         Ok(())
+    }
+
+    /// The part of a step's key that names the slots it calls: their names and, when one
+    /// is the ground-truth generator, its inconsistency and seed (content addressing: a
+    /// step is shared by variants that differ only in slots it does not call).
+    pub fn slot_key(&self, used: &[&str]) -> serde_json::Value {
+        let all = serde_json::to_value(&self.slots).expect("serializes");
+        let mut m = serde_json::Map::new();
+        let mut truth = false;
+        for &u in used {
+            let v = all.get(u).cloned().unwrap_or_default();
+            truth |= v == "truth";
+            m.insert(u.into(), v);
+        }
+        if truth {
+            m.insert(
+                "truth".into(),
+                serde_json::json!({"inconsistency": self.inconsistency, "seed": self.seed}),
+            );
+        }
+        serde_json::Value::Object(m)
     }
 
     /// The loss of every reconstruction: Eq. 7's weights, the depth term only with depth

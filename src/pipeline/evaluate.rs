@@ -7,7 +7,7 @@
 use super::rundir::{RunDir, StepDone};
 use super::{Event, Inputs, load_mask, read_json, save_mask, stem};
 use crate::camera::Camera;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::gaussian::Gaussians;
 use crate::io::image::{ImageF32, write_png};
 use crate::raster::{RenderOptions, render};
@@ -157,13 +157,8 @@ fn mean_on(map: &[f64], sel: &[bool]) -> f64 {
     if n == 0 { f64::NAN } else { s / n as f64 }
 }
 
-/// Evaluate `scenes` (`None` = the original scene; else a reconstruction step).
-pub fn run(
-    inputs: &Inputs,
-    scenes: &[(String, Option<StepDone>)],
-    dir: &RunDir,
-    on_event: &(dyn Fn(Event) + Sync),
-) -> Result<(Summary, Vec<StepDone>)> {
+/// The existing-pixel masks of the evaluation poses (step `eval/masks`).
+pub fn masks(inputs: &Inputs, dir: &RunDir, on_event: &(dyn Fn(Event) + Sync)) -> Result<StepDone> {
     let data = &inputs.data;
     let names: Vec<&str> = inputs
         .evaluation
@@ -175,7 +170,7 @@ pub fn run(
         "train": data.train.iter().map(|&i| &data.views[i].camera.name).collect::<Vec<_>>(),
         "tolerance": VISIBILITY_DEPTH_TOLERANCE,
     });
-    let masks = dir.step("eval/masks", key, on_event, |w| {
+    dir.step("eval/masks", key, on_event, |w| {
         let train: Vec<(&Camera, &[f32])> = data
             .train
             .iter()
@@ -197,11 +192,34 @@ pub fn run(
             )?;
         }
         Ok(())
-    })?;
+    })
+}
+
+/// Evaluate `scenes` (`None` = the original scene; else a reconstruction step) with the
+/// masks of [`masks`].
+pub fn run(
+    inputs: &Inputs,
+    scenes: &[(String, Option<StepDone>)],
+    masks: StepDone,
+    dir: &RunDir,
+    on_event: &(dyn Fn(Event) + Sync),
+) -> Result<(Summary, Vec<StepDone>)> {
+    let data = &inputs.data;
     let existing: Vec<Vec<bool>> = inputs
         .evaluation
         .iter()
-        .map(|&i| load_mask(&masks.dir, &stem(&data.views[i].camera.name)))
+        .map(|&i| {
+            let v = &data.views[i];
+            let m = load_mask(&masks.dir, &stem(&v.camera.name))?;
+            if m.len() != v.image.width * v.image.height {
+                return Err(Error::invalid(format!(
+                    "the existing-pixel mask of '{}' does not have the view's size",
+                    v.camera.name
+                ))
+                .at(&masks.dir));
+            }
+            Ok(m)
+        })
         .collect::<Result<_>>()?;
     let mut steps = vec![masks.clone()];
     let mut rows = Vec::new();

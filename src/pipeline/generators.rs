@@ -109,8 +109,17 @@ pub fn degrade(img: &ImageF32, inc: &Inconsistency, seed: u64) -> ImageF32 {
     let (w, h, c) = (img.width, img.height, img.channels);
     let mut data = img.data.clone();
     if inc.shift_px > 0.0 {
-        let a = u.range(0.0, std::f32::consts::TAU);
-        let (dx, dy) = (inc.shift_px * a.cos(), inc.shift_px * a.sin());
+        // A direction without platform trigonometry: a point drawn in the square, rejected
+        // outside the unit disc (or too near its centre), normalized.
+        let (ux, uy) = loop {
+            let (x, y) = (u.range(-1.0, 1.0), u.range(-1.0, 1.0));
+            let r2 = x * x + y * y;
+            if r2 <= 1.0 && r2 > 1e-4 {
+                let inv = 1.0 / r2.sqrt();
+                break (x * inv, y * inv);
+            }
+        };
+        let (dx, dy) = (inc.shift_px * ux, inc.shift_px * uy);
         let src = data.clone();
         let at = |x: isize, y: isize, ch: usize| {
             let xx = x.clamp(0, w as isize - 1) as usize;

@@ -42,9 +42,7 @@ pub fn run(
     let fkey = serde_json::json!({
         "stage2": s2.recon.digest,
         "videos": s2.videos.digest,
-        "slots": config.slots,
-        "inconsistency": config.inconsistency,
-        "seed": config.seed,
+        "slots": config.slot_key(&["fixer"]),
     });
     let fixer = dir.step("interpolate/fixer", fkey, on_event, |w| {
         let mut names = Vec::new();

@@ -88,6 +88,56 @@ pub struct Inputs {
     /// Evaluation poses (indices into `data.views`, with truth); may be empty.
     pub evaluation: Vec<usize>,
     pub background: [f32; 3],
+    /// sha256 of everything above that a step may read (scene, cameras, images, depths,
+    /// splits, background) and of the crate and conventions versions: part of every
+    /// step's key (SPEC.md §20.8).
+    pub digest: String,
+}
+
+/// The digest of [`Inputs`]: every view's camera, image and depth bits, the splits, the
+/// scene and candidates' file hashes, the background, the versions.
+fn inputs_digest(
+    data: &Dataset,
+    scene_sha256: &str,
+    candidates: &[Camera],
+    evaluation: &[usize],
+    background: [f32; 3],
+) -> String {
+    use sha2::{Digest, Sha256};
+    let mut h = Sha256::new();
+    let text = |h: &mut Sha256, s: &str| {
+        h.update((s.len() as u64).to_le_bytes());
+        h.update(s.as_bytes());
+    };
+    let floats = |h: &mut Sha256, v: &[f32]| {
+        h.update((v.len() as u64).to_le_bytes());
+        for x in v {
+            h.update(x.to_bits().to_le_bytes());
+        }
+    };
+    text(&mut h, env!("CARGO_PKG_VERSION"));
+    h.update(crate::oracle::CONVENTIONS_VERSION.to_le_bytes());
+    text(&mut h, scene_sha256);
+    text(
+        &mut h,
+        &crate::camera::inria::cameras_json_string(candidates),
+    );
+    floats(&mut h, &background);
+    for v in &data.views {
+        text(
+            &mut h,
+            &crate::camera::inria::cameras_json_string(std::slice::from_ref(&v.camera)),
+        );
+        floats(&mut h, &v.image.data);
+        floats(&mut h, v.depth.as_deref().unwrap_or(&[]));
+    }
+    for list in [&data.train, &data.test, &data.heldout, &evaluation.to_vec()] {
+        h.update((list.len() as u64).to_le_bytes());
+        for &i in list.iter() {
+            h.update((i as u64).to_le_bytes());
+        }
+    }
+    h.finalize().iter().map(|b| format!("{b:02x}")).collect()
 }
 
 /// Load a run, its dataset (from the run's manifest unless `dataset` is given), the
@@ -150,6 +200,14 @@ pub fn load_inputs(
         return Err(Error::invalid("the view list is empty").at(candidates));
     }
     for (i, c) in cands.iter().enumerate() {
+        if c.name.is_empty() || RESERVED_VIEW_NAMES.contains(&c.name.as_str()) {
+            return Err(Error::invalid(format!(
+                "candidate {i} has the name '{}', which is empty or reserved ({})",
+                c.name,
+                RESERVED_VIEW_NAMES.join(", ")
+            ))
+            .at(candidates));
+        }
         if cands[..i].iter().any(|d| d.name == c.name) {
             return Err(
                 Error::invalid(format!("candidate '{}' is listed twice", c.name)).at(candidates),
@@ -201,6 +259,7 @@ pub fn load_inputs(
             eval_idx.push(i);
         }
     }
+    let digest = inputs_digest(&data, &scene_sha256, &cands, &eval_idx, cfg.background);
     Ok(Inputs {
         run: run.to_path_buf(),
         scene,
@@ -210,6 +269,7 @@ pub fn load_inputs(
         candidates_sha256: sha256_hex(&cand_bytes),
         evaluation: eval_idx,
         background: cfg.background,
+        digest,
     })
 }
 
@@ -230,6 +290,18 @@ pub fn candidate_truth(inputs: &Inputs) -> Result<Vec<Truth>> {
                         c.name
                     ))
                 })?;
+            let same_pose = (v.camera.center - c.center).length() < 1e-9
+                && v
+                    .camera
+                    .world_from_camera_rotation
+                    .abs_diff_eq(c.world_from_camera_rotation, 1e-9);
+            if (v.camera.width, v.camera.height) != (c.width, c.height) || !same_pose {
+                return Err(Error::invalid(format!(
+                    "candidate '{}' differs in size or pose from the dataset's view of that name: the ground-truth generator cannot use its truth",
+                    c.name
+                ))
+                .at(&inputs.data.root));
+            }
             let depth = v.depth.clone().ok_or_else(|| {
                 Error::invalid(format!(
                     "the ground-truth generator needs the depth of candidate '{}'",
@@ -277,7 +349,11 @@ pub fn run_scoped(
     on_event: &(dyn Fn(Event) + Sync),
 ) -> Result<Outcome> {
     config.validate()?;
-    let dir = RunDir::open(out, resume, scope)?;
+    let target = match &scope {
+        Scope::All => None,
+        Scope::Only(s) | Scope::Until(s) => Some(s.clone()),
+    };
+    let dir = RunDir::open(out, resume, scope, &inputs.digest)?;
     match run_in(config, inputs, &dir, on_event) {
         // Anything after a scoped run's last step (a later step, or a sibling of an
         // `--only` step that is not needed) ends the run there.
@@ -286,6 +362,11 @@ pub fn run_scoped(
             scene: None,
             metrics: None,
         }),
+        Ok(_) if target.is_some() => Err(Error::invalid(format!(
+            "this run has no step called '{}' (the steps are listed in steps.json)",
+            target.unwrap_or_default()
+        ))
+        .at(out)),
         r => r,
     }
 }
@@ -310,6 +391,10 @@ fn run_in(
     };
     let mut gens = Generators::new(&config.slots, truth)?;
     let mut steps = Vec::new();
+    // Read only the dataset: attempted first, its error (if any) kept until it is needed,
+    // so `--only` of a later step does not need it.
+    let eval_masks =
+        (!inputs.evaluation.is_empty()).then(|| evaluate::masks(inputs, dir, on_event));
 
     on_event(Event::Stage {
         name: "views".into(),
@@ -350,16 +435,24 @@ fn run_in(
         scenes.push(("interpolate".to_string(), Some(ip.recon)));
     }
 
-    let metrics = if inputs.evaluation.is_empty() {
-        None
-    } else {
-        on_event(Event::Stage {
-            name: "eval".into(),
-        });
-        let (summary, st) = evaluate::run(inputs, &scenes, dir, on_event)?;
-        steps.extend(st);
-        Some(summary)
+    let metrics = match eval_masks {
+        None => None,
+        Some(masks) => {
+            on_event(Event::Stage {
+                name: "eval".into(),
+            });
+            let (summary, st) = evaluate::run(inputs, &scenes, masks?, dir, on_event)?;
+            steps.extend(st);
+            Some(summary)
+        }
     };
+    // The run's steps in order (what `compare` walks: steps of an earlier configuration
+    // left in the folder are not part of this run) and their times.
+    let names: Vec<&str> = steps.iter().map(|s| s.name.as_str()).collect();
+    let text = serde_json::to_string_pretty(&names).expect("serializes") + "\n";
+    crate::io::write_text(&out.join("steps.json"), &text)?;
+    let t = serde_json::to_string_pretty(&dir.timings(&steps)).expect("serializes") + "\n";
+    crate::io::write_text(&out.join("timings.json"), &t)?;
     Ok(Outcome {
         steps,
         scene: Some(last.dir.join("scene.ply")),
@@ -436,10 +529,23 @@ pub(crate) fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T
     serde_json::from_slice(&b).map_err(|e| Error::parse(path, format!("invalid JSON: {e}")))
 }
 
-/// A file-name-safe stem for a camera name.
-pub(crate) fn stem(name: &str) -> String {
-    crate::io::file_stem(name)
+/// The folder or file stem of a camera name in a run directory: ASCII letters, digits,
+/// `_` and `-` as they are, every other byte as `%XX` — injective, so two views never share
+/// a file, and never `.`, `..` or a path separator.
+pub fn stem(name: &str) -> String {
+    let mut s = String::with_capacity(name.len());
+    for b in name.bytes() {
+        if b.is_ascii_alphanumeric() || b == b'_' || b == b'-' {
+            s.push(b as char);
+        } else {
+            s.push_str(&format!("%{b:02X}"));
+        }
+    }
+    s
 }
+
+/// Names a candidate may not have: its stage-1 folder would be another step's.
+pub const RESERVED_VIEW_NAMES: [&str; 2] = ["recon", "propagate"];
 
 /// The pose distance used to pick "the closest training cameras" (SPEC.md §20.2):
 /// centre distance in units of the scene extent plus `1 − cos` of the angle between the

@@ -140,6 +140,7 @@ pub fn reconstruct(
     let n_orig = views.len();
     let mut masks: Vec<Option<Vec<f32>>> = vec![None; n_orig];
     let mut summary = Vec::new();
+    let mut pictures = std::collections::BTreeSet::new();
     for g in generated {
         let n = (g.camera.width * g.camera.height) as usize;
         if g.image.data.len() != n * 3 {
@@ -160,16 +161,18 @@ pub fn reconstruct(
         let mean = m
             .as_ref()
             .map_or(1.0, |m| m.iter().map(|&v| v as f64).sum::<f64>() / n as f64);
-        if let Some(m) = &m {
+        // One picture per camera (a camera supervised twice, e.g. a keyframe and its
+        // fixed render, has one weight map).
+        let pic = format!("weights/{}.png", stem(&g.camera.name));
+        if let Some(m) = m.as_ref().filter(|_| !pictures.contains(&pic)) {
+            pictures.insert(pic.clone());
             let heat = ImageF32::new(
                 g.camera.width as usize,
                 g.camera.height as usize,
                 3,
                 crate::qamask::heat_map(m),
             )?;
-            w.put(&format!("weights/{}.png", stem(&g.camera.name)), |p| {
-                crate::io::image::write_png(p, &heat)
-            })?;
+            w.put(&pic, |p| crate::io::image::write_png(p, &heat))?;
         }
         summary.push(serde_json::json!({
             "view": g.camera.name,

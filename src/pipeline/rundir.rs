@@ -15,7 +15,6 @@ use crate::io::manifest::{FileEntry, Manifest, inputs_sha256};
 use crate::io::{create_dir_all, sha256_hex, write_text};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
 use std::time::Instant;
 
 /// Which steps a run computes (SPEC.md §20.8): all, or one step alone (its inputs must be
@@ -33,9 +32,12 @@ pub struct RunDir {
     pub root: PathBuf,
     resume: bool,
     scope: Scope,
+    /// Digest of everything the run reads (scene, dataset views, candidates, crate and
+    /// conventions version): part of every step's inputs, so no step is reused across
+    /// different data.
+    base: String,
     /// Set once the scope's last step is done: later steps stop the run.
     finished: std::sync::atomic::AtomicBool,
-    timings: Mutex<BTreeMap<String, f64>>,
 }
 
 /// The message of the error that ends a scoped run after its last step (caught by
@@ -55,7 +57,7 @@ pub struct StepDone {
 impl RunDir {
     /// Open `root` for a new run (it must not exist or be empty) or, with `resume`, for
     /// continuing one.
-    pub fn open(root: &Path, resume: bool, scope: Scope) -> Result<RunDir> {
+    pub fn open(root: &Path, resume: bool, scope: Scope, base: &str) -> Result<RunDir> {
         if scope != Scope::All && !resume && root.is_dir() {
             return Err(Error::invalid(
                 "--only and --until continue a run directory: pass --resume",
@@ -76,19 +78,18 @@ impl RunDir {
         }
         create_dir_all(root)?;
         if resume {
+            // Files outside the steps (config, summaries): a step's own folder is removed
+            // whenever the step is recomputed, so its temporaries go with it; other jobs'
+            // steps in flight are left alone.
             remove_stale_temporaries(root)?;
+            remove_stale_temporaries(&root.join("eval"))?;
         }
-        let tpath = root.join("timings.json");
-        let timings = std::fs::read(&tpath)
-            .ok()
-            .and_then(|b| serde_json::from_slice(&b).ok())
-            .unwrap_or_default();
         Ok(RunDir {
             root: root.to_path_buf(),
             resume,
             scope,
+            base: base.to_string(),
             finished: std::sync::atomic::AtomicBool::new(false),
-            timings: Mutex::new(timings),
         })
     }
 
@@ -102,11 +103,19 @@ impl RunDir {
         compute: impl FnOnce(&mut StepWriter) -> Result<()>,
     ) -> Result<StepDone> {
         use std::sync::atomic::Ordering;
+        if self.finished.load(Ordering::SeqCst) {
+            return Err(Error::invalid(SCOPE_DONE));
+        }
+        let is_target = matches!(&self.scope, Scope::Only(s) | Scope::Until(s) if s == name);
         let dir = self.root.join(name);
+        let inputs = serde_json::json!({ "run": self.base, "step": inputs });
         let inputs_sha256 = inputs_sha256(&inputs);
         if self.resume || self.scope != Scope::All {
             if let Some(digest) = verified(&dir, &inputs_sha256) {
                 on_event(Event::StepSkipped { step: name.into() });
+                if is_target {
+                    self.finished.store(true, Ordering::SeqCst);
+                }
                 return Ok(StepDone {
                     name: name.into(),
                     dir,
@@ -114,9 +123,6 @@ impl RunDir {
                     skipped: true,
                 });
             }
-        }
-        if self.finished.load(Ordering::SeqCst) {
-            return Err(Error::invalid(SCOPE_DONE));
         }
         if let Scope::Only(only) = &self.scope {
             if only != name {
@@ -148,19 +154,16 @@ impl RunDir {
         })?;
         let mut files = w.files;
         files.sort_by(|a, b| a.path.cmp(&b.path));
-        let digest = Manifest::new("extrapolate", name, inputs, files).write(&dir)?;
         let secs = t0.elapsed().as_secs_f64();
-        {
-            let mut t = self.timings.lock().expect("timings lock");
-            t.insert(name.into(), secs);
-            let s = serde_json::to_string_pretty(&*t).expect("timings serialize");
-            write_text(&self.root.join("timings.json"), &s)?;
-        }
+        // Outside the manifest (timings differ run to run), written before it: a step is
+        // complete only once its manifest exists.
+        write_text(&dir.join(TIMING_FILE), &format!("{secs}\n"))?;
+        let digest = Manifest::new("extrapolate", name, inputs, files).write(&dir)?;
         on_event(Event::StepFinished {
             step: name.into(),
             seconds: secs,
         });
-        if matches!(&self.scope, Scope::Only(s) | Scope::Until(s) if s == name) {
+        if is_target {
             self.finished.store(true, Ordering::SeqCst);
         }
         Ok(StepDone {
@@ -176,25 +179,32 @@ impl RunDir {
         self.finished.load(std::sync::atomic::Ordering::SeqCst)
     }
 
-    /// Seconds per step measured so far (this run and, with `--resume`, earlier ones).
-    pub fn timings(&self) -> BTreeMap<String, f64> {
-        self.timings.lock().expect("timings lock").clone()
+    /// Seconds each of `steps` took when it was computed (this run or an earlier one).
+    pub fn timings(&self, steps: &[StepDone]) -> BTreeMap<String, f64> {
+        steps
+            .iter()
+            .filter_map(|s| {
+                let t = std::fs::read_to_string(s.dir.join(TIMING_FILE)).ok()?;
+                Some((s.name.clone(), t.trim().parse().ok()?))
+            })
+            .collect()
     }
 }
 
-/// Remove the `.<name>.tmp-<pid>` files a killed run left (§10), anywhere in the run.
+/// The seconds a step took, beside its manifest and not in it.
+pub const TIMING_FILE: &str = "timing.txt";
+
+/// Remove the `.<name>.tmp-<pid>` files a killed run left (§10) directly in `dir`.
 fn remove_stale_temporaries(dir: &Path) -> Result<()> {
-    for e in std::fs::read_dir(dir)
-        .map_err(|e| Error::io(dir, e))?
-        .flatten()
-    {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Ok(());
+    };
+    for e in entries.flatten() {
         let p = e.path();
-        if p.is_dir() {
-            remove_stale_temporaries(&p)?;
-        } else if e
-            .file_name()
-            .to_str()
-            .is_some_and(|n| n.starts_with('.') && n.contains(".tmp-"))
+        if p.is_file()
+            && e.file_name()
+                .to_str()
+                .is_some_and(|n| n.starts_with('.') && n.contains(".tmp-"))
         {
             std::fs::remove_file(&p).map_err(|err| Error::io(&p, err))?;
         }
@@ -231,6 +241,11 @@ impl StepWriter {
 
     /// Write `rel` with `write(path)` (which must write atomically), then hash it.
     pub fn put(&mut self, rel: &str, write: impl FnOnce(&Path) -> Result<()>) -> Result<PathBuf> {
+        if self.files.iter().any(|f| f.path == rel) {
+            return Err(Error::invalid(format!(
+                "{rel} is written twice in one step"
+            )));
+        }
         let p = self.dir.join(rel);
         if let Some(parent) = p.parent() {
             create_dir_all(parent)?;

@@ -132,25 +132,11 @@ pub fn run(
     dir: &RunDir,
     on_event: &(dyn Fn(Event) + Sync),
 ) -> Result<Stage1> {
-    let per_view: Vec<StepDone> = views
-        .plan
-        .independent
-        .par_iter()
-        .map(|name| independent_view(config, inputs, gens, views, name, dir, on_event))
-        // Every view runs to its end (no short circuit): a batch job's sibling that is
-        // out of scope must not cancel it; the first error in view order is reported.
-        .collect::<Vec<Result<StepDone>>>()
-        .into_iter()
-        .collect::<Result<_>>()?;
-    let mut steps = per_view.clone();
-    let propagate = if config.propagation && !views.plan.dependent.is_empty() {
-        let s = propagate(views, &per_view, dir, on_event)?;
-        steps.push(s.clone());
-        Some(s)
-    } else {
-        None
-    };
-    let (weights, qa) = recon::weights(
+    // The QA-Mask of the original scene and the per-view steps read nothing of each other:
+    // each is attempted before any error stops the stage, so `--only` any one of them
+    // needs only detection (an out-of-scope sibling's "not done" ends the run once the
+    // target is done).
+    let qa_result = recon::weights(
         config,
         inputs,
         &inputs.scene,
@@ -158,8 +144,26 @@ pub fn run(
         "original",
         dir,
         on_event,
-    )?;
-    steps.extend(qa.clone());
+    );
+    let per_view: Vec<Result<StepDone>> = views
+        .plan
+        .independent
+        .par_iter()
+        .map(|name| independent_view(config, inputs, gens, views, name, dir, on_event))
+        // No short circuit: every view runs to its end; the first error in view order is
+        // reported.
+        .collect();
+    let (weights, qa) = qa_result?;
+    let per_view: Vec<StepDone> = per_view.into_iter().collect::<Result<_>>()?;
+    let mut steps: Vec<StepDone> = qa.iter().cloned().collect();
+    steps.extend(per_view.iter().cloned());
+    let propagate = if config.propagation && !views.plan.dependent.is_empty() {
+        let s = propagate(views, &per_view, dir, on_event)?;
+        steps.push(s.clone());
+        Some(s)
+    } else {
+        None
+    };
     let key = serde_json::json!({
         "scene": inputs.scene_sha256,
         "views": per_view.iter().map(|s| &s.digest).collect::<Vec<_>>(),
@@ -219,8 +223,7 @@ fn independent_view(
     let key = serde_json::json!({
         "views": views.step.digest,
         "view": name,
-        "slots": config.slots,
-        "inconsistency": config.inconsistency,
+        "slots": config.slot_key(&["video", "video_depth"]),
         "video_sources": config.video_sources,
         "video_frames": config.video_frames,
         "align_space": config.align_space,
@@ -256,10 +259,11 @@ fn independent_view(
                 config.video_frames as usize,
             ) {
                 Ok(v) => clips.push((src, sd, v)),
-                Err(e) => failed.push(serde_json::json!({
+                Err(e) if e.message.contains(crate::models::morph::NO_VISIBLE_END) => failed.push(serde_json::json!({
                     "source": sv.camera.name,
                     "error": e.message,
                 })),
+                Err(e) => return Err(e),
             }
         }
         let mut rng = Uniform::new(stage_seed(config.seed, &format!("stage1:{name}")));

@@ -93,23 +93,25 @@ pub fn run(
             "views": views.step.digest,
             "stage1": s1.recon.digest,
             "propagate": s1.propagate.as_ref().map(|s| &s.digest),
-            "slots": config.slots,
-            "inconsistency": config.inconsistency,
+            "slots": config.slot_key(&["inpaint", "depth"]),
             "coverage_alpha": config.coverage_alpha,
             "align_space": config.align_space,
-            "seed": config.seed,
         });
         let step = dir.step("stage2/dependent", key, on_event, |w| {
             for dep in &views.plan.dependent {
                 let cam = views.camera(&dep.name)?;
                 let (wd, ht) = (cam.width as usize, cam.height as usize);
                 let (rgb, alpha, ed) = render_rgba(&s1_scene, cam, inputs.background)?;
+                // The un-extrapolated gap: what the stage-1 scene does not cover and, with
+                // propagation, what no warp of an independent view reached either.
+                let uncovered = alpha.iter().map(|&a| a < config.coverage_alpha);
                 let mask: Vec<bool> = match &s1.propagate {
                     Some(p) => load_mask(&p.dir.join(stem(&dep.name)), "covered")?
                         .iter()
-                        .map(|&c| !c)
+                        .zip(uncovered)
+                        .map(|(&c, u)| !c && u)
                         .collect(),
-                    None => alpha.iter().map(|&a| a < config.coverage_alpha).collect(),
+                    None => uncovered.collect(),
                 };
                 let ip = if mask.iter().any(|&m| m) {
                     gens.inpaint(cam, &rgb, &mask, &format!("stage2:{}", dep.name))?
@@ -161,10 +163,8 @@ pub fn run(
         "views": views.step.digest,
         "stage1": s1.views.iter().map(|s| &s.digest).collect::<Vec<_>>(),
         "dependent": dependent.as_ref().map(|s| &s.digest),
-        "slots": config.slots,
-        "inconsistency": config.inconsistency,
+        "slots": config.slot_key(&["video"]),
         "video_frames": config.video_frames,
-        "seed": config.seed,
     });
     let videos = dir.step("stage2/videos", vkey, on_event, |w| {
         for (k, &(a, b)) in pairs.iter().enumerate() {

@@ -234,13 +234,12 @@ pub fn run(
     let key = serde_json::json!({
         "scene": inputs.scene_sha256,
         "candidates": inputs.candidates_sha256,
-        "slots": config.slots,
-        "inconsistency": config.inconsistency,
+        "slots": config.slot_key(&["inpaint", "depth"]),
         "coverage_alpha": config.coverage_alpha,
         "inpaintings": config.inpaintings,
         "align_space": config.align_space,
         "independent_detection": config.independent_detection,
-        "seed": config.seed,
+
     });
     let step = dir.step("views", key, on_event, |w| {
         let mut records = Vec::new();

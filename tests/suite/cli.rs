@@ -1,5 +1,5 @@
 //! The `unseen` binary: outputs, and one clear error line for bad input.
-use super::common::reference;
+use super::common::{TempDir, reference};
 use std::path::PathBuf;
 use std::process::Command;
 use unseen::io::image::{read_exr, read_png};
@@ -8,10 +8,9 @@ fn unseen() -> Command {
     Command::new(env!("CARGO_BIN_EXE_unseen"))
 }
 
-fn out_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("unseen-cli-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    d
+/// A free path for an output, removed when the guard drops.
+fn out_dir(name: &str) -> TempDir {
+    TempDir::path_only(&format!("cli-{name}"))
 }
 
 #[test]

@@ -53,15 +53,21 @@ pub fn short_train_config(iterations: u32) -> unseen::train::trainer::TrainConfi
     }
 }
 
-/// A fresh folder under the system temp dir, removed when dropped (also when the test
-/// panics: the guard drops during unwinding).
+/// A path under the system temp dir, unique to this process and `name`, removed (file or
+/// folder) when the guard drops — also when the test panics, since the guard drops during
+/// unwinding. [`TempDir::new`] creates the folder; [`TempDir::path_only`] leaves the path
+/// free for the code under test to create.
 pub struct TempDir(pub PathBuf);
 
 impl TempDir {
     pub fn new(name: &str) -> TempDir {
+        let t = TempDir::path_only(name);
+        std::fs::create_dir_all(&t.0).unwrap();
+        t
+    }
+    pub fn path_only(name: &str) -> TempDir {
         let d = std::env::temp_dir().join(format!("unseen-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&d);
-        std::fs::create_dir_all(&d).unwrap();
+        remove(&d);
         TempDir(d)
     }
     pub fn path(&self) -> &std::path::Path {
@@ -69,8 +75,35 @@ impl TempDir {
     }
 }
 
+fn remove(p: &std::path::Path) {
+    if p.is_dir() {
+        let _ = std::fs::remove_dir_all(p);
+    } else {
+        let _ = std::fs::remove_file(p);
+    }
+}
+
 impl Drop for TempDir {
     fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
+        remove(&self.0);
+    }
+}
+
+impl std::ops::Deref for TempDir {
+    type Target = std::path::Path;
+    fn deref(&self) -> &std::path::Path {
+        &self.0
+    }
+}
+
+impl AsRef<std::path::Path> for TempDir {
+    fn as_ref(&self) -> &std::path::Path {
+        &self.0
+    }
+}
+
+impl AsRef<std::ffi::OsStr> for TempDir {
+    fn as_ref(&self) -> &std::ffi::OsStr {
+        self.0.as_os_str()
     }
 }

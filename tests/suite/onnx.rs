@@ -100,8 +100,7 @@ fn onnx_depth_adapter_matches_opencv_and_the_evaluator() {
 
 #[test]
 fn onnx_errors_name_the_file_and_the_mismatch() {
-    let dir = std::env::temp_dir().join(format!("unseen-onnx-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = super::common::TempDir::new("onnx");
     let err = |card: &std::path::Path| OnnxModel::load(card).err().unwrap().to_string();
     // Rank-3 image input.
     let e = err(&reference("onnx/bad_rank/card.json"));

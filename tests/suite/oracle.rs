@@ -8,8 +8,7 @@ use unseen::io::npy::read_npy_f32;
 #[test]
 fn oracle_backward_dump_is_complete_and_consistent() {
     let demo = reference("demo");
-    let out = std::env::temp_dir().join(format!("unseen-oracle-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&out);
+    let out = super::common::TempDir::path_only("oracle");
     // A target: the render of another camera, written by `unseen render`.
     let tdir = out.join("target");
     let st = Command::new(env!("CARGO_BIN_EXE_unseen"))
@@ -101,7 +100,7 @@ fn oracle_l1_dssim_loss() {
     let target: Vec<f32> = (0..40 * 30 * 3)
         .map(|i| ((i * 37) % 101) as f32 / 100.0)
         .collect();
-    let dir = std::env::temp_dir().join(format!("unseen-oracle-ssim-{}", std::process::id()));
+    let dir = super::common::TempDir::path_only("oracle-ssim");
     let t = Targets {
         rgb: &target,
         loss: Loss::L1DSsim,

@@ -1,8 +1,8 @@
 //! Readers and writers: COLMAP (against files COLMAP wrote), cameras.json, transforms.json,
 //! INRIA PLY (round trip, ASCII, big-endian, malformed input).
-use super::common::reference;
+use super::common::{TempDir, reference};
 use glam::{DMat3, DVec3};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use unseen::camera::colmap::read_colmap_model;
 use unseen::camera::inria::{cameras_json_string, read_cameras_json};
 use unseen::camera::transforms::read_transforms_json;
@@ -10,11 +10,9 @@ use unseen::error::ErrorKind;
 use unseen::gaussian::ply::{parse_ply, ply_bytes, read_ply, write_ply};
 use unseen::scene::random_scene;
 
-fn temp_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("unseen-test-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh folder, removed when the guard drops.
+fn temp_dir(name: &str) -> TempDir {
+    TempDir::new(&format!("readers-{name}"))
 }
 
 fn mat_from_rows(v: &serde_json::Value) -> DMat3 {

@@ -316,11 +316,9 @@ fn short_training_beats_the_psnr_floor() {
     assert!(r.mean_psnr > 24.0, "test PSNR {:.2} dB", r.mean_psnr);
 }
 
-fn temp_dir(name: &str) -> std::path::PathBuf {
-    let d = std::env::temp_dir().join(format!("unseen-ds-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh folder, removed when the guard drops.
+fn temp_dir(name: &str) -> super::common::TempDir {
+    super::common::TempDir::new(&format!("ds-{name}"))
 }
 
 /// A COLMAP directory (the pycolmap model + images we write) loads with its points, sorted

@@ -10,7 +10,7 @@ mod train;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
-use unseen::error::{Error, Result};
+use unseen::error::Result;
 
 #[derive(Parser)]
 #[command(
@@ -33,7 +33,7 @@ enum Command {
     /// interpolation; a resumable run directory with per-step manifests.
     Extrapolate(pipeline::ExtrapolateArgs),
     /// Compare two extrapolation runs step by step (the GPU port's check); exit 1 on
-    /// divergence beyond the tolerance.
+    /// divergence beyond the tolerance, 2 when the runs cannot be compared.
     Compare(pipeline::CompareArgs),
     /// Train 3D Gaussians on a dataset (unseen scene, COLMAP or transforms.json directory)
     /// with INRIA's recipe; writes INRIA's output layout into --out.
@@ -70,10 +70,7 @@ fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Demo(a) => pipeline::run_demo(&a),
         Command::Extrapolate(a) => pipeline::run_extrapolate(&a),
-        Command::Compare(a) => match pipeline::run_compare(&a)? {
-            true => Ok(()),
-            false => Err(Error::invalid("the runs diverge")),
-        },
+        Command::Compare(_) => unreachable!("handled in main"),
         Command::Train(a) => train::run_train(a),
         Command::Eval(a) => train::run_eval(a),
         Command::QaMask(a) => train::run_qa_mask(a),
@@ -89,7 +86,19 @@ fn run(cli: Cli) -> Result<()> {
 }
 
 fn main() -> ExitCode {
-    match run(Cli::parse()) {
+    let cli = Cli::parse();
+    // compare: 0 agree, 1 diverge, 2 could not compare.
+    if let Command::Compare(a) = &cli.command {
+        return match pipeline::run_compare(a) {
+            Ok(true) => ExitCode::SUCCESS,
+            Ok(false) => ExitCode::from(1),
+            Err(e) => {
+                eprintln!("error: {e}");
+                ExitCode::from(2)
+            }
+        };
+    }
+    match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e}");
