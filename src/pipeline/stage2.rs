@@ -13,7 +13,7 @@ use super::generators::Generators;
 use super::recon::{self, Supervision, reconstruct};
 use super::rundir::{RunDir, StepDone};
 use super::stage1::{Stage1, load_video, save_video, video_supervision};
-use super::views::{Views, apply_alignment, render_rgba};
+use super::views::{MIN_ALIGN_PIXELS, Views, apply_alignment, render_rgba};
 use super::{
     Event, Inputs, PipelineConfig, load_depth, load_image, load_mask, save_depth, save_image,
     save_mask, stem,
@@ -22,7 +22,7 @@ use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::io::image::ImageF32;
 use crate::models::{DepthHint, Keyframe};
-use crate::warp::align::{Frame, least_squares};
+use crate::warp::align::{Alignment, Frame, Space, least_squares};
 use std::path::PathBuf;
 
 pub struct Stage2 {
@@ -132,19 +132,33 @@ pub fn run(
                     },
                 )?;
                 let space = config.align_space.unwrap_or(est.kind.space());
-                let a = least_squares(
-                    &[Frame {
-                        estimate: &est.values,
-                        depth: &known,
-                    }],
-                    space,
-                )
-                .map_err(|e| {
-                    Error::invalid(format!(
-                        "dependent view '{}': cannot align its depth to the stage-1 scene ({})",
-                        dep.name, e.message
-                    ))
-                })?;
+                // As in detection (§20.2): too little known depth and a depth-kind
+                // estimate → used as it is; a disparity estimate cannot be.
+                let known_px = known.iter().filter(|&&d| d > 0.0).count();
+                let a = if known_px < MIN_ALIGN_PIXELS && space == Space::Depth {
+                    Alignment {
+                        scale: 1.0,
+                        offset: 0.0,
+                        inliers: 0,
+                        valid: known_px,
+                        residual_mean: 0.0,
+                        residual_max: 0.0,
+                    }
+                } else {
+                    least_squares(
+                        &[Frame {
+                            estimate: &est.values,
+                            depth: &known,
+                        }],
+                        space,
+                    )
+                    .map_err(|e| {
+                        Error::invalid(format!(
+                            "dependent view '{}': cannot align its depth to the stage-1 scene ({})",
+                            dep.name, e.message
+                        ))
+                    })?
+                };
                 let d = apply_alignment(&est, &a, space);
                 let s = stem(&dep.name);
                 save_image(w, &format!("{s}/render"), &rgb)?;
