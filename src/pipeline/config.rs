@@ -221,6 +221,10 @@ pub struct PipelineConfig {
     /// Interpolation by video reuse and the fixer (§3.3.3); off skips the stage.
     pub interpolation: bool,
     pub interpolate: ReconConfig,
+    /// The fixer's targets are remade from the scene being trained every this many
+    /// iterations of the interpolation (paper: "on the fly"); 0 = once, from the stage-2
+    /// scene.
+    pub fixer_every: u32,
 }
 
 impl Default for PipelineConfig {
@@ -257,6 +261,7 @@ impl PipelineConfig {
             stage2: ReconConfig::default(),
             interpolation: true,
             interpolate: ReconConfig::default(),
+            fixer_every: 3000,
         }
     }
 
@@ -280,6 +285,7 @@ impl PipelineConfig {
             stage1: recon(600),
             stage2: recon(600),
             interpolate: recon(400),
+            fixer_every: 100,
             ..PipelineConfig::paper()
         }
     }

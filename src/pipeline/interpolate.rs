@@ -10,13 +10,14 @@
 //! fix the renders of the stage-2 scene once, before it (SPEC.md §20.5 says why).
 
 use super::generators::Generators;
-use super::recon::{self, Supervision, reconstruct};
+use super::recon::{self, Refresh, Supervision, reconstruct_refreshing};
 use super::rundir::{RunDir, StepDone};
 use super::stage1::{Stage1, independent_supervision, load_video, video_supervision};
 use super::stage2::{Stage2, keyframes, neighbour_pairs};
 use super::views::{Views, render_rgba};
 use super::{Event, Inputs, PipelineConfig, load_image, save_image, stem};
 use crate::error::Result;
+use std::collections::BTreeMap;
 
 pub struct Interpolation {
     pub steps: Vec<StepDone>,
@@ -101,6 +102,8 @@ pub fn run(
         "mask_source": config.mask_source,
         "loss": config.recon_loss(),
         "recon": config.interpolate,
+        "fixer_every": config.fixer_every,
+        "slots": config.slot_key(&["fixer"]),
         "seed": config.seed,
     });
     let recon_step = dir.step("interpolate/recon", rkey, on_event, |w| {
@@ -123,7 +126,18 @@ pub fn run(
                 coverage: None,
             });
         }
+        // Where each fixer pose lies (for the truth slot): a keyframe, or frame j of n
+        // of the clip between keyframes a and b.
+        let mut between: BTreeMap<String, (usize, usize, usize, usize)> = BTreeMap::new();
+        for (p, &(a, b)) in pairs.iter().enumerate() {
+            let v = load_video(&s2.videos.dir.join(format!("video_{p}")))?;
+            let n = v.cameras.len();
+            for (j, c) in v.cameras.iter().enumerate() {
+                between.insert(c.name.clone(), (a, b, j, n));
+            }
+        }
         let cams = crate::camera::inria::read_cameras_json(&fixer.dir.join("cameras.json"))?;
+        let first_fixed = generated.len();
         for c in cams {
             generated.push(Supervision {
                 image: load_image(&fixer.dir.join(stem(&c.name)), "fixed")?,
@@ -132,13 +146,25 @@ pub fn run(
                 coverage: None,
             });
         }
-        reconstruct(
+        let fix = |cam: &crate::camera::Camera, render: &crate::io::image::ImageF32| {
+            let b = between
+                .get(&cam.name)
+                .map(|&(a, b, j, n)| (&keys[a].camera, &keys[b].camera, j, n));
+            gens.fix(cam, render, b)
+        };
+        let refresh = Refresh {
+            views: (first_fixed..generated.len()).collect(),
+            every: config.fixer_every,
+            fix: &fix,
+        };
+        reconstruct_refreshing(
             config,
             &config.interpolate,
             inputs,
             s2_scene.clone(),
             &generated,
             &weights,
+            Some(&refresh),
             "interpolate",
             w,
             on_event,

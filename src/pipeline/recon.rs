@@ -117,6 +117,17 @@ pub fn gaussians_from_points(
     Ok(Some(init_from_points(xyz, rgb, sh_degree)?))
 }
 
+/// Generated views whose targets are remade from the scene being trained (paper §3.3.3:
+/// the fixer's outputs of the current renders, added on the fly).
+pub struct Refresh<'f> {
+    /// Indices into the `generated` list of [`reconstruct`].
+    pub views: Vec<usize>,
+    /// The targets are remade before iterations `1 + k·every`, `k ≥ 1`.
+    pub every: u32,
+    /// Current render at a camera → new target.
+    pub fix: &'f (dyn Fn(&Camera, &ImageF32) -> Result<ImageF32> + Sync),
+}
+
 /// Fine-tune `init` on the original training views and `generated`, write `scene.ply`
 /// and the weight maps' heat images into `w`; returns the scene.
 #[allow(clippy::too_many_arguments)]
@@ -127,6 +138,25 @@ pub fn reconstruct(
     init: Gaussians,
     generated: &[Supervision],
     weights: &Weights,
+    stage: &str,
+    w: &mut StepWriter,
+    on_event: &(dyn Fn(Event) + Sync),
+) -> Result<Gaussians> {
+    reconstruct_refreshing(
+        config, recon, inputs, init, generated, weights, None, stage, w, on_event,
+    )
+}
+
+/// [`reconstruct`] with targets remade on the fly.
+#[allow(clippy::too_many_arguments)]
+pub fn reconstruct_refreshing(
+    config: &PipelineConfig,
+    recon: &ReconConfig,
+    inputs: &Inputs,
+    init: Gaussians,
+    generated: &[Supervision],
+    weights: &Weights,
+    refresh: Option<&Refresh>,
     stage: &str,
     w: &mut StepWriter,
     on_event: &(dyn Fn(Event) + Sync),
@@ -212,20 +242,38 @@ pub fn reconstruct(
     let deg = init.sh_degree;
     let mut trainer = Trainer::from_gaussians(&data, cfg, init, deg)?;
     trainer.masks = masks;
-    let step = stage.to_string();
-    trainer.run(
-        &mut |p| {
-            if p.iteration % 50 == 0 || p.iteration == p.iterations {
-                on_event(Event::Iterations {
-                    step: step.clone(),
-                    done: p.iteration,
-                    total: p.iterations,
-                    loss: p.loss_ema,
-                });
+    let mut refreshed = 0u32;
+    while trainer.iteration < recon.iterations {
+        if let Some(r) = refresh {
+            let it = trainer.iteration;
+            if it > 0 && r.every > 0 && it % r.every == 0 {
+                for &k in &r.views {
+                    let cam = &generated[k].camera;
+                    let (rgb, _, _) =
+                        super::views::render_rgba(&trainer.gaussians, cam, inputs.background)?;
+                    trainer.replace_image(n_orig + k, (r.fix)(cam, &rgb)?)?;
+                }
+                refreshed += 1;
             }
-        },
-        &mut |_, _| Ok(()),
-    )?;
+        }
+        let p = trainer.step()?;
+        if p.iteration % 50 == 0 || p.iteration == p.iterations {
+            on_event(Event::Iterations {
+                step: stage.to_string(),
+                done: p.iteration,
+                total: p.iterations,
+                loss: p.loss_ema,
+            });
+        }
+    }
+    if let Some(r) = refresh {
+        // The targets the last part trained on, for people and for a port's diff.
+        for &k in &r.views {
+            let img = trainer.dataset.views[n_orig + k].image.clone();
+            let rel = format!("refreshed/{}.png", stem(&generated[k].camera.name));
+            w.put(&rel, |p| crate::io::image::write_png(p, &img))?;
+        }
+    }
     let g = trainer.gaussians;
     save_scene(w, "scene.ply", &g)?;
     w.json(
@@ -234,6 +282,7 @@ pub fn reconstruct(
             "original_views": n_orig,
             "generated": summary,
             "iterations": recon.iterations,
+            "refreshed": refreshed,
             "gaussians": g.len(),
         }),
     )?;

@@ -209,7 +209,8 @@ pub struct Progress {
 /// Training state: parameters, optimizer, statistics, generator.
 pub struct Trainer<'a> {
     pub config: TrainConfig,
-    pub dataset: &'a Dataset,
+    /// The views (borrowed; copied on the first [`Trainer::replace_image`]).
+    pub dataset: std::borrow::Cow<'a, Dataset>,
     pub gaussians: Gaussians,
     pub adam: Adam,
     pub stats: DensifyStats,
@@ -279,7 +280,7 @@ impl<'a> Trainer<'a> {
         Ok(Trainer {
             active_sh_degree: initial_sh_degree.min(config.sh_degree),
             config,
-            dataset,
+            dataset: std::borrow::Cow::Borrowed(dataset),
             gaussians,
             adam,
             stats,
@@ -458,6 +459,32 @@ impl<'a> Trainer<'a> {
             pairs,
             densify: densified,
         })
+    }
+
+    /// Replace the target image of view `vi` (same size and channels), e.g. with an artifact
+    /// fixer's output of the current render (paper §3.3.3, on the fly).
+    pub fn replace_image(&mut self, vi: usize, image: crate::io::image::ImageF32) -> Result<()> {
+        let v = self
+            .dataset
+            .views
+            .get(vi)
+            .ok_or_else(|| Error::invalid(format!("no view {vi}")))?;
+        if (image.width, image.height, image.channels)
+            != (v.image.width, v.image.height, v.image.channels)
+        {
+            return Err(Error::invalid(format!(
+                "view '{}': the new image is {}x{}x{}, the view's {}x{}x{}",
+                v.camera.name,
+                image.width,
+                image.height,
+                image.channels,
+                v.image.width,
+                v.image.height,
+                v.image.channels
+            )));
+        }
+        self.dataset.to_mut().views[vi].image = image;
+        Ok(())
     }
 
     /// One iteration on the next view of the stack (with its mask, if any).

@@ -50,6 +50,7 @@ fn tiny_config() -> PipelineConfig {
         stage1: r(60),
         stage2: r(60),
         interpolate: r(40),
+        fixer_every: 20,
         ..PipelineConfig::quick()
     }
 }
