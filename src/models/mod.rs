@@ -64,13 +64,33 @@ pub struct DepthHint<'a> {
 /// Image + mask → image with the masked region generated.
 pub trait Inpainter: Send + Sync {
     fn name(&self) -> &str;
+    /// What identifies this model's behaviour in a cache key: its name, and for learned
+    /// models the hashes of their files.
+    fn fingerprint(&self) -> String {
+        self.name().to_string()
+    }
     fn inpaint(&self, image: &ImageF32, mask: &[bool]) -> Result<ImageF32>;
+    /// Inpaint with a seed (a diffusion model's noise); deterministic models ignore it.
+    fn inpaint_seeded(&self, image: &ImageF32, mask: &[bool], seed: u64) -> Result<ImageF32> {
+        let _ = seed;
+        self.inpaint(image, mask)
+    }
+    /// Whether different seeds can give different inpaintings (the `n` of paper Eq. 4 is
+    /// worth computing only then).
+    fn stochastic(&self) -> bool {
+        false
+    }
 }
 
 /// Image → relative depth or disparity. `hint` is what the caller knows; learned models
 /// ignore it, the classical default needs it.
 pub trait DepthEstimator: Send + Sync {
     fn name(&self) -> &str;
+    /// What identifies this model's behaviour in a cache key: its name, and for learned
+    /// models the hashes of their files.
+    fn fingerprint(&self) -> String {
+        self.name().to_string()
+    }
     fn estimate(&self, image: &ImageF32, hint: Option<DepthHint>) -> Result<DepthMap>;
 }
 
@@ -78,6 +98,11 @@ pub trait DepthEstimator: Send + Sync {
 /// consistent; the pipeline aligns all frames with one RANSAC, §17).
 pub trait VideoDepthEstimator: Send + Sync {
     fn name(&self) -> &str;
+    /// What identifies this model's behaviour in a cache key: its name, and for learned
+    /// models the hashes of their files.
+    fn fingerprint(&self) -> String {
+        self.name().to_string()
+    }
     fn estimate(&self, frames: &[ImageF32], hints: Option<&[DepthHint]>) -> Result<Vec<DepthMap>>;
 }
 
@@ -104,12 +129,22 @@ pub struct Video {
 /// Start and end frames (with cameras and depths when known) → `n` frames.
 pub trait VideoGenerator: Send + Sync {
     fn name(&self) -> &str;
+    /// What identifies this model's behaviour in a cache key: its name, and for learned
+    /// models the hashes of their files.
+    fn fingerprint(&self) -> String {
+        self.name().to_string()
+    }
     fn generate(&self, start: Keyframe, end: Keyframe, n: usize) -> Result<Video>;
 }
 
 /// A render (and optionally a reference view) → the render with artifacts removed.
 pub trait ArtifactFixer: Send + Sync {
     fn name(&self) -> &str;
+    /// What identifies this model's behaviour in a cache key: its name, and for learned
+    /// models the hashes of their files.
+    fn fingerprint(&self) -> String {
+        self.name().to_string()
+    }
     fn fix(&self, render: &ImageF32, reference: Option<&ImageF32>) -> Result<ImageF32>;
 }
 

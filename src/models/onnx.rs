@@ -118,6 +118,8 @@ type Plan = Arc<TypedRunnableModel<TypedModel>>;
 pub struct OnnxModel {
     card_path: PathBuf,
     model_path: PathBuf,
+    /// `onnx:` + sha256 of the card's bytes + sha256 of the model's bytes.
+    fingerprint: String,
     pub card: Card,
     model: InferenceModel,
     image_input: usize,
@@ -189,15 +191,27 @@ impl OnnxModel {
         model.set_output_names([&card.output]).map_err(|_| {
             Error::invalid(format!("the model has no output '{}'", card.output)).at(&model_path)
         })?;
+        let model_bytes = std::fs::read(&model_path).map_err(|e| Error::io(&model_path, e))?;
+        let fingerprint = format!(
+            "onnx:{}:{}",
+            crate::io::sha256_hex(text.as_bytes()),
+            crate::io::sha256_hex(&model_bytes)
+        );
         Ok(OnnxModel {
             card_path: card_path.to_path_buf(),
             model_path,
+            fingerprint,
             card,
             model,
             image_input,
             mask_input,
             plans: Mutex::new(HashMap::new()),
         })
+    }
+
+    /// What identifies the model's behaviour: the hashes of its card and its weights.
+    pub fn fingerprint(&self) -> &str {
+        &self.fingerprint
     }
 
     /// The model input size for an image of `w × h` (SPEC.md §19.4).
@@ -438,6 +452,9 @@ impl Inpainter for OnnxInpainter {
     fn name(&self) -> &str {
         "onnx"
     }
+    fn fingerprint(&self) -> String {
+        self.0.fingerprint().to_string()
+    }
     fn inpaint(&self, image: &ImageF32, mask: &[bool]) -> Result<ImageF32> {
         if mask.len() != image.width * image.height {
             return Err(Error::invalid("the mask does not have the image's size"));
@@ -476,6 +493,9 @@ impl DepthEstimator for OnnxDepth {
     fn name(&self) -> &str {
         "onnx"
     }
+    fn fingerprint(&self) -> String {
+        self.0.fingerprint().to_string()
+    }
     fn estimate(&self, image: &ImageF32, _hint: Option<DepthHint>) -> Result<DepthMap> {
         let d = self.0.run_image(image, None)?;
         if d.channels != 1 {
@@ -503,6 +523,9 @@ impl VideoDepthEstimator for OnnxDepth {
     fn name(&self) -> &str {
         "onnx"
     }
+    fn fingerprint(&self) -> String {
+        self.0.fingerprint().to_string()
+    }
     fn estimate(&self, frames: &[ImageF32], _hints: Option<&[DepthHint]>) -> Result<Vec<DepthMap>> {
         frames
             .iter()
@@ -525,6 +548,9 @@ impl OnnxFixer {
 impl ArtifactFixer for OnnxFixer {
     fn name(&self) -> &str {
         "onnx"
+    }
+    fn fingerprint(&self) -> String {
+        self.0.fingerprint().to_string()
     }
     fn fix(&self, render: &ImageF32, _reference: Option<&ImageF32>) -> Result<ImageF32> {
         Ok(unit(&self.0, self.0.run_image(render, None)?))

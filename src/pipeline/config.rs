@@ -354,27 +354,6 @@ impl PipelineConfig {
         Ok(())
     }
 
-    /// The part of a step's key that names the slots it calls: their names and, when one
-    /// is the ground-truth generator, its inconsistency and seed (content addressing: a
-    /// step is shared by variants that differ only in slots it does not call).
-    pub fn slot_key(&self, used: &[&str]) -> serde_json::Value {
-        let all = serde_json::to_value(&self.slots).expect("serializes");
-        let mut m = serde_json::Map::new();
-        let mut truth = false;
-        for &u in used {
-            let v = all.get(u).cloned().unwrap_or_default();
-            truth |= v == "truth";
-            m.insert(u.into(), v);
-        }
-        if truth {
-            m.insert(
-                "truth".into(),
-                serde_json::json!({"inconsistency": self.inconsistency, "seed": self.seed}),
-            );
-        }
-        serde_json::Value::Object(m)
-    }
-
     /// The loss of every reconstruction: Eq. 7's weights, the depth term only with depth
     /// supervision.
     pub fn recon_loss(&self) -> LossWeights {

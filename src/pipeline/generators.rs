@@ -211,11 +211,15 @@ pub struct Generators {
     video_depth: Slot<dyn VideoDepthEstimator>,
     fixer: Slot<dyn ArtifactFixer>,
     pub truth: Option<GroundTruth>,
+    /// Per slot, what identifies its behaviour (a model's fingerprint, or `truth`).
+    fingerprints: BTreeMap<&'static str, String>,
+    /// The run's seed (inpainting seeds are drawn from it by key).
+    seed: u64,
 }
 
 impl Generators {
     /// Build the slots by name; `truth` must be given when any slot is `truth`.
-    pub fn new(names: &SlotNames, truth: Option<GroundTruth>) -> Result<Generators> {
+    pub fn new(names: &SlotNames, truth: Option<GroundTruth>, seed: u64) -> Result<Generators> {
         if names.uses_truth() && truth.is_none() {
             return Err(Error::invalid(
                 "the ground-truth generator needs a dataset with the candidate views' images and depths",
@@ -227,7 +231,7 @@ impl Generators {
             ));
         }
         let is_truth = |s: &str| s == "truth";
-        Ok(Generators {
+        let mut g = Generators {
             inpaint: if is_truth(&names.inpaint) {
                 Slot::Truth
             } else {
@@ -254,7 +258,53 @@ impl Generators {
                 Slot::Model(models::artifact_fixer(&names.fixer)?)
             },
             truth,
-        })
+            fingerprints: BTreeMap::new(),
+            seed,
+        };
+        fn fp<T: ?Sized>(s: &Slot<T>, f: impl Fn(&T) -> String) -> String {
+            match s {
+                Slot::Model(m) => f(m),
+                Slot::Truth => "truth".into(),
+            }
+        }
+        g.fingerprints = BTreeMap::from([
+            ("inpaint", fp(&g.inpaint, |m| m.fingerprint())),
+            ("depth", fp(&g.depth, |m| m.fingerprint())),
+            ("video", fp(&g.video, |m| m.fingerprint())),
+            ("video_depth", fp(&g.video_depth, |m| m.fingerprint())),
+            ("fixer", fp(&g.fixer, |m| m.fingerprint())),
+        ]);
+        Ok(g)
+    }
+
+    /// The part of a step's key that names the slots it calls: each slot's fingerprint
+    /// (a learned model's card and weight hashes) and, when one is the ground-truth
+    /// generator, its inconsistency and seed. Variants that differ only in slots a step
+    /// does not call share that step.
+    pub fn key(&self, config: &super::PipelineConfig, used: &[&str]) -> serde_json::Value {
+        let mut m = serde_json::Map::new();
+        let mut truth = false;
+        for &u in used {
+            let f = self.fingerprints.get(u).cloned().unwrap_or_default();
+            truth |= f == "truth";
+            m.insert(u.into(), f.into());
+        }
+        if truth {
+            m.insert(
+                "truth".into(),
+                serde_json::json!({"inconsistency": config.inconsistency, "seed": config.seed}),
+            );
+        }
+        serde_json::Value::Object(m)
+    }
+
+    /// Whether inpaintings with different keys can differ (a stochastic model, or the
+    /// ground-truth generator with an inconsistency).
+    pub fn inpaintings_differ(&self) -> bool {
+        match &self.inpaint {
+            Slot::Model(m) => m.stochastic(),
+            Slot::Truth => !self.gt().inconsistency.is_none(),
+        }
     }
 
     fn gt(&self) -> &GroundTruth {
@@ -272,7 +322,9 @@ impl Generators {
         let named =
             |e: Error| Error::invalid(format!("view '{}': inpainting: {}", cam.name, e.message));
         let out = match &self.inpaint {
-            Slot::Model(m) => m.inpaint(image, mask).map_err(named)?,
+            Slot::Model(m) => m
+                .inpaint_seeded(image, mask, stage_seed(self.seed, key))
+                .map_err(named)?,
             Slot::Truth => {
                 let t = self.gt().get(&cam.name)?;
                 let g = self.gt().degrade(&t.image, key);

@@ -43,7 +43,7 @@ pub fn run(
     let fkey = serde_json::json!({
         "stage2": s2.recon.digest,
         "videos": s2.videos.digest,
-        "slots": config.slot_key(&["fixer"]),
+        "slots": gens.key(config, &["fixer"]),
     });
     let fixer = dir.step("interpolate/fixer", fkey, on_event, |w| {
         let mut names = Vec::new();
@@ -103,7 +103,7 @@ pub fn run(
         "loss": config.recon_loss(),
         "recon": config.interpolate,
         "fixer_every": config.fixer_every,
-        "slots": config.slot_key(&["fixer"]),
+        "slots": gens.key(config, &["fixer"]),
         "seed": config.seed,
     });
     let recon_step = dir.step("interpolate/recon", rkey, on_event, |w| {

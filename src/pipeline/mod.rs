@@ -389,7 +389,7 @@ fn run_in(
     } else {
         None
     };
-    let mut gens = Generators::new(&config.slots, truth)?;
+    let mut gens = Generators::new(&config.slots, truth, config.seed)?;
     let mut steps = Vec::new();
     // Read only the dataset: attempted first, its error (if any) kept until it is needed,
     // so `--only` of a later step does not need it.

@@ -223,7 +223,7 @@ fn independent_view(
     let key = serde_json::json!({
         "views": views.step.digest,
         "view": name,
-        "slots": config.slot_key(&["video", "video_depth"]),
+        "slots": gens.key(config, &["video", "video_depth"]),
         "video_sources": config.video_sources,
         "video_frames": config.video_frames,
         "align_space": config.align_space,

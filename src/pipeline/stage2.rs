@@ -93,7 +93,7 @@ pub fn run(
             "views": views.step.digest,
             "stage1": s1.recon.digest,
             "propagate": s1.propagate.as_ref().map(|s| &s.digest),
-            "slots": config.slot_key(&["inpaint", "depth"]),
+            "slots": gens.key(config, &["inpaint", "depth"]),
             "coverage_alpha": config.coverage_alpha,
             "align_space": config.align_space,
         });
@@ -177,7 +177,7 @@ pub fn run(
         "views": views.step.digest,
         "stage1": s1.views.iter().map(|s| &s.digest).collect::<Vec<_>>(),
         "dependent": dependent.as_ref().map(|s| &s.digest),
-        "slots": config.slot_key(&["video"]),
+        "slots": gens.key(config, &["video"]),
         "video_frames": config.video_frames,
     });
     let videos = dir.step("stage2/videos", vkey, on_event, |w| {

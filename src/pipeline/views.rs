@@ -234,7 +234,7 @@ pub fn run(
     let key = serde_json::json!({
         "scene": inputs.scene_sha256,
         "candidates": inputs.candidates_sha256,
-        "slots": config.slot_key(&["inpaint", "depth"]),
+        "slots": gens.key(config, &["inpaint", "depth"]),
         "coverage_alpha": config.coverage_alpha,
         "inpaintings": config.inpaintings,
         "align_space": config.align_space,
@@ -295,7 +295,14 @@ pub fn run(
                 None => (None, vec![0f32; wd * ht]),
             };
             rec.nearest_training = reference.clone();
-            for j in 0..config.inpaintings as usize {
+            // Eq. 4 over `n` inpaintings only when they can differ: a deterministic slot
+            // would give `n` equal ranges (SPEC.md §20.2).
+            let n = if gens.inpaintings_differ() {
+                config.inpaintings as usize
+            } else {
+                1
+            };
+            for j in 0..n {
                 let ip = gens.inpaint(cam, &rgb, &mask, &format!("views:{}:{j}", cam.name))?;
                 let est = gens
                     .depth(

@@ -502,3 +502,25 @@ fn view_names_map_to_distinct_safe_folders() {
         );
     }
 }
+
+/// A learned slot is keyed by the hashes of its card and weights, so editing either
+/// invalidates the steps that called it; classical slots by their name.
+#[test]
+fn slot_fingerprints_follow_the_model_files() {
+    use unseen::models::inpainter;
+    assert_eq!(inpainter("telea").unwrap().fingerprint(), "telea");
+    let t = TempDir::new("pipeline-fingerprint");
+    let src = reference("onnx/inpaint_tiny");
+    for e in std::fs::read_dir(&src).unwrap().flatten() {
+        std::fs::copy(e.path(), t.path().join(e.file_name())).unwrap();
+    }
+    let card = t.path().join("card.json");
+    let name = format!("onnx:{}", card.display());
+    let a = inpainter(&name).unwrap().fingerprint();
+    assert!(a.starts_with("onnx:") && a.len() == 5 + 64 + 1 + 64, "{a}");
+    let text = std::fs::read_to_string(&card).unwrap();
+    std::fs::write(&card, format!("{text}\n")).unwrap();
+    let b = inpainter(&name).unwrap().fingerprint();
+    assert_ne!(a, b);
+    assert_eq!(a[a.len() - 64..], b[b.len() - 64..], "same weights");
+}
