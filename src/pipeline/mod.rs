@@ -149,6 +149,9 @@ pub fn load_inputs(
     evaluation: Option<&Path>,
     dataset: Option<&Path>,
 ) -> Result<Inputs> {
+    if !run.join("config.json").is_file() {
+        return Err(Error::invalid("not an `unseen train` run directory (no config.json)").at(run));
+    }
     let cfg = read_config(run)?;
     let (_, ply) = latest_ply(run)?;
     let bytes = std::fs::read(&ply).map_err(|e| Error::io(&ply, e))?;

@@ -524,3 +524,113 @@ fn slot_fingerprints_follow_the_model_files() {
     assert_ne!(a, b);
     assert_eq!(a[a.len() - 64..], b[b.len() - 64..], "same weights");
 }
+
+/// `unseen extrapolate` / `unseen compare` on bad input: exit ≠ 0, one line on stderr naming
+/// the file and what is wrong, and no run directory left behind by a run that could not
+/// start.
+#[test]
+fn cli_extrapolate_bad_input_matrix() {
+    let t = TempDir::new("pipeline-cli-bad");
+    let run = tiny_run(t.path());
+    let cands = lounge().join("candidates.json");
+    let empty = t.path().join("empty.json");
+    std::fs::write(&empty, "[]").unwrap();
+    let broken = t.path().join("broken.json");
+    std::fs::write(&broken, "[{\"img_name\": ").unwrap();
+    let bad_cfg = t.path().join("bad_cfg.json");
+    std::fs::write(&bad_cfg, "{\"inpaintingz\": 3}").unwrap();
+    let nan_cam = t.path().join("nan.json");
+    std::fs::write(
+        &nan_cam,
+        std::fs::read_to_string(&cands)
+            .unwrap()
+            .replacen("\"fx\": ", "\"fx\": -", 1),
+    )
+    .unwrap();
+    let a_file = t.path().join("a_file");
+    std::fs::write(&a_file, "x").unwrap();
+    let no_run = t.path().join("no_run");
+    let cases: Vec<(&str, Vec<std::ffi::OsString>, &str, &str)> = vec![
+        (
+            "missing run",
+            vec![
+                no_run.clone().into(),
+                "--views".into(),
+                cands.clone().into(),
+            ],
+            "no_run",
+            "not an `unseen train` run",
+        ),
+        (
+            "missing views",
+            vec![
+                run.clone().into(),
+                "--views".into(),
+                t.path().join("none.json").into(),
+            ],
+            "none.json",
+            "No such file",
+        ),
+        (
+            "empty views",
+            vec![run.clone().into(), "--views".into(), empty.clone().into()],
+            "empty.json",
+            "empty",
+        ),
+        (
+            "malformed views",
+            vec![run.clone().into(), "--views".into(), broken.clone().into()],
+            "broken.json",
+            "cameras.json",
+        ),
+        (
+            "negative fx",
+            vec![run.clone().into(), "--views".into(), nan_cam.clone().into()],
+            "nan.json",
+            "must be finite and positive",
+        ),
+        (
+            "unknown config field",
+            vec![
+                run.clone().into(),
+                "--views".into(),
+                cands.clone().into(),
+                "--config".into(),
+                bad_cfg.clone().into(),
+            ],
+            "bad_cfg.json",
+            "inpaintingz",
+        ),
+    ];
+    for (what, args, file, words) in cases {
+        let out = t.path().join(format!("out-{}", what.replace(' ', "-")));
+        let st = Command::new(env!("CARGO_BIN_EXE_unseen"))
+            .arg("extrapolate")
+            .args(&args)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&st.stderr);
+        assert!(!st.status.success(), "{what}: succeeded");
+        assert_eq!(err.trim().lines().count(), 1, "{what}: {err}");
+        assert!(err.contains(file) && err.contains(words), "{what}: {err}");
+        assert!(!out.exists(), "{what}: left {}", out.display());
+    }
+    // The output path is a file: refused, the file untouched.
+    let st = Command::new(env!("CARGO_BIN_EXE_unseen"))
+        .args(["extrapolate"])
+        .arg(&run)
+        .arg("--views")
+        .arg(&cands)
+        .arg("--out")
+        .arg(&a_file)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&st.stderr);
+    assert!(
+        !st.status.success() && err.contains("a_file") && err.contains("is a file"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read_to_string(&a_file).unwrap(), "x");
+}
