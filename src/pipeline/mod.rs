@@ -156,6 +156,20 @@ pub fn load_inputs(
     let (_, ply) = latest_ply(run)?;
     let bytes = std::fs::read(&ply).map_err(|e| Error::io(&ply, e))?;
     let scene_sha256 = sha256_hex(&bytes);
+    // The scene must be the one the run wrote (a reused folder may hold a newer-numbered
+    // PLY of another run).
+    let manifest = crate::io::manifest::Manifest::read(run)?;
+    let rel = ply.strip_prefix(run).unwrap_or(&ply).display().to_string();
+    if !manifest
+        .files
+        .iter()
+        .any(|f| f.path == rel && f.sha256 == scene_sha256)
+    {
+        return Err(Error::invalid(
+            "this PLY is not the one the run's manifest.json lists (a stale file of another run?)",
+        )
+        .at(&ply));
+    }
     let (scene, _) = read_ply(&ply)?;
     if scene.is_empty() {
         return Err(Error::invalid("the scene has no Gaussians").at(&ply));

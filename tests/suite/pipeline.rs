@@ -324,6 +324,13 @@ fn bad_pipeline_input_is_one_clear_error() {
     std::fs::copy(run.join("config.json"), bare.join("config.json")).unwrap();
     let e = err(load_inputs(&bare, &cands, None, Some(&lounge())));
     assert!(e.contains("point_cloud"), "{e}");
+    // A newer-numbered PLY the run's manifest does not list (a stale file): refused.
+    let stale = run.join("point_cloud/iteration_999999");
+    std::fs::create_dir_all(&stale).unwrap();
+    std::fs::copy(reference("demo/scene.ply"), stale.join("point_cloud.ply")).unwrap();
+    let e = err(load_inputs(&run, &cands, None, Some(&lounge())));
+    assert!(e.contains("stale") && e.contains("iteration_999999"), "{e}");
+    std::fs::remove_dir_all(&stale).unwrap();
     // An output folder that holds something, without --resume; an output path that is a file.
     let inp = inputs(&run);
     let busy = t.path().join("busy");
