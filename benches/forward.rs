@@ -109,4 +109,37 @@ fn main() {
             }
         }
     }
+    rounding_peer();
+}
+
+/// `math::round::{floor, ceil}` against `f32::{floor, ceil}` (libm calls on the default
+/// x86-64 target) in the same run: ns per call over 4M values of the magnitudes splat
+/// bounds have.
+fn rounding_peer() {
+    let v: Vec<f32> = (0..1 << 22)
+        .map(|i| ((i as f32) * 0.618_034).fract() * 2048.0 - 1024.0)
+        .collect();
+    let time = |f: &dyn Fn(f32) -> f32| {
+        let mut best = f64::INFINITY;
+        for _ in 0..5 {
+            let t0 = Instant::now();
+            let mut acc = 0f32;
+            for &x in &v {
+                acc += f(std::hint::black_box(x));
+            }
+            std::hint::black_box(acc);
+            best = best.min(t0.elapsed().as_secs_f64() / v.len() as f64);
+        }
+        best * 1e9
+    };
+    let (sf, sc) = (time(&|x| x.floor()), time(&|x| x.ceil()));
+    let (of, oc) = (
+        time(&|x| unseen::math::round::floor(x)),
+        time(&|x| unseen::math::round::ceil(x)),
+    );
+    println!(
+        "rounding: f32::floor {sf:.2} ns, own floor {of:.2} ns ({:.1}x); f32::ceil {sc:.2} ns, own ceil {oc:.2} ns ({:.1}x)",
+        sf / of,
+        sc / oc
+    );
 }

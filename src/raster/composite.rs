@@ -27,6 +27,7 @@ use super::plan::RenderPlan;
 use super::project::{ALPHA_THRESHOLD, Projected, Splat};
 use super::tile::{TILE_SIZE, TileBins};
 use crate::math::fastexp::exp;
+use crate::math::round::{ceil, floor};
 use rayon::prelude::*;
 
 /// Upper clamp of per-splat alpha (gsplat ≥ 1.5.4 and INRIA; gsplat ≤ 1.5.3 used 0.999).
@@ -76,8 +77,8 @@ pub(crate) fn splat_rows(
     }
     let my = p.splats[gid].mean[1];
     let ry = p.radii[gid][1] as f32 + 1.0;
-    let lo = ((my - ry).floor() - y0 as f32).max(0.0);
-    let hi = ((my + ry).ceil() - y0 as f32 + 1.0).min(rows as f32);
+    let lo = (floor(my - ry) - y0 as f32).max(0.0);
+    let hi = (ceil(my + ry) - y0 as f32 + 1.0).min(rows as f32);
     (lo as u32, if hi > lo { hi as u32 } else { lo as u32 })
 }
 

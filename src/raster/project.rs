@@ -25,6 +25,7 @@ use super::{RenderOptions, RenderReport};
 use crate::camera::Camera;
 use crate::gaussian::Gaussians;
 use crate::math::fastexp::{exp, ln, sigmoid};
+use crate::math::round::ceil;
 use crate::math::sh::{MAX_SH_COEFFS, SH_C0, num_coeffs, sh_basis};
 use rayon::prelude::*;
 
@@ -363,8 +364,8 @@ pub fn project_one(
     } else {
         MAX_EXTENT_SIGMA
     };
-    let rx = (ext * a.sqrt()).ceil();
-    let ry = (ext * c.sqrt()).ceil();
+    let rx = ceil(ext * a.sqrt());
+    let ry = ceil(ext * c.sqrt());
     if rx <= 0.0 && ry <= 0.0 {
         return Err(Cull::LowOpacity);
     }

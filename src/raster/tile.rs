@@ -7,6 +7,7 @@
 //! order, so every list is sorted and the result does not depend on the thread count.
 
 use super::project::Projected;
+use crate::math::round::{ceil, floor};
 use rayon::prelude::*;
 
 /// Tile edge in pixels (gsplat, INRIA `BLOCK_X = BLOCK_Y = 16`).
@@ -43,10 +44,10 @@ pub fn tile_rect(mean: [f32; 2], radii: [i32; 2], tiles_x: usize, tiles_y: usize
     };
     let (rx, ry) = (radii[0] as f32, radii[1] as f32);
     [
-        clampi(((mean[0] - rx) / t).floor(), tiles_x),
-        clampi(((mean[0] + rx) / t).ceil(), tiles_x),
-        clampi(((mean[1] - ry) / t).floor(), tiles_y),
-        clampi(((mean[1] + ry) / t).ceil(), tiles_y),
+        clampi(floor((mean[0] - rx) / t), tiles_x),
+        clampi(ceil((mean[0] + rx) / t), tiles_x),
+        clampi(floor((mean[1] - ry) / t), tiles_y),
+        clampi(ceil((mean[1] + ry) / t), tiles_y),
     ]
 }
 
