@@ -68,6 +68,12 @@ pub fn peak_memory_bytes() -> Option<u64> {
     Some(kb * 1024)
 }
 
+/// Reset the peak resident memory mark (Linux: `5` into `/proc/self/clear_refs`), so the
+/// next [`peak_memory_bytes`] measures from now; false where the OS does not allow it.
+pub fn reset_peak_memory() -> bool {
+    std::fs::write("/proc/self/clear_refs", "5").is_ok()
+}
+
 /// A file-name-safe version of a camera name.
 pub fn file_stem(name: &str) -> String {
     let stem = Path::new(name)

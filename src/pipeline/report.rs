@@ -114,11 +114,16 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
             md += "\n\n";
         }
     }
-    let timings: std::collections::BTreeMap<String, f64> =
+    let timings: std::collections::BTreeMap<String, super::rundir::StepCost> =
         read_json(&run.join("timings.json")).unwrap_or_default();
-    md += "## Time per step (2 cores)\n\n| step | seconds |\n|---|---|\n";
+    md += "## Cost per step (2 cores)\n\n| step | seconds | peak memory |\n|---|---|---|\n";
     for (k, v) in &timings {
-        md += &format!("| {k} | {v:.1} |\n");
+        md += &format!(
+            "| {k} | {:.1} | {} |\n",
+            v.seconds,
+            v.peak_rss_bytes
+                .map_or("—".to_string(), |b| format!("{:.0} MB", b as f64 / 1e6))
+        );
     }
     md += &format!("\nThis invocation: {wall:.1} s.\n");
     Ok(md)

@@ -137,6 +137,7 @@ impl RunDir {
         }
         create_dir_all(&dir)?;
         on_event(Event::StepStarted { step: name.into() });
+        let peak_reset = crate::io::reset_peak_memory();
         let t0 = Instant::now();
         let mut w = StepWriter {
             dir: dir.clone(),
@@ -154,10 +155,15 @@ impl RunDir {
         })?;
         let mut files = w.files;
         files.sort_by(|a, b| a.path.cmp(&b.path));
-        let secs = t0.elapsed().as_secs_f64();
+        let cost = StepCost {
+            seconds: t0.elapsed().as_secs_f64(),
+            peak_rss_bytes: crate::io::peak_memory_bytes().filter(|_| peak_reset),
+        };
+        let secs = cost.seconds;
         // Outside the manifest (timings differ run to run), written before it: a step is
         // complete only once its manifest exists.
-        write_text(&dir.join(TIMING_FILE), &format!("{secs}\n"))?;
+        let text = serde_json::to_string(&cost).expect("serializes") + "\n";
+        write_text(&dir.join(TIMING_FILE), &text)?;
         let digest = Manifest::new("extrapolate", name, inputs, files).write(&dir)?;
         on_event(Event::StepFinished {
             step: name.into(),
@@ -179,20 +185,29 @@ impl RunDir {
         self.finished.load(std::sync::atomic::Ordering::SeqCst)
     }
 
-    /// Seconds each of `steps` took when it was computed (this run or an earlier one).
-    pub fn timings(&self, steps: &[StepDone]) -> BTreeMap<String, f64> {
+    /// What each of `steps` cost when it was computed (this run or an earlier one).
+    pub fn timings(&self, steps: &[StepDone]) -> BTreeMap<String, StepCost> {
         steps
             .iter()
             .filter_map(|s| {
-                let t = std::fs::read_to_string(s.dir.join(TIMING_FILE)).ok()?;
-                Some((s.name.clone(), t.trim().parse().ok()?))
+                let t = std::fs::read(s.dir.join(TIMING_FILE)).ok()?;
+                Some((s.name.clone(), serde_json::from_slice(&t).ok()?))
             })
             .collect()
     }
 }
 
-/// The seconds a step took, beside its manifest and not in it.
-pub const TIMING_FILE: &str = "timing.txt";
+/// What a step cost, beside its manifest and not in it (it differs run to run).
+pub const TIMING_FILE: &str = "cost.json";
+
+/// Wall time and peak resident memory of one step. The peak is the process's high-water
+/// mark since the step began (Linux: reset through `/proc/self/clear_refs`); steps that
+/// run side by side (stage 1's per-view steps) share it. `None` where the OS does not tell.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct StepCost {
+    pub seconds: f64,
+    pub peak_rss_bytes: Option<u64>,
+}
 
 /// Remove the `.<name>.tmp-<pid>` files a killed run left (§10) directly in `dir`.
 fn remove_stale_temporaries(dir: &Path) -> Result<()> {

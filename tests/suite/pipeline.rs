@@ -127,6 +127,17 @@ fn pipeline_extrapolates_and_is_the_same_bits_on_1_2_and_7_threads() {
     ] {
         assert!(ex.join(f).is_file(), "{f} missing");
     }
+    // Every step's cost: seconds and (on Linux) its peak resident memory.
+    let steps: Vec<String> =
+        serde_json::from_slice(&std::fs::read(ex.join("steps.json")).unwrap()).unwrap();
+    let costs: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(ex.join("timings.json")).unwrap()).unwrap();
+    for s in &steps {
+        assert!(costs[s]["seconds"].as_f64().unwrap() >= 0.0, "{s}");
+        if cfg!(target_os = "linux") {
+            assert!(costs[s]["peak_rss_bytes"].as_u64().unwrap() > 1_000_000, "{s}");
+        }
+    }
     let obj = tobj::load_obj(ex.join("views/frustums.obj"), &tobj::LoadOptions::default());
     assert!(obj.is_ok_and(|(m, _)| !m.is_empty()));
 }
