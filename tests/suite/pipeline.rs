@@ -135,7 +135,10 @@ fn pipeline_extrapolates_and_is_the_same_bits_on_1_2_and_7_threads() {
     for s in &steps {
         assert!(costs[s]["seconds"].as_f64().unwrap() >= 0.0, "{s}");
         if cfg!(target_os = "linux") {
-            assert!(costs[s]["peak_rss_bytes"].as_u64().unwrap() > 1_000_000, "{s}");
+            assert!(
+                costs[s]["peak_rss_bytes"].as_u64().unwrap() > 1_000_000,
+                "{s}"
+            );
         }
     }
     let obj = tobj::load_obj(ex.join("views/frustums.obj"), &tobj::LoadOptions::default());
