@@ -18,7 +18,7 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
     let mut md = String::from("# unseen: scene extrapolation\n\n");
     md += &format!(
         "Preset `{}`, slots: inpaint `{}`, depth `{}`, video `{}`, video depth `{}`, fixer `{}`{}; \
-         mask `{:?}`, depth supervision {}, DIBR propagation {}, independent view detection {}, \
+         mask `{}`, depth supervision {}, DIBR propagation {}, independent view detection {}, \
          interpolation {}. The whole configuration is `{prefix}/config.json`.\n\n",
         config.preset,
         config.slots.inpaint,
@@ -36,7 +36,10 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
              ground-truth upper bound)"
                 .to_string()
         },
-        config.mask_source,
+        serde_json::to_value(config.mask_source)
+            .ok()
+            .and_then(|v| v.as_str().map(str::to_string))
+            .unwrap_or_default(),
         config.depth_supervision,
         config.propagation,
         config.independent_detection,
@@ -91,9 +94,24 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
             }
         );
     }
-    md += &format!(
-        "\nDIBR propagation to the dependent views: `{prefix}/stage1/propagate/<view>/warped.png`.\n\n"
-    );
+    let propagated = run.join("stage1/propagate");
+    let shown: Vec<&super::views::Dependent> = plan
+        .dependent
+        .iter()
+        .filter(|d| propagated.join(stem(&d.name)).is_dir())
+        .take(4)
+        .collect();
+    if !shown.is_empty() {
+        md += "\n### DIBR propagation and the stage-2 gap\n\n| dependent view | between | warped inpaintings | covered | stage-1 render | gap inpainted |\n|---|---|---|---|---|---|\n";
+        for d in shown {
+            let s = stem(&d.name);
+            md += &format!(
+                "| {} | {} – {} | ![]({prefix}/stage1/propagate/{s}/warped.png) | ![]({prefix}/stage1/propagate/{s}/covered.mask.png) | ![]({prefix}/stage2/dependent/{s}/render.png) | ![]({prefix}/stage2/dependent/{s}/inpaint.mask.png) |\n",
+                d.name, d.between[0], d.between[1]
+            );
+        }
+        md += "\n";
+    }
     if let Some(m) = &out.metrics {
         md += "## Evaluation views (render | truth)\n\n";
         for r in &m.rows {
