@@ -127,18 +127,16 @@ fn pipeline_extrapolates_and_is_the_same_bits_on_1_2_and_7_threads() {
     ] {
         assert!(ex.join(f).is_file(), "{f} missing");
     }
-    // Every step's cost: seconds and (on Linux) its peak resident memory.
+    // Every step's cost: seconds and, where the OS lets the peak be reset and read (Linux
+    // `clear_refs`), its peak resident memory.
     let steps: Vec<String> =
         serde_json::from_slice(&std::fs::read(ex.join("steps.json")).unwrap()).unwrap();
     let costs: serde_json::Value =
         serde_json::from_slice(&std::fs::read(ex.join("timings.json")).unwrap()).unwrap();
     for s in &steps {
         assert!(costs[s]["seconds"].as_f64().unwrap() >= 0.0, "{s}");
-        if cfg!(target_os = "linux") {
-            assert!(
-                costs[s]["peak_rss_bytes"].as_u64().unwrap() > 1_000_000,
-                "{s}"
-            );
+        if let Some(peak) = costs[s]["peak_rss_bytes"].as_u64() {
+            assert!(peak > 1_000_000, "{s}: {peak}");
         }
     }
     let obj = tobj::load_obj(ex.join("views/frustums.obj"), &tobj::LoadOptions::default());
