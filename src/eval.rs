@@ -43,6 +43,17 @@ impl EvalReport {
     }
 }
 
+/// An RGB render (left) beside its ground truth (right), both `w × h`.
+pub fn side_by_side(rgb: &[f32], gt: &[f32], w: usize, h: usize) -> Result<ImageF32> {
+    let mut both = vec![0f32; 2 * w * h * 3];
+    for y in 0..h {
+        let row = &mut both[y * 2 * w * 3..(y + 1) * 2 * w * 3];
+        row[..w * 3].copy_from_slice(&rgb[y * w * 3..(y + 1) * w * 3]);
+        row[w * 3..].copy_from_slice(&gt[y * w * 3..(y + 1) * w * 3]);
+    }
+    ImageF32::new(2 * w, h, 3, both)
+}
+
 /// Render every view of `split`, score it, and when `out` is given write
 /// `out/<name>.png` with the render (left) beside the ground truth (right).
 pub fn evaluate(
@@ -80,16 +91,10 @@ pub fn evaluate(
         let p = psnr(&rgb, gt);
         let (s, _) = ssim(&rgb, gt, w, h, 3, false);
         if let Some(o) = out {
-            let mut both = vec![0f32; 2 * w * h * 3];
-            for y in 0..h {
-                let row = &mut both[y * 2 * w * 3..(y + 1) * 2 * w * 3];
-                row[..w * 3].copy_from_slice(&rgb[y * w * 3..(y + 1) * w * 3]);
-                row[w * 3..].copy_from_slice(&gt[y * w * 3..(y + 1) * w * 3]);
-            }
             let name = crate::io::file_stem(&v.camera.name);
             write_png(
                 &o.join(format!("{name}.png")),
-                &ImageF32::new(2 * w, h, 3, both)?,
+                &side_by_side(&rgb, gt, w, h)?,
             )?;
         }
         views.push(ViewMetrics {

@@ -25,9 +25,14 @@ pub struct FileEntry {
 impl FileEntry {
     /// A file and the sha256 of its bytes.
     pub fn new(path: impl Into<String>, bytes: &[u8]) -> FileEntry {
+        FileEntry::hashed(path, sha256_hex(bytes))
+    }
+
+    /// A file whose sha256 is already known.
+    pub fn hashed(path: impl Into<String>, sha256: String) -> FileEntry {
         FileEntry {
             path: path.into(),
-            sha256: sha256_hex(bytes),
+            sha256,
             name: None,
             shape: None,
             dtype: None,

@@ -9,7 +9,7 @@ use super::{Event, Inputs, load_mask, read_json, save_mask, stem};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gaussian::Gaussians;
-use crate::io::image::{ImageF32, write_png};
+use crate::io::image::write_png;
 use crate::raster::{RenderOptions, render};
 use crate::train::ssim::ssim_map;
 use glam::DVec3;
@@ -126,35 +126,6 @@ pub fn existing_pixels(cam: &Camera, depth: &[f32], train: &[(&Camera, &[f32])])
         }
     }
     out
-}
-
-/// PSNR over the pixels where `sel` holds (all channels); NaN when none.
-pub fn psnr_on(x: &[f32], y: &[f32], sel: &[bool]) -> f64 {
-    let (mut s, mut n) = (0f64, 0usize);
-    for (p, &m) in sel.iter().enumerate() {
-        if m {
-            for c in 0..3 {
-                let d = (x[p * 3 + c].clamp(0.0, 1.0) - y[p * 3 + c].clamp(0.0, 1.0)) as f64;
-                s += d * d;
-            }
-            n += 3;
-        }
-    }
-    if n == 0 {
-        return f64::NAN;
-    }
-    -10.0 * (s / n as f64).log10()
-}
-
-fn mean_on(map: &[f64], sel: &[bool]) -> f64 {
-    let (mut s, mut n) = (0f64, 0usize);
-    for (v, &m) in map.iter().zip(sel) {
-        if m {
-            s += v;
-            n += 1;
-        }
-    }
-    if n == 0 { f64::NAN } else { s / n as f64 }
 }
 
 /// The existing-pixel masks of the evaluation poses (step `eval/masks`).
@@ -290,13 +261,7 @@ fn score(
             }
         }
         if k < 4 {
-            let mut both = vec![0f32; 2 * wd * ht * 3];
-            for y in 0..ht {
-                let row = &mut both[y * 2 * wd * 3..(y + 1) * 2 * wd * 3];
-                row[..wd * 3].copy_from_slice(&rgb[y * wd * 3..(y + 1) * wd * 3]);
-                row[wd * 3..].copy_from_slice(&v.image.data[y * wd * 3..(y + 1) * wd * 3]);
-            }
-            let img = ImageF32::new(2 * wd, ht, 3, both)?;
+            let img = crate::eval::side_by_side(&rgb, &v.image.data, wd, ht)?;
             w.put(&format!("{}.png", stem(&v.camera.name)), |p| {
                 write_png(p, &img)
             })?;
@@ -325,12 +290,11 @@ fn score(
             .iter()
             .map(|x| x.clamp(0.0, 1.0))
             .collect();
-        let all = vec![true; v.image.width * v.image.height];
-        tp += psnr_on(&rgb, &v.image.data, &all);
-        ts += mean_on(
-            &ssim_map(&rgb, &v.image.data, v.image.width, v.image.height, 3),
-            &all,
-        );
+        // As `unseen eval` scores them (§14.7).
+        tp += crate::train::loss::psnr(&rgb, &v.image.data);
+        ts +=
+            crate::train::ssim::ssim(&rgb, &v.image.data, v.image.width, v.image.height, 3, false)
+                .0;
     }
     let nt = data.test.len().max(1) as f64;
     Ok(Row {

@@ -230,33 +230,20 @@ impl Generators {
                 "video_depth 'truth' is the truth video's own depth: it needs video 'truth'",
             ));
         }
-        let is_truth = |s: &str| s == "truth";
+        /// The slot called `name`: the ground-truth generator, or the model `load` makes.
+        fn slot<T: ?Sized>(name: &str, load: impl Fn(&str) -> Result<Box<T>>) -> Result<Slot<T>> {
+            Ok(if name == "truth" {
+                Slot::Truth
+            } else {
+                Slot::Model(load(name)?)
+            })
+        }
         let mut g = Generators {
-            inpaint: if is_truth(&names.inpaint) {
-                Slot::Truth
-            } else {
-                Slot::Model(models::inpainter(&names.inpaint)?)
-            },
-            depth: if is_truth(&names.depth) {
-                Slot::Truth
-            } else {
-                Slot::Model(models::depth_estimator(&names.depth)?)
-            },
-            video: if is_truth(&names.video) {
-                Slot::Truth
-            } else {
-                Slot::Model(models::video_generator(&names.video)?)
-            },
-            video_depth: if is_truth(&names.video_depth) {
-                Slot::Truth
-            } else {
-                Slot::Model(models::video_depth_estimator(&names.video_depth)?)
-            },
-            fixer: if is_truth(&names.fixer) {
-                Slot::Truth
-            } else {
-                Slot::Model(models::artifact_fixer(&names.fixer)?)
-            },
+            inpaint: slot(&names.inpaint, models::inpainter)?,
+            depth: slot(&names.depth, models::depth_estimator)?,
+            video: slot(&names.video, models::video_generator)?,
+            video_depth: slot(&names.video_depth, models::video_depth_estimator)?,
+            fixer: slot(&names.fixer, models::artifact_fixer)?,
             truth,
             fingerprints: BTreeMap::new(),
             seed,

@@ -46,13 +46,14 @@ pub fn run(
         "slots": gens.key(config, &["fixer"]),
     });
     let fixer = dir.step("interpolate/fixer", fkey, on_event, |w| {
-        let mut names = Vec::new();
+        // The fixer poses, in order: the keyframes, then each clip's intermediate frames.
+        let mut cams: Vec<crate::camera::Camera> = Vec::new();
         for k in &keys {
             let (rgb, _, _) = render_rgba(&s2_scene, &k.camera, inputs.background)?;
             let fixed = gens.fix(&k.camera, &rgb, None)?;
             save_image(w, &format!("{}/render", stem(&k.camera.name)), &rgb)?;
             save_image(w, &format!("{}/fixed", stem(&k.camera.name)), &fixed)?;
-            names.push(k.camera.name.clone());
+            cams.push(k.camera.clone());
         }
         for (p, &(a, b)) in pairs.iter().enumerate() {
             let v = load_video(&s2.videos.dir.join(format!("video_{p}")))?;
@@ -63,21 +64,9 @@ pub fn run(
                 let fixed = gens.fix(cam, &rgb, Some((&keys[a].camera, &keys[b].camera, j, n)))?;
                 save_image(w, &format!("{}/render", stem(&cam.name)), &rgb)?;
                 save_image(w, &format!("{}/fixed", stem(&cam.name)), &fixed)?;
-                names.push(cam.name.clone());
+                cams.push(cam.clone());
             }
         }
-        let cams: Vec<crate::camera::Camera> = keys
-            .iter()
-            .map(|k| k.camera.clone())
-            .chain(pairs.iter().enumerate().flat_map(|(p, _)| {
-                load_video(&s2.videos.dir.join(format!("video_{p}")))
-                    .map(|v| {
-                        let n = v.cameras.len();
-                        v.cameras[1..n.saturating_sub(1)].to_vec()
-                    })
-                    .unwrap_or_default()
-            }))
-            .collect();
         let text = crate::camera::inria::cameras_json_string(&cams);
         w.put("cameras.json", |p| crate::io::write_text(p, &text))?;
         Ok(())
@@ -93,19 +82,19 @@ pub fn run(
         on_event,
     )?;
     steps.extend(qa.clone());
-    let rkey = serde_json::json!({
-        "stage2": s2.recon.digest,
-        "fixer": fixer.digest,
-        "stage1_views": s1.views.iter().map(|s| &s.digest).collect::<Vec<_>>(),
-        "videos": s2.videos.digest,
-        "qa": qa.as_ref().map(|s| &s.digest),
-        "mask_source": config.mask_source,
-        "loss": config.recon_loss(),
-        "recon": config.interpolate,
-        "fixer_every": config.fixer_every,
-        "slots": gens.key(config, &["fixer"]),
-        "seed": config.seed,
-    });
+    let rkey = recon::recon_key(
+        config,
+        &config.interpolate,
+        qa.as_ref(),
+        serde_json::json!({
+            "stage2": s2.recon.digest,
+            "fixer": fixer.digest,
+            "stage1_views": s1.views.iter().map(|s| &s.digest).collect::<Vec<_>>(),
+            "videos": s2.videos.digest,
+            "fixer_every": config.fixer_every,
+            "slots": gens.key(config, &["fixer"]),
+        }),
+    );
     let recon_step = dir.step("interpolate/recon", rkey, on_event, |w| {
         let mut generated: Vec<Supervision> = Vec::new();
         for (name, s) in views.plan.independent.iter().zip(&s1.views) {

@@ -9,7 +9,7 @@
 
 use super::config::{MaskSource, PipelineConfig, ReconConfig};
 use super::rundir::{RunDir, StepDone, StepWriter};
-use super::{Event, Inputs, load_scene, save_image, save_scene, stem};
+use super::{Event, Inputs, load_scene, save_scene, stem};
 use crate::camera::Camera;
 use crate::dataset::{Dataset, View};
 use crate::error::{Error, Result};
@@ -19,7 +19,7 @@ use crate::qamask::{
     QaMaskConfig, fine_tune, mask_scene, opacity_mask, read_mask_dir, render_qa_mask,
     write_mask_dir,
 };
-use crate::train::trainer::{TrainConfig, Trainer, init_from_points, stage_seed};
+use crate::train::trainer::{TrainConfig, Trainer, stage_seed};
 
 /// One generated view for a reconstruction.
 #[derive(Clone, Debug)]
@@ -105,16 +105,23 @@ pub fn weights(
     }
 }
 
-/// New Gaussians from coloured points (INRIA's point-cloud initialization) at `sh_degree`.
-pub fn gaussians_from_points(
-    xyz: &[[f32; 3]],
-    rgb: &[[f32; 3]],
-    sh_degree: u32,
-) -> Result<Option<Gaussians>> {
-    if xyz.is_empty() {
-        return Ok(None);
-    }
-    Ok(Some(init_from_points(xyz, rgb, sh_degree)?))
+/// The key of a reconstruction step: `upstream` (the digests of the steps it reads) with
+/// the settings every reconstruction depends on — the weights' step, the mask source, the
+/// loss, the reconstruction settings and the seed.
+pub fn recon_key(
+    config: &PipelineConfig,
+    recon: &ReconConfig,
+    qa: Option<&StepDone>,
+    upstream: serde_json::Value,
+) -> serde_json::Value {
+    let mut key = upstream;
+    let m = key.as_object_mut().expect("upstream digests are an object");
+    m.insert("qa".into(), serde_json::json!(qa.map(|s| &s.digest)));
+    m.insert("mask_source".into(), serde_json::json!(config.mask_source));
+    m.insert("loss".into(), serde_json::json!(config.recon_loss()));
+    m.insert("recon".into(), serde_json::json!(recon));
+    m.insert("seed".into(), serde_json::json!(config.seed));
+    key
 }
 
 /// Generated views whose targets are remade from the scene being trained (paper §3.3.3:
@@ -292,12 +299,4 @@ pub fn reconstruct_refreshing(
 /// The scene of a finished reconstruction step.
 pub fn scene_of(step: &StepDone) -> Result<Gaussians> {
     load_scene(&step.dir, "scene.ply")
-}
-
-/// Save the images of `views` (for people and for a GPU port's diff).
-pub fn save_supervision(w: &mut StepWriter, views: &[Supervision]) -> Result<()> {
-    for v in views {
-        save_image(w, &format!("inputs/{}", stem(&v.camera.name)), &v.image)?;
-    }
-    Ok(())
 }

@@ -17,7 +17,7 @@
 //! ([`super::recon`]).
 
 use super::generators::Generators;
-use super::recon::{self, Supervision, gaussians_from_points, reconstruct};
+use super::recon::{self, Supervision, reconstruct};
 use super::rundir::{RunDir, StepDone};
 use super::views::{Views, apply_alignment, training_depth, warp_depth};
 use super::{
@@ -31,6 +31,7 @@ use crate::io::image::ImageF32;
 use crate::io::write_text;
 use crate::models::{DepthHint, Keyframe};
 use crate::scene::Uniform;
+use crate::train::trainer::init_from_points;
 use crate::train::trainer::stage_seed;
 use crate::warp::align::{Frame, RansacConfig, ransac};
 use crate::warp::dibr::{WarpOptions, warp};
@@ -164,16 +165,16 @@ pub fn run(
     } else {
         None
     };
-    let key = serde_json::json!({
-        "scene": inputs.scene_sha256,
-        "views": per_view.iter().map(|s| &s.digest).collect::<Vec<_>>(),
-        "propagate": propagate.as_ref().map(|s| &s.digest),
-        "qa": qa.as_ref().map(|s| &s.digest),
-        "mask_source": config.mask_source,
-        "loss": config.recon_loss(),
-        "recon": config.stage1,
-        "seed": config.seed,
-    });
+    let key = recon::recon_key(
+        config,
+        &config.stage1,
+        qa.as_ref(),
+        serde_json::json!({
+            "scene": inputs.scene_sha256,
+            "views": per_view.iter().map(|s| &s.digest).collect::<Vec<_>>(),
+            "propagate": propagate.as_ref().map(|s| &s.digest),
+        }),
+    );
     let recon_step = dir.step("stage1/recon", key, on_event, |w| {
         let mut init = inputs.scene.clone();
         let mut generated = Vec::new();
@@ -354,7 +355,8 @@ fn independent_view(
         save_depth(w, "inpaint", &d_i, wd, ht)?;
         save_mask(w, "inpaint", &mask, wd, ht)?;
         let (xyz, rgb) = unproject(cam, &ip, &d_i, &mask, config.init_stride as usize);
-        if let Some(g) = gaussians_from_points(&xyz, &rgb, inputs.scene.sh_degree)? {
+        if !xyz.is_empty() {
+            let g = init_from_points(&xyz, &rgb, inputs.scene.sh_degree)?;
             save_scene(w, "points.ply", &g)?;
         }
         w.json(

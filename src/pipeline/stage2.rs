@@ -12,7 +12,7 @@
 use super::generators::Generators;
 use super::recon::{self, Supervision, reconstruct};
 use super::rundir::{RunDir, StepDone};
-use super::stage1::{Stage1, load_video, save_video, video_supervision};
+use super::stage1::{Stage1, save_video, video_supervision};
 use super::views::{MIN_ALIGN_PIXELS, Views, apply_alignment, render_rgba};
 use super::{
     Event, Inputs, PipelineConfig, load_depth, load_image, load_mask, save_depth, save_image,
@@ -223,16 +223,16 @@ pub fn run(
         on_event,
     )?;
     steps.extend(qa.clone());
-    let rkey = serde_json::json!({
-        "stage1": s1.recon.digest,
-        "videos": videos.digest,
-        "dependent": dependent.as_ref().map(|s| &s.digest),
-        "qa": qa.as_ref().map(|s| &s.digest),
-        "mask_source": config.mask_source,
-        "loss": config.recon_loss(),
-        "recon": config.stage2,
-        "seed": config.seed,
-    });
+    let rkey = recon::recon_key(
+        config,
+        &config.stage2,
+        qa.as_ref(),
+        serde_json::json!({
+            "stage1": s1.recon.digest,
+            "videos": videos.digest,
+            "dependent": dependent.as_ref().map(|s| &s.digest),
+        }),
+    );
     let recon_step = dir.step("stage2/recon", rkey, on_event, |w| {
         let mut generated: Vec<Supervision> = keys
             .iter()
@@ -260,7 +260,6 @@ pub fn run(
         Ok(())
     })?;
     steps.push(recon_step.clone());
-    let _ = load_video;
     Ok(Stage2 {
         steps,
         dependent,

@@ -36,7 +36,6 @@ use crate::warp::align::{Alignment, Frame, Space, least_squares};
 use crate::warp::dibr::{WarpOptions, warp};
 use glam::DVec3;
 use std::collections::BTreeMap;
-use std::path::PathBuf;
 
 /// Fewest known-depth pixels a candidate must share with its reference training view.
 pub const MIN_ALIGN_PIXELS: usize = 16;
@@ -441,7 +440,6 @@ pub fn load(step: StepDone) -> Result<Views> {
             })
         })
         .collect::<Result<_>>()?;
-    let _: PathBuf = step.dir.clone();
     Ok(Views {
         step,
         plan,

@@ -219,9 +219,11 @@ pub fn train_run(
     });
     let files = files
         .iter()
-        .map(|(p, h)| FileEntry {
-            sha256: h.clone(),
-            ..FileEntry::new(p.strip_prefix(run).unwrap_or(p).display().to_string(), b"")
+        .map(|(p, h)| {
+            FileEntry::hashed(
+                p.strip_prefix(run).unwrap_or(p).display().to_string(),
+                h.clone(),
+            )
         })
         .collect();
     Manifest::new("train", "", inputs, files).write(run)?;
