@@ -135,7 +135,9 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
     let timings: std::collections::BTreeMap<String, super::rundir::StepCost> =
         read_json(&run.join("timings.json")).unwrap_or_default();
     md += "## Cost per step (2 cores)\n\n| step | seconds | peak memory |\n|---|---|---|\n";
-    for (k, v) in &timings {
+    // In run order (`steps.json`).
+    let order: Vec<String> = read_json(&run.join("steps.json")).unwrap_or_default();
+    for (k, v) in order.iter().filter_map(|k| timings.get(k).map(|v| (k, v))) {
         md += &format!(
             "| {k} | {:.1} | {} |\n",
             v.seconds,
