@@ -4,10 +4,15 @@
 //! each stage (project, bin, composite) and the blend throughput in Gaussian-pixel
 //! evaluations per second (the pairs the composite kernel evaluates, counted exactly).
 //! Scenes are `unseen::scene::random_scene` (seeded) seen by `default_camera`.
+//!
+//! Beside each line, in the same thread pool and run: the *bare kernel* bound
+//! (`composite::bare_blend`: the blend loop alone on an L1-resident list, SPEC.md §5.7), the
+//! composite's and the whole frame's pair rates as fractions of it, and the per-Gaussian
+//! work (project + bin) in units of bare-kernel pairs per Gaussian (issue #13: ≤ 24).
 
 use std::time::Instant;
-use unseen::raster::composite::{Kernel, Want, composite};
-use unseen::raster::project::project;
+use unseen::raster::composite::{Kernel, Want, bare_blend, composite};
+use unseen::raster::project::{Splat, project};
 use unseen::raster::tile::bin;
 use unseen::raster::{RenderOptions, RenderPlan, RenderReport};
 use unseen::scene::{default_camera, random_scene};
@@ -15,6 +20,39 @@ use unseen::scene::{default_camera, random_scene};
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
+}
+
+/// 128 splats inside one 16×16 tile (σ of 1–4 px, opacities 0.02–0.06, so transmittance
+/// stays above the stop over the whole list and every splat is evaluated on every row).
+fn tile_splats() -> Vec<Splat> {
+    let mut u = unseen::scene::Uniform::new(3);
+    (0..128)
+        .map(|_| {
+            let sd = u.range(1.0, 4.0);
+            let inv = 1.0 / (sd * sd);
+            Splat {
+                mean: [u.range(0.0, 16.0), u.range(0.0, 16.0)],
+                conic: [inv, u.range(-0.2, 0.2) * inv, inv],
+                opacity: u.range(0.02, 0.06),
+                color: [u.unit(), u.unit(), u.unit()],
+                depth: u.range(1.0, 5.0),
+            }
+        })
+        .collect()
+}
+
+/// Bare-kernel pairs per second in the current pool (median of 5).
+fn bare_rate(splats: &[Splat], kernel: Kernel) -> f64 {
+    let rows = 1 << 14;
+    median(
+        (0..5)
+            .map(|_| {
+                let t0 = Instant::now();
+                let pairs = bare_blend(splats, rows, kernel);
+                pairs as f64 / t0.elapsed().as_secs_f64()
+            })
+            .collect(),
+    )
 }
 
 fn main() {
@@ -26,8 +64,9 @@ fn main() {
     };
     let resolutions: &[(u32, u32)] = &[(256, 256), (1024, 768)];
     let kernels: &[(&str, Kernel)] = &[("auto", Kernel::Auto), ("scalar", Kernel::Scalar)];
+    let tile = tile_splats();
     println!(
-        "{:>9} {:>9} {:>3} {:>6} {:>9} {:>9} {:>11} {:>9} {:>12} {:>10}",
+        "{:>9} {:>9} {:>3} {:>6} {:>9} {:>9} {:>11} {:>9} {:>12} {:>9} {:>9} {:>9} {:>10} {:>9}",
         "gaussians",
         "image",
         "thr",
@@ -37,7 +76,11 @@ fn main() {
         "composite",
         "frame",
         "pairs",
-        "Gpairs/s"
+        "Gpairs/s",
+        "bare",
+        "comp/bare",
+        "frame/bare",
+        "pairs/G"
     );
     for &n in sizes {
         let scene = random_scene(n, 3, 7, 0.003, 0.03);
@@ -64,7 +107,9 @@ fn main() {
                     let reps = if n >= 1_000_000 { 3 } else { 7 };
                     let (mut tp, mut tb, mut tc) = (Vec::new(), Vec::new(), Vec::new());
                     let mut pairs = 0;
+                    let mut bare = 0.0;
                     pool.install(|| {
+                        bare = bare_rate(&tile, kernel);
                         for _ in 0..reps {
                             let mut rep = RenderReport::default();
                             let t0 = Instant::now();
@@ -92,8 +137,9 @@ fn main() {
                         }
                     });
                     let (p, b, c) = (median(tp), median(tb), median(tc));
+                    let rate = pairs as f64 / c;
                     println!(
-                        "{:>9} {:>9} {:>3} {:>6} {:>7.2}ms {:>7.2}ms {:>9.2}ms {:>7.2}ms {:>12} {:>10.3}",
+                        "{:>9} {:>9} {:>3} {:>6} {:>7.2}ms {:>7.2}ms {:>9.2}ms {:>7.2}ms {:>12} {:>9.3} {:>9.3} {:>9.2} {:>10.2} {:>9.1}",
                         n,
                         format!("{w}x{h}"),
                         threads,
@@ -103,7 +149,11 @@ fn main() {
                         c * 1e3,
                         (p + b + c) * 1e3,
                         pairs,
-                        pairs as f64 / c / 1e9
+                        rate / 1e9,
+                        bare / 1e9,
+                        rate / bare,
+                        pairs as f64 / (p + b + c) / bare,
+                        (p + b) * bare / n as f64
                     );
                 }
             }

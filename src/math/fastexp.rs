@@ -29,6 +29,19 @@ const LN2_LO: f32 = -2.121_944_4e-4;
 /// |v| < 2^22, using only additions, so it vectorizes without SSE4.1 `roundps`.
 const ROUND_MAGIC: f32 = 12_582_912.0;
 
+/// Cephes `logf` polynomial: `p(m) = (((c0·m + c1)·m + c2)·m + …)·m + c8`.
+const LOG_P: [f32; 9] = [
+    7.037_683_6e-2,
+    -1.151_461e-1,
+    1.167_699_9e-1,
+    -1.242_014_1e-1,
+    1.424_932_3e-1,
+    -1.666_805_8e-1,
+    2.000_071_4e-1,
+    -2.499_999_4e-1,
+    0.333_333_33,
+];
+
 /// `e^x` for `f32`, platform-independent, no FMA. See the module docs for the error bound.
 #[inline(always)]
 pub fn exp(x: f32) -> f32 {
@@ -115,18 +128,6 @@ pub fn ln(x: f32) -> f32 {
         m -= 1.0;
     }
     let z = m * m;
-    // Cephes logf: p(m) = (((((((c0·m + c1)·m + c2)·m + ...)·m + c8.
-    const LOG_P: [f32; 9] = [
-        7.037_683_6e-2,
-        -1.151_461e-1,
-        1.167_699_9e-1,
-        -1.242_014_1e-1,
-        1.424_932_3e-1,
-        -1.666_805_8e-1,
-        2.000_071_4e-1,
-        -2.499_999_4e-1,
-        0.333_333_33,
-    ];
     let mut p = LOG_P[0];
     for c in &LOG_P[1..] {
         p = p * m + c;
@@ -138,6 +139,72 @@ pub fn ln(x: f32) -> f32 {
     let mut r = m + y;
     r += 0.693_359_4 * ef;
     r
+}
+
+/// [`ln`] on 8 lanes with AVX2 intrinsics: the same operations in the same order, special
+/// values included, so every lane equals the scalar result bit for bit (test
+/// `ln_avx2_matches_scalar_bitwise`).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+pub unsafe fn ln_avx2(x: std::arch::x86_64::__m256) -> std::arch::x86_64::__m256 {
+    use std::arch::x86_64::*;
+    let c = |v: f32| _mm256_set1_ps(v);
+    let ci = |v: i32| _mm256_set1_epi32(v);
+    // Subnormals: scale into the normal range first (x < MIN_POSITIVE, ordered).
+    let sub = _mm256_cmp_ps::<_CMP_LT_OQ>(x, c(f32::MIN_POSITIVE));
+    let xs = _mm256_blendv_ps(x, _mm256_mul_ps(x, c(16_777_216.0)), sub);
+    let bias = _mm256_and_si256(_mm256_castps_si256(sub), ci(-24));
+    let bits = _mm256_castps_si256(xs);
+    let e = _mm256_add_epi32(
+        _mm256_sub_epi32(
+            _mm256_and_si256(_mm256_srli_epi32::<23>(bits), ci(0xff)),
+            ci(126),
+        ),
+        bias,
+    );
+    let m = _mm256_castsi256_ps(_mm256_or_si256(
+        _mm256_and_si256(bits, ci(0x007f_ffff)),
+        ci(0x3f00_0000),
+    ));
+    let low = _mm256_cmp_ps::<_CMP_LT_OQ>(m, c(std::f32::consts::FRAC_1_SQRT_2));
+    // e -= 1 where low (the mask is −1 there).
+    let e = _mm256_add_epi32(e, _mm256_castps_si256(low));
+    let m = _mm256_blendv_ps(
+        _mm256_sub_ps(m, c(1.0)),
+        _mm256_sub_ps(_mm256_add_ps(m, m), c(1.0)),
+        low,
+    );
+    let z = _mm256_mul_ps(m, m);
+    let mut p = c(LOG_P[0]);
+    for &k in &LOG_P[1..] {
+        p = _mm256_add_ps(_mm256_mul_ps(p, m), c(k));
+    }
+    let mut y = _mm256_mul_ps(_mm256_mul_ps(p, m), z);
+    let ef = _mm256_cvtepi32_ps(e);
+    y = _mm256_add_ps(y, _mm256_mul_ps(c(-2.121_944_4e-4), ef));
+    y = _mm256_add_ps(y, _mm256_mul_ps(c(-0.5), z));
+    let mut r = _mm256_add_ps(m, y);
+    r = _mm256_add_ps(r, _mm256_mul_ps(c(0.693_359_4), ef));
+    // Special values, in the scalar order: NaN or negative → NaN, 0 → −∞, +∞ → +∞.
+    let r = _mm256_blendv_ps(
+        r,
+        c(f32::INFINITY),
+        _mm256_cmp_ps::<_CMP_EQ_OQ>(x, c(f32::INFINITY)),
+    );
+    let r = _mm256_blendv_ps(
+        r,
+        c(f32::NEG_INFINITY),
+        _mm256_cmp_ps::<_CMP_EQ_OQ>(x, c(0.0)),
+    );
+    let nan = _mm256_or_ps(
+        _mm256_cmp_ps::<_CMP_UNORD_Q>(x, x),
+        _mm256_cmp_ps::<_CMP_LT_OQ>(x, c(0.0)),
+    );
+    _mm256_blendv_ps(r, c(f32::NAN), nan)
 }
 
 /// Logistic sigmoid `1 / (1 + e^-x)` on top of [`exp`].
@@ -206,6 +273,34 @@ mod tests {
                 assert!(
                     o.to_bits() == want.to_bits() || (o.is_nan() && want.is_nan()),
                     "exp({x})"
+                );
+            }
+        }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn ln_avx2_matches_scalar_bitwise() {
+        use std::arch::x86_64::*;
+        if !std::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        // Every 97th bit pattern of both signs (subnormals, ±0, ±∞ and NaNs included).
+        let mut xs: Vec<f32> = vec![f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 0.0, -0.0];
+        xs.extend((0..=u32::MAX).step_by(97).map(f32::from_bits));
+        xs.truncate(xs.len() / 8 * 8);
+        for chunk in xs.chunks_exact(8) {
+            let mut out = [0f32; 8];
+            // SAFETY: AVX2 is available (checked above).
+            unsafe {
+                let v = ln_avx2(_mm256_loadu_ps(chunk.as_ptr()));
+                _mm256_storeu_ps(out.as_mut_ptr(), v);
+            }
+            for (x, o) in chunk.iter().zip(out) {
+                let want = ln(*x);
+                assert!(
+                    o.to_bits() == want.to_bits() || (o.is_nan() && want.is_nan()),
+                    "ln({x:e}) = {o:e}, scalar {want:e}"
                 );
             }
         }

@@ -105,7 +105,7 @@ impl ShScalar for Dual3 {
 ///
 /// # Panics
 /// If `degree > 5` or `out` is shorter than `num_coeffs(degree)` (programming errors).
-#[inline]
+#[inline(always)] // compiled into each SIMD caller (math::lanes)
 pub fn sh_basis<T: ShScalar>(degree: u32, x: T, y: T, z: T, out: &mut [T]) {
     assert!(degree <= MAX_SH_DEGREE && out.len() >= num_coeffs(degree));
     let c = T::c;

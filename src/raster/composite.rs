@@ -39,7 +39,8 @@ pub const SIGMA_CLAMP: f32 = 30.0;
 /// Floor of alpha in `ED = D / max(alpha, ·)` (gsplat).
 pub const EXPECTED_DEPTH_EPS: f32 = 1e-10;
 
-/// Which compiled form of the blend kernel runs. All give identical bits.
+/// Which compiled form of the per-Gaussian (projection) and per-pixel (blend) kernels runs.
+/// All give identical bits.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Kernel {
     /// The fastest form this CPU supports (AVX2 when detected at run time).
@@ -550,6 +551,48 @@ fn band<const DEPTH: bool, const TRACK: bool>(
         };
     }
     band_impl::<DEPTH, TRACK, false>(ty, width, height, p, bins, plan, background, want)
+}
+
+/// The blend kernel alone: the bound [`composite`] is measured against
+/// (`benches/forward.rs`, SPEC.md §5.7). `rows` tile rows (16 pixels each, at image rows
+/// `row % 16`), each walking every splat of `splats` front to back from a fresh state with
+/// the same kernel and arithmetic as [`composite`] (colour only: no depth, no backward
+/// state), the list already gathered and small enough to stay in L1 (at most 256 splats),
+/// the state in registers, no row culling, no output written. Rows are split over the
+/// rayon pool in fixed chunks. Returns the Gaussian-pixel evaluations (16 per row and splat
+/// visited, as [`RenderReport::pairs_evaluated`] counts them).
+#[doc(hidden)]
+pub fn bare_blend(splats: &[Splat], rows: usize, kernel: Kernel) -> u64 {
+    assert!(
+        splats.len() <= BATCH,
+        "the bare kernel's list must fit one batch"
+    );
+    let list: Vec<TileSplat> = (0..splats.len())
+        .map(|k| TileSplat {
+            s: splats[k],
+            pos1: k as u32 + 1,
+        })
+        .collect();
+    let idx: Vec<u16> = (0..splats.len() as u16).collect();
+    let px: [f32; GROUP] = std::array::from_fn(|l| l as f32 + 0.5);
+    #[cfg(target_arch = "x86_64")]
+    let avx2 = kernel == Kernel::Auto && std::is_x86_feature_detected!("avx2");
+    let run = |row: usize| -> u64 {
+        let py = (row % TILE_SIZE) as f32 + 0.5;
+        let mut st = Group::new(GROUP);
+        #[cfg(target_arch = "x86_64")]
+        let pairs = if avx2 {
+            // SAFETY: AVX2 was detected above.
+            unsafe { avx2::blend_group::<false, false>(&list, &idx, &px, py, &mut st) }
+        } else {
+            blend_group_lanes::<false, false>(&list, &idx, &px, py, &mut st)
+        };
+        #[cfg(not(target_arch = "x86_64"))]
+        let pairs = blend_group_lanes::<false, false>(&list, &idx, &px, py, &mut st);
+        std::hint::black_box(&st); // the final state is the kernel's only output
+        pairs
+    };
+    (0..rows).into_par_iter().with_min_len(64).map(run).sum()
 }
 
 /// Final images of a composite, each present only when requested.

@@ -24,9 +24,11 @@ use super::plan::RenderPlan;
 use super::{RenderOptions, RenderReport};
 use crate::camera::Camera;
 use crate::gaussian::Gaussians;
-use crate::math::fastexp::{exp, ln, sigmoid};
-use crate::math::round::ceil;
+#[cfg(target_arch = "x86_64")]
+use crate::math::lanes::F32x8;
+use crate::math::lanes::Lanes;
 use crate::math::sh::{MAX_SH_COEFFS, SH_C0, num_coeffs, sh_basis};
+use crate::raster::Kernel;
 use rayon::prelude::*;
 
 /// Near clipping plane in camera z (gsplat `near_plane` default).
@@ -113,20 +115,14 @@ impl CameraF32 {
 }
 
 #[inline(always)]
-fn dot3(a: [f32; 3], b: [f32; 3]) -> f32 {
+fn dot3<R: Lanes>(a: [R; 3], b: [R; 3]) -> R {
     (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2]
-}
-
-#[inline(always)]
-fn clamp(v: f32, lo: f32, hi: f32) -> f32 {
-    let v = if v < lo { lo } else { v };
-    if v > hi { hi } else { v }
 }
 
 /// `A·B` for 3×3 row-major matrices, each entry summed in k order.
 #[inline(always)]
-fn mat3_mul(a: &[[f32; 3]; 3], b: &[[f32; 3]; 3]) -> [[f32; 3]; 3] {
-    let mut o = [[0f32; 3]; 3];
+fn mat3_mul<R: Lanes>(a: &[[R; 3]; 3], b: &[[R; 3]; 3]) -> [[R; 3]; 3] {
+    let mut o = [[R::splat(0.0); 3]; 3];
     for i in 0..3 {
         for j in 0..3 {
             o[i][j] = (a[i][0] * b[0][j] + a[i][1] * b[1][j]) + a[i][2] * b[2][j];
@@ -136,7 +132,7 @@ fn mat3_mul(a: &[[f32; 3]; 3], b: &[[f32; 3]; 3]) -> [[f32; 3]; 3] {
 }
 
 #[inline(always)]
-fn transpose(a: &[[f32; 3]; 3]) -> [[f32; 3]; 3] {
+fn transpose<R: Lanes>(a: &[[R; 3]; 3]) -> [[R; 3]; 3] {
     [
         [a[0][0], a[1][0], a[2][0]],
         [a[0][1], a[1][1], a[2][1]],
@@ -144,77 +140,137 @@ fn transpose(a: &[[f32; 3]; 3]) -> [[f32; 3]; 3] {
     ]
 }
 
+// Generic code over `Lanes` avoids `array::from_fn`, `array::map` and iterator adaptors on
+// lane values: they may stay out-of-line, compiled without AVX2 (see `math::lanes`).
+
 /// Rotation matrix of a normalized wxyz quaternion (row-major).
 #[inline(always)]
-pub fn quat_to_rotmat(q: [f32; 4]) -> [[f32; 3]; 3] {
+pub fn quat_to_rotmat<R: Lanes>(q: [R; 4]) -> [[R; 3]; 3] {
     let [w, x, y, z] = q;
+    let (one, two) = (R::splat(1.0), R::splat(2.0));
     let (x2, y2, z2) = (x * x, y * y, z * z);
     let (xy, xz, yz) = (x * y, x * z, y * z);
     let (wx, wy, wz) = (w * x, w * y, w * z);
     [
-        [1.0 - 2.0 * (y2 + z2), 2.0 * (xy - wz), 2.0 * (xz + wy)],
-        [2.0 * (xy + wz), 1.0 - 2.0 * (x2 + z2), 2.0 * (yz - wx)],
-        [2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (x2 + y2)],
+        [one - two * (y2 + z2), two * (xy - wz), two * (xz + wy)],
+        [two * (xy + wz), one - two * (x2 + z2), two * (yz - wx)],
+        [two * (xz - wy), two * (yz + wx), one - two * (x2 + y2)],
     ]
 }
 
-fn all_finite(v: &[f32]) -> bool {
-    v.iter().all(|x| x.is_finite())
+/// Which Gaussians (lanes) are culled so far and why: the first failing check wins, as in
+/// a sequence of early returns.
+#[derive(Clone, Copy)]
+pub(crate) struct Culls<R: Lanes> {
+    pub ok: R::Mask,
+    /// `1 + Cull as usize` of the first failed check, as f32; unspecified where `ok`.
+    code: R,
 }
 
-/// The projection's intermediate values for one Gaussian, steps 1–5 of the module docs up to
-/// the undilated 2D covariance. The backward pass recomputes them with this same function.
+/// Every reason in `Cull` order, for turning a lane's code back into a `Cull`.
+const CULLS: [Cull; 6] = [
+    Cull::NonFinite,
+    Cull::Near,
+    Cull::Far,
+    Cull::Degenerate,
+    Cull::LowOpacity,
+    Cull::OffScreen,
+];
+
+impl<R: Lanes> Culls<R> {
+    #[inline(always)]
+    fn new() -> Self {
+        Culls {
+            ok: !R::all_false(),
+            code: R::splat(0.0),
+        }
+    }
+    /// Cull the lanes where `fail` holds and no earlier check failed.
+    #[inline(always)]
+    fn check(&mut self, fail: R::Mask, why: Cull) {
+        self.code = R::select(fail & self.ok, R::splat(1.0 + why as u8 as f32), self.code);
+        self.ok = self.ok & !fail;
+    }
+    /// Cull the lanes where `fail` holds, before every check made so far.
+    #[inline(always)]
+    fn check_first(&mut self, fail: R::Mask, why: Cull) {
+        self.code = R::select(fail, R::splat(1.0 + why as u8 as f32), self.code);
+        self.ok = self.ok & !fail;
+    }
+}
+
+impl Culls<f32> {
+    fn result(&self) -> Result<(), Cull> {
+        if self.ok {
+            Ok(())
+        } else {
+            Err(CULLS[self.code as usize - 1])
+        }
+    }
+}
+
+/// The projection's intermediate values for one Gaussian (or one per lane), steps 1–5 of
+/// the module docs up to the undilated 2D covariance. The backward pass recomputes them with
+/// this same code.
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct Geometry {
+pub(crate) struct Geometry<R: Lanes = f32> {
     /// Camera-space mean.
-    pub t: [f32; 3],
+    pub t: [R; 3],
     /// Normalized quaternion and `1/|q|`.
-    pub qh: [f32; 4],
-    pub inv_qn: f32,
-    pub rot: [[f32; 3]; 3],
-    pub s: [f32; 3],
+    pub qh: [R; 4],
+    pub inv_qn: R,
+    pub rot: [[R; 3]; 3],
+    pub s: [R; 3],
     /// `M = R·diag(s)`.
-    pub m: [[f32; 3]; 3],
-    pub sigma_c: [[f32; 3]; 3],
-    pub rz: f32,
+    pub m: [[R; 3]; 3],
+    pub sigma_c: [[R; 3]; 3],
+    pub rz: R,
     /// Clamped `tx`, `ty` and whether the clamp was active.
-    pub tx: f32,
-    pub ty: f32,
-    pub x_clamped: bool,
-    pub y_clamped: bool,
-    pub j: [[f32; 3]; 2],
+    pub tx: R,
+    pub ty: R,
+    pub x_clamped: R::Mask,
+    pub y_clamped: R::Mask,
+    pub j: [[R; 3]; 2],
     /// `J·Σc·Jᵀ` as `(a, b, c)`, before the dilation.
-    pub cov: [f32; 3],
+    pub cov: [R; 3],
 }
 
-pub(crate) fn geometry(g: &Gaussians, i: usize, cam: &CameraF32) -> Result<Geometry, Cull> {
-    let mean = g.means[i];
+/// Steps 1–5 for the lanes' `mean`, `quat` and `log_scale`; failed checks go to `culls`.
+#[inline(always)]
+#[allow(clippy::needless_range_loop)] // `a`, `b` index two matrices
+fn geometry_lanes<R: Lanes>(
+    mean: [R; 3],
+    q: [R; 4],
+    ls: [R; 3],
+    cam: &CameraF32,
+    culls: &mut Culls<R>,
+) -> Geometry<R> {
+    let c = R::splat;
     // 1. Camera space.
-    let r = &cam.r_cw;
-    let x = dot3(r[0], mean) + cam.t_cw[0];
-    let y = dot3(r[1], mean) + cam.t_cw[1];
-    let z = dot3(r[2], mean) + cam.t_cw[2];
-    if !(x.is_finite() && y.is_finite() && z.is_finite()) {
-        return Err(Cull::NonFinite); // finite but huge means overflow here
+    let mut r = [[c(0.0); 3]; 3];
+    for a in 0..3 {
+        for b in 0..3 {
+            r[a][b] = c(cam.r_cw[a][b]);
+        }
     }
-    if z < NEAR_PLANE {
-        return Err(Cull::Near);
-    }
-    if z > FAR_PLANE {
-        return Err(Cull::Far);
-    }
+    let x = dot3(r[0], mean) + c(cam.t_cw[0]);
+    let y = dot3(r[1], mean) + c(cam.t_cw[1]);
+    let z = dot3(r[2], mean) + c(cam.t_cw[2]);
+    // Finite but huge means overflow here.
+    culls.check(
+        !(x.is_finite() & y.is_finite() & z.is_finite()),
+        Cull::NonFinite,
+    );
+    culls.check(z.lt(c(NEAR_PLANE)), Cull::Near);
+    culls.check(z.gt(c(FAR_PLANE)), Cull::Far);
     // 2. World covariance.
-    let q = g.quats[i];
     let qn2 = (q[0] * q[0] + q[1] * q[1]) + (q[2] * q[2] + q[3] * q[3]);
-    if !(qn2 > 0.0 && qn2.is_finite()) {
-        return Err(Cull::Degenerate);
-    }
-    let inv_qn = 1.0 / qn2.sqrt();
+    culls.check(!(qn2.gt(c(0.0)) & qn2.is_finite()), Cull::Degenerate);
+    let inv_qn = c(1.0) / qn2.sqrt();
     let qh = [q[0] * inv_qn, q[1] * inv_qn, q[2] * inv_qn, q[3] * inv_qn];
     let rot = quat_to_rotmat(qh);
-    let ls = g.log_scales[i];
-    let s = [exp(ls[0]), exp(ls[1]), exp(ls[2])];
-    let mut m = [[0f32; 3]; 3];
+    let s = [ls[0].exp(), ls[1].exp(), ls[2].exp()];
+    let mut m = rot;
     for a in 0..3 {
         for b in 0..3 {
             m[a][b] = rot[a][b] * s[b];
@@ -222,35 +278,38 @@ pub(crate) fn geometry(g: &Gaussians, i: usize, cam: &CameraF32) -> Result<Geome
     }
     let sigma = mat3_mul(&m, &transpose(&m));
     // 3. Camera covariance.
-    let sigma_c = mat3_mul(&mat3_mul(r, &sigma), &transpose(r));
-    // 4. Clamped Jacobian.
+    let sigma_c = mat3_mul(&mat3_mul(&r, &sigma), &transpose(&r));
+    // 4. Clamped Jacobian (the limits are per camera: computed once, in f32).
     let (w, h) = (cam.width as f32, cam.height as f32);
     let tan_fovx = 0.5 * w / cam.fx;
     let tan_fovy = 0.5 * h / cam.fy;
-    let lim_x_pos = (w - cam.cx) / cam.fx + JACOBIAN_GUARD * tan_fovx;
-    let lim_x_neg = cam.cx / cam.fx + JACOBIAN_GUARD * tan_fovx;
-    let lim_y_pos = (h - cam.cy) / cam.fy + JACOBIAN_GUARD * tan_fovy;
-    let lim_y_neg = cam.cy / cam.fy + JACOBIAN_GUARD * tan_fovy;
-    let rz = 1.0 / z;
+    let lim_x_pos = c((w - cam.cx) / cam.fx + JACOBIAN_GUARD * tan_fovx);
+    let lim_x_neg = c(-(cam.cx / cam.fx + JACOBIAN_GUARD * tan_fovx));
+    let lim_y_pos = c((h - cam.cy) / cam.fy + JACOBIAN_GUARD * tan_fovy);
+    let lim_y_neg = c(-(cam.cy / cam.fy + JACOBIAN_GUARD * tan_fovy));
+    let rz = c(1.0) / z;
     let rz2 = rz * rz;
     let (xz, yz) = (x * rz, y * rz);
-    let tx = z * clamp(xz, -lim_x_neg, lim_x_pos);
-    let ty = z * clamp(yz, -lim_y_neg, lim_y_pos);
+    let tx = z * xz.clamp_sel(lim_x_neg, lim_x_pos);
+    let ty = z * yz.clamp_sel(lim_y_neg, lim_y_pos);
+    let zero = c(0.0);
     let j = [
-        [cam.fx * rz, 0.0, -cam.fx * tx * rz2],
-        [0.0, cam.fy * rz, -cam.fy * ty * rz2],
+        [c(cam.fx) * rz, zero, c(-cam.fx) * tx * rz2],
+        [zero, c(cam.fy) * rz, c(-cam.fy) * ty * rz2],
     ];
     // 5. Σ2d = J·Σc·Jᵀ.
-    let mut js = [[0f32; 3]; 2];
+    let mut js = [[zero; 3]; 2];
     for a in 0..2 {
         for b in 0..3 {
             js[a][b] =
                 (j[a][0] * sigma_c[0][b] + j[a][1] * sigma_c[1][b]) + j[a][2] * sigma_c[2][b];
         }
     }
-    let cov = |a: usize, b: usize| (js[a][0] * j[b][0] + js[a][1] * j[b][1]) + js[a][2] * j[b][2];
-    let (a0, b, c0) = (cov(0, 0), cov(0, 1), cov(1, 1));
-    Ok(Geometry {
+    let mut cov = [zero; 3];
+    for (o, (a, b)) in cov.iter_mut().zip([(0, 0), (0, 1), (1, 1)]) {
+        *o = (js[a][0] * j[b][0] + js[a][1] * j[b][1]) + js[a][2] * j[b][2];
+    }
+    Geometry {
         t: [x, y, z],
         qh,
         inv_qn,
@@ -261,28 +320,31 @@ pub(crate) fn geometry(g: &Gaussians, i: usize, cam: &CameraF32) -> Result<Geome
         rz,
         tx,
         ty,
-        x_clamped: xz < -lim_x_neg || xz > lim_x_pos,
-        y_clamped: yz < -lim_y_neg || yz > lim_y_pos,
+        x_clamped: xz.lt(lim_x_neg) | xz.gt(lim_x_pos),
+        y_clamped: yz.lt(lim_y_neg) | yz.gt(lim_y_pos),
         j,
-        cov: [a0, b, c0],
-    })
+        cov,
+    }
 }
 
-/// The SH basis (up to `degree`) at Gaussian `i`'s view direction `(μ − C)/|μ − C|`.
-pub(crate) fn sh_view_basis(
-    g: &Gaussians,
-    i: usize,
-    cam: &CameraF32,
-    degree: u32,
-) -> [f32; MAX_SH_COEFFS] {
-    let mean = g.means[i];
+/// Steps 1–5 for Gaussian `i` (the backward pass's entry).
+pub(crate) fn geometry(g: &Gaussians, i: usize, cam: &CameraF32) -> Result<Geometry, Cull> {
+    let mut culls = Culls::new();
+    let geo = geometry_lanes(g.means[i], g.quats[i], g.log_scales[i], cam, &mut culls);
+    culls.result().map(|()| geo)
+}
+
+/// The SH basis (up to `degree`) at the view direction `(μ − C)/|μ − C|` of the lanes' means.
+#[inline(always)]
+fn sh_basis_lanes<R: Lanes>(mean: [R; 3], cam: &CameraF32, degree: u32) -> [R; MAX_SH_COEFFS] {
+    let c = R::splat;
     let d = [
-        mean[0] - cam.center[0],
-        mean[1] - cam.center[1],
-        mean[2] - cam.center[2],
+        mean[0] - c(cam.center[0]),
+        mean[1] - c(cam.center[1]),
+        mean[2] - c(cam.center[2]),
     ];
-    let inv_len = 1.0 / dot3(d, d).sqrt();
-    let mut basis = [0f32; MAX_SH_COEFFS];
+    let inv_len = R::splat(1.0) / dot3(d, d).sqrt();
+    let mut basis = [R::splat(0.0); MAX_SH_COEFFS];
     sh_basis(
         degree,
         d[0] * inv_len,
@@ -294,6 +356,44 @@ pub(crate) fn sh_view_basis(
 }
 
 /// SH colour sums `Σ_k coeff_k·Y_k(dir) + 0.5` per channel (before the clamp at 0) and the
+/// basis. Lane `l`'s rest coefficients are `rest[l·stride ..]` (layout of
+/// `Gaussians::sh_rest`). Also returns whether every coefficient used is finite.
+#[inline(always)]
+fn sh_color_lanes<R: Lanes>(
+    mean: [R; 3],
+    cam: &CameraF32,
+    degree: u32,
+    dc: [R; 3],
+    rest: &[f32],
+    stride: usize,
+) -> ([R; 3], [R; MAX_SH_COEFFS], R::Mask) {
+    let basis = sh_basis_lanes(mean, cam, degree);
+    let k_used = num_coeffs(degree) - 1;
+    let mut finite = dc[0].is_finite() & dc[1].is_finite() & dc[2].is_finite();
+    let mut out = [R::splat(0.0); 3];
+    for (ch, o) in out.iter_mut().enumerate() {
+        let mut acc = basis[0] * dc[ch];
+        for k in 0..k_used {
+            let coeff = R::gather(|l| rest[l * stride + k * 3 + ch]);
+            finite = finite & coeff.is_finite();
+            acc = acc + basis[k + 1] * coeff;
+        }
+        *o = acc + R::splat(0.5);
+    }
+    (out, basis, finite)
+}
+
+/// The SH basis (up to `degree`) at Gaussian `i`'s view direction `(μ − C)/|μ − C|`.
+pub(crate) fn sh_view_basis(
+    g: &Gaussians,
+    i: usize,
+    cam: &CameraF32,
+    degree: u32,
+) -> [f32; MAX_SH_COEFFS] {
+    sh_basis_lanes(g.means[i], cam, degree)
+}
+
+/// SH colour sums `Σ_k coeff_k·Y_k(dir) + 0.5` per channel (before the clamp at 0) and the
 /// basis, `dir = (μ − C)/|μ − C|`. Shared by the forward and backward passes.
 pub(crate) fn sh_color(
     g: &Gaussians,
@@ -301,21 +401,160 @@ pub(crate) fn sh_color(
     cam: &CameraF32,
     degree: u32,
 ) -> ([f32; 3], [f32; MAX_SH_COEFFS]) {
-    let basis = sh_view_basis(g, i, cam, degree);
-    let (dc, rest) = (g.sh_dc[i], g.rest(i));
-    let k_used = num_coeffs(degree) - 1;
-    let mut out = [0f32; 3];
-    for (ch, o) in out.iter_mut().enumerate() {
-        let mut acc = basis[0] * dc[ch];
-        for k in 0..k_used {
-            acc += basis[k + 1] * rest[k * 3 + ch];
-        }
-        *o = acc + 0.5;
-    }
-    (out, basis)
+    let (raw, basis, _) = sh_color_lanes(g.means[i], cam, degree, g.sh_dc[i], g.rest(i), 0);
+    (raw, basis)
 }
 
-/// Project one Gaussian.
+/// The projection of `R::N` consecutive Gaussians, one per lane.
+struct Block<R: Lanes> {
+    mean2d: [R; 2],
+    conic: [R; 3],
+    opacity: R,
+    color: [R; 3],
+    depth: R,
+    radii: [R; 2],
+    culls: Culls<R>,
+}
+
+/// Project Gaussians `i .. i + R::N` (steps 1–8 of the module docs, all lanes at once).
+#[inline(always)]
+fn project_block<R: Lanes>(
+    g: &Gaussians,
+    i: usize,
+    cam: &CameraF32,
+    degree: u32,
+    antialiased: bool,
+) -> Block<R> {
+    let c = R::splat;
+    let mean = gather3(&g.means[i..i + R::N]);
+    let quats = &g.quats[i..i + R::N];
+    let quat = [
+        R::gather(|l| quats[l][0]),
+        R::gather(|l| quats[l][1]),
+        R::gather(|l| quats[l][2]),
+        R::gather(|l| quats[l][3]),
+    ];
+    let log_scale = gather3(&g.log_scales[i..i + R::N]);
+    let logits = &g.opacity_logits[i..i + R::N];
+    let logit = R::gather(|l| logits[l]);
+    let stride = g.rest_per_channel() * 3;
+    let rest = &g.sh_rest[i * stride..(i + R::N) * stride];
+
+    let mut culls = Culls::new();
+    let geo = geometry_lanes(mean, quat, log_scale, cam, &mut culls);
+    let [x, y, z] = geo.t;
+    let (w, h) = (c(cam.width as f32), c(cam.height as f32));
+    let [a0, b, c0] = geo.cov;
+    let det_orig = a0 * c0 - b * b;
+    let (a, cc) = (a0 + c(EPS2D), c0 + c(EPS2D));
+    let det = a * cc - b * b;
+    culls.check(!(det.gt(c(0.0)) & det.is_finite()), Cull::Degenerate);
+    let inv_det = c(1.0) / det;
+    let conic = [cc * inv_det, -b * inv_det, a * inv_det];
+    // 6. Mean.
+    let mean2d = [
+        c(cam.fx) * x * geo.rz + c(cam.cx),
+        c(cam.fy) * y * geo.rz + c(cam.cy),
+    ];
+    // 7. Opacity and radius.
+    let mut opacity = c(1.0) / (c(1.0) + (-logit).exp()); // fastexp::sigmoid
+    if antialiased {
+        let ratio = det_orig / det;
+        opacity = opacity * R::select(ratio.gt(c(0.0)), ratio.sqrt(), c(0.0));
+    }
+    culls.check(opacity.lt(c(ALPHA_THRESHOLD)), Cull::LowOpacity);
+    let ext = (c(2.0) * (opacity * c(255.0)).ln()).sqrt();
+    let ext = R::select(ext.lt(c(MAX_EXTENT_SIGMA)), ext, c(MAX_EXTENT_SIGMA));
+    let rx = (ext * a.sqrt()).ceil();
+    let ry = (ext * cc.sqrt()).ceil();
+    culls.check(rx.le(c(0.0)) & ry.le(c(0.0)), Cull::LowOpacity);
+    let off = (mean2d[0] + rx).le(c(0.0))
+        | (mean2d[0] - rx).ge(w)
+        | (mean2d[1] + ry).le(c(0.0))
+        | (mean2d[1] - ry).ge(h);
+    culls.check(off, Cull::OffScreen);
+    // 8. Colour.
+    let dc = gather3(&g.sh_dc[i..i + R::N]);
+    let (raw, _, coeffs_finite) = sh_color_lanes(mean, cam, degree, dc, rest, stride);
+    let clamp0 = |v: R| R::select(v.gt(c(0.0)), v, c(0.0));
+    let color = [clamp0(raw[0]), clamp0(raw[1]), clamp0(raw[2])];
+    // Finite but huge SH coefficients overflow here.
+    let color_finite = color[0].is_finite() & color[1].is_finite() & color[2].is_finite();
+    culls.check(!color_finite, Cull::NonFinite);
+    // A non-finite parameter among those used is the first check of all.
+    let mut params_finite = coeffs_finite & logit.is_finite();
+    for k in 0..3 {
+        params_finite = params_finite & mean[k].is_finite() & log_scale[k].is_finite();
+    }
+    for q in quat {
+        params_finite = params_finite & q.is_finite();
+    }
+    culls.check_first(!params_finite, Cull::NonFinite);
+    Block {
+        mean2d,
+        conic,
+        opacity,
+        color,
+        depth: z,
+        radii: [rx, ry],
+        culls,
+    }
+}
+
+/// Lanes `l` of `v[l]` (one slice entry per lane).
+#[inline(always)]
+fn gather3<R: Lanes>(v: &[[f32; 3]]) -> [R; 3] {
+    [
+        R::gather(|l| v[l][0]),
+        R::gather(|l| v[l][1]),
+        R::gather(|l| v[l][2]),
+    ]
+}
+
+/// Lanes as an array (the first `R::N` entries).
+#[inline(always)]
+fn lanes_of<R: Lanes>(v: R) -> [f32; 8] {
+    let mut a = [0f32; 8];
+    v.write(&mut a);
+    a
+}
+
+/// Write a block's visible lanes to `splats`/`radii` (culled lanes are left as they are) and
+/// count each lane's outcome in `counts` (`[visible, 1 + Cull …]`).
+#[inline(always)]
+fn store<R: Lanes>(
+    b: &Block<R>,
+    splats: &mut [Splat],
+    radii: &mut [[i32; 2]],
+    counts: &mut [u64; 7],
+) {
+    let ok = lanes_of(R::select(b.culls.ok, R::splat(0.0), b.culls.code));
+    let v = lanes_of::<R>;
+    let (mx, my) = (v(b.mean2d[0]), v(b.mean2d[1]));
+    let conic = [v(b.conic[0]), v(b.conic[1]), v(b.conic[2])];
+    let color = [v(b.color[0]), v(b.color[1]), v(b.color[2])];
+    let (op, depth, rx, ry) = (v(b.opacity), v(b.depth), v(b.radii[0]), v(b.radii[1]));
+    for l in 0..R::N {
+        let code = ok[l] as usize;
+        counts[code] += 1;
+        if code == 0 {
+            splats[l] = Splat {
+                mean: [mx[l], my[l]],
+                conic: [conic[0][l], conic[1][l], conic[2][l]],
+                opacity: op[l],
+                color: [color[0][l], color[1][l], color[2][l]],
+                depth: depth[l],
+            };
+            // Radii are at most ~1e19 here; saturate to i32 for storage.
+            radii[l] = [
+                rx[l].min(i32::MAX as f32) as i32,
+                ry[l].min(i32::MAX as f32) as i32,
+            ];
+        }
+    }
+}
+
+/// Project one Gaussian (the reference form of what [`project`] does for every Gaussian).
 pub fn project_one(
     g: &Gaussians,
     i: usize,
@@ -323,80 +562,63 @@ pub fn project_one(
     plan: &RenderPlan,
     antialiased: bool,
 ) -> Result<(Splat, [i32; 2]), Cull> {
-    let mean = g.means[i];
-    let k_used = num_coeffs(plan.sh_degree) - 1;
-    let rest = &g.rest(i)[..k_used * 3];
-    if !(all_finite(&mean)
-        && all_finite(&g.log_scales[i])
-        && all_finite(&g.quats[i])
-        && g.opacity_logits[i].is_finite()
-        && all_finite(&g.sh_dc[i])
-        && all_finite(rest))
-    {
-        return Err(Cull::NonFinite);
+    let b = project_block::<f32>(g, i, cam, plan.sh_degree, antialiased);
+    b.culls.result()?;
+    let (mut splat, mut radii, mut counts) = ([Splat::default()], [[0, 0]], [0; 7]);
+    store(&b, &mut splat, &mut radii, &mut counts);
+    Ok((splat[0], radii[0]))
+}
+
+/// Project Gaussians `first ..` into `splats`/`radii`, `R::N` at a time, the remainder one
+/// at a time.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn project_range<R: Lanes>(
+    g: &Gaussians,
+    first: usize,
+    cam: &CameraF32,
+    degree: u32,
+    antialiased: bool,
+    splats: &mut [Splat],
+    radii: &mut [[i32; 2]],
+    counts: &mut [u64; 7],
+) {
+    let n = splats.len();
+    let full = n - n % R::N;
+    for k in (0..full).step_by(R::N) {
+        let b = project_block::<R>(g, first + k, cam, degree, antialiased);
+        store(&b, &mut splats[k..], &mut radii[k..], counts);
     }
-    let geo = geometry(g, i, cam)?;
-    let [x, y, z] = geo.t;
-    let (w, h) = (cam.width as f32, cam.height as f32);
-    let (rz, [a0, b, c0]) = (geo.rz, geo.cov);
-    let det_orig = a0 * c0 - b * b;
-    let (a, c) = (a0 + EPS2D, c0 + EPS2D);
-    let det = a * c - b * b;
-    if !(det > 0.0 && det.is_finite()) {
-        return Err(Cull::Degenerate);
+    for k in full..n {
+        let b = project_block::<f32>(g, first + k, cam, degree, antialiased);
+        store(&b, &mut splats[k..], &mut radii[k..], counts);
     }
-    let inv_det = 1.0 / det;
-    let conic = [c * inv_det, -b * inv_det, a * inv_det];
-    // 6. Mean.
-    let mean2d = [cam.fx * x * rz + cam.cx, cam.fy * y * rz + cam.cy];
-    // 7. Opacity and radius.
-    let mut opacity = sigmoid(g.opacity_logits[i]);
-    if antialiased {
-        let ratio = det_orig / det;
-        opacity *= if ratio > 0.0 { ratio.sqrt() } else { 0.0 };
-    }
-    if opacity < ALPHA_THRESHOLD {
-        return Err(Cull::LowOpacity);
-    }
-    let ext = (2.0 * ln(opacity * 255.0)).sqrt();
-    let ext = if ext < MAX_EXTENT_SIGMA {
-        ext
-    } else {
-        MAX_EXTENT_SIGMA
-    };
-    let rx = ceil(ext * a.sqrt());
-    let ry = ceil(ext * c.sqrt());
-    if rx <= 0.0 && ry <= 0.0 {
-        return Err(Cull::LowOpacity);
-    }
-    if mean2d[0] + rx <= 0.0 || mean2d[0] - rx >= w || mean2d[1] + ry <= 0.0 || mean2d[1] - ry >= h
-    {
-        return Err(Cull::OffScreen);
-    }
-    // 8. Colour.
-    let (raw, _) = sh_color(g, i, cam, plan.sh_degree);
-    let color = raw.map(|v| if v > 0.0 { v } else { 0.0 });
-    if !color.iter().all(|c| c.is_finite()) {
-        return Err(Cull::NonFinite); // finite but huge SH coefficients overflow here
-    }
-    let splat = Splat {
-        mean: mean2d,
-        conic,
-        opacity,
-        color,
-        depth: z,
-    };
-    // Radii are at most ~1e19 here; saturate to i32 for storage.
-    Ok((
-        splat,
-        [
-            rx.min(i32::MAX as f32) as i32,
-            ry.min(i32::MAX as f32) as i32,
-        ],
-    ))
+}
+
+/// [`project_range`] eight Gaussians per instruction.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn project_range_avx2(
+    g: &Gaussians,
+    first: usize,
+    cam: &CameraF32,
+    degree: u32,
+    antialiased: bool,
+    splats: &mut [Splat],
+    radii: &mut [[i32; 2]],
+    counts: &mut [u64; 7],
+) {
+    project_range::<F32x8>(g, first, cam, degree, antialiased, splats, radii, counts)
 }
 
 /// Project every Gaussian (parallel over fixed chunks; output order is the input order).
+/// `opts.kernel` chooses the lane width: [`Kernel::Auto`] runs eight Gaussians per AVX2
+/// instruction where the CPU has it, [`Kernel::Scalar`] one at a time; both give the same
+/// bits.
 pub fn project(
     g: &Gaussians,
     cam: &Camera,
@@ -410,6 +632,9 @@ pub fn project(
         splats: vec![Splat::default(); n],
         radii: vec![[0, 0]; n],
     };
+    #[cfg(target_arch = "x86_64")]
+    let avx2 = opts.kernel == Kernel::Auto && std::is_x86_feature_detected!("avx2");
+    let (degree, aa) = (plan.sh_degree, opts.antialiased);
     // Fixed chunks, written in place; per-chunk cull counts are integers, so their sum does
     // not depend on how chunks map to threads.
     const CHUNK: usize = 4096;
@@ -420,16 +645,14 @@ pub fn project(
         .enumerate()
         .map(|(ci, (splats, radii))| {
             let mut c = [0u64; 7];
-            for (k, (s, r)) in splats.iter_mut().zip(radii.iter_mut()).enumerate() {
-                match project_one(g, ci * CHUNK + k, &cam, plan, opts.antialiased) {
-                    Ok((splat, rad)) => {
-                        *s = splat;
-                        *r = rad;
-                        c[0] += 1;
-                    }
-                    Err(cull) => c[1 + cull as usize] += 1,
-                }
+            let first = ci * CHUNK;
+            #[cfg(target_arch = "x86_64")]
+            if avx2 {
+                // SAFETY: AVX2 was detected just above.
+                unsafe { project_range_avx2(g, first, &cam, degree, aa, splats, radii, &mut c) };
+                return c;
             }
+            project_range::<f32>(g, first, &cam, degree, aa, splats, radii, &mut c);
             c
         })
         .collect();
