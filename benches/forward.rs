@@ -63,7 +63,11 @@ fn main() {
         &[10_000, 100_000, 1_000_000]
     };
     let resolutions: &[(u32, u32)] = &[(256, 256), (1024, 768)];
-    let kernels: &[(&str, Kernel)] = &[("auto", Kernel::Auto), ("scalar", Kernel::Scalar)];
+    let kernels: &[(&str, Kernel)] = &[
+        ("auto", Kernel::Auto),
+        ("avx2", Kernel::Avx2),
+        ("scalar", Kernel::Scalar),
+    ];
     let tile = tile_splats();
     println!(
         "{:>9} {:>9} {:>3} {:>6} {:>9} {:>9} {:>11} {:>9} {:>12} {:>9} {:>9} {:>9} {:>10} {:>9}",

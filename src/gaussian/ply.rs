@@ -349,7 +349,8 @@ pub fn parse_ply(data: &[u8], path: &Path) -> Result<(Gaussians, PlyInfo)> {
         }
     }
     let rest_per_channel = n_rest / 3;
-    let degree = (n_rest % 3 == 0)
+    let degree = n_rest
+        .is_multiple_of(3)
         .then(|| degree_for_coeffs(rest_per_channel + 1))
         .flatten()
         .ok_or_else(|| {

@@ -178,14 +178,14 @@ impl OnnxModel {
             let fact = model
                 .input_fact(ix)
                 .map_err(|e| tract_err(&model_path, "model inputs", e))?;
-            if let Some(rank) = fact.shape.rank().concretize() {
-                if rank != 4 {
-                    return Err(Error::invalid(format!(
-                        "input '{name}' has rank {rank}; the card's {:?} layout needs rank 4",
-                        card.layout
-                    ))
-                    .at(&model_path));
-                }
+            if let Some(rank) = fact.shape.rank().concretize()
+                && rank != 4
+            {
+                return Err(Error::invalid(format!(
+                    "input '{name}' has rank {rank}; the card's {:?} layout needs rank 4",
+                    card.layout
+                ))
+                .at(&model_path));
             }
         }
         model.set_output_names([&card.output]).map_err(|_| {

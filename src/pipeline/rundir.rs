@@ -110,27 +110,27 @@ impl RunDir {
         let dir = self.root.join(name);
         let inputs = serde_json::json!({ "run": self.base, "step": inputs });
         let inputs_sha256 = inputs_sha256(&inputs);
-        if self.resume || self.scope != Scope::All {
-            if let Some(digest) = verified(&dir, &inputs_sha256) {
-                on_event(Event::StepSkipped { step: name.into() });
-                if is_target {
-                    self.finished.store(true, Ordering::SeqCst);
-                }
-                return Ok(StepDone {
-                    name: name.into(),
-                    dir,
-                    digest,
-                    skipped: true,
-                });
+        if (self.resume || self.scope != Scope::All)
+            && let Some(digest) = verified(&dir, &inputs_sha256)
+        {
+            on_event(Event::StepSkipped { step: name.into() });
+            if is_target {
+                self.finished.store(true, Ordering::SeqCst);
             }
+            return Ok(StepDone {
+                name: name.into(),
+                dir,
+                digest,
+                skipped: true,
+            });
         }
-        if let Scope::Only(only) = &self.scope {
-            if only != name {
-                return Err(Error::invalid(format!(
+        if let Scope::Only(only) = &self.scope
+            && only != name
+        {
+            return Err(Error::invalid(format!(
                     "step {name} is not done in this run directory and comes before --only {only} (run up to it first with --until {name}; or is there no step called {only}?)"
                 ))
                 .at(&self.root));
-            }
         }
         if dir.exists() {
             std::fs::remove_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;

@@ -43,12 +43,37 @@ pub const EXPECTED_DEPTH_EPS: f32 = 1e-10;
 /// All give identical bits.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Kernel {
-    /// The fastest form this CPU supports (AVX2 when detected at run time).
+    /// The fastest form this CPU supports, detected at run time: AVX-512F for the forward
+    /// blend, AVX2 elsewhere.
     #[default]
     Auto,
-    /// One pixel at a time, no vectorization: the reference form.
+    /// AVX2 where detected, never AVX-512 (tests and benches compare the forms).
+    Avx2,
+    /// One pixel (one Gaussian) at a time, no vectorization: the reference form.
     Scalar,
 }
+
+impl Kernel {
+    /// Whether the AVX2 forms run.
+    pub(crate) fn avx2(self) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        return self != Kernel::Scalar && std::is_x86_feature_detected!("avx2");
+        #[cfg(not(target_arch = "x86_64"))]
+        false
+    }
+    /// Whether the AVX-512F forms run, where one exists.
+    pub(crate) fn avx512(self) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        return self == Kernel::Auto && std::is_x86_feature_detected!("avx512f");
+        #[cfg(not(target_arch = "x86_64"))]
+        false
+    }
+}
+
+/// Instruction sets of the blend kernel (const parameter of the band loop).
+const ISA_SCALAR: u8 = 0;
+const ISA_AVX2: u8 = 1;
+const ISA_AVX512: u8 = 2;
 
 /// Pixels walked together: one tile row (two AVX2 registers of f32).
 const GROUP: usize = TILE_SIZE;
@@ -81,6 +106,28 @@ pub(crate) fn splat_rows(
     let lo = (floor(my - ry) - y0 as f32).max(0.0);
     let hi = (ceil(my + ry) - y0 as f32 + 1.0).min(rows as f32);
     (lo as u32, if hi > lo { hi as u32 } else { lo as u32 })
+}
+
+/// How many list entries ahead the gather prefetches splat data.
+const PREFETCH_AHEAD: usize = 8;
+
+/// Hint the cache to load what the gather will read of splat `gid` (its data and radii):
+/// tile lists are in depth order, so these reads jump through memory and used to be the
+/// composite's largest single stall (benches/README.md). No effect on any result.
+#[inline(always)]
+pub(crate) fn prefetch(p: &Projected, gid: usize) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        if let (Some(s), Some(r)) = (p.splats.get(gid), p.radii.get(gid)) {
+            // SAFETY: prefetching is a hint: it never faults and reads nothing visible; the
+            // pointers come from live references anyway.
+            unsafe {
+                _mm_prefetch::<_MM_HINT_T0>((s as *const Splat).cast());
+                _mm_prefetch::<_MM_HINT_T0>((r as *const [i32; 2]).cast());
+            }
+        }
+    }
 }
 
 /// Blend state of a group of pixels (one tile row).
@@ -344,6 +391,105 @@ mod avx2 {
     }
 }
 
+/// [`blend_group_lanes`] with AVX-512F intrinsics: one tile row is one 16-lane register,
+/// the operations those of [`avx2::blend_group`] one for one, masks in mask registers.
+#[cfg(target_arch = "x86_64")]
+mod avx512 {
+    use super::{
+        ALPHA_THRESHOLD, GROUP, Group, MAX_ALPHA, SIGMA_CLAMP, TRANSMITTANCE_STOP, TileSplat,
+    };
+    use crate::math::fastexp::exp_avx512;
+    use std::arch::x86_64::*;
+
+    /// # Safety
+    /// The CPU must support AVX-512F.
+    #[target_feature(enable = "avx512f")]
+    pub(super) unsafe fn blend_group<const DEPTH: bool, const TRACK: bool>(
+        list: &[TileSplat],
+        idx: &[u16],
+        px: &[f32; GROUP],
+        py: f32,
+        st: &mut Group,
+    ) -> u64 {
+        let c = |x: f32| _mm512_set1_ps(x);
+        let zero = _mm512_setzero_ps();
+        // SAFETY: every array read or written here has exactly GROUP = 16 lanes.
+        let (pxv, mut t, mut r, mut g, mut b, mut d, mut n, active) = unsafe {
+            (
+                _mm512_loadu_ps(px.as_ptr()),
+                _mm512_loadu_ps(st.t.as_ptr()),
+                _mm512_loadu_ps(st.r.as_ptr()),
+                _mm512_loadu_ps(st.g.as_ptr()),
+                _mm512_loadu_ps(st.b.as_ptr()),
+                _mm512_loadu_ps(st.d.as_ptr()),
+                _mm512_loadu_si512(st.n.as_ptr().cast()),
+                _mm512_loadu_si512(st.active.as_ptr().cast()),
+            )
+        };
+        let mut act: __mmask16 = _mm512_test_epi32_mask(active, active);
+        let mut pairs = 0;
+        for &k in idx {
+            let ts = &list[k as usize];
+            if act == 0 {
+                break;
+            }
+            pairs += GROUP as u64;
+            let s = &ts.s;
+            let dy = s.mean[1] - py;
+            let (cdd, dyv) = (c(s.conic[2] * dy * dy), c(dy));
+            let dx = _mm512_sub_ps(c(s.mean[0]), pxv);
+            let sum = _mm512_add_ps(_mm512_mul_ps(_mm512_mul_ps(c(s.conic[0]), dx), dx), cdd);
+            let sigma = _mm512_add_ps(
+                _mm512_mul_ps(c(0.5), sum),
+                _mm512_mul_ps(_mm512_mul_ps(c(s.conic[1]), dx), dyv),
+            );
+            let clamped = _mm512_min_ps(sigma, c(SIGMA_CLAMP));
+            let neg = _mm512_xor_si512(_mm512_castps_si512(clamped), _mm512_set1_epi32(i32::MIN));
+            // SAFETY: this function runs only on CPUs with AVX-512F.
+            let e = unsafe { exp_avx512(_mm512_castsi512_ps(neg)) };
+            let alpha = _mm512_min_ps(_mm512_mul_ps(c(s.opacity), e), c(MAX_ALPHA));
+            let valid = _mm512_mask_cmp_ps_mask::<_CMP_GE_OQ>(act, sigma, zero)
+                & _mm512_cmp_ps_mask::<_CMP_GE_OQ>(alpha, c(ALPHA_THRESHOLD));
+            // A splat valid for no pixel of the row changes no state (exact, and common).
+            if valid == 0 {
+                continue;
+            }
+            let nt = _mm512_mul_ps(t, _mm512_sub_ps(c(1.0), alpha));
+            let stop = _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(valid, nt, c(TRANSMITTANCE_STOP));
+            let blend = valid & !stop;
+            let w = _mm512_mul_ps(alpha, t);
+            let acc = |v: __m512, k: f32| {
+                _mm512_mask_blend_ps(blend, v, _mm512_add_ps(v, _mm512_mul_ps(c(k), w)))
+            };
+            r = acc(r, s.color[0]);
+            g = acc(g, s.color[1]);
+            b = acc(b, s.color[2]);
+            if DEPTH {
+                d = acc(d, s.depth);
+            }
+            if TRACK {
+                n = _mm512_mask_blend_epi32(blend, n, _mm512_set1_epi32(ts.pos1 as i32));
+            }
+            t = _mm512_mask_blend_ps(blend, t, nt);
+            act &= !stop;
+        }
+        // SAFETY: as above.
+        unsafe {
+            _mm512_storeu_ps(st.t.as_mut_ptr(), t);
+            _mm512_storeu_ps(st.r.as_mut_ptr(), r);
+            _mm512_storeu_ps(st.g.as_mut_ptr(), g);
+            _mm512_storeu_ps(st.b.as_mut_ptr(), b);
+            _mm512_storeu_ps(st.d.as_mut_ptr(), d);
+            _mm512_storeu_si512(st.n.as_mut_ptr().cast(), n);
+            _mm512_storeu_si512(
+                st.active.as_mut_ptr().cast(),
+                _mm512_maskz_mov_epi32(act, _mm512_set1_epi32(-1)),
+            );
+        }
+        pairs
+    }
+}
+
 /// Outputs of one band of 16 image rows.
 #[derive(Default)]
 struct BandOut {
@@ -368,7 +514,7 @@ pub struct Want {
 
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn band_impl<const DEPTH: bool, const TRACK: bool, const AVX2: bool>(
+fn band_impl<const DEPTH: bool, const TRACK: bool, const ISA: u8>(
     ty: usize,
     width: usize,
     height: usize,
@@ -444,6 +590,9 @@ fn band_impl<const DEPTH: bool, const TRACK: bool, const AVX2: bool>(
                 r.clear();
             }
             for (k, &gid) in chunk.iter().enumerate() {
+                if let Some(&ahead) = chunk.get(k + PREFETCH_AHEAD) {
+                    prefetch(p, ahead as usize);
+                }
                 let s = p.splats[gid as usize];
                 let (lo, hi) = splat_rows(p, gid as usize, y0, rows, plan.cull_rows);
                 if lo < hi {
@@ -460,14 +609,18 @@ fn band_impl<const DEPTH: bool, const TRACK: bool, const AVX2: bool>(
                 }
                 let py = (y0 + row) as f32 + 0.5;
                 let st = &mut groups[row];
+                let idx = &rows_idx[row];
                 #[cfg(target_arch = "x86_64")]
-                let pairs = if AVX2 {
-                    // SAFETY: AVX2 == true only inside `band_avx2`, entered after detection.
-                    unsafe {
-                        avx2::blend_group::<DEPTH, TRACK>(&batch, &rows_idx[row], &px, py, st)
-                    }
-                } else {
-                    blend_group_lanes::<DEPTH, TRACK>(&batch, &rows_idx[row], &px, py, st)
+                let pairs = match ISA {
+                    // SAFETY: ISA_AVX512 only inside `band_avx512`, entered after detection.
+                    ISA_AVX512 => unsafe {
+                        avx512::blend_group::<DEPTH, TRACK>(&batch, idx, &px, py, st)
+                    },
+                    // SAFETY: ISA_AVX2 only inside `band_avx2`, entered after detection.
+                    ISA_AVX2 => unsafe {
+                        avx2::blend_group::<DEPTH, TRACK>(&batch, idx, &px, py, st)
+                    },
+                    _ => blend_group_lanes::<DEPTH, TRACK>(&batch, idx, &px, py, st),
                 };
                 #[cfg(not(target_arch = "x86_64"))]
                 let pairs = blend_group_lanes::<DEPTH, TRACK>(&batch, &rows_idx[row], &px, py, st);
@@ -528,7 +681,23 @@ unsafe fn band_avx2<const DEPTH: bool, const TRACK: bool>(
     background: [f32; 3],
     want: Want,
 ) -> BandOut {
-    band_impl::<DEPTH, TRACK, true>(ty, width, height, p, bins, plan, background, want)
+    band_impl::<DEPTH, TRACK, ISA_AVX2>(ty, width, height, p, bins, plan, background, want)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn band_avx512<const DEPTH: bool, const TRACK: bool>(
+    ty: usize,
+    width: usize,
+    height: usize,
+    p: &Projected,
+    bins: &TileBins,
+    plan: &RenderPlan,
+    background: [f32; 3],
+    want: Want,
+) -> BandOut {
+    band_impl::<DEPTH, TRACK, ISA_AVX512>(ty, width, height, p, bins, plan, background, want)
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -544,13 +713,20 @@ fn band<const DEPTH: bool, const TRACK: bool>(
     kernel: Kernel,
 ) -> BandOut {
     #[cfg(target_arch = "x86_64")]
-    if kernel == Kernel::Auto && std::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above).
+    if kernel.avx512() {
+        // SAFETY: the CPU supports AVX-512F (checked by `avx512`).
+        return unsafe {
+            band_avx512::<DEPTH, TRACK>(ty, width, height, p, bins, plan, background, want)
+        };
+    }
+    #[cfg(target_arch = "x86_64")]
+    if kernel.avx2() {
+        // SAFETY: the CPU supports AVX2 (checked by `avx2`).
         return unsafe {
             band_avx2::<DEPTH, TRACK>(ty, width, height, p, bins, plan, background, want)
         };
     }
-    band_impl::<DEPTH, TRACK, false>(ty, width, height, p, bins, plan, background, want)
+    band_impl::<DEPTH, TRACK, ISA_SCALAR>(ty, width, height, p, bins, plan, background, want)
 }
 
 /// The blend kernel alone: the bound [`composite`] is measured against
@@ -575,13 +751,15 @@ pub fn bare_blend(splats: &[Splat], rows: usize, kernel: Kernel) -> u64 {
         .collect();
     let idx: Vec<u16> = (0..splats.len() as u16).collect();
     let px: [f32; GROUP] = std::array::from_fn(|l| l as f32 + 0.5);
-    #[cfg(target_arch = "x86_64")]
-    let avx2 = kernel == Kernel::Auto && std::is_x86_feature_detected!("avx2");
+    let (avx512, avx2) = (kernel.avx512(), kernel.avx2());
     let run = |row: usize| -> u64 {
         let py = (row % TILE_SIZE) as f32 + 0.5;
         let mut st = Group::new(GROUP);
         #[cfg(target_arch = "x86_64")]
-        let pairs = if avx2 {
+        let pairs = if avx512 {
+            // SAFETY: AVX-512F was detected above.
+            unsafe { avx512::blend_group::<false, false>(&list, &idx, &px, py, &mut st) }
+        } else if avx2 {
             // SAFETY: AVX2 was detected above.
             unsafe { avx2::blend_group::<false, false>(&list, &idx, &px, py, &mut st) }
         } else {

@@ -89,10 +89,10 @@ fn check_options(scene: &Gaussians, opts: &RenderOptions) -> Result<()> {
             opts.background
         )));
     }
-    if let Some(d) = opts.sh_degree {
-        if d > MAX_SH_DEGREE {
-            return Err(Error::invalid(format!("SH degree {d} > {MAX_SH_DEGREE}")));
-        }
+    if let Some(d) = opts.sh_degree
+        && d > MAX_SH_DEGREE
+    {
+        return Err(Error::invalid(format!("SH degree {d} > {MAX_SH_DEGREE}")));
     }
     Ok(())
 }

@@ -28,7 +28,6 @@ use crate::gaussian::Gaussians;
 use crate::math::lanes::F32x8;
 use crate::math::lanes::Lanes;
 use crate::math::sh::{MAX_SH_COEFFS, SH_C0, num_coeffs, sh_basis};
-use crate::raster::Kernel;
 use rayon::prelude::*;
 
 /// Near clipping plane in camera z (gsplat `near_plane` default).
@@ -616,9 +615,9 @@ unsafe fn project_range_avx2(
 }
 
 /// Project every Gaussian (parallel over fixed chunks; output order is the input order).
-/// `opts.kernel` chooses the lane width: [`Kernel::Auto`] runs eight Gaussians per AVX2
-/// instruction where the CPU has it, [`Kernel::Scalar`] one at a time; both give the same
-/// bits.
+/// `opts.kernel` chooses the lane width: eight Gaussians per AVX2 instruction where the CPU
+/// has it (`Kernel::Auto`, `Kernel::Avx2`), one at a time with `Kernel::Scalar`; both
+/// give the same bits.
 pub fn project(
     g: &Gaussians,
     cam: &Camera,
@@ -633,7 +632,7 @@ pub fn project(
         radii: vec![[0, 0]; n],
     };
     #[cfg(target_arch = "x86_64")]
-    let avx2 = opts.kernel == Kernel::Auto && std::is_x86_feature_detected!("avx2");
+    let avx2 = opts.kernel.avx2();
     let (degree, aa) = (plan.sh_degree, opts.antialiased);
     // Fixed chunks, written in place; per-chunk cull counts are integers, so their sum does
     // not depend on how chunks map to threads.

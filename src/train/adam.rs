@@ -22,10 +22,15 @@ use rayon::prelude::*;
 
 /// Adam's constants (INRIA: PyTorch defaults with `eps = 1e-15`).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
 pub struct AdamConfig {
     pub beta1: f32,
     pub beta2: f32,
     pub eps: f32,
+    /// *Sparse* Adam (gsplat's `SelectiveAdam`): a step updates only the Gaussians the
+    /// iteration's view sees (radii not both 0); the others keep their parameters and both
+    /// moments. Off by default (INRIA's dense Adam).
+    pub sparse: bool,
 }
 
 impl Default for AdamConfig {
@@ -34,6 +39,7 @@ impl Default for AdamConfig {
             beta1: 0.9,
             beta2: 0.999,
             eps: 1e-15,
+            sparse: false,
         }
     }
 }
@@ -87,15 +93,30 @@ impl Adam {
 
     /// One Adam step of group `p` with learning rate `lr`.
     pub fn step(&mut self, params: &mut Gaussians, p: Param, grad: &[f32], lr: f32) {
+        self.step_sparse(params, p, grad, lr, None);
+    }
+
+    /// [`Adam::step`] that, with `visible`, updates only the Gaussians `i` with
+    /// `visible[i]`: the others keep their parameters and moments (sparse Adam). The step
+    /// counter advances either way, so the bias correction is the dense one.
+    pub fn step_sparse(
+        &mut self,
+        params: &mut Gaussians,
+        p: Param,
+        grad: &[f32],
+        lr: f32,
+        visible: Option<&[bool]>,
+    ) {
         assert_eq!(
             params.param_mut(p).len(),
             grad.len(),
             "gradient length of {}",
             p.name()
         );
-        self.step_with(params, p, lr, &|first, out: &mut [f32]| {
+        let grad = &|first, out: &mut [f32]| {
             out.copy_from_slice(&grad[first..first + out.len()]);
-        });
+        };
+        self.step_impl(params, p, lr, grad, visible);
     }
 
     /// [`Adam::step`] with the gradient produced chunk by chunk: `grad(first, out)` fills
@@ -110,6 +131,20 @@ impl Adam {
         lr: f32,
         grad: &(dyn Fn(usize, &mut [f32]) + Sync),
     ) {
+        self.step_impl(params, p, lr, grad, None);
+    }
+
+    fn step_impl(
+        &mut self,
+        params: &mut Gaussians,
+        p: Param,
+        lr: f32,
+        grad: &(dyn Fn(usize, &mut [f32]) + Sync),
+        visible: Option<&[bool]>,
+    ) {
+        if let Some(vis) = visible {
+            assert_eq!(vis.len(), params.len(), "visibility length");
+        }
         let c = self.config;
         let s = &mut self.steps[group_index(p)];
         s.t += 1;
@@ -136,13 +171,30 @@ impl Adam {
                     grad(ci * chunk, g);
                     // Zipped slices (no index checks) so the loop vectorizes; every lane
                     // does the same IEEE operations, so the bits do not change.
-                    for (((x, m), v), &g) in
-                        x.iter_mut().zip(m.iter_mut()).zip(v.iter_mut()).zip(&*g)
-                    {
-                        *m = b1 * *m + ob1 * g;
-                        *v = b2 * *v + ob2 * (g * g);
-                        let denom = v.sqrt() / bc2_sqrt + eps;
-                        *x -= step_size * (*m / denom);
+                    let update = |x: &mut [f32], m: &mut [f32], v: &mut [f32], g: &[f32]| {
+                        for (((x, m), v), &g) in
+                            x.iter_mut().zip(m.iter_mut()).zip(v.iter_mut()).zip(g)
+                        {
+                            *m = b1 * *m + ob1 * g;
+                            *v = b2 * *v + ob2 * (g * g);
+                            let denom = v.sqrt() / bc2_sqrt + eps;
+                            *x -= step_size * (*m / denom);
+                        }
+                    };
+                    match visible {
+                        None => update(x, m, v, g),
+                        Some(vis) => {
+                            let rows = &vis[ci * CHUNK_ROWS..][..x.len() / row];
+                            for (k, _) in rows.iter().enumerate().filter(|(_, v)| **v) {
+                                let e = k * row..(k + 1) * row;
+                                update(
+                                    &mut x[e.clone()],
+                                    &mut m[e.clone()],
+                                    &mut v[e.clone()],
+                                    &g[e],
+                                );
+                            }
+                        }
                     }
                 },
             );

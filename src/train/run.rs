@@ -43,10 +43,10 @@ pub fn latest_ply(run: &Path) -> Result<(u32, PathBuf)> {
         if let Some(n) = name
             .strip_prefix("iteration_")
             .and_then(|n| n.parse::<u32>().ok())
+            && ply_path(run, n).is_file()
+            && best.is_none_or(|b| n > b)
         {
-            if ply_path(run, n).is_file() && best.is_none_or(|b| n > b) {
-                best = Some(n);
-            }
+            best = Some(n);
         }
     }
     let n = best.ok_or_else(|| {

@@ -353,7 +353,7 @@ impl<'a> Trainer<'a> {
         self.iteration += 1;
         let it = self.iteration;
         if self.config.sh_increase_interval > 0
-            && it % self.config.sh_increase_interval == 0
+            && it.is_multiple_of(self.config.sh_increase_interval)
             && self.active_sh_degree < self.config.sh_degree
         {
             self.active_sh_degree += 1;
@@ -405,7 +405,7 @@ impl<'a> Trainer<'a> {
             if it < d.until_iter && groups.geometry() && !last {
                 self.stats
                     .add_view(&grads.means2d_ndc, &fwd.projected.radii);
-                if it > d.from_iter && d.interval > 0 && it % d.interval == 0 {
+                if it > d.from_iter && d.interval > 0 && it.is_multiple_of(d.interval) {
                     let world_prune = it > d.opacity_reset_interval;
                     densified = Some(densify_and_prune(
                         &mut self.gaussians,
@@ -419,7 +419,7 @@ impl<'a> Trainer<'a> {
                 }
                 // INRIA also resets once at `from_iter` when training on white.
                 let white_start = self.config.background == [1.0; 3] && it == d.from_iter;
-                if (d.opacity_reset_interval > 0 && it % d.opacity_reset_interval == 0)
+                if (d.opacity_reset_interval > 0 && it.is_multiple_of(d.opacity_reset_interval))
                     || white_start
                 {
                     reset_opacity(&mut self.gaussians, &mut self.adam, d.opacity_reset_value);
@@ -428,13 +428,18 @@ impl<'a> Trainer<'a> {
             }
         }
         if densified.is_none() {
+            let visible: Option<Vec<bool>> = self.config.adam.sparse.then(|| {
+                let radii = &fwd.projected.radii;
+                radii.iter().map(|r| *r != [0, 0]).collect()
+            });
             for param in Param::ALL {
                 if self.config.frozen.contains(&param) || (reset && param == Param::OpacityLogits) {
                     continue;
                 }
                 let lr = self.lr(param, it);
+                let g = grads.param(param);
                 self.adam
-                    .step(&mut self.gaussians, param, grads.param(param), lr);
+                    .step_sparse(&mut self.gaussians, param, g, lr, visible.as_deref());
             }
         }
         let t = out.terms;

@@ -25,7 +25,7 @@ pub fn train_with_bar(
     let t0 = Instant::now();
     let mut on_progress = |p: &Progress| {
         // Without a terminal the bar is hidden: a log line every 1000 iterations instead.
-        if bar.is_hidden() && (p.iteration % 1000 == 0 || p.iteration == p.iterations) {
+        if bar.is_hidden() && (p.iteration.is_multiple_of(1000) || p.iteration == p.iterations) {
             eprintln!(
                 "iteration {}/{}: loss {:.4}, PSNR {:.2} dB, {} Gaussians, {:.1} s",
                 p.iteration,
@@ -36,7 +36,7 @@ pub fn train_with_bar(
                 t0.elapsed().as_secs_f64()
             );
         }
-        if p.iteration % 10 == 0 || p.iteration == p.iterations {
+        if p.iteration.is_multiple_of(10) || p.iteration == p.iterations {
             bar.set_position(p.iteration as u64);
             bar.set_message(format!(
                 "loss {:.4} PSNR {:.2} dB, {} Gaussians",

@@ -260,10 +260,10 @@ fn run_oracle(c: &OracleScene, targets: Option<(&Path, &str, Option<&Path>)>) ->
         Some(p) => Some(unseen::io::image::read_exr(p, &["Y"])?),
         None => None,
     };
-    if let (Some(d), Some(p)) = (&depth_img, depth) {
-        if (d.width, d.height) != (cam.width as usize, cam.height as usize) {
-            return Err(Error::invalid("depth target size differs from the camera's").at(p));
-        }
+    if let (Some(d), Some(p)) = (&depth_img, depth)
+        && (d.width, d.height) != (cam.width as usize, cam.height as usize)
+    {
+        return Err(Error::invalid("depth target size differs from the camera's").at(p));
     }
     let t = Targets {
         rgb: &img.data,

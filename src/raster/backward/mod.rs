@@ -82,14 +82,14 @@ pub fn backward(
         ("depth", &v.depth, 1),
         ("expected_depth", &v.expected_depth, 1),
     ] {
-        if let Some(img) = img {
-            if img.len() != npix * ch {
-                return Err(Error::invalid(format!(
-                    "{name} gradient has {} values, the {w}x{h} image needs {}",
-                    img.len(),
-                    npix * ch
-                )));
-            }
+        if let Some(img) = img
+            && img.len() != npix * ch
+        {
+            return Err(Error::invalid(format!(
+                "{name} gradient has {} values, the {w}x{h} image needs {}",
+                img.len(),
+                npix * ch
+            )));
         }
     }
     let r = &fwd.render;
