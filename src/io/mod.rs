@@ -74,6 +74,38 @@ pub fn reset_peak_memory() -> bool {
     std::fs::write("/proc/self/clear_refs", "5").is_ok()
 }
 
+/// Wall time and peak resident memory of one stage of work (a training run's loading or
+/// iterations, a pipeline step). The peak is the process's high-water mark since the stage
+/// began (Linux: reset through `/proc/self/clear_refs`); stages that run side by side
+/// share it. `None` where the OS does not tell.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Cost {
+    pub seconds: f64,
+    pub peak_rss_bytes: Option<u64>,
+}
+
+/// Measures a [`Cost`] from its creation.
+pub struct CostMeter {
+    start: std::time::Instant,
+    peak_reset: bool,
+}
+
+impl CostMeter {
+    pub fn start() -> CostMeter {
+        let peak_reset = reset_peak_memory();
+        CostMeter {
+            start: std::time::Instant::now(),
+            peak_reset,
+        }
+    }
+    pub fn finish(&self) -> Cost {
+        Cost {
+            seconds: self.start.elapsed().as_secs_f64(),
+            peak_rss_bytes: peak_memory_bytes().filter(|_| self.peak_reset),
+        }
+    }
+}
+
 /// A file-name-safe version of a camera name.
 pub fn file_stem(name: &str) -> String {
     let stem = Path::new(name)

@@ -132,7 +132,7 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
             md += "\n\n";
         }
     }
-    let timings: std::collections::BTreeMap<String, super::rundir::StepCost> =
+    let timings: std::collections::BTreeMap<String, crate::io::Cost> =
         read_json(&run.join("timings.json")).unwrap_or_default();
     md += "## Cost per step (2 cores)\n\n| step | seconds | peak memory |\n|---|---|---|\n";
     // In run order (`steps.json`).

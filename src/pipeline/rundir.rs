@@ -15,7 +15,6 @@ use crate::io::manifest::{FileEntry, Manifest, inputs_sha256};
 use crate::io::{create_dir_all, sha256_hex, write_text};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 /// Which steps a run computes (SPEC.md §20.8): all, or one step alone (its inputs must be
 /// done: a batch engine's worker), or everything up to one step.
@@ -137,8 +136,7 @@ impl RunDir {
         }
         create_dir_all(&dir)?;
         on_event(Event::StepStarted { step: name.into() });
-        let peak_reset = crate::io::reset_peak_memory();
-        let t0 = Instant::now();
+        let meter = crate::io::CostMeter::start();
         let mut w = StepWriter {
             dir: dir.clone(),
             files: Vec::new(),
@@ -155,10 +153,7 @@ impl RunDir {
         })?;
         let mut files = w.files;
         files.sort_by(|a, b| a.path.cmp(&b.path));
-        let cost = StepCost {
-            seconds: t0.elapsed().as_secs_f64(),
-            peak_rss_bytes: crate::io::peak_memory_bytes().filter(|_| peak_reset),
-        };
+        let cost = meter.finish();
         let secs = cost.seconds;
         // Outside the manifest (timings differ run to run), written before it: a step is
         // complete only once its manifest exists.
@@ -186,7 +181,7 @@ impl RunDir {
     }
 
     /// What each of `steps` cost when it was computed (this run or an earlier one).
-    pub fn timings(&self, steps: &[StepDone]) -> BTreeMap<String, StepCost> {
+    pub fn timings(&self, steps: &[StepDone]) -> BTreeMap<String, crate::io::Cost> {
         steps
             .iter()
             .filter_map(|s| {
@@ -199,15 +194,6 @@ impl RunDir {
 
 /// What a step cost, beside its manifest and not in it (it differs run to run).
 pub const TIMING_FILE: &str = "cost.json";
-
-/// Wall time and peak resident memory of one step. The peak is the process's high-water
-/// mark since the step began (Linux: reset through `/proc/self/clear_refs`); steps that
-/// run side by side (stage 1's per-view steps) share it. `None` where the OS does not tell.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct StepCost {
-    pub seconds: f64,
-    pub peak_rss_bytes: Option<u64>,
-}
 
 /// Remove the `.<name>.tmp-<pid>` files a killed run left (§10) directly in `dir`.
 fn remove_stale_temporaries(dir: &Path) -> Result<()> {

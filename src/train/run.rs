@@ -20,8 +20,10 @@ use crate::error::{Error, Result};
 use crate::gaussian::Gaussians;
 use crate::gaussian::ply::{ply_bytes, read_ply};
 use crate::io::manifest::{FileEntry, Manifest};
-use crate::io::{create_dir_all, peak_memory_bytes, sha256_hex, write_atomic, write_text};
-use crate::train::trainer::{Progress, TrainConfig, Trainer};
+use crate::io::{
+    Cost, CostMeter, create_dir_all, peak_memory_bytes, sha256_hex, write_atomic, write_text,
+};
+use crate::train::trainer::{IterationTimes, Progress, TrainConfig, Trainer};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -84,6 +86,11 @@ pub struct RunSummary {
     /// Gaussian-pixel pairs blended per second (forward evaluations of the blend kernel).
     pub pairs_per_second: f64,
     pub peak_memory_bytes: Option<u64>,
+    /// Wall time and peak resident memory of loading (dataset, initial scene) and of the
+    /// iterations (saves included).
+    pub stages: Vec<(String, Cost)>,
+    /// Where the iterations' time went.
+    pub iteration_seconds: IterationTimes,
     pub final_loss_ema: f64,
     pub final_psnr_ema: f64,
     /// `(iteration, seconds since the start)` of every saved PLY.
@@ -150,6 +157,7 @@ pub fn train_run(
     on_progress: &mut dyn FnMut(&Progress),
 ) -> Result<RunSummary> {
     config.validate()?;
+    let meter = CostMeter::start();
     let data = load_dataset(dataset_dir, config)?;
     create_dir_all(run)?;
     let config_text = serde_json::to_string_pretty(config).expect("config serializes");
@@ -174,6 +182,8 @@ pub fn train_run(
             t
         }
     };
+    let mut stages = vec![("load".to_string(), meter.finish())];
+    let meter = CostMeter::start();
     let mut files: Vec<(PathBuf, String)> = Vec::new();
     let mut curve = Vec::new();
     let mut pairs = 0u64;
@@ -200,6 +210,7 @@ pub fn train_run(
         &mut save,
     )?;
     let wall = start.elapsed().as_secs_f64();
+    stages.push(("train".to_string(), meter.finish()));
     let ply = files.last().map(|f| f.0.clone()).unwrap_or_default();
     for name in ["config.json", "cfg_args", "cameras.json"] {
         let p = run.join(name);
@@ -234,6 +245,8 @@ pub fn train_run(
         iterations_per_second: trainer.iteration as f64 / wall.max(1e-9),
         pairs_per_second: pairs as f64 / wall.max(1e-9),
         peak_memory_bytes: peak_memory_bytes(),
+        stages,
+        iteration_seconds: trainer.times,
         final_loss_ema: last.loss_ema,
         final_psnr_ema: last.psnr_ema,
         saves,

@@ -206,6 +206,20 @@ pub struct Progress {
     pub densify: Option<DensifyReport>,
 }
 
+/// Seconds spent in each part of the iterations so far (wall time, summed over iterations).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct IterationTimes {
+    /// Projection, binning and blend with backward state.
+    pub forward: f64,
+    /// L1 + D-SSIM (+ depth) and their gradient.
+    pub loss: f64,
+    /// Blend backward and projection backward.
+    pub backward: f64,
+    /// Densification statistics, densify/prune and opacity reset.
+    pub densify: f64,
+    pub adam: f64,
+}
+
 /// Training state: parameters, optimizer, statistics, generator.
 pub struct Trainer<'a> {
     pub config: TrainConfig,
@@ -219,6 +233,8 @@ pub struct Trainer<'a> {
     pub extent: f32,
     /// Per-view loss weights `M` (paper Eq. 7), indexed like `dataset.views`; empty = none.
     pub masks: Vec<Option<Vec<f32>>>,
+    /// Where the iterations' time went.
+    pub times: IterationTimes,
     rng: Uniform,
     stack: Vec<usize>,
     loss_ema: f64,
@@ -287,6 +303,7 @@ impl<'a> Trainer<'a> {
             iteration: 0,
             extent,
             masks: Vec::new(),
+            times: IterationTimes::default(),
             rng,
             stack: Vec::new(),
             loss_ema: 0.0,
@@ -362,7 +379,14 @@ impl<'a> Trainer<'a> {
         let use_depth = self.config.loss.depth > 0.0 && view.depth.is_some();
         let opts = self.render_options(use_depth);
         let cam = &view.camera;
+        let mut clock = std::time::Instant::now();
+        let mut lap = |acc: &mut f64| {
+            let now = std::time::Instant::now();
+            *acc += (now - clock).as_secs_f64();
+            clock = now;
+        };
         let fwd = render_for_backward(&self.gaussians, cam, &opts)?;
+        lap(&mut self.times.forward);
         let rgb = fwd.render.rgb.as_deref().expect("rgb rendered");
         let out = image_loss(
             &LossInput {
@@ -386,6 +410,7 @@ impl<'a> Trainer<'a> {
         )
         .map_err(|e| Error::invalid(format!("view '{}': {}", cam.name, e.message)))?;
         let p = psnr(rgb, &view.image.data);
+        lap(&mut self.times.loss);
         let v = ImageGrads {
             rgb: Some(out.grad_rgb),
             expected_depth: out.grad_depth,
@@ -393,6 +418,7 @@ impl<'a> Trainer<'a> {
         };
         let groups = self.groups();
         let (grads, pairs) = backward(&self.gaussians, cam, &opts, &fwd, &v, &groups)?;
+        lap(&mut self.times.backward);
 
         let mut densified = None;
         let mut reset = false;
@@ -427,6 +453,7 @@ impl<'a> Trainer<'a> {
                 }
             }
         }
+        lap(&mut self.times.densify);
         if densified.is_none() {
             let visible: Option<Vec<bool>> = self.config.adam.sparse.then(|| {
                 let radii = &fwd.projected.radii;
@@ -442,6 +469,7 @@ impl<'a> Trainer<'a> {
                     .step_sparse(&mut self.gaussians, param, g, lr, visible.as_deref());
             }
         }
+        lap(&mut self.times.adam);
         let t = out.terms;
         self.loss_ema = if it == 1 {
             t.total

@@ -197,6 +197,25 @@ fn cli_train_eval_and_demo() {
     let cfg: unseen::train::trainer::TrainConfig =
         serde_json::from_slice(&std::fs::read(run.join("config.json")).unwrap()).unwrap();
     assert_eq!((cfg.iterations, cfg.resolution), (30, 4));
+    // Costs per stage and the iterations' time split (SPEC.md §14.6).
+    let stats: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run.join("train_stats.json")).unwrap()).unwrap();
+    let stages: Vec<&str> = stats["stages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s[0].as_str().unwrap())
+        .collect();
+    assert_eq!(stages, ["load", "train"]);
+    let split = &stats["iteration_seconds"];
+    let parts =
+        ["forward", "loss", "backward", "densify", "adam"].map(|k| split[k].as_f64().unwrap());
+    let wall = stats["wall_seconds"].as_f64().unwrap();
+    assert!(
+        parts.iter().all(|&p| p >= 0.0) && parts.iter().sum::<f64>() <= wall,
+        "{split}"
+    );
+    assert!(parts[0] > 0.0 && parts[2] > 0.0, "{split}");
 
     let st = unseen()
         .arg("eval")
