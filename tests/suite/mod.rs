@@ -15,4 +15,5 @@ mod qamask;
 mod raster;
 mod readers;
 mod telea;
+mod tile;
 mod training;
