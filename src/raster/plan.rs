@@ -65,12 +65,24 @@ pub struct RenderPlan {
 impl RenderPlan {
     /// The minimal plan for `opts` on `scene`.
     pub fn new(scene: &Gaussians, opts: &RenderOptions) -> RenderPlan {
-        let requested = opts
-            .sh_degree
-            .unwrap_or(scene.sh_degree)
-            .min(scene.sh_degree);
+        let plan = Self::for_backward(scene, opts);
         RenderPlan {
-            sh_degree: requested.min(scene.highest_nonzero_band()),
+            sh_degree: match plan.sh_degree {
+                0 => 0, // nothing to skip: no scan of the coefficients
+                d => d.min(scene.highest_nonzero_band()),
+            },
+            ..plan
+        }
+    }
+
+    /// [`RenderPlan::new`] evaluating every requested SH band: a render for the backward
+    /// pass needs the zero bands too (the gradient of a zero coefficient is not zero).
+    pub fn for_backward(scene: &Gaussians, opts: &RenderOptions) -> RenderPlan {
+        RenderPlan {
+            sh_degree: opts
+                .sh_degree
+                .unwrap_or(scene.sh_degree)
+                .min(scene.sh_degree),
             accumulate_depth: opts.outputs.depth || opts.outputs.expected_depth,
             track_backward_state: opts.outputs.backward_state,
             apply_background: opts.background != [0.0; 3],

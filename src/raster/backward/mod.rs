@@ -54,8 +54,7 @@ pub fn render_for_backward(
     // Zero SH bands may be skipped in a forward-only render (their terms are exactly 0),
     // but not here: the gradient of a zero coefficient is not zero, and a skipped band
     // would never start to train.
-    let mut plan = RenderPlan::new(scene, &o);
-    plan.sh_degree = RenderPlan::full(scene, &o).sh_degree;
+    let plan = RenderPlan::for_backward(scene, &o);
     let (render, projected, bins) = crate::raster::render_staged(scene, cam, &o, &plan)?;
     Ok(ForwardState {
         render,
