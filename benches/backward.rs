@@ -3,16 +3,21 @@
 //! Per resolution × threads × gradient groups: median forward and backward wall time per
 //! iteration (the backward split into the blend walk and the projection chain), and the
 //! backward's Gaussian-pixel pairs per second (pairs walked back to front, counted exactly).
+//! `fwd-blend` times the forward composite alone on the same projected splats and tile lists
+//! (with the backward state, as training renders); the last three columns compare the two
+//! blends in the same run: forward and backward blend pair rates (each its own pair count)
+//! and `bwd/fwd`, their ratio (issue #13).
 //! `frozen` rows: SH-only iterations replayed from a `FrozenBlend` record (forward column =
 //! replayed render, backward column = replayed SH backward; the pairs are the full walk's).
 
 use std::time::Instant;
-use unseen::raster::RenderOptions;
 use unseen::raster::backward::composite::{PixelGrads, composite_backward};
 use unseen::raster::backward::frozen::FrozenBlend;
 use unseen::raster::backward::project::project_backward;
 use unseen::raster::backward::{GradGroups, ImageGrads, render_for_backward};
+use unseen::raster::composite::{Want, composite};
 use unseen::raster::project::CameraF32;
+use unseen::raster::{RenderOptions, RenderReport};
 use unseen::scene::{Uniform, default_camera, random_scene};
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -25,18 +30,29 @@ fn main() {
     let n = 100_000;
     let scene = random_scene(n, 3, 7, 0.003, 0.03);
     println!(
-        "{:>9} {:>9} {:>3} {:>8} {:>10} {:>10} {:>10} {:>10} {:>12} {:>10}",
+        "{:>9} {:>9} {:>3} {:>8} {:>10} {:>10} {:>10} {:>10} {:>10} {:>12} {:>10} {:>9} {:>9} {:>7}",
         "gaussians",
         "image",
         "thr",
         "groups",
         "forward",
+        "fwd-blend",
         "bwd-blend",
         "bwd-proj",
         "backward",
         "pairs",
-        "Mpairs/s"
+        "Mpairs/s",
+        "fwd Mp/s",
+        "bwd Mp/s",
+        "bwd/fwd"
     );
+    let want = Want {
+        rgb: true,
+        alpha: false,
+        depth: false,
+        expected_depth: false,
+        backward_state: true,
+    };
     let resolutions: &[(u32, u32)] = if quick {
         &[(256, 256)]
     } else {
@@ -61,11 +77,28 @@ fn main() {
                 .unwrap();
             for (gname, groups) in [("full", GradGroups::ALL), ("sh_rest", GradGroups::SH_REST)] {
                 let (mut tf, mut tc, mut tp) = (Vec::new(), Vec::new(), Vec::new());
-                let mut pairs = 0;
+                let mut tfc = Vec::new();
+                let (mut pairs, mut fwd_pairs) = (0, 0);
                 pool.install(|| {
                     for _ in 0..5 {
                         let t0 = Instant::now();
                         let fwd = render_for_backward(&scene, &cam, &opts).unwrap();
+                        let t1 = Instant::now();
+                        let mut rep = RenderReport::default();
+                        let out = composite(
+                            w as usize,
+                            h as usize,
+                            &fwd.projected,
+                            &fwd.bins,
+                            &fwd.plan,
+                            opts.background,
+                            want,
+                            opts.kernel,
+                            &mut rep,
+                        );
+                        tfc.push(t1.elapsed().as_secs_f64());
+                        std::hint::black_box(out);
+                        fwd_pairs = rep.pairs_evaluated;
                         let t1 = Instant::now();
                         let r = &fwd.render;
                         let pg = PixelGrads {
@@ -105,20 +138,25 @@ fn main() {
                         pairs = cg.pairs;
                     }
                 });
-                let (f, c, p) = (median(tf), median(tc), median(tp));
+                let (f, fc, c, p) = (median(tf), median(tfc), median(tc), median(tp));
                 let b = c + p;
+                let (fr, br) = (fwd_pairs as f64 / fc / 1e6, pairs as f64 / c / 1e6);
                 println!(
-                    "{:>9} {:>9} {:>3} {:>8} {:>8.1}ms {:>8.1}ms {:>8.1}ms {:>8.1}ms {:>12} {:>10.1}",
+                    "{:>9} {:>9} {:>3} {:>8} {:>8.1}ms {:>8.1}ms {:>8.1}ms {:>8.1}ms {:>8.1}ms {:>12} {:>10.1} {:>9.1} {:>9.1} {:>7.2}",
                     n,
                     format!("{w}x{h}"),
                     threads,
                     gname,
                     f * 1e3,
+                    fc * 1e3,
                     c * 1e3,
                     p * 1e3,
                     b * 1e3,
                     pairs,
-                    pairs as f64 / b / 1e6
+                    pairs as f64 / b / 1e6,
+                    fr,
+                    br,
+                    br / fr
                 );
                 if groups == GradGroups::SH_REST {
                     // Frozen geometry: record once, then replay forward and backward.
@@ -140,12 +178,13 @@ fn main() {
                     });
                     let (a, b) = (median(rf), median(rb));
                     println!(
-                        "{:>9} {:>9} {:>3} {:>8} {:>8.1}ms {:>10} {:>10} {:>8.1}ms {:>12} {:>10.1}",
+                        "{:>9} {:>9} {:>3} {:>8} {:>8.1}ms {:>10} {:>10} {:>10} {:>8.1}ms {:>12} {:>10.1}",
                         n,
                         format!("{w}x{h}"),
                         threads,
                         "frozen",
                         a * 1e3,
+                        "",
                         "",
                         "",
                         b * 1e3,

@@ -17,10 +17,36 @@
 //! `ED = D / max(alpha, 1e-10)` is folded in first: `v_D += v_ED / max(alpha, 1e-10)` and, when
 //! alpha > 1e-10, `v_alpha −= v_ED·D/alpha²`.
 //!
-//! Determinism: each tile is walked by one task, pixels in row-major order, each adding into
-//! the tile's per-entry accumulators; the per-intersection results are then summed per
-//! Gaussian in tile order. No atomics, no dependence on the thread count.
+//! Loop order: per tile, the walked prefix of its list (up to the largest `n_contrib`) is
+//! gathered once (prefetched: the gather is bound by cache misses), and each tile row gets
+//! the list of splats it must visit; each row (16 pixels, two AVX2 registers) then walks only
+//! those, back to front, its state in registers. Nothing depends on how bands are scheduled.
+//!
+//! Reduction order (SPEC.md §5.8): per (tile, splat) there are 8 lane-pair accumulators per
+//! contribution, starting at +0.0; each row visit adds `c_j + c_{j+8}` to lane `j`
+//! ([`add_pairs`]), rows in order; once per tile the 8 lanes are reduced in a fixed tree
+//! (`j + (j+4)`, then `+2`, `+1`: [`sum8`]). The per-(tile, splat) results are then summed
+//! per Gaussian in tile order. Each (tile, splat) sum has one pairwise step, a chain over at
+//! most 16 rows and a 3-level tree: as accurate as the former order (a 16-lane tree per row,
+//! then a chain over the rows; the same depth), with one horizontal reduction per
+//! (tile, splat) instead of one per row visit. No atomics, no dependence on the thread count.
+//!
+//! Exact skips (all tested against walking every (row, splat) of the prefix,
+//! `backward_skips_are_bit_identical`, and against the scalar reference, which evaluates every
+//! lane of every visit it is given, `backward_simd_and_scalar_are_bit_identical`). A row visits
+//! a splat only if, with the plan's culling on:
+//! - the row is within `ry + 1` pixels of its centre (row culling, SPEC.md §5.4);
+//! - some pixel of the row within `rx + 1` pixels of its centre in x (the same argument in x)
+//!   blended it or a splat behind it (`position < n_contrib`);
+//! - the row does not miss the ellipse: [`RowBound`], the minimum of σ over the row, with
+//!   margins far above f32 rounding, must not exceed `ln(255·o)`.
+//!
+//! In a visit, a splat that blends no pixel changes nothing (its contributions are +0.0,
+//! accumulators are never −0.0, no state moves): the AVX2 kernel skips the rest of the
+//! visit, and skips evaluating a half row (8 lanes) beyond the splat's x reach or without
+//! a blending pixel.
 
+use crate::math::round::{ceil, floor};
 use crate::raster::composite::Kernel;
 use crate::raster::composite::{
     EXPECTED_DEPTH_EPS, MAX_ALPHA, SIGMA_CLAMP, SplatAlpha, splat_alpha, splat_rows,
@@ -80,8 +106,9 @@ pub struct CompositeGrads {
 }
 
 struct BandGrads {
-    /// One entry per intersection of the band's tiles, in `bins.ids` order.
-    inter: Vec<SplatGrad>,
+    /// `(Gaussian, gradient)` per intersection some row of its tile walked, in `bins.ids`
+    /// order (the others would add +0.0).
+    inter: Vec<(u32, SplatGrad)>,
     background: [f64; 3],
     pairs: u64,
 }
@@ -105,18 +132,135 @@ struct RowState {
     buf_z: [f32; LANES],
 }
 
-/// The sum of 16 lanes in the fixed tree order the AVX2 reduction uses:
-/// `lane i + lane i+8`, then `+4`, then `+2`, then `+1`.
+/// How far ahead in a tile's list the gather prefetches splats.
+const PREFETCH: usize = 16;
+
+/// Lanes of one AVX2 register: a half row, and the width of the lane-pair accumulators.
+pub(crate) const HALF: usize = LANES / 2;
+
+/// Accumulators of one (tile, splat) entry: per contribution, lane `j` holds
+/// `Σ_rows (c_j + c_{j+8})`, rows in order ([`add_pairs`]); reduced once by [`sum8`].
+type Acc = [[f32; HALF]; NC];
+
+/// A splat of a tile's walked prefix that some row walks.
+#[derive(Clone, Copy)]
+struct Entry {
+    s: Splat,
+    /// Position in the tile's list (what `n_contrib` counts).
+    pos: u32,
+}
+
+/// Add one row visit's 16 lane contributions into the 8 lane-pair accumulators:
+/// `acc_j += c_j + c_{j+8}` (the AVX2 kernel: one add of the two halves, one add into `acc`).
 #[inline(always)]
-pub(crate) fn sum16(v: &[f32; LANES]) -> f32 {
-    let mut h = [0f32; 8];
-    for i in 0..8 {
-        h[i] = v[i] + v[i + 8];
+pub(crate) fn add_pairs(acc: &mut [f32; HALF], c: &[f32; LANES]) {
+    for j in 0..HALF {
+        acc[j] += c[j] + c[j + HALF];
     }
-    let k = [h[0] + h[4], h[1] + h[5], h[2] + h[6], h[3] + h[7]];
+}
+
+/// The sum of 8 lane-pair accumulators in a fixed tree: `lane j + lane j+4`, then `+2`,
+/// then `+1`.
+#[inline(always)]
+pub(crate) fn sum8(v: &[f32; HALF]) -> f32 {
+    let k = [v[0] + v[4], v[1] + v[5], v[2] + v[6], v[3] + v[7]];
     let m = [k[0] + k[2], k[1] + k[3]];
     m[0] + m[1]
 }
+
+/// The columns `[lo, hi)` of the tile starting at image column `x0` that splat `gid` can
+/// reach: those within `rx + 1` pixels of its centre — the x mirror of [`splat_rows`], exact
+/// by the same argument (SPEC.md §5.4).
+fn splat_cols(p: &Projected, gid: usize, x0: usize) -> (usize, usize) {
+    let mx = p.splats[gid].mean[0];
+    let rx = p.radii[gid][0] as f32 + 1.0;
+    let lo = (floor(mx - rx) - x0 as f32).max(0.0);
+    let hi = (ceil(mx + rx) - x0 as f32 + 1.0).min(LANES as f32);
+    (lo as usize, if hi > lo { hi as usize } else { lo as usize })
+}
+
+/// Bit `h` set when columns `[lo, hi)` meet half `h` of the row (lanes `8h..8h+8`).
+fn halves(lo: usize, hi: usize) -> u32 {
+    (0..LANES / HALF)
+        .filter(|h| lo < (h + 1) * HALF && hi > h * HALF)
+        .fold(0, |m, h| m | 1 << h)
+}
+
+/// A conservative test of which halves of a row a splat may blend, from the row alone. At
+/// row offset `dy`, `σ(dx) = σ_min + ½·A·(dx − dx*)²` with `σ_min = ½·dy²·(C − B²/A)` and
+/// `dx* = −B·dy/A` (the conic is positive definite), and a pixel blends only if
+/// `σ ≤ ln(255·o)` (else α < 1/255). Evaluated in f64 with margins far above the rounding of
+/// σ in f32 (a few ulp of `A·dx² + C·dy²`, dx bounded over the tile), of `dx = mean − p` and
+/// of `exp`, so a half it excludes is one where the kernel finds no blending lane (tested
+/// against walking every visit, `backward_skips_are_bit_identical`).
+struct RowBound {
+    a: f64,
+    /// `B/A`.
+    b_a: f64,
+    /// `½·(C − B²/A)`.
+    coef: f64,
+    /// `ln(255·o)` plus a margin.
+    limit: f64,
+    a_dx2: f64,
+    c: f64,
+    /// Centre x relative to the tile's first column.
+    mx: f64,
+}
+
+/// Slack, in pixels, on the extent of a row's blendable interval (covers the rounding of
+/// `dx` in f32 many times over).
+const ROW_SLACK: f64 = 0.01;
+
+impl RowBound {
+    fn new(s: &Splat, x0: usize) -> Option<RowBound> {
+        let [a, b, c] = s.conic.map(f64::from);
+        if !(a > 0.0 && c > 0.0 && b.is_finite() && a.is_finite() && c.is_finite()) {
+            return None;
+        }
+        let mx = f64::from(s.mean[0]) - x0 as f64;
+        let dx = (mx - 0.5).abs().max((mx - LANES as f64 + 0.5).abs()) + 1.0;
+        Some(RowBound {
+            a,
+            b_a: b / a,
+            coef: 0.5 * (c - b * b / a),
+            limit: (255.0 * f64::from(s.opacity)).ln() + 1e-3,
+            a_dx2: a * dx * dx,
+            c,
+            mx,
+        })
+    }
+
+    /// The halves (bit `h`: lanes `8h..8h+8`) of the row at offset `dy` (as the kernel
+    /// computes it) where some pixel may blend.
+    fn halves(&self, dy: f32) -> u32 {
+        let dy = f64::from(dy);
+        let dy2 = dy * dy;
+        let smin = self.coef * dy2;
+        let room = self.limit + 1e-6 * (self.a_dx2 + self.c * dy2 + smin.abs()) - smin;
+        if room.is_nan() {
+            return 0b11;
+        }
+        if room < 0.0 {
+            return 0;
+        }
+        // Pixels centres p with |p − (mean + B·dy/A)| ≤ w may blend.
+        let w = (2.0 * room / self.a).sqrt() + ROW_SLACK;
+        let centre = self.mx + self.b_a * dy;
+        let (lo, hi) = (centre - w, centre + w);
+        let mut m = 0;
+        for h in 0..LANES / HALF {
+            // Pixel centres of half h: (8h + 0.5) ..= (8h + 7.5).
+            let (first, last) = ((h * HALF) as f64 + 0.5, ((h + 1) * HALF) as f64 - 0.5);
+            if hi >= first && lo <= last {
+                m |= 1 << h;
+            }
+        }
+        m
+    }
+}
+
+/// A row's visit: the entry index, with the halves to evaluate in the top two bits.
+const VISIT_INDEX: u32 = (1 << 30) - 1;
 
 /// Step the recovered transmittance back over a splat of opacity `alpha`: returns
 /// `ra = 1/max(1e-6, 1 − α)`, the transmittance in front of the splat `T·ra`, and the splat's
@@ -196,91 +340,89 @@ fn lane<const GEOMETRY: bool>(
     st.t[l] = if valid { t } else { st.t[l] };
 }
 
-/// Add a row's reduced contributions to the splat's accumulator (fixed field order).
+/// Contributions accumulated per (tile, splat): colour only, or all ten.
+const fn fields(geometry: bool) -> usize {
+    if geometry { NC } else { 3 }
+}
+
+/// Add a row visit's contributions to the entry's lane-pair accumulators.
 #[inline(always)]
-#[allow(clippy::needless_range_loop)]
-fn add_row<const GEOMETRY: bool>(gr: &mut SplatGrad, c: &[[f32; LANES]; NC]) {
-    for k in 0..3 {
-        gr.color[k] += sum16(&c[k]);
-    }
-    if GEOMETRY {
-        gr.depth += sum16(&c[3]);
-        for k in 0..3 {
-            gr.conic[k] += sum16(&c[4 + k]);
-        }
-        gr.mean2d[0] += sum16(&c[7]);
-        gr.mean2d[1] += sum16(&c[8]);
-        gr.opacity += sum16(&c[9]);
+fn add_row<const GEOMETRY: bool>(acc: &mut Acc, c: &[[f32; LANES]; NC]) {
+    for (a, c) in acc.iter_mut().zip(c).take(fields(GEOMETRY)) {
+        add_pairs(a, c);
     }
 }
 
-/// Walk one row back to front, lane by lane (the reference form). Returns pairs visited.
+/// The (tile, splat) gradient: each field's accumulators reduced by [`sum8`].
+#[inline(always)]
+#[allow(clippy::needless_range_loop)] // k indexes parallel arrays
+fn reduce<const GEOMETRY: bool>(acc: &Acc) -> SplatGrad {
+    let mut gr = SplatGrad::default();
+    for k in 0..3 {
+        gr.color[k] = sum8(&acc[k]);
+    }
+    if GEOMETRY {
+        gr.depth = sum8(&acc[3]);
+        for k in 0..3 {
+            gr.conic[k] = sum8(&acc[4 + k]);
+        }
+        gr.mean2d = [sum8(&acc[7]), sum8(&acc[8])];
+        gr.opacity = sum8(&acc[9]);
+    }
+    gr
+}
+
+/// Walk one row back to front over the entries `idx` (ascending; walked in reverse), lane by
+/// lane, every lane evaluated (the reference form).
 #[inline(never)]
-#[allow(clippy::needless_range_loop)]
 fn row_lanes<const GEOMETRY: bool>(
-    list: &[(Splat, u32, u32)],
-    row: u32,
+    list: &[Entry],
+    idx: &[u32],
     px: &[f32; LANES],
     py: f32,
     st: &mut RowState,
-    acc: &mut [SplatGrad],
-) -> u64 {
-    let max_n = st.n.iter().copied().max().unwrap_or(0) as usize;
-    let mut pairs = 0;
+    acc: &mut [Acc],
+) {
     let mut c = [[0f32; LANES]; NC];
-    for pos in (0..max_n).rev() {
-        let (s, lo, hi) = &list[pos];
-        if row < *lo || row >= *hi {
-            continue;
+    for &v in idx.iter().rev() {
+        let i = v & VISIT_INDEX;
+        let Entry { s, pos } = &list[i as usize];
+        for (l, &x) in px.iter().enumerate() {
+            lane::<GEOMETRY>(s, *pos, x, py, st, l, &mut c);
         }
-        pairs += LANES as u64;
-        for l in 0..LANES {
-            lane::<GEOMETRY>(s, pos as u32, px[l], py, st, l, &mut c);
-        }
-        add_row::<GEOMETRY>(&mut acc[pos], &c);
+        add_row::<GEOMETRY>(&mut acc[i as usize], &c);
     }
-    pairs
 }
 
 /// [`row_lanes`] with AVX2 intrinsics: [`lane`]'s operations one for one, two registers of
-/// 8 lanes, and [`sum16`]'s reduction order.
+/// 8 lanes, and [`add_pairs`]'s accumulation (halves added, then added into the entry).
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
     use super::{
-        ALPHA_THRESHOLD, LANES, MAX_ALPHA, NC, RECOVER_EPS, RowState, SIGMA_CLAMP, Splat, SplatGrad,
+        ALPHA_THRESHOLD, Acc, Entry, LANES, MAX_ALPHA, NC, RECOVER_EPS, RowState, SIGMA_CLAMP,
+        VISIT_INDEX, fields,
     };
     use crate::math::fastexp::exp_avx2;
     use std::arch::x86_64::*;
-
-    /// `sum16` of the 16 lanes `lo ‖ hi`, in the same tree order.
-    #[target_feature(enable = "avx2")]
-    #[inline]
-    fn hsum16(lo: __m256, hi: __m256) -> f32 {
-        let h = _mm256_add_ps(lo, hi); // lane i + lane i+8
-        let k = _mm_add_ps(_mm256_castps256_ps128(h), _mm256_extractf128_ps::<1>(h)); // +4
-        let m = _mm_add_ps(k, _mm_movehl_ps(k, k)); // +2
-        _mm_cvtss_f32(_mm_add_ss(m, _mm_shuffle_ps::<0b01>(m, m))) // +1
-    }
 
     /// # Safety
     /// The CPU must support AVX2.
     #[target_feature(enable = "avx2")]
     #[allow(clippy::needless_range_loop)] // h and k index parallel register arrays
     pub(super) unsafe fn row<const GEOMETRY: bool>(
-        list: &[(Splat, u32, u32)],
-        row: u32,
+        list: &[Entry],
+        idx: &[u32],
         px: &[f32; LANES],
         py: f32,
         st: &mut RowState,
-        acc: &mut [SplatGrad],
-    ) -> u64 {
+        acc: &mut [Acc],
+    ) {
         let c = |x: f32| _mm256_set1_ps(x);
         let zero = _mm256_setzero_ps();
         let ld = |a: &[f32; LANES], h: usize| -> __m256 {
             // SAFETY: h ∈ {0, 1}, so 8h + 8 <= 16 elements.
             unsafe { _mm256_loadu_ps(a.as_ptr().add(8 * h)) }
         };
-        let max_n = st.n.iter().copied().max().unwrap_or(0) as usize;
         let mut pxv = [zero; 2];
         let (mut t, mut tf, mut va, mut vd, mut bgd) =
             ([zero; 2], [zero; 2], [zero; 2], [zero; 2], [zero; 2]);
@@ -303,23 +445,23 @@ mod avx2 {
             n[h] = unsafe { _mm256_loadu_si256(st.n.as_ptr().add(8 * h) as *const __m256i) };
         }
         // Unsigned `pos < n` as signed compare: counts stay far below 2^31.
-        let mut pairs = 0;
-        for pos in (0..max_n).rev() {
-            let (s, lo, hi) = &list[pos];
-            if row < *lo || row >= *hi {
-                continue;
-            }
-            pairs += LANES as u64;
+        for &visit in idx.iter().rev() {
+            let (i, halves) = (visit & VISIT_INDEX, visit >> 30);
+            let Entry { s, pos } = &list[i as usize];
             let dy = s.mean[1] - py;
             let cdd = c(s.conic[2] * dy * dy);
             let dyv = c(dy);
-            let posv = _mm256_set1_epi32(pos as i32);
+            let posv = _mm256_set1_epi32(*pos as i32);
             // First σ, α and the blend mask of both halves; a splat that blends no pixel of
-            // the row changes nothing (its contributions are +0.0 and no state moves), so
-            // skipping it is exact — and common, splats being narrower than a tile.
+            // the row (or of a half) changes nothing there (its contributions are +0.0 and no
+            // state moves), so skipping it is exact — and common, splats being narrower than
+            // a tile. A half beyond the splat's x reach is not even evaluated.
             let (mut dxs, mut es, mut as_, mut alphas, mut valids) =
                 ([zero; 2], [zero; 2], [zero; 2], [zero; 2], [zero; 2]);
             for h in 0..2 {
+                if halves & (1 << h) == 0 {
+                    continue;
+                }
                 let active = _mm256_castsi256_ps(_mm256_cmpgt_epi32(n[h], posv));
                 let dx = _mm256_sub_ps(c(s.mean[0]), pxv[h]);
                 let sum = _mm256_add_ps(_mm256_mul_ps(_mm256_mul_ps(c(s.conic[0]), dx), dx), cdd);
@@ -341,11 +483,15 @@ mod avx2 {
                 );
                 (dxs[h], es[h], as_[h], alphas[h]) = (dx, e, a, alpha);
             }
-            if _mm256_movemask_ps(_mm256_or_ps(valids[0], valids[1])) == 0 {
+            let blends = [_mm256_movemask_ps(valids[0]), _mm256_movemask_ps(valids[1])];
+            if blends[0] | blends[1] == 0 {
                 continue;
             }
             let mut cv = [[zero; 2]; NC];
             for h in 0..2 {
+                if blends[h] == 0 {
+                    continue;
+                }
                 let (dx, e, a, alpha, valid) = (dxs[h], es[h], as_[h], alphas[h], valids[h]);
                 let one_minus = _mm256_sub_ps(c(1.0), alpha);
                 // `max_ps(a, b)` is `a > b ? a : b`: the scalar select with the operands so.
@@ -404,22 +550,17 @@ mod avx2 {
                 }
                 t[h] = _mm256_blendv_ps(t[h], tn, valid);
             }
-            // The same fields in the same order as `add_row`, each reduced like `sum16`.
-            let gr = &mut acc[pos];
-            for k in 0..3 {
-                gr.color[k] += hsum16(cv[k][0], cv[k][1]);
-            }
-            if GEOMETRY {
-                gr.depth += hsum16(cv[3][0], cv[3][1]);
-                for k in 0..3 {
-                    gr.conic[k] += hsum16(cv[4 + k][0], cv[4 + k][1]);
+            // `add_pairs`: lane j + lane j+8, then into the entry's accumulator.
+            let a = &mut acc[i as usize];
+            for k in 0..fields(GEOMETRY) {
+                let p = a[k].as_mut_ptr();
+                // SAFETY: `a[k]` holds 8 f32.
+                unsafe {
+                    let sum = _mm256_add_ps(_mm256_loadu_ps(p), _mm256_add_ps(cv[k][0], cv[k][1]));
+                    _mm256_storeu_ps(p, sum);
                 }
-                gr.mean2d[0] += hsum16(cv[7][0], cv[7][1]);
-                gr.mean2d[1] += hsum16(cv[8][0], cv[8][1]);
-                gr.opacity += hsum16(cv[9][0], cv[9][1]);
             }
         }
-        pairs
     }
 }
 
@@ -436,39 +577,29 @@ fn band<const AVX2: bool, const GEOMETRY: bool>(
 ) -> BandGrads {
     let y0 = ty * TILE_SIZE;
     let rows = TILE_SIZE.min(height - y0);
-    let first = bins.offsets[ty * bins.tiles_x];
-    let last = bins.offsets[(ty + 1) * bins.tiles_x];
     let mut out = BandGrads {
-        inter: vec![SplatGrad::default(); last - first],
+        inter: Vec::new(),
         background: [0.0; 3],
         pairs: 0,
     };
-    let mut list: Vec<(Splat, u32, u32)> = Vec::new();
+    // Reused for every tile of the band: no allocation in the loop once warm.
+    let mut list: Vec<Entry> = Vec::new();
+    let mut rows_idx: [Vec<u32>; TILE_SIZE] = std::array::from_fn(|_| Vec::new());
+    let mut acc: Vec<Acc> = Vec::new();
+    let mut gids: Vec<u32> = Vec::new();
+    let mut states = [RowState::default(); TILE_SIZE];
+    let mut range_n = [[[0u32; LANES + 1]; LANES]; TILE_SIZE];
     for tx in 0..bins.tiles_x {
         let t = ty * bins.tiles_x + tx;
         let x0 = tx * TILE_SIZE;
         let cols = TILE_SIZE.min(width - x0);
         let ids = bins.tile(t);
-        let acc = &mut out.inter[bins.offsets[t] - first..bins.offsets[t + 1] - first];
-        // Only the prefix some pixel blended is needed.
-        let mut max_n = 0usize;
+        // Each row's backward state, and the prefix of the list it walks (the largest
+        // `n_contrib` of its pixels).
+        let mut row_n = [0u32; TILE_SIZE];
         for row in 0..rows {
-            for l in 0..cols {
-                max_n = max_n.max(g.n_contrib[(y0 + row) * width + x0 + l] as usize);
-            }
-        }
-        list.clear();
-        for &gid in &ids[..max_n] {
-            let (lo, hi) = splat_rows(p, gid as usize, y0, rows, cull_rows);
-            list.push((p.splats[gid as usize], lo, hi));
-        }
-        let mut px = [0f32; LANES];
-        for (l, v) in px.iter_mut().enumerate() {
-            *v = (x0 + l) as f32 + 0.5;
-        }
-        for row in 0..rows {
-            let py = (y0 + row) as f32 + 0.5;
-            let mut st = RowState::default();
+            let st = &mut states[row];
+            *st = RowState::default();
             for l in 0..cols {
                 let i = (y0 + row) * width + x0 + l;
                 let (tf, v_rgb, v_alpha, v_d) = upstream(g, i);
@@ -484,17 +615,117 @@ fn band<const AVX2: bool, const GEOMETRY: bool>(
                     + background[2] * v_rgb[2];
                 st.n[l] = g.n_contrib[i];
             }
-            #[cfg(target_arch = "x86_64")]
-            let pairs = if AVX2 {
-                // SAFETY: AVX2 == true only when the CPU has it (checked by the caller).
-                unsafe { avx2::row::<GEOMETRY>(&list, row as u32, &px, py, &mut st, acc) }
-            } else {
-                row_lanes::<GEOMETRY>(&list, row as u32, &px, py, &mut st, acc)
-            };
-            #[cfg(not(target_arch = "x86_64"))]
-            let pairs = row_lanes::<GEOMETRY>(&list, row as u32, &px, py, &mut st, acc);
-            out.pairs += pairs;
+            row_n[row] = st.n.iter().copied().max().unwrap_or(0);
+            // The largest n of every column range [a, b) of the row.
+            for (a, r) in range_n[row].iter_mut().enumerate() {
+                let mut m = 0;
+                r[a] = 0;
+                for b in a..LANES {
+                    m = m.max(st.n[b]);
+                    r[b + 1] = m;
+                }
+            }
         }
+        // Only the prefix some pixel blended is needed, and of it only the splats some row
+        // walks: those that can reach the row and lie before its last blended splat. Each
+        // row gets the indices of its entries (ascending, walked in reverse).
+        let max_n = row_n.iter().copied().max().unwrap_or(0) as usize;
+        let prefix = &ids[..max_n];
+        list.clear();
+        gids.clear();
+        for r in rows_idx.iter_mut() {
+            r.clear();
+        }
+        for (pos, &gid) in prefix.iter().enumerate() {
+            // The gather is bound by cache misses on the splats in list order: ask early.
+            #[cfg(target_arch = "x86_64")]
+            if let Some(&ahead) = prefix.get(pos + PREFETCH) {
+                use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+                let a = ahead as usize;
+                // SAFETY: prefetching never faults; the indices are in bounds.
+                unsafe {
+                    // A splat (40 bytes) may straddle two cache lines: ask for both ends.
+                    let sp = p.splats.as_ptr().add(a) as *const i8;
+                    _mm_prefetch::<_MM_HINT_T0>(sp);
+                    _mm_prefetch::<_MM_HINT_T0>(sp.add(size_of::<Splat>() - 1));
+                    _mm_prefetch::<_MM_HINT_T0>(p.radii.as_ptr().add(a) as *const i8);
+                }
+            }
+            let s = &p.splats[gid as usize];
+            let (lo, hi) = splat_rows(p, gid as usize, y0, rows, cull_rows);
+            // With culling, a visit is also skipped when no pixel of the row within the
+            // splat's x reach gets as far as this splat, or when the row misses the ellipse.
+            let (clo, chi) = if cull_rows {
+                splat_cols(p, gid as usize, x0)
+            } else {
+                (0, LANES)
+            };
+            let bound = if cull_rows {
+                RowBound::new(s, x0)
+            } else {
+                None
+            };
+            let i = list.len() as u32;
+            debug_assert!(i <= VISIT_INDEX);
+            let reach = halves(clo, chi);
+            let mut walked = false;
+            for row in lo as usize..hi as usize {
+                // The work unit counts every visit before the row's last blended splat,
+                // skipped or not (the same count for every kernel and plan).
+                out.pairs += if (pos as u32) < row_n[row] {
+                    LANES as u64
+                } else {
+                    0
+                };
+                let n = if !cull_rows {
+                    row_n[row]
+                } else if clo < chi {
+                    range_n[row][clo][chi]
+                } else {
+                    0
+                };
+                if (pos as u32) >= n {
+                    continue;
+                }
+                let py = (y0 + row) as f32 + 0.5;
+                let m = bound.as_ref().map_or(0b11, |b| b.halves(s.mean[1] - py)) & reach;
+                if m != 0 {
+                    rows_idx[row].push(i | m << 30);
+                    walked = true;
+                }
+            }
+            if walked {
+                list.push(Entry {
+                    s: *s,
+                    pos: pos as u32,
+                });
+                gids.push(gid);
+            }
+        }
+        acc.clear();
+        acc.resize(list.len(), [[0.0; HALF]; NC]);
+        let mut px = [0f32; LANES];
+        for (l, v) in px.iter_mut().enumerate() {
+            *v = (x0 + l) as f32 + 0.5;
+        }
+        for row in 0..rows {
+            let py = (y0 + row) as f32 + 0.5;
+            let (idx, st) = (&rows_idx[row], &mut states[row]);
+            #[cfg(target_arch = "x86_64")]
+            if AVX2 {
+                // SAFETY: AVX2 == true only when the CPU has it (checked by the caller).
+                unsafe { avx2::row::<GEOMETRY>(&list, idx, &px, py, st, &mut acc) }
+            } else {
+                row_lanes::<GEOMETRY>(&list, idx, &px, py, st, &mut acc)
+            }
+            #[cfg(not(target_arch = "x86_64"))]
+            row_lanes::<GEOMETRY>(&list, idx, &px, py, st, &mut acc);
+        }
+        out.inter.extend(
+            gids.iter()
+                .zip(&acc)
+                .map(|(&gid, a)| (gid, reduce::<GEOMETRY>(a))),
+        );
     }
     out
 }
@@ -539,10 +770,7 @@ pub fn composite_backward(
     geometry: bool,
     kernel: Kernel,
 ) -> CompositeGrads {
-    #[cfg(target_arch = "x86_64")]
-    let avx2 = kernel == Kernel::Auto && std::is_x86_feature_detected!("avx2");
-    #[cfg(not(target_arch = "x86_64"))]
-    let avx2 = false;
+    let avx2 = kernel.avx2();
     let run = |ty: usize| match (avx2, geometry) {
         (true, true) => band::<true, true>(ty, width, height, p, bins, cull_rows, background, g),
         (true, false) => band::<true, false>(ty, width, height, p, bins, cull_rows, background, g),
@@ -555,12 +783,11 @@ pub fn composite_backward(
     let mut splats = vec![SplatGrad::default(); p.splats.len()];
     let mut bg = [0f64; 3];
     let mut pairs = 0;
-    let mut k = 0;
-    // Sum per Gaussian in tile order (bands are consecutive runs of `bins.ids`).
+    // Sum per Gaussian in tile order. Only walked intersections are listed: the others
+    // would add +0.0 to accumulators that are never −0.0.
     for b in &bands {
-        for gr in &b.inter {
-            splats[bins.ids[k] as usize].add(gr);
-            k += 1;
+        for (gid, gr) in &b.inter {
+            splats[*gid as usize].add(gr);
         }
         for (acc, v) in bg.iter_mut().zip(b.background) {
             *acc += v;

@@ -1,15 +1,16 @@
 //! Frozen geometry: when only the SH colours train (the QA-Mask fine-tune), every splat's
 //! α at every pixel is fixed, so the blend weights can be recorded once per camera and
 //! replayed. Forward: `C = Σ c·w` with the forward's own `w = α·T`, in blend order; backward:
-//! per recorded row visit, `hsum16(fac·v_rgb)` with the backward's own `fac = α·T` (recovered
-//! transmittance), in the backward's visit order. Both replays give the same bits as the
+//! per recorded row visit, `fac·v_rgb` with the backward's own `fac = α·T` (recovered
+//! transmittance) added into the (tile, splat) lane-pair accumulators in the backward's visit
+//! order, reduced once per tile as the backward does. Both replays give the same bits as the
 //! full passes (tests `frozen_replay_*`), at a fraction of the cost: no σ, no exp, no
 //! transmittance recurrence.
 //!
 //! A lane that did not blend stores `fac = 0`: its term `0·v` is ±0 where the full pass adds
 //! a masked +0.0, and since the accumulators are never −0.0 (SPEC.md §5.8) the sums agree.
 
-use super::composite::{SplatGrad, recover, sum16};
+use super::composite::{HALF, SplatGrad, add_pairs, recover, sum8};
 use super::project::{GradGroups, Gradients, project_backward};
 use super::{ForwardState, render_for_backward};
 use crate::camera::Camera;
@@ -315,11 +316,12 @@ impl FrozenBlend {
         let (w, h) = (self.cam.width as usize, self.cam.height as usize);
         ws.bands.resize_with(bins.tiles_y, Default::default);
         // Per band, in the full backward's orders: background in (tile, row, pixel) order,
-        // then the visits into the band's intersection range.
+        // then the visits into their (tile, splat) lane-pair accumulators, reduced per tile
+        // into the band's intersection range.
         ws.bands
             .par_iter_mut()
             .enumerate()
-            .for_each(|(ty, (inter, bg))| {
+            .for_each(|(ty, BandWork { inter, lanes, bg })| {
                 let first = bins.offsets[ty * bins.tiles_x];
                 let last = bins.offsets[(ty + 1) * bins.tiles_x];
                 let y0 = ty * TILE_SIZE;
@@ -338,24 +340,44 @@ impl FrozenBlend {
                 }
                 inter.clear();
                 inter.resize(last - first, [0f32; 3]);
+                // The tile whose accumulators `lanes[..used]` hold (visits come tile by tile).
+                let (mut tile, mut used) = (ty * bins.tiles_x, 0usize);
+                let flush =
+                    |tile: usize, used: usize, lanes: &mut [Lanes], inter: &mut [[f32; 3]]| {
+                        let start = bins.offsets[tile] - first;
+                        for (acc, out) in lanes[..used].iter_mut().zip(&mut inter[start..]) {
+                            *out = acc.map(|a| sum8(&a));
+                            *acc = [[0.0; HALF]; 3];
+                        }
+                    };
                 for v in self.band_start[ty]..self.band_start[ty + 1] {
+                    let k = self.visit_k[v] as usize;
+                    while k >= bins.offsets[tile + 1] {
+                        flush(tile, used, lanes, inter);
+                        (tile, used) = (tile + 1, 0);
+                    }
+                    let pos = k - bins.offsets[tile];
+                    if lanes.len() <= pos {
+                        lanes.resize(pos + 1, [[0.0; HALF]; 3]);
+                    }
+                    used = used.max(pos + 1);
                     let (i0, cols) = self.visit_pix[v];
                     let fac = &self.visit_fac[v];
-                    let acc = &mut inter[self.visit_k[v] as usize - first];
-                    for (ch, a) in acc.iter_mut().enumerate() {
-                        let mut lanes = [0f32; LANES];
+                    for (ch, acc) in lanes[pos].iter_mut().enumerate() {
+                        let mut c = [0f32; LANES];
                         for l in 0..cols as usize {
-                            lanes[l] = fac[l] * v_rgb[3 * (i0 as usize + l) + ch];
+                            c[l] = fac[l] * v_rgb[3 * (i0 as usize + l) + ch];
                         }
-                        *a += sum16(&lanes);
+                        add_pairs(acc, &c);
                     }
                 }
+                flush(tile, used, lanes, inter);
             });
         ws.v_color.clear();
         ws.v_color.resize(self.geometry.len(), [0.0; 3]);
         let mut bg = [0f64; 3];
         let mut k = 0;
-        for (inter, b) in &ws.bands {
+        for BandWork { inter, bg: b, .. } in &ws.bands {
             for c in inter {
                 let g = &mut ws.v_color[bins.ids[k] as usize];
                 for ch in 0..3 {
@@ -453,7 +475,20 @@ pub struct FrozenWork {
     colors: Vec<[f32; 3]>,
     v_color: Vec<[f32; 3]>,
     background: [f32; 3],
-    bands: Vec<(Vec<[f32; 3]>, [f64; 3])>,
+    bands: Vec<BandWork>,
+}
+
+/// Per-splat colour lane-pair accumulators of one (tile, splat) entry.
+type Lanes = [[f32; HALF]; 3];
+
+/// Work buffers of one band of [`FrozenBlend::color_backward`].
+#[derive(Default)]
+struct BandWork {
+    /// Per intersection of the band, the reduced colour gradient.
+    inter: Vec<[f32; 3]>,
+    /// The current tile's accumulators, by list position (all +0.0 between tiles).
+    lanes: Vec<Lanes>,
+    bg: [f64; 3],
 }
 
 impl FrozenWork {
