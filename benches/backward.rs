@@ -26,6 +26,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 fn main() {
+    unseen::sys::keep_freed_memory(); // as the CLI does (SPEC.md §6)
     let quick = std::env::args().any(|a| a == "--quick");
     let n = 100_000;
     let scene = random_scene(n, 3, 7, 0.003, 0.03);

@@ -56,6 +56,7 @@ fn bare_rate(splats: &[Splat], kernel: Kernel) -> f64 {
 }
 
 fn main() {
+    unseen::sys::keep_freed_memory(); // as the CLI does (SPEC.md §6)
     let quick = std::env::args().any(|a| a == "--quick");
     let sizes: &[usize] = if quick {
         &[10_000, 100_000]

@@ -30,6 +30,7 @@ pub mod pipeline;
 pub mod qamask;
 pub mod raster;
 pub mod scene;
+pub mod sys;
 pub mod train;
 pub mod warp;
 

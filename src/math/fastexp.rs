@@ -239,6 +239,60 @@ pub unsafe fn ln_avx2(x: std::arch::x86_64::__m256) -> std::arch::x86_64::__m256
     _mm256_blendv_ps(r, c(f32::NAN), nan)
 }
 
+/// [`ln`] on 16 lanes with AVX-512F intrinsics: [`ln_avx2`]'s operations one for one, bit
+/// for bit the scalar result (test `ln_avx512_matches_scalar_bitwise`).
+///
+/// # Safety
+/// The CPU must support AVX-512F.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[inline]
+pub unsafe fn ln_avx512(x: std::arch::x86_64::__m512) -> std::arch::x86_64::__m512 {
+    use std::arch::x86_64::*;
+    let c = |v: f32| _mm512_set1_ps(v);
+    let ci = |v: i32| _mm512_set1_epi32(v);
+    let sub = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(x, c(f32::MIN_POSITIVE));
+    let xs = _mm512_mask_blend_ps(sub, x, _mm512_mul_ps(x, c(16_777_216.0)));
+    let bias = _mm512_maskz_mov_epi32(sub, ci(-24));
+    let bits = _mm512_castps_si512(xs);
+    let e = _mm512_add_epi32(
+        _mm512_sub_epi32(
+            _mm512_and_si512(_mm512_srli_epi32::<23>(bits), ci(0xff)),
+            ci(126),
+        ),
+        bias,
+    );
+    let m = _mm512_castsi512_ps(_mm512_or_si512(
+        _mm512_and_si512(bits, ci(0x007f_ffff)),
+        ci(0x3f00_0000),
+    ));
+    let low = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(m, c(std::f32::consts::FRAC_1_SQRT_2));
+    let e = _mm512_mask_sub_epi32(e, low, e, ci(1));
+    let m = _mm512_mask_blend_ps(
+        low,
+        _mm512_sub_ps(m, c(1.0)),
+        _mm512_sub_ps(_mm512_add_ps(m, m), c(1.0)),
+    );
+    let z = _mm512_mul_ps(m, m);
+    let mut p = c(LOG_P[0]);
+    for &k in &LOG_P[1..] {
+        p = _mm512_add_ps(_mm512_mul_ps(p, m), c(k));
+    }
+    let mut y = _mm512_mul_ps(_mm512_mul_ps(p, m), z);
+    let ef = _mm512_cvtepi32_ps(e);
+    y = _mm512_add_ps(y, _mm512_mul_ps(c(-2.121_944_4e-4), ef));
+    y = _mm512_add_ps(y, _mm512_mul_ps(c(-0.5), z));
+    let mut r = _mm512_add_ps(m, y);
+    r = _mm512_add_ps(r, _mm512_mul_ps(c(0.693_359_4), ef));
+    let inf = _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(x, c(f32::INFINITY));
+    let r = _mm512_mask_blend_ps(inf, r, c(f32::INFINITY));
+    let zero = _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(x, c(0.0));
+    let r = _mm512_mask_blend_ps(zero, r, c(f32::NEG_INFINITY));
+    let nan =
+        _mm512_cmp_ps_mask::<_CMP_UNORD_Q>(x, x) | _mm512_cmp_ps_mask::<_CMP_LT_OQ>(x, c(0.0));
+    _mm512_mask_blend_ps(nan, r, c(f32::NAN))
+}
+
 /// Logistic sigmoid `1 / (1 + e^-x)` on top of [`exp`].
 #[inline]
 pub fn sigmoid(x: f32) -> f32 {
@@ -356,6 +410,34 @@ mod tests {
             unsafe {
                 let v = ln_avx2(_mm256_loadu_ps(chunk.as_ptr()));
                 _mm256_storeu_ps(out.as_mut_ptr(), v);
+            }
+            for (x, o) in chunk.iter().zip(out) {
+                let want = ln(*x);
+                assert!(
+                    o.to_bits() == want.to_bits() || (o.is_nan() && want.is_nan()),
+                    "ln({x:e}) = {o:e}, scalar {want:e}"
+                );
+            }
+        }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn ln_avx512_matches_scalar_bitwise() {
+        use std::arch::x86_64::*;
+        if !std::is_x86_feature_detected!("avx512f") {
+            return;
+        }
+        // Every 97th bit pattern of both signs (subnormals, ±0, ±∞ and NaNs included).
+        let mut xs: Vec<f32> = vec![f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 0.0, -0.0];
+        xs.extend((0..=u32::MAX).step_by(97).map(f32::from_bits));
+        xs.truncate(xs.len() / 16 * 16);
+        for chunk in xs.chunks_exact(16) {
+            let mut out = [0f32; 16];
+            // SAFETY: AVX-512F is available (checked above).
+            unsafe {
+                let v = ln_avx512(_mm512_loadu_ps(chunk.as_ptr()));
+                _mm512_storeu_ps(out.as_mut_ptr(), v);
             }
             for (x, o) in chunk.iter().zip(out) {
                 let want = ln(*x);

@@ -133,6 +133,8 @@ impl Lanes for f32 {
 
 #[cfg(target_arch = "x86_64")]
 pub use avx2::{F32x8, M8};
+#[cfg(target_arch = "x86_64")]
+pub use avx512::F32x16;
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
@@ -314,6 +316,188 @@ mod avx2 {
     }
 }
 
+#[cfg(target_arch = "x86_64")]
+mod avx512 {
+    //! `F32x16`: sixteen lanes in one AVX-512F register, masks in `__mmask16`.
+    //!
+    //! The same contract as `F32x8` (module `avx2`): values exist only inside functions
+    //! compiled with `#[target_feature(enable = "avx512f")]` that the caller entered after
+    //! `is_x86_feature_detected!("avx512f")`; every method is `#[inline(always)]`. Only
+    //! AVX-512F instructions are used (bitwise float operations go through the integer
+    //! forms: `_mm512_and_ps` and friends are AVX512DQ).
+
+    use super::Lanes;
+    use crate::math::fastexp::{exp_avx512, ln_avx512};
+    use crate::math::sh::ShScalar;
+    use std::arch::x86_64::*;
+    use std::ops::{Add, Div, Mul, Neg, Sub};
+
+    /// Sixteen f32 lanes.
+    #[derive(Clone, Copy, Debug)]
+    pub struct F32x16(pub __m512);
+
+    // SAFETY (every `unsafe` block below): values of this type are only created and used in
+    // code running on a CPU with AVX-512F (module docs), the only precondition of the
+    // intrinsics; pointer-taking intrinsics are given arrays of exactly 16 lanes.
+
+    macro_rules! binop {
+        ($tr:ident, $f:ident, $intr:ident) => {
+            impl $tr for F32x16 {
+                type Output = F32x16;
+                #[inline(always)]
+                fn $f(self, o: F32x16) -> F32x16 {
+                    F32x16(unsafe { $intr(self.0, o.0) })
+                }
+            }
+        };
+    }
+    binop!(Add, add, _mm512_add_ps);
+    binop!(Sub, sub, _mm512_sub_ps);
+    binop!(Mul, mul, _mm512_mul_ps);
+    binop!(Div, div, _mm512_div_ps);
+
+    /// `x` AND `bits` in every lane.
+    #[inline(always)]
+    fn and_bits(x: __m512, bits: i32) -> __m512 {
+        unsafe {
+            _mm512_castsi512_ps(_mm512_and_si512(
+                _mm512_castps_si512(x),
+                _mm512_set1_epi32(bits),
+            ))
+        }
+    }
+
+    impl Neg for F32x16 {
+        type Output = F32x16;
+        #[inline(always)]
+        fn neg(self) -> F32x16 {
+            F32x16(unsafe {
+                _mm512_castsi512_ps(_mm512_xor_si512(
+                    _mm512_castps_si512(self.0),
+                    _mm512_set1_epi32(i32::MIN),
+                ))
+            })
+        }
+    }
+
+    impl ShScalar for F32x16 {
+        #[inline(always)]
+        fn c(v: f64) -> Self {
+            // The same rounding as `<f32 as ShScalar>::c`.
+            F32x16::splat(v as f32)
+        }
+    }
+
+    impl F32x16 {
+        #[inline(always)]
+        fn cmp<const P: i32>(self, o: F32x16) -> __mmask16 {
+            unsafe { _mm512_cmp_ps_mask::<P>(self.0, o.0) }
+        }
+        #[inline(always)]
+        fn abs(self) -> F32x16 {
+            F32x16(and_bits(self.0, i32::MAX))
+        }
+    }
+
+    impl Lanes for F32x16 {
+        const N: usize = 16;
+        type Mask = __mmask16;
+
+        #[inline(always)]
+        fn splat(v: f32) -> Self {
+            F32x16(unsafe { _mm512_set1_ps(v) })
+        }
+        #[inline(always)]
+        fn gather(f: impl Fn(usize) -> f32) -> Self {
+            let a: [f32; 16] = [
+                f(0),
+                f(1),
+                f(2),
+                f(3),
+                f(4),
+                f(5),
+                f(6),
+                f(7),
+                f(8),
+                f(9),
+                f(10),
+                f(11),
+                f(12),
+                f(13),
+                f(14),
+                f(15),
+            ];
+            F32x16(unsafe { _mm512_loadu_ps(a.as_ptr()) })
+        }
+        #[inline(always)]
+        fn write(self, out: &mut [f32]) {
+            let out = &mut out[..16];
+            unsafe { _mm512_storeu_ps(out.as_mut_ptr(), self.0) }
+        }
+        // Ordered, non-signalling predicates: false when either side is NaN, like `<` on f32.
+        #[inline(always)]
+        fn lt(self, o: Self) -> __mmask16 {
+            self.cmp::<_CMP_LT_OQ>(o)
+        }
+        #[inline(always)]
+        fn le(self, o: Self) -> __mmask16 {
+            self.cmp::<_CMP_LE_OQ>(o)
+        }
+        #[inline(always)]
+        fn gt(self, o: Self) -> __mmask16 {
+            self.cmp::<_CMP_GT_OQ>(o)
+        }
+        #[inline(always)]
+        fn ge(self, o: Self) -> __mmask16 {
+            self.cmp::<_CMP_GE_OQ>(o)
+        }
+        #[inline(always)]
+        fn select(m: __mmask16, a: Self, b: Self) -> Self {
+            F32x16(unsafe { _mm512_mask_blend_ps(m, b.0, a.0) })
+        }
+        #[inline(always)]
+        fn select_mask(m: __mmask16, a: __mmask16, b: __mmask16) -> __mmask16 {
+            (m & a) | (!m & b)
+        }
+        #[inline(always)]
+        fn all_false() -> __mmask16 {
+            0
+        }
+        #[inline(always)]
+        fn any(m: __mmask16) -> bool {
+            m != 0
+        }
+        #[inline(always)]
+        fn is_finite(self) -> __mmask16 {
+            // |x| < ∞, ordered: false for ±∞ and NaN.
+            self.abs().lt(F32x16::splat(f32::INFINITY))
+        }
+        #[inline(always)]
+        fn sqrt(self) -> Self {
+            F32x16(unsafe { _mm512_sqrt_ps(self.0) })
+        }
+        #[inline(always)]
+        fn exp(self) -> Self {
+            F32x16(unsafe { exp_avx512(self.0) })
+        }
+        #[inline(always)]
+        fn ln(self) -> Self {
+            F32x16(unsafe { ln_avx512(self.0) })
+        }
+        #[inline(always)]
+        fn ceil(self) -> Self {
+            // `round::ceil` lane by lane, as `F32x8::ceil`.
+            let x = self;
+            let keep = !x.abs().lt(F32x16::splat(8_388_608.0)); // NaN or |x| ≥ 2^23
+            let t = F32x16(unsafe { _mm512_cvtepi32_ps(_mm512_cvttps_epi32(x.0)) });
+            let c = F32x16::select(t.lt(x), t + F32x16::splat(1.0), t);
+            let signed_zero = F32x16(and_bits(x.0, i32::MIN));
+            let c = F32x16::select(c.cmp::<_CMP_EQ_OQ>(F32x16::splat(0.0)), signed_zero, c);
+            F32x16::select(keep, x, c)
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -388,12 +572,56 @@ mod tests {
         }
     }
 
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    fn check_avx512(xs: &[f32]) {
+        for chunk in xs.chunks_exact(16) {
+            let x = F32x16::gather(|l| chunk[l]);
+            let y = F32x16::gather(|l| chunk[15 - l]);
+            let mut out = [[0f32; 16]; 8];
+            x.exp().write(&mut out[0]);
+            x.ln().write(&mut out[1]);
+            x.ceil().write(&mut out[2]);
+            x.sqrt().write(&mut out[3]);
+            (x / y).write(&mut out[4]);
+            F32x16::select(x.lt(y) | !x.is_finite(), x, y).write(&mut out[5]);
+            x.clamp_sel(F32x16::splat(-1.0), F32x16::splat(2.0))
+                .write(&mut out[6]);
+            (-x).write(&mut out[7]);
+            for l in 0..16 {
+                let (a, b) = (chunk[l], chunk[15 - l]);
+                let want = [
+                    Lanes::exp(a),
+                    Lanes::ln(a),
+                    Lanes::ceil(a),
+                    a.sqrt(),
+                    a / b,
+                    if a < b || !a.is_finite() { a } else { b },
+                    a.clamp_sel(-1.0, 2.0),
+                    -a,
+                ];
+                for (k, w) in want.iter().enumerate() {
+                    assert!(
+                        same(out[k][l], *w),
+                        "op {k} at {a:e}, {b:e}: {} vs {w}",
+                        out[k][l]
+                    );
+                }
+            }
+        }
+    }
+
     #[test]
     fn lanes_match_scalar_bitwise() {
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") {
             // SAFETY: AVX2 is available (checked just above).
             unsafe { check_avx2(&samples()) };
+        }
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx512f") {
+            // SAFETY: AVX-512F is available (checked just above).
+            unsafe { check_avx512(&samples()) };
         }
     }
 }

@@ -24,9 +24,9 @@ use super::plan::RenderPlan;
 use super::{RenderOptions, RenderReport};
 use crate::camera::Camera;
 use crate::gaussian::Gaussians;
-#[cfg(target_arch = "x86_64")]
-use crate::math::lanes::F32x8;
 use crate::math::lanes::Lanes;
+#[cfg(target_arch = "x86_64")]
+use crate::math::lanes::{F32x8, F32x16};
 use crate::math::sh::{MAX_SH_COEFFS, SH_C0, num_coeffs, sh_basis};
 use rayon::prelude::*;
 
@@ -512,8 +512,8 @@ fn gather3<R: Lanes>(v: &[[f32; 3]]) -> [R; 3] {
 
 /// Lanes as an array (the first `R::N` entries).
 #[inline(always)]
-fn lanes_of<R: Lanes>(v: R) -> [f32; 8] {
-    let mut a = [0f32; 8];
+fn lanes_of<R: Lanes>(v: R) -> [f32; 16] {
+    let mut a = [0f32; 16];
     v.write(&mut a);
     a
 }
@@ -614,10 +614,30 @@ unsafe fn project_range_avx2(
     project_range::<F32x8>(g, first, cam, degree, antialiased, splats, radii, counts)
 }
 
+/// [`project_range`] sixteen Gaussians per instruction.
+///
+/// # Safety
+/// The CPU must support AVX-512F.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn project_range_avx512(
+    g: &Gaussians,
+    first: usize,
+    cam: &CameraF32,
+    degree: u32,
+    antialiased: bool,
+    splats: &mut [Splat],
+    radii: &mut [[i32; 2]],
+    counts: &mut [u64; 7],
+) {
+    project_range::<F32x16>(g, first, cam, degree, antialiased, splats, radii, counts)
+}
+
 /// Project every Gaussian (parallel over fixed chunks; output order is the input order).
-/// `opts.kernel` chooses the lane width: eight Gaussians per AVX2 instruction where the CPU
-/// has it (`Kernel::Auto`, `Kernel::Avx2`), one at a time with `Kernel::Scalar`; both
-/// give the same bits.
+/// `opts.kernel` chooses the lane width: sixteen Gaussians per AVX-512F instruction where
+/// the CPU has it (`Kernel::Auto`), eight per AVX2 instruction (`Kernel::Auto` without
+/// AVX-512F, `Kernel::Avx2`), one at a time with `Kernel::Scalar`; all give the same bits.
 pub fn project(
     g: &Gaussians,
     cam: &Camera,
@@ -632,7 +652,7 @@ pub fn project(
         radii: vec![[0, 0]; n],
     };
     #[cfg(target_arch = "x86_64")]
-    let avx2 = opts.kernel.avx2();
+    let (avx512, avx2) = (opts.kernel.avx512(), opts.kernel.avx2());
     let (degree, aa) = (plan.sh_degree, opts.antialiased);
     // Fixed chunks, written in place; per-chunk cull counts are integers, so their sum does
     // not depend on how chunks map to threads.
@@ -645,6 +665,12 @@ pub fn project(
         .map(|(ci, (splats, radii))| {
             let mut c = [0u64; 7];
             let first = ci * CHUNK;
+            #[cfg(target_arch = "x86_64")]
+            if avx512 {
+                // SAFETY: AVX-512F was detected just above.
+                unsafe { project_range_avx512(g, first, &cam, degree, aa, splats, radii, &mut c) };
+                return c;
+            }
             #[cfg(target_arch = "x86_64")]
             if avx2 {
                 // SAFETY: AVX2 was detected just above.

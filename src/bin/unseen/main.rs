@@ -86,6 +86,7 @@ fn run(cli: Cli) -> Result<()> {
 }
 
 fn main() -> ExitCode {
+    unseen::sys::keep_freed_memory();
     let cli = Cli::parse();
     // compare: 0 agree, 1 diverge, 2 could not compare.
     if let Command::Compare(a) = &cli.command {
