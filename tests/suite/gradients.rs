@@ -725,14 +725,22 @@ fn backward_skips_are_bit_identical() {
 #[test]
 fn frozen_replay_matches_full_render_and_backward() {
     use unseen::gaussian::Param;
+    use unseen::raster::Kernel;
     use unseen::raster::backward::frozen::{FrozenBlend, FrozenWork};
     use unseen::raster::render;
     use unseen::train::adam::{Adam, AdamConfig};
     let cam = default_camera(203, 117);
     let mut scene = random_scene(20_000, 3, 21, 0.003, 0.3);
-    for bg in [[0.0; 3], [0.3, 0.6, 0.9]] {
+    // The replay's SH backward has an AVX2 loop (`Kernel::Auto`) and the scalar one.
+    let cases = [
+        ([0.0; 3], Kernel::Auto),
+        ([0.3, 0.6, 0.9], Kernel::Auto),
+        ([0.3, 0.6, 0.9], Kernel::Scalar),
+    ];
+    for (bg, kernel) in cases {
         let opts = RenderOptions {
             background: bg,
+            kernel,
             ..Default::default()
         };
         let frozen = FrozenBlend::record(&scene, &cam, &opts).unwrap();
