@@ -7,6 +7,9 @@
 //! (with the backward state, as training renders); the last three columns compare the two
 //! blends in the same run: forward and backward blend pair rates (each its own pair count)
 //! and `bwd/fwd`, their ratio (issue #13).
+//! `kernel`: both blends timed per form, interleaved within each iteration on the same
+//! projected splats and lists — `auto` (AVX-512F where the CPU has it) and `avx2`; the
+//! render and the projection chain (`forward`, `bwd-proj`) are the `auto` ones, shared.
 //! `frozen` rows: SH-only iterations replayed from a `FrozenBlend` record (forward column =
 //! replayed render, backward column = replayed SH backward; the pairs are the full walk's).
 
@@ -15,7 +18,7 @@ use unseen::raster::backward::composite::{PixelGrads, composite_backward};
 use unseen::raster::backward::frozen::FrozenBlend;
 use unseen::raster::backward::project::project_backward;
 use unseen::raster::backward::{GradGroups, ImageGrads, render_for_backward};
-use unseen::raster::composite::{Want, composite};
+use unseen::raster::composite::{Kernel, Want, composite};
 use unseen::raster::project::CameraF32;
 use unseen::raster::{RenderOptions, RenderReport};
 use unseen::scene::{Uniform, default_camera, random_scene};
@@ -31,11 +34,12 @@ fn main() {
     let n = 100_000;
     let scene = random_scene(n, 3, 7, 0.003, 0.03);
     println!(
-        "{:>9} {:>9} {:>3} {:>8} {:>10} {:>10} {:>10} {:>10} {:>10} {:>12} {:>10} {:>9} {:>9} {:>7}",
+        "{:>9} {:>9} {:>3} {:>8} {:>6} {:>10} {:>10} {:>10} {:>10} {:>10} {:>12} {:>10} {:>9} {:>9} {:>7}",
         "gaussians",
         "image",
         "thr",
         "groups",
+        "kernel",
         "forward",
         "fwd-blend",
         "bwd-blend",
@@ -77,30 +81,16 @@ fn main() {
                 .build()
                 .unwrap();
             for (gname, groups) in [("full", GradGroups::ALL), ("sh_rest", GradGroups::SH_REST)] {
-                let (mut tf, mut tc, mut tp) = (Vec::new(), Vec::new(), Vec::new());
-                let mut tfc = Vec::new();
+                const KERNELS: [(&str, Kernel); 2] =
+                    [("auto", Kernel::Auto), ("avx2", Kernel::Avx2)];
+                let (mut tf, mut tp) = (Vec::new(), Vec::new());
+                let (mut tfc, mut tc) = ([Vec::new(), Vec::new()], [Vec::new(), Vec::new()]);
                 let (mut pairs, mut fwd_pairs) = (0, 0);
                 pool.install(|| {
                     for _ in 0..5 {
                         let t0 = Instant::now();
                         let fwd = render_for_backward(&scene, &cam, &opts).unwrap();
-                        let t1 = Instant::now();
-                        let mut rep = RenderReport::default();
-                        let out = composite(
-                            w as usize,
-                            h as usize,
-                            &fwd.projected,
-                            &fwd.bins,
-                            &fwd.plan,
-                            opts.background,
-                            want,
-                            opts.kernel,
-                            &mut rep,
-                        );
-                        tfc.push(t1.elapsed().as_secs_f64());
-                        std::hint::black_box(out);
-                        fwd_pairs = rep.pairs_evaluated;
-                        let t1 = Instant::now();
+                        tf.push(t0.elapsed().as_secs_f64());
                         let r = &fwd.render;
                         let pg = PixelGrads {
                             v_rgb: v.rgb.as_deref(),
@@ -111,17 +101,42 @@ fn main() {
                             n_contrib: r.n_contrib.as_deref().unwrap(),
                             depth: None,
                         };
-                        let cg = composite_backward(
-                            w as usize,
-                            h as usize,
-                            &fwd.projected,
-                            &fwd.bins,
-                            fwd.plan.cull_rows,
-                            opts.background,
-                            &pg,
-                            groups.geometry(),
-                            opts.kernel,
-                        );
+                        let mut splat_grads = Vec::new();
+                        for (k, &(_, kernel)) in KERNELS.iter().enumerate() {
+                            let t1 = Instant::now();
+                            let mut rep = RenderReport::default();
+                            let out = composite(
+                                w as usize,
+                                h as usize,
+                                &fwd.projected,
+                                &fwd.bins,
+                                &fwd.plan,
+                                opts.background,
+                                want,
+                                kernel,
+                                &mut rep,
+                            );
+                            tfc[k].push(t1.elapsed().as_secs_f64());
+                            std::hint::black_box(out);
+                            fwd_pairs = rep.pairs_evaluated;
+                            let t1 = Instant::now();
+                            let cg = composite_backward(
+                                w as usize,
+                                h as usize,
+                                &fwd.projected,
+                                &fwd.bins,
+                                fwd.plan.cull_rows,
+                                opts.background,
+                                &pg,
+                                groups.geometry(),
+                                kernel,
+                            );
+                            tc[k].push(t1.elapsed().as_secs_f64());
+                            pairs = cg.pairs;
+                            if kernel == opts.kernel {
+                                splat_grads = cg.splats;
+                            }
+                        }
                         let t2 = Instant::now();
                         let g = project_backward(
                             &scene,
@@ -129,36 +144,36 @@ fn main() {
                             &fwd.projected,
                             &fwd.plan,
                             &groups,
-                            &cg.splats,
+                            &splat_grads,
                         );
-                        let t3 = Instant::now();
+                        tp.push(t2.elapsed().as_secs_f64());
                         std::hint::black_box(g);
-                        tf.push((t1 - t0).as_secs_f64());
-                        tc.push((t2 - t1).as_secs_f64());
-                        tp.push((t3 - t2).as_secs_f64());
-                        pairs = cg.pairs;
                     }
                 });
-                let (f, fc, c, p) = (median(tf), median(tfc), median(tc), median(tp));
-                let b = c + p;
-                let (fr, br) = (fwd_pairs as f64 / fc / 1e6, pairs as f64 / c / 1e6);
-                println!(
-                    "{:>9} {:>9} {:>3} {:>8} {:>8.1}ms {:>8.1}ms {:>8.1}ms {:>8.1}ms {:>8.1}ms {:>12} {:>10.1} {:>9.1} {:>9.1} {:>7.2}",
-                    n,
-                    format!("{w}x{h}"),
-                    threads,
-                    gname,
-                    f * 1e3,
-                    fc * 1e3,
-                    c * 1e3,
-                    p * 1e3,
-                    b * 1e3,
-                    pairs,
-                    pairs as f64 / b / 1e6,
-                    fr,
-                    br,
-                    br / fr
-                );
+                let (f, p) = (median(tf), median(tp));
+                for (k, (kname, _)) in KERNELS.iter().enumerate() {
+                    let (fc, c) = (median(tfc[k].clone()), median(tc[k].clone()));
+                    let b = c + p;
+                    let (fr, br) = (fwd_pairs as f64 / fc / 1e6, pairs as f64 / c / 1e6);
+                    println!(
+                        "{:>9} {:>9} {:>3} {:>8} {:>6} {:>8.1}ms {:>8.1}ms {:>8.1}ms {:>8.1}ms {:>8.1}ms {:>12} {:>10.1} {:>9.1} {:>9.1} {:>7.2}",
+                        n,
+                        format!("{w}x{h}"),
+                        threads,
+                        gname,
+                        kname,
+                        f * 1e3,
+                        fc * 1e3,
+                        c * 1e3,
+                        p * 1e3,
+                        b * 1e3,
+                        pairs,
+                        pairs as f64 / b / 1e6,
+                        fr,
+                        br,
+                        br / fr
+                    );
+                }
                 if groups == GradGroups::SH_REST {
                     // Frozen geometry: record once, then replay forward and backward.
                     let (mut rf, mut rb) = (Vec::new(), Vec::new());
@@ -179,11 +194,12 @@ fn main() {
                     });
                     let (a, b) = (median(rf), median(rb));
                     println!(
-                        "{:>9} {:>9} {:>3} {:>8} {:>8.1}ms {:>10} {:>10} {:>10} {:>8.1}ms {:>12} {:>10.1}",
+                        "{:>9} {:>9} {:>3} {:>8} {:>6} {:>8.1}ms {:>10} {:>10} {:>10} {:>8.1}ms {:>12} {:>10.1}",
                         n,
                         format!("{w}x{h}"),
                         threads,
                         "frozen",
+                        "",
                         a * 1e3,
                         "",
                         "",

@@ -583,7 +583,8 @@ fn gradient_hard_cases() {
     assert!(gr.sh_dc[0].iter().all(|v| v.is_finite() && *v > 0.0));
 }
 
-/// The AVX2 backward and the lane-by-lane reference give the same bits.
+/// The AVX-512 backward (`Kernel::Auto` where the CPU has AVX-512F), the AVX2 backward and the
+/// lane-by-lane reference give the same bits.
 #[test]
 fn backward_simd_and_scalar_are_bit_identical() {
     use unseen::raster::Kernel;
@@ -608,15 +609,38 @@ fn backward_simd_and_scalar_are_bit_identical() {
             let fwd = render_for_backward(&scene, &cam, &opts).unwrap();
             backward(&scene, &cam, &opts, &fwd, &v, &groups).unwrap()
         };
-        let (a, pa) = run(Kernel::Auto);
         let (b, pb) = run(Kernel::Scalar);
-        assert!(a == b && pa == pb, "{groups:?}");
+        let bits = grads_bits(&b);
+        assert!(b.sh_rest.iter().any(|&g| g != 0.0));
+        for kernel in [Kernel::Auto, Kernel::Avx2] {
+            let (a, pa) = run(kernel);
+            assert!(
+                grads_bits(&a) == bits && pa == pb,
+                "{kernel:?} vs Scalar, {groups:?}"
+            );
+        }
     }
+}
+
+/// Every gradient of a backward, as bits (NaN and −0.0 compared exactly).
+fn grads_bits(g: &Gradients) -> Vec<u32> {
+    let mut v: Vec<f32> = Vec::new();
+    v.extend(g.means.iter().flatten());
+    v.extend(g.log_scales.iter().flatten());
+    v.extend(g.quats.iter().flatten());
+    v.extend(&g.opacity_logits);
+    v.extend(g.sh_dc.iter().flatten());
+    v.extend(&g.sh_rest);
+    v.extend(g.background);
+    v.extend(g.means2d.iter().flatten());
+    v.extend(g.means2d_ndc.iter().flatten());
+    v.into_iter().map(f32::to_bits).collect()
 }
 
 /// The backward's exact skips — row and column culling, visits past the last blended splat
 /// of the reachable pixels, rows that miss the ellipse — give the same bits as walking every
-/// (row, splat) of the list prefix (`cull_rows = false`), for both kernels.
+/// (row, splat) of the list prefix (`cull_rows = false`), for all three kernels (AVX-512 as
+/// `Kernel::Auto` where the CPU has it, AVX2, scalar), which also agree with each other.
 #[test]
 fn backward_skips_are_bit_identical() {
     use unseen::raster::Kernel;
@@ -660,8 +684,9 @@ fn backward_skips_are_bit_identical() {
             n_contrib: r.n_contrib.as_deref().unwrap(),
             depth: r.depth.as_deref(),
         };
-        for kernel in [Kernel::Auto, Kernel::Scalar] {
-            for geometry in [true, false] {
+        for geometry in [true, false] {
+            let mut reference: Option<(Vec<u32>, [u32; 3])> = None;
+            for kernel in [Kernel::Scalar, Kernel::Avx2, Kernel::Auto] {
                 let run = |cull| {
                     composite_backward(
                         w,
@@ -676,11 +701,20 @@ fn backward_skips_are_bit_identical() {
                     )
                 };
                 let (a, b) = (run(true), run(false));
+                let bits = grad_bits(&a.splats);
                 assert!(
-                    grad_bits(&a.splats) == grad_bits(&b.splats) && a.background == b.background,
+                    bits == grad_bits(&b.splats) && a.background == b.background,
                     "{kernel:?} geometry {geometry}"
                 );
                 assert!(a.splats.iter().any(|g| g.color[0] != 0.0));
+                let bg = a.background.map(f32::to_bits);
+                match &reference {
+                    None => reference = Some((bits, bg)),
+                    Some(r) => assert!(
+                        *r == (bits, bg),
+                        "{kernel:?} vs Scalar, geometry {geometry}"
+                    ),
+                }
             }
         }
     }
@@ -691,14 +725,22 @@ fn backward_skips_are_bit_identical() {
 #[test]
 fn frozen_replay_matches_full_render_and_backward() {
     use unseen::gaussian::Param;
+    use unseen::raster::Kernel;
     use unseen::raster::backward::frozen::{FrozenBlend, FrozenWork};
     use unseen::raster::render;
     use unseen::train::adam::{Adam, AdamConfig};
     let cam = default_camera(203, 117);
     let mut scene = random_scene(20_000, 3, 21, 0.003, 0.3);
-    for bg in [[0.0; 3], [0.3, 0.6, 0.9]] {
+    // The replay's SH backward has an AVX2 loop (`Kernel::Auto`) and the scalar one.
+    let cases = [
+        ([0.0; 3], Kernel::Auto),
+        ([0.3, 0.6, 0.9], Kernel::Auto),
+        ([0.3, 0.6, 0.9], Kernel::Scalar),
+    ];
+    for (bg, kernel) in cases {
         let opts = RenderOptions {
             background: bg,
+            kernel,
             ..Default::default()
         };
         let frozen = FrozenBlend::record(&scene, &cam, &opts).unwrap();

@@ -19,12 +19,16 @@
 //!
 //! Loop order: per tile, the walked prefix of its list (up to the largest `n_contrib`) is
 //! gathered once (prefetched: the gather is bound by cache misses), and each tile row gets
-//! the list of splats it must visit; each row (16 pixels, two AVX2 registers) then walks only
-//! those, back to front, its state in registers. Nothing depends on how bands are scheduled.
+//! the list of splats it must visit; each row (16 pixels: one AVX-512F register, two AVX2
+//! registers, or 16 scalar lanes — [`Kernel`] picks the form, all give the same bits) then
+//! walks only those, back to front, its state in registers. Nothing depends on how bands are
+//! scheduled.
 //!
 //! Reduction order (SPEC.md §5.8): per (tile, splat) there are 8 lane-pair accumulators per
 //! contribution, starting at +0.0; each row visit adds `c_j + c_{j+8}` to lane `j`
-//! ([`add_pairs`]), rows in order; once per tile the 8 lanes are reduced in a fixed tree
+//! ([`add_pairs`]; AVX2 adds its two registers, AVX-512F the upper 8 lanes of its register to
+//! the lower 8, then each adds the sum into the accumulator), rows in order; once per tile
+//! the 8 lanes are reduced in a fixed tree
 //! (`j + (j+4)`, then `+2`, `+1`: [`sum8`]). The per-(tile, splat) results are then summed
 //! per Gaussian in tile order. Each (tile, splat) sum has one pairwise step, a chain over at
 //! most 16 rows and a 3-level tree: as accurate as the former order (a 16-lane tree per row,
@@ -44,7 +48,10 @@
 //! In a visit, a splat that blends no pixel changes nothing (its contributions are +0.0,
 //! accumulators are never −0.0, no state moves): the AVX2 kernel skips the rest of the
 //! visit, and skips evaluating a half row (8 lanes) beyond the splat's x reach or without
-//! a blending pixel.
+//! a blending pixel. The AVX-512F kernel evaluates the whole row when either half is asked
+//! for, masks the lanes of a half not asked for out of `valid` (so they contribute +0.0 and
+//! move no state, exactly as the lanes AVX2 does not evaluate), and skips the rest of a
+//! visit the same way.
 
 use crate::math::round::{ceil, floor};
 use crate::raster::composite::Kernel;
@@ -258,6 +265,11 @@ impl RowBound {
         m
     }
 }
+
+/// Instruction sets of the row kernel (const parameter of the band loop).
+const ISA_SCALAR: u8 = 0;
+const ISA_AVX2: u8 = 1;
+const ISA_AVX512: u8 = 2;
 
 /// A row's visit: the entry index, with the halves to evaluate in the top two bits.
 const VISIT_INDEX: u32 = (1 << 30) - 1;
@@ -564,8 +576,163 @@ mod avx2 {
     }
 }
 
+/// [`avx2::row`] with AVX-512F intrinsics: one 16-lane register per tile row, masks in mask
+/// registers, the same operations one for one. A visit evaluates the whole row when either
+/// half is needed; the lanes of a half the AVX2 kernel would not evaluate are masked out of
+/// `valid` (so they contribute +0.0 and move no state, exactly as there). Each contribution
+/// is reduced as [`add_pairs`]: its upper 8 lanes added to its lower 8 (`c_j + c_{j+8}`),
+/// then added into the entry's accumulator.
+#[cfg(target_arch = "x86_64")]
+mod avx512 {
+    use super::{
+        ALPHA_THRESHOLD, Acc, Entry, LANES, MAX_ALPHA, NC, RECOVER_EPS, RowState, SIGMA_CLAMP,
+        VISIT_INDEX, fields,
+    };
+    use crate::math::fastexp::exp_avx512;
+    use std::arch::x86_64::*;
+
+    /// # Safety
+    /// The CPU must support AVX-512F.
+    #[target_feature(enable = "avx512f")]
+    #[allow(clippy::needless_range_loop)] // k indexes parallel register arrays
+    pub(super) unsafe fn row<const GEOMETRY: bool>(
+        list: &[Entry],
+        idx: &[u32],
+        px: &[f32; LANES],
+        py: f32,
+        st: &mut RowState,
+        acc: &mut [Acc],
+    ) {
+        let c = |x: f32| _mm512_set1_ps(x);
+        let zero = _mm512_setzero_ps();
+        // `-x`: the sign bit flipped (integer xor; `_mm512_xor_ps` needs AVX512DQ).
+        let neg = |x: __m512| {
+            let m = _mm512_set1_epi32(i32::MIN);
+            _mm512_castsi512_ps(_mm512_xor_si512(_mm512_castps_si512(x), m))
+        };
+        let ld = |a: &[f32; LANES]| -> __m512 {
+            // SAFETY: `a` holds exactly LANES = 16 f32.
+            unsafe { _mm512_loadu_ps(a.as_ptr()) }
+        };
+        let pxv = ld(px);
+        let mut t = ld(&st.t);
+        let (tf, va, vd, bgd) = (
+            ld(&st.t_final),
+            ld(&st.v_alpha),
+            ld(&st.v_d),
+            ld(&st.bg_dot),
+        );
+        let v = [ld(&st.v[0]), ld(&st.v[1]), ld(&st.v[2])];
+        let mut buf = [ld(&st.buf[0]), ld(&st.buf[1]), ld(&st.buf[2])];
+        let mut bz = ld(&st.buf_z);
+        // SAFETY: `st.n` holds exactly 16 u32.
+        let n = unsafe { _mm512_loadu_si512(st.n.as_ptr().cast()) };
+        // Lanes of the halves (bit h: lanes 8h..8h+8) a visit asks for.
+        const HALF_LANES: [__mmask16; 4] = [0, 0x00ff, 0xff00, 0xffff];
+        // Unsigned `pos < n` as signed compare: counts stay far below 2^31.
+        for &visit in idx.iter().rev() {
+            let (i, halves) = (visit & VISIT_INDEX, visit >> 30);
+            let Entry { s, pos } = &list[i as usize];
+            let dy = s.mean[1] - py;
+            let cdd = c(s.conic[2] * dy * dy);
+            let dyv = c(dy);
+            let active = _mm512_mask_cmpgt_epi32_mask(
+                HALF_LANES[halves as usize],
+                n,
+                _mm512_set1_epi32(*pos as i32),
+            );
+            let dx = _mm512_sub_ps(c(s.mean[0]), pxv);
+            let sum = _mm512_add_ps(_mm512_mul_ps(_mm512_mul_ps(c(s.conic[0]), dx), dx), cdd);
+            let sigma = _mm512_add_ps(
+                _mm512_mul_ps(c(0.5), sum),
+                _mm512_mul_ps(_mm512_mul_ps(c(s.conic[1]), dx), dyv),
+            );
+            let clamped = _mm512_min_ps(sigma, c(SIGMA_CLAMP));
+            // SAFETY: AVX-512F is available in this function.
+            let e = unsafe { exp_avx512(neg(clamped)) };
+            let a = _mm512_mul_ps(c(s.opacity), e);
+            let alpha = _mm512_min_ps(a, c(MAX_ALPHA));
+            let valid = _mm512_mask_cmp_ps_mask::<_CMP_GE_OQ>(active, sigma, zero)
+                & _mm512_cmp_ps_mask::<_CMP_GE_OQ>(alpha, c(ALPHA_THRESHOLD));
+            // A splat that blends no pixel of the row changes nothing (exact, and common).
+            if valid == 0 {
+                continue;
+            }
+            let mut cv = [zero; NC];
+            let one_minus = _mm512_sub_ps(c(1.0), alpha);
+            // `max_ps(a, b)` is `a > b ? a : b`: the scalar select with the operands so.
+            let den = _mm512_max_ps(one_minus, c(RECOVER_EPS));
+            let ra = _mm512_div_ps(c(1.0), den);
+            let tn = _mm512_mul_ps(t, ra);
+            let fac = _mm512_mul_ps(alpha, tn);
+            // The selected value where `m`, +0.0 elsewhere (as `and_ps` with a lane mask).
+            let sel = |m: __mmask16, x: __m512| _mm512_maskz_mov_ps(m, x);
+            for k in 0..3 {
+                cv[k] = sel(valid, _mm512_mul_ps(fac, v[k]));
+            }
+            if GEOMETRY {
+                let term = |col: f32, b: __m512, vv: __m512| {
+                    _mm512_mul_ps(
+                        _mm512_sub_ps(_mm512_mul_ps(c(col), tn), _mm512_mul_ps(b, ra)),
+                        vv,
+                    )
+                };
+                let mut v_a = term(s.color[0], buf[0], v[0]);
+                v_a = _mm512_add_ps(v_a, term(s.color[1], buf[1], v[1]));
+                v_a = _mm512_add_ps(v_a, term(s.color[2], buf[2], v[2]));
+                v_a = _mm512_add_ps(v_a, term(s.depth, bz, vd));
+                let tfra = _mm512_mul_ps(tf, ra);
+                v_a = _mm512_add_ps(v_a, _mm512_mul_ps(tfra, va));
+                v_a = _mm512_sub_ps(v_a, _mm512_mul_ps(tfra, bgd));
+                cv[3] = sel(valid, _mm512_mul_ps(fac, vd));
+                let open = _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(valid, a, c(MAX_ALPHA));
+                let v_sigma = _mm512_mul_ps(neg(a), v_a);
+                cv[4] = sel(
+                    open,
+                    _mm512_mul_ps(_mm512_mul_ps(_mm512_mul_ps(c(0.5), v_sigma), dx), dx),
+                );
+                cv[5] = sel(open, _mm512_mul_ps(_mm512_mul_ps(v_sigma, dx), dyv));
+                cv[6] = sel(
+                    open,
+                    _mm512_mul_ps(_mm512_mul_ps(_mm512_mul_ps(c(0.5), v_sigma), dyv), dyv),
+                );
+                let gx = _mm512_add_ps(
+                    _mm512_mul_ps(c(s.conic[0]), dx),
+                    _mm512_mul_ps(c(s.conic[1]), dyv),
+                );
+                let gy = _mm512_add_ps(
+                    _mm512_mul_ps(c(s.conic[1]), dx),
+                    _mm512_mul_ps(c(s.conic[2]), dyv),
+                );
+                cv[7] = sel(open, _mm512_mul_ps(v_sigma, gx));
+                cv[8] = sel(open, _mm512_mul_ps(v_sigma, gy));
+                cv[9] = sel(open, _mm512_mul_ps(e, v_a));
+                for k in 0..3 {
+                    let nb = _mm512_add_ps(buf[k], _mm512_mul_ps(c(s.color[k]), fac));
+                    buf[k] = _mm512_mask_blend_ps(valid, buf[k], nb);
+                }
+                let nz = _mm512_add_ps(bz, _mm512_mul_ps(c(s.depth), fac));
+                bz = _mm512_mask_blend_ps(valid, bz, nz);
+            }
+            t = _mm512_mask_blend_ps(valid, t, tn);
+            // `add_pairs`: lane j + lane j+8, then into the entry's accumulator.
+            let a = &mut acc[i as usize];
+            for k in 0..fields(GEOMETRY) {
+                let lo = _mm512_castps512_ps256(cv[k]);
+                let hi = _mm256_castpd_ps(_mm512_extractf64x4_pd::<1>(_mm512_castps_pd(cv[k])));
+                let p = a[k].as_mut_ptr();
+                // SAFETY: `a[k]` holds 8 f32.
+                unsafe {
+                    let sum = _mm256_add_ps(_mm256_loadu_ps(p), _mm256_add_ps(lo, hi));
+                    _mm256_storeu_ps(p, sum);
+                }
+            }
+        }
+    }
+}
+
 #[allow(clippy::too_many_arguments)]
-fn band<const AVX2: bool, const GEOMETRY: bool>(
+fn band<const ISA: u8, const GEOMETRY: bool>(
     ty: usize,
     width: usize,
     height: usize,
@@ -712,8 +879,11 @@ fn band<const AVX2: bool, const GEOMETRY: bool>(
             let py = (y0 + row) as f32 + 0.5;
             let (idx, st) = (&rows_idx[row], &mut states[row]);
             #[cfg(target_arch = "x86_64")]
-            if AVX2 {
-                // SAFETY: AVX2 == true only when the CPU has it (checked by the caller).
+            if ISA == ISA_AVX512 {
+                // SAFETY: ISA_AVX512 only when the CPU has AVX-512F (checked by the caller).
+                unsafe { avx512::row::<GEOMETRY>(&list, idx, &px, py, st, &mut acc) }
+            } else if ISA == ISA_AVX2 {
+                // SAFETY: ISA_AVX2 only when the CPU has AVX2 (checked by the caller).
                 unsafe { avx2::row::<GEOMETRY>(&list, idx, &px, py, st, &mut acc) }
             } else {
                 row_lanes::<GEOMETRY>(&list, idx, &px, py, st, &mut acc)
@@ -770,14 +940,21 @@ pub fn composite_backward(
     geometry: bool,
     kernel: Kernel,
 ) -> CompositeGrads {
-    let avx2 = kernel.avx2();
-    let run = |ty: usize| match (avx2, geometry) {
-        (true, true) => band::<true, true>(ty, width, height, p, bins, cull_rows, background, g),
-        (true, false) => band::<true, false>(ty, width, height, p, bins, cull_rows, background, g),
-        (false, true) => band::<false, true>(ty, width, height, p, bins, cull_rows, background, g),
-        (false, false) => {
-            band::<false, false>(ty, width, height, p, bins, cull_rows, background, g)
-        }
+    let isa = if kernel.avx512() {
+        ISA_AVX512
+    } else if kernel.avx2() {
+        ISA_AVX2
+    } else {
+        ISA_SCALAR
+    };
+    let (w, h, bkg) = (width, height, background);
+    let run = |ty: usize| match (isa, geometry) {
+        (ISA_AVX512, true) => band::<ISA_AVX512, true>(ty, w, h, p, bins, cull_rows, bkg, g),
+        (ISA_AVX512, false) => band::<ISA_AVX512, false>(ty, w, h, p, bins, cull_rows, bkg, g),
+        (ISA_AVX2, true) => band::<ISA_AVX2, true>(ty, w, h, p, bins, cull_rows, bkg, g),
+        (ISA_AVX2, false) => band::<ISA_AVX2, false>(ty, w, h, p, bins, cull_rows, bkg, g),
+        (_, true) => band::<ISA_SCALAR, true>(ty, w, h, p, bins, cull_rows, bkg, g),
+        (_, false) => band::<ISA_SCALAR, false>(ty, w, h, p, bins, cull_rows, bkg, g),
     };
     let bands: Vec<BandGrads> = (0..bins.tiles_y).into_par_iter().map(run).collect();
     let mut splats = vec![SplatGrad::default(); p.splats.len()];

@@ -7,6 +7,9 @@
 //! full passes (tests `frozen_replay_*`), at a fraction of the cost: no σ, no exp, no
 //! transmittance recurrence.
 //!
+//! The SH backward's per-visit loop has an AVX2 form (`visit_avx2`, full-width visits,
+//! when the record's kernel allows AVX2), the scalar loop's operations one for one.
+//!
 //! A lane that did not blend stores `fac = 0`: its term `0·v` is ±0 where the full pass adds
 //! a masked +0.0, and since the accumulators are never −0.0 (SPEC.md §5.8) the sums agree.
 
@@ -17,7 +20,7 @@ use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gaussian::Gaussians;
 use crate::math::sh::num_coeffs;
-use crate::raster::composite::{TRANSMITTANCE_STOP, splat_alpha, splat_rows};
+use crate::raster::composite::{Kernel, TRANSMITTANCE_STOP, splat_alpha, splat_rows};
 use crate::raster::project::{ALPHA_THRESHOLD, CameraF32, sh_color, sh_view_basis};
 use crate::raster::tile::TILE_SIZE;
 use crate::raster::{Outputs, RenderOptions};
@@ -48,6 +51,9 @@ pub struct FrozenBlend {
     /// First pixel of the visited row segment and its width (lanes beyond are 0).
     visit_pix: Vec<(u32, u8)>,
     visit_fac: Vec<[f32; LANES]>,
+    /// The recording's kernel choice: the replayed SH backward uses [`visit_avx2`] where
+    /// `kernel.avx2()`, else the scalar loop (same bits).
+    kernel: Kernel,
 }
 
 /// The geometric parameters of `scene` (means, scales, rotations, opacities; no SH).
@@ -224,6 +230,7 @@ impl FrozenBlend {
             visit_k,
             visit_pix,
             visit_fac,
+            kernel: opts.kernel,
         })
     }
 
@@ -315,6 +322,8 @@ impl FrozenBlend {
         let bins = &self.fwd.bins;
         let (w, h) = (self.cam.width as usize, self.cam.height as usize);
         ws.bands.resize_with(bins.tiles_y, Default::default);
+        #[cfg(target_arch = "x86_64")]
+        let avx2 = self.kernel.avx2();
         // Per band, in the full backward's orders: background in (tile, row, pixel) order,
         // then the visits into their (tile, splat) lane-pair accumulators, reduced per tile
         // into the band's intersection range.
@@ -363,6 +372,15 @@ impl FrozenBlend {
                     used = used.max(pos + 1);
                     let (i0, cols) = self.visit_pix[v];
                     let fac = &self.visit_fac[v];
+                    #[cfg(target_arch = "x86_64")]
+                    if avx2 && cols as usize == LANES {
+                        let i = 3 * i0 as usize;
+                        let rgb: &[f32; 3 * LANES] =
+                            v_rgb[i..i + 3 * LANES].try_into().expect("16 pixels");
+                        // SAFETY: `avx2` only when the CPU has AVX2 (`Kernel::avx2`).
+                        unsafe { visit_avx2(&mut lanes[pos], fac, rgb) };
+                        continue;
+                    }
                     for (ch, acc) in lanes[pos].iter_mut().enumerate() {
                         let mut c = [0f32; LANES];
                         for l in 0..cols as usize {
@@ -462,6 +480,51 @@ impl FrozenBlend {
             grads.background = ws.background;
         }
         Ok(grads)
+    }
+}
+
+/// One full-width visit of [`FrozenBlend::color_backward`] in AVX2: per channel, the 16
+/// contributions `fac[l]·v_rgb[3l + ch]` and [`add_pairs`] (`acc_j += c_j + c_{j+8}`), the
+/// scalar loop's operations one for one. `rgb` (16 interleaved pixels) is split into
+/// channels by blends and a lane permutation (data movement only).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[allow(clippy::needless_range_loop)] // h indexes parallel register arrays
+unsafe fn visit_avx2(acc: &mut Lanes, fac: &[f32; LANES], rgb: &[f32; 3 * LANES]) {
+    use std::arch::x86_64::*;
+    let ld = |a: &[f32], o: usize| -> __m256 {
+        // SAFETY: `a[o..o + 8]` (bounds-checked) holds 8 f32.
+        unsafe { _mm256_loadu_ps(a[o..o + 8].as_ptr()) }
+    };
+    let idx = |i: [i32; 8]| _mm256_setr_epi32(i[0], i[1], i[2], i[3], i[4], i[5], i[6], i[7]);
+    // 8 pixels r0 g0 b0 r1 … b7 in a0, a1, a2: lanes of channel ch come from a0, a1, a2 in
+    // a rotating pattern; two blends gather them in one register, a permutation orders them.
+    let (pr, pg, pb) = (
+        idx([0, 3, 6, 1, 4, 7, 2, 5]),
+        idx([1, 4, 7, 2, 5, 0, 3, 6]),
+        idx([2, 5, 0, 3, 6, 1, 4, 7]),
+    );
+    let mut c = [[_mm256_setzero_ps(); 2]; 3];
+    for h in 0..2 {
+        let (a0, a1, a2) = (ld(rgb, 24 * h), ld(rgb, 24 * h + 8), ld(rgb, 24 * h + 16));
+        let r = _mm256_blend_ps::<0x24>(_mm256_blend_ps::<0x92>(a0, a1), a2);
+        let g = _mm256_blend_ps::<0x49>(_mm256_blend_ps::<0x24>(a0, a1), a2);
+        let b = _mm256_blend_ps::<0x92>(_mm256_blend_ps::<0x49>(a0, a1), a2);
+        let f = ld(fac, 8 * h);
+        c[0][h] = _mm256_mul_ps(f, _mm256_permutevar8x32_ps(r, pr));
+        c[1][h] = _mm256_mul_ps(f, _mm256_permutevar8x32_ps(g, pg));
+        c[2][h] = _mm256_mul_ps(f, _mm256_permutevar8x32_ps(b, pb));
+    }
+    for (a, c) in acc.iter_mut().zip(&c) {
+        let p = a.as_mut_ptr();
+        // SAFETY: `a` holds 8 f32.
+        unsafe {
+            let sum = _mm256_add_ps(_mm256_loadu_ps(p), _mm256_add_ps(c[0], c[1]));
+            _mm256_storeu_ps(p, sum);
+        }
     }
 }
 
