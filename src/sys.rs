@@ -10,7 +10,8 @@
 /// glibc's `M_MMAP_THRESHOLD` to its maximum (32 MiB on 64-bit) and its `M_TRIM_THRESHOLD`
 /// to 1 GiB, so such buffers are reused from the heap. It changes no result, only where
 /// memory comes from; peak resident memory may grow by the reused blocks. A no-op on other
-/// platforms and C libraries. Call it once, at the start of `main`.
+/// platforms and C libraries. Call it once, at the start of `main`. [`release_freed_memory`]
+/// returns what is kept between stages.
 pub fn keep_freed_memory() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     {
@@ -24,6 +25,23 @@ pub fn keep_freed_memory() {
         unsafe {
             mallopt(M_MMAP_THRESHOLD, 32 << 20);
             mallopt(M_TRIM_THRESHOLD, 1 << 30);
+        }
+    }
+}
+
+/// Return the freed memory [`keep_freed_memory`] keeps to the OS (glibc `malloc_trim(0)`),
+/// e.g. between pipeline steps, so that each step's peak resident memory is its own
+/// (`io::CostMeter` calls it when a stage starts). Changes no result; a no-op elsewhere.
+pub fn release_freed_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        unsafe extern "C" {
+            fn malloc_trim(pad: usize) -> i32;
+        }
+        // SAFETY: `malloc_trim` only returns free heap pages to the OS; it takes the
+        // allocator's own locks and is safe to call from any thread at any time.
+        unsafe {
+            malloc_trim(0);
         }
     }
 }

@@ -91,7 +91,10 @@ pub struct CostMeter {
 }
 
 impl CostMeter {
+    /// Start measuring: freed memory the process kept is returned to the OS first
+    /// ([`crate::sys::release_freed_memory`]), so the peak is the stage's own.
     pub fn start() -> CostMeter {
+        crate::sys::release_freed_memory();
         let peak_reset = reset_peak_memory();
         CostMeter {
             start: std::time::Instant::now(),
