@@ -37,11 +37,7 @@ pub trait Lanes: ShScalar + Div<Output = Self> {
     fn ge(self, o: Self) -> Self::Mask;
     /// `m ? a : b` per lane.
     fn select(m: Self::Mask, a: Self, b: Self) -> Self;
-    /// `m ? a : b` per lane, for masks.
-    fn select_mask(m: Self::Mask, a: Self::Mask, b: Self::Mask) -> Self::Mask;
     fn all_false() -> Self::Mask;
-    /// Whether any lane of `m` is set.
-    fn any(m: Self::Mask) -> bool;
     /// Neither NaN nor ±∞.
     fn is_finite(self) -> Self::Mask;
     /// Correctly rounded square root.
@@ -98,16 +94,8 @@ impl Lanes for f32 {
         if m { a } else { b }
     }
     #[inline(always)]
-    fn select_mask(m: bool, a: bool, b: bool) -> bool {
-        if m { a } else { b }
-    }
-    #[inline(always)]
     fn all_false() -> bool {
         false
-    }
-    #[inline(always)]
-    fn any(m: bool) -> bool {
-        m
     }
     #[inline(always)]
     fn is_finite(self) -> bool {
@@ -263,16 +251,8 @@ mod avx2 {
             F32x8(unsafe { _mm256_blendv_ps(b.0, a.0, m.0) })
         }
         #[inline(always)]
-        fn select_mask(m: M8, a: M8, b: M8) -> M8 {
-            M8(unsafe { _mm256_blendv_ps(b.0, a.0, m.0) })
-        }
-        #[inline(always)]
         fn all_false() -> M8 {
             M8(unsafe { _mm256_setzero_ps() })
-        }
-        #[inline(always)]
-        fn any(m: M8) -> bool {
-            unsafe { _mm256_movemask_ps(m.0) != 0 }
         }
         #[inline(always)]
         fn is_finite(self) -> M8 {
@@ -456,16 +436,8 @@ mod avx512 {
             F32x16(unsafe { _mm512_mask_blend_ps(m, b.0, a.0) })
         }
         #[inline(always)]
-        fn select_mask(m: __mmask16, a: __mmask16, b: __mmask16) -> __mmask16 {
-            (m & a) | (!m & b)
-        }
-        #[inline(always)]
         fn all_false() -> __mmask16 {
             0
-        }
-        #[inline(always)]
-        fn any(m: __mmask16) -> bool {
-            m != 0
         }
         #[inline(always)]
         fn is_finite(self) -> __mmask16 {
