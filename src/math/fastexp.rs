@@ -67,7 +67,7 @@ pub fn exp(x: f32) -> f32 {
 
 /// [`exp`] on 8 lanes with AVX2 intrinsics: the same IEEE operations in the same order
 /// (no FMA), so every lane equals the scalar result bit for bit (test
-/// `exp_avx2_matches_scalar_bitwise`).
+/// `exp_and_ln_simd_match_scalar_bitwise`).
 ///
 /// # Safety
 /// The CPU must support AVX2.
@@ -100,7 +100,7 @@ pub unsafe fn exp_avx2(x: std::arch::x86_64::__m256) -> std::arch::x86_64::__m25
 }
 
 /// [`exp`] on 16 lanes with AVX-512F intrinsics: the same operations in the same order as
-/// [`exp_avx2`], bit for bit the scalar result (test `exp_avx512_matches_scalar_bitwise`).
+/// [`exp_avx2`], bit for bit the scalar result (test `exp_and_ln_simd_match_scalar_bitwise`).
 ///
 /// # Safety
 /// The CPU must support AVX-512F.
@@ -175,7 +175,7 @@ pub fn ln(x: f32) -> f32 {
 
 /// [`ln`] on 8 lanes with AVX2 intrinsics: the same operations in the same order, special
 /// values included, so every lane equals the scalar result bit for bit (test
-/// `ln_avx2_matches_scalar_bitwise`).
+/// `exp_and_ln_simd_match_scalar_bitwise`).
 ///
 /// # Safety
 /// The CPU must support AVX2.
@@ -240,7 +240,7 @@ pub unsafe fn ln_avx2(x: std::arch::x86_64::__m256) -> std::arch::x86_64::__m256
 }
 
 /// [`ln`] on 16 lanes with AVX-512F intrinsics: [`ln_avx2`]'s operations one for one, bit
-/// for bit the scalar result (test `ln_avx512_matches_scalar_bitwise`).
+/// for bit the scalar result (test `exp_and_ln_simd_match_scalar_bitwise`).
 ///
 /// # Safety
 /// The CPU must support AVX-512F.
@@ -335,117 +335,62 @@ mod tests {
         assert!(ln(-1.0).is_nan());
     }
 
+    /// `simd` (lanes of `width`) against `scalar`, bit for bit (NaN payloads aside), on
+    /// `xs` (truncated to whole vectors).
     #[cfg(target_arch = "x86_64")]
-    #[test]
-    fn exp_avx2_matches_scalar_bitwise() {
-        use std::arch::x86_64::*;
-        if !std::is_x86_feature_detected!("avx2") {
-            return;
-        }
-        // Every f32 in [-100, 100] with stride 61 in the bit pattern, plus special values.
-        let mut xs: Vec<f32> = vec![f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 0.0, -0.0];
-        let (lo, hi) = (100f32.to_bits(), (-100f32).to_bits());
-        xs.extend((0..lo).step_by(61).map(f32::from_bits));
-        xs.extend(((1u32 << 31)..hi).step_by(61).map(f32::from_bits));
-        for chunk in xs.chunks_exact(8) {
-            let mut out = [0f32; 8];
-            // SAFETY: AVX2 is available (checked above).
-            unsafe {
-                let v = exp_avx2(_mm256_loadu_ps(chunk.as_ptr()));
-                _mm256_storeu_ps(out.as_mut_ptr(), v);
-            }
-            for (x, o) in chunk.iter().zip(out) {
-                let want = exp(*x);
+    fn assert_lanes_match(
+        xs: &[f32],
+        width: usize,
+        simd: impl Fn(&[f32], &mut [f32]),
+        scalar: impl Fn(f32) -> f32,
+        name: &str,
+    ) {
+        let mut out = vec![0f32; width];
+        for chunk in xs.chunks_exact(width) {
+            simd(chunk, &mut out);
+            for (x, o) in chunk.iter().zip(&out) {
+                let want = scalar(*x);
                 assert!(
                     o.to_bits() == want.to_bits() || (o.is_nan() && want.is_nan()),
-                    "exp({x})"
+                    "{name}({x:e}) = {o:e}, scalar {want:e}"
                 );
             }
         }
     }
 
+    /// Every `stride`-th bit pattern of both signs, plus ±0, ±∞ and NaN.
     #[cfg(target_arch = "x86_64")]
-    #[test]
-    fn exp_avx512_matches_scalar_bitwise() {
-        use std::arch::x86_64::*;
-        if !std::is_x86_feature_detected!("avx512f") {
-            return;
-        }
-        // Every 61st bit pattern of both signs (NaNs, infinities and subnormals included).
-        let xs: Vec<f32> = (0..=u32::MAX)
-            .step_by(61 * 16)
-            .flat_map(|b| (0..16).map(move |k| f32::from_bits(b.wrapping_add(k * 61))))
-            .collect();
-        for chunk in xs.chunks_exact(16) {
-            let mut out = [0f32; 16];
-            // SAFETY: AVX-512F is available (checked above).
-            unsafe {
-                let v = exp_avx512(_mm512_loadu_ps(chunk.as_ptr()));
-                _mm512_storeu_ps(out.as_mut_ptr(), v);
-            }
-            for (x, o) in chunk.iter().zip(out) {
-                let want = exp(*x);
-                assert!(
-                    o.to_bits() == want.to_bits() || (o.is_nan() && want.is_nan()),
-                    "exp({x:e})"
-                );
-            }
-        }
+    fn bit_patterns(stride: usize) -> Vec<f32> {
+        let mut xs: Vec<f32> = vec![f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 0.0, -0.0];
+        xs.extend((0..=u32::MAX).step_by(stride).map(f32::from_bits));
+        xs
     }
 
     #[cfg(target_arch = "x86_64")]
     #[test]
-    fn ln_avx2_matches_scalar_bitwise() {
+    fn exp_and_ln_simd_match_scalar_bitwise() {
         use std::arch::x86_64::*;
-        if !std::is_x86_feature_detected!("avx2") {
-            return;
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY (each closure): AVX2 is available (checked above); chunks have 8 lanes.
+            let exp8 = |x: &[f32], o: &mut [f32]| unsafe {
+                _mm256_storeu_ps(o.as_mut_ptr(), exp_avx2(_mm256_loadu_ps(x.as_ptr())))
+            };
+            let ln8 = |x: &[f32], o: &mut [f32]| unsafe {
+                _mm256_storeu_ps(o.as_mut_ptr(), ln_avx2(_mm256_loadu_ps(x.as_ptr())))
+            };
+            assert_lanes_match(&bit_patterns(61), 8, exp8, exp, "exp_avx2");
+            assert_lanes_match(&bit_patterns(97), 8, ln8, ln, "ln_avx2");
         }
-        // Every 97th bit pattern of both signs (subnormals, ±0, ±∞ and NaNs included).
-        let mut xs: Vec<f32> = vec![f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 0.0, -0.0];
-        xs.extend((0..=u32::MAX).step_by(97).map(f32::from_bits));
-        xs.truncate(xs.len() / 8 * 8);
-        for chunk in xs.chunks_exact(8) {
-            let mut out = [0f32; 8];
-            // SAFETY: AVX2 is available (checked above).
-            unsafe {
-                let v = ln_avx2(_mm256_loadu_ps(chunk.as_ptr()));
-                _mm256_storeu_ps(out.as_mut_ptr(), v);
-            }
-            for (x, o) in chunk.iter().zip(out) {
-                let want = ln(*x);
-                assert!(
-                    o.to_bits() == want.to_bits() || (o.is_nan() && want.is_nan()),
-                    "ln({x:e}) = {o:e}, scalar {want:e}"
-                );
-            }
-        }
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[test]
-    fn ln_avx512_matches_scalar_bitwise() {
-        use std::arch::x86_64::*;
-        if !std::is_x86_feature_detected!("avx512f") {
-            return;
-        }
-        // Every 97th bit pattern of both signs (subnormals, ±0, ±∞ and NaNs included).
-        let mut xs: Vec<f32> = vec![f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 0.0, -0.0];
-        xs.extend((0..=u32::MAX).step_by(97).map(f32::from_bits));
-        xs.truncate(xs.len() / 16 * 16);
-        for chunk in xs.chunks_exact(16) {
-            let mut out = [0f32; 16];
-            // SAFETY: AVX-512F is available (checked above).
-            unsafe {
-                let v = ln_avx512(_mm512_loadu_ps(chunk.as_ptr()));
-                _mm512_storeu_ps(out.as_mut_ptr(), v);
-            }
-            for (x, o) in chunk.iter().zip(out) {
-                let want = ln(*x);
-                assert!(
-                    o.to_bits() == want.to_bits() || (o.is_nan() && want.is_nan()),
-                    "ln({x:e}) = {o:e}, scalar {want:e}"
-                );
-            }
+        if std::is_x86_feature_detected!("avx512f") {
+            // SAFETY (each closure): AVX-512F is available (checked above); 16 lanes.
+            let exp16 = |x: &[f32], o: &mut [f32]| unsafe {
+                _mm512_storeu_ps(o.as_mut_ptr(), exp_avx512(_mm512_loadu_ps(x.as_ptr())))
+            };
+            let ln16 = |x: &[f32], o: &mut [f32]| unsafe {
+                _mm512_storeu_ps(o.as_mut_ptr(), ln_avx512(_mm512_loadu_ps(x.as_ptr())))
+            };
+            assert_lanes_match(&bit_patterns(61), 16, exp16, exp, "exp_avx512");
+            assert_lanes_match(&bit_patterns(97), 16, ln16, ln, "ln_avx512");
         }
     }
 

@@ -20,7 +20,7 @@
 //! The per-pixel arithmetic is written once in scalar Rust ([`blend_lane`], the reference
 //! form, [`Kernel::Scalar`]) and once with AVX2 intrinsics, operation for operation (same
 //! order, no FMA, selects for branches), chosen at run time. Both give the same bits
-//! (tests `simd_and_scalar_kernels_are_bit_identical`, `exp_avx2_matches_scalar_bitwise`).
+//! (tests `simd_and_scalar_kernels_are_bit_identical`, `exp_and_ln_simd_match_scalar_bitwise`).
 
 use super::RenderReport;
 use super::plan::RenderPlan;
