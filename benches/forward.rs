@@ -8,7 +8,9 @@
 //! Beside each line, in the same thread pool and run: the *bare kernel* bound
 //! (`composite::bare_blend`: the blend loop alone on an L1-resident list, SPEC.md §5.7), the
 //! composite's and the whole frame's pair rates as fractions of it, and the per-Gaussian
-//! work (project + bin) in units of bare-kernel pairs per Gaussian (issue #13: ≤ 24).
+//! work (project + bin) in units of bare-kernel pairs per Gaussian (issue #13: ≤ 24), and
+//! `read/G`: the time to merely read the parameters the projection reads (236 B per
+//! Gaussian at SH degree 3) in the same units, the memory-bandwidth floor of that work.
 
 use std::time::Instant;
 use unseen::raster::composite::{Kernel, Want, bare_blend, composite};
@@ -55,6 +57,38 @@ fn bare_rate(splats: &[Splat], kernel: Kernel) -> f64 {
     )
 }
 
+/// Seconds to read every parameter the projection reads (means, scales, rotations,
+/// opacities, SH) once, summed in parallel chunks (median of 5): the memory-bandwidth floor
+/// of the per-Gaussian stages in the current pool.
+fn read_seconds(scene: &unseen::gaussian::Gaussians) -> f64 {
+    use rayon::prelude::*;
+    let arrays: [&[f32]; 6] = [
+        scene.means.as_flattened(),
+        scene.log_scales.as_flattened(),
+        scene.quats.as_flattened(),
+        &scene.opacity_logits,
+        scene.sh_dc.as_flattened(),
+        &scene.sh_rest,
+    ];
+    median(
+        (0..5)
+            .map(|_| {
+                let t0 = Instant::now();
+                let s: f32 = arrays
+                    .iter()
+                    .map(|a| {
+                        a.par_chunks(1 << 14)
+                            .map(|c| c.iter().fold(0.0f32, |x, &y| x + y))
+                            .sum::<f32>()
+                    })
+                    .sum();
+                std::hint::black_box(s);
+                t0.elapsed().as_secs_f64()
+            })
+            .collect(),
+    )
+}
+
 fn main() {
     unseen::sys::keep_freed_memory(); // as the CLI does (SPEC.md §6)
     let quick = std::env::args().any(|a| a == "--quick");
@@ -71,7 +105,7 @@ fn main() {
     ];
     let tile = tile_splats();
     println!(
-        "{:>9} {:>9} {:>3} {:>6} {:>9} {:>9} {:>11} {:>9} {:>12} {:>9} {:>9} {:>9} {:>10} {:>9}",
+        "{:>9} {:>9} {:>3} {:>6} {:>9} {:>9} {:>11} {:>9} {:>12} {:>9} {:>9} {:>9} {:>10} {:>9} {:>8}",
         "gaussians",
         "image",
         "thr",
@@ -85,7 +119,8 @@ fn main() {
         "bare",
         "comp/bare",
         "frame/bare",
-        "pairs/G"
+        "pairs/G",
+        "read/G"
     );
     for &n in sizes {
         let scene = random_scene(n, 3, 7, 0.003, 0.03);
@@ -112,9 +147,10 @@ fn main() {
                     let reps = if n >= 1_000_000 { 3 } else { 7 };
                     let (mut tp, mut tb, mut tc) = (Vec::new(), Vec::new(), Vec::new());
                     let mut pairs = 0;
-                    let mut bare = 0.0;
+                    let (mut bare, mut read) = (0.0, 0.0);
                     pool.install(|| {
                         bare = bare_rate(&tile, kernel);
+                        read = read_seconds(&scene);
                         for _ in 0..reps {
                             let mut rep = RenderReport::default();
                             let t0 = Instant::now();
@@ -144,7 +180,7 @@ fn main() {
                     let (p, b, c) = (median(tp), median(tb), median(tc));
                     let rate = pairs as f64 / c;
                     println!(
-                        "{:>9} {:>9} {:>3} {:>6} {:>7.2}ms {:>7.2}ms {:>9.2}ms {:>7.2}ms {:>12} {:>9.3} {:>9.3} {:>9.2} {:>10.2} {:>9.1}",
+                        "{:>9} {:>9} {:>3} {:>6} {:>7.2}ms {:>7.2}ms {:>9.2}ms {:>7.2}ms {:>12} {:>9.3} {:>9.3} {:>9.2} {:>10.2} {:>9.1} {:>8.1}",
                         n,
                         format!("{w}x{h}"),
                         threads,
@@ -158,7 +194,8 @@ fn main() {
                         bare / 1e9,
                         rate / bare,
                         pairs as f64 / (p + b + c) / bare,
-                        (p + b) * bare / n as f64
+                        (p + b) * bare / n as f64,
+                        read * bare / n as f64
                     );
                 }
             }

@@ -117,11 +117,17 @@ fn main() {
                 .collect();
             let mut qadam = unseen::train::adam::Adam::new(Default::default(), &qs).unwrap();
             let black = vec![0f32; 160 * 120 * 3];
+            // The fine-tune's fused path (`qamask::fine_tune`): replayed render, loss, blend
+            // backward, SH-rest gradient made per chunk inside the Adam step.
+            let (mut work, mut rgb) = (
+                unseen::raster::backward::frozen::FrozenWork::default(),
+                Vec::new(),
+            );
             let mut tq = Vec::new();
             for k in 0..if quick { 10 } else { 40 } {
                 let q0 = Instant::now();
                 let rec = &records[k % records.len()];
-                let rgb = rec.render_rgb(&qs).unwrap();
+                rec.render_rgb_with(&qs, &mut work, &mut rgb).unwrap();
                 let out = image_loss(
                     &LossInput {
                         width: 160,
@@ -135,10 +141,10 @@ fn main() {
                     &LossWeights::INRIA,
                 )
                 .unwrap();
-                let g = rec
-                    .backward_sh(&qs, &out.grad_rgb, &GradGroups::SH_REST)
-                    .unwrap();
-                qadam.step(&mut qs, Param::ShRest, g.param(Param::ShRest), 1.25e-4);
+                rec.color_backward(&out.grad_rgb, &mut work).unwrap();
+                qadam.step_with(&mut qs, Param::ShRest, 1.25e-4, &|first, g| {
+                    rec.sh_rest_grad(&work, first, g)
+                });
                 tq.push(q0.elapsed().as_secs_f64());
             }
             let f = median(tf);

@@ -1,56 +1,72 @@
 //! Frozen geometry: when only the SH colours train (the QA-Mask fine-tune), every splat's
-//! α at every pixel is fixed, so the blend weights can be recorded once per camera and
-//! replayed. Forward: `C = Σ c·w` with the forward's own `w = α·T`, in blend order; backward:
-//! per recorded row visit, `fac·v_rgb` with the backward's own `fac = α·T` (recovered
-//! transmittance) added into the (tile, splat) lane-pair accumulators in the backward's visit
-//! order, reduced once per tile as the backward does. Both replays give the same bits as the
-//! full passes (tests `frozen_replay_*`), at a fraction of the cost: no σ, no exp, no
-//! transmittance recurrence.
+//! α at every pixel is fixed, so the blend can be recorded once per camera and replayed.
+//! The record holds α per blended (pixel, splat) pair, grouped in (tile row, splat) visits
+//! in the backward's walk order (SPEC.md §5.9). Forward: `C = Σ c·w` with the forward's own
+//! `w = α·T, T ← T·(1 − α)`, front to back; backward: per visit, `fac·v_rgb` with the
+//! backward's own `fac = α·T` (transmittance recovered back to front from the final `T`)
+//! added into the (tile, splat) lane-pair accumulators in the backward's visit order,
+//! reduced once per tile as the backward does. Both replays give the same bits as the full
+//! passes (tests `frozen_replay_*`), at a fraction of the cost: no projection, no σ, no
+//! exp.
 //!
 //! The SH backward's per-visit loop has an AVX2 form (`visit_avx2`, full-width visits,
 //! when the record's kernel allows AVX2), the scalar loop's operations one for one.
 //!
-//! A lane that did not blend stores `fac = 0`: its term `0·v` is ±0 where the full pass adds
+//! A lane that did not blend has `fac = 0`: its term `0·v` is ±0 where the full pass adds
 //! a masked +0.0, and since the accumulators are never −0.0 (SPEC.md §5.8) the sums agree.
+//! The forward replay skips such a lane, as the forward does.
 
 use super::composite::{HALF, SplatGrad, add_pairs, recover, sum8};
 use super::project::{GradGroups, Gradients, project_backward};
-use super::{ForwardState, render_for_backward};
+use super::render_for_backward;
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gaussian::Gaussians;
 use crate::math::sh::num_coeffs;
-use crate::raster::composite::{Kernel, TRANSMITTANCE_STOP, splat_alpha, splat_rows};
-use crate::raster::project::{ALPHA_THRESHOLD, CameraF32, sh_color, sh_view_basis};
-use crate::raster::tile::TILE_SIZE;
-use crate::raster::{Outputs, RenderOptions};
+use crate::raster::composite::{Kernel, splat_alpha, splat_rows};
+use crate::raster::plan::RenderPlan;
+use crate::raster::project::{ALPHA_THRESHOLD, CameraF32, project, sh_color, sh_view_basis};
+use crate::raster::tile::{TILE_SIZE, TileBins};
+use crate::raster::{Outputs, RenderOptions, RenderReport};
 use rayon::prelude::*;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 const LANES: usize = TILE_SIZE;
 
-/// Recorded blend weights of one camera.
+/// Recorded blend of one camera: for every tile row, the splats that blend there (back to
+/// front, the backward's walk order) and their α at each pixel of the row. Both replays
+/// rebuild their weights from α with the passes' own recurrences: the forward's
+/// `w = α·T, T ← T·(1 − α)` front to back from `T = 1`, the backward's [`recover`] back to
+/// front from the final `T`. α is the one per-pair value either pass needs, so a record
+/// holds 4 bytes per blended pair plus 6 per (row, splat) visit (SPEC.md §5.8, "Frozen
+/// geometry").
 pub struct FrozenBlend {
     /// Unique per record ([`FrozenWork`] checks it).
     id: u64,
     /// The geometry the record was made with (no SH); every replay checks the scene still
     /// has it. Shared between the records of one scene ([`FrozenBlend::record_shared`]).
     geometry: Arc<Gaussians>,
-    fwd: ForwardState,
+    camera: Camera,
     cam: CameraF32,
-    background: [f32; 3],
-    /// Per pixel `pix_start[i]..pix_start[i+1]` into `blend_gid`/`blend_w`, front to back.
-    pix_start: Vec<u32>,
-    blend_gid: Vec<u32>,
-    blend_w: Vec<f32>,
-    /// Backward visits per band (`band_start[b]..band_start[b+1]`), in walk order: the
-    /// intersection index (into `bins.ids`) and the 16 lanes' `fac`.
-    band_start: Vec<usize>,
+    /// The options and plan of the recorded render ([`FrozenBlend::backward_sh`] projects
+    /// again with them).
+    opts: RenderOptions,
+    plan: RenderPlan,
+    /// Per Gaussian: has a splat in this view (radius > 0).
+    visible: Vec<bool>,
+    bins: TileBins,
+    final_t: Vec<f32>,
+    /// Tile row `r = t·TILE_SIZE + row` (rows past the image's bottom are empty): visits
+    /// `row_visits[r]..row_visits[r+1]`, their α from `row_alpha[r]`.
+    row_visits: Vec<usize>,
+    row_alpha: Vec<usize>,
+    /// Per visit, back to front within its row: the intersection index (into `bins.ids`)
+    /// and the run of lanes `[first, first + count)` whose α follow in `alpha` (lanes of
+    /// the run that do not blend hold α = 0; lanes outside it do not blend).
     visit_k: Vec<u32>,
-    /// First pixel of the visited row segment and its width (lanes beyond are 0).
-    visit_pix: Vec<(u32, u8)>,
-    visit_fac: Vec<[f32; LANES]>,
+    visit_lanes: Vec<[u8; 2]>,
+    alpha: Vec<f32>,
     /// The recording's kernel choice: the replayed SH backward uses [`visit_avx2`] where
     /// `kernel.avx2()`, else the scalar loop (same bits).
     kernel: Kernel,
@@ -80,8 +96,19 @@ fn same_geometry(scene: &Gaussians, g: &Gaussians) -> bool {
         && eq(&scene.opacity_logits, &g.opacity_logits)
 }
 
+/// The record of one band (tile row of tiles): per tile row its visit and α counts, then
+/// the visits and α in order.
+#[derive(Default)]
+struct BandRecord {
+    row_visits: Vec<usize>,
+    row_alpha: Vec<usize>,
+    visit_k: Vec<u32>,
+    visit_lanes: Vec<[u8; 2]>,
+    alpha: Vec<f32>,
+}
+
 impl FrozenBlend {
-    /// Render once and record the weights. The geometry (everything but SH) must not change
+    /// Render once and record the blend. The geometry (everything but SH) must not change
     /// while the record is used.
     pub fn record(scene: &Gaussians, cam: &Camera, opts: &RenderOptions) -> Result<FrozenBlend> {
         Self::record_shared(scene, cam, opts, Arc::new(geometry_of(scene)))
@@ -110,69 +137,36 @@ impl FrozenBlend {
         let fwd = render_for_backward(scene, cam, &opts)?;
         let (w, h) = (cam.width as usize, cam.height as usize);
         let (p, bins) = (&fwd.projected, &fwd.bins);
-        let final_t = fwd.render.final_t.as_ref().expect("backward state");
+        let final_t = fwd.render.final_t.expect("backward state");
         let n_contrib = fwd.render.n_contrib.as_ref().expect("backward state");
         let cull = fwd.plan.cull_rows;
-        // Forward weights: each pixel walks its tile list exactly as the blend does.
-        let per_pixel: Vec<Vec<(u32, f32)>> = (0..w * h)
-            .into_par_iter()
-            .with_min_len(256)
-            .map(|i| {
-                let (x, y) = (i % w, i / w);
-                let (tx, ty) = (x / TILE_SIZE, y / TILE_SIZE);
-                let y0 = ty * TILE_SIZE;
-                let rows = TILE_SIZE.min(h - y0);
-                let ids = bins.tile(ty * bins.tiles_x + tx);
-                let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
-                let mut t = 1.0f32;
-                let mut out = Vec::new();
-                for &gid in &ids[..n_contrib[i] as usize] {
-                    let (lo, hi) = splat_rows(p, gid as usize, y0, rows, cull);
-                    if ((y - y0) as u32) < lo || ((y - y0) as u32) >= hi {
-                        continue;
-                    }
-                    let s = &p.splats[gid as usize];
-                    let sa = splat_alpha(s, s.mean[0] - px, s.mean[1] - py);
-                    if !(sa.sigma >= 0.0 && sa.alpha >= ALPHA_THRESHOLD) {
-                        continue;
-                    }
-                    let nt = t * (1.0 - sa.alpha);
-                    debug_assert!(nt > TRANSMITTANCE_STOP);
-                    out.push((gid, sa.alpha * t));
-                    t = nt;
-                }
-                out
-            })
-            .collect();
-        let mut pix_start = Vec::with_capacity(w * h + 1);
-        let (mut blend_gid, mut blend_w) = (Vec::new(), Vec::new());
-        pix_start.push(0);
-        for list in per_pixel {
-            for (g, wt) in list {
-                blend_gid.push(g);
-                blend_w.push(wt);
-            }
-            pix_start.push(blend_gid.len() as u32);
+        if bins.ids.len() > u32::MAX as usize {
+            return Err(Error::invalid(format!(
+                "{} tile intersections: a frozen-blend record indexes them in 32 bits",
+                bins.ids.len()
+            )));
         }
-        // Backward visits: each tile row walks back to front exactly as the backward does.
-        type BandVisits = (Vec<u32>, Vec<(u32, u8)>, Vec<[f32; LANES]>);
-        let bands: Vec<BandVisits> = (0..bins.tiles_y)
+        // Each tile row walks back to front exactly as the backward does; a lane blends
+        // where the forward blended it (before `n_contrib`, σ ≥ 0, α ≥ the threshold).
+        let bands: Vec<BandRecord> = (0..bins.tiles_y)
             .into_par_iter()
             .map(|ty| {
                 let y0 = ty * TILE_SIZE;
                 let rows = TILE_SIZE.min(h - y0);
-                let (mut ks, mut pix, mut facs) = (Vec::new(), Vec::new(), Vec::new());
+                let mut rec = BandRecord::default();
                 for tx in 0..bins.tiles_x {
                     let t = ty * bins.tiles_x + tx;
                     let (x0, cols) = (tx * TILE_SIZE, TILE_SIZE.min(w - tx * TILE_SIZE));
                     let ids = bins.tile(t);
-                    for row in 0..rows {
-                        let mut tt = [0f32; LANES];
+                    for row in 0..TILE_SIZE {
+                        rec.row_visits.push(rec.visit_k.len());
+                        rec.row_alpha.push(rec.alpha.len());
+                        if row >= rows {
+                            continue;
+                        }
                         let mut n = [0u32; LANES];
-                        for l in 0..cols {
-                            let i = (y0 + row) * w + x0 + l;
-                            tt[l] = final_t[i];
-                            n[l] = n_contrib[i];
+                        for (l, n) in n.iter_mut().enumerate().take(cols) {
+                            *n = n_contrib[(y0 + row) * w + x0 + l];
                         }
                         let max_n = n.iter().copied().max().unwrap_or(0) as usize;
                         let py = (y0 + row) as f32 + 0.5;
@@ -183,55 +177,82 @@ impl FrozenBlend {
                                 continue;
                             }
                             let s = &p.splats[gid];
-                            let mut fac = [0f32; LANES];
-                            let mut any = false;
-                            for l in 0..LANES {
+                            let mut a = [0f32; LANES];
+                            for l in 0..cols {
                                 let px = (x0 + l) as f32 + 0.5;
                                 let sa = splat_alpha(s, s.mean[0] - px, s.mean[1] - py);
                                 let valid = ((pos as u32) < n[l])
                                     & (sa.sigma >= 0.0)
                                     & (sa.alpha >= ALPHA_THRESHOLD);
                                 if valid {
-                                    let (_, tn, f) = recover(tt[l], sa.alpha);
-                                    fac[l] = f;
-                                    tt[l] = tn;
-                                    any = true;
+                                    a[l] = sa.alpha;
                                 }
                             }
-                            if any {
-                                ks.push((bins.offsets[t] + pos) as u32);
-                                pix.push((((y0 + row) * w + x0) as u32, cols as u8));
-                                facs.push(fac);
-                            }
+                            let Some(first) = a.iter().position(|&v| v > 0.0) else {
+                                continue;
+                            };
+                            let last = a.iter().rposition(|&v| v > 0.0).expect("first exists");
+                            rec.visit_k.push((bins.offsets[t] + pos) as u32);
+                            rec.visit_lanes
+                                .push([first as u8, (last + 1 - first) as u8]);
+                            rec.alpha.extend_from_slice(&a[first..=last]);
                         }
                     }
                 }
-                (ks, pix, facs)
+                rec
             })
             .collect();
-        let mut band_start = vec![0];
-        let (mut visit_k, mut visit_pix, mut visit_fac) = (Vec::new(), Vec::new(), Vec::new());
-        for (ks, pix, facs) in bands {
-            visit_k.extend(ks);
-            visit_pix.extend(pix);
-            visit_fac.extend(facs);
-            band_start.push(visit_k.len());
+        let mut out = BandRecord::default();
+        for band in bands {
+            let (v0, a0) = (out.visit_k.len(), out.alpha.len());
+            out.row_visits
+                .extend(band.row_visits.iter().map(|&v| v0 + v));
+            out.row_alpha.extend(band.row_alpha.iter().map(|&a| a0 + a));
+            out.visit_k.extend(band.visit_k);
+            out.visit_lanes.extend(band.visit_lanes);
+            out.alpha.extend(band.alpha);
         }
+        out.row_visits.push(out.visit_k.len());
+        out.row_alpha.push(out.alpha.len());
+        let visible = p.radii.iter().map(|r| *r != [0, 0]).collect();
         Ok(FrozenBlend {
             id: NEXT_RECORD.fetch_add(1, Ordering::Relaxed),
             geometry,
+            camera: cam.clone(),
             cam: CameraF32::new(cam),
-            background: opts.background,
-            fwd,
-            pix_start,
-            blend_gid,
-            blend_w,
-            band_start,
-            visit_k,
-            visit_pix,
-            visit_fac,
             kernel: opts.kernel,
+            opts,
+            plan: fwd.plan,
+            visible,
+            bins: fwd.bins,
+            final_t,
+            row_visits: out.row_visits,
+            row_alpha: out.row_alpha,
+            visit_k: out.visit_k,
+            visit_lanes: out.visit_lanes,
+            alpha: out.alpha,
         })
+    }
+
+    /// Heap bytes held by this record (the shared geometry not counted).
+    pub fn heap_bytes(&self) -> usize {
+        fn b<T>(v: &[T]) -> usize {
+            std::mem::size_of_val(v)
+        }
+        b(&self.visible)
+            + b(&self.bins.ids)
+            + b(&self.bins.offsets)
+            + b(&self.final_t)
+            + b(&self.row_visits)
+            + b(&self.row_alpha)
+            + b(&self.visit_k)
+            + b(&self.visit_lanes)
+            + b(&self.alpha)
+    }
+
+    /// Blended (pixel, splat) pairs of the record.
+    pub fn pairs(&self) -> usize {
+        self.alpha.iter().filter(|&&a| a > 0.0).count()
     }
 
     /// The replay is valid only for the recorded geometry: compare it bit for bit (a few MB
@@ -249,8 +270,7 @@ impl FrozenBlend {
     /// Per-Gaussian SH sums (before the clamp) and colours (after it) for the scene's
     /// current SH, into `ws`.
     fn colors(&self, scene: &Gaussians, ws: &mut FrozenWork) {
-        let p = &self.fwd.projected;
-        let degree = self.fwd.plan.sh_degree;
+        let degree = self.plan.sh_degree;
         ws.raw.resize(scene.len(), [0.0; 3]);
         ws.colors.resize(scene.len(), [0.0; 3]);
         ws.raw
@@ -259,7 +279,7 @@ impl FrozenBlend {
             .enumerate()
             .with_min_len(1024)
             .for_each(|(i, (raw, col))| {
-                if p.radii[i] == [0, 0] {
+                if !self.visible[i] {
                     (*raw, *col) = ([0.0; 3], [0.0; 3]);
                     return;
                 }
@@ -286,24 +306,50 @@ impl FrozenBlend {
     ) -> Result<()> {
         self.check(scene)?;
         self.colors(scene, ws);
-        let final_t = self.fwd.render.final_t.as_ref().expect("backward state");
-        let (bg, apply) = (self.background, self.fwd.plan.apply_background);
-        let colors = &ws.colors;
-        rgb.resize(final_t.len() * 3, 0.0);
-        rgb.par_chunks_mut(3)
+        let (w, h) = (self.cam.width as usize, self.cam.height as usize);
+        let (bg, apply) = (self.opts.background, self.plan.apply_background);
+        let (colors, bins) = (&ws.colors, &self.bins);
+        rgb.clear();
+        rgb.resize(w * h * 3, 0.0);
+        // Per band, per tile row: the visits front to back (the record's order reversed),
+        // each lane's `c += col·w` with the forward's `w = α·T`, `T ← T·(1 − α)`.
+        rgb.par_chunks_mut(3 * w * TILE_SIZE)
             .enumerate()
-            .with_min_len(256)
-            .for_each(|(i, out)| {
-                let mut c = [0f32; 3];
-                for k in self.pix_start[i] as usize..self.pix_start[i + 1] as usize {
-                    let (col, w) = (colors[self.blend_gid[k] as usize], self.blend_w[k]);
-                    for ch in 0..3 {
-                        c[ch] += col[ch] * w;
+            .for_each(|(ty, band)| {
+                let rows = band.len() / (3 * w);
+                for tx in 0..bins.tiles_x {
+                    let t = ty * bins.tiles_x + tx;
+                    let (x0, cols) = (tx * TILE_SIZE, TILE_SIZE.min(w - tx * TILE_SIZE));
+                    for row in 0..rows {
+                        let r = t * TILE_SIZE + row;
+                        let mut c = [[0f32; 3]; LANES];
+                        let mut tr = [1f32; LANES];
+                        let mut a_end = self.row_alpha[r + 1];
+                        for v in (self.row_visits[r]..self.row_visits[r + 1]).rev() {
+                            let col = colors[bins.ids[self.visit_k[v] as usize] as usize];
+                            let [first, count] = self.visit_lanes[v].map(usize::from);
+                            let alphas = &self.alpha[a_end - count..a_end];
+                            a_end -= count;
+                            for (j, &a) in alphas.iter().enumerate() {
+                                if a > 0.0 {
+                                    let l = first + j;
+                                    let wt = a * tr[l];
+                                    for ch in 0..3 {
+                                        c[l][ch] += col[ch] * wt;
+                                    }
+                                    tr[l] *= 1.0 - a;
+                                }
+                            }
+                        }
+                        for (l, c) in c.iter().enumerate().take(cols) {
+                            let i = (ty * TILE_SIZE + row) * w + x0 + l;
+                            let out = &mut band[3 * (row * w + x0 + l)..][..3];
+                            let t = self.final_t[i];
+                            for ch in 0..3 {
+                                out[ch] = if apply { c[ch] + t * bg[ch] } else { c[ch] };
+                            }
+                        }
                     }
-                }
-                let t = final_t[i];
-                for ch in 0..3 {
-                    out[ch] = if apply { c[ch] + t * bg[ch] } else { c[ch] };
                 }
             });
         Ok(())
@@ -313,13 +359,13 @@ impl FrozenBlend {
     /// colours and the background gradient, into `ws`; the same bits as the full
     /// backward's splat colour gradients.
     pub fn color_backward(&self, v_rgb: &[f32], ws: &mut FrozenWork) -> Result<()> {
-        let final_t = self.fwd.render.final_t.as_ref().expect("backward state");
+        let final_t = &self.final_t;
         if v_rgb.len() != final_t.len() * 3 {
             return Err(Error::invalid(
                 "rgb gradient size differs from the recorded camera",
             ));
         }
-        let bins = &self.fwd.bins;
+        let bins = &self.bins;
         let (w, h) = (self.cam.width as usize, self.cam.height as usize);
         ws.bands.resize_with(bins.tiles_y, Default::default);
         #[cfg(target_arch = "x86_64")]
@@ -349,47 +395,58 @@ impl FrozenBlend {
                 }
                 inter.clear();
                 inter.resize(last - first, [0f32; 3]);
-                // The tile whose accumulators `lanes[..used]` hold (visits come tile by tile).
-                let (mut tile, mut used) = (ty * bins.tiles_x, 0usize);
-                let flush =
-                    |tile: usize, used: usize, lanes: &mut [Lanes], inter: &mut [[f32; 3]]| {
-                        let start = bins.offsets[tile] - first;
-                        for (acc, out) in lanes[..used].iter_mut().zip(&mut inter[start..]) {
-                            *out = acc.map(|a| sum8(&a));
-                            *acc = [[0.0; HALF]; 3];
+                for tx in 0..bins.tiles_x {
+                    let t = ty * bins.tiles_x + tx;
+                    let (x0, cols) = (tx * TILE_SIZE, TILE_SIZE.min(w - tx * TILE_SIZE));
+                    let n = bins.offsets[t + 1] - bins.offsets[t];
+                    if lanes.len() < n {
+                        lanes.resize(n, [[0.0; HALF]; 3]);
+                    }
+                    let mut used = 0usize;
+                    for row in 0..rows {
+                        let r = t * TILE_SIZE + row;
+                        let i0 = (y0 + row) * w + x0;
+                        let mut tt = [0f32; LANES];
+                        tt[..cols].copy_from_slice(&final_t[i0..i0 + cols]);
+                        let mut a0 = self.row_alpha[r];
+                        for v in self.row_visits[r]..self.row_visits[r + 1] {
+                            let pos = self.visit_k[v] as usize - bins.offsets[t];
+                            used = used.max(pos + 1);
+                            let [first, count] = self.visit_lanes[v].map(usize::from);
+                            let mut fac = [0f32; LANES];
+                            for (j, &a) in self.alpha[a0..a0 + count].iter().enumerate() {
+                                if a > 0.0 {
+                                    let l = first + j;
+                                    let (_, tn, f) = recover(tt[l], a);
+                                    fac[l] = f;
+                                    tt[l] = tn;
+                                }
+                            }
+                            a0 += count;
+                            #[cfg(target_arch = "x86_64")]
+                            if avx2 && cols == LANES {
+                                let rgb: &[f32; 3 * LANES] = v_rgb[3 * i0..3 * (i0 + LANES)]
+                                    .try_into()
+                                    .expect("16 pixels");
+                                // SAFETY: `avx2` only when the CPU has AVX2 (`Kernel::avx2`).
+                                unsafe { visit_avx2(&mut lanes[pos], &fac, rgb) };
+                                continue;
+                            }
+                            for (ch, acc) in lanes[pos].iter_mut().enumerate() {
+                                let mut c = [0f32; LANES];
+                                for l in 0..cols {
+                                    c[l] = fac[l] * v_rgb[3 * (i0 + l) + ch];
+                                }
+                                add_pairs(acc, &c);
+                            }
                         }
-                    };
-                for v in self.band_start[ty]..self.band_start[ty + 1] {
-                    let k = self.visit_k[v] as usize;
-                    while k >= bins.offsets[tile + 1] {
-                        flush(tile, used, lanes, inter);
-                        (tile, used) = (tile + 1, 0);
                     }
-                    let pos = k - bins.offsets[tile];
-                    if lanes.len() <= pos {
-                        lanes.resize(pos + 1, [[0.0; HALF]; 3]);
-                    }
-                    used = used.max(pos + 1);
-                    let (i0, cols) = self.visit_pix[v];
-                    let fac = &self.visit_fac[v];
-                    #[cfg(target_arch = "x86_64")]
-                    if avx2 && cols as usize == LANES {
-                        let i = 3 * i0 as usize;
-                        let rgb: &[f32; 3 * LANES] =
-                            v_rgb[i..i + 3 * LANES].try_into().expect("16 pixels");
-                        // SAFETY: `avx2` only when the CPU has AVX2 (`Kernel::avx2`).
-                        unsafe { visit_avx2(&mut lanes[pos], fac, rgb) };
-                        continue;
-                    }
-                    for (ch, acc) in lanes[pos].iter_mut().enumerate() {
-                        let mut c = [0f32; LANES];
-                        for l in 0..cols as usize {
-                            c[l] = fac[l] * v_rgb[3 * (i0 as usize + l) + ch];
-                        }
-                        add_pairs(acc, &c);
+                    let start = bins.offsets[t] - first;
+                    for (acc, out) in lanes[..used].iter_mut().zip(&mut inter[start..]) {
+                        *out = acc.map(|a| sum8(&a));
+                        *acc = [[0.0; HALF]; 3];
                     }
                 }
-                flush(tile, used, lanes, inter);
             });
         ws.v_color.clear();
         ws.v_color.resize(self.geometry.len(), [0.0; 3]);
@@ -424,16 +481,15 @@ impl FrozenBlend {
             ws.record, self.id,
             "the work buffers belong to another record"
         );
-        let k_used = num_coeffs(self.fwd.plan.sh_degree) - 1;
+        let k_used = num_coeffs(self.plan.sh_degree) - 1;
         let row = g.rest_per_channel() * 3;
-        let p = &self.fwd.projected;
         for (j, o) in out.chunks_exact_mut(row).enumerate() {
             let i = first / row + j;
             o.fill(0.0);
-            if p.radii[i] == [0, 0] {
+            if !self.visible[i] {
                 continue;
             }
-            let basis = sh_view_basis(g, i, &self.cam, self.fwd.plan.sh_degree);
+            let basis = sh_view_basis(g, i, &self.cam, self.plan.sh_degree);
             let (raw, vc) = (ws.raw[i], ws.v_color[i]);
             let v_sh: [f32; 3] = std::array::from_fn(|ch| if raw[ch] > 0.0 { vc[ch] } else { 0.0 });
             for k in 0..k_used {
@@ -445,7 +501,9 @@ impl FrozenBlend {
     }
 
     /// SH (and background) gradients for `v_rgb`: the same bits as the full backward with
-    /// these groups. Geometry groups are refused.
+    /// these groups. Geometry groups are refused. Projects the scene again (the record
+    /// keeps no splats); [`FrozenBlend::color_backward`] and
+    /// [`FrozenBlend::sh_rest_grad`] are the fine-tune's allocation-free path.
     pub fn backward_sh(
         &self,
         scene: &Gaussians,
@@ -468,14 +526,14 @@ impl FrozenBlend {
                 ..SplatGrad::default()
             })
             .collect();
-        let mut grads = project_backward(
+        let projected = project(
             scene,
-            &self.cam,
-            &self.fwd.projected,
-            &self.fwd.plan,
-            groups,
-            &splats,
+            &self.camera,
+            &self.plan,
+            &self.opts,
+            &mut RenderReport::default(),
         );
+        let mut grads = project_backward(scene, &self.cam, &projected, &self.plan, groups, &splats);
         if groups.background {
             grads.background = ws.background;
         }
