@@ -61,6 +61,10 @@ pub enum Event {
     StepSkipped {
         step: String,
     },
+    /// Copied from the step cache (computed by another run with the same inputs).
+    StepCached {
+        step: String,
+    },
     /// Iterations of a reconstruction or QA-Mask fine-tune.
     Iterations {
         step: String,
@@ -344,6 +348,19 @@ pub struct Outcome {
     pub metrics: Option<evaluate::Summary>,
 }
 
+/// How [`run_with`] treats the run directory.
+#[derive(Clone, Debug, Default)]
+pub struct RunOptions {
+    /// Continue a run: verified steps are skipped, the others recomputed.
+    pub resume: bool,
+    /// All steps, one step alone (the steps it reads must be done: a batch engine's
+    /// worker), or the steps up to one.
+    pub scope: Scope,
+    /// A step cache shared with other runs (SPEC.md §20.8): steps with equal inputs are
+    /// computed once.
+    pub cache: Option<PathBuf>,
+}
+
 /// Run the whole pipeline into `out` (resuming a previous run with `resume`).
 pub fn run(
     config: &PipelineConfig,
@@ -352,25 +369,30 @@ pub fn run(
     resume: bool,
     on_event: &(dyn Fn(Event) + Sync),
 ) -> Result<Outcome> {
-    run_scoped(config, inputs, out, resume, Scope::All, on_event)
+    let opts = RunOptions {
+        resume,
+        ..RunOptions::default()
+    };
+    run_with(config, inputs, out, &opts, on_event)
 }
 
-/// [`run`] limited to one step (`Scope::Only`: the steps it reads must be done — a batch
-/// engine's worker) or to the steps up to one (`Scope::Until`).
-pub fn run_scoped(
+/// [`run`] with a scope and a step cache.
+pub fn run_with(
     config: &PipelineConfig,
     inputs: &Inputs,
     out: &Path,
-    resume: bool,
-    scope: Scope,
+    opts: &RunOptions,
     on_event: &(dyn Fn(Event) + Sync),
 ) -> Result<Outcome> {
     config.validate()?;
-    let target = match &scope {
+    let target = match &opts.scope {
         Scope::All => None,
         Scope::Only(s) | Scope::Until(s) => Some(s.clone()),
     };
-    let dir = RunDir::open(out, resume, scope, &inputs.digest)?;
+    let mut dir = RunDir::open(out, opts.resume, opts.scope.clone(), &inputs.digest)?;
+    if let Some(c) = &opts.cache {
+        dir = dir.with_cache(c)?;
+    }
     match run_in(config, inputs, &dir, on_event) {
         // Anything after a scoped run's last step (a later step, or a sibling of an
         // `--only` step that is not needed) ends the run there.

@@ -8,6 +8,12 @@
 //! A step's inputs are its own settings and the manifests' digests of the steps it reads,
 //! so a change anywhere upstream invalidates everything downstream, and two variants of a
 //! run that share a step's inputs share its digest (content addressing).
+//!
+//! With a *step cache* (a folder shared by many run directories, e.g. the variants of an
+//! audit), every finished step is also published there under the hash of its name and
+//! inputs, and a step whose verified twin is in the cache is copied (hard-linked where the
+//! file system allows) instead of computed: the same files, the same manifest, the same
+//! digest, so everything downstream is keyed exactly as if it had been computed here.
 
 use super::Event;
 use crate::error::{Error, Result};
@@ -37,6 +43,8 @@ pub struct RunDir {
     base: String,
     /// Set once the scope's last step is done: later steps stop the run.
     finished: std::sync::atomic::AtomicBool,
+    /// Shared step cache ([`RunDir::with_cache`]).
+    cache: Option<PathBuf>,
 }
 
 /// The message of the error that ends a scoped run after its last step (caught by
@@ -89,7 +97,19 @@ impl RunDir {
             scope,
             base: base.to_string(),
             finished: std::sync::atomic::AtomicBool::new(false),
+            cache: None,
         })
+    }
+
+    /// Reuse and publish finished steps through the shared folder `cache` (created).
+    pub fn with_cache(mut self, cache: &Path) -> Result<RunDir> {
+        if cache.is_file() {
+            return Err(Error::invalid("the step cache path is a file").at(cache));
+        }
+        // Temporaries of killed publishers are left alone: another job may be writing one.
+        create_dir_all(cache)?;
+        self.cache = Some(cache.to_path_buf());
+        Ok(self)
     }
 
     /// Run step `name` (a relative folder, e.g. `stage1/view_x`) from `inputs` unless a
@@ -122,6 +142,28 @@ impl RunDir {
                 digest,
                 skipped: true,
             });
+        }
+        if let Some(cached) = self.cache_entry(name, &inputs_sha256)
+            && let Some(digest) = verified(&cached, &inputs_sha256)
+        {
+            if dir.exists() {
+                std::fs::remove_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+            }
+            copy_step(&cached, &dir)?;
+            // The copy is checked like any step on disk (a cache entry changed while it
+            // was being copied is not used).
+            if verified(&dir, &inputs_sha256).as_ref() == Some(&digest) {
+                on_event(Event::StepCached { step: name.into() });
+                if is_target {
+                    self.finished.store(true, Ordering::SeqCst);
+                }
+                return Ok(StepDone {
+                    name: name.into(),
+                    dir,
+                    digest,
+                    skipped: true,
+                });
+            }
         }
         if let Scope::Only(only) = &self.scope
             && only != name
@@ -160,6 +202,9 @@ impl RunDir {
         let text = serde_json::to_string(&cost).expect("serializes") + "\n";
         write_text(&dir.join(TIMING_FILE), &text)?;
         let digest = Manifest::new("extrapolate", name, inputs, files).write(&dir)?;
+        if let Some(cached) = self.cache_entry(name, &inputs_sha256) {
+            publish(&dir, &cached)?;
+        }
         on_event(Event::StepFinished {
             step: name.into(),
             seconds: secs,
@@ -173,6 +218,12 @@ impl RunDir {
             digest,
             skipped: false,
         })
+    }
+
+    /// The cache folder of step `name` with these inputs (`None` without a cache).
+    fn cache_entry(&self, name: &str, inputs_sha256: &str) -> Option<PathBuf> {
+        let key = sha256_hex(format!("{name}\n{inputs_sha256}").as_bytes());
+        self.cache.as_ref().map(|c| c.join(key))
     }
 
     /// True once a scoped run's last step is done.
@@ -211,6 +262,54 @@ fn remove_stale_temporaries(dir: &Path) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Copy the step folder `from` to `to` (which must not exist): files hard-linked where
+/// possible (step files are only ever replaced by rename, never written in place), else
+/// copied; through a temporary sibling renamed into place, so `to` appears whole.
+fn copy_step(from: &Path, to: &Path) -> Result<()> {
+    fn walk(from: &Path, to: &Path) -> Result<()> {
+        create_dir_all(to)?;
+        for e in std::fs::read_dir(from).map_err(|e| Error::io(from, e))? {
+            let e = e.map_err(|e| Error::io(from, e))?;
+            let (src, dst) = (e.path(), to.join(e.file_name()));
+            if src.is_dir() {
+                walk(&src, &dst)?;
+            } else if std::fs::hard_link(&src, &dst).is_err() {
+                std::fs::copy(&src, &dst).map_err(|err| Error::io(&src, err))?;
+            }
+        }
+        Ok(())
+    }
+    let parent = to.parent().unwrap_or(Path::new("."));
+    create_dir_all(parent)?;
+    let name = to.file_name().and_then(|n| n.to_str()).unwrap_or("step");
+    let tmp = parent.join(format!(".{name}.tmp-{}", std::process::id()));
+    if tmp.exists() {
+        std::fs::remove_dir_all(&tmp).map_err(|e| Error::io(&tmp, e))?;
+    }
+    let r = walk(from, &tmp).and_then(|()| std::fs::rename(&tmp, to).map_err(|e| Error::io(to, e)));
+    if r.is_err() {
+        let _ = std::fs::remove_dir_all(&tmp);
+    }
+    r
+}
+
+/// Publish a finished step into the cache entry `to`; an entry another job published
+/// first (same key, same content) is kept.
+fn publish(from: &Path, to: &Path) -> Result<()> {
+    if to.join("manifest.json").is_file() {
+        return Ok(());
+    }
+    if to.exists() {
+        // An incomplete entry (a killed publisher cannot leave one: entries appear by
+        // rename), or one of an older format: replace it.
+        std::fs::remove_dir_all(to).map_err(|e| Error::io(to, e))?;
+    }
+    match copy_step(from, to) {
+        Err(_) if to.join("manifest.json").is_file() => Ok(()),
+        r => r,
+    }
 }
 
 /// The manifest digest when `dir` holds a complete step with these inputs.

@@ -392,7 +392,15 @@ fn bad_pipeline_input_is_one_clear_error() {
 /// a job whose inputs are not done is a clear error.
 #[test]
 fn per_view_jobs_then_resume_equal_one_run() {
-    use unseen::pipeline::{Scope, run_scoped};
+    use unseen::pipeline::{RunOptions, Scope};
+    let run_scoped = |cfg, inp, out: &Path, resume, scope, on_event: &(dyn Fn(Event) + Sync)| {
+        let opts = RunOptions {
+            resume,
+            scope,
+            cache: None,
+        };
+        pipeline::run_with(cfg, inp, out, &opts, on_event)
+    };
     let t = TempDir::new("pipeline-batch");
     let run = tiny_run(t.path());
     let inp = inputs(&run);
@@ -652,4 +660,79 @@ fn cli_extrapolate_bad_input_matrix() {
         "{err}"
     );
     assert_eq!(std::fs::read_to_string(&a_file).unwrap(), "x");
+}
+
+/// A step cache shared by two run directories: a repeat run copies every step, a variant
+/// copies the steps whose inputs it shares and computes the rest, both to the bits of a
+/// run without the cache; a corrupted cache entry is not used.
+#[test]
+fn step_cache_shares_equal_steps_across_runs() {
+    use unseen::pipeline::{MaskSource, RunOptions};
+    let t = TempDir::new("pipeline-cache");
+    let run = tiny_run(t.path());
+    let inp = inputs(&run);
+    let cfg = PipelineConfig {
+        interpolation: false,
+        ..tiny_config()
+    };
+    let cache = t.path().join("cache");
+    let opts = RunOptions {
+        cache: Some(cache.clone()),
+        ..RunOptions::default()
+    };
+    let events = |cfg: &PipelineConfig, out: &Path| {
+        let log = std::sync::Mutex::new((Vec::new(), Vec::new()));
+        pipeline::run_with(cfg, &inp, out, &opts, &|e| match e {
+            Event::StepCached { step } => log.lock().unwrap().0.push(step),
+            Event::StepFinished { step, .. } => log.lock().unwrap().1.push(step),
+            _ => {}
+        })
+        .unwrap();
+        // Per-view steps run in parallel: compare as sets.
+        let (mut cached, mut computed) = log.into_inner().unwrap();
+        cached.sort();
+        computed.sort();
+        (cached, computed)
+    };
+    let a = t.path().join("a");
+    let (cached, computed) = events(&cfg, &a);
+    assert!(cached.is_empty() && !computed.is_empty());
+    let b = t.path().join("b");
+    let (cached_b, computed_b) = events(&cfg, &b);
+    assert_eq!(cached_b, computed, "a repeat run copies every step");
+    assert!(computed_b.is_empty());
+    assert!(compare(&a, &b, 0.0).unwrap().first_divergent.is_none());
+    // A variant that changes only the reconstructions' weights shares the views and the
+    // per-view generation steps.
+    let variant = PipelineConfig {
+        mask_source: MaskSource::Opacity,
+        ..cfg.clone()
+    };
+    let v = t.path().join("v");
+    let (cached_v, computed_v) = events(&variant, &v);
+    assert!(cached_v.contains(&"views".to_string()), "{cached_v:?}");
+    assert!(
+        computed_v.contains(&"stage1/recon".to_string()),
+        "{computed_v:?}"
+    );
+    let plain = t.path().join("plain");
+    pipeline::run(&variant, &inp, &plain, false, &quiet).unwrap();
+    assert!(compare(&v, &plain, 0.0).unwrap().first_divergent.is_none());
+    // Corrupt the cached views step: the next run computes it again.
+    let entry = std::fs::read_dir(&cache)
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| p.join("plan.json").is_file())
+        .unwrap();
+    let plan = entry.join("plan.json");
+    let mut text = std::fs::read(&plan).unwrap();
+    text.push(b' ');
+    std::fs::remove_file(&plan).unwrap(); // the file is a hard link of a's: replace, not edit
+    std::fs::write(&plan, text).unwrap();
+    let c = t.path().join("c");
+    let (cached_c, computed_c) = events(&cfg, &c);
+    assert!(computed_c.contains(&"views".to_string()), "{computed_c:?}");
+    assert!(!cached_c.contains(&"views".to_string()));
+    assert!(compare(&a, &c, 0.0).unwrap().first_divergent.is_none());
 }

@@ -8,7 +8,8 @@ use std::time::Instant;
 use unseen::error::{Error, Result};
 use unseen::pipeline::compare::compare;
 use unseen::pipeline::{
-    self, Inconsistency, Inputs, MaskSource, PipelineConfig, Scope, SlotNames, load_inputs,
+    self, Inconsistency, Inputs, MaskSource, PipelineConfig, RunOptions, Scope, SlotNames,
+    load_inputs,
 };
 use unseen::train::run::train_run;
 use unseen::train::trainer::TrainConfig;
@@ -76,6 +77,10 @@ pub struct ExtrapolateArgs {
     /// Dataset directory (default: the one recorded in RUN/manifest.json).
     #[arg(long)]
     dataset: Option<PathBuf>,
+    /// Step cache shared with other runs: a step whose inputs another run already
+    /// computed is copied from it instead (same bits).
+    #[arg(long)]
+    cache: Option<PathBuf>,
     #[command(flatten)]
     knobs: Knobs,
 }
@@ -191,9 +196,13 @@ pub fn run_extrapolate(a: &ExtrapolateArgs) -> Result<()> {
         (None, Some(s)) => Scope::Until(s.clone()),
         (None, None) => Scope::All,
     };
-    let resume = a.resume || (scope != Scope::All && a.out.is_dir());
+    let opts = RunOptions {
+        resume: a.resume || (scope != Scope::All && a.out.is_dir()),
+        scope,
+        cache: a.cache.clone(),
+    };
     let out = with_threads(a.threads, || {
-        pipeline::run_scoped(&cfg, &inputs, &a.out, resume, scope, &draw)
+        pipeline::run_with(&cfg, &inputs, &a.out, &opts, &draw)
     })??;
     if let Some(m) = &out.metrics {
         print!("{}", m.table());

@@ -68,6 +68,7 @@ pub fn drawer() -> impl Fn(Event) + Sync {
                 );
             }
             Event::StepSkipped { step } => eprintln!("   {step}: verified, skipped"),
+            Event::StepCached { step } => eprintln!("   {step}: from the step cache"),
             Event::Iterations {
                 step,
                 done,
