@@ -19,7 +19,7 @@ use glam::DVec3;
 pub const VISIBILITY_DEPTH_TOLERANCE: f64 = 0.02;
 
 /// NaN (a class with no pixel) as JSON `null`, and back.
-mod nan_null {
+pub(crate) mod nan_null {
     use serde::{Deserialize, Deserializer, Serializer};
     pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
         if v.is_finite() {

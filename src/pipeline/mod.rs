@@ -14,6 +14,7 @@
 //! directory). Nothing below this module imports it. Progress arrives as [`Event`]s, so
 //! a command line only draws them.
 
+pub mod audit;
 pub mod compare;
 pub mod config;
 pub mod evaluate;

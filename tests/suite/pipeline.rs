@@ -736,3 +736,103 @@ fn step_cache_shares_equal_steps_across_runs() {
     assert!(!cached_c.contains(&"views".to_string()));
     assert!(compare(&a, &c, 0.0).unwrap().first_divergent.is_none());
 }
+
+/// The audit on a tiny configuration: two seeds, two variants, one generator. Every job
+/// runs, the variants share their common steps through the cache, the report has a
+/// verdict for each claim on the variants run, and a second run verifies and reuses
+/// everything (the same results bit for bit).
+#[test]
+fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
+    use unseen::pipeline::audit::{self, AuditConfig, GeneratorKind, Job, Variant};
+    let t = TempDir::new("pipeline-audit");
+    let cfg = AuditConfig {
+        base: PipelineConfig {
+            interpolation: false,
+            ..tiny_config()
+        },
+        variants: vec![Variant::Full, Variant::OpacityMask],
+        generators: vec![GeneratorKind::Truth("low")],
+        seeds: 2,
+        train_iterations: 300,
+        train_resolution: 4,
+    };
+    let dir = t.path().join("audit");
+    // A pipeline job before its original scene: a clear error naming the job to run.
+    let job = Job::Run {
+        generator: GeneratorKind::Truth("low"),
+        variant: Variant::Full,
+        seed: 0,
+    };
+    let e = audit::run_job(&cfg, &lounge(), &dir, &job, &quiet)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("original/seed-0"), "{e}");
+    let cached = std::sync::Mutex::new(Vec::new());
+    let report = audit::run(&cfg, &lounge(), &dir, &|e| {
+        if let Event::StepCached { step } = e {
+            cached.lock().unwrap().push(step)
+        }
+    })
+    .unwrap();
+    assert_eq!(report.results.len(), 4);
+    let cached = cached.into_inner().unwrap();
+    assert!(
+        cached.iter().filter(|s| *s == "views").count() == 2,
+        "each seed's second variant copies the views step: {cached:?}"
+    );
+    // Claims on the opacity-mask variant only, each with both seeds.
+    let claims: Vec<&str> = report.verdicts.iter().map(|v| v.claim).collect();
+    assert_eq!(
+        claims,
+        [
+            "QA-Mask over opacity maps, existing",
+            "QA-Mask over opacity maps, extrapolated"
+        ]
+    );
+    for v in &report.verdicts {
+        assert_eq!(v.seeds, 2);
+        assert!(v.mean_diff.is_finite() && v.std_diff.is_finite(), "{v:?}");
+        assert!(
+            ["holds", "does not hold", "within noise"].contains(&v.verdict.as_str()),
+            "{v:?}"
+        );
+    }
+    let md = std::fs::read_to_string(dir.join("audit.md")).unwrap();
+    assert!(md.contains("| truth-low | opacity_mask |"), "{md}");
+    assert!(md.contains("QA-Mask over opacity maps, existing"));
+    let svg = std::fs::read_to_string(dir.join("inconsistency.svg")).unwrap();
+    assert!(svg.starts_with("<svg") && svg.contains("<circle"));
+    // Again: nothing is computed, the results are the same bits.
+    let computed = std::sync::Mutex::new(Vec::new());
+    let again = audit::run(&cfg, &lounge(), &dir, &|e| {
+        if let Event::StepFinished { step, .. } | Event::StepStarted { step } = e {
+            computed.lock().unwrap().push(step)
+        }
+    })
+    .unwrap();
+    assert!(computed.into_inner().unwrap().is_empty());
+    let bits = |r: &audit::Report| serde_json::to_string(&r.results).unwrap();
+    assert_eq!(bits(&report), bits(&again));
+}
+
+/// The verdict rule (SPEC.md §21.2): 2 sample std of the per-seed differences.
+#[test]
+fn audit_verdicts_follow_the_two_std_rule() {
+    use unseen::pipeline::audit::{Direction, verdict};
+    assert_eq!(verdict(Direction::Beats, 1.0, 0.4, 3), "holds");
+    assert_eq!(verdict(Direction::Beats, 1.0, 0.5, 3), "within noise");
+    assert_eq!(verdict(Direction::Beats, -1.0, 0.4, 3), "does not hold");
+    assert_eq!(verdict(Direction::DoesNotHurt, -0.5, 0.4, 3), "holds");
+    assert_eq!(
+        verdict(Direction::DoesNotHurt, -1.0, 0.4, 3),
+        "does not hold"
+    );
+    assert_eq!(
+        verdict(Direction::Beats, 0.3, f64::NAN, 1),
+        "agrees (1 seed)"
+    );
+    assert_eq!(
+        verdict(Direction::Beats, -0.3, f64::NAN, 1),
+        "disagrees (1 seed)"
+    );
+}

@@ -35,6 +35,9 @@ enum Command {
     /// Compare two extrapolation runs step by step (the GPU port's check); exit 1 on
     /// divergence beyond the tolerance, 2 when the runs cannot be compared.
     Compare(pipeline::CompareArgs),
+    /// Check the paper's claims: every ablation under several generators and seeds, with
+    /// verdicts per claim (DIR/audit.md)
+    Audit(pipeline::AuditArgs),
     /// Train 3D Gaussians on a dataset (unseen scene, COLMAP or transforms.json directory)
     /// with INRIA's recipe; writes INRIA's output layout into --out.
     Train(train::TrainArgs),
@@ -70,6 +73,7 @@ fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Demo(a) => pipeline::run_demo(&a),
         Command::Extrapolate(a) => pipeline::run_extrapolate(&a),
+        Command::Audit(a) => pipeline::run_audit(&a),
         Command::Compare(_) => unreachable!("handled in main"),
         Command::Train(a) => train::run_train(a),
         Command::Eval(a) => train::run_eval(a),

@@ -330,3 +330,96 @@ pub fn run_demo(a: &DemoArgs) -> Result<()> {
     println!("demo: report in {}", a.out.join("report.md").display());
     Ok(())
 }
+
+#[derive(Args)]
+pub struct AuditArgs {
+    /// Dataset with ground truth, candidates.json and evaluation.json (a bundled room).
+    dataset: PathBuf,
+    /// Audit directory (continued when it exists: finished jobs are verified and kept).
+    #[arg(long)]
+    out: PathBuf,
+    #[arg(long, value_enum, default_value = "quick")]
+    preset: Preset,
+    /// Variants, comma-separated (default: all): full, no_qa_mask, opacity_mask,
+    /// even_views, no_depth_supervision, no_propagation, qa_sh3, qa_sh4, no_interpolation.
+    #[arg(long, value_delimiter = ',')]
+    variants: Vec<String>,
+    /// Generators, comma-separated: classical, truth-none, truth-low, truth-high
+    /// (default: quick classical,truth-low; paper all four).
+    #[arg(long, value_delimiter = ',')]
+    generators: Vec<String>,
+    /// Seeds 0..K (default: quick 1, paper 3).
+    #[arg(long)]
+    seeds: Option<u32>,
+    /// Training iterations of the original scene (default: quick 1500, paper 30000).
+    #[arg(long)]
+    train_iterations: Option<u32>,
+    /// Run one job alone (`original/seed-K` or `runs/<generator>/<variant>/seed-K`, as
+    /// `--list` prints them): a batch engine's worker. Finish with a run without it.
+    #[arg(long)]
+    only: Option<String>,
+    /// Print the jobs and exit.
+    #[arg(long)]
+    list: bool,
+    /// Worker threads (default: all cores); results are the same bits for any count.
+    #[arg(long)]
+    threads: Option<usize>,
+}
+
+/// `unseen audit`: every job (or one), then the report.
+pub fn run_audit(a: &AuditArgs) -> Result<()> {
+    use unseen::pipeline::audit::{self, AuditConfig, GeneratorKind, Variant};
+    let mut cfg = AuditConfig::preset(match a.preset {
+        Preset::Quick => "quick",
+        Preset::Paper => "paper",
+    })?;
+    if !a.variants.is_empty() {
+        cfg.variants = a
+            .variants
+            .iter()
+            .map(|v| Variant::by_name(v))
+            .collect::<Result<_>>()?;
+    }
+    if !a.generators.is_empty() {
+        cfg.generators = a
+            .generators
+            .iter()
+            .map(|g| GeneratorKind::by_name(g))
+            .collect::<Result<_>>()?;
+    }
+    if let Some(k) = a.seeds {
+        cfg.seeds = k;
+    }
+    if let Some(n) = a.train_iterations {
+        cfg.train_iterations = n;
+    }
+    cfg.validate()?;
+    let jobs = audit::jobs(&cfg);
+    if a.list {
+        for j in &jobs {
+            println!("{}", j.name());
+        }
+        return Ok(());
+    }
+    let draw = super::progress::drawer();
+    if let Some(only) = &a.only {
+        let job = jobs
+            .iter()
+            .find(|j| &j.name() == only)
+            .ok_or_else(|| Error::invalid(format!("no job '{only}' in this audit (see --list)")))?;
+        with_threads(a.threads, || {
+            audit::run_job(&cfg, &a.dataset, &a.out, job, &draw)
+        })??;
+        println!("done: {only}");
+        return Ok(());
+    }
+    let report = with_threads(a.threads, || audit::run(&cfg, &a.dataset, &a.out, &draw))??;
+    for v in &report.verdicts {
+        println!(
+            "{:<42} {:<11} {:+6.2} dB  {}",
+            v.claim, v.generator, v.mean_diff, v.verdict
+        );
+    }
+    println!("audit: report in {}", a.out.join("audit.md").display());
+    Ok(())
+}

@@ -1,0 +1,932 @@
+//! `unseen audit` (SPEC.md §21): the paper's claims checked on a dataset with ground truth.
+//!
+//! Every variant of the paper's ablations (Tables 3 and 4) runs as a whole pipeline from
+//! the same original scene, under several generators: the classical slots and the
+//! ground-truth generator at controlled inconsistency levels (the x-axis of the paper's
+//! mechanism claims: QA-Mask protects existing regions from *inconsistent* generated
+//! content; independent views avoid *conflicting* content). Each (generator, variant, seed)
+//! is one job with its own run directory; all jobs share one step cache
+//! ([`super::RunOptions::cache`]), so a step whose inputs several variants share (the
+//! views, the per-view generation, a QA-Mask of a given degree) is computed once.
+//!
+//! A claim "A beats B" is tested on the per-seed paired differences `d = A − B`: it
+//! *holds* when `mean(d) > 2·std(d)`, *does not hold* when `mean(d) < −2·std(d)`, and is
+//! *within noise* otherwise; with one seed there is no noise estimate and only the
+//! direction is reported. A claim "A does not hurt B's metric" holds unless
+//! `mean(d) < −2·std(d)`.
+
+use super::evaluate::{Row, Summary};
+use super::{Event, Inconsistency, MaskSource, PipelineConfig, RunOptions, SlotNames};
+use crate::error::{Error, Result};
+use crate::train::run::{latest_ply, read_config, train_run};
+use crate::train::trainer::TrainConfig;
+use std::path::{Path, PathBuf};
+
+/// One ablation of the paper (or the full method).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Variant {
+    Full,
+    /// Uniform weights on generated views ("w/o QA-Mask").
+    NoQaMask,
+    /// `1 − alpha` of the scene being updated instead of the QA-Mask (Table 3's baseline).
+    OpacityMask,
+    /// The same number of views, evenly spaced along the candidate list ("w/o Idpdt Cam
+    /// Detection").
+    EvenViews,
+    NoDepthSupervision,
+    NoPropagation,
+    QaSh3,
+    QaSh4,
+    NoInterpolation,
+}
+
+impl Variant {
+    pub const ALL: [Variant; 9] = [
+        Variant::Full,
+        Variant::NoQaMask,
+        Variant::OpacityMask,
+        Variant::EvenViews,
+        Variant::NoDepthSupervision,
+        Variant::NoPropagation,
+        Variant::QaSh3,
+        Variant::QaSh4,
+        Variant::NoInterpolation,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Variant::Full => "full",
+            Variant::NoQaMask => "no_qa_mask",
+            Variant::OpacityMask => "opacity_mask",
+            Variant::EvenViews => "even_views",
+            Variant::NoDepthSupervision => "no_depth_supervision",
+            Variant::NoPropagation => "no_propagation",
+            Variant::QaSh3 => "qa_sh3",
+            Variant::QaSh4 => "qa_sh4",
+            Variant::NoInterpolation => "no_interpolation",
+        }
+    }
+
+    pub fn by_name(name: &str) -> Result<Variant> {
+        Variant::ALL
+            .into_iter()
+            .find(|v| v.name() == name)
+            .ok_or_else(|| {
+                Error::invalid(format!(
+                    "unknown variant '{name}' ({})",
+                    Variant::ALL.map(|v| v.name()).join(", ")
+                ))
+            })
+    }
+
+    /// The variant's switch on top of the preset.
+    pub fn apply(self, c: &mut PipelineConfig) {
+        match self {
+            Variant::Full => {}
+            Variant::NoQaMask => c.mask_source = MaskSource::None,
+            Variant::OpacityMask => c.mask_source = MaskSource::Opacity,
+            Variant::EvenViews => c.independent_detection = false,
+            Variant::NoDepthSupervision => c.depth_supervision = false,
+            Variant::NoPropagation => c.propagation = false,
+            Variant::QaSh3 => c.qa_sh_degree = 3,
+            Variant::QaSh4 => c.qa_sh_degree = 4,
+            Variant::NoInterpolation => c.interpolation = false,
+        }
+    }
+}
+
+/// Which generators fill the slots of a job.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum GeneratorKind {
+    /// The deterministic classical slots (Telea, depth-fill, morph).
+    Classical,
+    /// The labelled ground-truth generator at a named inconsistency level.
+    Truth(&'static str),
+}
+
+impl GeneratorKind {
+    pub fn name(self) -> String {
+        match self {
+            GeneratorKind::Classical => "classical".into(),
+            GeneratorKind::Truth(level) => format!("truth-{level}"),
+        }
+    }
+
+    /// `classical`, `truth-none`, `truth-low`, `truth-high`.
+    pub fn by_name(name: &str) -> Result<GeneratorKind> {
+        match name {
+            "classical" => Ok(GeneratorKind::Classical),
+            "truth-none" => Ok(GeneratorKind::Truth("none")),
+            "truth-low" => Ok(GeneratorKind::Truth("low")),
+            "truth-high" => Ok(GeneratorKind::Truth("high")),
+            _ => Err(Error::invalid(format!(
+                "unknown generator '{name}' (classical, truth-none, truth-low, truth-high)"
+            ))),
+        }
+    }
+
+    fn apply(self, c: &mut PipelineConfig) -> Result<()> {
+        match self {
+            GeneratorKind::Classical => {
+                c.slots = SlotNames::default();
+                c.inconsistency = Inconsistency::NONE;
+            }
+            GeneratorKind::Truth(level) => {
+                c.slots = SlotNames::truth();
+                c.inconsistency = Inconsistency::by_name(level)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Position on the inconsistency axis (classical: none).
+    fn level(self) -> Option<usize> {
+        match self {
+            GeneratorKind::Classical => None,
+            GeneratorKind::Truth(l) => ["none", "low", "high"].iter().position(|&x| x == l),
+        }
+    }
+}
+
+/// What an audit runs.
+#[derive(Clone, Debug)]
+pub struct AuditConfig {
+    /// The pipeline configuration every job starts from (a preset), before its
+    /// generator, variant and seed are applied.
+    pub base: PipelineConfig,
+    pub variants: Vec<Variant>,
+    pub generators: Vec<GeneratorKind>,
+    /// Seeds `0..seeds` (original scene and pipeline alike).
+    pub seeds: u32,
+    /// Training of the original scene on the dataset's training half.
+    pub train_iterations: u32,
+    pub train_resolution: u32,
+}
+
+impl AuditConfig {
+    /// One seed, every variant, the classical slots and the ground-truth generator at the
+    /// low inconsistency level; the original scene as the demo trains it.
+    pub fn quick() -> AuditConfig {
+        AuditConfig {
+            base: PipelineConfig::quick(),
+            variants: Variant::ALL.to_vec(),
+            generators: vec![GeneratorKind::Classical, GeneratorKind::Truth("low")],
+            seeds: 1,
+            train_iterations: 1500,
+            train_resolution: 2,
+        }
+    }
+
+    /// Three seeds, every variant, the classical slots and the ground-truth generator at
+    /// every level, the paper's pipeline settings and INRIA's 30 000 training iterations.
+    pub fn paper() -> AuditConfig {
+        AuditConfig {
+            base: PipelineConfig::paper(),
+            variants: Variant::ALL.to_vec(),
+            generators: vec![
+                GeneratorKind::Classical,
+                GeneratorKind::Truth("none"),
+                GeneratorKind::Truth("low"),
+                GeneratorKind::Truth("high"),
+            ],
+            seeds: 3,
+            train_iterations: 30_000,
+            train_resolution: 1,
+        }
+    }
+
+    pub fn preset(name: &str) -> Result<AuditConfig> {
+        match name {
+            "quick" => Ok(Self::quick()),
+            "paper" => Ok(Self::paper()),
+            _ => Err(Error::invalid(format!(
+                "unknown preset '{name}' (quick or paper)"
+            ))),
+        }
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        if self.variants.is_empty() || self.generators.is_empty() || self.seeds == 0 {
+            return Err(Error::invalid(
+                "an audit needs at least one variant, one generator and one seed",
+            ));
+        }
+        if !self.variants.contains(&Variant::Full) {
+            return Err(Error::invalid(
+                "every claim compares against the full method: include the variant 'full'",
+            ));
+        }
+        Ok(())
+    }
+
+    /// The pipeline configuration of one job.
+    pub fn pipeline_config(
+        &self,
+        generator: GeneratorKind,
+        variant: Variant,
+        seed: u32,
+    ) -> Result<PipelineConfig> {
+        let mut c = self.base.clone();
+        c.seed = seed as u64;
+        generator.apply(&mut c)?;
+        variant.apply(&mut c);
+        Ok(c)
+    }
+
+    fn train_config(&self, seed: u32) -> TrainConfig {
+        TrainConfig {
+            iterations: self.train_iterations,
+            resolution: self.train_resolution,
+            seed: seed as u64,
+            save_iterations: vec![],
+            ..TrainConfig::default()
+        }
+    }
+}
+
+/// One job of an audit: the original scene of a seed, or a pipeline run.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Job {
+    Original {
+        seed: u32,
+    },
+    Run {
+        generator: GeneratorKind,
+        variant: Variant,
+        seed: u32,
+    },
+}
+
+impl Job {
+    /// The job's folder under the audit directory, also its name on the command line:
+    /// `original/seed-K` or `runs/<generator>/<variant>/seed-K`.
+    pub fn name(&self) -> String {
+        match self {
+            Job::Original { seed } => format!("original/seed-{seed}"),
+            Job::Run {
+                generator,
+                variant,
+                seed,
+            } => format!("runs/{}/{}/seed-{seed}", generator.name(), variant.name()),
+        }
+    }
+}
+
+/// Every job of `cfg`, originals first (a run needs its seed's original scene).
+pub fn jobs(cfg: &AuditConfig) -> Vec<Job> {
+    let mut v: Vec<Job> = (0..cfg.seeds).map(|seed| Job::Original { seed }).collect();
+    for seed in 0..cfg.seeds {
+        for &generator in &cfg.generators {
+            for &variant in &cfg.variants {
+                v.push(Job::Run {
+                    generator,
+                    variant,
+                    seed,
+                });
+            }
+        }
+    }
+    v
+}
+
+/// The measured outcome of one pipeline job.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct JobResult {
+    pub generator: String,
+    pub variant: String,
+    pub seed: u32,
+    /// The original scene's metrics on the evaluation poses.
+    pub original: Row,
+    /// The final scene's (the last stage the variant runs).
+    pub last: Row,
+    /// Per stage (`views`, `stage1`, `stage2`, `interpolate`, `eval`): seconds of the steps
+    /// as they were computed (a step copied from the cache counts what it cost there).
+    pub stage_seconds: std::collections::BTreeMap<String, f64>,
+}
+
+/// Run (or verify) one job. Originals are trained once per seed and reused; a pipeline job
+/// continues its run directory (verified steps are skipped) and shares `DIR/cache`.
+pub fn run_job(
+    cfg: &AuditConfig,
+    dataset: &Path,
+    dir: &Path,
+    job: &Job,
+    on_event: &(dyn Fn(Event) + Sync),
+) -> Result<Option<JobResult>> {
+    cfg.validate()?;
+    on_event(Event::Stage { name: job.name() });
+    match *job {
+        Job::Original { seed } => {
+            original(cfg, dataset, dir, seed, on_event)?;
+            Ok(None)
+        }
+        Job::Run {
+            generator,
+            variant,
+            seed,
+        } => {
+            let run = dir.join(Job::Original { seed }.name());
+            if !original_done(cfg, &run, seed) {
+                return Err(Error::invalid(format!(
+                    "job {} needs the original scene of seed {seed}: run the job {} first",
+                    job.name(),
+                    Job::Original { seed }.name()
+                ))
+                .at(dir));
+            }
+            let inputs = super::load_inputs(
+                &run,
+                &dataset.join("candidates.json"),
+                Some(&dataset.join("evaluation.json")),
+                Some(dataset),
+            )?;
+            let pc = cfg.pipeline_config(generator, variant, seed)?;
+            let out = dir.join(job.name());
+            let opts = RunOptions {
+                resume: out.is_dir(),
+                cache: Some(dir.join("cache")),
+                ..RunOptions::default()
+            };
+            let outcome = super::run_with(&pc, &inputs, &out, &opts, on_event)?;
+            let summary: Summary = outcome.metrics.ok_or_else(|| {
+                Error::invalid("the dataset has no evaluation poses (evaluation.json)").at(dataset)
+            })?;
+            let (first, last) = match (summary.rows.first(), summary.rows.last()) {
+                (Some(f), Some(l)) => (f.clone(), l.clone()),
+                _ => return Err(Error::invalid("the run evaluated no scene").at(&out)),
+            };
+            let mut stage_seconds = std::collections::BTreeMap::new();
+            for step in &outcome.steps {
+                let t = std::fs::read(step.dir.join(super::rundir::TIMING_FILE))
+                    .ok()
+                    .and_then(|b| serde_json::from_slice::<crate::io::Cost>(&b).ok());
+                let stage = step.name.split('/').next().unwrap_or("").to_string();
+                let stage = if stage == "qa" {
+                    "qa-mask".to_string()
+                } else {
+                    stage
+                };
+                *stage_seconds.entry(stage).or_insert(0.0) += t.map_or(0.0, |c| c.seconds);
+            }
+            let result = JobResult {
+                generator: generator.name(),
+                variant: variant.name().into(),
+                seed,
+                original: first,
+                last,
+                stage_seconds,
+            };
+            let text = serde_json::to_string_pretty(&result).expect("serializes") + "\n";
+            crate::io::write_text(&out.join("audit_job.json"), &text)?;
+            Ok(Some(result))
+        }
+    }
+}
+
+fn original_done(cfg: &AuditConfig, run: &Path, seed: u32) -> bool {
+    run.join("manifest.json").is_file()
+        && latest_ply(run).is_ok()
+        && read_config(run).is_ok_and(|c| c == cfg.train_config(seed))
+}
+
+fn original(
+    cfg: &AuditConfig,
+    dataset: &Path,
+    dir: &Path,
+    seed: u32,
+    on_event: &(dyn Fn(Event) + Sync),
+) -> Result<PathBuf> {
+    let run = dir.join(Job::Original { seed }.name());
+    if original_done(cfg, &run, seed) {
+        on_event(Event::StepSkipped {
+            step: Job::Original { seed }.name(),
+        });
+        return Ok(run);
+    }
+    if run.exists() {
+        // An interrupted or differently configured training: start it again.
+        std::fs::remove_dir_all(&run).map_err(|e| Error::io(&run, e))?;
+    }
+    let tc = cfg.train_config(seed);
+    let step = Job::Original { seed }.name();
+    on_event(Event::StepStarted { step: step.clone() });
+    let t0 = std::time::Instant::now();
+    train_run(dataset, &run, &tc, None, &mut |p| {
+        if p.iteration % 50 == 0 || p.iteration == tc.iterations {
+            on_event(Event::Iterations {
+                step: step.clone(),
+                done: p.iteration,
+                total: tc.iterations,
+                loss: p.loss,
+            });
+        }
+    })?;
+    on_event(Event::StepFinished {
+        step,
+        seconds: t0.elapsed().as_secs_f64(),
+    });
+    Ok(run)
+}
+
+/// The metric a claim compares (on the evaluation poses, final scene of each variant).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Metric {
+    PsnrAll,
+    PsnrExisting,
+    PsnrExtrapolated,
+}
+
+impl Metric {
+    fn of(self, r: &Row) -> f64 {
+        match self {
+            Metric::PsnrAll => r.psnr_all,
+            Metric::PsnrExisting => r.psnr_existing,
+            Metric::PsnrExtrapolated => r.psnr_extrapolated,
+        }
+    }
+
+    fn label(self) -> &'static str {
+        match self {
+            Metric::PsnrAll => "PSNR all",
+            Metric::PsnrExisting => "PSNR existing",
+            Metric::PsnrExtrapolated => "PSNR extrapolated",
+        }
+    }
+}
+
+/// How a claim compares the full method with a variant.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Direction {
+    /// The full method is better.
+    Beats,
+    /// The full method is not worse.
+    DoesNotHurt,
+}
+
+/// A claim of the paper: the full method against one variant on one metric.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct Claim {
+    pub id: &'static str,
+    pub variant: Variant,
+    pub metric: Metric,
+    pub direction: Direction,
+    /// What the paper reports (and where).
+    pub paper: &'static str,
+}
+
+/// The claims the audit tests (SPEC.md §21.2).
+pub const CLAIMS: [Claim; 11] = [
+    Claim {
+        id: "independent views",
+        variant: Variant::EvenViews,
+        metric: Metric::PsnrAll,
+        direction: Direction::Beats,
+        paper: "Table 4, ScanNet++ PSNR: 23.79 vs 20.27 (−3.52 dB)",
+    },
+    Claim {
+        id: "depth supervision",
+        variant: Variant::NoDepthSupervision,
+        metric: Metric::PsnrAll,
+        direction: Direction::Beats,
+        paper: "Table 4, ScanNet++ PSNR: 23.79 vs 23.66 (−0.13 dB)",
+    },
+    Claim {
+        id: "QA-Mask SH 5 over SH 3",
+        variant: Variant::QaSh3,
+        metric: Metric::PsnrAll,
+        direction: Direction::Beats,
+        paper: "Table 4, ScanNet++ PSNR: 23.79 vs 22.45 (−1.34 dB)",
+    },
+    Claim {
+        id: "QA-Mask SH 5 over SH 4",
+        variant: Variant::QaSh4,
+        metric: Metric::PsnrAll,
+        direction: Direction::Beats,
+        paper: "Table 4, ScanNet++ PSNR: 23.79 vs 23.28 (−0.51 dB)",
+    },
+    Claim {
+        id: "QA-Mask (whole image)",
+        variant: Variant::NoQaMask,
+        metric: Metric::PsnrAll,
+        direction: Direction::Beats,
+        paper: "Table 4, Mip-NeRF 360 CLIP-IQA: 0.404 vs 0.343 (no PSNR given)",
+    },
+    Claim {
+        id: "DIBR propagation",
+        variant: Variant::NoPropagation,
+        metric: Metric::PsnrAll,
+        direction: Direction::Beats,
+        paper: "Table 4, Mip-NeRF 360 CLIP-IQA: 0.404 vs 0.316 (no PSNR given)",
+    },
+    Claim {
+        id: "QA-Mask protects existing regions",
+        variant: Variant::NoQaMask,
+        metric: Metric::PsnrExisting,
+        direction: Direction::Beats,
+        paper: "Table 3, existing PSNR: DiFix3D+ 28.11 → 28.58, GenFusion 26.49 → 28.33",
+    },
+    Claim {
+        id: "QA-Mask does not hurt extrapolation",
+        variant: Variant::NoQaMask,
+        metric: Metric::PsnrExtrapolated,
+        direction: Direction::DoesNotHurt,
+        paper: "Table 3, extrapolated PSNR: DiFix3D+ 10.23 → 10.20, GenFusion 15.04 → 15.10",
+    },
+    Claim {
+        id: "QA-Mask over opacity maps, existing",
+        variant: Variant::OpacityMask,
+        metric: Metric::PsnrExisting,
+        direction: Direction::Beats,
+        paper: "Table 3, existing PSNR: DiFix3D+ 28.15 → 28.58, GenFusion 28.03 → 28.33",
+    },
+    Claim {
+        id: "QA-Mask over opacity maps, extrapolated",
+        variant: Variant::OpacityMask,
+        metric: Metric::PsnrExtrapolated,
+        direction: Direction::DoesNotHurt,
+        paper: "Table 3, extrapolated PSNR: DiFix3D+ 10.17 → 10.20, GenFusion 15.04 → 15.10",
+    },
+    Claim {
+        id: "interpolation stage",
+        variant: Variant::NoInterpolation,
+        metric: Metric::PsnrAll,
+        direction: Direction::Beats,
+        paper: "§3.3.3 (design; no ablation number)",
+    },
+];
+
+/// A claim tested under one generator.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Verdict {
+    pub claim: &'static str,
+    pub generator: String,
+    pub metric: Metric,
+    pub direction: Direction,
+    pub paper: &'static str,
+    /// Seeds with both runs.
+    pub seeds: usize,
+    /// Mean and sample standard deviation of `full − variant` over the seeds (std is NaN,
+    /// `null` in JSON, with one seed).
+    pub mean_diff: f64,
+    #[serde(with = "super::evaluate::nan_null")]
+    pub std_diff: f64,
+    /// `holds`, `does not hold`, `within noise`, or with one seed `agrees (1 seed)` /
+    /// `disagrees (1 seed)`.
+    pub verdict: String,
+}
+
+/// Mean and sample standard deviation (NaN for fewer than 2 values).
+fn mean_std(v: &[f64]) -> (f64, f64) {
+    let n = v.len() as f64;
+    let m = v.iter().sum::<f64>() / n;
+    if v.len() < 2 {
+        return (m, f64::NAN);
+    }
+    let var = v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (n - 1.0);
+    (m, var.sqrt())
+}
+
+/// The verdict of `d = full − variant` from its mean and sample std over `seeds` seeds
+/// (SPEC.md §21.2).
+pub fn verdict(direction: Direction, mean: f64, std: f64, seeds: usize) -> String {
+    if seeds < 2 {
+        let agrees = match direction {
+            Direction::Beats => mean > 0.0,
+            Direction::DoesNotHurt => mean >= 0.0,
+        };
+        return if agrees {
+            "agrees (1 seed)"
+        } else {
+            "disagrees (1 seed)"
+        }
+        .into();
+    }
+    let (above, below) = (mean > 2.0 * std, mean < -2.0 * std);
+    match direction {
+        Direction::Beats if above => "holds",
+        Direction::Beats if below => "does not hold",
+        Direction::Beats => "within noise",
+        Direction::DoesNotHurt if below => "does not hold",
+        Direction::DoesNotHurt => "holds",
+    }
+    .into()
+}
+
+/// Every claim whose variant was run, per generator.
+pub fn verdicts(cfg: &AuditConfig, results: &[JobResult]) -> Vec<Verdict> {
+    let find = |g: &str, v: Variant, seed: u32| {
+        results
+            .iter()
+            .find(|r| r.generator == g && r.variant == v.name() && r.seed == seed)
+    };
+    let mut out = Vec::new();
+    for claim in CLAIMS {
+        if !cfg.variants.contains(&claim.variant) {
+            continue;
+        }
+        for g in &cfg.generators {
+            let g = g.name();
+            let d: Vec<f64> = (0..cfg.seeds)
+                .filter_map(|s| {
+                    let (a, b) = (find(&g, Variant::Full, s)?, find(&g, claim.variant, s)?);
+                    let d = claim.metric.of(&a.last) - claim.metric.of(&b.last);
+                    d.is_finite().then_some(d)
+                })
+                .collect();
+            if d.is_empty() {
+                continue;
+            }
+            let (mean, std) = mean_std(&d);
+            out.push(Verdict {
+                claim: claim.id,
+                generator: g,
+                metric: claim.metric,
+                direction: claim.direction,
+                paper: claim.paper,
+                seeds: d.len(),
+                mean_diff: mean,
+                std_diff: std,
+                verdict: verdict(claim.direction, mean, std, d.len()),
+            });
+        }
+    }
+    out
+}
+
+/// What `audit.json` holds.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Report {
+    pub dataset: String,
+    pub preset: String,
+    pub seeds: u32,
+    pub generators: Vec<String>,
+    pub variants: Vec<String>,
+    pub train_iterations: u32,
+    pub train_resolution: u32,
+    pub results: Vec<JobResult>,
+    pub verdicts: Vec<Verdict>,
+}
+
+/// Run every job of `cfg` that is not done (each resumes its own folder), then write
+/// `DIR/audit.json`, `DIR/audit.md` and `DIR/inconsistency.svg`.
+pub fn run(
+    cfg: &AuditConfig,
+    dataset: &Path,
+    dir: &Path,
+    on_event: &(dyn Fn(Event) + Sync),
+) -> Result<Report> {
+    cfg.validate()?;
+    if dir.is_file() {
+        return Err(Error::invalid("the output path is a file").at(dir));
+    }
+    for f in ["candidates.json", "evaluation.json"] {
+        if !dataset.join(f).is_file() {
+            return Err(Error::invalid(format!(
+                "an audit needs {f} (candidate and evaluation poses with ground truth)"
+            ))
+            .at(dataset));
+        }
+    }
+    crate::io::create_dir_all(dir)?;
+    let mut results = Vec::new();
+    for job in jobs(cfg) {
+        if let Some(r) = run_job(cfg, dataset, dir, &job, on_event)? {
+            results.push(r);
+        }
+    }
+    let report = Report {
+        dataset: dataset.display().to_string(),
+        preset: cfg.base.preset.clone(),
+        seeds: cfg.seeds,
+        generators: cfg.generators.iter().map(|g| g.name()).collect(),
+        variants: cfg.variants.iter().map(|v| v.name().to_string()).collect(),
+        train_iterations: cfg.train_iterations,
+        train_resolution: cfg.train_resolution,
+        verdicts: verdicts(cfg, &results),
+        results,
+    };
+    let json = serde_json::to_string_pretty(&report).expect("serializes") + "\n";
+    crate::io::write_text(&dir.join("audit.json"), &json)?;
+    crate::io::write_text(&dir.join("inconsistency.svg"), &plot(cfg, &report.results))?;
+    crate::io::write_text(&dir.join("audit.md"), &markdown(cfg, &report))?;
+    Ok(report)
+}
+
+/// `mean ± std` over the seeds of one (generator, variant), or `mean` with one seed.
+fn stat(results: &[&JobResult], f: impl Fn(&JobResult) -> f64, digits: usize) -> String {
+    let v: Vec<f64> = results.iter().map(|r| f(r)).collect();
+    let (m, s) = mean_std(&v);
+    if s.is_nan() {
+        format!("{m:.digits$}")
+    } else {
+        format!("{m:.digits$} ± {s:.digits$}")
+    }
+}
+
+/// `audit.md`.
+pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
+    let mut s = format!(
+        "# Audit of the paper's claims\n\nDataset `{}`; preset `{}`; seeds {}; original scene: {} iterations at resolution 1/{} on the training half. Metrics on the evaluation poses, pixels split into *existing* (seen by the training half) and *extrapolated*; mean ± sample std over seeds. Made by `unseen audit` (SPEC.md §21).\n\n",
+        report.dataset,
+        report.preset,
+        report.seeds,
+        report.train_iterations,
+        report.train_resolution
+    );
+    s += "## Claims\n\nΔ = full − variant, in dB. A claim *holds* where Δ exceeds 2 std of its per-seed values in the claimed direction, *does not hold* where it exceeds 2 std the other way, and is *within noise* otherwise; with one seed only the direction is given. The paper's numbers are from ScanNet++ / Mip-NeRF 360 with diffusion generators: compare directions, not values.\n\n| claim | metric | paper | generator | Δ (dB) | verdict |\n|---|---|---|---|---|---|\n";
+    for v in &report.verdicts {
+        let d = if v.std_diff.is_nan() {
+            format!("{:+.2}", v.mean_diff)
+        } else {
+            format!("{:+.2} ± {:.2}", v.mean_diff, v.std_diff)
+        };
+        s += &format!(
+            "| {} | {} | {} | {} | {} | **{}** |\n",
+            v.claim,
+            v.metric.label(),
+            v.paper,
+            v.generator,
+            d,
+            v.verdict
+        );
+    }
+    s += "\n## Every variant\n\n| generator | variant | PSNR existing | PSNR extrapolated | PSNR all | SSIM existing | SSIM extrapolated | train-half PSNR | compute (s) |\n|---|---|---|---|---|---|---|---|---|\n";
+    for g in &cfg.generators {
+        let g = g.name();
+        let group: Vec<&JobResult> = report
+            .results
+            .iter()
+            .filter(|r| r.generator == g && r.variant == Variant::Full.name())
+            .collect();
+        if !group.is_empty() {
+            s += &format!(
+                "| {g} | *original scene* | {} | {} | {} | {} | {} | {} | |\n",
+                stat(&group, |r| r.original.psnr_existing, 2),
+                stat(&group, |r| r.original.psnr_extrapolated, 2),
+                stat(&group, |r| r.original.psnr_all, 2),
+                stat(&group, |r| r.original.ssim_existing, 4),
+                stat(&group, |r| r.original.ssim_extrapolated, 4),
+                stat(&group, |r| r.original.psnr_train_half, 2),
+            );
+        }
+        for v in &cfg.variants {
+            let group: Vec<&JobResult> = report
+                .results
+                .iter()
+                .filter(|r| r.generator == g && r.variant == v.name())
+                .collect();
+            if group.is_empty() {
+                continue;
+            }
+            s += &format!(
+                "| {g} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                v.name(),
+                stat(&group, |r| r.last.psnr_existing, 2),
+                stat(&group, |r| r.last.psnr_extrapolated, 2),
+                stat(&group, |r| r.last.psnr_all, 2),
+                stat(&group, |r| r.last.ssim_existing, 4),
+                stat(&group, |r| r.last.ssim_extrapolated, 4),
+                stat(&group, |r| r.last.psnr_train_half, 2),
+                stat(&group, |r| r.stage_seconds.values().sum(), 0),
+            );
+        }
+    }
+    s += "\n*compute*: the seconds each step took where it was computed; steps shared through the cache are counted in every variant that uses them.\n\n![PSNR against the generator's inconsistency](inconsistency.svg)\n";
+    s
+}
+
+/// Existing and extrapolated PSNR of full / w/o QA-Mask / opacity mask against the
+/// ground-truth generator's inconsistency level (mean over seeds), as an SVG.
+pub fn plot(cfg: &AuditConfig, results: &[JobResult]) -> String {
+    let levels = ["none", "low", "high"];
+    let series = [
+        (Variant::Full, "#1f77b4"),
+        (Variant::NoQaMask, "#d62728"),
+        (Variant::OpacityMask, "#2ca02c"),
+    ];
+    let truth: Vec<GeneratorKind> = cfg
+        .generators
+        .iter()
+        .copied()
+        .filter(|g| g.level().is_some())
+        .collect();
+    // Mean and std over seeds of one (generator, variant, metric).
+    let point = |g: GeneratorKind, v: Variant, m: Metric| {
+        let vals: Vec<f64> = results
+            .iter()
+            .filter(|r| r.generator == g.name() && r.variant == v.name())
+            .map(|r| m.of(&r.last))
+            .filter(|x| x.is_finite())
+            .collect();
+        (!vals.is_empty()).then(|| mean_std(&vals))
+    };
+    let panels = [Metric::PsnrExisting, Metric::PsnrExtrapolated];
+    let mut all = Vec::new();
+    for m in panels {
+        for (v, _) in series {
+            for &g in &truth {
+                if let Some((y, sd)) = point(g, v, m) {
+                    let sd = if sd.is_nan() { 0.0 } else { sd };
+                    all.extend([y - sd, y + sd]);
+                }
+            }
+        }
+    }
+    let (lo, hi) = if all.is_empty() {
+        (0.0, 1.0)
+    } else {
+        let lo = all.iter().cloned().fold(f64::INFINITY, f64::min);
+        let hi = all.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+        ((lo - 1.0).floor(), (hi + 1.0).ceil())
+    };
+    let (pw, ph, left, top) = (300.0, 220.0, 60.0, 40.0);
+    let x_of = |i: usize| left + 30.0 + i as f64 * (pw - 60.0) / 2.0;
+    let y_of = |v: f64| top + ph - (v - lo) / (hi - lo) * ph;
+    let mut svg = format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{}\" height=\"{}\" font-family=\"sans-serif\" font-size=\"12\">\n",
+        2.0 * (pw + left) + 40.0,
+        ph + top + 90.0
+    );
+    for (k, m) in panels.iter().enumerate() {
+        let dx = k as f64 * (pw + left + 20.0);
+        svg += &format!("<g transform=\"translate({dx},0)\">\n");
+        svg += &format!(
+            "<text x=\"{}\" y=\"20\" text-anchor=\"middle\">{} (dB)</text>\n",
+            left + pw / 2.0,
+            m.label()
+        );
+        svg += &format!(
+            "<rect x=\"{left}\" y=\"{top}\" width=\"{pw}\" height=\"{ph}\" fill=\"none\" stroke=\"#888\"/>\n"
+        );
+        let step = if hi - lo > 10.0 { 2.0 } else { 1.0 };
+        let mut t = lo;
+        while t <= hi + 1e-9 {
+            svg += &format!(
+                "<text x=\"{}\" y=\"{}\" text-anchor=\"end\">{t:.0}</text>\n",
+                left - 5.0,
+                y_of(t) + 4.0
+            );
+            t += step;
+        }
+        for (i, l) in levels.iter().enumerate() {
+            svg += &format!(
+                "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{l}</text>\n",
+                x_of(i),
+                top + ph + 18.0
+            );
+        }
+        // Series side by side around each level (offset 8 px), ±1 std as a bar.
+        for (j, (v, color)) in series.iter().enumerate() {
+            let dx = (j as f64 - 1.0) * 8.0;
+            let pts: Vec<(f64, f64, f64)> = truth
+                .iter()
+                .filter_map(|&g| {
+                    let (y, sd) = point(g, *v, *m)?;
+                    Some((x_of(g.level()?) + dx, y, if sd.is_nan() { 0.0 } else { sd }))
+                })
+                .collect();
+            if pts.len() > 1 {
+                let path: Vec<String> = pts
+                    .iter()
+                    .map(|(x, y, _)| format!("{x:.1},{:.1}", y_of(*y)))
+                    .collect();
+                svg += &format!(
+                    "<polyline points=\"{}\" fill=\"none\" stroke=\"{color}\" stroke-width=\"2\"/>\n",
+                    path.join(" ")
+                );
+            }
+            for (x, y, sd) in pts {
+                if sd > 0.0 {
+                    svg += &format!(
+                        "<line x1=\"{x:.1}\" x2=\"{x:.1}\" y1=\"{:.1}\" y2=\"{:.1}\" stroke=\"{color}\"/>\n",
+                        y_of(y - sd),
+                        y_of(y + sd)
+                    );
+                }
+                svg += &format!(
+                    "<circle cx=\"{x:.1}\" cy=\"{:.1}\" r=\"4\" fill=\"{color}\"/>\n",
+                    y_of(y)
+                );
+            }
+        }
+        svg += "</g>\n";
+    }
+    for (i, (v, color)) in series.iter().enumerate() {
+        let x = left + i as f64 * 170.0;
+        let y = top + ph + 50.0;
+        svg += &format!(
+            "<rect x=\"{x}\" y=\"{}\" width=\"12\" height=\"12\" fill=\"{color}\"/><text x=\"{}\" y=\"{y}\">{}</text>\n",
+            y - 10.0,
+            x + 18.0,
+            v.name()
+        );
+    }
+    svg += &format!(
+        "<text x=\"{left}\" y=\"{}\">x: the ground-truth generator's inconsistency level (SPEC.md §20.6); mean ± 1 std over seeds</text>\n</svg>\n",
+        top + ph + 75.0
+    );
+    svg
+}
