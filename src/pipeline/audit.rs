@@ -196,14 +196,15 @@ impl AuditConfig {
         }
     }
 
+    /// `quick` or `paper` (the pipeline preset of the same name, and the grid above).
     pub fn preset(name: &str) -> Result<AuditConfig> {
-        match name {
-            "quick" => Ok(Self::quick()),
-            "paper" => Ok(Self::paper()),
-            _ => Err(Error::invalid(format!(
-                "unknown preset '{name}' (quick or paper)"
-            ))),
-        }
+        let base = PipelineConfig::preset(name)?;
+        let grid = if name == "paper" {
+            Self::paper()
+        } else {
+            Self::quick()
+        };
+        Ok(AuditConfig { base, ..grid })
     }
 
     pub fn validate(&self) -> Result<()> {
@@ -561,11 +562,9 @@ pub const CLAIMS: [Claim; 11] = [
 /// A claim tested under one generator.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Verdict {
-    pub claim: &'static str,
+    #[serde(flatten)]
+    pub claim: Claim,
     pub generator: String,
-    pub metric: Metric,
-    pub direction: Direction,
-    pub paper: &'static str,
     /// Seeds with both runs.
     pub seeds: usize,
     /// Mean and sample standard deviation of `full − variant` over the seeds (std is NaN,
@@ -641,11 +640,8 @@ pub fn verdicts(cfg: &AuditConfig, results: &[JobResult]) -> Vec<Verdict> {
             }
             let (mean, std) = mean_std(&d);
             out.push(Verdict {
-                claim: claim.id,
+                claim,
                 generator: g,
-                metric: claim.metric,
-                direction: claim.direction,
-                paper: claim.paper,
                 seeds: d.len(),
                 mean_diff: mean,
                 std_diff: std,
@@ -745,9 +741,9 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
         };
         s += &format!(
             "| {} | {} | {} | {} | {} | **{}** |\n",
-            v.claim,
-            v.metric.label(),
-            v.paper,
+            v.claim.id,
+            v.claim.metric.label(),
+            v.claim.paper,
             v.generator,
             d,
             v.verdict

@@ -129,19 +129,23 @@ impl RunDir {
         let dir = self.root.join(name);
         let inputs = serde_json::json!({ "run": self.base, "step": inputs });
         let inputs_sha256 = inputs_sha256(&inputs);
-        if (self.resume || self.scope != Scope::All)
-            && let Some(digest) = verified(&dir, &inputs_sha256)
-        {
-            on_event(Event::StepSkipped { step: name.into() });
+        // A step already done here (`--resume`, scoped runs) or in the cache.
+        let reuse = |dir: PathBuf, digest: String, event: Event| {
+            on_event(event);
             if is_target {
                 self.finished.store(true, Ordering::SeqCst);
             }
-            return Ok(StepDone {
+            Ok(StepDone {
                 name: name.into(),
                 dir,
                 digest,
                 skipped: true,
-            });
+            })
+        };
+        if (self.resume || self.scope != Scope::All)
+            && let Some(digest) = verified(&dir, &inputs_sha256)
+        {
+            return reuse(dir, digest, Event::StepSkipped { step: name.into() });
         }
         if let Some(cached) = self.cache_entry(name, &inputs_sha256)
             && let Some(digest) = verified(&cached, &inputs_sha256)
@@ -153,16 +157,7 @@ impl RunDir {
             // The copy is checked like any step on disk (a cache entry changed while it
             // was being copied is not used).
             if verified(&dir, &inputs_sha256).as_ref() == Some(&digest) {
-                on_event(Event::StepCached { step: name.into() });
-                if is_target {
-                    self.finished.store(true, Ordering::SeqCst);
-                }
-                return Ok(StepDone {
-                    name: name.into(),
-                    dir,
-                    digest,
-                    skipped: true,
-                });
+                return reuse(dir, digest, Event::StepCached { step: name.into() });
             }
         }
         if let Scope::Only(only) = &self.scope

@@ -781,7 +781,7 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
         "each seed's second variant copies the views step: {cached:?}"
     );
     // Claims on the opacity-mask variant only, each with both seeds.
-    let claims: Vec<&str> = report.verdicts.iter().map(|v| v.claim).collect();
+    let claims: Vec<&str> = report.verdicts.iter().map(|v| v.claim.id).collect();
     assert_eq!(
         claims,
         [

@@ -417,7 +417,7 @@ pub fn run_audit(a: &AuditArgs) -> Result<()> {
     for v in &report.verdicts {
         println!(
             "{:<42} {:<11} {:+6.2} dB  {}",
-            v.claim, v.generator, v.mean_diff, v.verdict
+            v.claim.id, v.generator, v.mean_diff, v.verdict
         );
     }
     println!("audit: report in {}", a.out.join("audit.md").display());
