@@ -790,7 +790,46 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
             );
         }
     }
-    s += "\n*compute*: the seconds each step took where it was computed; steps shared through the cache are counted in every variant that uses them.\n\n![PSNR against the generator's inconsistency](inconsistency.svg)\n";
+    s += "\n*compute*: the seconds each step took where it was computed; steps shared through the cache are counted in every variant that uses them.\n\n## Compute per stage (s, mean over seeds)\n\n";
+    let stages = [
+        "views",
+        "qa-mask",
+        "stage1",
+        "stage2",
+        "interpolate",
+        "eval",
+    ];
+    s += &format!(
+        "| generator | variant | {} |\n|---|---|{}\n",
+        stages.join(" | "),
+        "---|".repeat(stages.len())
+    );
+    for g in &cfg.generators {
+        let g = g.name();
+        for v in &cfg.variants {
+            let group: Vec<&JobResult> = report
+                .results
+                .iter()
+                .filter(|r| r.generator == g && r.variant == v.name())
+                .collect();
+            if group.is_empty() {
+                continue;
+            }
+            let cells: Vec<String> = stages
+                .iter()
+                .map(|st| {
+                    let t: f64 = group
+                        .iter()
+                        .map(|r| r.stage_seconds.get(*st).copied().unwrap_or(0.0))
+                        .sum::<f64>()
+                        / group.len() as f64;
+                    format!("{t:.1}")
+                })
+                .collect();
+            s += &format!("| {g} | {} | {} |\n", v.name(), cells.join(" | "));
+        }
+    }
+    s += "\n![PSNR against the generator's inconsistency](inconsistency.svg)\n";
     s
 }
 
