@@ -13,6 +13,7 @@ use super::generators::Generators;
 use super::recon::{self, Refresh, Supervision, reconstruct_refreshing};
 use super::rundir::{RunDir, StepDone};
 use super::stage1::{Stage1, independent_supervision, load_video, video_supervision};
+use super::stage2::made_clips;
 use super::stage2::{Stage2, keyframes, neighbour_pairs};
 use super::views::{Views, render_rgba};
 use super::{Event, Inputs, PipelineConfig, load_image, save_image, stem};
@@ -55,7 +56,8 @@ pub fn run(
             save_image(w, &format!("{}/fixed", stem(&k.camera.name)), &fixed)?;
             cams.push(k.camera.clone());
         }
-        for (p, &(a, b)) in pairs.iter().enumerate() {
+        for p in made_clips(&s2.videos, pairs.len())? {
+            let (a, b) = pairs[p];
             let v = load_video(&s2.videos.dir.join(format!("video_{p}")))?;
             let n = v.cameras.len();
             for j in 1..n.saturating_sub(1) {
@@ -102,7 +104,7 @@ pub fn run(
             let sup = independent_supervision(views.camera(name)?, &s.dir)?;
             generated.extend(sup.into_iter().skip(1));
         }
-        for k in 0..pairs.len() {
+        for k in made_clips(&s2.videos, pairs.len())? {
             generated.extend(video_supervision(
                 &s2.videos.dir.join(format!("video_{k}")),
             )?);
@@ -118,7 +120,8 @@ pub fn run(
         // Where each fixer pose lies (for the truth slot): a keyframe, or frame j of n
         // of the clip between keyframes a and b.
         let mut between: BTreeMap<String, (usize, usize, usize, usize)> = BTreeMap::new();
-        for (p, &(a, b)) in pairs.iter().enumerate() {
+        for p in made_clips(&s2.videos, pairs.len())? {
+            let (a, b) = pairs[p];
             let v = load_video(&s2.videos.dir.join(format!("video_{p}")))?;
             let n = v.cameras.len();
             for (j, c) in v.cameras.iter().enumerate() {

@@ -181,9 +181,12 @@ pub fn run(
         "video_frames": config.video_frames,
     });
     let videos = dir.step("stage2/videos", vkey, on_event, |w| {
+        // A clip the video slot cannot make (`morph` across a turn where an intermediate
+        // camera sees neither end) is recorded and left out, as in stage 1.
+        let (mut made, mut failed) = (Vec::new(), Vec::new());
         for (k, &(a, b)) in pairs.iter().enumerate() {
             let (ka, kb) = (&keys[a], &keys[b]);
-            let v = gens.video(
+            let v = match gens.video(
                 Keyframe {
                     image: &ka.image,
                     camera: &ka.camera,
@@ -195,7 +198,17 @@ pub fn run(
                     depth: Some(&kb.depth),
                 },
                 config.video_frames as usize,
-            )?;
+            ) {
+                Ok(v) => v,
+                Err(e) if e.message.contains(crate::models::morph::NO_VISIBLE_END) => {
+                    failed.push(serde_json::json!({
+                        "pair": [&ka.camera.name, &kb.camera.name],
+                        "error": e.message,
+                    }));
+                    continue;
+                }
+                Err(e) => return Err(e),
+            };
             save_video(
                 w,
                 &format!("video_{k}"),
@@ -203,11 +216,14 @@ pub fn run(
                 &v.cameras,
                 v.depths.as_deref(),
             )?;
+            made.push(k);
         }
         w.json(
             "videos.json",
             &serde_json::json!({
                 "pairs": pairs.iter().map(|&(a, b)| [&keys[a].camera.name, &keys[b].camera.name]).collect::<Vec<_>>(),
+                "made": made,
+                "failed_clips": failed,
             }),
         )?;
         Ok(())
@@ -243,7 +259,7 @@ pub fn run(
                 coverage: None,
             })
             .collect();
-        for k in 0..pairs.len() {
+        for k in made_clips(&videos, pairs.len())? {
             generated.extend(video_supervision(&videos.dir.join(format!("video_{k}")))?);
         }
         reconstruct(
@@ -266,4 +282,23 @@ pub fn run(
         videos,
         recon: recon_step,
     })
+}
+
+/// The indices (into the neighbour pairs) of the clips `stage2/videos` made, from its
+/// `videos.json`.
+pub fn made_clips(videos: &StepDone, pairs: usize) -> Result<Vec<usize>> {
+    let path = videos.dir.join("videos.json");
+    let list: serde_json::Value = super::read_json(&path)?;
+    let made = list["made"]
+        .as_array()
+        .ok_or_else(|| Error::parse(&path, "no \"made\" list of clips"))?;
+    made.iter()
+        .map(|k| match k.as_u64() {
+            Some(k) if (k as usize) < pairs => Ok(k as usize),
+            _ => Err(Error::parse(
+                &path,
+                format!("clip index {k} is not one of the {pairs} pairs"),
+            )),
+        })
+        .collect()
 }
