@@ -285,13 +285,17 @@ pub fn run(
 }
 
 /// The indices (into the neighbour pairs) of the clips `stage2/videos` made, from its
-/// `videos.json`.
+/// `videos.json` (one written before clips could fail has no `made` list: every clip was
+/// made).
 pub fn made_clips(videos: &StepDone, pairs: usize) -> Result<Vec<usize>> {
     let path = videos.dir.join("videos.json");
     let list: serde_json::Value = super::read_json(&path)?;
-    let made = list["made"]
+    let Some(made) = list.get("made") else {
+        return Ok((0..pairs).collect());
+    };
+    let made = made
         .as_array()
-        .ok_or_else(|| Error::parse(&path, "no \"made\" list of clips"))?;
+        .ok_or_else(|| Error::parse(&path, "\"made\" is not a list of clips"))?;
     made.iter()
         .map(|k| match k.as_u64() {
             Some(k) if (k as usize) < pairs => Ok(k as usize),
