@@ -343,9 +343,6 @@ mod avx2 {
                     ),
                 );
             }
-            if _mm256_movemask_ps(_mm256_or_ps(valids[0], valids[1])) == 0 {
-                continue;
-            }
             for h in 0..H {
                 let (alpha, valid) = (alphas[h], valids[h]);
                 let nt = _mm256_mul_ps(t[h], _mm256_sub_ps(c(1.0), alpha));
@@ -450,10 +447,6 @@ mod avx512 {
             let alpha = _mm512_min_ps(_mm512_mul_ps(c(s.opacity), e), c(MAX_ALPHA));
             let valid = _mm512_mask_cmp_ps_mask::<_CMP_GE_OQ>(act, sigma, zero)
                 & _mm512_cmp_ps_mask::<_CMP_GE_OQ>(alpha, c(ALPHA_THRESHOLD));
-            // A splat valid for no pixel of the row changes no state (exact, and common).
-            if valid == 0 {
-                continue;
-            }
             let nt = _mm512_mul_ps(t, _mm512_sub_ps(c(1.0), alpha));
             let stop = _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(valid, nt, c(TRANSMITTANCE_STOP));
             let blend = valid & !stop;
