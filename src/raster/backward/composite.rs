@@ -654,10 +654,6 @@ mod avx512 {
             let alpha = _mm512_min_ps(a, c(MAX_ALPHA));
             let valid = _mm512_mask_cmp_ps_mask::<_CMP_GE_OQ>(active, sigma, zero)
                 & _mm512_cmp_ps_mask::<_CMP_GE_OQ>(alpha, c(ALPHA_THRESHOLD));
-            // A splat that blends no pixel of the row changes nothing (exact, and common).
-            if valid == 0 {
-                continue;
-            }
             let mut cv = [zero; NC];
             let one_minus = _mm512_sub_ps(c(1.0), alpha);
             // `max_ps(a, b)` is `a > b ? a : b`: the scalar select with the operands so.
