@@ -50,8 +50,9 @@
 //! visit, and skips evaluating a half row (8 lanes) beyond the splat's x reach or without
 //! a blending pixel. The AVX-512F kernel evaluates the whole row when either half is asked
 //! for, masks the lanes of a half not asked for out of `valid` (so they contribute +0.0 and
-//! move no state, exactly as the lanes AVX2 does not evaluate), and skips the rest of a
-//! visit the same way.
+//! move no state, exactly as the lanes AVX2 does not evaluate), and does not branch on a
+//! visit where no lane blends: it runs with an empty mask (a branch there mispredicts on
+//! real tile lists, SPEC.md §5.8).
 
 use crate::math::round::{ceil, floor};
 use crate::raster::composite::Kernel;
