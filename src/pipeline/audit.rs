@@ -316,9 +316,9 @@ pub fn run_job(
     on_event: &(dyn Fn(Event) + Sync),
 ) -> Result<Option<JobResult>> {
     cfg.validate()?;
-    on_event(Event::Stage { name: job.name() });
     match *job {
         Job::Original { seed } => {
+            on_event(Event::Stage { name: job.name() });
             original(cfg, dataset, dir, seed, on_event)?;
             Ok(None)
         }
@@ -336,6 +336,7 @@ pub fn run_job(
                 ))
                 .at(dir));
             }
+            on_event(Event::Stage { name: job.name() });
             let inputs = super::load_inputs(
                 &run,
                 &dataset.join("candidates.json"),

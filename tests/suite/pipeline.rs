@@ -864,3 +864,96 @@ fn a_clip_the_video_slot_cannot_make_is_left_out() {
     // the path it is about; before, the whole run stopped on it.
     assert!(failed >= 1 && made >= 1, "made {made}, failed {failed}");
 }
+
+/// `unseen audit` with bad input: one line naming what is wrong, nothing written.
+#[test]
+fn cli_audit_bad_input_is_one_clear_error() {
+    let t = TempDir::new("pipeline-cli-audit");
+    let a_file = t.path().join("a_file");
+    std::fs::write(&a_file, "x").unwrap();
+    let lounge = lounge();
+    let cases: Vec<(&str, Vec<std::ffi::OsString>, &str)> = vec![
+        ("no candidates", vec![t.path().into()], "candidates.json"),
+        (
+            "unknown variant",
+            vec![
+                lounge.clone().into(),
+                "--variants".into(),
+                "full,bogus".into(),
+            ],
+            "unknown variant 'bogus'",
+        ),
+        (
+            "unknown generator",
+            vec![
+                lounge.clone().into(),
+                "--generators".into(),
+                "truth-medium".into(),
+            ],
+            "unknown generator 'truth-medium'",
+        ),
+        (
+            "no full variant",
+            vec![
+                lounge.clone().into(),
+                "--variants".into(),
+                "no_qa_mask".into(),
+            ],
+            "include the variant 'full'",
+        ),
+        (
+            "job before its original",
+            vec![
+                lounge.clone().into(),
+                "--only".into(),
+                "runs/truth-low/full/seed-0".into(),
+            ],
+            "original/seed-0",
+        ),
+        (
+            "unknown job",
+            vec![lounge.clone().into(), "--only".into(), "runs/x".into()],
+            "no job 'runs/x'",
+        ),
+    ];
+    for (what, args, words) in cases {
+        let out = t.path().join(format!("out-{}", what.replace(' ', "-")));
+        let st = Command::new(env!("CARGO_BIN_EXE_unseen"))
+            .arg("audit")
+            .args(&args)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&st.stderr);
+        assert!(!st.status.success(), "{what}: succeeded");
+        assert_eq!(err.trim().lines().count(), 1, "{what}: {err}");
+        assert!(err.contains(words), "{what}: {err}");
+        assert!(!out.exists(), "{what}: left {}", out.display());
+    }
+    let st = Command::new(env!("CARGO_BIN_EXE_unseen"))
+        .arg("audit")
+        .arg(&lounge)
+        .arg("--out")
+        .arg(&a_file)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&st.stderr);
+    assert!(!st.status.success() && err.contains("is a file"), "{err}");
+    assert_eq!(std::fs::read_to_string(&a_file).unwrap(), "x");
+    // `--list`: the originals, then one job per generator × variant (quick: 2 × 9).
+    let st = Command::new(env!("CARGO_BIN_EXE_unseen"))
+        .arg("audit")
+        .arg(&lounge)
+        .arg("--out")
+        .arg(t.path().join("listed"))
+        .arg("--list")
+        .output()
+        .unwrap();
+    let jobs = String::from_utf8_lossy(&st.stdout);
+    assert!(st.status.success());
+    assert_eq!(jobs.lines().count(), 19, "{jobs}");
+    assert_eq!(jobs.lines().next(), Some("original/seed-0"));
+    assert!(jobs.contains("runs/truth-low/even_views/seed-0"));
+    assert!(!t.path().join("listed").exists());
+}
