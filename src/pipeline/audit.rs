@@ -213,6 +213,15 @@ impl AuditConfig {
                 "an audit needs at least one variant, one generator and one seed",
             ));
         }
+        let dup_v =
+            (1..self.variants.len()).any(|i| self.variants[..i].contains(&self.variants[i]));
+        let dup_g =
+            (1..self.generators.len()).any(|i| self.generators[..i].contains(&self.generators[i]));
+        if dup_v || dup_g {
+            return Err(Error::invalid(
+                "a variant or generator is listed twice (each is one set of jobs)",
+            ));
+        }
         if !self.variants.contains(&Variant::Full) {
             return Err(Error::invalid(
                 "every claim compares against the full method: include the variant 'full'",
@@ -316,6 +325,7 @@ pub fn run_job(
     on_event: &(dyn Fn(Event) + Sync),
 ) -> Result<Option<JobResult>> {
     cfg.validate()?;
+    check_inputs(dataset, dir)?;
     match *job {
         Job::Original { seed } => {
             on_event(Event::Stage { name: job.name() });
@@ -328,7 +338,7 @@ pub fn run_job(
             seed,
         } => {
             let run = dir.join(Job::Original { seed }.name());
-            if !original_done(cfg, &run, seed) {
+            if !original_done(cfg, dataset, &run, seed) {
                 return Err(Error::invalid(format!(
                     "job {} needs the original scene of seed {seed}: run the job {} first",
                     job.name(),
@@ -386,10 +396,44 @@ pub fn run_job(
     }
 }
 
-fn original_done(cfg: &AuditConfig, run: &Path, seed: u32) -> bool {
-    run.join("manifest.json").is_file()
+/// The original scene of `seed` is trained in `run`: its manifest names this dataset and
+/// every file it lists has its hash, and its configuration is this audit's.
+fn original_done(cfg: &AuditConfig, dataset: &Path, run: &Path, seed: u32) -> bool {
+    let Ok(m) = crate::io::manifest::Manifest::read(run) else {
+        return false;
+    };
+    let same_path = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => a == b,
+    };
+    let same_data = m
+        .inputs
+        .get("dataset")
+        .and_then(|d| d.as_str())
+        .is_some_and(|d| same_path(Path::new(d), dataset));
+    same_data
+        && m.files.iter().all(|f| {
+            std::fs::read(run.join(&f.path)).is_ok_and(|b| crate::io::sha256_hex(&b) == f.sha256)
+        })
         && latest_ply(run).is_ok()
         && read_config(run).is_ok_and(|c| c == cfg.train_config(seed))
+}
+
+/// What every job needs: the dataset's candidate and evaluation poses, an output path
+/// that is not a file.
+fn check_inputs(dataset: &Path, dir: &Path) -> Result<()> {
+    if dir.is_file() {
+        return Err(Error::invalid("the output path is a file").at(dir));
+    }
+    for f in ["candidates.json", "evaluation.json"] {
+        if !dataset.join(f).is_file() {
+            return Err(Error::invalid(format!(
+                "an audit needs {f} (candidate and evaluation poses with ground truth)"
+            ))
+            .at(dataset));
+        }
+    }
+    Ok(())
 }
 
 fn original(
@@ -400,7 +444,7 @@ fn original(
     on_event: &(dyn Fn(Event) + Sync),
 ) -> Result<PathBuf> {
     let run = dir.join(Job::Original { seed }.name());
-    if original_done(cfg, &run, seed) {
+    if original_done(cfg, dataset, &run, seed) {
         on_event(Event::StepSkipped {
             step: Job::Original { seed }.name(),
         });
@@ -676,17 +720,7 @@ pub fn run(
     on_event: &(dyn Fn(Event) + Sync),
 ) -> Result<Report> {
     cfg.validate()?;
-    if dir.is_file() {
-        return Err(Error::invalid("the output path is a file").at(dir));
-    }
-    for f in ["candidates.json", "evaluation.json"] {
-        if !dataset.join(f).is_file() {
-            return Err(Error::invalid(format!(
-                "an audit needs {f} (candidate and evaluation poses with ground truth)"
-            ))
-            .at(dataset));
-        }
-    }
+    check_inputs(dataset, dir)?;
     crate::io::create_dir_all(dir)?;
     let mut results = Vec::new();
     for job in jobs(cfg) {

@@ -390,6 +390,11 @@ pub fn run_with(
         Scope::All => None,
         Scope::Only(s) | Scope::Until(s) => Some(s.clone()),
     };
+    if let Some(c) = &opts.cache
+        && c.is_file()
+    {
+        return Err(Error::invalid("the step cache path is a file").at(c));
+    }
     let mut dir = RunDir::open(out, opts.resume, opts.scope.clone(), &inputs.digest)?;
     if let Some(c) = &opts.cache {
         dir = dir.with_cache(c)?;

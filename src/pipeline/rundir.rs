@@ -153,10 +153,11 @@ impl RunDir {
             if dir.exists() {
                 std::fs::remove_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
             }
-            copy_step(&cached, &dir)?;
-            // The copy is checked like any step on disk (a cache entry changed while it
-            // was being copied is not used).
-            if verified(&dir, &inputs_sha256).as_ref() == Some(&digest) {
+            // The copy is checked like any step on disk; a copy that fails or does not
+            // verify (the entry replaced meanwhile) is dropped and the step computed.
+            if copy_step(&cached, &dir).is_ok()
+                && verified(&dir, &inputs_sha256).as_ref() == Some(&digest)
+            {
                 return reuse(dir, digest, Event::StepCached { step: name.into() });
             }
         }
@@ -198,7 +199,13 @@ impl RunDir {
         write_text(&dir.join(TIMING_FILE), &text)?;
         let digest = Manifest::new("extrapolate", name, inputs, files).write(&dir)?;
         if let Some(cached) = self.cache_entry(name, &inputs_sha256) {
-            publish(&dir, &cached)?;
+            // Best effort: a cache that cannot be written costs reuse, not the step.
+            if let Err(e) = publish(&dir, &cached, &inputs_sha256) {
+                on_event(Event::Note(format!(
+                    "step cache not updated: {}",
+                    e.message
+                )));
+            }
         }
         on_event(Event::StepFinished {
             step: name.into(),
@@ -259,52 +266,74 @@ fn remove_stale_temporaries(dir: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Copy the step folder `from` to `to` (which must not exist): files hard-linked where
-/// possible (step files are only ever replaced by rename, never written in place), else
-/// copied; through a temporary sibling renamed into place, so `to` appears whole.
+/// Copy the step folder `from` into `to`, `manifest.json` last (a step is done only once its
+/// manifest verifies, so a copy cut short is never taken for a step): files hard-linked
+/// where possible (step files are only ever replaced by rename, never written in place),
+/// else copied.
 fn copy_step(from: &Path, to: &Path) -> Result<()> {
-    fn walk(from: &Path, to: &Path) -> Result<()> {
+    fn walk(from: &Path, to: &Path, top: bool) -> Result<()> {
         create_dir_all(to)?;
-        for e in std::fs::read_dir(from).map_err(|e| Error::io(from, e))? {
-            let e = e.map_err(|e| Error::io(from, e))?;
+        let mut entries: Vec<_> = std::fs::read_dir(from)
+            .map_err(|e| Error::io(from, e))?
+            .collect::<std::io::Result<_>>()
+            .map_err(|e| Error::io(from, e))?;
+        entries.sort_by_key(|e| (top && e.file_name() == "manifest.json", e.file_name()));
+        for e in entries {
             let (src, dst) = (e.path(), to.join(e.file_name()));
             if src.is_dir() {
-                walk(&src, &dst)?;
+                walk(&src, &dst, false)?;
             } else if std::fs::hard_link(&src, &dst).is_err() {
                 std::fs::copy(&src, &dst).map_err(|err| Error::io(&src, err))?;
             }
         }
         Ok(())
     }
-    let parent = to.parent().unwrap_or(Path::new("."));
-    create_dir_all(parent)?;
-    let name = to.file_name().and_then(|n| n.to_str()).unwrap_or("step");
-    let tmp = parent.join(format!(".{name}.tmp-{}", std::process::id()));
-    if tmp.exists() {
-        std::fs::remove_dir_all(&tmp).map_err(|e| Error::io(&tmp, e))?;
+    walk(from, to, true)
+}
+
+/// A name no other job uses (process id, clock, counter): cache temporaries may be made by
+/// jobs on several machines sharing the folder.
+fn unique_suffix() -> String {
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos());
+    format!(
+        "{}-{nanos}-{}",
+        std::process::id(),
+        COUNTER.fetch_add(1, Ordering::Relaxed)
+    )
+}
+
+/// Publish a finished step into the cache entry `to`: copied into a temporary sibling, then
+/// renamed into place, so an entry appears whole. A verified entry is kept (another job
+/// published the same step); one that does not verify is first renamed aside, then
+/// removed, so no job ever deletes in place an entry another job may be reading.
+fn publish(from: &Path, to: &Path, inputs_sha256: &str) -> Result<()> {
+    if verified(to, inputs_sha256).is_some() {
+        return Ok(());
     }
-    let r = walk(from, &tmp).and_then(|()| std::fs::rename(&tmp, to).map_err(|e| Error::io(to, e)));
-    if r.is_err() {
+    let parent = to.parent().unwrap_or(Path::new("."));
+    let key = to.file_name().and_then(|n| n.to_str()).unwrap_or("step");
+    let tmp = parent.join(format!(".{key}.tmp-{}", unique_suffix()));
+    let r = copy_step(from, &tmp).and_then(|()| {
+        if to.exists() {
+            let aside = parent.join(format!(".{key}.stale-{}", unique_suffix()));
+            if std::fs::rename(to, &aside).is_ok() {
+                let _ = std::fs::remove_dir_all(&aside);
+            }
+        }
+        match std::fs::rename(&tmp, to) {
+            // Another job renamed its copy into place first: keep that one.
+            Err(_) if verified(to, inputs_sha256).is_some() => Ok(()),
+            r => r.map_err(|e| Error::io(to, e)),
+        }
+    });
+    if tmp.exists() {
         let _ = std::fs::remove_dir_all(&tmp);
     }
     r
-}
-
-/// Publish a finished step into the cache entry `to`; an entry another job published
-/// first (same key, same content) is kept.
-fn publish(from: &Path, to: &Path) -> Result<()> {
-    if to.join("manifest.json").is_file() {
-        return Ok(());
-    }
-    if to.exists() {
-        // An incomplete entry (a killed publisher cannot leave one: entries appear by
-        // rename), or one of an older format: replace it.
-        std::fs::remove_dir_all(to).map_err(|e| Error::io(to, e))?;
-    }
-    match copy_step(from, to) {
-        Err(_) if to.join("manifest.json").is_file() => Ok(()),
-        r => r,
-    }
 }
 
 /// The manifest digest when `dir` holds a complete step with these inputs.

@@ -320,8 +320,8 @@ mod avx2 {
             let (cdd, dyv) = (c(s.conic[2] * dy * dy), c(dy));
             let (mx, ca, cb, op) = (c(s.mean[0]), c(s.conic[0]), c(s.conic[1]), c(s.opacity));
             let pos = _mm256_set1_epi32(ts.pos1 as i32);
-            // σ, α and the mask of both halves first; a splat that is valid for no pixel of
-            // the row changes no state, so skipping the rest is exact (and common).
+            // σ, α and the mask of both halves first; a splat valid for no pixel of the row
+            // runs on with an empty mask and changes no state (no branch: SPEC.md §5.7).
             let (mut alphas, mut valids) = ([zero; H], [zero; H]);
             for h in 0..H {
                 let dx = _mm256_sub_ps(mx, pxv[h]);

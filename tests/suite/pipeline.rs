@@ -735,6 +735,13 @@ fn step_cache_shares_equal_steps_across_runs() {
     assert!(computed_c.contains(&"views".to_string()), "{computed_c:?}");
     assert!(!cached_c.contains(&"views".to_string()));
     assert!(compare(&a, &c, 0.0).unwrap().first_divergent.is_none());
+    // ... and publishes it again: the entry is repaired, the next run copies it.
+    assert_eq!(
+        std::fs::read(&plan).unwrap(),
+        std::fs::read(a.join("views/plan.json")).unwrap()
+    );
+    let (cached_d, _) = events(&cfg, &t.path().join("d"));
+    assert!(cached_d.contains(&"views".to_string()), "{cached_d:?}");
 }
 
 /// The audit on a tiny configuration: two seeds, two variants, one generator. Every job
@@ -909,6 +916,20 @@ fn cli_audit_bad_input_is_one_clear_error() {
                 "runs/truth-low/full/seed-0".into(),
             ],
             "original/seed-0",
+        ),
+        (
+            "duplicate variant",
+            vec![
+                lounge.clone().into(),
+                "--variants".into(),
+                "full,full".into(),
+            ],
+            "listed twice",
+        ),
+        (
+            "no candidates, one job",
+            vec![t.path().into(), "--only".into(), "original/seed-0".into()],
+            "candidates.json",
         ),
         (
             "unknown job",

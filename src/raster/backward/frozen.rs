@@ -398,7 +398,16 @@ impl FrozenBlend {
                 for tx in 0..bins.tiles_x {
                     let t = ty * bins.tiles_x + tx;
                     let (x0, cols) = (tx * TILE_SIZE, TILE_SIZE.min(w - tx * TILE_SIZE));
-                    let n = bins.offsets[t + 1] - bins.offsets[t];
+                    // A row's first visit (back to front) is its deepest list position.
+                    let n = (0..rows)
+                        .filter_map(|row| {
+                            let r = t * TILE_SIZE + row;
+                            (self.row_visits[r] < self.row_visits[r + 1]).then(|| {
+                                self.visit_k[self.row_visits[r]] as usize - bins.offsets[t] + 1
+                            })
+                        })
+                        .max()
+                        .unwrap_or(0);
                     if lanes.len() < n {
                         lanes.resize(n, [[0.0; HALF]; 3]);
                     }
