@@ -757,6 +757,14 @@ fn stat(results: &[&JobResult], f: impl Fn(&JobResult) -> f64, digits: usize) ->
     }
 }
 
+/// The results of one (generator, variant), seeds in order.
+fn group<'a>(results: &'a [JobResult], generator: &str, variant: Variant) -> Vec<&'a JobResult> {
+    results
+        .iter()
+        .filter(|r| r.generator == generator && r.variant == variant.name())
+        .collect()
+}
+
 /// `audit.md`.
 pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
     let mut s = format!(
@@ -787,41 +795,33 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
     s += "\n## Every variant\n\n| generator | variant | PSNR existing | PSNR extrapolated | PSNR all | SSIM existing | SSIM extrapolated | train-half PSNR | compute (s) |\n|---|---|---|---|---|---|---|---|---|\n";
     for g in &cfg.generators {
         let g = g.name();
-        let group: Vec<&JobResult> = report
-            .results
-            .iter()
-            .filter(|r| r.generator == g && r.variant == Variant::Full.name())
-            .collect();
-        if !group.is_empty() {
+        let rows = group(&report.results, &g, Variant::Full);
+        if !rows.is_empty() {
             s += &format!(
                 "| {g} | *original scene* | {} | {} | {} | {} | {} | {} | |\n",
-                stat(&group, |r| r.original.psnr_existing, 2),
-                stat(&group, |r| r.original.psnr_extrapolated, 2),
-                stat(&group, |r| r.original.psnr_all, 2),
-                stat(&group, |r| r.original.ssim_existing, 4),
-                stat(&group, |r| r.original.ssim_extrapolated, 4),
-                stat(&group, |r| r.original.psnr_train_half, 2),
+                stat(&rows, |r| r.original.psnr_existing, 2),
+                stat(&rows, |r| r.original.psnr_extrapolated, 2),
+                stat(&rows, |r| r.original.psnr_all, 2),
+                stat(&rows, |r| r.original.ssim_existing, 4),
+                stat(&rows, |r| r.original.ssim_extrapolated, 4),
+                stat(&rows, |r| r.original.psnr_train_half, 2),
             );
         }
         for v in &cfg.variants {
-            let group: Vec<&JobResult> = report
-                .results
-                .iter()
-                .filter(|r| r.generator == g && r.variant == v.name())
-                .collect();
-            if group.is_empty() {
+            let rows = group(&report.results, &g, *v);
+            if rows.is_empty() {
                 continue;
             }
             s += &format!(
                 "| {g} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
                 v.name(),
-                stat(&group, |r| r.last.psnr_existing, 2),
-                stat(&group, |r| r.last.psnr_extrapolated, 2),
-                stat(&group, |r| r.last.psnr_all, 2),
-                stat(&group, |r| r.last.ssim_existing, 4),
-                stat(&group, |r| r.last.ssim_extrapolated, 4),
-                stat(&group, |r| r.last.psnr_train_half, 2),
-                stat(&group, |r| r.stage_seconds.values().sum(), 0),
+                stat(&rows, |r| r.last.psnr_existing, 2),
+                stat(&rows, |r| r.last.psnr_extrapolated, 2),
+                stat(&rows, |r| r.last.psnr_all, 2),
+                stat(&rows, |r| r.last.ssim_existing, 4),
+                stat(&rows, |r| r.last.ssim_extrapolated, 4),
+                stat(&rows, |r| r.last.psnr_train_half, 2),
+                stat(&rows, |r| r.stage_seconds.values().sum(), 0),
             );
         }
     }
@@ -842,22 +842,18 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
     for g in &cfg.generators {
         let g = g.name();
         for v in &cfg.variants {
-            let group: Vec<&JobResult> = report
-                .results
-                .iter()
-                .filter(|r| r.generator == g && r.variant == v.name())
-                .collect();
-            if group.is_empty() {
+            let rows = group(&report.results, &g, *v);
+            if rows.is_empty() {
                 continue;
             }
             let cells: Vec<String> = stages
                 .iter()
                 .map(|st| {
-                    let t: f64 = group
+                    let t: f64 = rows
                         .iter()
                         .map(|r| r.stage_seconds.get(*st).copied().unwrap_or(0.0))
                         .sum::<f64>()
-                        / group.len() as f64;
+                        / rows.len() as f64;
                     format!("{t:.1}")
                 })
                 .collect();
