@@ -141,7 +141,7 @@ fn main() {
                         let g = project_backward(
                             &scene,
                             &CameraF32::new(&cam),
-                            &fwd.projected,
+                            &fwd.projected.radii,
                             &fwd.plan,
                             &groups,
                             &splat_grads,

@@ -25,9 +25,9 @@ use crate::gaussian::Gaussians;
 use crate::math::sh::num_coeffs;
 use crate::raster::composite::{Kernel, splat_alpha, splat_rows};
 use crate::raster::plan::RenderPlan;
-use crate::raster::project::{ALPHA_THRESHOLD, CameraF32, project, sh_color, sh_view_basis};
+use crate::raster::project::{ALPHA_THRESHOLD, CameraF32, sh_color, sh_view_basis};
 use crate::raster::tile::{TILE_SIZE, TileBins};
-use crate::raster::{Outputs, RenderOptions, RenderReport};
+use crate::raster::{Outputs, RenderOptions};
 use rayon::prelude::*;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -47,10 +47,8 @@ pub struct FrozenBlend {
     /// The geometry the record was made with (no SH); every replay checks the scene still
     /// has it. Shared between the records of one scene ([`FrozenBlend::record_shared`]).
     geometry: Arc<Gaussians>,
-    camera: Camera,
     cam: CameraF32,
-    /// The options and plan of the recorded render ([`FrozenBlend::backward_sh`] projects
-    /// again with them).
+    /// The options and plan of the recorded render.
     opts: RenderOptions,
     plan: RenderPlan,
     /// Per Gaussian: has a splat in this view (radius > 0).
@@ -218,7 +216,6 @@ impl FrozenBlend {
         Ok(FrozenBlend {
             id: NEXT_RECORD.fetch_add(1, Ordering::Relaxed),
             geometry,
-            camera: cam.clone(),
             cam: CameraF32::new(cam),
             kernel: opts.kernel,
             opts,
@@ -510,8 +507,7 @@ impl FrozenBlend {
     }
 
     /// SH (and background) gradients for `v_rgb`: the same bits as the full backward with
-    /// these groups. Geometry groups are refused. Projects the scene again (the record
-    /// keeps no splats); [`FrozenBlend::color_backward`] and
+    /// these groups. Geometry groups are refused. [`FrozenBlend::color_backward`] and
     /// [`FrozenBlend::sh_rest_grad`] are the fine-tune's allocation-free path.
     pub fn backward_sh(
         &self,
@@ -535,14 +531,13 @@ impl FrozenBlend {
                 ..SplatGrad::default()
             })
             .collect();
-        let projected = project(
-            scene,
-            &self.camera,
-            &self.plan,
-            &self.opts,
-            &mut RenderReport::default(),
-        );
-        let mut grads = project_backward(scene, &self.cam, &projected, &self.plan, groups, &splats);
+        // Only "culled or not" of the projection is read: the record's visibility.
+        let radii: Vec<[i32; 2]> = self
+            .visible
+            .iter()
+            .map(|&v| if v { [1, 1] } else { [0, 0] })
+            .collect();
+        let mut grads = project_backward(scene, &self.cam, &radii, &self.plan, groups, &splats);
         if groups.background {
             grads.background = ws.background;
         }

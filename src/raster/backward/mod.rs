@@ -124,8 +124,14 @@ pub fn backward(
         opts.kernel,
     );
     let camf = CameraF32::new(cam);
-    let mut grads =
-        project::project_backward(scene, &camf, &fwd.projected, &fwd.plan, groups, &cg.splats);
+    let mut grads = project::project_backward(
+        scene,
+        &camf,
+        &fwd.projected.radii,
+        &fwd.plan,
+        groups,
+        &cg.splats,
+    );
     if groups.background {
         grads.background = cg.background;
     }

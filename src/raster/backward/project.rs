@@ -18,7 +18,7 @@ use crate::gaussian::{Gaussians, Param};
 use crate::math::fastexp::sigmoid;
 use crate::math::sh::{MAX_SH_COEFFS, num_coeffs, sh_basis_grad};
 use crate::raster::plan::RenderPlan;
-use crate::raster::project::{CameraF32, EPS2D, Geometry, Projected, geometry, sh_color};
+use crate::raster::project::{CameraF32, EPS2D, Geometry, geometry, sh_color};
 
 /// Which raw parameter groups need gradients. Skipped groups come back as zeros and cost
 /// nothing: SH-only requests skip the whole geometric chain.
@@ -305,11 +305,11 @@ fn backward_one(
 }
 
 /// Backward of [`crate::raster::project::project`] for every Gaussian with a non-zero splat
-/// gradient (culled Gaussians get exactly zero).
+/// gradient (culled Gaussians, radii `(0, 0)` in the projection, get exactly zero).
 pub fn project_backward(
     g: &Gaussians,
     cam: &CameraF32,
-    p: &Projected,
+    radii: &[[i32; 2]],
     plan: &RenderPlan,
     groups: &GradGroups,
     splat_grads: &[crate::raster::backward::composite::SplatGrad],
@@ -357,7 +357,7 @@ pub fn project_backward(
         .for_each(|(ci, (((((mc, lc), qc), oc), dc), rc))| {
             for k in 0..mc.len() {
                 let i = ci * CHUNK + k;
-                if p.radii[i] == [0, 0] {
+                if radii[i] == [0, 0] {
                     continue;
                 }
                 let r = &mut rc[k * rest_per..k * rest_per + k1 * 3];
