@@ -765,6 +765,20 @@ fn group<'a>(results: &'a [JobResult], generator: &str, variant: Variant) -> Vec
         .collect()
 }
 
+/// The six metric cells of a table row (PSNR existing, extrapolated, all; SSIM existing,
+/// extrapolated; train-half PSNR) of the scene `pick` selects, over the seeds.
+fn metric_cells(rows: &[&JobResult], pick: impl Fn(&JobResult) -> &Row) -> String {
+    [
+        stat(rows, |r| pick(r).psnr_existing, 2),
+        stat(rows, |r| pick(r).psnr_extrapolated, 2),
+        stat(rows, |r| pick(r).psnr_all, 2),
+        stat(rows, |r| pick(r).ssim_existing, 4),
+        stat(rows, |r| pick(r).ssim_extrapolated, 4),
+        stat(rows, |r| pick(r).psnr_train_half, 2),
+    ]
+    .join(" | ")
+}
+
 /// `audit.md`.
 pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
     let mut s = format!(
@@ -798,13 +812,8 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
         let rows = group(&report.results, &g, Variant::Full);
         if !rows.is_empty() {
             s += &format!(
-                "| {g} | *original scene* | {} | {} | {} | {} | {} | {} | |\n",
-                stat(&rows, |r| r.original.psnr_existing, 2),
-                stat(&rows, |r| r.original.psnr_extrapolated, 2),
-                stat(&rows, |r| r.original.psnr_all, 2),
-                stat(&rows, |r| r.original.ssim_existing, 4),
-                stat(&rows, |r| r.original.ssim_extrapolated, 4),
-                stat(&rows, |r| r.original.psnr_train_half, 2),
+                "| {g} | *original scene* | {} | |\n",
+                metric_cells(&rows, |r| &r.original)
             );
         }
         for v in &cfg.variants {
@@ -813,14 +822,9 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
                 continue;
             }
             s += &format!(
-                "| {g} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                "| {g} | {} | {} | {} |\n",
                 v.name(),
-                stat(&rows, |r| r.last.psnr_existing, 2),
-                stat(&rows, |r| r.last.psnr_extrapolated, 2),
-                stat(&rows, |r| r.last.psnr_all, 2),
-                stat(&rows, |r| r.last.ssim_existing, 4),
-                stat(&rows, |r| r.last.ssim_extrapolated, 4),
-                stat(&rows, |r| r.last.psnr_train_half, 2),
+                metric_cells(&rows, |r| &r.last),
                 stat(&rows, |r| r.stage_seconds.values().sum(), 0),
             );
         }
