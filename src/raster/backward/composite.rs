@@ -251,17 +251,20 @@ impl RowBound {
         if room < 0.0 {
             return 0;
         }
-        // Pixels centres p with |p − (mean + B·dy/A)| ≤ w may blend.
-        let w = (2.0 * room / self.a).sqrt() + ROW_SLACK;
+        // Pixel centres p with |p − (mean + B·dy/A)| ≤ w may blend, w = √(2·room/A) +
+        // ROW_SLACK. Half h holds such a p iff its pixel centres [first, last] lie within w
+        // of the centre, i.e. d = max(first − centre, centre − last) − ROW_SLACK is ≤ 0 or
+        // A·d² ≤ 2·room: the same test without a division or a square root.
         let centre = self.mx + self.b_a * dy;
-        let (lo, hi) = (centre - w, centre + w);
+        let two_room = 2.0 * room;
         let mut m = 0;
         for h in 0..LANES / HALF {
             // Pixel centres of half h: (8h + 0.5) ..= (8h + 7.5).
             let (first, last) = ((h * HALF) as f64 + 0.5, ((h + 1) * HALF) as f64 - 0.5);
-            if hi >= first && lo <= last {
-                m |= 1 << h;
-            }
+            let d = (first - centre).max(centre - last) - ROW_SLACK;
+            // A NaN centre keeps the half (conservative). No branch: it mispredicts.
+            let keep = d.is_nan() | (d <= 0.0) | (self.a * d * d <= two_room);
+            m |= u32::from(keep) << h;
         }
         m
     }
