@@ -145,6 +145,7 @@ fn main() {
                             &fwd.plan,
                             &groups,
                             &splat_grads,
+                            opts.kernel,
                         );
                         tp.push(t2.elapsed().as_secs_f64());
                         std::hint::black_box(g);

@@ -114,13 +114,13 @@ impl CameraF32 {
 }
 
 #[inline(always)]
-fn dot3<R: Lanes>(a: [R; 3], b: [R; 3]) -> R {
+pub(crate) fn dot3<R: Lanes>(a: [R; 3], b: [R; 3]) -> R {
     (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2]
 }
 
 /// `A·B` for 3×3 row-major matrices, each entry summed in k order.
 #[inline(always)]
-fn mat3_mul<R: Lanes>(a: &[[R; 3]; 3], b: &[[R; 3]; 3]) -> [[R; 3]; 3] {
+pub(crate) fn mat3_mul<R: Lanes>(a: &[[R; 3]; 3], b: &[[R; 3]; 3]) -> [[R; 3]; 3] {
     let mut o = [[R::splat(0.0); 3]; 3];
     for i in 0..3 {
         for j in 0..3 {
@@ -131,7 +131,7 @@ fn mat3_mul<R: Lanes>(a: &[[R; 3]; 3], b: &[[R; 3]; 3]) -> [[R; 3]; 3] {
 }
 
 #[inline(always)]
-fn transpose<R: Lanes>(a: &[[R; 3]; 3]) -> [[R; 3]; 3] {
+pub(crate) fn transpose<R: Lanes>(a: &[[R; 3]; 3]) -> [[R; 3]; 3] {
     [
         [a[0][0], a[1][0], a[2][0]],
         [a[0][1], a[1][1], a[2][1]],
@@ -178,7 +178,7 @@ const CULLS: [Cull; 6] = [
 
 impl<R: Lanes> Culls<R> {
     #[inline(always)]
-    fn new() -> Self {
+    pub(crate) fn new() -> Self {
         Culls {
             ok: !R::all_false(),
             code: R::splat(0.0),
@@ -237,7 +237,7 @@ pub(crate) struct Geometry<R: Lanes = f32> {
 /// Steps 1–5 for the lanes' `mean`, `quat` and `log_scale`; failed checks go to `culls`.
 #[inline(always)]
 #[allow(clippy::needless_range_loop)] // `a`, `b` index two matrices
-fn geometry_lanes<R: Lanes>(
+pub(crate) fn geometry_lanes<R: Lanes>(
     mean: [R; 3],
     q: [R; 4],
     ls: [R; 3],
@@ -324,13 +324,6 @@ fn geometry_lanes<R: Lanes>(
         j,
         cov,
     }
-}
-
-/// Steps 1–5 for Gaussian `i` (the backward pass's entry).
-pub(crate) fn geometry(g: &Gaussians, i: usize, cam: &CameraF32) -> Result<Geometry, Cull> {
-    let mut culls = Culls::new();
-    let geo = geometry_lanes(g.means[i], g.quats[i], g.log_scales[i], cam, &mut culls);
-    culls.result().map(|()| geo)
 }
 
 /// The SH basis (up to `degree`) at the view direction `(μ − C)/|μ − C|` of the lanes' means.
@@ -502,7 +495,7 @@ fn project_block<R: Lanes>(
 
 /// Lanes `l` of `v[l]` (one slice entry per lane).
 #[inline(always)]
-fn gather3<R: Lanes>(v: &[[f32; 3]]) -> [R; 3] {
+pub(crate) fn gather3<R: Lanes>(v: &[[f32; 3]]) -> [R; 3] {
     [
         R::gather(|l| v[l][0]),
         R::gather(|l| v[l][1]),
@@ -512,7 +505,7 @@ fn gather3<R: Lanes>(v: &[[f32; 3]]) -> [R; 3] {
 
 /// Lanes as an array (the first `R::N` entries).
 #[inline(always)]
-fn lanes_of<R: Lanes>(v: R) -> [f32; 16] {
+pub(crate) fn lanes_of<R: Lanes>(v: R) -> [f32; 16] {
     let mut a = [0f32; 16];
     v.write(&mut a);
     a

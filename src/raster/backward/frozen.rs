@@ -537,7 +537,15 @@ impl FrozenBlend {
             .iter()
             .map(|&v| if v { [1, 1] } else { [0, 0] })
             .collect();
-        let mut grads = project_backward(scene, &self.cam, &radii, &self.plan, groups, &splats);
+        let mut grads = project_backward(
+            scene,
+            &self.cam,
+            &radii,
+            &self.plan,
+            groups,
+            &splats,
+            self.kernel,
+        );
         if groups.background {
             grads.background = ws.background;
         }

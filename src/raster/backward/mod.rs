@@ -131,6 +131,7 @@ pub fn backward(
         &fwd.plan,
         groups,
         &cg.splats,
+        opts.kernel,
     );
     if groups.background {
         grads.background = cg.background;

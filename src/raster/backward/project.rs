@@ -1,6 +1,9 @@
 //! Backward of the projection (mirrors `raster::project`): from splat gradients to the raw
-//! parameters. Per Gaussian and independent, so parallel and deterministic. In f32, except
-//! the SH direction derivative, which uses the f64 forward-mode basis (`sh_basis_grad`).
+//! parameters. Per Gaussian and independent, so parallel and deterministic. All in f32,
+//! the geometric chain and the SH direction derivative (forward-mode duals of the basis,
+//! `Dual3<R>`) in lanes of Gaussians like the projection (`math::lanes`), the colour and SH
+//! coefficient gradients one Gaussian at a time (they read the coefficients in memory order,
+//! which lanes would gather and scatter).
 //!
 //! Chain (forward in `raster::project`):
 //! `conic = Σ2d⁻¹` → `v_Σ2d = −Σ2d⁻¹·G·Σ2d⁻¹` with `G = [[vA, vB/2], [vB/2, vC]]`;
@@ -15,10 +18,16 @@
 
 use super::composite::SplatGrad;
 use crate::gaussian::{Gaussians, Param};
-use crate::math::fastexp::sigmoid;
-use crate::math::sh::{MAX_SH_COEFFS, num_coeffs, sh_basis_grad};
+use crate::math::lanes::Lanes;
+#[cfg(target_arch = "x86_64")]
+use crate::math::lanes::{F32x8, F32x16};
+use crate::math::sh::{Dual3, MAX_SH_COEFFS, ShScalar, num_coeffs, sh_basis};
+use crate::raster::composite::Kernel;
 use crate::raster::plan::RenderPlan;
-use crate::raster::project::{CameraF32, EPS2D, Geometry, geometry, sh_color};
+use crate::raster::project::{
+    CameraF32, Culls, EPS2D, Geometry, dot3, gather3, geometry_lanes, lanes_of, mat3_mul, sh_color,
+    transpose,
+};
 
 /// Which raw parameter groups need gradients. Skipped groups come back as zeros and cost
 /// nothing: SH-only requests skip the whole geometric chain.
@@ -76,67 +85,98 @@ pub struct Gradients {
     pub means2d_ndc: Vec<[f32; 2]>,
 }
 
-type M3 = [[f32; 3]; 3];
-
-fn mul(a: &M3, b: &M3) -> M3 {
-    let mut o = [[0f32; 3]; 3];
-    for i in 0..3 {
-        for j in 0..3 {
-            o[i][j] = (a[i][0] * b[0][j] + a[i][1] * b[1][j]) + a[i][2] * b[2][j];
-        }
-    }
-    o
+/// One chunk of the outputs (entry `k` is Gaussian `first + k`); `rest` holds `rest_per`
+/// values per Gaussian.
+struct OutChunk<'a> {
+    means: &'a mut [[f32; 3]],
+    log_scales: &'a mut [[f32; 3]],
+    quats: &'a mut [[f32; 4]],
+    opacity: &'a mut [f32],
+    sh_dc: &'a mut [[f32; 3]],
+    rest: &'a mut [f32],
+    rest_per: usize,
 }
 
-fn tr(a: &M3) -> M3 {
-    [
-        [a[0][0], a[1][0], a[2][0]],
-        [a[0][1], a[1][1], a[2][1]],
-        [a[0][2], a[1][2], a[2][2]],
-    ]
-}
-
-/// One Gaussian's backward. `sg` is its accumulated splat gradient.
-#[allow(clippy::too_many_arguments)]
-fn backward_one(
+/// The backward of Gaussians `first .. first + R::N`, one per lane, into entries
+/// `k .. k + R::N` of `out`. Lanes the forward culled (radii `(0, 0)`) are not written
+/// (their entries stay +0.0); a lane whose geometry the forward culled gets only its SH
+/// gradients. The `f32` instance is the reference form; every lane of a wider instance
+/// equals it bit for bit (`projection_backward_simd_matches_scalar_bitwise`).
+#[inline(always)]
+#[allow(clippy::too_many_arguments, clippy::needless_range_loop)] // a, b index matrices
+fn backward_block<R: Lanes>(
     g: &Gaussians,
-    i: usize,
+    first: usize,
     cam: &CameraF32,
-    plan: &RenderPlan,
+    degree: u32,
     groups: &GradGroups,
-    sg: &SplatGrad,
-    out_mean: &mut [f32; 3],
-    out_ls: &mut [f32; 3],
-    out_q: &mut [f32; 4],
-    out_op: &mut f32,
-    out_dc: &mut [f32; 3],
-    out_rest: &mut [f32],
+    sg: &[SplatGrad],
+    radii: &[[i32; 2]],
+    out: &mut OutChunk,
+    k: usize,
 ) {
-    let r = &cam.r_cw;
-    let k_used = num_coeffs(plan.sh_degree) - 1;
-    let rest = g.rest(i);
-    // Colour: which channels are open (Σ + 0.5 > 0), recomputed as the forward did.
-    let (raw, basis) = sh_color(g, i, cam, plan.sh_degree);
-    let v_sh: [f32; 3] = std::array::from_fn(|ch| if raw[ch] > 0.0 { sg.color[ch] } else { 0.0 });
-    if groups.sh_dc {
-        for ch in 0..3 {
-            out_dc[ch] = basis[0] * v_sh[ch];
-        }
+    let n = R::N;
+    let visible: [bool; 16] = std::array::from_fn(|l| l < n && radii[l] != [0, 0]);
+    if !visible.contains(&true) {
+        return;
     }
-    if groups.sh_rest {
-        for k in 0..k_used {
-            for ch in 0..3 {
-                out_rest[k * 3 + ch] = basis[k + 1] * v_sh[ch];
+    let k_used = num_coeffs(degree) - 1;
+    // Per lane, in scalar (the coefficients are read once, in memory order): which colour
+    // channels are open (Σ + 0.5 > 0, recomputed as the forward did), the SH coefficient
+    // gradients `Y_k·v_c`, and the weights `w_k = Σ_c coeff_kc·v_c` of the direction term.
+    let mut w = [[0f32; 16]; MAX_SH_COEFFS - 1];
+    let mut flows = [0f32; 16];
+    for l in 0..n {
+        if !visible[l] {
+            continue;
+        }
+        let i = first + l;
+        let (raw, basis) = sh_color(g, i, cam, degree);
+        let v: [f32; 3] =
+            std::array::from_fn(|ch| if raw[ch] > 0.0 { sg[l].color[ch] } else { 0.0 });
+        if groups.sh_dc {
+            out.sh_dc[k + l] = [basis[0] * v[0], basis[0] * v[1], basis[0] * v[2]];
+        }
+        if groups.sh_rest {
+            let r = &mut out.rest[(k + l) * out.rest_per..];
+            for j in 0..k_used {
+                for ch in 0..3 {
+                    r[j * 3 + ch] = basis[j + 1] * v[ch];
+                }
             }
         }
+        if groups.means {
+            let rest = g.rest(i);
+            for j in 0..k_used {
+                let cf = &rest[j * 3..j * 3 + 3];
+                w[j][l] = (cf[0] * v[0] + cf[1] * v[1]) + cf[2] * v[2];
+            }
+            flows[l] = if v.iter().any(|&x| x != 0.0) {
+                1.0
+            } else {
+                0.0
+            };
+        }
     }
+    let c = R::splat;
+    let zero = c(0.0);
     if !groups.geometry() {
         return;
     }
-    // The forward quantities the chain needs, recomputed by the forward's own code.
-    let Ok(geo) = geometry(g, i, cam) else {
-        return; // culled in the forward too (radii are checked by the caller)
-    };
+    // The forward quantities the chain needs, recomputed by the forward's own code; a lane
+    // it culls there was culled in the forward too (radii are (0, 0)).
+    let mean = gather3::<R>(&g.means[first..first + n]);
+    let quats = &g.quats[first..first + n];
+    let q = [
+        R::gather(|l| quats[l][0]),
+        R::gather(|l| quats[l][1]),
+        R::gather(|l| quats[l][2]),
+        R::gather(|l| quats[l][3]),
+    ];
+    let ls = gather3::<R>(&g.log_scales[first..first + n]);
+    let mut culls = Culls::new();
+    let geo = geometry_lanes(mean, q, ls, cam, &mut culls);
+    let geo_ok = lanes_of(R::select(culls.ok, c(1.0), zero));
     let Geometry {
         t: [x, y, _],
         qh,
@@ -153,166 +193,272 @@ fn backward_one(
         j,
         cov,
     } = geo;
+    let gv = |f: fn(&SplatGrad) -> f32| R::gather(|l| f(&sg[l]));
     let rz2 = rz * rz;
-    let (a_, b_, c_) = (cov[0] + EPS2D, cov[1], cov[2] + EPS2D);
-    let inv_det = 1.0 / (a_ * c_ - b_ * b_);
+    let (a_, b_, c_) = (cov[0] + c(EPS2D), cov[1], cov[2] + c(EPS2D));
+    let inv_det = c(1.0) / (a_ * c_ - b_ * b_);
     let ci = [[c_ * inv_det, -b_ * inv_det], [-b_ * inv_det, a_ * inv_det]];
     // v_Σ2d = −Σ⁻¹·G·Σ⁻¹ with G the symmetric gradient of the conic.
-    let gm = [
-        [sg.conic[0], 0.5 * sg.conic[1]],
-        [0.5 * sg.conic[1], sg.conic[2]],
-    ];
-    let mut tmp = [[0f32; 2]; 2];
+    let half_b = c(0.5) * gv(|s| s.conic[1]);
+    let gm = [[gv(|s| s.conic[0]), half_b], [half_b, gv(|s| s.conic[2])]];
+    let mut tmp = [[zero; 2]; 2];
     for a in 0..2 {
         for b in 0..2 {
             tmp[a][b] = ci[a][0] * gm[0][b] + ci[a][1] * gm[1][b];
         }
     }
-    let mut v_cov = [[0f32; 2]; 2];
+    let mut v_cov = [[zero; 2]; 2];
     for a in 0..2 {
         for b in 0..2 {
             v_cov[a][b] = -(tmp[a][0] * ci[0][b] + tmp[a][1] * ci[1][b]);
         }
     }
     // v_Σc = Jᵀ·V·J and v_J = 2·V·J·Σc (V symmetric, Σc symmetric).
-    let mut vj = [[0f32; 3]; 2]; // V·J
+    let mut vj = [[zero; 3]; 2]; // V·J
     for a in 0..2 {
         for b in 0..3 {
             vj[a][b] = v_cov[a][0] * j[0][b] + v_cov[a][1] * j[1][b];
         }
     }
-    let mut v_sigma_c = [[0f32; 3]; 3];
+    let mut v_sigma_c = [[zero; 3]; 3];
     for a in 0..3 {
         for b in 0..3 {
             v_sigma_c[a][b] = j[0][a] * vj[0][b] + j[1][a] * vj[1][b];
         }
     }
-    let mut v_j = [[0f32; 3]; 2];
+    let mut v_j = [[zero; 3]; 2];
     for a in 0..2 {
         for b in 0..3 {
-            v_j[a][b] = 2.0
+            v_j[a][b] = c(2.0)
                 * ((vj[a][0] * sigma_c[0][b] + vj[a][1] * sigma_c[1][b])
                     + vj[a][2] * sigma_c[2][b]);
         }
     }
     // Camera-space mean.
-    let v_m2d = sg.mean2d;
+    let (fx, fy) = (c(cam.fx), c(cam.fy));
+    let v_m2d = [gv(|s| s.mean2d[0]), gv(|s| s.mean2d[1])];
     let mut v_t = [
-        v_m2d[0] * cam.fx * rz,
-        v_m2d[1] * cam.fy * rz,
-        -(v_m2d[0] * cam.fx * x + v_m2d[1] * cam.fy * y) * rz2 + sg.depth,
+        v_m2d[0] * fx * rz,
+        v_m2d[1] * fy * rz,
+        -(v_m2d[0] * fx * x + v_m2d[1] * fy * y) * rz2 + gv(|s| s.depth),
     ];
-    let v_tx = v_j[0][2] * (-cam.fx * rz2);
-    let v_ty = v_j[1][2] * (-cam.fy * rz2);
-    v_t[2] += v_j[0][0] * (-cam.fx * rz2)
-        + v_j[1][1] * (-cam.fy * rz2)
-        + v_j[0][2] * (2.0 * cam.fx * tx * rz2 * rz)
-        + v_j[1][2] * (2.0 * cam.fy * ty * rz2 * rz);
-    if x_clamped {
-        v_t[2] += v_tx * (tx * rz);
-    } else {
-        v_t[0] += v_tx;
-    }
-    if y_clamped {
-        v_t[2] += v_ty * (ty * rz);
-    } else {
-        v_t[1] += v_ty;
+    let v_tx = v_j[0][2] * (c(-cam.fx) * rz2);
+    let v_ty = v_j[1][2] * (c(-cam.fy) * rz2);
+    v_t[2] = v_t[2]
+        + (v_j[0][0] * (c(-cam.fx) * rz2)
+            + v_j[1][1] * (c(-cam.fy) * rz2)
+            + v_j[0][2] * (c(2.0 * cam.fx) * tx * rz2 * rz)
+            + v_j[1][2] * (c(2.0 * cam.fy) * ty * rz2 * rz));
+    // A clamped x/z makes tx = z·lim: its gradient goes to z.
+    v_t[2] = R::select(x_clamped, v_t[2] + v_tx * (tx * rz), v_t[2]);
+    v_t[0] = R::select(x_clamped, v_t[0], v_t[0] + v_tx);
+    v_t[2] = R::select(y_clamped, v_t[2] + v_ty * (ty * rz), v_t[2]);
+    v_t[1] = R::select(y_clamped, v_t[1], v_t[1] + v_ty);
+    let mut r = [[zero; 3]; 3];
+    for a in 0..3 {
+        for b in 0..3 {
+            r[a][b] = c(cam.r_cw[a][b]);
+        }
     }
     if groups.means {
-        let mut v_mu = [0f32; 3];
-        for (a, v) in v_mu.iter_mut().enumerate() {
-            *v = (r[0][a] * v_t[0] + r[1][a] * v_t[1]) + r[2][a] * v_t[2];
+        let mut v_mu = [zero; 3];
+        for a in 0..3 {
+            v_mu[a] = (r[0][a] * v_t[0] + r[1][a] * v_t[1]) + r[2][a] * v_t[2];
         }
-        // The colour depends on the mean through dir = (μ − C)/|μ − C|.
-        if v_sh.iter().any(|&v| v != 0.0) && plan.sh_degree > 0 {
-            let mean = g.means[i];
-            let d: [f32; 3] = std::array::from_fn(|a| mean[a] - cam.center[a]);
-            let len = ((d[0] * d[0] + d[1] * d[1]) + d[2] * d[2]).sqrt();
-            let dir = d.map(|v| v / len);
-            let mut vals = [0f64; MAX_SH_COEFFS];
-            let mut grads = [[0f64; 3]; MAX_SH_COEFFS];
-            sh_basis_grad(plan.sh_degree, dir.map(|v| v as f64), &mut vals, &mut grads);
-            let mut v_dir = [0f64; 3];
-            for k in 1..=k_used {
-                for ch in 0..3 {
-                    let coef = rest[(k - 1) * 3 + ch] as f64 * v_sh[ch] as f64;
-                    for a in 0..3 {
-                        v_dir[a] += coef * grads[k][a];
-                    }
+        // The colour depends on the mean through dir = (μ − C)/|μ − C|: the derivative of
+        // Σ_k w_k·Y_k(dir) by forward-mode duals of the basis, then through the
+        // normalization (only where some colour gradient flows).
+        if degree > 0 {
+            let d = [
+                mean[0] - c(cam.center[0]),
+                mean[1] - c(cam.center[1]),
+                mean[2] - c(cam.center[2]),
+            ];
+            let len = dot3(d, d).sqrt();
+            let dir = [d[0] / len, d[1] / len, d[2] / len];
+            let mut yk = [Dual3::<R>::c(0.0); MAX_SH_COEFFS];
+            let var = |i: usize| Dual3::var(dir[i], i);
+            sh_basis(degree, var(0), var(1), var(2), &mut yk);
+            let mut v_dir = [zero; 3];
+            for kk in 1..=k_used {
+                let wk = R::gather(|l| w[kk - 1][l]);
+                for a in 0..3 {
+                    v_dir[a] = v_dir[a] + wk * yk[kk].d[a];
                 }
             }
-            let dd =
-                (dir[0] as f64 * v_dir[0] + dir[1] as f64 * v_dir[1]) + dir[2] as f64 * v_dir[2];
+            let dd = dot3(dir, v_dir);
+            let flows = R::gather(|l| flows[l]).gt(zero);
             for a in 0..3 {
-                v_mu[a] += ((v_dir[a] - dir[a] as f64 * dd) / len as f64) as f32;
+                let v = v_mu[a] + (v_dir[a] - dir[a] * dd) / len;
+                v_mu[a] = R::select(flows, v, v_mu[a]);
             }
         }
-        *out_mean = v_mu;
+        let v = [lanes_of(v_mu[0]), lanes_of(v_mu[1]), lanes_of(v_mu[2])];
+        for l in 0..n {
+            if visible[l] && geo_ok[l] != 0.0 {
+                out.means[k + l] = [v[0][l], v[1][l], v[2][l]];
+            }
+        }
     }
     if groups.opacities {
-        let o = sigmoid(g.opacity_logits[i]);
-        *out_op = sg.opacity * o * (1.0 - o);
+        let logits = &g.opacity_logits[first..first + n];
+        let o = c(1.0) / (c(1.0) + (-R::gather(|l| logits[l])).exp()); // fastexp::sigmoid
+        let v = lanes_of(gv(|s| s.opacity) * o * (c(1.0) - o));
+        for l in 0..n {
+            if visible[l] && geo_ok[l] != 0.0 {
+                out.opacity[k + l] = v[l];
+            }
+        }
     }
     if groups.log_scales || groups.quats {
         // v_Σ = Wᵀ·v_Σc·W, v_M = 2·v_Σ·M.
-        let v_sigma = mul(&mul(&tr(r), &v_sigma_c), r);
-        let v_m = mul(&v_sigma, &m).map(|row| row.map(|v| 2.0 * v));
+        let v_sigma = mat3_mul(&mat3_mul(&transpose(&r), &v_sigma_c), &r);
+        let mut v_m = mat3_mul(&v_sigma, &m);
+        for a in 0..3 {
+            for b in 0..3 {
+                v_m[a][b] = c(2.0) * v_m[a][b];
+            }
+        }
         if groups.log_scales {
+            let mut v_ls = [zero; 3];
             for b in 0..3 {
                 let v_s = (v_m[0][b] * rot[0][b] + v_m[1][b] * rot[1][b]) + v_m[2][b] * rot[2][b];
-                out_ls[b] = v_s * s[b];
+                v_ls[b] = v_s * s[b];
+            }
+            let v = [lanes_of(v_ls[0]), lanes_of(v_ls[1]), lanes_of(v_ls[2])];
+            for l in 0..n {
+                if visible[l] && geo_ok[l] != 0.0 {
+                    out.log_scales[k + l] = [v[0][l], v[1][l], v[2][l]];
+                }
             }
         }
         if groups.quats {
-            let mut vr = [[0f32; 3]; 3];
+            let mut vr = [[zero; 3]; 3];
             for a in 0..3 {
                 for b in 0..3 {
                     vr[a][b] = v_m[a][b] * s[b];
                 }
             }
             let [w_, x_, y_, z_] = qh;
+            let two = c(2.0);
             let vq = [
-                2.0 * (-z_ * vr[0][1] + y_ * vr[0][2] + z_ * vr[1][0]
+                two * (-z_ * vr[0][1] + y_ * vr[0][2] + z_ * vr[1][0]
                     - x_ * vr[1][2]
                     - y_ * vr[2][0]
                     + x_ * vr[2][1]),
-                2.0 * (y_ * vr[0][1] + z_ * vr[0][2] + y_ * vr[1][0]
-                    - 2.0 * x_ * vr[1][1]
+                two * (y_ * vr[0][1] + z_ * vr[0][2] + y_ * vr[1][0]
+                    - two * x_ * vr[1][1]
                     - w_ * vr[1][2]
                     + z_ * vr[2][0]
                     + w_ * vr[2][1]
-                    - 2.0 * x_ * vr[2][2]),
-                2.0 * (-2.0 * y_ * vr[0][0]
+                    - two * x_ * vr[2][2]),
+                two * (c(-2.0) * y_ * vr[0][0]
                     + x_ * vr[0][1]
                     + w_ * vr[0][2]
                     + x_ * vr[1][0]
                     + z_ * vr[1][2]
                     - w_ * vr[2][0]
                     + z_ * vr[2][1]
-                    - 2.0 * y_ * vr[2][2]),
-                2.0 * (-2.0 * z_ * vr[0][0] - w_ * vr[0][1] + x_ * vr[0][2] + w_ * vr[1][0]
-                    - 2.0 * z_ * vr[1][1]
+                    - two * y_ * vr[2][2]),
+                two * (c(-2.0) * z_ * vr[0][0] - w_ * vr[0][1] + x_ * vr[0][2] + w_ * vr[1][0]
+                    - two * z_ * vr[1][1]
                     + y_ * vr[1][2]
                     + x_ * vr[2][0]
                     + y_ * vr[2][1]),
             ];
             let dot = (qh[0] * vq[0] + qh[1] * vq[1]) + (qh[2] * vq[2] + qh[3] * vq[3]);
-            for k in 0..4 {
-                out_q[k] = (vq[k] - qh[k] * dot) * inv_qn;
+            let v = [
+                lanes_of((vq[0] - qh[0] * dot) * inv_qn),
+                lanes_of((vq[1] - qh[1] * dot) * inv_qn),
+                lanes_of((vq[2] - qh[2] * dot) * inv_qn),
+                lanes_of((vq[3] - qh[3] * dot) * inv_qn),
+            ];
+            for l in 0..n {
+                if visible[l] && geo_ok[l] != 0.0 {
+                    out.quats[k + l] = [v[0][l], v[1][l], v[2][l], v[3][l]];
+                }
             }
         }
     }
 }
 
-/// Backward of [`crate::raster::project::project`] for every Gaussian with a non-zero splat
-/// gradient (culled Gaussians, radii `(0, 0)` in the projection, get exactly zero).
+/// [`backward_block`] over a chunk: `R::N` Gaussians at a time, the remainder one at a time.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn backward_range<R: Lanes>(
+    g: &Gaussians,
+    first: usize,
+    cam: &CameraF32,
+    degree: u32,
+    groups: &GradGroups,
+    sg: &[SplatGrad],
+    radii: &[[i32; 2]],
+    out: &mut OutChunk,
+) {
+    let n = out.means.len();
+    let full = n - n % R::N;
+    for k in (0..full).step_by(R::N) {
+        let (s, r) = (&sg[first + k..], &radii[first + k..]);
+        backward_block::<R>(g, first + k, cam, degree, groups, s, r, out, k);
+    }
+    for k in full..n {
+        let (s, r) = (&sg[first + k..], &radii[first + k..]);
+        backward_block::<f32>(g, first + k, cam, degree, groups, s, r, out, k);
+    }
+}
+
+/// [`backward_range`] eight Gaussians per instruction.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn backward_range_avx2(
+    g: &Gaussians,
+    first: usize,
+    cam: &CameraF32,
+    degree: u32,
+    groups: &GradGroups,
+    sg: &[SplatGrad],
+    radii: &[[i32; 2]],
+    out: &mut OutChunk,
+) {
+    backward_range::<F32x8>(g, first, cam, degree, groups, sg, radii, out)
+}
+
+/// [`backward_range`] sixteen Gaussians per instruction.
+///
+/// # Safety
+/// The CPU must support AVX-512F.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn backward_range_avx512(
+    g: &Gaussians,
+    first: usize,
+    cam: &CameraF32,
+    degree: u32,
+    groups: &GradGroups,
+    sg: &[SplatGrad],
+    radii: &[[i32; 2]],
+    out: &mut OutChunk,
+) {
+    backward_range::<F32x16>(g, first, cam, degree, groups, sg, radii, out)
+}
+
+/// Backward of [`crate::raster::project::project`] for every Gaussian the forward did not
+/// cull (culled Gaussians, radii `(0, 0)` in the projection, get exactly zero).
+/// `kernel` chooses the lane width as the projection does (sixteen Gaussians per AVX-512F
+/// instruction, eight per AVX2 instruction, or one); all give the same bits.
 pub fn project_backward(
     g: &Gaussians,
     cam: &CameraF32,
     radii: &[[i32; 2]],
     plan: &RenderPlan,
     groups: &GradGroups,
-    splat_grads: &[crate::raster::backward::composite::SplatGrad],
+    splat_grads: &[SplatGrad],
+    kernel: Kernel,
 ) -> Gradients {
     use rayon::prelude::*;
     let n = g.len();
@@ -336,6 +482,11 @@ pub fn project_backward(
             })
             .collect(),
     };
+    #[cfg(target_arch = "x86_64")]
+    let (avx512, avx2) = (kernel.avx512(), kernel.avx2());
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = kernel;
+    let degree = plan.sh_degree;
     // Fixed chunks of Gaussians written in place. Degree 0 has no rest coefficients: a
     // placeholder of one value per Gaussian keeps the chunks aligned.
     const CHUNK: usize = 1024;
@@ -354,29 +505,34 @@ pub fn project_backward(
         .zip(out.sh_dc.par_chunks_mut(CHUNK))
         .zip(rest.par_chunks_mut(CHUNK * rest_per))
         .enumerate()
-        .for_each(|(ci, (((((mc, lc), qc), oc), dc), rc))| {
-            for k in 0..mc.len() {
-                let i = ci * CHUNK + k;
-                if radii[i] == [0, 0] {
-                    continue;
+        .for_each(
+            |(ci, (((((means, log_scales), quats), opacity), sh_dc), rest))| {
+                let mut o = OutChunk {
+                    means,
+                    log_scales,
+                    quats,
+                    opacity,
+                    sh_dc,
+                    rest,
+                    rest_per,
+                };
+                let first = ci * CHUNK;
+                let (sg, r) = (splat_grads, radii);
+                #[cfg(target_arch = "x86_64")]
+                if avx512 {
+                    // SAFETY: AVX-512F was detected (`Kernel::avx512`).
+                    unsafe { backward_range_avx512(g, first, cam, degree, groups, sg, r, &mut o) };
+                    return;
                 }
-                let r = &mut rc[k * rest_per..k * rest_per + k1 * 3];
-                backward_one(
-                    g,
-                    i,
-                    cam,
-                    plan,
-                    groups,
-                    &splat_grads[i],
-                    &mut mc[k],
-                    &mut lc[k],
-                    &mut qc[k],
-                    &mut oc[k],
-                    &mut dc[k],
-                    r,
-                );
-            }
-        });
+                #[cfg(target_arch = "x86_64")]
+                if avx2 {
+                    // SAFETY: AVX2 was detected (`Kernel::avx2`).
+                    unsafe { backward_range_avx2(g, first, cam, degree, groups, sg, r, &mut o) };
+                    return;
+                }
+                backward_range::<f32>(g, first, cam, degree, groups, sg, r, &mut o);
+            },
+        );
     out
 }
 
