@@ -151,6 +151,13 @@ fn group_index(p: Param) -> usize {
     Param::ALL.iter().position(|&q| q == p).expect("listed")
 }
 
+/// Where a step's gradient comes from: a whole array, or chunk by chunk (`Adam::step_with`).
+#[derive(Clone, Copy)]
+enum Grad<'a> {
+    Slice(&'a [f32]),
+    Chunks(&'a (dyn Fn(usize, &mut [f32]) + Sync)),
+}
+
 impl Adam {
     pub fn new(config: AdamConfig, params: &Gaussians) -> Result<Self> {
         let z = Gaussians::zeros(params.len(), params.sh_degree)?;
@@ -193,10 +200,7 @@ impl Adam {
             "gradient length of {}",
             p.name()
         );
-        let grad = &|first, out: &mut [f32]| {
-            out.copy_from_slice(&grad[first..first + out.len()]);
-        };
-        self.step_impl(params, p, lr, grad, visible);
+        self.step_impl(params, p, lr, Grad::Slice(grad), visible);
     }
 
     /// [`Adam::step`] with the gradient produced chunk by chunk: `grad(first, out)` fills
@@ -211,7 +215,7 @@ impl Adam {
         lr: f32,
         grad: &(dyn Fn(usize, &mut [f32]) + Sync),
     ) {
-        self.step_impl(params, p, lr, grad, None);
+        self.step_impl(params, p, lr, Grad::Chunks(grad), None);
     }
 
     fn step_impl(
@@ -219,7 +223,7 @@ impl Adam {
         params: &mut Gaussians,
         p: Param,
         lr: f32,
-        grad: &(dyn Fn(usize, &mut [f32]) + Sync),
+        grad: Grad,
         visible: Option<&[bool]>,
     ) {
         if let Some(vis) = visible {
@@ -252,31 +256,36 @@ impl Adam {
             .zip(m.par_chunks_mut(chunk))
             .zip(v.par_chunks_mut(chunk))
             .enumerate()
-            .for_each_init(
-                || vec![0f32; chunk],
-                |buf, (ci, ((x, m), v))| {
-                    let g = &mut buf[..x.len()];
-                    grad(ci * chunk, g);
-                    let update = |x: &mut [f32], m: &mut [f32], v: &mut [f32], g: &[f32]| {
-                        update_dispatch(isa, x, m, v, g, k);
-                    };
-                    match visible {
-                        None => update(x, m, v, g),
-                        Some(vis) => {
-                            let rows = &vis[ci * CHUNK_ROWS..][..x.len() / row];
-                            for (k, _) in rows.iter().enumerate().filter(|(_, v)| **v) {
-                                let e = k * row..(k + 1) * row;
-                                update(
-                                    &mut x[e.clone()],
-                                    &mut m[e.clone()],
-                                    &mut v[e.clone()],
-                                    &g[e],
-                                );
-                            }
+            .for_each_init(Vec::new, |buf, (ci, ((x, m), v))| {
+                let first = ci * chunk;
+                // A gradient array is read in place; a chunked one is made in `buf`.
+                let g: &[f32] = match grad {
+                    Grad::Slice(g) => &g[first..first + x.len()],
+                    Grad::Chunks(f) => {
+                        buf.resize(x.len(), 0.0);
+                        f(first, buf);
+                        buf
+                    }
+                };
+                let update = |x: &mut [f32], m: &mut [f32], v: &mut [f32], g: &[f32]| {
+                    update_dispatch(isa, x, m, v, g, k);
+                };
+                match visible {
+                    None => update(x, m, v, g),
+                    Some(vis) => {
+                        let rows = &vis[ci * CHUNK_ROWS..][..x.len() / row];
+                        for (k, _) in rows.iter().enumerate().filter(|(_, v)| **v) {
+                            let e = k * row..(k + 1) * row;
+                            update(
+                                &mut x[e.clone()],
+                                &mut m[e.clone()],
+                                &mut v[e.clone()],
+                                &g[e],
+                            );
                         }
                     }
-                },
-            );
+                }
+            });
     }
 
     /// Zero both moments of group `p` (INRIA's `replace_tensor_to_optimizer`, used by the
