@@ -15,6 +15,14 @@ use std::path::Path;
 /// The conventions version of SPEC.md (bumped when a number a port must match changes).
 pub const CONVENTIONS_VERSION: u32 = 1;
 
+/// The numerics revision (SPEC.md §20.8): bumped whenever any bit of any stage's output
+/// changes — a new summation order, another form of a derivative — including changes the
+/// conventions version does not cover (numbers a port matches only to a tolerance). Part
+/// of every pipeline step's key, so neither a step cache nor `--resume` reuses a result the
+/// current code would not reproduce bit for bit. History: 1 before issue #13; 2 the
+/// backward blend's lane-pair summation order; 3 the f32 SH direction derivative.
+pub const NUMERICS_REVISION: u32 = 3;
+
 /// Image losses the oracle can differentiate.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Loss {

@@ -122,6 +122,7 @@ fn inputs_digest(
     };
     text(&mut h, env!("CARGO_PKG_VERSION"));
     h.update(crate::oracle::CONVENTIONS_VERSION.to_le_bytes());
+    h.update(crate::oracle::NUMERICS_REVISION.to_le_bytes());
     text(&mut h, scene_sha256);
     text(
         &mut h,
