@@ -158,11 +158,11 @@ fn backward_block<R: Lanes>(
             };
         }
     }
-    let c = R::splat;
-    let zero = c(0.0);
     if !groups.geometry() {
         return;
     }
+    let c = R::splat;
+    let zero = c(0.0);
     // The forward quantities the chain needs, recomputed by the forward's own code; a lane
     // it culls there was culled in the forward too (radii are (0, 0)).
     let mean = gather3::<R>(&g.means[first..first + n]);
