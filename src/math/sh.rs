@@ -242,7 +242,6 @@ mod tests {
         }
     }
 
-    /// Orthonormality on the sphere (Fibonacci quadrature, 20k points): ∫Y_i Y_j = δ_ij.
     /// The f32 duals the backward projection uses agree with the f64 duals to
     /// `SH_GRAD_F32_ATOL` on 4096 Fibonacci-sphere directions, degree 5. Measured 2.2e-6: the
     /// direction's own rounding to f32 (≤ 6e-8 relative) times second derivatives of up to
@@ -273,6 +272,7 @@ mod tests {
         assert!(worst < SH_GRAD_F32_ATOL, "{worst}");
     }
 
+    /// Orthonormality on the sphere (Fibonacci quadrature, 20k points): ∫Y_i Y_j = δ_ij.
     #[test]
     fn sh_basis_is_orthonormal() {
         let n = 20_000;

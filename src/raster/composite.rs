@@ -44,7 +44,7 @@ pub const EXPECTED_DEPTH_EPS: f32 = 1e-10;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Kernel {
     /// The fastest form this CPU supports, detected at run time: AVX-512F for the forward
-    /// and backward blends, AVX2 elsewhere.
+    /// and backward blends and both projections (forward and backward), AVX2 elsewhere.
     #[default]
     Auto,
     /// AVX2 where detected, never AVX-512 (tests and benches compare the forms).

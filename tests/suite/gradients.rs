@@ -625,14 +625,22 @@ fn backward_simd_and_scalar_are_bit_identical() {
 /// The backward projection in lanes (sixteen Gaussians per AVX-512F instruction, eight per
 /// AVX2 instruction, a scalar remainder) gives the bits of the scalar reference: SH degrees
 /// 0–5 (and a plan degree below the stored one), blocks that mix visible and culled
-/// Gaussians (behind the camera, off screen), a count that leaves a remainder, and every
-/// group combination, with a non-zero splat gradient on every Gaussian.
+/// Gaussians (behind the camera, off screen), visible Gaussians beyond the Jacobian's clamp
+/// in x and in y, Gaussians without colour gradient, Gaussians marked visible whose
+/// geometry fails (SH gradients only), a count that leaves a remainder, and four group
+/// sets.
 #[test]
 fn projection_backward_simd_matches_scalar_bitwise() {
     use unseen::raster::backward::composite::SplatGrad;
     use unseen::raster::backward::project::project_backward;
     use unseen::raster::project::{CameraF32, project};
     use unseen::raster::{Kernel, RenderPlan, RenderReport};
+    #[cfg(target_arch = "x86_64")]
+    eprintln!(
+        "lane forms compared with the scalar one: AVX-512F {}, AVX2 {}",
+        std::is_x86_feature_detected!("avx512f"),
+        std::is_x86_feature_detected!("avx2")
+    );
     let cam = default_camera(97, 61);
     let groups = [
         GradGroups::ALL,
@@ -657,6 +665,11 @@ fn projection_backward_simd_matches_scalar_bitwise() {
                 scene.means[i][2] = -2.0; // behind the camera
             } else if i % 7 == 2 {
                 scene.means[i][0] = 40.0; // off screen
+            } else if i % 11 == 3 {
+                // Beyond the clamp of x/z (0.75 here) or y/z (0.47), still on screen.
+                let (axis, ratio) = if i % 2 == 0 { (0, 0.85) } else { (1, 0.55) };
+                scene.means[i][axis] = ratio * scene.means[i][2];
+                scene.log_scales[i] = [0.5f32.ln(); 3];
             }
         }
         let opts = RenderOptions {
@@ -667,6 +680,13 @@ fn projection_backward_simd_matches_scalar_bitwise() {
         let projected = project(&scene, &cam, &plan, &opts, &mut RenderReport::default());
         let culled = projected.radii.iter().filter(|r| **r == [0, 0]).count();
         assert!(culled > 300 && culled < 700, "{culled} culled");
+        let clamped = (0..scene.len())
+            .filter(|&i| i % 11 == 3 && i % 5 != 1 && i % 7 != 2)
+            .filter(|&i| projected.radii[i] != [0, 0])
+            .count();
+        assert!(clamped > 30, "{clamped} visible beyond the clamp");
+        // Every Gaussian marked visible: those behind the camera fail the geometry.
+        let all_visible = vec![[1, 1]; scene.len()];
         let mut u = Uniform::new(degree as u64);
         let splats: Vec<SplatGrad> = (0..scene.len())
             .map(|_| SplatGrad {
@@ -676,10 +696,18 @@ fn projection_backward_simd_matches_scalar_bitwise() {
                 color: [u.range(-1.0, 1.0), u.range(-1.0, 1.0), u.range(-1.0, 1.0)],
                 depth: u.range(-1.0, 1.0),
             })
+            .enumerate()
+            .map(|(i, s)| SplatGrad {
+                color: if i % 13 == 4 { [0.0; 3] } else { s.color },
+                ..s
+            })
             .collect();
         let camf = CameraF32::new(&cam);
-        for g in &groups {
-            let run = |k| project_backward(&scene, &camf, &projected.radii, &plan, g, &splats, k);
+        for (g, radii) in groups
+            .iter()
+            .flat_map(|g| [(g, &projected.radii), (g, &all_visible)])
+        {
+            let run = |k| project_backward(&scene, &camf, radii, &plan, g, &splats, k);
             let reference = run(Kernel::Scalar);
             assert!(reference.means.iter().flatten().any(|&v| v != 0.0) == g.means);
             for kernel in [Kernel::Auto, Kernel::Avx2] {

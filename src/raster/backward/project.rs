@@ -193,14 +193,16 @@ fn backward_block<R: Lanes>(
         j,
         cov,
     } = geo;
-    let gv = |f: fn(&SplatGrad) -> f32| R::gather(|l| f(&sg[l]));
     let rz2 = rz * rz;
     let (a_, b_, c_) = (cov[0] + c(EPS2D), cov[1], cov[2] + c(EPS2D));
     let inv_det = c(1.0) / (a_ * c_ - b_ * b_);
     let ci = [[c_ * inv_det, -b_ * inv_det], [-b_ * inv_det, a_ * inv_det]];
     // v_Σ2d = −Σ⁻¹·G·Σ⁻¹ with G the symmetric gradient of the conic.
-    let half_b = c(0.5) * gv(|s| s.conic[1]);
-    let gm = [[gv(|s| s.conic[0]), half_b], [half_b, gv(|s| s.conic[2])]];
+    let half_b = c(0.5) * R::gather(|l| sg[l].conic[1]);
+    let gm = [
+        [R::gather(|l| sg[l].conic[0]), half_b],
+        [half_b, R::gather(|l| sg[l].conic[2])],
+    ];
     let mut tmp = [[zero; 2]; 2];
     for a in 0..2 {
         for b in 0..2 {
@@ -236,11 +238,14 @@ fn backward_block<R: Lanes>(
     }
     // Camera-space mean.
     let (fx, fy) = (c(cam.fx), c(cam.fy));
-    let v_m2d = [gv(|s| s.mean2d[0]), gv(|s| s.mean2d[1])];
+    let v_m2d = [
+        R::gather(|l| sg[l].mean2d[0]),
+        R::gather(|l| sg[l].mean2d[1]),
+    ];
     let mut v_t = [
         v_m2d[0] * fx * rz,
         v_m2d[1] * fy * rz,
-        -(v_m2d[0] * fx * x + v_m2d[1] * fy * y) * rz2 + gv(|s| s.depth),
+        -(v_m2d[0] * fx * x + v_m2d[1] * fy * y) * rz2 + R::gather(|l| sg[l].depth),
     ];
     let v_tx = v_j[0][2] * (c(-cam.fx) * rz2);
     let v_ty = v_j[1][2] * (c(-cam.fy) * rz2);
@@ -277,8 +282,8 @@ fn backward_block<R: Lanes>(
             let len = dot3(d, d).sqrt();
             let dir = [d[0] / len, d[1] / len, d[2] / len];
             let mut yk = [Dual3::<R>::c(0.0); MAX_SH_COEFFS];
-            let var = |i: usize| Dual3::var(dir[i], i);
-            sh_basis(degree, var(0), var(1), var(2), &mut yk);
+            let (ux, uy) = (Dual3::var(dir[0], 0), Dual3::var(dir[1], 1));
+            sh_basis(degree, ux, uy, Dual3::var(dir[2], 2), &mut yk);
             let mut v_dir = [zero; 3];
             for kk in 1..=k_used {
                 let wk = R::gather(|l| w[kk - 1][l]);
@@ -303,7 +308,7 @@ fn backward_block<R: Lanes>(
     if groups.opacities {
         let logits = &g.opacity_logits[first..first + n];
         let o = c(1.0) / (c(1.0) + (-R::gather(|l| logits[l])).exp()); // fastexp::sigmoid
-        let v = lanes_of(gv(|s| s.opacity) * o * (c(1.0) - o));
+        let v = lanes_of(R::gather(|l| sg[l].opacity) * o * (c(1.0) - o));
         for l in 0..n {
             if visible[l] && geo_ok[l] != 0.0 {
                 out.opacity[k + l] = v[l];
