@@ -141,7 +141,7 @@ fn main() {
                         let g = project_backward(
                             &scene,
                             &CameraF32::new(&cam),
-                            &fwd.projected.radii,
+                            &fwd.projected,
                             &fwd.plan,
                             &groups,
                             &splat_grads,

@@ -328,7 +328,11 @@ pub(crate) fn geometry_lanes<R: Lanes>(
 
 /// The SH basis (up to `degree`) at the view direction `(μ − C)/|μ − C|` of the lanes' means.
 #[inline(always)]
-fn sh_basis_lanes<R: Lanes>(mean: [R; 3], cam: &CameraF32, degree: u32) -> [R; MAX_SH_COEFFS] {
+pub(crate) fn sh_basis_lanes<R: Lanes>(
+    mean: [R; 3],
+    cam: &CameraF32,
+    degree: u32,
+) -> [R; MAX_SH_COEFFS] {
     let c = R::splat;
     let d = [
         mean[0] - c(cam.center[0]),

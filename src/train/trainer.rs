@@ -14,7 +14,9 @@ use crate::error::{Error, Result};
 use crate::gaussian::{Gaussians, Param};
 use crate::math::fastexp::ln;
 use crate::math::sh::{SH_C0, num_coeffs};
-use crate::raster::backward::{GradGroups, ImageGrads, backward, render_for_backward};
+use crate::raster::backward::{
+    GradGroups, Gradients, ImageGrads, backward_into, render_for_backward,
+};
 use crate::raster::{Outputs, RenderOptions};
 use crate::scene::Uniform;
 use crate::train::adam::{Adam, AdamConfig, ExpSchedule};
@@ -239,6 +241,8 @@ pub struct Trainer<'a> {
     stack: Vec<usize>,
     loss_ema: f64,
     psnr_ema: f64,
+    /// The backward's output, reused across iterations.
+    grads: Gradients,
 }
 
 /// Seed of a stage's generator: the run seed mixed with the stage name (FNV-1a), so
@@ -308,6 +312,7 @@ impl<'a> Trainer<'a> {
             stack: Vec::new(),
             loss_ema: 0.0,
             psnr_ema: 0.0,
+            grads: Gradients::default(),
         })
     }
 
@@ -417,7 +422,9 @@ impl<'a> Trainer<'a> {
             ..Default::default()
         };
         let groups = self.groups();
-        let (grads, pairs) = backward(&self.gaussians, cam, &opts, &fwd, &v, &groups)?;
+        // Taken for the iteration, put back after Adam (lost only with an error).
+        let mut grads = std::mem::take(&mut self.grads);
+        let pairs = backward_into(&self.gaussians, cam, &opts, &fwd, &v, &groups, &mut grads)?;
         lap(&mut self.times.backward);
 
         let mut densified = None;
@@ -469,6 +476,7 @@ impl<'a> Trainer<'a> {
                     .step_sparse(&mut self.gaussians, param, g, lr, visible.as_deref());
             }
         }
+        self.grads = grads;
         lap(&mut self.times.adam);
         let t = out.terms;
         self.loss_ema = if it == 1 {

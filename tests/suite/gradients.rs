@@ -685,8 +685,13 @@ fn projection_backward_simd_matches_scalar_bitwise() {
             .filter(|&i| projected.radii[i] != [0, 0])
             .count();
         assert!(clamped > 30, "{clamped} visible beyond the clamp");
-        // Every Gaussian marked visible: those behind the camera fail the geometry.
-        let all_visible = vec![[1, 1]; scene.len()];
+        // Every Gaussian marked visible (those behind the camera fail the geometry), with
+        // colour channels closed by the clamp in a pattern.
+        let mut all_visible = projected.clone();
+        all_visible.radii.fill([1, 1]);
+        for (i, s) in all_visible.splats.iter_mut().enumerate() {
+            s.color = std::array::from_fn(|ch| if (i + ch) % 4 == 0 { 0.0 } else { 0.5 });
+        }
         let mut u = Uniform::new(degree as u64);
         let splats: Vec<SplatGrad> = (0..scene.len())
             .map(|_| SplatGrad {
@@ -703,11 +708,11 @@ fn projection_backward_simd_matches_scalar_bitwise() {
             })
             .collect();
         let camf = CameraF32::new(&cam);
-        for (g, radii) in groups
+        for (g, fwd) in groups
             .iter()
-            .flat_map(|g| [(g, &projected.radii), (g, &all_visible)])
+            .flat_map(|g| [(g, &projected), (g, &all_visible)])
         {
-            let run = |k| project_backward(&scene, &camf, radii, &plan, g, &splats, k);
+            let run = |k| project_backward(&scene, &camf, fwd, &plan, g, &splats, k);
             let reference = run(Kernel::Scalar);
             assert!(reference.means.iter().flatten().any(|&v| v != 0.0) == g.means);
             for kernel in [Kernel::Auto, Kernel::Avx2] {

@@ -25,7 +25,9 @@ use crate::gaussian::Gaussians;
 use crate::math::sh::num_coeffs;
 use crate::raster::composite::{Kernel, splat_alpha, splat_rows};
 use crate::raster::plan::RenderPlan;
-use crate::raster::project::{ALPHA_THRESHOLD, CameraF32, sh_color, sh_view_basis};
+use crate::raster::project::{
+    ALPHA_THRESHOLD, CameraF32, Projected, Splat, sh_color, sh_view_basis,
+};
 use crate::raster::tile::{TILE_SIZE, TileBins};
 use crate::raster::{Outputs, RenderOptions};
 use rayon::prelude::*;
@@ -531,16 +533,28 @@ impl FrozenBlend {
                 ..SplatGrad::default()
             })
             .collect();
-        // Only "culled or not" of the projection is read: the record's visibility.
-        let radii: Vec<[i32; 2]> = self
-            .visible
-            .iter()
-            .map(|&v| if v { [1, 1] } else { [0, 0] })
-            .collect();
+        // Of the projection, only "culled or not" (the record's visibility) and the colours
+        // (the clamp) are read.
+        self.colors(scene, &mut ws);
+        let fwd = Projected {
+            splats: ws
+                .colors
+                .iter()
+                .map(|&color| Splat {
+                    color,
+                    ..Splat::default()
+                })
+                .collect(),
+            radii: self
+                .visible
+                .iter()
+                .map(|&v| if v { [1, 1] } else { [0, 0] })
+                .collect(),
+        };
         let mut grads = project_backward(
             scene,
             &self.cam,
-            &radii,
+            &fwd,
             &self.plan,
             groups,
             &splats,

@@ -64,7 +64,8 @@ pub fn render_for_backward(
     })
 }
 
-/// Gradients of the raw parameters for the upstream image gradients `v`.
+/// Gradients of the raw parameters for the upstream image gradients `v`, and the number of
+/// Gaussian-pixel pairs walked.
 pub fn backward(
     scene: &Gaussians,
     cam: &Camera,
@@ -73,6 +74,21 @@ pub fn backward(
     v: &ImageGrads,
     groups: &GradGroups,
 ) -> Result<(Gradients, u64)> {
+    let mut grads = Gradients::default();
+    let pairs = backward_into(scene, cam, opts, fwd, v, groups, &mut grads)?;
+    Ok((grads, pairs))
+}
+
+/// [`backward`] into `grads`, whose arrays are reused (a training loop allocates them once).
+pub fn backward_into(
+    scene: &Gaussians,
+    cam: &Camera,
+    opts: &RenderOptions,
+    fwd: &ForwardState,
+    v: &ImageGrads,
+    groups: &GradGroups,
+    grads: &mut Gradients,
+) -> Result<u64> {
     let (w, h) = (cam.width as usize, cam.height as usize);
     let npix = w * h;
     for (name, img, ch) in [
@@ -124,17 +140,18 @@ pub fn backward(
         opts.kernel,
     );
     let camf = CameraF32::new(cam);
-    let mut grads = project::project_backward(
+    project::project_backward_into(
         scene,
         &camf,
-        &fwd.projected.radii,
+        &fwd.projected,
         &fwd.plan,
         groups,
         &cg.splats,
         opts.kernel,
+        grads,
     );
     if groups.background {
         grads.background = cg.background;
     }
-    Ok((grads, cg.pairs))
+    Ok(cg.pairs)
 }

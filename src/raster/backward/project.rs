@@ -25,8 +25,8 @@ use crate::math::sh::{Dual3, MAX_SH_COEFFS, ShScalar, num_coeffs, sh_basis};
 use crate::raster::composite::Kernel;
 use crate::raster::plan::RenderPlan;
 use crate::raster::project::{
-    CameraF32, Culls, EPS2D, Geometry, dot3, gather3, geometry_lanes, lanes_of, mat3_mul, sh_color,
-    transpose,
+    CameraF32, Culls, EPS2D, Geometry, Projected, dot3, gather3, geometry_lanes, lanes_of,
+    mat3_mul, sh_basis_lanes, transpose,
 };
 
 /// Which raw parameter groups need gradients. Skipped groups come back as zeros and cost
@@ -98,9 +98,9 @@ struct OutChunk<'a> {
 }
 
 /// The backward of Gaussians `first .. first + R::N`, one per lane, into entries
-/// `k .. k + R::N` of `out`. Lanes the forward culled (radii `(0, 0)`) are not written
-/// (their entries stay +0.0); a lane whose geometry the forward culled gets only its SH
-/// gradients. The `f32` instance is the reference form; every lane of a wider instance
+/// `k .. k + R::N` of `out`, every entry of them (the buffers are reused): lanes the forward
+/// culled (radii `(0, 0)`) get +0.0, a lane whose geometry the forward culled gets only its
+/// SH gradients, skipped groups and coefficients above the plan's degree +0.0. The `f32` instance is the reference form; every lane of a wider instance
 /// equals it bit for bit (`projection_backward_simd_matches_scalar_bitwise`).
 #[inline(always)]
 #[allow(clippy::too_many_arguments, clippy::needless_range_loop)] // a, b index matrices
@@ -111,19 +111,27 @@ fn backward_block<R: Lanes>(
     degree: u32,
     groups: &GradGroups,
     sg: &[SplatGrad],
-    radii: &[[i32; 2]],
+    fwd: &Projected,
     out: &mut OutChunk,
     k: usize,
 ) {
     let n = R::N;
-    let visible: [bool; 16] = std::array::from_fn(|l| l < n && radii[l] != [0, 0]);
+    out.zero(k, n);
+    let visible: [bool; 16] = std::array::from_fn(|l| l < n && fwd.radii[first + l] != [0, 0]);
     if !visible.contains(&true) {
         return;
     }
     let k_used = num_coeffs(degree) - 1;
-    // Per lane, in scalar (the coefficients are read once, in memory order): which colour
-    // channels are open (Σ + 0.5 > 0, recomputed as the forward did), the SH coefficient
-    // gradients `Y_k·v_c`, and the weights `w_k = Σ_c coeff_kc·v_c` of the direction term.
+    let mean = gather3::<R>(&g.means[first..first + n]);
+    // The forward's basis, by the forward's own code (lanes give the scalar bits).
+    let basis_lanes = sh_basis_lanes(mean, cam, degree);
+    let mut basis = [[0f32; 16]; MAX_SH_COEFFS];
+    for (b, &v) in basis.iter_mut().zip(&basis_lanes).take(k_used + 1) {
+        *b = lanes_of(v);
+    }
+    // Per lane, in scalar (the coefficients are read once, in memory order): the SH
+    // coefficient gradients `Y_k·v_c` where the forward's clamp was open (colour > 0 ⇔ the
+    // SH sum > 0), and the weights `w_k = Σ_c coeff_kc·v_c` of the direction term.
     let mut w = [[0f32; 16]; MAX_SH_COEFFS - 1];
     let mut flows = [0f32; 16];
     for l in 0..n {
@@ -131,17 +139,23 @@ fn backward_block<R: Lanes>(
             continue;
         }
         let i = first + l;
-        let (raw, basis) = sh_color(g, i, cam, degree);
-        let v: [f32; 3] =
-            std::array::from_fn(|ch| if raw[ch] > 0.0 { sg[l].color[ch] } else { 0.0 });
+        let colour = fwd.splats[i].color;
+        let v: [f32; 3] = std::array::from_fn(|ch| {
+            if colour[ch] > 0.0 {
+                sg[l].color[ch]
+            } else {
+                0.0
+            }
+        });
         if groups.sh_dc {
-            out.sh_dc[k + l] = [basis[0] * v[0], basis[0] * v[1], basis[0] * v[2]];
+            let y0 = basis[0][l];
+            out.sh_dc[k + l] = [y0 * v[0], y0 * v[1], y0 * v[2]];
         }
         if groups.sh_rest {
             let r = &mut out.rest[(k + l) * out.rest_per..];
             for j in 0..k_used {
                 for ch in 0..3 {
-                    r[j * 3 + ch] = basis[j + 1] * v[ch];
+                    r[j * 3 + ch] = basis[j + 1][l] * v[ch];
                 }
             }
         }
@@ -165,7 +179,6 @@ fn backward_block<R: Lanes>(
     let zero = c(0.0);
     // The forward quantities the chain needs, recomputed by the forward's own code; a lane
     // it culls there was culled in the forward too (radii are (0, 0)).
-    let mean = gather3::<R>(&g.means[first..first + n]);
     let quats = &g.quats[first..first + n];
     let q = [
         R::gather(|l| quats[l][0]),
@@ -387,6 +400,20 @@ fn backward_block<R: Lanes>(
     }
 }
 
+impl OutChunk<'_> {
+    /// Zero entries `k .. k + n` (in cache just before the block writes them: no pass over
+    /// the whole arrays).
+    #[inline(always)]
+    fn zero(&mut self, k: usize, n: usize) {
+        self.means[k..k + n].fill([0.0; 3]);
+        self.log_scales[k..k + n].fill([0.0; 3]);
+        self.quats[k..k + n].fill([0.0; 4]);
+        self.opacity[k..k + n].fill(0.0);
+        self.sh_dc[k..k + n].fill([0.0; 3]);
+        self.rest[k * self.rest_per..(k + n) * self.rest_per].fill(0.0);
+    }
+}
+
 /// [`backward_block`] over a chunk: `R::N` Gaussians at a time, the remainder one at a time.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
@@ -397,18 +424,36 @@ fn backward_range<R: Lanes>(
     degree: u32,
     groups: &GradGroups,
     sg: &[SplatGrad],
-    radii: &[[i32; 2]],
+    fwd: &Projected,
     out: &mut OutChunk,
 ) {
     let n = out.means.len();
     let full = n - n % R::N;
     for k in (0..full).step_by(R::N) {
-        let (s, r) = (&sg[first + k..], &radii[first + k..]);
-        backward_block::<R>(g, first + k, cam, degree, groups, s, r, out, k);
+        backward_block::<R>(
+            g,
+            first + k,
+            cam,
+            degree,
+            groups,
+            &sg[first + k..],
+            fwd,
+            out,
+            k,
+        );
     }
     for k in full..n {
-        let (s, r) = (&sg[first + k..], &radii[first + k..]);
-        backward_block::<f32>(g, first + k, cam, degree, groups, s, r, out, k);
+        backward_block::<f32>(
+            g,
+            first + k,
+            cam,
+            degree,
+            groups,
+            &sg[first + k..],
+            fwd,
+            out,
+            k,
+        );
     }
 }
 
@@ -426,10 +471,10 @@ unsafe fn backward_range_avx2(
     degree: u32,
     groups: &GradGroups,
     sg: &[SplatGrad],
-    radii: &[[i32; 2]],
+    fwd: &Projected,
     out: &mut OutChunk,
 ) {
-    backward_range::<F32x8>(g, first, cam, degree, groups, sg, radii, out)
+    backward_range::<F32x8>(g, first, cam, degree, groups, sg, fwd, out)
 }
 
 /// [`backward_range`] sixteen Gaussians per instruction.
@@ -446,10 +491,10 @@ unsafe fn backward_range_avx512(
     degree: u32,
     groups: &GradGroups,
     sg: &[SplatGrad],
-    radii: &[[i32; 2]],
+    fwd: &Projected,
     out: &mut OutChunk,
 ) {
-    backward_range::<F32x16>(g, first, cam, degree, groups, sg, radii, out)
+    backward_range::<F32x16>(g, first, cam, degree, groups, sg, fwd, out)
 }
 
 /// Backward of [`crate::raster::project::project`] for every Gaussian the forward did not
@@ -459,34 +504,51 @@ unsafe fn backward_range_avx512(
 pub fn project_backward(
     g: &Gaussians,
     cam: &CameraF32,
-    radii: &[[i32; 2]],
+    fwd: &Projected,
     plan: &RenderPlan,
     groups: &GradGroups,
     splat_grads: &[SplatGrad],
     kernel: Kernel,
 ) -> Gradients {
+    let mut out = Gradients::default();
+    project_backward_into(g, cam, fwd, plan, groups, splat_grads, kernel, &mut out);
+    out
+}
+
+/// [`project_backward`] into `out`, whose arrays are resized and overwritten (every entry
+/// is written once, zeros included: no clearing pass, no allocation once they have the
+/// size). The background gradient is set to zero.
+#[allow(clippy::too_many_arguments)]
+pub fn project_backward_into(
+    g: &Gaussians,
+    cam: &CameraF32,
+    fwd: &Projected,
+    plan: &RenderPlan,
+    groups: &GradGroups,
+    splat_grads: &[SplatGrad],
+    kernel: Kernel,
+    out: &mut Gradients,
+) {
     use rayon::prelude::*;
     let n = g.len();
     let k1 = g.rest_per_channel();
-    let mut out = Gradients {
-        means: vec![[0.0; 3]; n],
-        log_scales: vec![[0.0; 3]; n],
-        quats: vec![[0.0; 4]; n],
-        opacity_logits: vec![0.0; n],
-        sh_dc: vec![[0.0; 3]; n],
-        sh_rest: vec![0.0; n * k1 * 3],
-        background: [0.0; 3],
-        means2d: splat_grads.iter().map(|s| s.mean2d).collect(),
-        means2d_ndc: splat_grads
-            .iter()
-            .map(|s| {
-                [
-                    s.mean2d[0] * 0.5 * cam.width as f32,
-                    s.mean2d[1] * 0.5 * cam.height as f32,
-                ]
-            })
-            .collect(),
-    };
+    // Growing fills with zeros, which the blocks overwrite anyway; shrinking truncates.
+    out.means.resize(n, [0.0; 3]);
+    out.log_scales.resize(n, [0.0; 3]);
+    out.quats.resize(n, [0.0; 4]);
+    out.opacity_logits.resize(n, 0.0);
+    out.sh_dc.resize(n, [0.0; 3]);
+    out.sh_rest.resize(n * k1 * 3, 0.0);
+    out.background = [0.0; 3];
+    out.means2d.clear();
+    out.means2d.extend(splat_grads.iter().map(|s| s.mean2d));
+    out.means2d_ndc.clear();
+    out.means2d_ndc.extend(splat_grads.iter().map(|s| {
+        [
+            s.mean2d[0] * 0.5 * cam.width as f32,
+            s.mean2d[1] * 0.5 * cam.height as f32,
+        ]
+    }));
     #[cfg(target_arch = "x86_64")]
     let (avx512, avx2) = (kernel.avx512(), kernel.avx2());
     #[cfg(not(target_arch = "x86_64"))]
@@ -522,7 +584,7 @@ pub fn project_backward(
                     rest_per,
                 };
                 let first = ci * CHUNK;
-                let (sg, r) = (splat_grads, radii);
+                let (sg, r) = (splat_grads, fwd);
                 #[cfg(target_arch = "x86_64")]
                 if avx512 {
                     // SAFETY: AVX-512F was detected (`Kernel::avx512`).
@@ -538,7 +600,6 @@ pub fn project_backward(
                 backward_range::<f32>(g, first, cam, degree, groups, sg, r, &mut o);
             },
         );
-    out
 }
 
 impl Gradients {
