@@ -45,6 +45,10 @@ impl FileEntry {
 pub struct Manifest {
     pub crate_version: String,
     pub conventions_version: u32,
+    /// [`crate::oracle::NUMERICS_REVISION`] of the binary that wrote it (0: written before
+    /// the field existed): outputs are bit-reproducible by a binary of the same revision.
+    #[serde(default)]
+    pub numerics_revision: u32,
     /// `train`, `qa-mask`, `oracle forward`, `oracle backward`, `extrapolate`.
     pub command: String,
     /// The pipeline step (`views`, `stage1/recon`, ...); empty for other commands.
@@ -68,6 +72,7 @@ impl Manifest {
         Manifest {
             crate_version: env!("CARGO_PKG_VERSION").into(),
             conventions_version: crate::oracle::CONVENTIONS_VERSION,
+            numerics_revision: crate::oracle::NUMERICS_REVISION,
             command: command.into(),
             step: step.into(),
             inputs_sha256: inputs_sha256(&inputs),

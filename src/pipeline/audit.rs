@@ -700,6 +700,10 @@ pub fn verdicts(cfg: &AuditConfig, results: &[JobResult]) -> Vec<Verdict> {
 /// What `audit.json` holds.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Report {
+    /// The binary that made it: the same crate version and numerics revision
+    /// ([`crate::oracle::NUMERICS_REVISION`]) give the same bits for the same seeds.
+    pub crate_version: String,
+    pub numerics_revision: u32,
     pub dataset: String,
     pub preset: String,
     pub seeds: u32,
@@ -729,6 +733,8 @@ pub fn run(
         }
     }
     let report = Report {
+        crate_version: env!("CARGO_PKG_VERSION").into(),
+        numerics_revision: crate::oracle::NUMERICS_REVISION,
         dataset: dataset.display().to_string(),
         preset: cfg.base.preset.clone(),
         seeds: cfg.seeds,
@@ -782,12 +788,14 @@ fn metric_cells(rows: &[&JobResult], pick: impl Fn(&JobResult) -> &Row) -> Strin
 /// `audit.md`.
 pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
     let mut s = format!(
-        "# Audit of the paper's claims\n\nDataset `{}`; preset `{}`; seeds {}; original scene: {} iterations at resolution 1/{} on the training half. Metrics on the evaluation poses, pixels split into *existing* (seen by the training half) and *extrapolated*; mean ± sample std over seeds. Made by `unseen audit` (SPEC.md §21).\n\n",
+        "# Audit of the paper's claims\n\nDataset `{}`; preset `{}`; seeds {}; original scene: {} iterations at resolution 1/{} on the training half. Metrics on the evaluation poses, pixels split into *existing* (seen by the training half) and *extrapolated*; mean ± sample std over seeds. Made by `unseen audit` (SPEC.md §21), crate {} at numerics revision {} (a binary of the same revision gives the same bits for the same seeds).\n\n",
         report.dataset,
         report.preset,
         report.seeds,
         report.train_iterations,
-        report.train_resolution
+        report.train_resolution,
+        report.crate_version,
+        report.numerics_revision
     );
     s += "## Claims\n\nΔ = full − variant, in dB. A claim *holds* where Δ exceeds 2 std of its per-seed values in the claimed direction, *does not hold* where it exceeds 2 std the other way, and is *within noise* otherwise; with one seed only the direction is given. The paper's numbers are from ScanNet++ / Mip-NeRF 360 with diffusion generators: compare directions, not values.\n\n| claim | metric | paper | generator | Δ (dB) | verdict |\n|---|---|---|---|---|---|\n";
     for v in &report.verdicts {
