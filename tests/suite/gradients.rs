@@ -10,7 +10,7 @@ use unseen::scene::{Uniform, default_camera, random_scene};
 
 /// The forward in f64, per pixel over all Gaussians (no tiles), the same rules as the
 /// f32 rasterizer (SPEC.md §5). Returns rgb (interleaved), alpha, D, ED.
-fn forward64(g: &Gaussians, p: &[f64], cam: &Camera, bg: [f64; 3]) -> [Vec<f64>; 4] {
+pub(super) fn forward64(g: &Gaussians, p: &[f64], cam: &Camera, bg: [f64; 3]) -> [Vec<f64>; 4] {
     let n = g.len();
     let k1 = g.rest_per_channel();
     let stride = 14 + 3 * k1;
@@ -36,7 +36,8 @@ fn forward64(g: &Gaussians, p: &[f64], cam: &Camera, bg: [f64; 3]) -> [Vec<f64>;
         let x = rcw[0][0] * mu[0] + rcw[0][1] * mu[1] + rcw[0][2] * mu[2] + t.x;
         let y = rcw[1][0] * mu[0] + rcw[1][1] * mu[1] + rcw[1][2] * mu[2] + t.y;
         let z = rcw[2][0] * mu[0] + rcw[2][1] * mu[1] + rcw[2][2] * mu[2] + t.z;
-        if z < 0.01 {
+        // The near plane is the f32 constant (0.01f32 < 0.01).
+        if z < f64::from(0.01f32) {
             continue;
         }
         let s = [q[3].exp(), q[4].exp(), q[5].exp()];
@@ -98,7 +99,7 @@ fn forward64(g: &Gaussians, p: &[f64], cam: &Camera, bg: [f64; 3]) -> [Vec<f64>;
         let (a, b, c) = (cov[0][0] + 0.3, cov[0][1], cov[1][1] + 0.3);
         let det = a * c - b * b;
         let o = 1.0 / (1.0 + (-q[10]).exp());
-        if det <= 0.0 || o < 1.0 / 255.0 {
+        if det.is_nan() || det <= 0.0 || o < 1.0 / 255.0 {
             continue;
         }
         let d = [
@@ -172,7 +173,7 @@ fn forward64(g: &Gaussians, p: &[f64], cam: &Camera, bg: [f64; 3]) -> [Vec<f64>;
 }
 
 /// Raw parameters flattened per Gaussian: mean 3, log-scale 3, quat 4, logit 1, dc 3, rest.
-fn flatten(g: &Gaussians) -> Vec<f64> {
+pub(super) fn flatten(g: &Gaussians) -> Vec<f64> {
     let mut p = Vec::new();
     for i in 0..g.len() {
         p.extend(g.means[i].iter().map(|&v| v as f64));

@@ -6,6 +6,7 @@ mod dibr;
 mod golden_drjit;
 mod golden_grad;
 mod gradients;
+mod hard_cases;
 mod mitsuba_crosscheck;
 mod models;
 mod onnx;
