@@ -1,9 +1,9 @@
 //! The rasterizer's hard-case catalogue (SPEC.md §5.9): each case renders forward and
 //! backward with every kernel form and checks no panic, no non-finite output or gradient,
 //! the same bits from every kernel, the documented skip counts, and the images within
-//! [`HARD_CASE_ATOL`] of the f64 twin of the forward (`gradients::forward64`) evaluated on
+//! [`HARD_CASE_ATOL`] of the f64 twin of the forward (`twin::forward64`) evaluated on
 //! the Gaussians the f32 rasterizer is specified to draw.
-use super::gradients::{flatten, forward64};
+use super::twin::{flatten, forward64};
 use unseen::camera::Camera;
 use unseen::gaussian::Gaussians;
 use unseen::raster::backward::{GradGroups, ImageGrads, backward, render_for_backward};

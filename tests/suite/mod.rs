@@ -18,3 +18,4 @@ mod readers;
 mod telea;
 mod tile;
 mod training;
+mod twin;

@@ -1,0 +1,442 @@
+//! What accuracy costs in time: `cargo bench --bench accuracy [-- --quick] [--out DIR]`.
+//!
+//! Per stage and knob, the error against a shadow computed in the same run and the time,
+//! written to `DIR/accuracy.csv`, `DIR/accuracy.md` and `DIR/accuracy.svg` (default
+//! `reference_data/accuracy/`). A point is on its stage's Pareto front when no other point
+//! of the stage has both less error and less time. Stages (SPEC.md §5.10):
+//! - `forward`: an SH-5 scene rendered in f32 at SH degree 0–5 (and every kernel form at 5)
+//!   against the f64 twin of the forward at degree 5 (`tests/suite/twin.rs`), and the twin;
+//! - `exp`: our Cephes `exp` (what the blend uses), the platform's `f32::exp`, and `f64::exp`
+//!   rounded to f32, in ulp against `f64::exp` (scalar and in AVX2 / AVX-512F lanes);
+//! - `ransac`: RANSAC iterations and inlier threshold against the known scale of synthetic
+//!   depths with 30 % outliers and ±3 % noise on the inliers (a monocular estimator's
+//!   error), relative scale error; and least squares.
+//!
+//! Times are the best of several runs on one thread; errors are exact maxima over the
+//! inputs used.
+
+#[path = "../tests/suite/twin.rs"]
+#[allow(dead_code)]
+mod twin;
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::time::Instant;
+use unseen::math::fastexp;
+use unseen::raster::{Kernel, Outputs, RenderOptions, render};
+use unseen::scene::{Uniform, default_camera, random_scene};
+use unseen::warp::align::{Frame, RansacConfig, Space, least_squares, ransac};
+
+struct Point {
+    stage: &'static str,
+    knob: String,
+    /// The shipped default of the stage.
+    default: bool,
+    metric: &'static str,
+    error: f64,
+    seconds: f64,
+    pareto: bool,
+}
+
+fn best<T>(runs: usize, mut f: impl FnMut() -> T) -> (f64, T) {
+    let mut t_best = f64::MAX;
+    let mut out = None;
+    for _ in 0..runs {
+        let t = Instant::now();
+        let r = f();
+        t_best = t_best.min(t.elapsed().as_secs_f64());
+        out = Some(r);
+    }
+    (t_best, out.expect("runs > 0"))
+}
+
+fn forward(quick: bool, points: &mut Vec<Point>) {
+    let (n, w, h) = if quick {
+        (3000, 96, 72)
+    } else {
+        (20000, 192, 144)
+    };
+    let cam = default_camera(w, h);
+    let bg = [0.1f32, 0.2, 0.3];
+    // One scene of SH degree 5 against its full-degree f64 twin: rendering at a lower
+    // degree (`RenderOptions::sh_degree`) trades the truncated bands' colour for time.
+    let scene = random_scene(n, 5, 7, 0.01, 0.25);
+    let p = twin::flatten(&scene);
+    let (t64, reference) = best(1, || twin::forward64(&scene, &p, &cam, bg.map(f64::from)));
+    let metric = "max |rgb − f64 twin of SH 5|";
+    for degree in [0u32, 1, 2, 3, 4, 5] {
+        let kernels: &[(Kernel, &str)] = if degree == 5 {
+            &[
+                (Kernel::Auto, "auto"),
+                (Kernel::Avx2, "avx2"),
+                (Kernel::Scalar, "scalar"),
+            ]
+        } else {
+            &[(Kernel::Auto, "auto")]
+        };
+        for &(kernel, kname) in kernels {
+            let opts = RenderOptions {
+                background: bg,
+                outputs: Outputs::RGB,
+                kernel,
+                sh_degree: Some(degree),
+                ..Default::default()
+            };
+            let (t, r) = best(5, || render(&scene, &cam, &opts).expect("renders"));
+            let rgb = r.rgb.expect("rgb");
+            let err = rgb
+                .iter()
+                .zip(&reference[0])
+                .map(|(&a, &b)| (a as f64 - b).abs())
+                .fold(0.0, f64::max);
+            points.push(Point {
+                stage: "forward",
+                knob: format!("f32 render at SH {degree}, kernel {kname}"),
+                default: degree == 5 && kernel == Kernel::Auto,
+                metric,
+                error: err,
+                seconds: t,
+                pareto: false,
+            });
+        }
+    }
+    points.push(Point {
+        stage: "forward",
+        knob: "f64 twin at SH 5 (the shadow itself)".into(),
+        default: false,
+        metric,
+        error: 0.0,
+        seconds: t64,
+        pareto: false,
+    });
+}
+
+/// Distance in units in the last place between two finite f32 of the same sign.
+fn ulp(a: f32, b: f32) -> f64 {
+    let key = |x: f32| {
+        let i = x.to_bits() as i32;
+        if i < 0 {
+            i64::from(i32::MIN) - i64::from(i)
+        } else {
+            i64::from(i)
+        }
+    };
+    (key(a) - key(b)).unsigned_abs() as f64
+}
+
+fn exp(quick: bool, points: &mut Vec<Point>) {
+    let n = if quick { 1 << 20 } else { 1 << 24 };
+    let xs: Vec<f32> = (0..n)
+        .map(|i| -87.0 + 175.0 * (i as f32 + 0.5) / n as f32)
+        .collect();
+    let exact: Vec<f32> = xs.iter().map(|&x| (x as f64).exp() as f32).collect();
+    let mut run = |name: &str, default: bool, f: &dyn Fn(f32) -> f32| {
+        let (t, out) = best(5, || xs.iter().map(|&x| f(x)).collect::<Vec<f32>>());
+        let err = out
+            .iter()
+            .zip(&exact)
+            .map(|(&a, &b)| ulp(a, b))
+            .fold(0.0, f64::max);
+        points.push(Point {
+            stage: "exp",
+            knob: name.to_string(),
+            default,
+            metric: "max ulp vs f64 exp (per 2^20 calls: s)",
+            error: err,
+            seconds: t * (1 << 20) as f64 / n as f64,
+            pareto: false,
+        });
+    };
+    run("own Cephes exp, scalar", false, &|x| {
+        fastexp::exp(std::hint::black_box(x))
+    });
+    run("platform f32::exp", false, &|x| {
+        std::hint::black_box(x).exp()
+    });
+    run("f64::exp rounded", false, &|x| {
+        (std::hint::black_box(x) as f64).exp() as f32
+    });
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::*;
+        let mut lanes = |name: &str, width: usize, f: &dyn Fn(&[f32], &mut [f32])| {
+            let (t, out) = best(5, || {
+                let mut out = vec![0f32; xs.len()];
+                for (x, o) in xs.chunks_exact(width).zip(out.chunks_exact_mut(width)) {
+                    f(x, o);
+                }
+                out
+            });
+            let err = out
+                .iter()
+                .zip(&exact)
+                .map(|(&a, &b)| ulp(a, b))
+                .fold(0.0, f64::max);
+            points.push(Point {
+                stage: "exp",
+                knob: name.to_string(),
+                default: width == 16,
+                metric: "max ulp vs f64 exp (per 2^20 calls: s)",
+                error: err,
+                seconds: t * (1 << 20) as f64 / n as f64,
+                pareto: false,
+            });
+        };
+        if is_x86_feature_detected!("avx2") {
+            // SAFETY: AVX2 was detected; chunks hold exactly 8 f32.
+            lanes("own Cephes exp, AVX2 (8 lanes)", 8, &|x, o| unsafe {
+                _mm256_storeu_ps(
+                    o.as_mut_ptr(),
+                    fastexp::exp_avx2(_mm256_loadu_ps(x.as_ptr())),
+                )
+            });
+        }
+        if is_x86_feature_detected!("avx512f") {
+            // SAFETY: AVX-512F was detected; chunks hold exactly 16 f32.
+            lanes(
+                "own Cephes exp, AVX-512F (16 lanes, the blend's)",
+                16,
+                &|x, o| unsafe {
+                    _mm512_storeu_ps(
+                        o.as_mut_ptr(),
+                        fastexp::exp_avx512(_mm512_loadu_ps(x.as_ptr())),
+                    )
+                },
+            );
+        }
+    }
+}
+
+fn alignment(quick: bool, points: &mut Vec<Point>) {
+    let (frames, side) = if quick { (4, 128) } else { (16, 256) };
+    let (s_true, t_true) = (2.5f64, 0.75f64);
+    let mut u = Uniform::new(3);
+    let data: Vec<(Vec<f32>, Vec<f32>)> = (0..frames)
+        .map(|_| {
+            let est: Vec<f32> = (0..side * side).map(|_| u.range(0.2, 4.0)).collect();
+            let depth = est
+                .iter()
+                .map(|&r| {
+                    let d = s_true * r as f64 + t_true;
+                    if u.range(0.0, 1.0) < 0.3 {
+                        u.range(0.1, 12.0) // outlier
+                    } else {
+                        (d * (1.0 + 0.03 * u.range(-1.0, 1.0) as f64)) as f32
+                    }
+                })
+                .collect();
+            (est, depth)
+        })
+        .collect();
+    let fr: Vec<Frame> = data
+        .iter()
+        .map(|(e, d)| Frame {
+            estimate: e,
+            depth: d,
+        })
+        .collect();
+    let mut add = |knob: String, default: bool, t: f64, s: f64| {
+        points.push(Point {
+            stage: "ransac",
+            knob,
+            default,
+            metric: "|s − s_true| / s_true",
+            error: (s - s_true).abs() / s_true,
+            seconds: t,
+            pareto: false,
+        })
+    };
+    let (t, a) = best(3, || least_squares(&fr, Space::Depth).expect("fits"));
+    add("least squares (no RANSAC)".into(), false, t, a.scale);
+    for threshold in [0.01, 0.05, 0.2] {
+        for iterations in [10u32, 30, 100, 300, 1000] {
+            let cfg = RansacConfig {
+                threshold,
+                iterations,
+                confidence: None,
+                seed: 0,
+            };
+            let (t, a) = best(3, || ransac(&fr, Space::Depth, &cfg).expect("fits"));
+            add(
+                format!("threshold {threshold}, {iterations} iterations"),
+                false,
+                t,
+                a.scale,
+            );
+        }
+        let cfg = RansacConfig {
+            threshold,
+            ..RansacConfig::default()
+        };
+        let (t, a) = best(3, || ransac(&fr, Space::Depth, &cfg).expect("fits"));
+        add(
+            format!("threshold {threshold}, adaptive (≤ 1000, 0.999)"),
+            threshold == RansacConfig::default().threshold,
+            t,
+            a.scale,
+        );
+    }
+}
+
+/// Mark each stage's Pareto front (less error and less time than every other point of the
+/// stage in at least one, no more in the other).
+fn mark_pareto(points: &mut [Point]) {
+    for i in 0..points.len() {
+        let dominated = points.iter().enumerate().any(|(j, q)| {
+            j != i
+                && q.stage == points[i].stage
+                && q.error <= points[i].error
+                && q.seconds <= points[i].seconds
+                && (q.error < points[i].error || q.seconds < points[i].seconds)
+        });
+        points[i].pareto = !dominated;
+    }
+}
+
+fn csv(points: &[Point]) -> String {
+    let mut s = String::from("stage,knob,default,metric,error,seconds,pareto\n");
+    for p in points {
+        let _ = writeln!(
+            s,
+            "{},\"{}\",{},\"{}\",{:e},{:e},{}",
+            p.stage, p.knob, p.default, p.metric, p.error, p.seconds, p.pareto
+        );
+    }
+    s
+}
+
+fn markdown(points: &[Point], quick: bool) -> String {
+    let mut s = format!(
+        "# Accuracy against time\n\nMade by `cargo bench --bench accuracy{}` (one thread, best of several runs; errors are exact maxima over the inputs). *Pareto*: no other point of the stage has less error and less time. *Default*: what the crate ships. SPEC.md §5.10 says why each default sits where it does.\n",
+        if quick { " -- --quick" } else { "" }
+    );
+    let mut stage = "";
+    for p in points {
+        if p.stage != stage {
+            stage = p.stage;
+            let _ = write!(
+                s,
+                "\n## {stage}\n\n| knob | {} | time (s) | Pareto | default |\n|---|---|---|---|---|\n",
+                p.metric.replace('|', "\\|")
+            );
+        }
+        let _ = writeln!(
+            s,
+            "| {} | {:.3e} | {:.3e} | {} | {} |",
+            p.knob,
+            p.error,
+            p.seconds,
+            if p.pareto { "yes" } else { "" },
+            if p.default { "**default**" } else { "" }
+        );
+    }
+    s
+}
+
+/// One panel per stage: log10 error (zero errors drawn at the panel's floor) against log10
+/// time; Pareto points filled, the default ringed.
+fn svg(points: &[Point]) -> String {
+    let stages: Vec<&str> = {
+        let mut v: Vec<&str> = points.iter().map(|p| p.stage).collect();
+        v.dedup();
+        v
+    };
+    let (pw, ph, m) = (320.0, 240.0, 50.0);
+    let width = stages.len() as f64 * (pw + m) + m;
+    let mut s = format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{width}\" height=\"{}\" font-family=\"sans-serif\" font-size=\"11\">\n",
+        ph + 2.0 * m
+    );
+    for (k, stage) in stages.iter().enumerate() {
+        let ps: Vec<&Point> = points.iter().filter(|p| p.stage == *stage).collect();
+        let le = |p: &Point| {
+            if p.error > 0.0 {
+                p.error.log10()
+            } else {
+                f64::NAN
+            }
+        };
+        let lt = |p: &Point| p.seconds.log10();
+        let finite: Vec<f64> = ps.iter().map(|p| le(p)).filter(|v| v.is_finite()).collect();
+        let (emin, emax) = finite
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+        let (emin, emax) = if finite.is_empty() {
+            (-1.0, 0.0)
+        } else {
+            (emin - 1.0, emax + 0.5)
+        };
+        let (tmin, tmax) = ps.iter().fold((f64::MAX, f64::MIN), |(a, b), p| {
+            (a.min(lt(p)), b.max(lt(p)))
+        });
+        let (tmin, tmax) = (tmin - 0.2, tmax + 0.2);
+        let x0 = m + k as f64 * (pw + m);
+        let px = |t: f64| x0 + (t - tmin) / (tmax - tmin) * pw;
+        let py = |e: f64| m + ph - (e - emin) / (emax - emin) * ph;
+        let _ = writeln!(
+            s,
+            "<rect x=\"{x0}\" y=\"{m}\" width=\"{pw}\" height=\"{ph}\" fill=\"none\" stroke=\"#888\"/>\n<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{stage}</text>\n<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">log10 seconds ({tmin:.1} … {tmax:.1})</text>\n<text x=\"{}\" y=\"{}\" transform=\"rotate(-90 {} {})\" text-anchor=\"middle\">log10 error ({emin:.1} … {emax:.1}; 0 at the floor)</text>",
+            x0 + pw / 2.0,
+            m - 10.0,
+            x0 + pw / 2.0,
+            m + ph + 30.0,
+            x0 - 12.0,
+            m + ph / 2.0,
+            x0 - 12.0,
+            m + ph / 2.0
+        );
+        for p in &ps {
+            let e = le(p);
+            let (x, y) = (px(lt(p)), if e.is_finite() { py(e) } else { m + ph - 4.0 });
+            let fill = if p.pareto { "#1f77b4" } else { "white" };
+            let _ = writeln!(
+                s,
+                "<circle cx=\"{x:.1}\" cy=\"{y:.1}\" r=\"4\" fill=\"{fill}\" stroke=\"#1f77b4\"><title>{}: {:.3e}, {:.3e} s</title></circle>",
+                p.knob, p.error, p.seconds
+            );
+            if p.default {
+                let _ = writeln!(
+                    s,
+                    "<circle cx=\"{x:.1}\" cy=\"{y:.1}\" r=\"8\" fill=\"none\" stroke=\"#d62728\"/>"
+                );
+            }
+        }
+    }
+    s + "</svg>\n"
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let quick = args.iter().any(|a| a == "--quick");
+    let out = args
+        .iter()
+        .position(|a| a == "--out")
+        .and_then(|i| args.get(i + 1))
+        .map_or_else(|| PathBuf::from("reference_data/accuracy"), PathBuf::from);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("pool");
+    let mut points = Vec::new();
+    pool.install(|| {
+        forward(quick, &mut points);
+        exp(quick, &mut points);
+        alignment(quick, &mut points);
+    });
+    mark_pareto(&mut points);
+    let md = markdown(&points, quick);
+    print!("{md}");
+    std::fs::create_dir_all(&out).expect("output folder");
+    for (name, text) in [
+        ("accuracy.csv", csv(&points)),
+        ("accuracy.md", md),
+        ("accuracy.svg", svg(&points)),
+    ] {
+        let path = out.join(name);
+        let tmp = out.join(format!(".{name}.tmp"));
+        std::fs::write(&tmp, text)
+            .and_then(|()| std::fs::rename(&tmp, &path))
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    }
+    eprintln!("wrote {}", out.display());
+}

@@ -1,0 +1,184 @@
+//! The f64 twin of the forward rasterizer, used only by tests and the accuracy bench
+//! (`benches/accuracy.rs` includes this file): per pixel over all Gaussians, no tiles, the
+//! same rules as the f32 rasterizer (SPEC.md §5) in f64.
+use unseen::camera::Camera;
+use unseen::gaussian::Gaussians;
+use unseen::math::sh::sh_basis;
+
+/// The forward in f64, per pixel over all Gaussians (no tiles), the same rules as the
+/// f32 rasterizer (SPEC.md §5). Returns rgb (interleaved), alpha, D, ED.
+pub fn forward64(g: &Gaussians, p: &[f64], cam: &Camera, bg: [f64; 3]) -> [Vec<f64>; 4] {
+    let n = g.len();
+    let k1 = g.rest_per_channel();
+    let stride = 14 + 3 * k1;
+    let r = cam.camera_from_world_rotation();
+    let t = cam.camera_from_world_translation();
+    let rcw = [
+        [r.x_axis.x, r.y_axis.x, r.z_axis.x],
+        [r.x_axis.y, r.y_axis.y, r.z_axis.y],
+        [r.x_axis.z, r.y_axis.z, r.z_axis.z],
+    ];
+    let (w, h) = (cam.width as f64, cam.height as f64);
+    struct S {
+        m: [f64; 2],
+        con: [f64; 3],
+        o: f64,
+        c: [f64; 3],
+        z: f64,
+    }
+    let mut splats: Vec<(f64, usize, S)> = Vec::new();
+    for i in 0..n {
+        let q = &p[i * stride..(i + 1) * stride];
+        let mu = [q[0], q[1], q[2]];
+        let x = rcw[0][0] * mu[0] + rcw[0][1] * mu[1] + rcw[0][2] * mu[2] + t.x;
+        let y = rcw[1][0] * mu[0] + rcw[1][1] * mu[1] + rcw[1][2] * mu[2] + t.y;
+        let z = rcw[2][0] * mu[0] + rcw[2][1] * mu[1] + rcw[2][2] * mu[2] + t.z;
+        // The near plane is the f32 constant (0.01f32 < 0.01).
+        if z < f64::from(0.01f32) {
+            continue;
+        }
+        let s = [q[3].exp(), q[4].exp(), q[5].exp()];
+        let qn = (q[6] * q[6] + q[7] * q[7] + q[8] * q[8] + q[9] * q[9]).sqrt();
+        let (qw, qx, qy, qz) = (q[6] / qn, q[7] / qn, q[8] / qn, q[9] / qn);
+        let rot = [
+            [
+                1.0 - 2.0 * (qy * qy + qz * qz),
+                2.0 * (qx * qy - qw * qz),
+                2.0 * (qx * qz + qw * qy),
+            ],
+            [
+                2.0 * (qx * qy + qw * qz),
+                1.0 - 2.0 * (qx * qx + qz * qz),
+                2.0 * (qy * qz - qw * qx),
+            ],
+            [
+                2.0 * (qx * qz - qw * qy),
+                2.0 * (qy * qz + qw * qx),
+                1.0 - 2.0 * (qx * qx + qy * qy),
+            ],
+        ];
+        let mut sig = [[0.0; 3]; 3];
+        for a in 0..3 {
+            for b in 0..3 {
+                for k in 0..3 {
+                    sig[a][b] += rot[a][k] * s[k] * rot[b][k] * s[k];
+                }
+            }
+        }
+        let mut sc = [[0.0; 3]; 3];
+        for a in 0..3 {
+            for b in 0..3 {
+                for k in 0..3 {
+                    for l in 0..3 {
+                        sc[a][b] += rcw[a][k] * sig[k][l] * rcw[b][l];
+                    }
+                }
+            }
+        }
+        let (fx, fy) = (cam.fx, cam.fy);
+        let (tfx, tfy) = (0.5 * w / fx, 0.5 * h / fy);
+        let tx = z * (x / z).clamp(-(cam.cx / fx + 0.3 * tfx), (w - cam.cx) / fx + 0.3 * tfx);
+        let ty = z * (y / z).clamp(-(cam.cy / fy + 0.3 * tfy), (h - cam.cy) / fy + 0.3 * tfy);
+        let j = [
+            [fx / z, 0.0, -fx * tx / (z * z)],
+            [0.0, fy / z, -fy * ty / (z * z)],
+        ];
+        let mut cov = [[0.0; 2]; 2];
+        for a in 0..2 {
+            for b in 0..2 {
+                for k in 0..3 {
+                    for l in 0..3 {
+                        cov[a][b] += j[a][k] * sc[k][l] * j[b][l];
+                    }
+                }
+            }
+        }
+        let (a, b, c) = (cov[0][0] + 0.3, cov[0][1], cov[1][1] + 0.3);
+        let det = a * c - b * b;
+        let o = 1.0 / (1.0 + (-q[10]).exp());
+        if det.is_nan() || det <= 0.0 || o < 1.0 / 255.0 {
+            continue;
+        }
+        let d = [
+            mu[0] - cam.center.x,
+            mu[1] - cam.center.y,
+            mu[2] - cam.center.z,
+        ];
+        let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        let mut basis = [0.0; 36];
+        sh_basis(g.sh_degree, d[0] / len, d[1] / len, d[2] / len, &mut basis);
+        let mut col = [0.0; 3];
+        for ch in 0..3 {
+            let mut acc = basis[0] * q[11 + ch];
+            for k in 0..k1 {
+                acc += basis[k + 1] * q[14 + k * 3 + ch];
+            }
+            col[ch] = (acc + 0.5).max(0.0);
+        }
+        let m = [fx * x / z + cam.cx, fy * y / z + cam.cy];
+        splats.push((
+            z,
+            i,
+            S {
+                m,
+                con: [c / det, -b / det, a / det],
+                o,
+                c: col,
+                z,
+            },
+        ));
+    }
+    splats.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    let npix = (cam.width * cam.height) as usize;
+    let mut out = [
+        vec![0.0; npix * 3],
+        vec![0.0; npix],
+        vec![0.0; npix],
+        vec![0.0; npix],
+    ];
+    for pi in 0..npix {
+        let (px, py) = (
+            (pi % cam.width as usize) as f64 + 0.5,
+            (pi / cam.width as usize) as f64 + 0.5,
+        );
+        let (mut tt, mut col, mut dd) = (1.0, [0.0; 3], 0.0);
+        for (_, _, s) in &splats {
+            let (dx, dy) = (s.m[0] - px, s.m[1] - py);
+            let sigma = 0.5 * (s.con[0] * dx * dx + s.con[2] * dy * dy) + s.con[1] * dx * dy;
+            let alpha = (s.o * (-sigma).exp()).min(0.99);
+            if sigma < 0.0 || alpha < 1.0 / 255.0 {
+                continue;
+            }
+            let nt = tt * (1.0 - alpha);
+            if nt <= 1e-4 {
+                break;
+            }
+            for (c, sc) in col.iter_mut().zip(s.c) {
+                *c += sc * alpha * tt;
+            }
+            dd += s.z * alpha * tt;
+            tt = nt;
+        }
+        for k in 0..3 {
+            out[0][pi * 3 + k] = col[k] + tt * bg[k];
+        }
+        out[1][pi] = 1.0 - tt;
+        out[2][pi] = dd;
+        out[3][pi] = dd / (1.0 - tt).max(1e-10);
+    }
+    out
+}
+
+/// Raw parameters flattened per Gaussian: mean 3, log-scale 3, quat 4, logit 1, dc 3, rest.
+pub fn flatten(g: &Gaussians) -> Vec<f64> {
+    let mut p = Vec::new();
+    for i in 0..g.len() {
+        p.extend(g.means[i].iter().map(|&v| v as f64));
+        p.extend(g.log_scales[i].iter().map(|&v| v as f64));
+        p.extend(g.quats[i].iter().map(|&v| v as f64));
+        p.push(g.opacity_logits[i] as f64);
+        p.extend(g.sh_dc[i].iter().map(|&v| v as f64));
+        p.extend(g.rest(i).iter().map(|&v| v as f64));
+    }
+    p
+}
