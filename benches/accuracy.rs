@@ -12,6 +12,9 @@
 //!   depths with 30 % outliers and ±3 % noise on the inliers (a monocular estimator's
 //!   error), relative scale error; and least squares.
 //!
+//! - `training`: iterations with and without densification on `lounge` against the
+//!   test views' mean squared error (ground truth), checkpoints of one run each.
+//!
 //! Times are the best of several runs on one thread; errors are exact maxima over the
 //! inputs used.
 
@@ -278,6 +281,75 @@ fn alignment(quick: bool, points: &mut Vec<Point>) {
     }
 }
 
+/// Training on `lounge` (resolution 1/2 quick, 1 full): checkpoints of one run per setting
+/// (densification on, the INRIA default, and off), scored on the test views (INRIA's every
+/// 8th training view) by their mean squared error against the ground truth images; time is
+/// the run's wall time up to the checkpoint.
+fn training(quick: bool, points: &mut Vec<Point>) {
+    use unseen::dataset::{self, LoadOptions, Split};
+    use unseen::train::trainer::{TrainConfig, Trainer};
+    let resolution = if quick { 2 } else { 1 };
+    let checkpoints: &[u32] = if quick {
+        &[250, 500, 1000, 2000]
+    } else {
+        &[500, 1000, 2000, 4000, 7000]
+    };
+    let root =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("reference_data/scenes/lounge");
+    let data = dataset::load(
+        &root,
+        &LoadOptions {
+            resolution,
+            ..LoadOptions::default()
+        },
+    )
+    .expect("bundled scene");
+    for densify in [true, false] {
+        let defaults = TrainConfig::default();
+        let cfg = TrainConfig {
+            iterations: *checkpoints.last().expect("checkpoints"),
+            save_iterations: vec![],
+            resolution,
+            densify: if densify { defaults.densify } else { None },
+            ..defaults
+        };
+        let mut t = Trainer::new(&data, cfg.clone()).expect("trainer");
+        let mut seconds = 0.0;
+        let mut done = 0;
+        for &c in checkpoints {
+            let t0 = Instant::now();
+            while done < c {
+                t.step().expect("step");
+                done += 1;
+            }
+            seconds += t0.elapsed().as_secs_f64();
+            let r = unseen::eval::evaluate(&t.gaussians, &data, Split::Test, cfg.background, None)
+                .expect("evaluates");
+            let mse = r
+                .views
+                .iter()
+                .map(|v| 10f64.powf(-v.psnr / 10.0))
+                .sum::<f64>()
+                / r.views.len() as f64;
+            points.push(Point {
+                stage: "training",
+                knob: format!(
+                    "{c} iterations, densification {}, {} Gaussians, test PSNR {:.2} dB",
+                    if densify { "on" } else { "off" },
+                    t.gaussians.len(),
+                    r.mean_psnr
+                ),
+                // The recipe's setting; the iteration count is the user's budget.
+                default: densify,
+                metric: "test-view MSE",
+                error: mse,
+                seconds,
+                pareto: false,
+            });
+        }
+    }
+}
+
 /// Mark each stage's Pareto front (less error and less time than every other point of the
 /// stage in at least one, no more in the other).
 fn mark_pareto(points: &mut [Point]) {
@@ -422,6 +494,7 @@ fn main() {
         forward(quick, &mut points);
         exp(quick, &mut points);
         alignment(quick, &mut points);
+        training(quick, &mut points);
     });
     mark_pareto(&mut points);
     let md = markdown(&points, quick);
