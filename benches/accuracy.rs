@@ -12,6 +12,8 @@
 //!   depths with 30 % outliers and ±3 % noise on the inliers (a monocular estimator's
 //!   error), relative scale error; and least squares.
 //!
+//! - `gjk`: the duality-gap tolerance and the iteration cap against box pairs of known
+//!   distance (`collide::gjk::proximity_with`);
 //! - `training`: iterations with and without densification on `lounge` against the
 //!   test views' mean squared error (ground truth), checkpoints of one run each.
 //!
@@ -350,6 +352,109 @@ fn training(quick: bool, points: &mut Vec<Point>) {
     }
 }
 
+/// GJK on pairs of boxes whose exact distance is known: axis-aligned boxes with random
+/// extents and gaps (distance `√Σ max(0, gap_i)²`, 0 when they overlap), both moved by one
+/// random rigid motion (which keeps the distance, up to the rounding of the vertices,
+/// ~1e-16 of the scale). Error: the largest `|d − d_exact| / scale` (`scale` as GJK's, the
+/// largest vertex magnitude); a wrong verdict or a non-converged pair counts as 1.
+fn gjk(quick: bool, points: &mut Vec<Point>) {
+    use glam::{DMat3, DQuat, DVec3};
+    use unseen::collide::gjk::{ConvexHull, Tolerances, proximity_with};
+    let pairs = if quick { 2000 } else { 20000 };
+    let mut u = Uniform::new(11);
+    let mut r = |lo: f64, hi: f64| f64::from(u.range(lo as f32, hi as f32));
+    let cases: Vec<(ConvexHull, ConvexHull, f64)> = (0..pairs)
+        .map(|_| {
+            let e1 = DVec3::new(r(0.1, 2.0), r(0.1, 2.0), r(0.1, 2.0));
+            let e2 = DVec3::new(r(0.1, 2.0), r(0.1, 2.0), r(0.1, 2.0));
+            // Gaps per axis in [−1, 1.5], no deeper than the boxes (an overlap of more than
+            // both extents would flip the centres' order): about 6 % of the pairs overlap.
+            let gap = DVec3::new(r(-1.0, 1.5), r(-1.0, 1.5), r(-1.0, 1.5)).max(-(e1 + e2));
+            let sign = DVec3::new(
+                if r(0.0, 1.0) < 0.5 { -1.0 } else { 1.0 },
+                if r(0.0, 1.0) < 0.5 { -1.0 } else { 1.0 },
+                if r(0.0, 1.0) < 0.5 { -1.0 } else { 1.0 },
+            );
+            let c2 = sign * (e1 + e2 + gap);
+            let exact = gap.max(DVec3::ZERO).length();
+            let rot = DMat3::from_quat(DQuat::from_axis_angle(
+                DVec3::new(r(-1.0, 1.0), r(-1.0, 1.0), r(0.1, 1.0)).normalize(),
+                r(0.0, 6.28),
+            ));
+            let t = DVec3::new(r(-5.0, 5.0), r(-5.0, 5.0), r(-5.0, 5.0));
+            let corners = |c: DVec3, e: DVec3| {
+                let v: Vec<DVec3> = (0..8)
+                    .map(|k| {
+                        let s = DVec3::new(
+                            if k & 1 == 0 { -1.0 } else { 1.0 },
+                            if k & 2 == 0 { -1.0 } else { 1.0 },
+                            if k & 4 == 0 { -1.0 } else { 1.0 },
+                        );
+                        rot * (c + s * e) + t
+                    })
+                    .collect();
+                ConvexHull::new(v).expect("finite")
+            };
+            (corners(DVec3::ZERO, e1), corners(c2, e2), exact)
+        })
+        .collect();
+    let defaults = Tolerances::default();
+    let mut knobs: Vec<(String, Tolerances)> = [1e-4, 1e-6, 1e-9, 1e-12, 1e-15]
+        .iter()
+        .map(|&rel_eps| {
+            (
+                format!("duality gap {rel_eps:e}, cap {}", defaults.max_iterations),
+                Tolerances {
+                    rel_eps,
+                    ..defaults
+                },
+            )
+        })
+        .collect();
+    for cap in [3, 5, 8, 16] {
+        knobs.push((
+            format!("duality gap {:e}, cap {cap}", defaults.rel_eps),
+            Tolerances {
+                max_iterations: cap,
+                ..defaults
+            },
+        ));
+    }
+    for (name, tol) in knobs {
+        let (t, (err, wrong)) = best(3, || {
+            let mut err = 0f64;
+            let mut wrong = 0usize;
+            for (a, b, exact) in &cases {
+                let scale = a
+                    .vertices
+                    .iter()
+                    .chain(&b.vertices)
+                    .map(|v| v.abs().max_element())
+                    .fold(0.0, f64::max);
+                match proximity_with(a, b, &tol) {
+                    Ok(p) if p.intersect == (*exact <= p.touch_eps) => {
+                        err = err.max((p.distance - exact).abs() / scale)
+                    }
+                    _ => {
+                        err = 1.0;
+                        wrong += 1;
+                    }
+                }
+            }
+            (err, wrong)
+        });
+        points.push(Point {
+            stage: "gjk",
+            knob: format!("{name}: {wrong} of {pairs} wrong or not converged"),
+            default: tol == defaults,
+            metric: "max |d − d_exact| / scale",
+            error: err,
+            seconds: t,
+            pareto: false,
+        });
+    }
+}
+
 /// Mark each stage's Pareto front (less error and less time than every other point of the
 /// stage in at least one, no more in the other).
 fn mark_pareto(points: &mut [Point]) {
@@ -494,6 +599,7 @@ fn main() {
         forward(quick, &mut points);
         exp(quick, &mut points);
         alignment(quick, &mut points);
+        gjk(quick, &mut points);
         training(quick, &mut points);
     });
     mark_pareto(&mut points);

@@ -116,11 +116,38 @@ impl Simplex {
     }
 }
 
+/// The stopping rules of [`proximity_with`]; [`Default`] is the constants above, what
+/// [`proximity`] uses (their cost in accuracy and time: `cargo bench --bench accuracy`,
+/// SPEC.md §5.10).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Tolerances {
+    pub max_iterations: usize,
+    pub rel_eps: f64,
+    pub abs_eps: f64,
+    pub touch_rel: f64,
+}
+
+impl Default for Tolerances {
+    fn default() -> Self {
+        Tolerances {
+            max_iterations: MAX_ITERATIONS,
+            rel_eps: REL_EPS,
+            abs_eps: ABS_EPS,
+            touch_rel: TOUCH_REL,
+        }
+    }
+}
+
 /// Distance and intersection of two convex shapes.
 pub fn proximity(a: &dyn Support, b: &dyn Support) -> Result<Proximity> {
+    proximity_with(a, b, &Tolerances::default())
+}
+
+/// [`proximity`] with other stopping rules.
+pub fn proximity_with(a: &dyn Support, b: &dyn Support, tol: &Tolerances) -> Result<Proximity> {
     let scale = a.scale().max(b.scale()).max(1e-300);
-    let touch_eps = TOUCH_REL * scale;
-    let abs_eps = ABS_EPS * scale;
+    let touch_eps = tol.touch_rel * scale;
+    let abs_eps = tol.abs_eps * scale;
     let sup = |d: DVec3| a.support(-d) - b.support(d);
     let mut simplex = Simplex {
         p: [DVec3::ZERO; 4],
@@ -134,13 +161,13 @@ pub fn proximity(a: &dyn Support, b: &dyn Support) -> Result<Proximity> {
         touch_eps,
         iterations,
     };
-    for it in 1..=MAX_ITERATIONS {
+    for it in 1..=tol.max_iterations {
         let vv = v.length_squared();
         if vv.sqrt() <= abs_eps {
             return Ok(done(0.0, it));
         }
         let w = sup(v);
-        if vv - v.dot(w) <= REL_EPS * vv || simplex.contains(w) {
+        if vv - v.dot(w) <= tol.rel_eps * vv || simplex.contains(w) {
             return Ok(done(vv.sqrt(), it));
         }
         simplex.push(w);
@@ -156,7 +183,8 @@ pub fn proximity(a: &dyn Support, b: &dyn Support) -> Result<Proximity> {
         v = closest;
     }
     Err(Error::invalid(format!(
-        "GJK did not converge in {MAX_ITERATIONS} iterations (distance estimate {})",
+        "GJK did not converge in {} iterations (distance estimate {})",
+        tol.max_iterations,
         v.length()
     )))
 }
