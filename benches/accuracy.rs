@@ -379,7 +379,7 @@ fn gjk(quick: bool, points: &mut Vec<Point>) {
             let exact = gap.max(DVec3::ZERO).length();
             let rot = DMat3::from_quat(DQuat::from_axis_angle(
                 DVec3::new(r(-1.0, 1.0), r(-1.0, 1.0), r(0.1, 1.0)).normalize(),
-                r(0.0, 6.28),
+                r(0.0, std::f64::consts::TAU),
             ));
             let t = DVec3::new(r(-5.0, 5.0), r(-5.0, 5.0), r(-5.0, 5.0));
             let corners = |c: DVec3, e: DVec3| {
