@@ -60,6 +60,9 @@ fn cli_render_writes_png_and_exr() {
 #[test]
 fn cli_errors_name_the_file() {
     let demo = reference("demo");
+    // Never written (every case fails before any output); a guard removes it if one did.
+    let out = TempDir::path_only("cli-errors");
+    let out_arg = out.display().to_string();
     let cases: Vec<(Vec<String>, &str)> = vec![
         (
             vec![
@@ -68,7 +71,7 @@ fn cli_errors_name_the_file() {
                 "--cameras".into(),
                 demo.join("cameras.json").display().to_string(),
                 "--out".into(),
-                "/tmp/x".into(),
+                out_arg.clone(),
             ],
             "/nonexistent/s.ply",
         ),
@@ -79,7 +82,7 @@ fn cli_errors_name_the_file() {
                 "--cameras".into(),
                 demo.join("scene.ply").display().to_string(),
                 "--out".into(),
-                "/tmp/x".into(),
+                out_arg.clone(),
             ],
             "scene.ply: not an INRIA cameras.json",
         ),
@@ -92,7 +95,7 @@ fn cli_errors_name_the_file() {
                 "--camera".into(),
                 "nope".into(),
                 "--out".into(),
-                "/tmp/x".into(),
+                out_arg.clone(),
             ],
             "no camera named 'nope'",
         ),
@@ -103,6 +106,7 @@ fn cli_errors_name_the_file() {
         assert!(!o.status.success());
         assert!(err.contains(needle) && err.contains("error: "), "{err}");
         assert!(!err.contains("panicked"), "{err}");
+        assert!(!out.exists(), "a failed command wrote {}", out.display());
     }
 }
 
