@@ -14,6 +14,7 @@
 //!
 //! - `gjk`: the duality-gap tolerance and the iteration cap against box pairs of known
 //!   distance (`collide::gjk::proximity_with`);
+//! - `dibr`: the warp's footprint and crack closing against a ray-traced plane;
 //! - `training`: iterations with and without densification on `lounge` against the
 //!   test views' mean squared error (ground truth), checkpoints of one run each.
 //!
@@ -455,6 +456,113 @@ fn gjk(quick: bool, points: &mut Vec<Point>) {
     }
 }
 
+/// DIBR against a ray-traced warp: a textured plane (smooth colours, a known surface) seen
+/// from a source camera is warped to a target camera moved 0.15 and turned 4°; the shadow
+/// is the plane ray-traced from the target. Error: mean |warp − ray-traced| over the
+/// target pixels the warp fills (holes are counted in the knob).
+fn dibr(quick: bool, points: &mut Vec<Point>) {
+    use glam::{DMat3, DVec3};
+    use unseen::camera::Camera;
+    use unseen::io::image::ImageF32;
+    use unseen::warp::dibr::{Footprint, WarpOptions, warp};
+    let (w, h) = if quick {
+        (256usize, 192usize)
+    } else {
+        (1024, 768)
+    };
+    let f = 0.5 * w as f64 / 35f64.to_radians().tan();
+    let from = Camera::new(
+        "from",
+        w as u32,
+        h as u32,
+        f,
+        f,
+        DMat3::IDENTITY,
+        DVec3::ZERO,
+    )
+    .expect("camera");
+    let to = Camera::new(
+        "to",
+        w as u32,
+        h as u32,
+        f,
+        f,
+        DMat3::from_rotation_y(4f64.to_radians()),
+        DVec3::new(0.15, -0.05, 0.0),
+    )
+    .expect("camera");
+    // The plane n·P = 4 (slanted), and its texture.
+    let n = DVec3::new(0.2, -0.1, 1.0).normalize();
+    let tex = |p: DVec3| {
+        [
+            0.5 + 0.4 * (3.0 * p.x).sin() * (2.0 * p.y).cos(),
+            0.5 + 0.4 * (2.5 * p.y + 1.0).sin(),
+            0.5 + 0.3 * (4.0 * (p.x + p.y)).cos(),
+        ]
+    };
+    // Ray-trace a camera: colours and camera z.
+    let trace = |cam: &Camera| {
+        let mut rgb = Vec::with_capacity(w * h * 3);
+        let mut z = Vec::with_capacity(w * h);
+        for v in 0..h {
+            for u in 0..w {
+                let d = DVec3::new(
+                    (u as f64 + 0.5 - cam.cx) / cam.fx,
+                    (v as f64 + 0.5 - cam.cy) / cam.fy,
+                    1.0,
+                );
+                let dw = cam.world_from_camera_rotation * d;
+                let s = (4.0 - n.dot(cam.center)) / n.dot(dw);
+                rgb.extend(tex(cam.center + dw * s).map(|c| c as f32));
+                z.push(s as f32);
+            }
+        }
+        (rgb, z)
+    };
+    let (src, src_z) = trace(&from);
+    let (truth, _) = trace(&to);
+    let img = ImageF32::new(w, h, 3, src).expect("image");
+    for (name, opts, default) in [
+        ("nearest", WarpOptions::default(), false),
+        (
+            "nearest + crack closing 1 (the pipeline's)",
+            WarpOptions {
+                close_cracks: 1,
+                ..WarpOptions::default()
+            },
+            true,
+        ),
+        (
+            "bilinear",
+            WarpOptions {
+                footprint: Footprint::Bilinear,
+                ..WarpOptions::default()
+            },
+            false,
+        ),
+    ] {
+        let (t, r) = best(3, || warp(&img, &src_z, &from, &to, &opts).expect("warps"));
+        let (mut sum, mut filled) = (0.0, 0usize);
+        for (i, &hole) in r.holes.iter().enumerate() {
+            if !hole {
+                filled += 1;
+                for c in 0..3 {
+                    sum += (r.image.data[3 * i + c] as f64 - truth[3 * i + c] as f64).abs();
+                }
+            }
+        }
+        points.push(Point {
+            stage: "dibr",
+            knob: format!("{name}: {} holes of {}", w * h - filled, w * h),
+            default,
+            metric: "mean |warp − ray-traced| (filled pixels)",
+            error: sum / (3 * filled.max(1)) as f64,
+            seconds: t,
+            pareto: false,
+        });
+    }
+}
+
 /// Mark each stage's Pareto front (less error and less time than every other point of the
 /// stage in at least one, no more in the other).
 fn mark_pareto(points: &mut [Point]) {
@@ -600,6 +708,7 @@ fn main() {
         exp(quick, &mut points);
         alignment(quick, &mut points);
         gjk(quick, &mut points);
+        dibr(quick, &mut points);
         training(quick, &mut points);
     });
     mark_pareto(&mut points);
