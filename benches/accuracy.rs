@@ -6,6 +6,8 @@
 //! of the stage has both less error and less time. Stages (SPEC.md §5.10):
 //! - `forward`: an SH-5 scene rendered in f32 at SH degree 0–5 (and every kernel form at 5)
 //!   against the f64 twin of the forward at degree 5 (`tests/suite/twin.rs`), and the twin;
+//! - `backward`: f32 gradients of every raw parameter against f64 central differences of
+//!   the twin, on a smooth scene;
 //! - `exp`: our Cephes `exp` (what the blend uses), the platform's `f32::exp`, and `f64::exp`
 //!   rounded to f32, in ulp against `f64::exp` (scalar and in AVX2 / AVX-512F lanes);
 //! - `ransac`: RANSAC iterations and inlier threshold against the known scale of synthetic
@@ -113,6 +115,109 @@ fn forward(quick: bool, points: &mut Vec<Point>) {
         metric,
         error: 0.0,
         seconds: t64,
+        pareto: false,
+    });
+}
+
+/// The backward against central finite differences (in f64) of the f64 twin: a smooth
+/// scene (five large Gaussians covering the image with 1/255 < α < 0.99 and T ≫ 1e-4, so
+/// the loss `Σ w·rgb` is differentiable), SH degree 3, 24×18; every raw parameter.
+fn backward_fd(points: &mut Vec<Point>) {
+    use unseen::gaussian::Gaussians;
+    use unseen::raster::backward::{GradGroups, ImageGrads, backward, render_for_backward};
+    let cam = default_camera(24, 18);
+    let npix = 24 * 18;
+    let bg = [0.1f32, 0.2, 0.3];
+    let mut u = Uniform::new(21);
+    let mut g = Gaussians::new(3).expect("degree");
+    for _ in 0..5 {
+        let mean = [u.range(-0.3, 0.3), u.range(-0.2, 0.2), u.range(2.5, 4.0)];
+        let ls = [
+            u.range(0.4f32.ln(), 0.9f32.ln()),
+            u.range(0.4f32.ln(), 0.9f32.ln()),
+            u.range(0.3f32.ln(), 0.6f32.ln()),
+        ];
+        let q = [
+            u.range(0.5, 1.0),
+            u.range(-0.5, 0.5),
+            u.range(-0.5, 0.5),
+            u.range(-0.5, 0.5),
+        ];
+        let dc = [u.range(-0.8, 0.8), u.range(-0.8, 0.8), u.range(-0.8, 0.8)];
+        let rest: Vec<f32> = (0..45).map(|_| u.range(-0.2, 0.2)).collect();
+        g.push(mean, ls, q, u.range(-1.0, 0.5), dc, &rest);
+    }
+    let w: Vec<f32> = (0..npix * 3)
+        .map(|_| u.range(-1.0, 1.0) / npix as f32)
+        .collect();
+    let loss64 = |p: &[f64]| -> f64 {
+        let out = twin::forward64(&g, p, &cam, bg.map(f64::from));
+        out[0].iter().zip(&w).map(|(&a, &b)| a * b as f64).sum()
+    };
+    let p0 = twin::flatten(&g);
+    let (t_fd, fd) = best(1, || {
+        (0..p0.len())
+            .map(|k| {
+                let h = 1e-5 * p0[k].abs().max(1.0);
+                let mut p = p0.clone();
+                p[k] = p0[k] + h;
+                let up = loss64(&p);
+                p[k] = p0[k] - h;
+                (up - loss64(&p)) / (2.0 * h)
+            })
+            .collect::<Vec<f64>>()
+    });
+    for (kernel, kname) in [(Kernel::Auto, "auto"), (Kernel::Scalar, "scalar")] {
+        let opts = RenderOptions {
+            background: bg,
+            kernel,
+            ..Default::default()
+        };
+        let v = ImageGrads {
+            rgb: Some(w.clone()),
+            ..Default::default()
+        };
+        let (t, gr) = best(20, || {
+            let fwd = render_for_backward(&g, &cam, &opts).expect("renders");
+            backward(&g, &cam, &opts, &fwd, &v, &GradGroups::ALL)
+                .expect("backward")
+                .0
+        });
+        let mut flat = Vec::new();
+        for i in 0..g.len() {
+            flat.extend(gr.means[i]);
+            flat.extend(gr.log_scales[i]);
+            flat.extend(gr.quats[i]);
+            flat.push(gr.opacity_logits[i]);
+            flat.extend(gr.sh_dc[i]);
+            flat.extend(&gr.sh_rest[i * 45..(i + 1) * 45]);
+        }
+        let err = flat
+            .iter()
+            .zip(&fd)
+            .map(|(&a, &b)| (a as f64 - b).abs())
+            .fold(0.0, f64::max);
+        points.push(Point {
+            stage: "backward",
+            knob: format!(
+                "f32 forward + backward, kernel {kname}, {} parameters (largest |gradient| {:.1e})",
+                fd.len(),
+                fd.iter().fold(0f64, |m, v| m.max(v.abs()))
+            ),
+            default: kernel == Kernel::Auto,
+            metric: "max |gradient − f64 central differences|",
+            error: err,
+            seconds: t,
+            pareto: false,
+        });
+    }
+    points.push(Point {
+        stage: "backward",
+        knob: "f64 central differences of the twin (the shadow itself)".into(),
+        default: false,
+        metric: "max |gradient − f64 central differences|",
+        error: 0.0,
+        seconds: t_fd,
         pareto: false,
     });
 }
@@ -608,7 +713,7 @@ fn markdown(points: &[Point], quick: bool) -> String {
         let _ = writeln!(
             s,
             "| {} | {:.3e} | {:.3e} | {} | {} |",
-            p.knob,
+            p.knob.replace('|', "\\|"),
             p.error,
             p.seconds,
             if p.pareto { "yes" } else { "" },
@@ -705,6 +810,7 @@ fn main() {
     let mut points = Vec::new();
     pool.install(|| {
         forward(quick, &mut points);
+        backward_fd(&mut points);
         exp(quick, &mut points);
         alignment(quick, &mut points);
         gjk(quick, &mut points);
