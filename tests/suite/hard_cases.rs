@@ -1,12 +1,12 @@
 //! The rasterizer's hard-case catalogue (SPEC.md §5.9): each case renders forward and
-//! backward with every kernel form and checks no panic, no non-finite output or gradient,
+//! backward with every kernel form (AVX-512F where present, AVX2, scalar) and checks no panic, no non-finite output or gradient,
 //! the same bits from every kernel, the documented skip counts, and the images within
 //! [`HARD_CASE_ATOL`] of the f64 twin of the forward (`twin::forward64`) evaluated on
 //! the Gaussians the f32 rasterizer is specified to draw.
 use super::twin::{flatten, forward64};
 use unseen::camera::Camera;
 use unseen::gaussian::Gaussians;
-use unseen::raster::backward::{GradGroups, ImageGrads, backward, render_for_backward};
+use unseen::raster::backward::{GradGroups, Gradients, ImageGrads, backward, render_for_backward};
 use unseen::raster::{Kernel, Outputs, RenderOptions, RenderReport, render};
 use unseen::scene::default_camera;
 
@@ -153,7 +153,9 @@ fn cases() -> Vec<Case> {
     push(&mut g, [0.0, 0.0, 1e-3], [1e-4; 3], Q, 1.0);
     push(&mut g, [0.0, 0.0, 1e5], [1e4; 3], Q, 1.0);
     push(&mut g, [0.05, 0.0, 3.0], [0.3; 3], Q, 0.5);
-    push(&mut g, [-0.05, 0.0, 3.0], [0.3; 3], Q, 0.5);
+    // The tied pair differs in colour, so drawing it in the other order shows.
+    let scale = [0.3f32.ln(); 3];
+    g.push([-0.05, 0.0, 3.0], scale, Q, 0.5, [-0.4, 0.7, 0.1], &[]);
     add("depths 1e-3, 1e5 and a tie", g, &cam, vec![], (0, 0, 1, 0));
 
     // 1×1 and 4096×1 images.
@@ -181,8 +183,9 @@ fn cases() -> Vec<Case> {
         (0, 0, 0, 0),
     );
 
-    // 10^6 Gaussians on one pixel (α = 0.02 each, distinct depths): the stop at T ≤ 1e-4
-    // ends every walk after a few hundred of them.
+    // 10^6 Gaussians on the centre of the middle pixel of a 3×3 image (α = 0.02 there,
+    // distinct depths; the other pixels are 1 px away, where α = 0.0038 < 1/255): the stop
+    // at T ≤ 1e-4 ends the walk after 456 of them.
     let mut g = scene(0);
     let logit = (0.02f32 / 0.98).ln();
     for i in 0..1_000_000 {
@@ -192,11 +195,29 @@ fn cases() -> Vec<Case> {
     add(
         "10^6 Gaussians on one pixel",
         g,
-        &default_camera(4, 4),
+        &default_camera(3, 3),
         vec![],
         (0, 0, 0, 0),
     );
     v
+}
+
+/// Every gradient's bits, in one list.
+fn grad_bits(g: &Gradients) -> Vec<u32> {
+    [
+        g.means.as_flattened(),
+        g.log_scales.as_flattened(),
+        g.quats.as_flattened(),
+        &g.opacity_logits[..],
+        g.sh_dc.as_flattened(),
+        &g.sh_rest[..],
+        &g.background[..],
+        g.means2d.as_flattened(),
+    ]
+    .concat()
+    .iter()
+    .map(|v| v.to_bits())
+    .collect()
 }
 
 /// The scene without the Gaussians at `skipped`.
@@ -257,7 +278,10 @@ fn rasterizer_hard_cases_are_finite_and_match_the_f64_twin() {
         for kernel in [Kernel::Avx2, Kernel::Scalar] {
             let o = render(&case.scene, &case.cam, &opts(kernel)).unwrap();
             assert!(
-                o.rgb == r.rgb && o.alpha == r.alpha && o.depth == r.depth,
+                o.rgb == r.rgb
+                    && o.alpha == r.alpha
+                    && o.depth == r.depth
+                    && o.expected_depth == r.expected_depth,
                 "{name}: {kernel:?} differs from Auto"
             );
         }
@@ -313,6 +337,15 @@ fn rasterizer_hard_cases_are_finite_and_match_the_f64_twin() {
                 "{name}: skipped Gaussian {i} has a gradient"
             );
         }
+        for kernel in [Kernel::Avx2, Kernel::Scalar] {
+            let ko = opts(kernel);
+            let kf = render_for_backward(&case.scene, &case.cam, &ko).unwrap();
+            let (kg, _) = backward(&case.scene, &case.cam, &ko, &kf, &v, &GradGroups::ALL).unwrap();
+            assert!(
+                grad_bits(&kg) == grad_bits(&gr),
+                "{name}: {kernel:?} gradients differ from Auto"
+            );
+        }
     }
 }
 
@@ -340,7 +373,7 @@ fn degenerate_cameras_are_clear_errors() {
             .err()
             .unwrap()
             .to_string();
-        assert!(e.contains(expect), "{e}");
+        assert!(e.contains(expect) && e.contains("default"), "{e}");
     }
 }
 
