@@ -733,3 +733,50 @@ fn frozen_replay_matches_full_render_and_backward() {
         assert!(bits(&adam_a.v.sh_rest) == bits(&adam_b.v.sh_rest));
     }
 }
+
+/// A reused gradient buffer (`backward_into`, as training uses it) gives the bits of a fresh
+/// one whatever it held: here NaN everywhere, longer and shorter than needed, and with a
+/// plan degree below the scene's (the coefficients above it must come back +0.0).
+#[test]
+fn reused_gradient_buffers_give_fresh_bits() {
+    use unseen::raster::backward::backward_into;
+    let cam = default_camera(40, 30);
+    let scene = random_scene(700, 3, 17, 0.01, 0.3);
+    let npix = 40 * 30;
+    let mut u = Uniform::new(9);
+    let v = ImageGrads {
+        rgb: Some((0..npix * 3).map(|_| u.range(-1.0, 1.0)).collect()),
+        alpha: Some((0..npix).map(|_| u.range(-1.0, 1.0)).collect()),
+        ..Default::default()
+    };
+    let poison = |n: usize, k: usize| Gradients {
+        means: vec![[f32::NAN; 3]; n],
+        log_scales: vec![[f32::NAN; 3]; n],
+        quats: vec![[f32::NAN; 4]; n],
+        opacity_logits: vec![f32::NAN; n],
+        sh_dc: vec![[f32::NAN; 3]; n],
+        sh_rest: vec![f32::NAN; n * k],
+        background: [f32::NAN; 3],
+        means2d: vec![[f32::NAN; 2]; n],
+        means2d_ndc: vec![[f32::NAN; 2]; n],
+    };
+    for degree in [3, 1] {
+        let opts = RenderOptions {
+            sh_degree: Some(degree),
+            ..Default::default()
+        };
+        let fwd = render_for_backward(&scene, &cam, &opts).unwrap();
+        for groups in [GradGroups::ALL, GradGroups::SH_REST] {
+            let (fresh, pairs) = backward(&scene, &cam, &opts, &fwd, &v, &groups).unwrap();
+            for n in [100, 700, 2000] {
+                let mut g = poison(n, 45);
+                let p = backward_into(&scene, &cam, &opts, &fwd, &v, &groups, &mut g).unwrap();
+                assert_eq!(p, pairs);
+                assert!(
+                    grads_bits(&g) == grads_bits(&fresh),
+                    "degree {degree}, {groups:?}, buffer of {n}"
+                );
+            }
+        }
+    }
+}
