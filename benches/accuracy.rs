@@ -119,35 +119,17 @@ fn forward(quick: bool, points: &mut Vec<Point>) {
     });
 }
 
-/// The backward against central finite differences (in f64) of the f64 twin: five large
-/// Gaussians (SH degree 3, 24×18 image) and the loss `Σ w·rgb`, every raw parameter. The
+/// The backward against central finite differences (in f64) of the f64 twin: the tests'
+/// smooth scene of five large Gaussians (`twin::smooth_scene`, SH degree 3, 24×18 image) and the loss `Σ w·rgb`, every raw parameter. The
 /// loss is smooth only piecewise (the α = 1/255 cut-off crosses the image border region), so
 /// a difference that straddled a crossing would show as a large error; none does here.
 fn backward_fd(points: &mut Vec<Point>) {
-    use unseen::gaussian::Gaussians;
     use unseen::raster::backward::{GradGroups, ImageGrads, backward, render_for_backward};
     let cam = default_camera(24, 18);
     let npix = 24 * 18;
     let bg = [0.1f32, 0.2, 0.3];
+    let g = twin::smooth_scene(3, 21);
     let mut u = Uniform::new(21);
-    let mut g = Gaussians::new(3).expect("degree");
-    for _ in 0..5 {
-        let mean = [u.range(-0.3, 0.3), u.range(-0.2, 0.2), u.range(2.5, 4.0)];
-        let ls = [
-            u.range(0.4f32.ln(), 0.9f32.ln()),
-            u.range(0.4f32.ln(), 0.9f32.ln()),
-            u.range(0.3f32.ln(), 0.6f32.ln()),
-        ];
-        let q = [
-            u.range(0.5, 1.0),
-            u.range(-0.5, 0.5),
-            u.range(-0.5, 0.5),
-            u.range(-0.5, 0.5),
-        ];
-        let dc = [u.range(-0.8, 0.8), u.range(-0.8, 0.8), u.range(-0.8, 0.8)];
-        let rest: Vec<f32> = (0..45).map(|_| u.range(-0.2, 0.2)).collect();
-        g.push(mean, ls, q, u.range(-1.0, 0.5), dc, &rest);
-    }
     let w: Vec<f32> = (0..npix * 3)
         .map(|_| u.range(-1.0, 1.0) / npix as f32)
         .collect();

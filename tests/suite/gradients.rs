@@ -1,10 +1,9 @@
 //! Backward pass: central finite differences of an f64 twin of the forward (used only by
 //! these tests), determinism, frozen groups and hard cases.
 use super::common::{bits, with_threads};
-use super::twin::{flatten, forward64};
+use super::twin::{flatten, forward64, smooth_scene};
 use unseen::camera::Camera;
 use unseen::gaussian::Gaussians;
-use unseen::math::sh::num_coeffs;
 use unseen::raster::backward::{GradGroups, Gradients, ImageGrads, backward, render_for_backward};
 use unseen::raster::{Outputs, RenderOptions};
 use unseen::scene::{Uniform, default_camera, random_scene};
@@ -43,33 +42,6 @@ const PARAM_NAMES: [&str; 14] = [
 /// Finite-difference tolerance: 5e-5 absolute + 1% relative (the bound).
 const FD_ATOL: f64 = 5e-5;
 const FD_RTOL: f64 = 0.01;
-
-/// A smooth scene: a few large Gaussians that cover the whole small image with
-/// 1/255 < α < 0.99 at every pixel and T well above 1e-4, so the loss is differentiable.
-fn smooth_scene(degree: u32, seed: u64) -> Gaussians {
-    let mut u = Uniform::new(seed);
-    let mut g = Gaussians::new(degree).unwrap();
-    let k1 = num_coeffs(degree) - 1;
-    for _ in 0..5 {
-        let mean = [u.range(-0.3, 0.3), u.range(-0.2, 0.2), u.range(2.5, 4.0)];
-        let ls = [
-            u.range(0.4f32.ln(), 0.9f32.ln()),
-            u.range(0.4f32.ln(), 0.9f32.ln()),
-            u.range(0.3f32.ln(), 0.6f32.ln()),
-        ];
-        let q = [
-            u.range(0.5, 1.0),
-            u.range(-0.5, 0.5),
-            u.range(-0.5, 0.5),
-            u.range(-0.5, 0.5),
-        ];
-        let op = u.range(-1.0, 0.5);
-        let dc = [u.range(-0.8, 0.8), u.range(-0.8, 0.8), u.range(-0.8, 0.8)];
-        let rest: Vec<f32> = (0..k1 * 3).map(|_| u.range(-0.2, 0.2)).collect();
-        g.push(mean, ls, q, op, dc, &rest);
-    }
-    g
-}
 
 struct Weights {
     rgb: Vec<f32>,

@@ -3,7 +3,8 @@
 //! same rules as the f32 rasterizer (SPEC.md §5) in f64.
 use unseen::camera::Camera;
 use unseen::gaussian::Gaussians;
-use unseen::math::sh::sh_basis;
+use unseen::math::sh::{num_coeffs, sh_basis};
+use unseen::scene::Uniform;
 
 /// The forward in f64, per pixel over all Gaussians (no tiles), the same rules as the
 /// f32 rasterizer (SPEC.md §5). Returns rgb (interleaved), alpha, D, ED.
@@ -181,4 +182,31 @@ pub fn flatten(g: &Gaussians) -> Vec<f64> {
         p.extend(g.rest(i).iter().map(|&v| v as f64));
     }
     p
+}
+
+/// A smooth scene: a few large Gaussians that cover the whole small image with
+/// 1/255 < α < 0.99 at every pixel and T well above 1e-4, so the loss is differentiable.
+pub fn smooth_scene(degree: u32, seed: u64) -> Gaussians {
+    let mut u = Uniform::new(seed);
+    let mut g = Gaussians::new(degree).unwrap();
+    let k1 = num_coeffs(degree) - 1;
+    for _ in 0..5 {
+        let mean = [u.range(-0.3, 0.3), u.range(-0.2, 0.2), u.range(2.5, 4.0)];
+        let ls = [
+            u.range(0.4f32.ln(), 0.9f32.ln()),
+            u.range(0.4f32.ln(), 0.9f32.ln()),
+            u.range(0.3f32.ln(), 0.6f32.ln()),
+        ];
+        let q = [
+            u.range(0.5, 1.0),
+            u.range(-0.5, 0.5),
+            u.range(-0.5, 0.5),
+            u.range(-0.5, 0.5),
+        ];
+        let op = u.range(-1.0, 0.5);
+        let dc = [u.range(-0.8, 0.8), u.range(-0.8, 0.8), u.range(-0.8, 0.8)];
+        let rest: Vec<f32> = (0..k1 * 3).map(|_| u.range(-0.2, 0.2)).collect();
+        g.push(mean, ls, q, op, dc, &rest);
+    }
+    g
 }
