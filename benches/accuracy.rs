@@ -23,10 +23,13 @@
 //! Times are the best of several runs on one thread; errors are exact maxima over the
 //! inputs used.
 
+mod common;
+
 #[path = "../tests/suite/twin.rs"]
 #[allow(dead_code)]
 mod twin;
 
+use common::best;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -44,18 +47,6 @@ struct Point {
     error: f64,
     seconds: f64,
     pareto: bool,
-}
-
-fn best<T>(runs: usize, mut f: impl FnMut() -> T) -> (f64, T) {
-    let mut t_best = f64::MAX;
-    let mut out = None;
-    for _ in 0..runs {
-        let t = Instant::now();
-        let r = f();
-        t_best = t_best.min(t.elapsed().as_secs_f64());
-        out = Some(r);
-    }
-    (t_best, out.expect("runs > 0"))
 }
 
 fn forward(quick: bool, points: &mut Vec<Point>) {

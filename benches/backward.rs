@@ -13,6 +13,9 @@
 //! `frozen` rows: SH-only iterations replayed from a `FrozenBlend` record (forward column =
 //! replayed render, backward column = replayed SH backward; the pairs are the full walk's).
 
+mod common;
+
+use common::median;
 use std::time::Instant;
 use unseen::raster::backward::composite::{PixelGrads, composite_backward};
 use unseen::raster::backward::frozen::{FrozenBlend, FrozenWork};
@@ -22,11 +25,6 @@ use unseen::raster::composite::{Kernel, Want, composite};
 use unseen::raster::project::CameraF32;
 use unseen::raster::{RenderOptions, RenderReport};
 use unseen::scene::{Uniform, default_camera, random_scene};
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
 
 fn main() {
     unseen::sys::keep_freed_memory(); // as the CLI does (SPEC.md §6)

@@ -12,17 +12,15 @@
 //! `read/G`: the time to merely read the parameters the projection reads (236 B per
 //! Gaussian at SH degree 3) in the same units, the memory-bandwidth floor of that work.
 
+mod common;
+
+use common::median;
 use std::time::Instant;
 use unseen::raster::composite::{Kernel, Want, bare_blend, composite};
 use unseen::raster::project::{Splat, project};
 use unseen::raster::tile::bin;
 use unseen::raster::{RenderOptions, RenderPlan, RenderReport};
 use unseen::scene::{default_camera, random_scene};
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
 
 /// 128 splats inside one 16×16 tile (σ of 1–4 px, opacities 0.02–0.06, so transmittance
 /// stays above the stop over the whole list and every splat is evaluated on every row).

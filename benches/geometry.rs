@@ -6,44 +6,15 @@
 //! RANSAC: 32 frames of 256×256 with 30 % outliers (depth space), adaptive count and a
 //! fixed 1000 iterations; 1 and all threads; best of 3.
 
+mod common;
+
+use common::{best, pools};
 use glam::{DMat3, DVec3};
-use std::time::Instant;
 use unseen::camera::Camera;
 use unseen::io::image::ImageF32;
 use unseen::scene::Uniform;
 use unseen::warp::align::{Frame, RansacConfig, Space, ransac};
 use unseen::warp::dibr::{Footprint, WarpOptions, warp};
-
-fn best<T>(runs: usize, mut f: impl FnMut() -> T) -> (f64, T) {
-    let mut t_best = f64::MAX;
-    let mut out = None;
-    for _ in 0..runs {
-        let t = Instant::now();
-        let r = f();
-        t_best = t_best.min(t.elapsed().as_secs_f64());
-        out = Some(r);
-    }
-    (t_best, out.expect("runs > 0"))
-}
-
-fn pools() -> Vec<(usize, rayon::ThreadPool)> {
-    let all = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let mut v = vec![1];
-    if all > 1 {
-        v.push(all);
-    }
-    v.into_iter()
-        .map(|n| {
-            (
-                n,
-                rayon::ThreadPoolBuilder::new()
-                    .num_threads(n)
-                    .build()
-                    .unwrap(),
-            )
-        })
-        .collect()
-}
 
 fn main() {
     let (w, h) = (1024usize, 768usize);

@@ -8,24 +8,16 @@
 //! - tract: a user-provided Depth-Anything-sized model, when `UNSEEN_DEPTH_CARD` names its
 //!   card (skipped otherwise).
 
+mod common;
+
+use common::best;
 use glam::{DMat3, DVec3};
-use std::time::Instant;
 use unseen::camera::Camera;
 use unseen::io::image::{ImageF32, write_png};
 use unseen::models::morph::Morph;
 use unseen::models::telea::inpaint;
 use unseen::models::{Keyframe, VideoGenerator};
 use unseen::scene::Uniform;
-
-fn best(runs: usize, mut f: impl FnMut()) -> f64 {
-    (0..runs)
-        .map(|_| {
-            let t = Instant::now();
-            f();
-            t.elapsed().as_secs_f64()
-        })
-        .fold(f64::MAX, f64::min)
-}
 
 fn blob_mask(w: usize, h: usize, target: f64, u: &mut Uniform) -> Vec<bool> {
     let mut m = vec![false; w * h];
@@ -63,7 +55,7 @@ fn telea() {
         .collect();
     let mask = blob_mask(w, h, 0.10, &mut u);
     let frac = mask.iter().filter(|&&b| b).count() as f64 / (w * h) as f64;
-    let ours = best(5, || {
+    let (ours, _) = best(5, || {
         inpaint(&img, w, h, 3, &mask, 3.0).unwrap();
     });
     println!(
@@ -140,7 +132,7 @@ fn morph() {
         depth: Some(&depth),
     };
     let n = 6;
-    let t = best(3, || {
+    let (t, _) = best(3, || {
         Morph::default().generate(ka, kb, n).unwrap();
     });
     println!(
@@ -159,7 +151,7 @@ fn tract_depth() {
     let img = ImageF32::new(640, 480, 3, vec![0.5; 640 * 480 * 3]).unwrap();
     use unseen::models::DepthEstimator;
     d.estimate(&img, None).unwrap(); // plan built once
-    let t = best(3, || {
+    let (t, _) = best(3, || {
         d.estimate(&img, None).unwrap();
     });
     let (mw, mh) = d.0.model_size(640, 480);

@@ -8,6 +8,9 @@
 //! The `qa-mask` row is one QA-Mask fine-tune iteration (SH degree 5, only SH rest) on the
 //! same scene: frozen-blend replay render, loss, SH backward, Adam on SH rest.
 
+mod common;
+
+use common::median;
 use std::path::Path;
 use std::time::Instant;
 use unseen::dataset::{self, LoadOptions};
@@ -15,11 +18,6 @@ use unseen::gaussian::Param;
 use unseen::raster::backward::{GradGroups, ImageGrads, backward, render_for_backward};
 use unseen::train::loss::{LossInput, LossWeights, image_loss};
 use unseen::train::trainer::{TrainConfig, Trainer};
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
 
 fn main() {
     unseen::sys::keep_freed_memory(); // as the CLI does (SPEC.md §6)
