@@ -34,6 +34,7 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
 use unseen::math::fastexp;
+use unseen::pipeline::compare::ulp_distance;
 use unseen::raster::{Kernel, Outputs, RenderOptions, render};
 use unseen::scene::{Uniform, default_camera, random_scene};
 use unseen::warp::align::{Frame, RansacConfig, Space, least_squares, ransac};
@@ -196,19 +197,6 @@ fn backward_fd(points: &mut Vec<Point>) {
     });
 }
 
-/// Distance in units in the last place between two finite f32 of the same sign.
-fn ulp(a: f32, b: f32) -> f64 {
-    let key = |x: f32| {
-        let i = x.to_bits() as i32;
-        if i < 0 {
-            i64::from(i32::MIN) - i64::from(i)
-        } else {
-            i64::from(i)
-        }
-    };
-    (key(a) - key(b)).unsigned_abs() as f64
-}
-
 fn exp(quick: bool, points: &mut Vec<Point>) {
     let n = if quick { 1 << 20 } else { 1 << 24 };
     let xs: Vec<f32> = (0..n)
@@ -220,7 +208,7 @@ fn exp(quick: bool, points: &mut Vec<Point>) {
         let err = out
             .iter()
             .zip(&exact)
-            .map(|(&a, &b)| ulp(a, b))
+            .map(|(&a, &b)| ulp_distance(a, b) as f64)
             .fold(0.0, f64::max);
         points.push(Point {
             stage: "exp",
@@ -261,7 +249,7 @@ fn exp(quick: bool, points: &mut Vec<Point>) {
             let err = out
                 .iter()
                 .zip(&exact)
-                .map(|(&a, &b)| ulp(a, b))
+                .map(|(&a, &b)| ulp_distance(a, b) as f64)
                 .fold(0.0, f64::max);
             points.push(Point {
                 stage: "exp",
