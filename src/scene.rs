@@ -15,6 +15,14 @@ impl Uniform {
     pub fn new(seed: u64) -> Self {
         Uniform(Pcg64Mcg::seed_from_u64(seed))
     }
+    /// The generator's whole state (a training checkpoint saves it).
+    pub fn state(&self) -> u128 {
+        self.0.state()
+    }
+    /// The generator with a state from [`Uniform::state`]: it continues the same stream.
+    pub fn from_state(state: u128) -> Self {
+        Uniform(Pcg64Mcg::new(state))
+    }
     /// Uniform in `[0, 1)` with 24 random bits.
     pub fn unit(&mut self) -> f32 {
         (self.0.next_u32() >> 8) as f32 * (1.0 / 16_777_216.0)

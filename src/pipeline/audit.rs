@@ -18,7 +18,8 @@
 use super::evaluate::{Row, Summary};
 use super::{Event, Inconsistency, MaskSource, PipelineConfig, RunOptions, SlotNames};
 use crate::error::{Error, Result};
-use crate::train::run::{latest_ply, read_config, train_run};
+use crate::train::checkpoint::checkpoint_path;
+use crate::train::run::{Checkpointing, latest_ply, read_config, train_run};
 use crate::train::trainer::TrainConfig;
 use std::path::{Path, PathBuf};
 
@@ -436,6 +437,10 @@ fn check_inputs(dataset: &Path, dir: &Path) -> Result<()> {
     Ok(())
 }
 
+/// Iterations between checkpoints of an original-scene training (a killed audit loses at
+/// most this many iterations of it).
+const ORIGINAL_CHECKPOINT_EVERY: u32 = 1000;
+
 fn original(
     cfg: &AuditConfig,
     dataset: &Path,
@@ -450,15 +455,21 @@ fn original(
         });
         return Ok(run);
     }
-    if run.exists() {
-        // An interrupted or differently configured training: start it again.
+    let tc = cfg.train_config(seed);
+    // An interrupted training of this config continues from its checkpoint (same bits,
+    // SPEC.md §14.8); anything else there is started again.
+    let resumable = checkpoint_path(&run).is_file() && read_config(&run).is_ok_and(|c| c == tc);
+    if run.exists() && !resumable {
         std::fs::remove_dir_all(&run).map_err(|e| Error::io(&run, e))?;
     }
-    let tc = cfg.train_config(seed);
     let step = Job::Original { seed }.name();
     on_event(Event::StepStarted { step: step.clone() });
     let t0 = std::time::Instant::now();
-    train_run(dataset, &run, &tc, None, &mut |p| {
+    let checkpoints = Checkpointing {
+        every: ORIGINAL_CHECKPOINT_EVERY,
+        resume: resumable,
+    };
+    train_run(dataset, &run, &tc, None, checkpoints, &mut |p| {
         if p.iteration % 50 == 0 || p.iteration == tc.iterations {
             on_event(Event::Iterations {
                 step: step.clone(),

@@ -18,7 +18,7 @@
 use super::Event;
 use crate::error::{Error, Result};
 use crate::io::manifest::{FileEntry, Manifest, inputs_sha256};
-use crate::io::{create_dir_all, sha256_hex, write_text};
+use crate::io::{create_dir_all, remove_stale_temporaries, sha256_hex, write_text};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -247,24 +247,6 @@ impl RunDir {
 
 /// What a step cost, beside its manifest and not in it (it differs run to run).
 pub const TIMING_FILE: &str = "cost.json";
-
-/// Remove the `.<name>.tmp-<pid>` files a killed run left (§10) directly in `dir`.
-fn remove_stale_temporaries(dir: &Path) -> Result<()> {
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return Ok(());
-    };
-    for e in entries.flatten() {
-        let p = e.path();
-        if p.is_file()
-            && e.file_name()
-                .to_str()
-                .is_some_and(|n| n.starts_with('.') && n.contains(".tmp-"))
-        {
-            std::fs::remove_file(&p).map_err(|err| Error::io(&p, err))?;
-        }
-    }
-    Ok(())
-}
 
 /// Copy the step folder `from` into `to`, `manifest.json` last (a step is done only once its
 /// manifest verifies, so a copy cut short is never taken for a step): files hard-linked

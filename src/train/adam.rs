@@ -132,8 +132,8 @@ fn update_dispatch(
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct GroupStep {
     pub t: u64,
-    beta1_pow: f64,
-    beta2_pow: f64,
+    pub(crate) beta1_pow: f64,
+    pub(crate) beta2_pow: f64,
 }
 
 /// The optimizer state for a set of Gaussians.

@@ -1,7 +1,9 @@
 //! Training (SPEC.md §13–14): losses ([`loss`], [`ssim`]), Adam ([`adam`]), adaptive
-//! density control ([`densify`]), the loop ([`trainer`]) and the run directory ([`run`]).
+//! density control ([`densify`]), the loop ([`trainer`]), checkpoints ([`checkpoint`]) and the
+//! run directory ([`run`]).
 
 pub mod adam;
+pub mod checkpoint;
 pub mod densify;
 pub mod knn;
 pub mod loss;

@@ -8,6 +8,7 @@
 //! RUN/cfg_args                                  INRIA's Namespace line, for its viewers
 //! RUN/manifest.json                             sha256 of every output, seed, config
 //! RUN/train_stats.json                          wall time, it/s, peak memory, loss curve
+//! RUN/checkpoint.bin                            the training state while the run is going
 //! ```
 //!
 //! Every file is written to a temporary name and renamed, so an interrupted run never leaves
@@ -21,8 +22,10 @@ use crate::gaussian::Gaussians;
 use crate::gaussian::ply::{ply_bytes, read_ply};
 use crate::io::manifest::{FileEntry, Manifest};
 use crate::io::{
-    Cost, CostMeter, create_dir_all, peak_memory_bytes, sha256_hex, write_atomic, write_text,
+    Cost, CostMeter, create_dir_all, peak_memory_bytes, remove_stale_temporaries, sha256_hex,
+    write_atomic, write_text,
 };
+use crate::train::checkpoint::{Checkpoint, checkpoint_path};
 use crate::train::trainer::{IterationTimes, Progress, TrainConfig, Trainer};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -147,6 +150,30 @@ pub struct Init<'a> {
     pub weights: Option<ViewWeights<'a>>,
 }
 
+/// Checkpointing of a run (SPEC.md §14.8).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Checkpointing {
+    /// Write `RUN/checkpoint.bin` after every this many iterations (0: never). The file is
+    /// removed when the run completes.
+    pub every: u32,
+    /// Continue from `RUN/checkpoint.bin` if the run has one (else start afresh).
+    pub resume: bool,
+}
+
+/// A run's bookkeeping between iterations (saved in a checkpoint's header, so a resumed
+/// run's summary and manifest continue it).
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
+struct Book {
+    /// Saved PLYs (relative to the run) and their sha256.
+    files: Vec<(PathBuf, String)>,
+    curve: Vec<(u32, f64, f64, usize)>,
+    saves: Vec<(u32, f64)>,
+    pairs: u64,
+    /// Seconds of iterations before this process.
+    elapsed: f64,
+    times: IterationTimes,
+}
+
 /// Train on `dataset_dir` into `run` (from `init` when given); `on_progress` sees every
 /// iteration.
 pub fn train_run(
@@ -154,19 +181,46 @@ pub fn train_run(
     run: &Path,
     config: &TrainConfig,
     init: Option<&Init<'_>>,
+    checkpoints: Checkpointing,
     on_progress: &mut dyn FnMut(&Progress),
 ) -> Result<RunSummary> {
     config.validate()?;
     let meter = CostMeter::start();
     let data = load_dataset(dataset_dir, config)?;
+    let ck_path = checkpoint_path(run);
+    let resumed = if checkpoints.resume && ck_path.is_file() {
+        Some(Checkpoint::read(&ck_path)?)
+    } else {
+        if checkpoints.resume && run.join("manifest.json").is_file() {
+            return Err(Error::invalid(
+                "the run is complete (manifest.json and no checkpoint.bin): nothing to resume",
+            )
+            .at(run));
+        }
+        None
+    };
     create_dir_all(run)?;
+    // What a killed process was writing when it died (§10).
+    remove_stale_temporaries(run)?;
+    if let Ok(entries) = std::fs::read_dir(run.join("point_cloud")) {
+        for e in entries.flatten() {
+            remove_stale_temporaries(&e.path())?;
+        }
+    }
+    if resumed.is_none() {
+        // A fresh start: a checkpoint of an earlier run here no longer belongs to it.
+        remove_if_present(&ck_path)?;
+    }
     let config_text = serde_json::to_string_pretty(config).expect("config serializes");
     write_text(&run.join("config.json"), &config_text)?;
     write_text(&run.join("cfg_args"), &cfg_args(dataset_dir, run, config))?;
     let cams: Vec<_> = data.views.iter().map(|v| v.camera.clone()).collect();
     write_text(&run.join("cameras.json"), &cameras_json_string(&cams))?;
 
-    let start = Instant::now();
+    let init_sha256 = match init {
+        Some(i) => Some(sha256_hex(&ply_bytes(&i.scene)?)),
+        None => None,
+    };
     let mut trainer = match init {
         None => Trainer::new(&data, config.clone())?,
         Some(i) => {
@@ -182,40 +236,68 @@ pub fn train_run(
             t
         }
     };
+    let mut book = Book::default();
+    if let Some(ck) = resumed {
+        let at = |e: Error| e.at(&ck_path);
+        if ck.header.init_sha256 != init_sha256 {
+            return Err(at(Error::invalid(
+                "the checkpoint continues another initial scene (--init) than this one",
+            )));
+        }
+        book = serde_json::from_value(ck.header.run.clone())
+            .map_err(|e| Error::parse(&ck_path, format!("invalid run record: {e}")))?;
+        for (rel, sha) in &book.files {
+            let p = run.join(rel);
+            let bytes = std::fs::read(&p).map_err(|e| Error::io(&p, e))?;
+            if sha256_hex(&bytes) != *sha {
+                return Err(Error::invalid("changed since the checkpoint was written").at(&p));
+            }
+        }
+        ck.restore(&mut trainer).map_err(at)?;
+    }
     let mut stages = vec![("load".to_string(), meter.finish())];
     let meter = CostMeter::start();
-    let mut files: Vec<(PathBuf, String)> = Vec::new();
-    let mut curve = Vec::new();
-    let mut pairs = 0u64;
-    let mut last = Progress::default();
-    let mut saves = Vec::new();
-    let mut save = |it: u32, g: &Gaussians| -> Result<()> {
-        saves.push((it, start.elapsed().as_secs_f64()));
-        let p = ply_path(run, it);
-        create_dir_all(p.parent().expect("has a parent"))?;
-        let bytes = ply_bytes(g)?;
-        write_atomic(&p, |w| w.write_all(&bytes))?;
-        files.push((p, sha256_hex(&bytes)));
-        Ok(())
-    };
-    trainer.run(
-        &mut |p| {
-            pairs += p.pairs;
-            if p.iteration % 100 == 0 || p.iteration == p.iterations {
-                curve.push((p.iteration, p.loss_ema, p.psnr_ema, p.gaussians));
-            }
-            last = *p;
-            on_progress(p);
-        },
-        &mut save,
-    )?;
-    let wall = start.elapsed().as_secs_f64();
+    let start = Instant::now();
+    let elapsed = |b: &Book| b.elapsed + start.elapsed().as_secs_f64();
+    while trainer.iteration < config.iterations {
+        let mut p = trainer.step()?;
+        let it = trainer.iteration;
+        book.pairs += p.pairs;
+        if it.is_multiple_of(100) || it == config.iterations {
+            book.curve.push((it, p.loss_ema, p.psnr_ema, p.gaussians));
+        }
+        if config.save_iterations.contains(&it) || it == config.iterations {
+            book.saves.push((it, elapsed(&book)));
+            let path = ply_path(run, it);
+            create_dir_all(path.parent().expect("has a parent"))?;
+            let bytes = ply_bytes(&trainer.gaussians)?;
+            write_atomic(&path, |w| w.write_all(&bytes))?;
+            let rel = path.strip_prefix(run).unwrap_or(&path).to_path_buf();
+            book.files.push((rel, sha256_hex(&bytes)));
+        }
+        if checkpoints.every > 0 && it.is_multiple_of(checkpoints.every) && it < config.iterations {
+            let mut b = book.clone();
+            b.elapsed = elapsed(&book);
+            b.times = trainer.times;
+            let record = serde_json::to_value(&b).expect("book serializes");
+            Checkpoint::of(&trainer, init_sha256.clone(), record).write(&ck_path)?;
+            p.checkpointed = true;
+        }
+        on_progress(&p);
+    }
+    let wall = elapsed(&book);
+    let pairs = book.pairs;
     stages.push(("train".to_string(), meter.finish()));
-    let ply = files.last().map(|f| f.0.clone()).unwrap_or_default();
+    let ply = book
+        .files
+        .last()
+        .map(|f| run.join(&f.0))
+        .unwrap_or_default();
+    let mut files = book.files.clone();
     for name in ["config.json", "cfg_args", "cameras.json"] {
         let p = run.join(name);
         let bytes = std::fs::read(&p).map_err(|e| Error::io(&p, e))?;
-        files.push((p, sha256_hex(&bytes)));
+        files.push((PathBuf::from(name), sha256_hex(&bytes)));
     }
     let inputs = serde_json::json!({
         "dataset": dataset_dir.display().to_string(),
@@ -230,12 +312,7 @@ pub fn train_run(
     });
     let files = files
         .iter()
-        .map(|(p, h)| {
-            FileEntry::hashed(
-                p.strip_prefix(run).unwrap_or(p).display().to_string(),
-                h.clone(),
-            )
-        })
+        .map(|(p, h)| FileEntry::hashed(p.display().to_string(), h.clone()))
         .collect();
     Manifest::new("train", "", inputs, files).write(run)?;
     let summary = RunSummary {
@@ -247,17 +324,26 @@ pub fn train_run(
         peak_memory_bytes: peak_memory_bytes(),
         stages,
         iteration_seconds: trainer.times,
-        final_loss_ema: last.loss_ema,
-        final_psnr_ema: last.psnr_ema,
-        saves,
-        curve,
+        final_loss_ema: trainer.loss_ema,
+        final_psnr_ema: trainer.psnr_ema,
+        saves: book.saves,
+        curve: book.curve,
         ply,
     };
     write_text(
         &run.join("train_stats.json"),
         &serde_json::to_string_pretty(&summary).expect("summary serializes"),
     )?;
+    remove_if_present(&ck_path)?;
     Ok(summary)
+}
+
+/// Remove a file if it exists, naming it in the error otherwise.
+fn remove_if_present(p: &Path) -> Result<()> {
+    match std::fs::remove_file(p) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(Error::io(p, e)),
+        _ => Ok(()),
+    }
 }
 
 /// The Gaussians of a run at `iteration` (default: the latest saved one).

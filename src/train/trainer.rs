@@ -24,7 +24,7 @@ use crate::train::densify::{
     DensifyConfig, DensifyReport, DensifyStats, densify_and_prune, reset_opacity,
 };
 use crate::train::knn::mean_sq_dist_3nn;
-use crate::train::loss::{LossInput, LossTerms, LossWeights, image_loss, psnr};
+use crate::train::loss::{LossInput, LossWeights, image_loss, psnr};
 
 /// Learning rates (INRIA `OptimizationParams`; opacity as in the 2024 update).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -206,10 +206,12 @@ pub struct Progress {
     pub gaussians: usize,
     pub pairs: u64,
     pub densify: Option<DensifyReport>,
+    /// A checkpoint was written after this iteration (`train::run`).
+    pub checkpointed: bool,
 }
 
 /// Seconds spent in each part of the iterations so far (wall time, summed over iterations).
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct IterationTimes {
     /// Projection, binning and blend with backward state.
     pub forward: f64,
@@ -237,10 +239,11 @@ pub struct Trainer<'a> {
     pub masks: Vec<Option<Vec<f32>>>,
     /// Where the iterations' time went.
     pub times: IterationTimes,
-    rng: Uniform,
-    stack: Vec<usize>,
-    loss_ema: f64,
-    psnr_ema: f64,
+    pub(crate) rng: Uniform,
+    /// INRIA's view stack (views not yet drawn in this pass).
+    pub(crate) stack: Vec<usize>,
+    pub(crate) loss_ema: f64,
+    pub(crate) psnr_ema: f64,
     /// The backward's output, reused across iterations.
     grads: Gradients,
 }
@@ -499,6 +502,7 @@ impl<'a> Trainer<'a> {
             gaussians: self.gaussians.len(),
             pairs,
             densify: densified,
+            checkpointed: false,
         })
     }
 
@@ -537,26 +541,5 @@ impl<'a> Trainer<'a> {
             self.masks[vi] = Some(m);
         }
         r
-    }
-
-    /// Run to `config.iterations`, calling `on_progress` after every iteration and
-    /// `on_save` at the save iterations and at the end.
-    pub fn run(
-        &mut self,
-        on_progress: &mut dyn FnMut(&Progress),
-        on_save: &mut dyn FnMut(u32, &Gaussians) -> Result<()>,
-    ) -> Result<LossTerms> {
-        let mut last = LossTerms::default();
-        while self.iteration < self.config.iterations {
-            let p = self.step()?;
-            last.total = p.loss;
-            on_progress(&p);
-            if self.config.save_iterations.contains(&self.iteration)
-                || self.iteration == self.config.iterations
-            {
-                on_save(self.iteration, &self.gaussians)?;
-            }
-        }
-        Ok(last)
     }
 }

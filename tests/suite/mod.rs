@@ -15,6 +15,7 @@ mod pipeline;
 mod qamask;
 mod raster;
 mod readers;
+mod resume;
 mod telea;
 mod tile;
 mod training;

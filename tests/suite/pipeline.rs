@@ -33,7 +33,7 @@ fn tiny_run(dir: &Path) -> PathBuf {
         save_iterations: vec![],
         ..TrainConfig::default()
     };
-    train_run(&lounge(), &run, &cfg, None, &mut |_| {}).unwrap();
+    train_run(&lounge(), &run, &cfg, None, Default::default(), &mut |_| {}).unwrap();
     run
 }
 

@@ -11,7 +11,7 @@ use unseen::pipeline::{
     self, Inconsistency, Inputs, MaskSource, PipelineConfig, RunOptions, Scope, SlotNames,
     load_inputs,
 };
-use unseen::train::run::train_run;
+use unseen::train::run::{Checkpointing, train_run};
 use unseen::train::trainer::TrainConfig;
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -304,12 +304,19 @@ pub fn run_demo(a: &DemoArgs) -> Result<()> {
         );
         let bar = ProgressBar::new(a.iterations as u64);
         bar.set_style(ProgressStyle::with_template("   {bar:30} {pos}/{len} {msg}").expect("t"));
-        train_run(&scene, &run, &tc, None, &mut |p| {
-            if p.iteration % 10 == 0 {
-                bar.set_position(p.iteration as u64);
-                bar.set_message(format!("PSNR {:.2} dB", p.psnr_ema));
-            }
-        })?;
+        train_run(
+            &scene,
+            &run,
+            &tc,
+            None,
+            Checkpointing::default(),
+            &mut |p| {
+                if p.iteration % 10 == 0 {
+                    bar.set_position(p.iteration as u64);
+                    bar.set_message(format!("PSNR {:.2} dB", p.psnr_ema));
+                }
+            },
+        )?;
         bar.finish_and_clear();
     }
     let inputs: Inputs = load_inputs(

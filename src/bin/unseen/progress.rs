@@ -6,7 +6,7 @@ use std::sync::Mutex;
 use std::time::Instant;
 use unseen::error::Result;
 use unseen::pipeline::Event;
-use unseen::train::run::{Init, train_run};
+use unseen::train::run::{Checkpointing, Init, train_run};
 use unseen::train::trainer::{Progress, TrainConfig};
 
 pub fn train_with_bar(
@@ -14,6 +14,7 @@ pub fn train_with_bar(
     out: &Path,
     cfg: &TrainConfig,
     init: Option<&Init<'_>>,
+    checkpoints: Checkpointing,
 ) -> Result<unseen::train::run::RunSummary> {
     let bar = ProgressBar::new(cfg.iterations as u64);
     bar.set_style(
@@ -36,6 +37,9 @@ pub fn train_with_bar(
                 t0.elapsed().as_secs_f64()
             );
         }
+        if p.checkpointed && bar.is_hidden() {
+            eprintln!("checkpoint at iteration {}", p.iteration);
+        }
         if p.iteration.is_multiple_of(10) || p.iteration == p.iterations {
             bar.set_position(p.iteration as u64);
             bar.set_message(format!(
@@ -44,7 +48,7 @@ pub fn train_with_bar(
             ));
         }
     };
-    let s = train_run(dataset, out, cfg, init, &mut on_progress);
+    let s = train_run(dataset, out, cfg, init, checkpoints, &mut on_progress);
     bar.finish_and_clear();
     s
 }

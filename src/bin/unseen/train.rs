@@ -14,7 +14,9 @@ use unseen::qamask::{
     QaMaskConfig, fine_tune, mask_scene, parse_color, read_mask_dir, write_mask_dir,
 };
 use unseen::train::loss::LossWeights;
-use unseen::train::run::{Init, load_dataset, read_config, read_run_scene, read_train_views};
+use unseen::train::run::{
+    Checkpointing, Init, load_dataset, read_config, read_run_scene, read_train_views,
+};
 use unseen::train::trainer::{TrainConfig, TrainOverrides};
 
 #[derive(Args)]
@@ -51,6 +53,15 @@ pub struct TrainArgs {
     /// QA-Mask directory written by `unseen qa-mask`.
     #[arg(long)]
     mask_dir: Option<PathBuf>,
+    /// Save the training state to OUT/checkpoint.bin every this many iterations (0: never;
+    /// the file is removed when the run completes).
+    #[arg(long, default_value_t = 1000)]
+    checkpoint_every: u32,
+    /// Continue the interrupted run in OUT from its last checkpoint, with OUT/config.json
+    /// (give the same DATASET, --init, --mask and --mask-dir): the result has the same bits
+    /// as an uninterrupted run.
+    #[arg(long, conflicts_with_all = ["iterations", "seed", "resolution", "sh_degree", "config"])]
+    resume: bool,
 }
 
 #[derive(Args)]
@@ -123,16 +134,22 @@ pub fn run_train(a: TrainArgs) -> Result<()> {
         init,
         mask,
         mask_dir,
+        checkpoint_every,
+        resume,
     } = a;
-    let mut cfg = TrainConfig::from_file_and_flags(
-        config.as_deref(),
-        &TrainOverrides {
-            iterations,
-            seed,
-            resolution,
-            sh_degree,
-        },
-    )?;
+    let mut cfg = if resume {
+        read_config(&out)?
+    } else {
+        TrainConfig::from_file_and_flags(
+            config.as_deref(),
+            &TrainOverrides {
+                iterations,
+                seed,
+                resolution,
+                sh_degree,
+            },
+        )?
+    };
     let (scene, weights) = match init {
         None if mask != "none" => {
             return Err(Error::invalid(
@@ -169,7 +186,11 @@ pub fn run_train(a: TrainArgs) -> Result<()> {
         scene,
         weights: Some(&at),
     });
-    let s = train_with_bar(&dataset, &out, &cfg, init.as_ref())?;
+    let checkpoints = Checkpointing {
+        every: checkpoint_every,
+        resume,
+    };
+    let s = train_with_bar(&dataset, &out, &cfg, init.as_ref(), checkpoints)?;
     println!(
         "trained {} iterations in {:.1} s ({:.1} it/s, {:.3} G pairs/s), {} Gaussians: {}",
         s.iterations,

@@ -1,0 +1,237 @@
+//! Interrupted training (SPEC.md §14.8): `unseen train` killed with SIGKILL at seeded
+//! points and continued with `--resume` ends with the same bits as a run that was never
+//! interrupted; checkpoint files are checked before use.
+use super::common::{TempDir, reference, short_train_config};
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use unseen::scene::Uniform;
+use unseen::train::checkpoint::{Checkpoint, checkpoint_path};
+
+const ITERATIONS: u32 = 400;
+const EVERY: u32 = 40;
+
+fn unseen() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_unseen"))
+}
+
+/// A short recipe that densifies (from 100, every 100), resets opacity (250) and raises
+/// the SH degree (every 200), so every part of the state matters after a resume; one PLY
+/// saved before the end.
+fn write_config(dir: &Path) -> PathBuf {
+    let mut c = short_train_config(ITERATIONS);
+    c.resolution = 4;
+    c.seed = 5;
+    c.save_iterations = vec![200];
+    let p = dir.join("config.json");
+    std::fs::write(&p, serde_json::to_string(&c).unwrap()).unwrap();
+    p
+}
+
+/// `unseen train` into `run`: fresh with `config`, or `--resume`.
+fn train(run: &Path, config: Option<&Path>) -> Command {
+    let mut cmd = unseen();
+    cmd.arg("train")
+        .arg(reference("scenes/lounge"))
+        .arg("--out")
+        .arg(run)
+        .args(["--checkpoint-every", &EVERY.to_string()]);
+    match config {
+        Some(c) => cmd.arg("--config").arg(c),
+        None => cmd.arg("--resume"),
+    };
+    cmd
+}
+
+/// Start `cmd`, and once it has reported `checkpoints` checkpoints, wait `delay_ms` and
+/// SIGKILL it. Returns whether it was killed (a run that finished first is not).
+fn kill_after(mut cmd: Command, checkpoints: usize, delay_ms: u64) -> bool {
+    let mut child = cmd.stderr(Stdio::piped()).spawn().unwrap();
+    let stderr = child.stderr.take().unwrap();
+    let mut seen = 0;
+    let mut lines = BufReader::new(stderr).lines();
+    for line in lines.by_ref() {
+        let line = line.unwrap();
+        if line.starts_with("checkpoint at iteration") {
+            seen += 1;
+            if seen == checkpoints {
+                break;
+            }
+        }
+    }
+    std::thread::sleep(std::time::Duration::from_millis(delay_ms));
+    let killed = child.kill().is_ok();
+    // Drain, so the child never blocks on a full pipe before the signal lands.
+    for _ in lines {}
+    let status = child.wait().unwrap();
+    killed && !status.success()
+}
+
+fn ply(run: &Path, it: u32) -> Vec<u8> {
+    let p = run.join(format!("point_cloud/iteration_{it}/point_cloud.ply"));
+    std::fs::read(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
+
+fn manifest_files(run: &Path) -> Vec<serde_json::Value> {
+    let m: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run.join("manifest.json")).unwrap()).unwrap();
+    m["files"].as_array().unwrap().clone()
+}
+
+fn assert_clean(run: &Path) {
+    assert!(
+        !checkpoint_path(run).exists(),
+        "checkpoint left after the run"
+    );
+    let mut stack = vec![run.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            let name = p.file_name().unwrap().to_string_lossy().into_owned();
+            assert!(!name.starts_with('.'), "leftover {}", p.display());
+            if p.is_dir() {
+                stack.push(p);
+            }
+        }
+    }
+}
+
+#[test]
+fn train_killed_and_resumed_gives_the_same_bits() {
+    let tmp = TempDir::new("resume");
+    let config = write_config(tmp.path());
+    let whole = tmp.path().join("whole");
+    let st = train(&whole, Some(&config)).output().unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    assert_clean(&whole);
+
+    // Seeded kill points: after the k-th checkpoint of the process, plus a delay, twice
+    // (the second kill hits a resumed process).
+    let mut rng = Uniform::new(20261124);
+    let cut = tmp.path().join("cut");
+    let k1 = 1 + rng.below(3) as usize;
+    assert!(
+        kill_after(train(&cut, Some(&config)), k1, rng.below(40) as u64),
+        "the first run finished before the kill"
+    );
+    let k2 = 1 + rng.below(2) as usize;
+    kill_after(train(&cut, None), k2, rng.below(40) as u64);
+    // Resume until done (a kill that landed after the last checkpoint's rename leaves a
+    // complete checkpoint; one that landed during its write leaves the previous one).
+    let st = train(&cut, None).output().unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    assert_clean(&cut);
+
+    for it in [200, ITERATIONS] {
+        assert!(
+            ply(&whole, it) == ply(&cut, it),
+            "PLY of iteration {it} differs"
+        );
+    }
+    let plys = |run: &Path| -> Vec<serde_json::Value> {
+        manifest_files(run)
+            .into_iter()
+            .filter(|f| f["path"].as_str().unwrap().ends_with(".ply"))
+            .collect()
+    };
+    assert_eq!(plys(&whole), plys(&cut));
+    assert_eq!(plys(&whole).len(), 2);
+
+    // A finished run has nothing to resume: a clear error, the outputs untouched.
+    let st = train(&cut, None).output().unwrap();
+    assert!(!st.status.success());
+    let err = String::from_utf8_lossy(&st.stderr);
+    assert!(err.contains("nothing to resume"), "{err}");
+    assert!(ply(&cut, ITERATIONS) == ply(&whole, ITERATIONS));
+}
+
+/// A checkpoint is written and read back to the same state; a damaged, truncated or
+/// foreign file is refused with an error naming it, and `--resume` with one fails cleanly.
+#[test]
+fn checkpoint_files_are_checked() {
+    let tmp = TempDir::new("checkpoint-files");
+    let config = write_config(tmp.path());
+    let run = tmp.path().join("run");
+    // Kill after the first checkpoint: the run directory holds a checkpoint.
+    assert!(kill_after(train(&run, Some(&config)), 1, 0));
+    let ck = checkpoint_path(&run);
+    let good = std::fs::read(&ck).unwrap();
+    let c = Checkpoint::read(&ck).unwrap();
+    assert!(c.header.iteration >= EVERY && c.header.iteration.is_multiple_of(EVERY));
+    assert_eq!(c.gaussians.len(), c.header.gaussians);
+    assert_eq!(c.adam_m.len(), c.gaussians.len());
+    assert_eq!(c.stats.count.len(), c.gaussians.len());
+    // Written again, the same bytes.
+    let again = tmp.path().join("again.bin");
+    c.write(&again).unwrap();
+    assert!(std::fs::read(&again).unwrap() == good);
+
+    let cases: Vec<(&str, Vec<u8>, &str)> = vec![
+        ("empty", vec![], "not an unseen training checkpoint"),
+        (
+            "truncated",
+            good[..good.len() / 2].to_vec(),
+            "checksum does not match",
+        ),
+        (
+            "flipped",
+            {
+                let mut b = good.clone();
+                let i = b.len() - 100;
+                b[i] ^= 1;
+                b
+            },
+            "checksum does not match",
+        ),
+        ("ply", ply_like(), "not an unseen training checkpoint"),
+    ];
+    for (name, bytes, want) in cases {
+        std::fs::write(&ck, &bytes).unwrap();
+        let e = Checkpoint::read(&ck).err().unwrap().to_string();
+        assert!(
+            e.contains(want) && e.contains("checkpoint.bin"),
+            "{name}: {e}"
+        );
+        let st = train(&run, None).output().unwrap();
+        assert!(!st.status.success(), "{name}");
+        let err = String::from_utf8_lossy(&st.stderr);
+        assert!(
+            err.contains("checkpoint.bin") && err.contains(want),
+            "{name}: {err}"
+        );
+        assert_eq!(err.lines().count(), 1, "{name}: {err}");
+    }
+    // A header announcing more Gaussians than the file holds is refused before any
+    // allocation (the digest is recomputed, so only the count is wrong).
+    let hlen = u64::from_le_bytes(good[12..20].try_into().unwrap()) as usize;
+    let header = std::str::from_utf8(&good[20..20 + hlen]).unwrap();
+    let n = c.header.gaussians;
+    let huge = header.replace(
+        &format!("\"gaussians\":{n},"),
+        "\"gaussians\":1000000000000,",
+    );
+    assert_ne!(huge, header);
+    let mut b = b"UNSEENCK".to_vec();
+    b.extend_from_slice(&1u32.to_le_bytes());
+    b.extend_from_slice(&(huge.len() as u64).to_le_bytes());
+    b.extend_from_slice(huge.as_bytes());
+    b.extend_from_slice(&good[20 + hlen..good.len() - 32]);
+    use sha2::Digest;
+    let d = sha2::Sha256::digest(&b);
+    b.extend_from_slice(&d);
+    std::fs::write(&ck, &b).unwrap();
+    let e = Checkpoint::read(&ck).err().unwrap().to_string();
+    assert!(e.contains("announces 1000000000000 Gaussians"), "{e}");
+}
+
+fn ply_like() -> Vec<u8> {
+    b"ply\nformat binary_little_endian 1.0\nelement vertex 0\nend_header\n".repeat(2)
+}
