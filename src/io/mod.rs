@@ -18,18 +18,78 @@ pub fn write_atomic(
     path: &Path,
     write: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
 ) -> Result<()> {
-    let tmp = temp_sibling(path);
+    let tmp = Temporary::register(temp_sibling(path));
     let result = (|| -> std::io::Result<()> {
-        let mut w = BufWriter::new(File::create(&tmp)?);
+        let mut w = BufWriter::new(File::create(tmp.path())?);
         write(&mut w)?;
         let f = w.into_inner().map_err(|e| e.into_error())?;
         f.sync_all()?;
-        std::fs::rename(&tmp, path)
+        tmp.rename_to(path)
     })();
     result.map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
+        let _ = std::fs::remove_file(tmp.path());
         Error::io(path, e)
     })
+}
+
+/// Every temporary file or folder this process is writing (§10), so that an interrupt can
+/// remove them before the process exits ([`abandon_temporaries`]).
+static IN_FLIGHT: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
+
+fn in_flight() -> std::sync::MutexGuard<'static, Vec<PathBuf>> {
+    // A panic while holding the lock leaves the list itself consistent.
+    IN_FLIGHT.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// A temporary file or folder in flight: registered before it is created, renamed into
+/// place under the registry's lock (so an interrupt sees either the temporary or the
+/// finished output, never a rename half done), unregistered when dropped. Removing the
+/// temporary after a failure stays the owner's job.
+pub(crate) struct Temporary(PathBuf);
+
+impl Temporary {
+    pub(crate) fn register(path: PathBuf) -> Temporary {
+        in_flight().push(path.clone());
+        Temporary(path)
+    }
+
+    pub(crate) fn path(&self) -> &Path {
+        &self.0
+    }
+
+    /// `rename(temporary, to)` under the registry's lock.
+    pub(crate) fn rename_to(&self, to: &Path) -> std::io::Result<()> {
+        let _held = in_flight();
+        std::fs::rename(&self.0, to)
+    }
+}
+
+impl Drop for Temporary {
+    fn drop(&mut self) {
+        let mut list = in_flight();
+        if let Some(i) = list.iter().position(|p| *p == self.0) {
+            list.swap_remove(i);
+        }
+    }
+}
+
+/// For an interrupt handler that exits right after: remove every temporary in flight and
+/// keep the registry locked, so no write starts or finishes a rename afterwards. Returns
+/// how many were removed. Finished outputs are left as they are.
+pub fn abandon_temporaries() -> usize {
+    let list = in_flight();
+    let mut n = 0;
+    for p in list.iter() {
+        let gone = if p.is_dir() {
+            std::fs::remove_dir_all(p)
+        } else {
+            std::fs::remove_file(p)
+        };
+        n += usize::from(gone.is_ok());
+    }
+    // Held until the process exits.
+    std::mem::forget(list);
+    n
 }
 
 /// `dir/.name.tmp-<pid>`: same folder (so rename is atomic), hidden, per process.

@@ -18,7 +18,7 @@
 use super::Event;
 use crate::error::{Error, Result};
 use crate::io::manifest::{FileEntry, Manifest, inputs_sha256};
-use crate::io::{create_dir_all, remove_stale_temporaries, sha256_hex, write_text};
+use crate::io::{Temporary, create_dir_all, remove_stale_temporaries, sha256_hex, write_text};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -298,22 +298,23 @@ fn publish(from: &Path, to: &Path, inputs_sha256: &str) -> Result<()> {
     }
     let parent = to.parent().unwrap_or(Path::new("."));
     let key = to.file_name().and_then(|n| n.to_str()).unwrap_or("step");
-    let tmp = parent.join(format!(".{key}.tmp-{}", unique_suffix()));
-    let r = copy_step(from, &tmp).and_then(|()| {
+    let tmp = Temporary::register(parent.join(format!(".{key}.tmp-{}", unique_suffix())));
+    let r = copy_step(from, tmp.path()).and_then(|()| {
         if to.exists() {
-            let aside = parent.join(format!(".{key}.stale-{}", unique_suffix()));
-            if std::fs::rename(to, &aside).is_ok() {
-                let _ = std::fs::remove_dir_all(&aside);
+            let aside =
+                Temporary::register(parent.join(format!(".{key}.stale-{}", unique_suffix())));
+            if std::fs::rename(to, aside.path()).is_ok() {
+                let _ = std::fs::remove_dir_all(aside.path());
             }
         }
-        match std::fs::rename(&tmp, to) {
+        match tmp.rename_to(to) {
             // Another job renamed its copy into place first: keep that one.
             Err(_) if verified(to, inputs_sha256).is_some() => Ok(()),
             r => r.map_err(|e| Error::io(to, e)),
         }
     });
-    if tmp.exists() {
-        let _ = std::fs::remove_dir_all(&tmp);
+    if tmp.path().exists() {
+        let _ = std::fs::remove_dir_all(tmp.path());
     }
     r
 }

@@ -89,8 +89,22 @@ fn run(cli: Cli) -> Result<()> {
     }
 }
 
+/// Ctrl-C (SIGINT) and SIGTERM: remove the temporaries being written, keep every finished
+/// output, exit with 130 (SPEC.md §10).
+fn exit_cleanly_on_interrupt() {
+    let installed = ctrlc::set_handler(|| {
+        let n = unseen::io::abandon_temporaries();
+        eprintln!("interrupted: removed {n} temporary file(s); finished outputs are kept");
+        std::process::exit(130);
+    });
+    if let Err(e) = installed {
+        eprintln!("warning: no interrupt handler ({e}); an interrupt may leave .tmp files");
+    }
+}
+
 fn main() -> ExitCode {
     unseen::sys::keep_freed_memory();
+    exit_cleanly_on_interrupt();
     let cli = Cli::parse();
     // compare: 0 agree, 1 diverge, 2 could not compare.
     if let Command::Compare(a) = &cli.command {
