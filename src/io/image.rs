@@ -293,10 +293,54 @@ pub fn read_depth(path: &Path, width: usize, height: usize) -> Result<Vec<f32>> 
     Ok(d.data)
 }
 
+/// Refuse an EXR whose declared pixels need more memory than its file can hold (SPEC.md
+/// §10), from the header alone, before the decoder allocates them: the samples' bytes may
+/// be at most the file size times the compression's largest ratio (none 1, RLE 64 — a
+/// 128-byte run in 2 bytes —, ZIP / PXR24 1032, deflate's limit), plus 64 KiB; for the
+/// other compressions, whose ratio has no small bound, at most 1 GiB.
+fn check_exr_size(path: &Path) -> Result<()> {
+    use exr::compression::Compression as C;
+    let meta = exr::meta::MetaData::read_from_file(path, false)
+        .map_err(|e| UError::parse(path, format!("cannot read EXR: {e}")))?;
+    let file = std::fs::metadata(path)
+        .map_err(|e| UError::io(path, e))?
+        .len() as u128;
+    for h in &meta.headers {
+        let (w, ht) = (h.layer_size.width() as u128, h.layer_size.height() as u128);
+        let bytes: u128 = h
+            .channels
+            .list
+            .iter()
+            .map(|c| {
+                let (sx, sy) = (c.sampling.x().max(1) as u128, c.sampling.y().max(1) as u128);
+                w.div_ceil(sx) * ht.div_ceil(sy) * c.sample_type.bytes_per_sample() as u128
+            })
+            .sum();
+        let limit = match h.compression {
+            C::Uncompressed => file + (64 << 10),
+            C::RLE => 64 * file + (64 << 10),
+            C::ZIP1 | C::ZIP16 | C::PXR24 => 1032 * file + (64 << 10),
+            _ => 1 << 30,
+        };
+        if bytes > limit {
+            return Err(UError::parse(
+                path,
+                format!(
+                    "the header declares {w}x{ht} pixels ({bytes} bytes of samples), more than \
+                     a {file}-byte file compressed with {:?} can hold",
+                    h.compression
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Read the first layer of an EXR as float channels, in the order of `names`
 /// (e.g. `["R","G","B"]` or `["Y"]`). Missing channels are an error naming them.
 pub fn read_exr(path: &Path, names: &[&str]) -> Result<ImageF32> {
     use exr::prelude::*;
+    check_exr_size(path)?;
     let image = read()
         .no_deep_data()
         .largest_resolution_level()

@@ -115,8 +115,11 @@ pub fn read_npy_f32(path: &Path) -> Result<(Vec<usize>, Vec<f32>)> {
         .map(|s| s.parse().map_err(|_| bad("invalid shape")))
         .collect::<Result<_>>()?;
     let body = &b[10 + hl..];
-    let count: usize = shape.iter().product();
-    if body.len() != count * 4 {
+    let bytes = shape
+        .iter()
+        .try_fold(4usize, |n, &d| n.checked_mul(d))
+        .ok_or_else(|| bad("the shape's size overflows"))?;
+    if body.len() != bytes {
         return Err(bad("data size does not match the shape"));
     }
     let data = body

@@ -7,6 +7,7 @@ mod golden_drjit;
 mod golden_grad;
 mod gradients;
 mod hard_cases;
+mod limits;
 mod mitsuba_crosscheck;
 mod models;
 mod onnx;
