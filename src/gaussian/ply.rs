@@ -454,6 +454,12 @@ pub fn parse_ply(data: &[u8], path: &Path) -> Result<(Gaussians, PlyInfo)> {
                 continue;
             };
             let x = x as f32;
+            if !x.is_finite() && !matches!(slot, Slot::Ignore) {
+                return Err(err(format!(
+                    "vertex {v} of {n}: property '{}' is {x} (a scene holds finite numbers)",
+                    p.name
+                )));
+            }
             match *slot {
                 Slot::Mean(k) => mean[k] = x,
                 Slot::Dc(k) => dc[k] = x,

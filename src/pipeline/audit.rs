@@ -420,19 +420,22 @@ fn original_done(cfg: &AuditConfig, dataset: &Path, run: &Path, seed: u32) -> bo
         && read_config(run).is_ok_and(|c| c == cfg.train_config(seed))
 }
 
-/// What every job needs: the dataset's candidate and evaluation poses, an output path
-/// that is not a file.
+/// What every job needs, checked before the first job starts (an audit runs for hours):
+/// the dataset's candidate and evaluation poses, readable, and an output path that is
+/// not a file.
 fn check_inputs(dataset: &Path, dir: &Path) -> Result<()> {
     if dir.is_file() {
         return Err(Error::invalid("the output path is a file").at(dir));
     }
     for f in ["candidates.json", "evaluation.json"] {
-        if !dataset.join(f).is_file() {
+        let p = dataset.join(f);
+        if !p.is_file() {
             return Err(Error::invalid(format!(
                 "an audit needs {f} (candidate and evaluation poses with ground truth)"
             ))
             .at(dataset));
         }
+        crate::camera::inria::read_cameras_json(&p)?;
     }
     Ok(())
 }

@@ -109,10 +109,9 @@ fn manifests(root: &Path) -> Result<Vec<(String, Manifest)>> {
             if p.is_dir() {
                 stack.push(p);
             } else if p.file_name().is_some_and(|n| n == "manifest.json") && d != root {
-                let b = std::fs::read(&p).map_err(|e| Error::io(&p, e))?;
-                if let Ok(m) = serde_json::from_slice::<Manifest>(&b) {
-                    out.push((m.step.clone(), m));
-                }
+                // A manifest that does not parse is damage, not something to skip.
+                let m = Manifest::read(&d)?;
+                out.push((m.step.clone(), m));
             }
         }
     }

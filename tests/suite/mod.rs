@@ -1,4 +1,5 @@
 mod align;
+mod bad_input;
 mod cli;
 mod collide;
 mod common;

@@ -99,6 +99,13 @@ pub fn run_warp(a: &WarpArgs) -> Result<()> {
         find(&cams, &a.to, &a.cameras)?,
     );
     let image = read_png(&a.image)?;
+    if (image.width, image.height) != (from.width as usize, from.height as usize) {
+        return Err(Error::invalid(format!(
+            "image is {}x{} but camera '{}' is {}x{}",
+            image.width, image.height, from.name, from.width, from.height
+        ))
+        .at(&a.image));
+    }
     let depth = read_depth(&a.depth, image.width, image.height)?;
     let opts = WarpOptions {
         footprint: match a.footprint {

@@ -1,9 +1,9 @@
 //! Model-slot commands: `unseen inpaint`, `unseen depth` (SPEC.md §19.5).
 
 use clap::Args;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use unseen::error::{Error, Result};
-use unseen::io::image::{ImageF32, read_depth, read_png, to_u8, write_exr, write_png};
+use unseen::io::image::{ImageF32, read_exr, read_png, to_u8, write_exr, write_png};
 use unseen::models::{DepthHint, depth_estimator, inpainter};
 
 #[derive(Args)]
@@ -41,15 +41,27 @@ pub struct DepthArgs {
     hint_mask: Option<PathBuf>,
 }
 
-fn read_mask(path: &std::path::Path, w: usize, h: usize) -> Result<Vec<bool>> {
-    let m = read_png(path)?;
-    if (m.width, m.height) != (w, h) {
-        return Err(Error::invalid(format!(
-            "mask is {}x{} but the image is {w}x{h}",
-            m.width, m.height
-        ))
-        .at(path));
+/// `path` (a mask or depth of `size`) must have the size of `image`: the error names both
+/// files, since either may be the wrong one.
+fn same_size(path: &Path, size: (usize, usize), image: &Path, img: &ImageF32) -> Result<()> {
+    if size == (img.width, img.height) {
+        return Ok(());
     }
+    Err(Error::invalid(format!(
+        "{}x{}, but the image {} is {}x{}",
+        size.0,
+        size.1,
+        image.display(),
+        img.width,
+        img.height
+    ))
+    .at(path))
+}
+
+/// A mask (non-zero = true) of `image`'s size.
+fn read_mask(path: &Path, image: &Path, img: &ImageF32) -> Result<Vec<bool>> {
+    let m = read_png(path)?;
+    same_size(path, (m.width, m.height), image, img)?;
     Ok(m.data
         .chunks(m.channels)
         .map(|c| c.iter().any(|&v| v > 0.0))
@@ -58,7 +70,7 @@ fn read_mask(path: &std::path::Path, w: usize, h: usize) -> Result<Vec<bool>> {
 
 pub fn run_inpaint(a: &InpaintArgs) -> Result<()> {
     let img = read_png(&a.image)?;
-    let mask = read_mask(&a.mask, img.width, img.height)?;
+    let mask = read_mask(&a.mask, &a.image, &img)?;
     let out = if a.method == "telea" {
         // 8-bit in, 8-bit arithmetic: the same values as cv2.inpaint (SPEC.md §19.1).
         let bytes: Vec<u8> = img.data.iter().map(|&v| to_u8(v)).collect();
@@ -96,11 +108,15 @@ pub fn run_depth(a: &DepthArgs) -> Result<()> {
     let img = read_png(&a.image)?;
     let est = depth_estimator(&a.method)?;
     let hint = match &a.hint {
-        Some(p) => Some(read_depth(p, img.width, img.height)?),
+        Some(p) => {
+            let d = read_exr(p, &["Y"])?;
+            same_size(p, (d.width, d.height), &a.image, &img)?;
+            Some(d.data)
+        }
         None => None,
     };
     let mask = match &a.hint_mask {
-        Some(p) => Some(read_mask(p, img.width, img.height)?),
+        Some(p) => Some(read_mask(p, &a.image, &img)?),
         None => None,
     };
     let d = est
