@@ -14,5 +14,6 @@ fuzz_target!(|data: &[u8]| {
     }
     let p = common::file_with("manifest.json", data);
     let _ = unseen::io::manifest::Manifest::read(p.parent().unwrap());
+    let p = common::file_with("config.json", data);
     let _ = unseen::train::run::read_config(p.parent().unwrap());
 });

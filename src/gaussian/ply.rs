@@ -557,6 +557,31 @@ pub fn parse_point_cloud(data: &[u8], path: &Path) -> Result<PointCloud> {
 /// The PLY bytes of `g` in INRIA's binary little-endian layout.
 pub fn ply_bytes(g: &Gaussians) -> Result<Vec<u8>> {
     g.validate()?;
+    // The reader refuses non-finite values; so does the writer (a diverged training stops
+    // with this error instead of saving a scene nothing can read).
+    let arrays: [&[f32]; 6] = [
+        g.means.as_flattened(),
+        g.log_scales.as_flattened(),
+        g.quats.as_flattened(),
+        &g.opacity_logits,
+        g.sh_dc.as_flattened(),
+        &g.sh_rest,
+    ];
+    for (a, name) in arrays.iter().zip([
+        "mean",
+        "log-scale",
+        "quaternion",
+        "opacity",
+        "DC",
+        "SH rest",
+    ]) {
+        if let Some(i) = a.iter().position(|x| !x.is_finite()) {
+            return Err(Error::invalid(format!(
+                "cannot write a PLY: a Gaussian's {name} value is {} (value {i} of the array)",
+                a[i]
+            )));
+        }
+    }
     let k1 = num_coeffs(g.sh_degree) - 1;
     let mut header = String::from("ply\nformat binary_little_endian 1.0\n");
     header += &format!("element vertex {}\n", g.len());

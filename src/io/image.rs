@@ -2,7 +2,7 @@
 //!
 //! Images in memory are row-major `f32`, `channels` interleaved values per pixel.
 
-use super::{temp_sibling, write_atomic};
+use super::write_atomic;
 use crate::error::{Error as UError, Result};
 use std::path::Path;
 
@@ -259,24 +259,37 @@ pub fn write_exr(path: &Path, img: &ImageF32) -> Result<()> {
         AnyChannels::sort(channels),
     );
     let image = Image::from_layer(layer);
-    let tmp = temp_sibling(path);
     // Sequential writing: the parallel writer may order blocks by completion, so the bytes
     // would depend on the thread count.
-    let r = image.write().non_parallel().to_file(&tmp);
-    match r
-        .map_err(|e| e.to_string())
-        .and_then(|_| std::fs::rename(&tmp, path).map_err(|e| e.to_string()))
-    {
-        Ok(()) => Ok(()),
-        Err(e) => {
-            let _ = std::fs::remove_file(&tmp);
-            Err(UError::new(
-                crate::error::ErrorKind::Io,
-                format!("cannot write EXR: {e}"),
-            )
-            .at(path))
-        }
+    super::write_atomic(path, |w| {
+        image
+            .write()
+            .non_parallel()
+            .to_buffered(w)
+            .map_err(|e| std::io::Error::other(format!("cannot write EXR: {e}")))
+    })
+}
+
+/// `path`, of `size`, belongs to the image `image` of `image_size` and must have its size:
+/// the error names both files, since either may be the wrong one.
+pub fn check_same_size(
+    path: &Path,
+    size: (usize, usize),
+    image: &Path,
+    image_size: (usize, usize),
+) -> Result<()> {
+    if size == image_size {
+        return Ok(());
     }
+    Err(UError::invalid(format!(
+        "{}x{}, but the image {} is {}x{}",
+        size.0,
+        size.1,
+        image.display(),
+        image_size.0,
+        image_size.1
+    ))
+    .at(path))
 }
 
 /// Read a depth map (EXR channel `Y`) that must be `width × height` (the size of the image
@@ -296,7 +309,8 @@ pub fn read_depth(path: &Path, width: usize, height: usize) -> Result<Vec<f32>> 
 /// Refuse an EXR whose declared pixels need more memory than its file can hold (SPEC.md
 /// §10), from the header alone, before the decoder allocates them: the samples' bytes may
 /// be at most the file size times the compression's largest ratio (none 1, RLE 64 — a
-/// 128-byte run in 2 bytes —, ZIP / PXR24 1032, deflate's limit), plus 64 KiB; for the
+/// 128-byte run in 2 bytes —, ZIP 1032, deflate's limit, PXR24 1376 = 1032·4/3), plus
+/// 64 KiB; for the
 /// other compressions, whose ratio has no small bound, at most 1 GiB.
 fn check_exr_size(path: &Path) -> Result<()> {
     use exr::compression::Compression as C;
@@ -319,7 +333,9 @@ fn check_exr_size(path: &Path) -> Result<()> {
         let limit = match h.compression {
             C::Uncompressed => file + (64 << 10),
             C::RLE => 64 * file + (64 << 10),
-            C::ZIP1 | C::ZIP16 | C::PXR24 => 1032 * file + (64 << 10),
+            C::ZIP1 | C::ZIP16 => 1032 * file + (64 << 10),
+            // Deflate over 24 of every 32 bits of a float sample.
+            C::PXR24 => 1376 * file + (64 << 10),
             _ => 1 << 30,
         };
         if bytes > limit {

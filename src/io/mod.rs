@@ -18,9 +18,9 @@ pub fn write_atomic(
     path: &Path,
     write: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
 ) -> Result<()> {
-    let tmp = Temporary::register(temp_sibling(path));
+    let (tmp, file) = Temporary::create_file(temp_sibling(path)).map_err(|e| Error::io(path, e))?;
     let result = (|| -> std::io::Result<()> {
-        let mut w = BufWriter::new(File::create(tmp.path())?);
+        let mut w = BufWriter::new(file);
         write(&mut w)?;
         let f = w.into_inner().map_err(|e| e.into_error())?;
         f.sync_all()?;
@@ -41,13 +41,31 @@ fn in_flight() -> std::sync::MutexGuard<'static, Vec<PathBuf>> {
     IN_FLIGHT.lock().unwrap_or_else(|e| e.into_inner())
 }
 
-/// A temporary file or folder in flight: registered before it is created, renamed into
-/// place under the registry's lock (so an interrupt sees either the temporary or the
-/// finished output, never a rename half done), unregistered when dropped. Removing the
-/// temporary after a failure stays the owner's job.
+/// A temporary file or folder in flight: created and registered under the registry's lock
+/// (an interrupt's sweep either sees it or runs before it exists and then holds the lock
+/// until the process exits), renamed into place under the lock (an interrupt sees either
+/// the temporary or the finished output, never a rename half done), unregistered when
+/// dropped. Removing the temporary after a failure stays the owner's job.
 pub(crate) struct Temporary(PathBuf);
 
 impl Temporary {
+    /// Create the file `path` (truncating) and register it.
+    pub(crate) fn create_file(path: PathBuf) -> std::io::Result<(Temporary, File)> {
+        let mut list = in_flight();
+        let f = File::create(&path)?;
+        list.push(path.clone());
+        Ok((Temporary(path), f))
+    }
+
+    /// Create the folder `path` (its parent must exist) and register it.
+    pub(crate) fn create_dir(path: PathBuf) -> std::io::Result<Temporary> {
+        let mut list = in_flight();
+        std::fs::create_dir(&path)?;
+        list.push(path.clone());
+        Ok(Temporary(path))
+    }
+
+    /// Register a path that does not exist yet and that only a rename will create.
     pub(crate) fn register(path: PathBuf) -> Temporary {
         in_flight().push(path.clone());
         Temporary(path)
@@ -74,8 +92,9 @@ impl Drop for Temporary {
 }
 
 /// For an interrupt handler that exits right after: remove every temporary in flight and
-/// keep the registry locked, so no write starts or finishes a rename afterwards. Returns
-/// how many were removed. Finished outputs are left as they are.
+/// keep the registry locked, so no temporary is created or renamed into place afterwards.
+/// Returns how many were removed. Finished outputs are left as they are. **The process
+/// must exit next**: every later atomic write in any thread blocks forever.
 pub fn abandon_temporaries() -> usize {
     let list = in_flight();
     let mut n = 0;
@@ -132,10 +151,12 @@ pub fn write_text(path: &Path, text: &str) -> Result<()> {
 /// Lower-case hex SHA-256 of `bytes` (manifests).
 pub fn sha256_hex(bytes: &[u8]) -> String {
     use sha2::{Digest, Sha256};
-    Sha256::digest(bytes)
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect()
+    hex(&Sha256::digest(bytes))
+}
+
+/// Lower-case hex of a digest.
+pub fn hex(digest: &[u8]) -> String {
+    digest.iter().map(|b| format!("{b:02x}")).collect()
 }
 
 /// Peak resident memory of this process in bytes (Linux `VmHWM`), if the OS tells.

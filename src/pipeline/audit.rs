@@ -468,20 +468,34 @@ fn original(
     let step = Job::Original { seed }.name();
     on_event(Event::StepStarted { step: step.clone() });
     let t0 = std::time::Instant::now();
-    let checkpoints = Checkpointing {
-        every: ORIGINAL_CHECKPOINT_EVERY,
-        resume: resumable,
+    let train = |resume: bool| {
+        let checkpoints = Checkpointing {
+            every: ORIGINAL_CHECKPOINT_EVERY,
+            resume,
+        };
+        train_run(dataset, &run, &tc, None, checkpoints, &mut |p| {
+            if p.iteration % 50 == 0 || p.iteration == tc.iterations {
+                on_event(Event::Iterations {
+                    step: step.clone(),
+                    done: p.iteration,
+                    total: tc.iterations,
+                    loss: p.loss,
+                });
+            }
+        })
     };
-    train_run(dataset, &run, &tc, None, checkpoints, &mut |p| {
-        if p.iteration % 50 == 0 || p.iteration == tc.iterations {
-            on_event(Event::Iterations {
-                step: step.clone(),
-                done: p.iteration,
-                total: tc.iterations,
-                loss: p.loss,
-            });
+    if let Err(e) = train(resumable) {
+        if !resumable {
+            return Err(e);
         }
-    })?;
+        // A checkpoint that does not continue this training (another build's numerics,
+        // another dataset, a damaged file): start again rather than fail every audit.
+        on_event(Event::Note(format!(
+            "{step}: not resumed ({e}); training again"
+        )));
+        std::fs::remove_dir_all(&run).map_err(|e| Error::io(&run, e))?;
+        train(false)?;
+    }
     on_event(Event::StepFinished {
         step,
         seconds: t0.elapsed().as_secs_f64(),

@@ -106,7 +106,9 @@ fn manifests(root: &Path) -> Result<Vec<(String, Manifest)>> {
         let entries = std::fs::read_dir(&d).map_err(|e| Error::io(&d, e))?;
         for e in entries.flatten() {
             let p = e.path();
-            if p.is_dir() {
+            let hidden = e.file_name().to_string_lossy().starts_with('.');
+            if p.is_dir() && !hidden {
+                // (Hidden folders are temporaries: a killed copy, a cache entry set aside.)
                 stack.push(p);
             } else if p.file_name().is_some_and(|n| n == "manifest.json") && d != root {
                 // A manifest that does not parse is damage, not something to skip.

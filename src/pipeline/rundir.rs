@@ -252,9 +252,19 @@ pub const TIMING_FILE: &str = "cost.json";
 /// manifest verifies, so a copy cut short is never taken for a step): files hard-linked
 /// where possible (step files are only ever replaced by rename, never written in place),
 /// else copied.
+/// `to` is created with its parents; below it, folders are created one level at a time,
+/// so a copy into a temporary that an interrupt removed fails instead of re-creating it.
 fn copy_step(from: &Path, to: &Path) -> Result<()> {
+    create_dir_all(to)?;
+    copy_into(from, to)
+}
+
+/// [`copy_step`] into the existing folder `to`.
+fn copy_into(from: &Path, to: &Path) -> Result<()> {
     fn walk(from: &Path, to: &Path, top: bool) -> Result<()> {
-        create_dir_all(to)?;
+        if !top {
+            std::fs::create_dir(to).map_err(|e| Error::io(to, e))?;
+        }
         let mut entries: Vec<_> = std::fs::read_dir(from)
             .map_err(|e| Error::io(from, e))?
             .collect::<std::io::Result<_>>()
@@ -298,8 +308,9 @@ fn publish(from: &Path, to: &Path, inputs_sha256: &str) -> Result<()> {
     }
     let parent = to.parent().unwrap_or(Path::new("."));
     let key = to.file_name().and_then(|n| n.to_str()).unwrap_or("step");
-    let tmp = Temporary::register(parent.join(format!(".{key}.tmp-{}", unique_suffix())));
-    let r = copy_step(from, tmp.path()).and_then(|()| {
+    let tmp = Temporary::create_dir(parent.join(format!(".{key}.tmp-{}", unique_suffix())))
+        .map_err(|e| Error::io(to, e))?;
+    let r = copy_into(from, tmp.path()).and_then(|()| {
         if to.exists() {
             let aside =
                 Temporary::register(parent.join(format!(".{key}.stale-{}", unique_suffix())));

@@ -60,8 +60,9 @@ pub struct CheckpointHeader {
     pub config: TrainConfig,
     /// The views trained on, in the dataset's order (a resume must see the same ones).
     pub train_views: Vec<String>,
-    /// sha256 of the initial scene's PLY bytes for a fine-tune (`--init`), else `None`.
-    pub init_sha256: Option<String>,
+    /// sha256 of what the run trains on (`train::run`: cameras, training images, depths
+    /// and loss weights, the initial scene of a fine-tune): a resume must see the same.
+    pub inputs_sha256: String,
     pub iteration: u32,
     pub active_sh_degree: u32,
     pub gaussians: usize,
@@ -89,7 +90,7 @@ pub struct Checkpoint {
 
 impl Checkpoint {
     /// Capture `t`'s state (cloned; the trainer goes on).
-    pub fn of(t: &Trainer<'_>, init_sha256: Option<String>, run: serde_json::Value) -> Checkpoint {
+    pub fn of(t: &Trainer<'_>, inputs_sha256: String, run: serde_json::Value) -> Checkpoint {
         let d = &t.dataset;
         Checkpoint {
             header: CheckpointHeader {
@@ -100,7 +101,7 @@ impl Checkpoint {
                     .iter()
                     .map(|&i| d.views[i].camera.name.clone())
                     .collect(),
-                init_sha256,
+                inputs_sha256,
                 iteration: t.iteration,
                 active_sh_degree: t.active_sh_degree,
                 gaussians: t.gaussians.len(),
@@ -144,10 +145,12 @@ impl Checkpoint {
                 "the checkpoint was made with another training config",
             ));
         }
-        let views = t.dataset.views.len();
-        if h.stack.iter().any(|&v| v >= views) || h.adam_steps.len() != t.adam.steps.len() {
+        if h.stack.iter().any(|v| !t.dataset.train.contains(v))
+            || h.adam_steps.len() != t.adam.steps.len()
+            || h.iteration >= h.config.iterations
+        {
             return Err(Error::invalid(
-                "the checkpoint's view stack or Adam groups do not fit this dataset",
+                "the checkpoint's view stack, Adam groups or iteration do not fit its run",
             ));
         }
         if self.gaussians.sh_degree != t.config.sh_degree || h.active_sh_degree > t.config.sh_degree

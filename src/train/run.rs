@@ -184,6 +184,27 @@ pub fn train_run(
     checkpoints: Checkpointing,
     on_progress: &mut dyn FnMut(&Progress),
 ) -> Result<RunSummary> {
+    train_run_resuming(
+        dataset_dir,
+        run,
+        config,
+        init,
+        checkpoints,
+        &mut |_| {},
+        on_progress,
+    )
+}
+
+/// [`train_run`], calling `on_resume` with the checkpoint's iteration when it continues one.
+pub fn train_run_resuming(
+    dataset_dir: &Path,
+    run: &Path,
+    config: &TrainConfig,
+    init: Option<&Init<'_>>,
+    checkpoints: Checkpointing,
+    on_resume: &mut dyn FnMut(u32),
+    on_progress: &mut dyn FnMut(&Progress),
+) -> Result<RunSummary> {
     config.validate()?;
     let meter = CostMeter::start();
     let data = load_dataset(dataset_dir, config)?;
@@ -208,8 +229,16 @@ pub fn train_run(
         }
     }
     if resumed.is_none() {
-        // A fresh start: a checkpoint of an earlier run here no longer belongs to it.
-        remove_if_present(&ck_path)?;
+        // A fresh start: the checkpoint and the completion records of an earlier run here
+        // no longer belong to it (a kill before the first checkpoint must not leave the
+        // folder looking complete).
+        for p in [
+            &ck_path,
+            &run.join("manifest.json"),
+            &run.join("train_stats.json"),
+        ] {
+            remove_if_present(p)?;
+        }
     }
     let config_text = serde_json::to_string_pretty(config).expect("config serializes");
     write_text(&run.join("config.json"), &config_text)?;
@@ -217,10 +246,6 @@ pub fn train_run(
     let cams: Vec<_> = data.views.iter().map(|v| v.camera.clone()).collect();
     write_text(&run.join("cameras.json"), &cameras_json_string(&cams))?;
 
-    let init_sha256 = match init {
-        Some(i) => Some(sha256_hex(&ply_bytes(&i.scene)?)),
-        None => None,
-    };
     let mut trainer = match init {
         None => Trainer::new(&data, config.clone())?,
         Some(i) => {
@@ -236,12 +261,19 @@ pub fn train_run(
             t
         }
     };
+    // What the training reads, so that a checkpoint only continues the run it was made by.
+    let inputs_sha256 = if checkpoints.every > 0 || checkpoints.resume {
+        inputs_digest(&trainer, init.map(|i| &i.scene))?
+    } else {
+        String::new()
+    };
     let mut book = Book::default();
     if let Some(ck) = resumed {
         let at = |e: Error| e.at(&ck_path);
-        if ck.header.init_sha256 != init_sha256 {
+        if ck.header.inputs_sha256 != inputs_sha256 {
             return Err(at(Error::invalid(
-                "the checkpoint continues another initial scene (--init) than this one",
+                "the checkpoint was made from other inputs (the dataset's cameras or training \
+                 images, the --init scene or the --mask weights differ)",
             )));
         }
         book = serde_json::from_value(ck.header.run.clone())
@@ -254,6 +286,8 @@ pub fn train_run(
             }
         }
         ck.restore(&mut trainer).map_err(at)?;
+        trainer.times = book.times;
+        on_resume(trainer.iteration);
     }
     let mut stages = vec![("load".to_string(), meter.finish())];
     let meter = CostMeter::start();
@@ -280,7 +314,7 @@ pub fn train_run(
             b.elapsed = elapsed(&book);
             b.times = trainer.times;
             let record = serde_json::to_value(&b).expect("book serializes");
-            Checkpoint::of(&trainer, init_sha256.clone(), record).write(&ck_path)?;
+            Checkpoint::of(&trainer, inputs_sha256.clone(), record).write(&ck_path)?;
             p.checkpointed = true;
         }
         on_progress(&p);
@@ -336,6 +370,33 @@ pub fn train_run(
     )?;
     remove_if_present(&ck_path)?;
     Ok(summary)
+}
+
+/// sha256 of what a trainer's iterations read besides its own state: every camera, the
+/// training views' images, depths and loss weights, and the initial scene of a fine-tune.
+fn inputs_digest(t: &Trainer<'_>, init: Option<&Gaussians>) -> Result<String> {
+    use sha2::{Digest, Sha256};
+    let mut h = Sha256::new();
+    let cams: Vec<_> = t.dataset.views.iter().map(|v| v.camera.clone()).collect();
+    h.update(cameras_json_string(&cams).as_bytes());
+    let floats = |h: &mut Sha256, tag: &[u8], v: Option<&[f32]>| {
+        h.update(tag);
+        h.update((v.map_or(u64::MAX, |v| v.len() as u64)).to_le_bytes());
+        for x in v.unwrap_or_default() {
+            h.update(x.to_bits().to_le_bytes());
+        }
+    };
+    for &vi in &t.dataset.train {
+        let v = &t.dataset.views[vi];
+        floats(&mut h, b"image", Some(&v.image.data));
+        floats(&mut h, b"depth", v.depth.as_deref());
+        floats(&mut h, b"mask", t.masks.get(vi).and_then(|m| m.as_deref()));
+    }
+    if let Some(g) = init {
+        h.update(b"init");
+        h.update(ply_bytes(g)?);
+    }
+    Ok(crate::io::hex(&h.finalize()))
 }
 
 /// Remove a file if it exists, naming it in the error otherwise.

@@ -1,9 +1,10 @@
 //! The bad-input matrix (SPEC.md §11): every subcommand, fed a missing, empty, truncated or
 //! wrong-kind file in each of its inputs (and in the files inside its dataset and run
-//! folders), non-finite numbers, an image of the wrong size, a camera with fx = 0, an
-//! output path that is a file or cannot be created, exits with 1 (`compare`: 2), prints
-//! exactly one `error:` line naming the file, never panics, and leaves no partial output:
-//! nothing at the destination (or the file that was there, unchanged) and no `.tmp` file.
+//! folders), a NaN in a scene, numbers out of range, an image of the wrong size, a camera
+//! with fx = 0, an output path that is a file or cannot be created, exits with 1
+//! (`compare`: 2), prints exactly one `error:` line naming the file, never panics, and
+//! leaves no partial output: nothing at the destination (or the file that was there,
+//! unchanged) and no `.tmp` file.
 use super::common::{TempDir, reference};
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
@@ -14,13 +15,13 @@ use std::process::Command;
 enum Kind {
     /// Any JSON document.
     Json,
-    /// INRIA cameras.json (also: non-finite position, fx = 0).
+    /// INRIA cameras.json (also: a position out of range, fx = 0).
     Cameras,
     /// Binary PLY (also: a NaN in the first vertex).
     Ply,
     /// PNG whose size must match its camera or partner image (also: 3×3).
     Png,
-    /// Single-channel EXR whose size must match (also: 3×3, NaN).
+    /// Single-channel EXR whose size must match (also: 3×3).
     Exr,
     /// A folder (missing; a file in its place); its files are slots of their own.
     Dir,
@@ -90,7 +91,10 @@ fn variants(
         Kind::Cameras => {
             let text = String::from_utf8(valid.to_vec()).unwrap();
             let inf = replace_first_number_after(&text, "\"position\"", "1e999");
-            v.push(("non-finite position".into(), Some(inf.into_bytes())));
+            v.push((
+                "position out of range (1e999)".into(),
+                Some(inf.into_bytes()),
+            ));
             let fx0 = replace_first_number_after(&text, "\"fx\"", "0");
             v.push(("fx = 0".into(), Some(fx0.into_bytes())));
         }

@@ -49,28 +49,67 @@ fn train_every(run: &Path, config: Option<&Path>, every: u32) -> Command {
     cmd
 }
 
-/// Start `cmd`, and once it has reported `checkpoints` checkpoints, wait `delay_ms` and
-/// SIGKILL it. Returns whether it was killed (a run that finished first is not).
-fn kill_after(mut cmd: Command, checkpoints: usize, delay_ms: u64) -> bool {
-    let mut child = cmd.stderr(Stdio::piped()).spawn().unwrap();
-    let stderr = child.stderr.take().unwrap();
-    let mut seen = 0;
-    let mut lines = BufReader::new(stderr).lines();
+/// A child process that is SIGKILLed and reaped when dropped, so a failing test leaves
+/// none writing into its temp dir.
+struct Reaped(std::process::Child);
+
+impl Drop for Reaped {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// The number at the end of `line` if it starts with `prefix`.
+fn iteration_after(line: &str, prefix: &str) -> Option<u32> {
+    line.strip_prefix(prefix)?.trim().parse().ok()
+}
+
+/// What [`kill_at`] saw.
+struct Killed {
+    /// The iteration the process said it resumed from.
+    resumed_from: Option<u32>,
+    /// It was killed before it finished.
+    killed: bool,
+}
+
+/// Start `cmd`; once it reports a checkpoint at iteration `at` or later, wait `delay_ms`
+/// and SIGKILL it.
+fn kill_at(mut cmd: Command, at: u32, delay_ms: u64) -> Killed {
+    let mut child = Reaped(cmd.stderr(Stdio::piped()).spawn().unwrap());
+    let mut lines = BufReader::new(child.0.stderr.take().unwrap()).lines();
+    let mut resumed_from = None;
     for line in lines.by_ref() {
         let line = line.unwrap();
-        if line.starts_with("checkpoint at iteration") {
-            seen += 1;
-            if seen == checkpoints {
-                break;
-            }
+        resumed_from = resumed_from.or(iteration_after(
+            &line,
+            "resuming from the checkpoint at iteration",
+        ));
+        if iteration_after(&line, "checkpoint at iteration").is_some_and(|it| it >= at) {
+            break;
         }
     }
     std::thread::sleep(std::time::Duration::from_millis(delay_ms));
-    let killed = child.kill().is_ok();
+    let killed = child.0.try_wait().unwrap().is_none() && child.0.kill().is_ok();
     // Drain, so the child never blocks on a full pipe before the signal lands.
     for _ in lines {}
-    let status = child.wait().unwrap();
-    killed && !status.success()
+    let status = child.0.wait().unwrap();
+    Killed {
+        resumed_from,
+        killed: killed && !status.success(),
+    }
+}
+
+/// `train_stats.json`'s numbers that come from the training state (not the clock).
+fn state_stats(run: &Path) -> serde_json::Value {
+    let s: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run.join("train_stats.json")).unwrap()).unwrap();
+    serde_json::json!([
+        s["curve"],
+        s["final_loss_ema"],
+        s["final_psnr_ema"],
+        s["gaussians"]
+    ])
 }
 
 fn ply(run: &Path, it: u32) -> Vec<u8> {
@@ -115,25 +154,35 @@ fn train_killed_and_resumed_gives_the_same_bits() {
     );
     assert_clean(&whole);
 
-    // Seeded kill points: after the k-th checkpoint of the process, plus a delay, twice
-    // (the second kill hits a resumed process).
+    // Seeded kill points: once after an early checkpoint (before any densification), once
+    // in a resumed process after iteration 240 (densified twice, SH degree raised, just
+    // before the opacity reset at 250), each after a seeded delay.
     let mut rng = Uniform::new(20261124);
     let cut = tmp.path().join("cut");
-    let k1 = 1 + rng.below(3) as usize;
-    assert!(
-        kill_after(train(&cut, Some(&config)), k1, rng.below(40) as u64),
-        "the first run finished before the kill"
+    let first = kill_at(
+        train(&cut, Some(&config)),
+        EVERY * (1 + rng.below(2)),
+        rng.below(30) as u64,
     );
-    let k2 = 1 + rng.below(2) as usize;
-    kill_after(train(&cut, None), k2, rng.below(40) as u64);
+    assert!(first.killed, "the first run finished before the kill");
+    let second = kill_at(
+        train(&cut, None),
+        EVERY * (6 + rng.below(2)),
+        rng.below(30) as u64,
+    );
+    assert!(second.killed, "the resumed run finished before the kill");
+    let from = second.resumed_from.expect("the second run resumed");
+    assert!((EVERY..240).contains(&from), "resumed from {from}");
     // Resume until done (a kill that landed after the last checkpoint's rename leaves a
     // complete checkpoint; one that landed during its write leaves the previous one).
     let st = train(&cut, None).output().unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
-    );
+    let err = String::from_utf8_lossy(&st.stderr);
+    assert!(st.status.success(), "{err}");
+    let from = err
+        .lines()
+        .find_map(|l| iteration_after(l, "resuming from the checkpoint at iteration"))
+        .expect("the last run resumed");
+    assert!(from >= 240, "resumed from {from}");
     assert_clean(&cut);
 
     for it in [200, ITERATIONS] {
@@ -150,6 +199,8 @@ fn train_killed_and_resumed_gives_the_same_bits() {
     };
     assert_eq!(plys(&whole), plys(&cut));
     assert_eq!(plys(&whole).len(), 2);
+    // The averages and the curve continue too (they do not reach the PLYs).
+    assert_eq!(state_stats(&whole), state_stats(&cut));
 
     // A finished run has nothing to resume: a clear error, the outputs untouched.
     let st = train(&cut, None).output().unwrap();
@@ -167,7 +218,7 @@ fn checkpoint_files_are_checked() {
     let config = write_config(tmp.path());
     let run = tmp.path().join("run");
     // Kill after the first checkpoint: the run directory holds a checkpoint.
-    assert!(kill_after(train(&run, Some(&config)), 1, 0));
+    assert!(kill_at(train(&run, Some(&config)), EVERY, 0).killed);
     let ck = checkpoint_path(&run);
     let good = std::fs::read(&ck).unwrap();
     let c = Checkpoint::read(&ck).unwrap();
@@ -255,11 +306,13 @@ fn interrupts_remove_temporaries_and_keep_finished_outputs() {
         .enumerate()
     {
         let run = tmp.path().join(format!("run{i}"));
-        let mut child = train_every(&run, Some(&config), 1)
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
-        let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+        let mut child = Reaped(
+            train_every(&run, Some(&config), 1)
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap(),
+        );
+        let mut lines = BufReader::new(child.0.stderr.take().unwrap()).lines();
         let mut err = String::new();
         for line in lines.by_ref() {
             let line = line.unwrap();
@@ -269,12 +322,16 @@ fn interrupts_remove_temporaries_and_keep_finished_outputs() {
             err += &line;
         }
         std::thread::sleep(std::time::Duration::from_millis(rng.below(60) as u64));
-        // SAFETY: signalling our own child, whose pid is alive until we wait for it.
-        assert_eq!(unsafe { libc::kill(child.id() as i32, signal) }, 0);
+        assert!(
+            child.0.try_wait().unwrap().is_none(),
+            "finished before the signal"
+        );
+        // SAFETY: signalling our own child, alive (not yet reaped) until we wait for it.
+        assert_eq!(unsafe { libc::kill(child.0.id() as i32, signal) }, 0);
         for line in lines {
             err += &line.unwrap();
         }
-        let status = child.wait().unwrap();
+        let status = child.0.wait().unwrap();
         assert_eq!(status.code(), Some(130), "signal {signal}: {err}");
         assert!(err.contains("interrupted"), "{err}");
         let ck = checkpoint_path(&run);

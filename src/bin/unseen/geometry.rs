@@ -9,7 +9,7 @@ use unseen::collide::frustum::{Outline, mean_range, write_obj};
 use unseen::collide::gjk::{ConvexHull, proximity};
 use unseen::collide::independent::select_regions;
 use unseen::error::{Error, Result};
-use unseen::io::image::{ImageF32, read_depth, read_png, write_exr, write_png};
+use unseen::io::image::{ImageF32, check_same_size, read_exr, read_png, write_exr, write_png};
 use unseen::io::{create_dir_all, write_text};
 use unseen::warp::dibr::{Footprint, WarpOptions, warp};
 
@@ -106,7 +106,14 @@ pub fn run_warp(a: &WarpArgs) -> Result<()> {
         ))
         .at(&a.image));
     }
-    let depth = read_depth(&a.depth, image.width, image.height)?;
+    let depth = read_exr(&a.depth, &["Y"])?;
+    check_same_size(
+        &a.depth,
+        (depth.width, depth.height),
+        &a.image,
+        (image.width, image.height),
+    )?;
+    let depth = depth.data;
     let opts = WarpOptions {
         footprint: match a.footprint {
             FootprintArg::Nearest => Footprint::Nearest,

@@ -2,8 +2,10 @@
 
 use clap::Args;
 use std::path::{Path, PathBuf};
-use unseen::error::{Error, Result};
-use unseen::io::image::{ImageF32, read_exr, read_png, to_u8, write_exr, write_png};
+use unseen::error::Result;
+use unseen::io::image::{
+    ImageF32, check_same_size, read_exr, read_png, to_u8, write_exr, write_png,
+};
 use unseen::models::{DepthHint, depth_estimator, inpainter};
 
 #[derive(Args)]
@@ -41,27 +43,10 @@ pub struct DepthArgs {
     hint_mask: Option<PathBuf>,
 }
 
-/// `path` (a mask or depth of `size`) must have the size of `image`: the error names both
-/// files, since either may be the wrong one.
-fn same_size(path: &Path, size: (usize, usize), image: &Path, img: &ImageF32) -> Result<()> {
-    if size == (img.width, img.height) {
-        return Ok(());
-    }
-    Err(Error::invalid(format!(
-        "{}x{}, but the image {} is {}x{}",
-        size.0,
-        size.1,
-        image.display(),
-        img.width,
-        img.height
-    ))
-    .at(path))
-}
-
 /// A mask (non-zero = true) of `image`'s size.
 fn read_mask(path: &Path, image: &Path, img: &ImageF32) -> Result<Vec<bool>> {
     let m = read_png(path)?;
-    same_size(path, (m.width, m.height), image, img)?;
+    check_same_size(path, (m.width, m.height), image, (img.width, img.height))?;
     Ok(m.data
         .chunks(m.channels)
         .map(|c| c.iter().any(|&v| v > 0.0))
@@ -110,7 +95,7 @@ pub fn run_depth(a: &DepthArgs) -> Result<()> {
     let hint = match &a.hint {
         Some(p) => {
             let d = read_exr(p, &["Y"])?;
-            same_size(p, (d.width, d.height), &a.image, &img)?;
+            check_same_size(p, (d.width, d.height), &a.image, (img.width, img.height))?;
             Some(d.data)
         }
         None => None,

@@ -6,7 +6,7 @@ use std::sync::Mutex;
 use std::time::Instant;
 use unseen::error::Result;
 use unseen::pipeline::Event;
-use unseen::train::run::{Checkpointing, Init, train_run};
+use unseen::train::run::{Checkpointing, Init, train_run_resuming};
 use unseen::train::trainer::{Progress, TrainConfig};
 
 pub fn train_with_bar(
@@ -48,7 +48,15 @@ pub fn train_with_bar(
             ));
         }
     };
-    let s = train_run(dataset, out, cfg, init, checkpoints, &mut on_progress);
+    let s = train_run_resuming(
+        dataset,
+        out,
+        cfg,
+        init,
+        checkpoints,
+        &mut |it| eprintln!("resuming from the checkpoint at iteration {it}"),
+        &mut on_progress,
+    );
     bar.finish_and_clear();
     s
 }
