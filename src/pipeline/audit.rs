@@ -453,6 +453,8 @@ fn original(
 ) -> Result<PathBuf> {
     let run = dir.join(Job::Original { seed }.name());
     if original_done(cfg, dataset, &run, seed) {
+        // A kill between the manifest and the checkpoint's removal leaves the latter.
+        let _ = std::fs::remove_file(checkpoint_path(&run));
         on_event(Event::StepSkipped {
             step: Job::Original { seed }.name(),
         });

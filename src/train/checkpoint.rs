@@ -89,40 +89,46 @@ pub struct Checkpoint {
 }
 
 impl Checkpoint {
-    /// Capture `t`'s state (cloned; the trainer goes on).
-    pub fn of(t: &Trainer<'_>, inputs_sha256: String, run: serde_json::Value) -> Checkpoint {
+    /// Write `t`'s state to `path` (atomically, from the trainer's own arrays: nothing is
+    /// copied).
+    pub fn save(
+        t: &Trainer<'_>,
+        inputs_sha256: String,
+        run: serde_json::Value,
+        path: &Path,
+    ) -> Result<()> {
         let d = &t.dataset;
-        Checkpoint {
-            header: CheckpointHeader {
-                numerics_revision: crate::oracle::NUMERICS_REVISION,
-                config: t.config.clone(),
-                train_views: d
-                    .train
-                    .iter()
-                    .map(|&i| d.views[i].camera.name.clone())
-                    .collect(),
-                inputs_sha256,
-                iteration: t.iteration,
-                active_sh_degree: t.active_sh_degree,
-                gaussians: t.gaussians.len(),
-                sh_degree: t.gaussians.sh_degree,
-                rng_state: format!("{:032x}", t.rng.state()),
-                stack: t.stack.clone(),
-                loss_ema_bits: t.loss_ema.to_bits(),
-                psnr_ema_bits: t.psnr_ema.to_bits(),
-                adam_steps: t
-                    .adam
-                    .steps
-                    .iter()
-                    .map(|s| (s.t, s.beta1_pow.to_bits(), s.beta2_pow.to_bits()))
-                    .collect(),
-                run,
-            },
-            gaussians: t.gaussians.clone(),
-            adam_m: t.adam.m.clone(),
-            adam_v: t.adam.v.clone(),
-            stats: t.stats.clone(),
-        }
+        let header = CheckpointHeader {
+            numerics_revision: crate::oracle::NUMERICS_REVISION,
+            config: t.config.clone(),
+            train_views: d
+                .train
+                .iter()
+                .map(|&i| d.views[i].camera.name.clone())
+                .collect(),
+            inputs_sha256,
+            iteration: t.iteration,
+            active_sh_degree: t.active_sh_degree,
+            gaussians: t.gaussians.len(),
+            sh_degree: t.gaussians.sh_degree,
+            rng_state: format!("{:032x}", t.rng.state()),
+            stack: t.stack.clone(),
+            loss_ema_bits: t.loss_ema.to_bits(),
+            psnr_ema_bits: t.psnr_ema.to_bits(),
+            adam_steps: t
+                .adam
+                .steps
+                .iter()
+                .map(|s| (s.t, s.beta1_pow.to_bits(), s.beta2_pow.to_bits()))
+                .collect(),
+            run,
+        };
+        write_parts(
+            path,
+            &header,
+            [&t.gaussians, &t.adam.m, &t.adam.v],
+            &t.stats,
+        )
     }
 
     /// Put the state into `t`, a trainer built on the same dataset and config (its
@@ -184,29 +190,12 @@ impl Checkpoint {
     /// Write to `path` atomically (§10): a kill during the write leaves the previous
     /// checkpoint in place.
     pub fn write(&self, path: &Path) -> Result<()> {
-        let header = serde_json::to_vec(&self.header).expect("header serializes");
-        crate::io::write_atomic(path, |w| {
-            let mut w = HashingWriter {
-                inner: w,
-                hash: Sha256::new(),
-            };
-            w.write_all(MAGIC)?;
-            w.write_all(&VERSION.to_le_bytes())?;
-            w.write_all(&(header.len() as u64).to_le_bytes())?;
-            w.write_all(&header)?;
-            for g in [&self.gaussians, &self.adam_m, &self.adam_v] {
-                for a in gaussian_arrays(g) {
-                    write_f32s(&mut w, a)?;
-                }
-            }
-            write_f32s(&mut w, &self.stats.grad_accum)?;
-            for c in &self.stats.count {
-                w.write_all(&c.to_le_bytes())?;
-            }
-            write_f32s(&mut w, &self.stats.max_radius)?;
-            let digest = w.hash.finalize();
-            w.inner.write_all(&digest)
-        })
+        write_parts(
+            path,
+            &self.header,
+            [&self.gaussians, &self.adam_m, &self.adam_v],
+            &self.stats,
+        )
     }
 
     /// Read and check a checkpoint file.
@@ -293,6 +282,38 @@ impl Checkpoint {
             stats,
         })
     }
+}
+
+/// The file layout (module docs) from its parts.
+fn write_parts(
+    path: &Path,
+    header: &CheckpointHeader,
+    sets: [&Gaussians; 3],
+    stats: &DensifyStats,
+) -> Result<()> {
+    let header = serde_json::to_vec(header).expect("header serializes");
+    crate::io::write_atomic(path, |w| {
+        let mut w = HashingWriter {
+            inner: w,
+            hash: Sha256::new(),
+        };
+        w.write_all(MAGIC)?;
+        w.write_all(&VERSION.to_le_bytes())?;
+        w.write_all(&(header.len() as u64).to_le_bytes())?;
+        w.write_all(&header)?;
+        for g in sets {
+            for a in gaussian_arrays(g) {
+                write_f32s(&mut w, a)?;
+            }
+        }
+        write_f32s(&mut w, &stats.grad_accum)?;
+        for c in &stats.count {
+            w.write_all(&c.to_le_bytes())?;
+        }
+        write_f32s(&mut w, &stats.max_radius)?;
+        let digest = w.hash.finalize();
+        w.inner.write_all(&digest)
+    })
 }
 
 /// The six parameter arrays of `g` in file order.

@@ -166,7 +166,9 @@ pub struct Checkpointing {
 struct Book {
     /// Saved PLYs (relative to the run) and their sha256.
     files: Vec<(PathBuf, String)>,
-    curve: Vec<(u32, f64, f64, usize)>,
+    /// `(iteration, loss EMA bits, PSNR EMA bits, Gaussians)`: bits, so a diverged run's
+    /// NaN survives the JSON header.
+    curve: Vec<(u32, u64, u64, usize)>,
     saves: Vec<(u32, f64)>,
     pairs: u64,
     /// Seconds of iterations before this process.
@@ -298,7 +300,8 @@ pub fn train_run_resuming(
         let it = trainer.iteration;
         book.pairs += p.pairs;
         if it.is_multiple_of(100) || it == config.iterations {
-            book.curve.push((it, p.loss_ema, p.psnr_ema, p.gaussians));
+            book.curve
+                .push((it, p.loss_ema.to_bits(), p.psnr_ema.to_bits(), p.gaussians));
         }
         if config.save_iterations.contains(&it) || it == config.iterations {
             book.saves.push((it, elapsed(&book)));
@@ -314,7 +317,7 @@ pub fn train_run_resuming(
             b.elapsed = elapsed(&book);
             b.times = trainer.times;
             let record = serde_json::to_value(&b).expect("book serializes");
-            Checkpoint::of(&trainer, inputs_sha256.clone(), record).write(&ck_path)?;
+            Checkpoint::save(&trainer, inputs_sha256.clone(), record, &ck_path)?;
             p.checkpointed = true;
         }
         on_progress(&p);
@@ -361,7 +364,11 @@ pub fn train_run_resuming(
         final_loss_ema: trainer.loss_ema,
         final_psnr_ema: trainer.psnr_ema,
         saves: book.saves,
-        curve: book.curve,
+        curve: book
+            .curve
+            .iter()
+            .map(|&(i, l, p, n)| (i, f64::from_bits(l), f64::from_bits(p), n))
+            .collect(),
         ply,
     };
     write_text(
