@@ -108,6 +108,7 @@ impl RunDir {
         }
         // Temporaries of killed publishers are left alone: another job may be writing one.
         create_dir_all(cache)?;
+        sweep_abandoned(cache, ABANDONED_AFTER);
         self.cache = Some(cache.to_path_buf());
         Ok(self)
     }
@@ -283,6 +284,31 @@ fn copy_into(from: &Path, to: &Path) -> Result<()> {
     walk(from, to, true)
 }
 
+/// How old a cache temporary must be to count as abandoned: a publisher copies one step,
+/// which takes seconds, so a day-old one belongs to a job that was killed.
+const ABANDONED_AFTER: std::time::Duration = std::time::Duration::from_secs(24 * 3600);
+
+/// Remove the temporaries (`.<key>.tmp-*`, `.<key>.stale-*` folders) that killed
+/// publishers left in `cache`, once they are older than `age` (younger ones may belong to
+/// a job publishing right now, on this machine or another). Best effort.
+fn sweep_abandoned(cache: &Path, age: std::time::Duration) {
+    let Ok(entries) = std::fs::read_dir(cache) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let temporary =
+            name.starts_with('.') && (name.contains(".tmp-") || name.contains(".stale-"));
+        let old = e
+            .metadata()
+            .and_then(|m| m.modified())
+            .is_ok_and(|t| t.elapsed().is_ok_and(|a| a >= age));
+        if temporary && old {
+            let _ = std::fs::remove_dir_all(e.path());
+        }
+    }
+}
+
 /// A name no other job uses (process id, clock, counter): cache temporaries may be made by
 /// jobs on several machines sharing the folder.
 fn unique_suffix() -> String {
@@ -377,5 +403,45 @@ impl StepWriter {
     pub fn json<T: serde::Serialize>(&mut self, rel: &str, v: &T) -> Result<PathBuf> {
         let text = serde_json::to_string_pretty(v).expect("serializes") + "\n";
         self.put(rel, |p| write_text(p, &text))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Removes the folder when dropped (also when the test panics).
+    struct Scratch(PathBuf);
+    impl Drop for Scratch {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+
+    /// Old cache temporaries go, young ones (a publisher at work) and entries stay.
+    #[test]
+    fn sweep_removes_only_old_temporaries() {
+        let root =
+            Scratch(std::env::temp_dir().join(format!("unseen-sweep-{}", std::process::id())));
+        let day = std::time::Duration::from_secs(24 * 3600);
+        let two_days_ago = std::time::SystemTime::now() - 2 * day;
+        let make = |name: &str, old: bool| {
+            let p = root.0.join(name);
+            std::fs::create_dir_all(p.join("sub")).unwrap();
+            if old {
+                std::fs::File::open(&p)
+                    .unwrap()
+                    .set_modified(two_days_ago)
+                    .unwrap();
+            }
+            p
+        };
+        let old_tmp = make(".key.tmp-1-2-3", true);
+        let old_stale = make(".key.stale-1-2-3", true);
+        let young_tmp = make(".key.tmp-4-5-6", false);
+        let old_entry = make("key", true);
+        sweep_abandoned(&root.0, day);
+        assert!(!old_tmp.exists() && !old_stale.exists());
+        assert!(young_tmp.exists() && old_entry.exists());
     }
 }
