@@ -345,6 +345,14 @@ pub fn parse_ply(data: &[u8], path: &Path) -> Result<(Gaussians, PlyInfo)> {
             let k: usize = k
                 .parse()
                 .map_err(|_| err(format!("bad property name '{}'", p.name)))?;
+            // (Checked before `k + 1`: the fuzzer found f_rest_18446744073709551615.)
+            let most = (num_coeffs(crate::math::sh::MAX_SH_DEGREE) - 1) * 3;
+            if k >= most {
+                return Err(err(format!(
+                    "vertex property '{}': SH degree 5 has {most} f_rest fields",
+                    p.name
+                )));
+            }
             n_rest = n_rest.max(k + 1);
         }
     }

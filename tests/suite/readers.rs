@@ -272,6 +272,16 @@ fn malformed_ply_files_are_clear_errors() {
         ),
         "twice",
     );
+    // Found by the `ply` fuzz target (2026-11-24): an f_rest index of usize::MAX overflowed
+    // `k + 1` (a panic with overflow checks, a wrap without).
+    let crash = b"ply\nformat ascii 1.0\nelement vertex 0\nproperty float _dc_0\n\
+        property float f_dc_\nproperty float f_rest_18446744073709551615 \t\t\n\
+        end_headery f5 0.5\n";
+    check(crash, "SH degree 5 has 105 f_rest fields");
+    check(
+        &edit("f_rest_44", "f_rest_105"),
+        "SH degree 5 has 105 f_rest fields",
+    );
     let err = read_ply(Path::new("/nonexistent/x.ply")).unwrap_err();
     assert_eq!(err.kind, ErrorKind::Io);
     assert!(err.to_string().contains("/nonexistent/x.ply"));
