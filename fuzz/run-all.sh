@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
-# Run every fuzz target for MINUTES each (default 30), JOBS at a time (default 1), on its
-# corpus (fuzz/corpus/<target>, grown by the run, not committed) and the committed seeds
-# (fuzz/seeds/<target>). Appends one line per target to fuzz/runs.log:
+# Usage: run-all.sh [MINUTES [TARGET...]]
+# Run every fuzz target (or the TARGETs given) for MINUTES each (default 30), JOBS at a
+# time (default 1), on its corpus (fuzz/corpus/<target>, grown by the run, not committed)
+# and the committed seeds (fuzz/seeds/<target>). Appends one line per target to fuzz/runs.log:
 #   date target minutes executions exit-status
 # and leaves any crashing input under fuzz/artifacts/<target>/ (turn each into a test in
 # tests/suite/, see fuzz/README.md).
@@ -11,6 +12,7 @@
 set -euo pipefail
 cd "$(dirname "$0")"
 MINUTES="${1:-30}"
+shift || true
 JOBS="${JOBS:-1}"
 if ! rustc --version | grep -q nightly; then
     export RUSTC_BOOTSTRAP=1
@@ -32,4 +34,5 @@ run_one() {
 }
 export -f run_one
 export MINUTES
-cargo fuzz list | xargs -P "$JOBS" -I{} bash -c 'run_one {}'
+if [ $# -gt 0 ]; then printf '%s\n' "$@"; else cargo fuzz list; fi |
+    xargs -P "$JOBS" -I{} bash -c 'run_one {}'
