@@ -24,9 +24,14 @@ run_one() {
     mkdir -p "corpus/$t" "seeds/$t"
     local log="logs/$t.log"
     local status=0
-    cargo fuzz run "$t" "corpus/$t" "seeds/$t" -- \
+    # The targets that feed path readers write their inputs under TMPDIR: a fresh one per
+    # run, removed after.
+    local scratch
+    scratch="$(mktemp -d)"
+    TMPDIR="$scratch" cargo fuzz run "$t" "corpus/$t" "seeds/$t" -- \
         -max_total_time=$((MINUTES * 60)) -rss_limit_mb=2048 -max_len=65536 \
         -print_final_stats=1 >"$log" 2>&1 || status=$?
+    rm -rf "$scratch"
     local execs
     execs=$(grep -o 'stat::number_of_executed_units: [0-9]*' "$log" | awk '{print $2}' | tail -1)
     echo "$(date -u +%Y-%m-%dT%H:%MZ) $t $MINUTES ${execs:-?} $status" >>runs.log
