@@ -10,7 +10,7 @@
 //! Unknown vertex properties are ignored and their names reported in [`PlyInfo`].
 //! Writing produces binary little-endian in INRIA's layout (normals written as 0).
 
-use super::Gaussians;
+use super::{Gaussians, Param};
 use crate::error::{Error, Result};
 use crate::math::sh::{degree_for_coeffs, num_coeffs};
 use std::io::Write;
@@ -567,25 +567,12 @@ pub fn ply_bytes(g: &Gaussians) -> Result<Vec<u8>> {
     g.validate()?;
     // The reader refuses non-finite values; so does the writer (a diverged training stops
     // with this error instead of saving a scene nothing can read).
-    let arrays: [&[f32]; 6] = [
-        g.means.as_flattened(),
-        g.log_scales.as_flattened(),
-        g.quats.as_flattened(),
-        &g.opacity_logits,
-        g.sh_dc.as_flattened(),
-        &g.sh_rest,
-    ];
-    for (a, name) in arrays.iter().zip([
-        "mean",
-        "log-scale",
-        "quaternion",
-        "opacity",
-        "DC",
-        "SH rest",
-    ]) {
+    for p in Param::ALL {
+        let a = g.param(p);
         if let Some(i) = a.iter().position(|x| !x.is_finite()) {
             return Err(Error::invalid(format!(
-                "cannot write a PLY: a Gaussian's {name} value is {} (value {i} of the array)",
+                "cannot write a PLY: {} value {i} is {}",
+                p.name(),
                 a[i]
             )));
         }

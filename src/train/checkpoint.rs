@@ -16,9 +16,9 @@
 //! version           u32 (1)
 //! header length H   u64
 //! header            H bytes of JSON (CheckpointHeader)
-//! arrays            for params, Adam m, Adam v: means, log_scales, quats, opacity_logits,
-//!                   sh_dc, sh_rest (f32); then grad_accum (f32), count (u32),
-//!                   max_radius (f32)
+//! arrays            for params, Adam m, Adam v: the six arrays in `Param::ALL` order
+//!                   (means, sh_dc, sh_rest, opacity_logits, log_scales, quats; f32);
+//!                   then grad_accum (f32), count (u32), max_radius (f32)
 //! sha256            32 bytes, of everything before
 //! ```
 //!
@@ -27,7 +27,7 @@
 //! names the file in every error.
 
 use crate::error::{Error, Result};
-use crate::gaussian::Gaussians;
+use crate::gaussian::{Gaussians, Param};
 use crate::math::sh::num_coeffs;
 use crate::scene::Uniform;
 use crate::train::adam::GroupStep;
@@ -250,15 +250,12 @@ impl Checkpoint {
         let mut r = &body[hend..];
         let mut sets = Vec::with_capacity(3);
         for _ in 0..3 {
-            let mut g = Gaussians::new(header.sh_degree)?;
-            let n = header.gaussians;
-            let k1 = num_coeffs(header.sh_degree) - 1;
-            g.means = read_f32s(&mut r, n * 3).chunks_exact(3).map(arr).collect();
-            g.log_scales = read_f32s(&mut r, n * 3).chunks_exact(3).map(arr).collect();
-            g.quats = read_f32s(&mut r, n * 4).chunks_exact(4).map(arr).collect();
-            g.opacity_logits = read_f32s(&mut r, n);
-            g.sh_dc = read_f32s(&mut r, n * 3).chunks_exact(3).map(arr).collect();
-            g.sh_rest = read_f32s(&mut r, n * k1 * 3);
+            let mut g = Gaussians::zeros(header.gaussians, header.sh_degree)?;
+            for p in Param::ALL {
+                let a = g.param_mut(p);
+                let n = a.len();
+                a.copy_from_slice(&read_f32s(&mut r, n));
+            }
             sets.push(g);
         }
         let n = header.gaussians;
@@ -302,8 +299,8 @@ fn write_parts(
         w.write_all(&(header.len() as u64).to_le_bytes())?;
         w.write_all(&header)?;
         for g in sets {
-            for a in gaussian_arrays(g) {
-                write_f32s(&mut w, a)?;
+            for p in Param::ALL {
+                write_f32s(&mut w, g.param(p))?;
             }
         }
         write_f32s(&mut w, &stats.grad_accum)?;
@@ -314,22 +311,6 @@ fn write_parts(
         let digest = w.hash.finalize();
         w.inner.write_all(&digest)
     })
-}
-
-/// The six parameter arrays of `g` in file order.
-fn gaussian_arrays(g: &Gaussians) -> [&[f32]; 6] {
-    [
-        g.means.as_flattened(),
-        g.log_scales.as_flattened(),
-        g.quats.as_flattened(),
-        &g.opacity_logits,
-        g.sh_dc.as_flattened(),
-        &g.sh_rest,
-    ]
-}
-
-fn arr<const K: usize>(c: &[f32]) -> [f32; K] {
-    c.try_into().expect("chunk of K")
 }
 
 fn write_f32s(w: &mut impl Write, v: &[f32]) -> std::io::Result<()> {
