@@ -1,4 +1,5 @@
-//! What accuracy costs in time: `cargo bench --bench accuracy [-- --quick] [--out DIR]`.
+//! What accuracy costs in time:
+//! `cargo bench --bench accuracy [-- --quick] [--only STAGE,...] [--out DIR]`.
 //!
 //! Per stage and knob, the error against a shadow computed in the same run and the time,
 //! written to `DIR/accuracy.csv`, `DIR/accuracy.md` and `DIR/accuracy.svg` (default
@@ -13,21 +14,29 @@
 //! - `ransac`: RANSAC iterations and inlier threshold against the known scale of synthetic
 //!   depths with 30 % outliers and ±3 % noise on the inliers (a monocular estimator's
 //!   error), relative scale error; and least squares.
-//!
 //! - `gjk`: the duality-gap tolerance and the iteration cap against box pairs of known
 //!   distance (`collide::gjk::proximity_with`);
-//! - `dibr`: the warp's footprint and crack closing against a ray-traced plane;
+//! - `gjk frustums` (`--only gjk-frustums`): the same knobs on random frustum pairs and
+//!   pairs with nearly parallel facing faces, against the exact distance by exhaustion
+//!   (`tests/suite/polytope.rs`);
+//! - `dibr`, `dibr edges`: the warp's footprint and crack closing against a ray-traced
+//!   plane, and the plane behind a card (depth edges);
 //! - `training`: iterations with and without densification on `lounge` against the
-//!   test views' mean squared error (ground truth), checkpoints of one run each.
+//!   test views' mean squared error (ground truth), checkpoints of one run each;
+//! - `qa-mask`: fine-tune iterations × SH degree 3–5 against a long SH-5 fine-tune, mean
+//!   mask difference on the held-out views.
 //!
 //! Times are the best of several runs on one thread; errors are exact maxima over the
-//! inputs used.
+//! inputs used. `--only` prints the chosen stages and writes files only with `--out`.
 
 mod common;
 
 #[path = "../tests/suite/twin.rs"]
 #[allow(dead_code)]
 mod twin;
+
+#[path = "../tests/suite/polytope.rs"]
+mod polytope;
 
 use common::best;
 use std::fmt::Write as _;
@@ -433,7 +442,7 @@ fn training(quick: bool, points: &mut Vec<Point>) {
 /// largest vertex magnitude); a wrong verdict or a non-converged pair counts as 1.
 fn gjk(quick: bool, points: &mut Vec<Point>) {
     use glam::{DMat3, DQuat, DVec3};
-    use unseen::collide::gjk::{ConvexHull, Tolerances, proximity_with};
+    use unseen::collide::gjk::ConvexHull;
     let pairs = if quick { 2000 } else { 20000 };
     let mut u = Uniform::new(11);
     let mut r = |lo: f64, hi: f64| f64::from(u.range(lo as f32, hi as f32));
@@ -472,6 +481,63 @@ fn gjk(quick: bool, points: &mut Vec<Point>) {
             (corners(DVec3::ZERO, e1), corners(c2, e2), exact)
         })
         .collect();
+    gjk_knobs("gjk", &cases, points);
+}
+
+/// GJK on the frustums the pipeline collides: 2000 random pairs (as the tests' random
+/// frustums) and 1000 with nearly parallel facing faces (`polytope::facing_pair`, gaps
+/// 1e-6–1 of the face, turned 1e-12–1e-2 rad), against the exact distance by exhaustion
+/// over feature pairs (`polytope::exact_distance`, 0 where the separating-axis test finds
+/// no gap). Pairs within 100 touching tolerances of contact are left out.
+fn gjk_frustums(quick: bool, points: &mut Vec<Point>) {
+    use polytope::{exact_distance, facing_pair, log_uniform, random_frustum, sat_gap};
+    use unseen::collide::gjk::TOUCH_REL;
+    let (random, facing) = if quick { (2000, 1000) } else { (20000, 6000) };
+    let mut u = Uniform::new(5);
+    let mut cases = Vec::new();
+    for k in 0..random + facing {
+        let (a, b) = if k >= random {
+            let gap = log_uniform(&mut u, 1e-6, 1.0);
+            let angle = log_uniform(&mut u, 1e-12, 1e-2);
+            facing_pair(&mut u, k % 6, gap, angle)
+        } else {
+            let a = random_frustum(&mut u, glam::DVec3::ZERO);
+            let far = (a.v[4] - a.v[0]).length().max(1e-3);
+            let off = glam::DVec3::new(
+                f64::from(u.range(-1.0, 1.0)),
+                f64::from(u.range(-1.0, 1.0)),
+                f64::from(u.range(-1.0, 1.0)),
+            ) * far;
+            (a, random_frustum(&mut u, off))
+        };
+        let (ha, hb) = (a.hull(), b.hull());
+        let scale = ha
+            .vertices
+            .iter()
+            .chain(&hb.vertices)
+            .map(|v| v.abs().max_element())
+            .fold(0.0, f64::max);
+        if sat_gap(&a, &b).abs() > 100.0 * TOUCH_REL * scale {
+            cases.push((ha, hb, exact_distance(&a, &b)));
+        }
+    }
+    gjk_knobs("gjk frustums", &cases, points);
+}
+
+/// Every stopping rule (duality gaps 1e-4–1e-15 at the default cap, caps 3–16 at the
+/// default gap) on `cases` (pairs and their exact distance). Error: the largest
+/// `|d − d_exact| / scale` (`scale` as GJK's, the largest vertex magnitude); a wrong
+/// verdict or a non-converged pair counts as 1.
+fn gjk_knobs(
+    stage: &'static str,
+    cases: &[(
+        unseen::collide::gjk::ConvexHull,
+        unseen::collide::gjk::ConvexHull,
+        f64,
+    )],
+    points: &mut Vec<Point>,
+) {
+    use unseen::collide::gjk::{Tolerances, proximity_with};
     let defaults = Tolerances::default();
     let mut knobs: Vec<(String, Tolerances)> = [1e-4, 1e-6, 1e-9, 1e-12, 1e-15]
         .iter()
@@ -498,7 +564,7 @@ fn gjk(quick: bool, points: &mut Vec<Point>) {
         let (t, (err, wrong)) = best(3, || {
             let mut err = 0f64;
             let mut wrong = 0usize;
-            for (a, b, exact) in &cases {
+            for (a, b, exact) in cases {
                 let scale = a
                     .vertices
                     .iter()
@@ -518,8 +584,8 @@ fn gjk(quick: bool, points: &mut Vec<Point>) {
             (err, wrong)
         });
         points.push(Point {
-            stage: "gjk",
-            knob: format!("{name}: {wrong} of {pairs} wrong or not converged"),
+            stage,
+            knob: format!("{name}: {wrong} of {} wrong or not converged", cases.len()),
             default: tol == defaults,
             metric: "max |d − d_exact| / scale",
             error: err,
@@ -529,10 +595,17 @@ fn gjk(quick: bool, points: &mut Vec<Point>) {
     }
 }
 
-/// DIBR against a ray-traced warp: a textured plane (smooth colours, a known surface) seen
-/// from a source camera is warped to a target camera moved 0.15 and turned 4°; the shadow
-/// is the plane ray-traced from the target. Error: mean |warp − ray-traced| over the
-/// target pixels the warp fills (holes are counted in the knob).
+/// DIBR against a ray-traced warp, on two scenes seen from a source camera and warped to a
+/// target camera moved 0.15 and turned 4°; the shadow is the scene ray-traced from the
+/// target (f64):
+/// - `dibr`: a slanted textured plane (smooth colours, a known surface);
+/// - `dibr edges`: the same plane behind a textured card at half its depth, whose outline
+///   is a depth edge (disocclusions on one side, the card's silhouette on the other).
+///
+/// Error: mean |warp − ray-traced| over the target pixels the warp fills (holes are counted
+/// in the knob, and for the edge scene the pixels whose warped depth is more than 1 % from
+/// the ray-traced one, the surface the warp got wrong, and the mean error over the pixels
+/// within 2 of a ray-traced depth edge).
 fn dibr(quick: bool, points: &mut Vec<Point>) {
     use glam::{DMat3, DVec3};
     use unseen::camera::Camera;
@@ -566,15 +639,36 @@ fn dibr(quick: bool, points: &mut Vec<Point>) {
     .expect("camera");
     // The plane n·P = 4 (slanted), and its texture.
     let n = DVec3::new(0.2, -0.1, 1.0).normalize();
-    let tex = |p: DVec3| {
-        [
-            0.5 + 0.4 * (3.0 * p.x).sin() * (2.0 * p.y).cos(),
-            0.5 + 0.4 * (2.5 * p.y + 1.0).sin(),
-            0.5 + 0.3 * (4.0 * (p.x + p.y)).cos(),
-        ]
+    let plane = |o: DVec3, d: DVec3| {
+        let s = (4.0 - n.dot(o)) / n.dot(d);
+        let p = o + d * s;
+        (
+            s,
+            [
+                0.5 + 0.4 * (3.0 * p.x).sin() * (2.0 * p.y).cos(),
+                0.5 + 0.4 * (2.5 * p.y + 1.0).sin(),
+                0.5 + 0.3 * (4.0 * (p.x + p.y)).cos(),
+            ],
+        )
     };
-    // Ray-trace a camera: colours and camera z.
-    let trace = |cam: &Camera| {
+    // The card: z = 2, |x| < 0.35, |y| < 0.3, a texture of other colours.
+    let card = |o: DVec3, d: DVec3| {
+        let s = (2.0 - o.z) / d.z;
+        let p = o + d * s;
+        (p.x.abs() < 0.35 && p.y.abs() < 0.3).then(|| {
+            (
+                s,
+                [
+                    0.85 - 0.1 * (9.0 * p.x).cos(),
+                    0.25 + 0.1 * (7.0 * p.y).sin(),
+                    0.15,
+                ],
+            )
+        })
+    };
+    // Ray-trace a camera: colours and camera z (`d` has camera z 1, so the ray parameter
+    // is the camera z).
+    let trace = |cam: &Camera, with_card: bool| {
         let mut rgb = Vec::with_capacity(w * h * 3);
         let mut z = Vec::with_capacity(w * h);
         for v in 0..h {
@@ -585,17 +679,17 @@ fn dibr(quick: bool, points: &mut Vec<Point>) {
                     1.0,
                 );
                 let dw = cam.world_from_camera_rotation * d;
-                let s = (4.0 - n.dot(cam.center)) / n.dot(dw);
-                rgb.extend(tex(cam.center + dw * s).map(|c| c as f32));
+                let (s, c) = match (with_card, plane(cam.center, dw)) {
+                    (true, back) => card(cam.center, dw).unwrap_or(back),
+                    (false, back) => back,
+                };
+                rgb.extend(c.map(|c| c as f32));
                 z.push(s as f32);
             }
         }
         (rgb, z)
     };
-    let (src, src_z) = trace(&from);
-    let (truth, _) = trace(&to);
-    let img = ImageF32::new(w, h, 3, src).expect("image");
-    for (name, opts, default) in [
+    let knobs = [
         ("nearest", WarpOptions::default(), false),
         (
             "nearest + crack closing 1 (the pipeline's)",
@@ -613,27 +707,205 @@ fn dibr(quick: bool, points: &mut Vec<Point>) {
             },
             false,
         ),
-    ] {
-        let (t, r) = best(3, || warp(&img, &src_z, &from, &to, &opts).expect("warps"));
-        let (mut sum, mut filled) = (0.0, 0usize);
-        for (i, &hole) in r.holes.iter().enumerate() {
-            if !hole {
+        (
+            "bilinear + crack closing 1",
+            WarpOptions {
+                footprint: Footprint::Bilinear,
+                close_cracks: 1,
+                ..WarpOptions::default()
+            },
+            false,
+        ),
+        (
+            "bilinear, depth tolerance 10 %",
+            WarpOptions {
+                footprint: Footprint::Bilinear,
+                depth_tolerance: 0.1,
+                ..WarpOptions::default()
+            },
+            false,
+        ),
+    ];
+    for (stage, with_card) in [("dibr", false), ("dibr edges", true)] {
+        let (src, src_z) = trace(&from, with_card);
+        let (truth, truth_z) = trace(&to, with_card);
+        let img = ImageF32::new(w, h, 3, src).expect("image");
+        // Target pixels within 2 of a ray-traced depth edge (a 4-neighbour with more than
+        // 10 % depth difference).
+        let edge_px: Vec<bool> = {
+            let jump = |a: usize, b: usize| {
+                (truth_z[a] - truth_z[b]).abs() > 0.1 * truth_z[a].min(truth_z[b])
+            };
+            let on: Vec<bool> = (0..w * h)
+                .map(|i| {
+                    let (x, y) = (i % w, i / w);
+                    (x + 1 < w && jump(i, i + 1)) || (y + 1 < h && jump(i, i + w))
+                })
+                .collect();
+            (0..w * h)
+                .map(|i| {
+                    let (x, y) = ((i % w) as i64, (i / w) as i64);
+                    (-2..=2).any(|dy| {
+                        (-2..=2).any(|dx| {
+                            let (xx, yy) = (x + dx, y + dy);
+                            xx >= 0
+                                && yy >= 0
+                                && xx < w as i64
+                                && yy < h as i64
+                                && on[yy as usize * w + xx as usize]
+                        })
+                    })
+                })
+                .collect()
+        };
+        for (name, opts, default) in knobs {
+            if !with_card && opts.depth_tolerance != WarpOptions::default().depth_tolerance {
+                continue; // one surface: the depth band changes nothing
+            }
+            let (t, r) = best(3, || warp(&img, &src_z, &from, &to, &opts).expect("warps"));
+            let (mut sum, mut filled) = (0.0, 0usize);
+            let (mut edge_sum, mut edge_filled, mut wrong_surface) = (0.0, 0usize, 0usize);
+            for (i, &hole) in r.holes.iter().enumerate() {
+                if hole {
+                    continue;
+                }
+                let e: f64 = (0..3)
+                    .map(|c| (r.image.data[3 * i + c] as f64 - truth[3 * i + c] as f64).abs())
+                    .sum();
                 filled += 1;
-                for c in 0..3 {
-                    sum += (r.image.data[3 * i + c] as f64 - truth[3 * i + c] as f64).abs();
+                sum += e;
+                if edge_px[i] {
+                    edge_filled += 1;
+                    edge_sum += e;
+                }
+                if (r.depth[i] - truth_z[i]).abs() > 0.01 * truth_z[i] {
+                    wrong_surface += 1;
                 }
             }
+            let mut knob = format!("{name}: {} holes of {}", w * h - filled, w * h);
+            if with_card {
+                knob += &format!(
+                    ", {wrong_surface} on the wrong surface, {:.2e} mean within 2 px of an edge",
+                    edge_sum / (3 * edge_filled.max(1)) as f64
+                );
+            }
+            points.push(Point {
+                stage,
+                knob,
+                default,
+                metric: "mean |warp − ray-traced| (filled pixels)",
+                error: sum / (3 * filled.max(1)) as f64,
+                seconds: t,
+                pareto: false,
+            });
         }
-        points.push(Point {
-            stage: "dibr",
-            knob: format!("{name}: {} holes of {}", w * h - filled, w * h),
-            default,
-            metric: "mean |warp − ray-traced| (filled pixels)",
-            error: sum / (3 * filled.max(1)) as f64,
-            seconds: t,
-            pareto: false,
-        });
     }
+}
+
+/// The QA-Mask's fine-tune iterations and SH degree against a long SH-5 fine-tune (the
+/// paper's setting; 3000 iterations in quick mode, INRIA's 20 000 in the full run) of the
+/// same trained lounge scene (1000 iterations at resolution 1/2 in quick mode, 7000 at
+/// full resolution). Error: mean |mask − reference mask| over the held-out views' pixels,
+/// views no training camera saw, as the pipeline's generated views (the knob also gives it
+/// on the in-distribution test views, where the mask goes towards 0). Time: the fine-tune
+/// alone.
+fn qa_mask(quick: bool, points: &mut Vec<Point>) {
+    use unseen::camera::Camera;
+    use unseen::dataset::{self, LoadOptions};
+    use unseen::qamask::{QaMaskConfig, fine_tune, mask_scene, render_qa_mask};
+    use unseen::train::trainer::{TrainConfig, Trainer};
+    let (resolution, train_its, reference_its, budgets): (u32, u32, u32, &[u32]) = if quick {
+        (2, 1000, 3000, &[100, 300, 1000])
+    } else {
+        (1, 7000, 20_000, &[1000, 3000, 10_000])
+    };
+    let root =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("reference_data/scenes/lounge");
+    let data = dataset::load(
+        &root,
+        &LoadOptions {
+            resolution,
+            ..LoadOptions::default()
+        },
+    )
+    .expect("bundled scene");
+    let mut t = Trainer::new(
+        &data,
+        TrainConfig {
+            iterations: train_its,
+            save_iterations: vec![],
+            resolution,
+            ..TrainConfig::default()
+        },
+    )
+    .expect("trainer");
+    for _ in 0..train_its {
+        t.step().expect("step");
+    }
+    let trained = t.gaussians;
+    let cams = |split: &[usize]| -> Vec<Camera> {
+        split
+            .iter()
+            .map(|&i| data.views[i].camera.clone())
+            .collect()
+    };
+    let (train, heldout, test) = (cams(&data.train), cams(&data.heldout), cams(&data.test));
+    let run = |degree: u32, iterations: u32| {
+        let cfg = QaMaskConfig {
+            sh_degree: degree,
+            iterations,
+            ..QaMaskConfig::default()
+        };
+        let mut scene = mask_scene(&trained, &cfg).expect("mask scene");
+        let t0 = Instant::now();
+        fine_tune(&mut scene, &train, &cfg, &mut |_| {}).expect("fine-tune");
+        let seconds = t0.elapsed().as_secs_f64();
+        let masks = |views: &[Camera]| -> Vec<f32> {
+            views
+                .iter()
+                .flat_map(|c| render_qa_mask(&scene, c, &cfg).expect("mask"))
+                .collect()
+        };
+        (seconds, masks(&heldout), masks(&test))
+    };
+    let mean_diff = |a: &[f32], b: &[f32]| {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| f64::from((x - y).abs()))
+            .sum::<f64>()
+            / b.len() as f64
+    };
+    let (ref_seconds, reference, reference_test) = run(5, reference_its);
+    let default = QaMaskConfig::default();
+    for degree in [3, 4, 5] {
+        for &iterations in budgets {
+            let (seconds, masks, masks_test) = run(degree, iterations);
+            points.push(Point {
+                stage: "qa-mask",
+                knob: format!(
+                    "SH {degree}, {iterations} iterations ({:.2e} on the test views)",
+                    mean_diff(&masks_test, &reference_test)
+                ),
+                default: degree == default.sh_degree && iterations == default.iterations,
+                metric: "mean |mask − long SH-5 mask| (held-out pixels)",
+                error: mean_diff(&masks, &reference),
+                seconds,
+                pareto: false,
+            });
+        }
+    }
+    points.push(Point {
+        stage: "qa-mask",
+        knob: format!(
+            "SH 5, {reference_its} iterations (the reference itself; {} Gaussians)",
+            trained.len()
+        ),
+        default: reference_its == default.iterations,
+        metric: "mean |mask − long SH-5 mask| (held-out pixels)",
+        error: 0.0,
+        seconds: ref_seconds,
+        pareto: false,
+    });
 }
 
 /// Mark each stage's Pareto front (less error and less time than every other point of the
@@ -765,29 +1037,56 @@ fn svg(points: &[Point]) -> String {
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
+    let value = |flag: &str| {
+        args.iter()
+            .position(|a| a == flag)
+            .and_then(|i| args.get(i + 1))
+    };
     let quick = args.iter().any(|a| a == "--quick");
-    let out = args
-        .iter()
-        .position(|a| a == "--out")
-        .and_then(|i| args.get(i + 1))
-        .map_or_else(|| PathBuf::from("reference_data/accuracy"), PathBuf::from);
+    // `--only gjk,dibr` runs those stages and writes only where `--out` says (a partial
+    // table must not replace the committed one by default).
+    let only: Option<Vec<&str>> = value("--only").map(|v| v.split(',').collect());
+    let out = match (value("--out"), &only) {
+        (Some(dir), _) => Some(PathBuf::from(dir)),
+        (None, None) => Some(PathBuf::from("reference_data/accuracy")),
+        (None, Some(_)) => None,
+    };
+    type Stage = fn(bool, &mut Vec<Point>);
+    let stages: [(&str, Stage); 9] = [
+        ("forward", forward),
+        ("backward", |_, p| backward_fd(p)),
+        ("exp", exp),
+        ("ransac", alignment),
+        ("gjk", gjk),
+        ("gjk-frustums", gjk_frustums),
+        ("dibr", dibr),
+        ("training", training),
+        ("qa-mask", qa_mask),
+    ];
+    if let Some(names) = &only {
+        for name in names {
+            assert!(
+                stages.iter().any(|(s, _)| s == name),
+                "--only: no stage {name:?} (stages: forward, backward, exp, ransac, gjk, gjk-frustums, dibr, training, qa-mask)"
+            );
+        }
+    }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
         .expect("pool");
     let mut points = Vec::new();
     pool.install(|| {
-        forward(quick, &mut points);
-        backward_fd(&mut points);
-        exp(quick, &mut points);
-        alignment(quick, &mut points);
-        gjk(quick, &mut points);
-        dibr(quick, &mut points);
-        training(quick, &mut points);
+        for (name, stage) in stages {
+            if only.as_ref().is_none_or(|o| o.contains(&name)) {
+                stage(quick, &mut points);
+            }
+        }
     });
     mark_pareto(&mut points);
     let md = markdown(&points, quick);
     print!("{md}");
+    let Some(out) = out else { return };
     std::fs::create_dir_all(&out).expect("output folder");
     for (name, text) in [
         ("accuracy.csv", csv(&points)),

@@ -14,6 +14,7 @@ mod models;
 mod onnx;
 mod oracle;
 mod pipeline;
+mod polytope;
 mod qamask;
 mod raster;
 mod readers;
