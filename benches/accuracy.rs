@@ -21,6 +21,8 @@
 //!   (`tests/suite/polytope.rs`);
 //! - `dibr`, `dibr edges`: the warp's footprint and crack closing against a ray-traced
 //!   plane, and the plane behind a card (depth edges);
+//! - `ssim`: the float type (f64 / f32) and window form (separable / direct 11×11) of the
+//!   loss's SSIM against the f64 direct window;
 //! - `training`: iterations with and without densification on `lounge` against the
 //!   test views' mean squared error (ground truth), checkpoints of one run each;
 //! - `qa-mask`: fine-tune iterations × SH degree 3–5 against a long SH-5 fine-tune, mean
@@ -908,6 +910,159 @@ fn qa_mask(quick: bool, points: &mut Vec<Point>) {
     });
 }
 
+/// Mean SSIM (`train::ssim`'s definition: 11×11 Gaussian window, σ 1.5, zero padding,
+/// per channel) in the float type `$t`, with the 2D window applied directly (`separable:
+/// false`, INRIA's `conv2d` with the outer product) or as two 1D passes.
+macro_rules! ssim_in {
+    ($name:ident, $t:ty) => {
+        fn $name(x: &[f32], y: &[f32], w: usize, h: usize, c: usize, separable: bool) -> f64 {
+            let k1: Vec<$t> = {
+                let g: Vec<f64> = (0..11)
+                    .map(|i| (-((i as f64 - 5.0).powi(2)) / (2.0 * 1.5 * 1.5)).exp())
+                    .collect();
+                let s: f64 = g.iter().sum();
+                g.iter().map(|v| (v / s) as $t).collect()
+            };
+            let blur = |src: &[$t]| -> Vec<$t> {
+                let mut out = vec![0 as $t; w * h];
+                if separable {
+                    // Row-wise passes, taps outer and pixels inner (the loop order of
+                    // `train::ssim`'s blur, so both vectorize alike).
+                    let mut tmp = vec![0 as $t; w * h];
+                    for (row_out, row_in) in tmp.chunks_exact_mut(w).zip(src.chunks_exact(w)) {
+                        for (t, &kv) in k1.iter().enumerate() {
+                            let off = t as isize - 5;
+                            let lo = (-off).max(0) as usize;
+                            let hi = (w as isize - off).clamp(0, w as isize) as usize;
+                            if lo < hi {
+                                let from = (lo as isize + off) as usize;
+                                for (o, &v) in row_out[lo..hi].iter_mut().zip(&row_in[from..]) {
+                                    *o += kv * v;
+                                }
+                            }
+                        }
+                    }
+                    for (yy, row_out) in out.chunks_exact_mut(w).enumerate() {
+                        for (t, &kv) in k1.iter().enumerate() {
+                            let sy = yy as isize + t as isize - 5;
+                            if sy >= 0 && (sy as usize) < h {
+                                let row = &tmp[sy as usize * w..(sy as usize + 1) * w];
+                                for (o, &v) in row_out.iter_mut().zip(row) {
+                                    *o += kv * v;
+                                }
+                            }
+                        }
+                    }
+                } else {
+                    for yy in 0..h {
+                        for xx in 0..w {
+                            let mut acc = 0 as $t;
+                            for (ty, &ky) in k1.iter().enumerate() {
+                                let sy = yy as isize + ty as isize - 5;
+                                if sy < 0 || sy as usize >= h {
+                                    continue;
+                                }
+                                for (tx, &kx) in k1.iter().enumerate() {
+                                    let sx = xx as isize + tx as isize - 5;
+                                    if sx >= 0 && (sx as usize) < w {
+                                        acc += (ky * kx) * src[sy as usize * w + sx as usize];
+                                    }
+                                }
+                            }
+                            out[yy * w + xx] = acc;
+                        }
+                    }
+                }
+                out
+            };
+            let (c1, c2) = (0.01 as $t * 0.01 as $t, 0.03 as $t * 0.03 as $t);
+            let mut total = 0f64;
+            for ch in 0..c {
+                let plane = |f: &dyn Fn($t, $t) -> $t| -> Vec<$t> {
+                    (0..w * h)
+                        .map(|p| f(x[p * c + ch] as $t, y[p * c + ch] as $t))
+                        .collect()
+                };
+                let mx = blur(&plane(&|a, _| a));
+                let my = blur(&plane(&|_, b| b));
+                let exx = blur(&plane(&|a, _| a * a));
+                let eyy = blur(&plane(&|_, b| b * b));
+                let exy = blur(&plane(&|a, b| a * b));
+                for p in 0..w * h {
+                    let (ux, uy) = (mx[p], my[p]);
+                    let (sxx, syy, sxy) = (exx[p] - ux * ux, eyy[p] - uy * uy, exy[p] - ux * uy);
+                    let v = ((2 as $t) * ux * uy + c1) * ((2 as $t) * sxy + c2)
+                        / ((ux * ux + uy * uy + c1) * (sxx + syy + c2));
+                    total += f64::from(v);
+                }
+            }
+            total / (w * h * c) as f64
+        }
+    };
+}
+ssim_in!(ssim_f32, f32);
+ssim_in!(ssim_f64, f64);
+
+/// SSIM's float type and window form against the f64 direct 2D window (the shadow) on a
+/// pair of 3-channel images: a smooth texture with noise, and it blurred, shifted in
+/// colour and noised again (a render against its ground truth). Error: |mean SSIM −
+/// shadow|.
+fn ssim_stage(quick: bool, points: &mut Vec<Point>) {
+    let (w, h) = if quick { (128, 96) } else { (512, 384) };
+    let mut u = Uniform::new(21);
+    let x: Vec<f32> = (0..w * h * 3)
+        .map(|i| {
+            let (p, c) = (i / 3, i % 3);
+            let (px, py) = ((p % w) as f32, (p / w) as f32);
+            (0.5 + 0.3 * (0.11 * px + c as f32).sin() * (0.07 * py).cos() + 0.05 * u.normal())
+                .clamp(0.0, 1.0)
+        })
+        .collect();
+    let y: Vec<f32> = (0..w * h * 3)
+        .map(|i| {
+            let l = if i >= 3 { x[i - 3] } else { x[i] };
+            (0.5 * (x[i] + l) + 0.02 + 0.03 * u.normal()).clamp(0.0, 1.0)
+        })
+        .collect();
+    let (_, shadow) = best(1, || ssim_f64(&x, &y, w, h, 3, false));
+    let runs = if quick { 3 } else { 1 };
+    type Form<'a> = (&'a str, bool, Box<dyn Fn() -> f64 + 'a>);
+    let forms: [Form; 4] = [
+        (
+            "f64 separable (train::ssim, the loss's)",
+            true,
+            Box::new(|| unseen::train::ssim::ssim(&x, &y, w, h, 3, false).0),
+        ),
+        (
+            "f64 direct 11×11 window (the shadow itself)",
+            false,
+            Box::new(|| ssim_f64(&x, &y, w, h, 3, false)),
+        ),
+        (
+            "f32 direct 11×11 window (INRIA's conv2d arithmetic)",
+            false,
+            Box::new(|| ssim_f32(&x, &y, w, h, 3, false)),
+        ),
+        (
+            "f32 separable",
+            false,
+            Box::new(|| ssim_f32(&x, &y, w, h, 3, true)),
+        ),
+    ];
+    for (name, default, f) in forms {
+        let (t, v) = best(runs, &f);
+        points.push(Point {
+            stage: "ssim",
+            knob: format!("{name}, {w}×{h}×3 (SSIM {v:.6})"),
+            default,
+            metric: "|SSIM − f64 direct window|",
+            error: (v - shadow).abs(),
+            seconds: t,
+            pareto: false,
+        });
+    }
+}
+
 /// Mark each stage's Pareto front (less error and less time than every other point of the
 /// stage in at least one, no more in the other).
 fn mark_pareto(points: &mut [Point]) {
@@ -1052,7 +1207,7 @@ fn main() {
         (None, Some(_)) => None,
     };
     type Stage = fn(bool, &mut Vec<Point>);
-    let stages: [(&str, Stage); 9] = [
+    let stages: [(&str, Stage); 10] = [
         ("forward", forward),
         ("backward", |_, p| backward_fd(p)),
         ("exp", exp),
@@ -1060,6 +1215,7 @@ fn main() {
         ("gjk", gjk),
         ("gjk-frustums", gjk_frustums),
         ("dibr", dibr),
+        ("ssim", ssim_stage),
         ("training", training),
         ("qa-mask", qa_mask),
     ];
@@ -1067,7 +1223,7 @@ fn main() {
         for name in names {
             assert!(
                 stages.iter().any(|(s, _)| s == name),
-                "--only: no stage {name:?} (stages: forward, backward, exp, ransac, gjk, gjk-frustums, dibr, training, qa-mask)"
+                "--only: no stage {name:?} (stages: forward, backward, exp, ransac, gjk, gjk-frustums, dibr, ssim, training, qa-mask)"
             );
         }
     }
