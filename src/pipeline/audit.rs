@@ -314,6 +314,78 @@ pub struct JobResult {
     /// Per stage (`views`, `stage1`, `stage2`, `interpolate`, `eval`): seconds of the steps
     /// as they were computed (a step copied from the cache counts what it cost there).
     pub stage_seconds: std::collections::BTreeMap<String, f64>,
+    /// Every step of the job's run, in run order, with its manifest digest (equal digests
+    /// are one computation, shared through the cache) and its compute seconds. Empty in
+    /// job files written before it was recorded.
+    #[serde(default)]
+    pub steps: Vec<StepCost>,
+}
+
+/// One step of a job: what [`sharing`] counts.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct StepCost {
+    pub name: String,
+    pub digest: String,
+    pub seconds: f64,
+}
+
+/// Stage names as the audit reports them (`qa/<scene>` is `qa-mask`).
+fn stage_of(step: &str) -> String {
+    match step.split('/').next().unwrap_or("") {
+        "qa" => "qa-mask".into(),
+        s => s.into(),
+    }
+}
+
+/// What the step cache saves, per stage (in first-seen order): step executions over all
+/// jobs, distinct steps (digests), compute seconds if every job computed its own steps, and
+/// seconds with each distinct step computed once.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sharing {
+    pub stage: String,
+    pub executions: usize,
+    pub distinct: usize,
+    pub unshared_seconds: f64,
+    pub shared_seconds: f64,
+}
+
+/// [`Sharing`] of `results`, per stage and a last row `all`.
+pub fn sharing(results: &[JobResult]) -> Vec<Sharing> {
+    let mut rows: Vec<Sharing> = Vec::new();
+    let mut seen = std::collections::BTreeSet::new();
+    let mut add = |stage: String, step: &StepCost, first: bool| {
+        let i = match rows.iter().position(|r| r.stage == stage) {
+            Some(i) => i,
+            None => {
+                rows.push(Sharing {
+                    stage,
+                    executions: 0,
+                    distinct: 0,
+                    unshared_seconds: 0.0,
+                    shared_seconds: 0.0,
+                });
+                rows.len() - 1
+            }
+        };
+        let r = &mut rows[i];
+        r.executions += 1;
+        r.unshared_seconds += step.seconds;
+        if first {
+            r.distinct += 1;
+            r.shared_seconds += step.seconds;
+        }
+    };
+    for step in results.iter().flat_map(|r| &r.steps) {
+        let first = seen.insert(step.digest.clone());
+        add(stage_of(&step.name), step, first);
+        add("all".into(), step, first);
+    }
+    // `all` last.
+    if let Some(i) = rows.iter().position(|r| r.stage == "all") {
+        let all = rows.remove(i);
+        rows.push(all);
+    }
+    rows
 }
 
 /// Run (or verify) one job. Originals are trained once per seed and reused; a pipeline job
@@ -370,17 +442,18 @@ pub fn run_job(
                 _ => return Err(Error::invalid("the run evaluated no scene").at(&out)),
             };
             let mut stage_seconds = std::collections::BTreeMap::new();
+            let mut steps = Vec::new();
             for step in &outcome.steps {
-                let t = std::fs::read(step.dir.join(super::rundir::TIMING_FILE))
+                let seconds = std::fs::read(step.dir.join(super::rundir::TIMING_FILE))
                     .ok()
-                    .and_then(|b| serde_json::from_slice::<crate::io::Cost>(&b).ok());
-                let stage = step.name.split('/').next().unwrap_or("").to_string();
-                let stage = if stage == "qa" {
-                    "qa-mask".to_string()
-                } else {
-                    stage
-                };
-                *stage_seconds.entry(stage).or_insert(0.0) += t.map_or(0.0, |c| c.seconds);
+                    .and_then(|b| serde_json::from_slice::<crate::io::Cost>(&b).ok())
+                    .map_or(0.0, |c| c.seconds);
+                *stage_seconds.entry(stage_of(&step.name)).or_insert(0.0) += seconds;
+                steps.push(StepCost {
+                    name: step.name.clone(),
+                    digest: step.digest.clone(),
+                    seconds,
+                });
             }
             let result = JobResult {
                 generator: generator.name(),
@@ -389,6 +462,7 @@ pub fn run_job(
                 original: first,
                 last,
                 stage_seconds,
+                steps,
             };
             let text = serde_json::to_string_pretty(&result).expect("serializes") + "\n";
             crate::io::write_text(&out.join("audit_job.json"), &text)?;
@@ -900,6 +974,24 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
                 })
                 .collect();
             s += &format!("| {g} | {} | {} |\n", v.name(), cells.join(" | "));
+        }
+    }
+    let shared = sharing(&report.results);
+    if !shared.is_empty() {
+        s += "\n## What the step cache saves\n\nSteps whose inputs are equal (same manifest digest) are computed once and reused by every job that needs them (SPEC.md §20.8). *executions*: steps over all jobs; *distinct*: computed; compute in seconds if every job computed its own steps, and as run. The original scenes (one training per seed) are not counted.\n\n| stage | executions | distinct | unshared (s) | shared (s) | saved |\n|---|---|---|---|---|---|\n";
+        for r in &shared {
+            let saved = if r.unshared_seconds > 0.0 {
+                format!(
+                    "{:.0} %",
+                    100.0 * (1.0 - r.shared_seconds / r.unshared_seconds)
+                )
+            } else {
+                "–".into()
+            };
+            s += &format!(
+                "| {} | {} | {} | {:.1} | {:.1} | {saved} |\n",
+                r.stage, r.executions, r.distinct, r.unshared_seconds, r.shared_seconds
+            );
         }
     }
     s += "\n![PSNR against the generator's inconsistency](inconsistency.svg)\n";

@@ -804,8 +804,23 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
             "{v:?}"
         );
     }
+    // What sharing saved: every step copied from the cache is one execution more than the
+    // distinct steps; the views step is computed once per seed.
+    let shared = audit::sharing(&report.results);
+    let all = shared.last().unwrap();
+    assert_eq!(all.stage, "all");
+    assert_eq!(all.executions - all.distinct, cached.len(), "{shared:?}");
+    let views = shared.iter().find(|r| r.stage == "views").unwrap();
+    assert_eq!((views.executions, views.distinct), (4, 2), "{shared:?}");
+    for r in &shared {
+        assert!(
+            r.shared_seconds <= r.unshared_seconds && r.shared_seconds > 0.0,
+            "{r:?}"
+        );
+    }
     let md = std::fs::read_to_string(dir.join("audit.md")).unwrap();
     assert!(md.contains("| truth-low | opacity_mask |"), "{md}");
+    assert!(md.contains("## What the step cache saves"), "{md}");
     assert!(md.contains("QA-Mask over opacity maps, existing"));
     let svg = std::fs::read_to_string(dir.join("inconsistency.svg")).unwrap();
     assert!(svg.starts_with("<svg") && svg.contains("<circle"));
