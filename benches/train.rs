@@ -140,9 +140,13 @@ fn main() {
                 )
                 .unwrap();
                 rec.color_backward(&out.grad_rgb, &mut work).unwrap();
-                qadam.step_with(&mut qs, Param::ShRest, 1.25e-4, &|first, g| {
-                    rec.sh_rest_grad(&work, first, g)
-                });
+                qadam.step_with(
+                    &mut qs,
+                    Param::ShRest,
+                    1.25e-4,
+                    &|first, g| rec.sh_rest_grad(&work, first, g),
+                    None,
+                );
                 tq.push(q0.elapsed().as_secs_f64());
             }
             let f = median(tf);

@@ -178,6 +178,15 @@ pub fn fine_tune(
             (0..n).flat_map(|_| cfg.target_color).collect()
         })
         .collect();
+    // Gaussians no view has a splat of get a zero gradient at every step, so Adam leaves
+    // them (and their zero moments) as they are: skipping them is exact (SPEC.md §15.1).
+    let mut seen = vec![false; scene.len()];
+    for rec in &records {
+        for (s, &v) in seen.iter_mut().zip(rec.visible()) {
+            *s |= v;
+        }
+    }
+    let skip = seen.contains(&false).then_some(&seen[..]);
     let mut adam = Adam::new(cfg.adam, scene)?;
     let mut rng = Uniform::new(stage_seed(cfg.seed, "qa-mask"));
     let mut stack: Vec<usize> = Vec::new();
@@ -206,9 +215,13 @@ pub fn fine_tune(
         rec.color_backward(&out.grad_rgb, &mut work)?;
         // The SH-rest gradient is made chunk by chunk inside the Adam step: the full
         // (N, K−1, 3) gradient array is never written.
-        adam.step_with(scene, Param::ShRest, cfg.lr_sh_rest, &|first, g| {
-            rec.sh_rest_grad(&work, first, g)
-        });
+        adam.step_with(
+            scene,
+            Param::ShRest,
+            cfg.lr_sh_rest,
+            &|first, g| rec.sh_rest_grad(&work, first, g),
+            skip,
+        );
         loss = out.terms.total;
         on_progress(&FineTuneProgress {
             iteration: it,

@@ -207,15 +207,17 @@ impl Adam {
     /// `out` with the gradient of elements `first..first + out.len()` of the group (chunks
     /// hold whole Gaussians). A caller that can compute its gradient per Gaussian (the
     /// QA-Mask fine-tune) never materializes the full gradient array; the bits are those
-    /// of [`Adam::step`] with the same gradient.
+    /// of [`Adam::step_sparse`] with the same gradient and `visible`. With `visible`,
+    /// `grad` is not called for a chunk without a visible Gaussian.
     pub fn step_with(
         &mut self,
         params: &mut Gaussians,
         p: Param,
         lr: f32,
         grad: &(dyn Fn(usize, &mut [f32]) + Sync),
+        visible: Option<&[bool]>,
     ) {
-        self.step_impl(params, p, lr, Grad::Chunks(grad), None);
+        self.step_impl(params, p, lr, Grad::Chunks(grad), visible);
     }
 
     fn step_impl(
@@ -258,6 +260,10 @@ impl Adam {
             .enumerate()
             .for_each_init(Vec::new, |buf, (ci, ((x, m), v))| {
                 let first = ci * chunk;
+                let rows = visible.map(|vis| &vis[ci * CHUNK_ROWS..][..x.len() / row]);
+                if rows.is_some_and(|r| !r.contains(&true)) {
+                    return; // nothing to update: no gradient to make
+                }
                 // A gradient array is read in place; a chunked one is made in `buf`.
                 let g: &[f32] = match grad {
                     Grad::Slice(g) => &g[first..first + x.len()],
@@ -270,10 +276,9 @@ impl Adam {
                 let update = |x: &mut [f32], m: &mut [f32], v: &mut [f32], g: &[f32]| {
                     update_dispatch(isa, x, m, v, g, k);
                 };
-                match visible {
+                match rows {
                     None => update(x, m, v, g),
-                    Some(vis) => {
-                        let rows = &vis[ci * CHUNK_ROWS..][..x.len() / row];
+                    Some(rows) => {
                         for (k, _) in rows.iter().enumerate().filter(|(_, v)| **v) {
                             let e = k * row..(k + 1) * row;
                             update(
@@ -373,5 +378,46 @@ mod tests {
         if std::is_x86_feature_detected!("avx2") {
             assert_eq!(run(Isa::Avx2), reference);
         }
+    }
+
+    /// `step_with` with `visible` gives the bits of `step_sparse` with the same gradient and
+    /// never asks for the gradient of a chunk without a visible Gaussian.
+    #[test]
+    fn chunked_sparse_step_skips_invisible_chunks() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let n = 3 * CHUNK_ROWS + 17;
+        let mut a = Gaussians::zeros(n, 1).unwrap();
+        for (i, x) in a.sh_rest.iter_mut().enumerate() {
+            *x = (i as f32 * 0.37).sin();
+        }
+        let mut b = a.clone();
+        let grad: Vec<f32> = (0..a.sh_rest.len())
+            .map(|i| (i as f32 * 0.11).cos())
+            .collect();
+        // Visible: Gaussians 0–9, and every 7th from 2·256 + 50 on; chunk 1 has none.
+        let visible: Vec<bool> = (0..n)
+            .map(|i| i < 10 || (i >= 2 * CHUNK_ROWS + 50 && i % 7 == 0))
+            .collect();
+        let mut adam_a = Adam::new(AdamConfig::default(), &a).unwrap();
+        let mut adam_b = adam_a.clone();
+        let calls = AtomicUsize::new(0);
+        for _ in 0..3 {
+            adam_a.step_sparse(&mut a, Param::ShRest, &grad, 1e-2, Some(&visible));
+            adam_b.step_with(
+                &mut b,
+                Param::ShRest,
+                1e-2,
+                &|first, out| {
+                    calls.fetch_add(1, Ordering::Relaxed);
+                    out.copy_from_slice(&grad[first..first + out.len()]);
+                },
+                Some(&visible),
+            );
+        }
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&a.sh_rest), bits(&b.sh_rest));
+        assert_eq!(bits(&adam_a.v.sh_rest), bits(&adam_b.v.sh_rest));
+        // Chunks 0, 2 and 3 of 4, three steps: 9 calls.
+        assert_eq!(calls.load(Ordering::Relaxed), 9);
     }
 }

@@ -694,9 +694,13 @@ fn frozen_replay_matches_full_render_and_backward() {
         let mut adam_b = adam_a.clone();
         for _ in 0..2 {
             adam_a.step(&mut a, Param::ShRest, &want.sh_rest, 1e-3);
-            adam_b.step_with(&mut b, Param::ShRest, 1e-3, &|first, g| {
-                frozen.sh_rest_grad(&ws, first, g)
-            });
+            adam_b.step_with(
+                &mut b,
+                Param::ShRest,
+                1e-3,
+                &|first, g| frozen.sh_rest_grad(&ws, first, g),
+                None,
+            );
         }
         assert!(
             bits(&a.sh_rest) == bits(&b.sh_rest),

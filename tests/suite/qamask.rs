@@ -4,7 +4,8 @@
 use super::common::{reference, short_train_config, with_threads};
 use unseen::camera::Camera;
 use unseen::dataset::{self, Dataset, LoadOptions, Split};
-use unseen::gaussian::Gaussians;
+use unseen::gaussian::{Gaussians, Param};
+use unseen::math::sh::num_coeffs;
 use unseen::qamask::{QaMaskConfig, audit, fine_tune, mask_scene, render_qa_mask};
 use unseen::raster::{RenderOptions, render};
 use unseen::train::trainer::Trainer;
@@ -127,6 +128,112 @@ fn qa_mask_fine_tune_changes_only_sh_rest_and_is_deterministic() {
             .unwrap()
             .iter()
             .all(|&m| m == 1.0)
+    );
+}
+
+/// The fine-tune of [`fine_tune`] written out densely: every view's record replayed with
+/// [`FrozenBlend::backward_sh`] and a dense [`Adam::step`] over every Gaussian (no skip).
+fn dense_fine_tune(scene: &mut Gaussians, views: &[Camera], cfg: &QaMaskConfig) {
+    use unseen::raster::Outputs;
+    use unseen::raster::backward::GradGroups;
+    use unseen::raster::backward::frozen::FrozenBlend;
+    use unseen::scene::Uniform;
+    use unseen::train::adam::Adam;
+    use unseen::train::loss::{LossInput, image_loss};
+    use unseen::train::trainer::stage_seed;
+    let opts = RenderOptions {
+        background: cfg.target_color,
+        sh_degree: Some(cfg.sh_degree),
+        outputs: Outputs::RGB,
+        ..RenderOptions::default()
+    };
+    let records: Vec<FrozenBlend> = views
+        .iter()
+        .map(|c| FrozenBlend::record(scene, c, &opts).unwrap())
+        .collect();
+    let mut adam = Adam::new(cfg.adam, scene).unwrap();
+    let mut rng = Uniform::new(stage_seed(cfg.seed, "qa-mask"));
+    let mut stack: Vec<usize> = Vec::new();
+    for _ in 0..cfg.iterations {
+        if stack.is_empty() {
+            stack = (0..views.len()).collect();
+        }
+        let vi = stack.remove(rng.below(stack.len() as u32) as usize);
+        let (w, h) = (views[vi].width as usize, views[vi].height as usize);
+        let rgb = records[vi].render_rgb(scene).unwrap();
+        let target: Vec<f32> = (0..w * h).flat_map(|_| cfg.target_color).collect();
+        let out = image_loss(
+            &LossInput {
+                width: w,
+                height: h,
+                rgb: &rgb,
+                target_rgb: &target,
+                depth: None,
+                target_depth: None,
+                mask: None,
+            },
+            &cfg.loss,
+        )
+        .unwrap();
+        let g = records[vi]
+            .backward_sh(scene, &out.grad_rgb, &GradGroups::SH_REST)
+            .unwrap();
+        adam.step(scene, Param::ShRest, &g.sh_rest, cfg.lr_sh_rest);
+    }
+}
+
+/// The fine-tune skips the Gaussians no training view has a splat of (they get a zero
+/// gradient at every step, so Adam leaves them as they are): exact. The trained scene plus
+/// 700 copies culled everywhere (opacity below the alpha threshold; whole Adam chunks of
+/// them, and a few interleaved) fine-tunes to the bits of the dense fine-tune (no skip) of
+/// the same scene, and to those of the trained scene alone; the copies keep their zero SH
+/// rest.
+#[test]
+fn qa_mask_fine_tune_skips_unseen_gaussians_exactly() {
+    let (d, g) = fixture();
+    let cfg = short_cfg(60, 3);
+    let train = cams(d, Split::Train);
+    let n = g.len();
+    let mut extra = g.select(&(0..700).collect::<Vec<_>>());
+    extra.opacity_logits.fill(-100.0);
+    // Interleaved: the first 7 copies go between the trained Gaussians.
+    let mut order: Vec<usize> = (0..n).collect();
+    for k in 0..7 {
+        order.insert(k * 100 + 50, n + k);
+    }
+    order.extend(n + 7..n + 700);
+    let mut both = g.clone();
+    both.append(&extra);
+    let both = both.select(&order);
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    let tune = |scene: &Gaussians| {
+        let mut s = mask_scene(scene, &cfg).unwrap();
+        fine_tune(&mut s, &train, &cfg, &mut |_| {}).unwrap();
+        s
+    };
+    let (alone, with_extra) = (tune(g), tune(&both));
+    let mut dense = mask_scene(&both, &cfg).unwrap();
+    dense_fine_tune(&mut dense, &train, &cfg);
+    assert!(
+        bits(&dense.sh_rest) == bits(&with_extra.sh_rest),
+        "the skipping fine-tune differs from the dense one"
+    );
+    let k = (num_coeffs(3) - 1) * 3;
+    let mut kept = Vec::new();
+    for (pos, &i) in order.iter().enumerate() {
+        let rest = &with_extra.sh_rest[pos * k..(pos + 1) * k];
+        if i < n {
+            kept.extend_from_slice(rest);
+        } else {
+            assert!(
+                rest.iter().all(|v| v.to_bits() == 0),
+                "culled copy {i} changed"
+            );
+        }
+    }
+    assert!(
+        bits(&kept) == bits(&alone.sh_rest),
+        "the skip changed the fine-tune"
     );
 }
 

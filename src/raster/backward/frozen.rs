@@ -249,6 +249,12 @@ impl FrozenBlend {
             + b(&self.alpha)
     }
 
+    /// Per Gaussian: has a splat in this view (a Gaussian without one gets no gradient
+    /// from it).
+    pub fn visible(&self) -> &[bool] {
+        &self.visible
+    }
+
     /// Blended (pixel, splat) pairs of the record.
     pub fn pairs(&self) -> usize {
         self.alpha.iter().filter(|&&a| a > 0.0).count()
