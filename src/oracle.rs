@@ -20,8 +20,10 @@ pub const CONVENTIONS_VERSION: u32 = 1;
 /// conventions version does not cover (numbers a port matches only to a tolerance). Part
 /// of every pipeline step's key, so neither a step cache nor `--resume` reuses a result the
 /// current code would not reproduce bit for bit. History: 1 before issue #13; 2 the
-/// backward blend's lane-pair summation order; 3 the f32 SH direction derivative.
-pub const NUMERICS_REVISION: u32 = 3;
+/// backward blend's lane-pair summation order; 3 the f32 SH direction derivative; 4 GJK's
+/// verdict on its certified lower bound (differs only where GJK stalls on nearly parallel
+/// faces).
+pub const NUMERICS_REVISION: u32 = 4;
 
 /// Image losses the oracle can differentiate.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

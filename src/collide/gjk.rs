@@ -8,12 +8,14 @@
 //! - the simplex is a tetrahedron containing the origin, or `|v|` is at rounding level
 //!   (`|v| ≤ ABS_EPS · scale`): **intersecting**;
 //! - the duality gap `|v|² − v·w ≤ REL_EPS · |v|²` (van den Bergen's relative test), or `w`
-//!   is already in the simplex, or `|v|` stopped decreasing: **separated** at distance `|v|`;
+//!   is already in the simplex, or `|v|` stopped decreasing: the distance is in
+//!   `[lower, |v|]`, `lower` the largest support-plane distance `v·w/|v|` seen;
 //! - after [`MAX_ITERATIONS`]: an error, never a silent answer.
 //!
-//! A distance at or below `touch_eps = TOUCH_REL · scale` (`scale` = the largest vertex
+//! A lower bound at or below `touch_eps = TOUCH_REL · scale` (`scale` = the largest vertex
 //! magnitude of either shape, at least 1e-300) counts as touching, i.e. colliding: two
-//! views are independent only when clearly separated.
+//! views are independent only when certainly separated (on nearly parallel faces GJK can
+//! stall with `|v|` well above the distance, SPEC.md §16.1).
 
 use crate::error::{Error, Result};
 use glam::DVec3;
@@ -79,15 +81,19 @@ impl Support for ConvexHull {
 /// The answer of a query.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Proximity {
-    /// Distance between the shapes (0 when they intersect): `|v|`, the length of a point of
-    /// the Minkowski difference, so never below the true distance (up to rounding).
+    /// Distance between the shapes (0 when the simplex holds the origin): `|v|`, the length
+    /// of a point of the Minkowski difference, so never below the true distance (up to
+    /// rounding).
     pub distance: f64,
-    /// A certified lower bound of the distance: the largest `v·w / |v|` of the iterations
-    /// (the support plane's distance; 0 when they intersect). `distance − lower_bound` is
-    /// the duality gap left when the query stopped; it is at rounding level except where
-    /// GJK stalls, on nearly parallel faces (SPEC.md §16.1).
+    /// A lower bound of the distance, exact up to rounding: the largest `v·w / |v|` of the
+    /// iterations (the support plane's distance), at most `distance`; 0 when `distance`
+    /// is (the origin in a tetrahedron, or `|v| ≤ ABS_EPS·scale`, which may hide a true
+    /// distance up to that). `distance − lower_bound` is the duality gap left when the
+    /// query stopped: rounding level except where GJK stalls on nearly parallel faces
+    /// (SPEC.md §16.1).
     pub lower_bound: f64,
-    /// True when they overlap or touch within `touch_eps`.
+    /// True when they may overlap or touch within `touch_eps`: `lower_bound ≤ touch_eps`
+    /// (a stalled query errs towards colliding).
     pub intersect: bool,
     /// The touching tolerance used (`TOUCH_REL · scale`).
     pub touch_eps: f64,
@@ -161,16 +167,19 @@ pub fn proximity_with(a: &dyn Support, b: &dyn Support, tol: &Tolerances) -> Res
     };
     // Start from the difference of two vertices along an arbitrary axis.
     let mut v = a.support(DVec3::X) - b.support(-DVec3::X);
-    let done = |distance: f64, lower_bound: f64, iterations: usize| Proximity {
-        distance,
-        lower_bound: if distance == 0.0 {
-            0.0
-        } else {
-            lower_bound.min(distance)
-        },
-        intersect: distance <= touch_eps,
-        touch_eps,
-        iterations,
+    let done = |distance: f64, lower: f64, iterations: usize| {
+        debug_assert!(
+            lower <= distance + 1e-13 * scale,
+            "support-plane bound {lower} above the distance {distance}"
+        );
+        let lower_bound = lower.min(distance);
+        Proximity {
+            distance,
+            lower_bound,
+            intersect: lower_bound <= touch_eps,
+            touch_eps,
+            iterations,
+        }
     };
     let mut lower = 0f64;
     for it in 1..=tol.max_iterations {

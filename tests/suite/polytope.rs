@@ -181,8 +181,9 @@ fn segment_segment(p0: DVec3, p1: DVec3, q0: DVec3, q1: DVec3) -> f64 {
     let (a, e, b) = (d1.length_squared(), d2.length_squared(), d1.dot(d2));
     let (c, f) = (d1.dot(r), d2.dot(r));
     let denom = a * e - b * b;
-    // Parallel (or degenerate) segments: the end points attain the minimum.
-    if denom <= 1e-14 * a * e {
+    // Parallel (or degenerate) segments: the end points attain the minimum. Otherwise any
+    // `(s, t)` inside the square is a real pair of points, however ill-conditioned.
+    if denom <= 0.0 {
         return ends;
     }
     let s = (b * f - c * e) / denom;
@@ -220,8 +221,9 @@ pub fn exact_distance(a: &Frustum, b: &Frustum) -> f64 {
 
 /// A pair with nearly parallel facing faces: `a` is a random frustum (`random_frustum`),
 /// `b` its mirror image across a plane parallel to one of `a`'s faces (`face`: 0 near,
-/// 1 far, 2–5 sides) `gap` × the face's diagonal beyond it, turned by `angle` about an axis
-/// in that plane through the face's centre. At `angle = 0` the two faces are parallel.
+/// 1 far, 2–5 sides) half of `gap` × the face's diagonal beyond it — so the mirrored face
+/// is `gap` × the diagonal away —, turned by `angle` about a random axis in that plane
+/// through the point above the face's centre. At `angle = 0` the faces are parallel.
 pub fn facing_pair(u: &mut Uniform, face: usize, gap: f64, angle: f64) -> (Frustum, Frustum) {
     const FACES: [[usize; 4]; 6] = [
         [0, 1, 2, 3],
@@ -253,4 +255,48 @@ pub fn facing_pair(u: &mut Uniform, face: usize, gap: f64, angle: f64) -> (Frust
         *p = pivot + turn * (mirrored - pivot);
     }
     (a, b)
+}
+
+/// The largest vertex coordinate magnitude of a pair (GJK's `scale`).
+pub fn pair_scale(a: &Frustum, b: &Frustum) -> f64 {
+    a.v.iter()
+        .chain(&b.v)
+        .map(|v| v.abs().max_element())
+        .fold(0.0, f64::max)
+}
+
+/// A random pair: two `random_frustum`s, the second centred within ±1 of the first's
+/// near-to-far length (so about half the pairs overlap).
+pub fn random_pair(u: &mut Uniform) -> (Frustum, Frustum) {
+    let a = random_frustum(u, DVec3::ZERO);
+    let far = (a.v[4] - a.v[0]).length().max(1e-3);
+    let off = DVec3::new(
+        u.range(-1.0, 1.0) as f64,
+        u.range(-1.0, 1.0) as f64,
+        u.range(-1.0, 1.0) as f64,
+    ) * far;
+    let b = random_frustum(u, off);
+    (a, b)
+}
+
+/// The families of pairs the GJK test and the accuracy bench draw: random pairs, facing
+/// pairs with gaps 1e-6–1 of the face turned 1e-12–1e-2 rad, and facing pairs closer and
+/// flatter (gaps 1e-10–1e-2, turned 1e-14–1e-4 rad), where GJK stalls most.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Family {
+    Random,
+    Facing,
+    FacingClose,
+}
+
+/// Pair `k` of a family (the face cycles with `k`).
+pub fn draw_pair(u: &mut Uniform, family: Family, k: usize) -> (Frustum, Frustum) {
+    let (gaps, angles) = match family {
+        Family::Random => return random_pair(u),
+        Family::Facing => ((1e-6, 1.0), (1e-12, 1e-2)),
+        Family::FacingClose => ((1e-10, 1e-2), (1e-14, 1e-4)),
+    };
+    let gap = log_uniform(u, gaps.0, gaps.1);
+    let angle = log_uniform(u, angles.0, angles.1);
+    facing_pair(u, k % 6, gap, angle)
 }
