@@ -368,12 +368,27 @@ fn alignment(quick: bool, points: &mut Vec<Point>) {
     }
 }
 
+/// The bundled `lounge` scene at `1/resolution`.
+fn lounge(resolution: u32) -> unseen::dataset::Dataset {
+    use unseen::dataset::{self, LoadOptions};
+    let root =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("reference_data/scenes/lounge");
+    dataset::load(
+        &root,
+        &LoadOptions {
+            resolution,
+            ..LoadOptions::default()
+        },
+    )
+    .expect("bundled scene")
+}
+
 /// Training on `lounge` (resolution 1/2 quick, 1 full): checkpoints of one run per setting
 /// (densification on, the INRIA default, and off), scored on the test views (INRIA's every
 /// 8th training view) by their mean squared error against the ground truth images; time is
 /// the run's wall time up to the checkpoint.
 fn training(quick: bool, points: &mut Vec<Point>) {
-    use unseen::dataset::{self, LoadOptions, Split};
+    use unseen::dataset::Split;
     use unseen::train::trainer::{TrainConfig, Trainer};
     let resolution = if quick { 2 } else { 1 };
     let checkpoints: &[u32] = if quick {
@@ -381,16 +396,7 @@ fn training(quick: bool, points: &mut Vec<Point>) {
     } else {
         &[500, 1000, 2000, 4000, 7000]
     };
-    let root =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("reference_data/scenes/lounge");
-    let data = dataset::load(
-        &root,
-        &LoadOptions {
-            resolution,
-            ..LoadOptions::default()
-        },
-    )
-    .expect("bundled scene");
+    let data = lounge(resolution);
     for densify in [true, false] {
         let defaults = TrainConfig::default();
         let cfg = TrainConfig {
@@ -791,7 +797,6 @@ fn dibr(quick: bool, points: &mut Vec<Point>) {
 /// alone.
 fn qa_mask(quick: bool, points: &mut Vec<Point>) {
     use unseen::camera::Camera;
-    use unseen::dataset::{self, LoadOptions};
     use unseen::qamask::{QaMaskConfig, fine_tune, mask_scene, render_qa_mask};
     use unseen::train::trainer::{TrainConfig, Trainer};
     let (resolution, train_its, reference_its, budgets): (u32, u32, u32, &[u32]) = if quick {
@@ -799,16 +804,7 @@ fn qa_mask(quick: bool, points: &mut Vec<Point>) {
     } else {
         (1, 7000, 20_000, &[1000, 3000, 10_000])
     };
-    let root =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("reference_data/scenes/lounge");
-    let data = dataset::load(
-        &root,
-        &LoadOptions {
-            resolution,
-            ..LoadOptions::default()
-        },
-    )
-    .expect("bundled scene");
+    let data = lounge(resolution);
     let mut t = Trainer::new(
         &data,
         TrainConfig {
