@@ -71,6 +71,13 @@ impl Default for QaMaskConfig {
 
 impl QaMaskConfig {
     pub fn validate(&self) -> Result<()> {
+        self.adam.validate()?;
+        if !(self.lr_sh_rest >= 0.0 && self.lr_sh_rest.is_finite()) {
+            return Err(Error::invalid(format!(
+                "the QA-Mask learning rate must be finite and ≥ 0, got {}",
+                self.lr_sh_rest
+            )));
+        }
         if self.sh_degree == 0 || self.sh_degree > crate::math::sh::MAX_SH_DEGREE {
             return Err(Error::invalid(format!(
                 "QA-Mask SH degree {} must be 1..=5 (degree 0 has no view dependence)",
@@ -182,6 +189,7 @@ pub fn fine_tune(
     // them (and their zero moments) as they are: skipping them is exact (SPEC.md §15.1).
     let mut seen = vec![false; scene.len()];
     for rec in &records {
+        assert_eq!(rec.visible().len(), seen.len(), "a record of another scene");
         for (s, &v) in seen.iter_mut().zip(rec.visible()) {
             *s |= v;
         }

@@ -339,7 +339,9 @@ fn stage_of(step: &str) -> String {
 
 /// What the step cache saves, per stage (in first-seen order): step executions over all
 /// jobs, distinct steps (digests), compute seconds if every job computed its own steps, and
-/// seconds with each distinct step computed once.
+/// seconds with each distinct step computed once — what a fresh sequential audit computes;
+/// a resumed one, parallel workers or an older cache may have computed a step twice or
+/// not at all here (the digests do not say which).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Sharing {
     pub stage: String,
@@ -978,7 +980,7 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
     }
     let shared = sharing(&report.results);
     if !shared.is_empty() {
-        s += "\n## What the step cache saves\n\nSteps whose inputs are equal (same manifest digest) are computed once and reused by every job that needs them (SPEC.md §20.8). *executions*: steps over all jobs; *distinct*: computed; compute in seconds if every job computed its own steps, and as run. The original scenes (one training per seed) are not counted.\n\n| stage | executions | distinct | unshared (s) | shared (s) | saved |\n|---|---|---|---|---|---|\n";
+        s += "\n## What the step cache saves\n\nSteps whose inputs are equal (same manifest digest) are computed once and reused by every job that needs them (SPEC.md §20.8). *executions*: steps over all jobs; *distinct*: different steps; compute in seconds if every job computed its own steps, and with each distinct step computed once (what a fresh audit computes; a resumed audit, parallel `--only` workers or a cache from an earlier audit may have computed some twice or none here). The original scenes (one training per seed) are not counted.\n\n| stage | executions | distinct | every job its own (s) | each distinct step once (s) | saved |\n|---|---|---|---|---|---|\n";
         for r in &shared {
             let saved = if r.unshared_seconds > 0.0 {
                 format!(

@@ -16,7 +16,7 @@
 //! the same index lists (INRIA: new Gaussians start with zero moments, pruned ones drop
 //! theirs, the step count is kept).
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::gaussian::{Gaussians, Param};
 use rayon::prelude::*;
 
@@ -31,6 +31,28 @@ pub struct AdamConfig {
     /// iteration's view sees (radii not both 0); the others keep their parameters and both
     /// moments. Off by default (INRIA's dense Adam).
     pub sparse: bool,
+}
+
+impl AdamConfig {
+    /// `β1, β2 ∈ [0, 1)` and `ε` finite and positive: the update is then finite, and a
+    /// zero gradient from zero moments leaves a parameter and its moments exactly as they
+    /// are (the QA-Mask fine-tune's skip relies on it, SPEC.md §15.1).
+    pub fn validate(&self) -> Result<()> {
+        let beta = |b: f32| (0.0..1.0).contains(&b);
+        if !(beta(self.beta1) && beta(self.beta2)) {
+            return Err(Error::invalid(format!(
+                "Adam's beta1 and beta2 must be in [0, 1), got {} and {}",
+                self.beta1, self.beta2
+            )));
+        }
+        if !(self.eps > 0.0 && self.eps.is_finite()) {
+            return Err(Error::invalid(format!(
+                "Adam's eps must be finite and positive, got {}",
+                self.eps
+            )));
+        }
+        Ok(())
+    }
 }
 
 impl Default for AdamConfig {
@@ -416,6 +438,7 @@ mod tests {
         }
         let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         assert_eq!(bits(&a.sh_rest), bits(&b.sh_rest));
+        assert_eq!(bits(&adam_a.m.sh_rest), bits(&adam_b.m.sh_rest));
         assert_eq!(bits(&adam_a.v.sh_rest), bits(&adam_b.v.sh_rest));
         // Chunks 0, 2 and 3 of 4, three steps: 9 calls.
         assert_eq!(calls.load(Ordering::Relaxed), 9);

@@ -149,6 +149,7 @@ impl TrainConfig {
         if self.sh_degree > crate::math::sh::MAX_SH_DEGREE {
             return Err(Error::invalid(format!("SH degree {} > 5", self.sh_degree)));
         }
+        self.adam.validate()?;
         if self.resolution == 0 {
             return Err(Error::invalid("resolution factor must be at least 1"));
         }

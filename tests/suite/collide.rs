@@ -143,6 +143,11 @@ fn gjk_distance_is_exact_on_random_and_facing_frustum_pairs() {
             "{family:?}: {count} pairs, {band} in the touching band, widest interval {widest:e} of the scale, {conservative} separated pairs called colliding"
         );
         assert!(band <= max_band, "{family:?}: {band} pairs in the band");
+        // SPEC.md §16.1 states none in these draws.
+        assert_eq!(
+            conservative, 0,
+            "{family:?}: separated pairs called colliding"
+        );
     }
 }
 

@@ -164,16 +164,17 @@ pub fn run_collide(a: &CollideArgs) -> Result<()> {
     if a.json {
         println!(
             "{}",
-            serde_json::json!({"intersect": p.intersect, "distance": p.distance})
+            serde_json::json!({"intersect": p.intersect, "distance": p.distance, "lower_bound": p.lower_bound})
         );
     } else {
         println!(
-            "{} (distance {:e}, touching counts as intersecting below {:e}; {} GJK iterations)",
+            "{} (distance in [{:e}, {:e}]; a lower bound at or below {:e} counts as intersecting; {} GJK iterations)",
             if p.intersect {
                 "intersect"
             } else {
                 "separated"
             },
+            p.lower_bound,
             p.distance,
             p.touch_eps,
             p.iterations
