@@ -93,12 +93,31 @@ impl Manifest {
         Ok(sha256_hex(text.as_bytes()))
     }
 
-    /// Read `dir/manifest.json`.
+    /// Read `dir/manifest.json`. Every listed file must lie inside `dir`
+    /// ([`inside`]): readers join the paths to `dir`, and a manifest from elsewhere must
+    /// not make them read (or verify) files outside it.
     pub fn read(dir: &Path) -> Result<Manifest> {
         let p = dir.join("manifest.json");
         let b = std::fs::read(&p).map_err(|e| Error::io(&p, e))?;
-        serde_json::from_slice(&b).map_err(|e| Error::parse(&p, format!("invalid manifest: {e}")))
+        let m: Manifest = serde_json::from_slice(&b)
+            .map_err(|e| Error::parse(&p, format!("invalid manifest: {e}")))?;
+        if let Some(f) = m.files.iter().find(|f| !inside(&f.path)) {
+            return Err(Error::parse(
+                &p,
+                format!("file {:?} is not a path inside the folder", f.path),
+            ));
+        }
+        Ok(m)
     }
+}
+
+/// `rel` is a non-empty relative path of plain names (no root, no `.` or `..`): joined to a
+/// folder, it stays inside it.
+pub fn inside(rel: &str) -> bool {
+    !rel.is_empty()
+        && Path::new(rel)
+            .components()
+            .all(|c| matches!(c, std::path::Component::Normal(_)))
 }
 
 /// sha256 of a value's compact JSON.

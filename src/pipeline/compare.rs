@@ -210,6 +210,16 @@ pub fn compare(a: &Path, b: &Path, tolerance: f64) -> Result<Comparison> {
     let listed: Option<Vec<String>> = std::fs::read(a.join("steps.json"))
         .ok()
         .and_then(|b| serde_json::from_slice(&b).ok());
+    if let Some(n) = listed
+        .iter()
+        .flatten()
+        .find(|n| !crate::io::manifest::inside(n))
+    {
+        return Err(Error::parse(
+            &a.join("steps.json"),
+            format!("step {n:?} is not a folder inside the run"),
+        ));
+    }
     let ma = match listed {
         Some(names) => names
             .iter()

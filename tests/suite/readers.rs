@@ -320,3 +320,40 @@ property float z\nend_header\nnan 0 1\n";
     let e = parse_point_cloud(nan, p).unwrap_err().to_string();
     assert!(e.contains("non-finite"), "{e}");
 }
+
+/// A manifest listing a file outside its folder, and a `steps.json` naming a step outside
+/// the run, are clear errors: readers join those paths to the folder and must not leave it.
+#[test]
+fn manifests_and_step_lists_stay_inside_their_folder() {
+    use unseen::io::manifest::{FileEntry, Manifest};
+    let t = temp_dir("inside");
+    let dir = t.path().join("run");
+    std::fs::create_dir_all(&dir).unwrap();
+    for bad in ["../outside.txt", "/etc/hostname", "a/../../b", "./a", ""] {
+        let m = Manifest::new(
+            "train",
+            "",
+            serde_json::json!({}),
+            vec![FileEntry::new(bad, b"x")],
+        );
+        std::fs::write(dir.join("manifest.json"), m.text()).unwrap();
+        let e = Manifest::read(&dir).unwrap_err().to_string();
+        assert!(
+            e.contains("manifest.json") && e.contains("inside"),
+            "{bad}: {e}"
+        );
+    }
+    let good = Manifest::new(
+        "train",
+        "",
+        serde_json::json!({}),
+        vec![FileEntry::new("a/b.ply", b"x")],
+    );
+    std::fs::write(dir.join("manifest.json"), good.text()).unwrap();
+    assert!(Manifest::read(&dir).is_ok());
+    std::fs::write(dir.join("steps.json"), r#"["../run"]"#).unwrap();
+    let e = unseen::pipeline::compare::compare(&dir, &dir, 0.0)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("steps.json") && e.contains("inside"), "{e}");
+}
