@@ -56,8 +56,9 @@ fn bare_rate(splats: &[Splat], kernel: Kernel) -> f64 {
 }
 
 /// Seconds to read every parameter the projection reads (means, scales, rotations,
-/// opacities, SH) once, summed in parallel chunks (median of 5): the memory-bandwidth floor
-/// of the per-Gaussian stages in the current pool.
+/// opacities, SH) once, xor-folded in parallel chunks (median of 5): the memory-bandwidth
+/// floor of the per-Gaussian stages in the current pool. (An f32 sum here was bound by the
+/// add's latency, one value per 3–4 cycles, not by memory: it overstated the floor ~3×.)
 fn read_seconds(scene: &unseen::gaussian::Gaussians) -> f64 {
     use rayon::prelude::*;
     let arrays: [&[f32]; 6] = [
@@ -72,14 +73,14 @@ fn read_seconds(scene: &unseen::gaussian::Gaussians) -> f64 {
         (0..5)
             .map(|_| {
                 let t0 = Instant::now();
-                let s: f32 = arrays
+                let s: u32 = arrays
                     .iter()
                     .map(|a| {
                         a.par_chunks(1 << 14)
-                            .map(|c| c.iter().fold(0.0f32, |x, &y| x + y))
-                            .sum::<f32>()
+                            .map(|c| c.iter().fold(0u32, |x, &y| x ^ y.to_bits()))
+                            .reduce(|| 0, |x, y| x ^ y)
                     })
-                    .sum();
+                    .fold(0, |x, y| x ^ y);
                 std::hint::black_box(s);
                 t0.elapsed().as_secs_f64()
             })

@@ -31,6 +31,28 @@ pub trait Lanes: ShScalar + Div<Output = Self> {
     fn gather(f: impl Fn(usize) -> f32) -> Self;
     /// Write the `N` lanes to `out[..N]`.
     fn write(self, out: &mut [f32]);
+    /// Columns of `N` rows: lane `l` of `out[k]` ← `src[l·stride + k]` for every
+    /// `k < out.len()` (`out.len() ≤ stride` unless `N = 1`). The values of
+    /// `gather(|l| src[l·stride + k])`, loaded row by row and transposed where the lanes
+    /// have a transpose (`F32x8`).
+    #[inline(always)]
+    fn load_columns(src: &[f32], stride: usize, out: &mut [Self]) {
+        for (k, o) in out.iter_mut().enumerate() {
+            *o = Self::gather(|l| src[l * stride + k]);
+        }
+    }
+    /// The inverse of [`Lanes::load_columns`]: `dst[l·stride + k]` ← lane `l` of `cols[k]`
+    /// for every `k < cols.len() ≤ stride` and `l < N`; nothing else in `dst` is written.
+    #[inline(always)]
+    fn store_columns(cols: &[Self], dst: &mut [f32], stride: usize) {
+        let mut lanes = [0f32; 16];
+        for (k, c) in cols.iter().enumerate() {
+            c.write(&mut lanes);
+            for l in 0..Self::N {
+                dst[l * stride + k] = lanes[l];
+            }
+        }
+    }
     fn lt(self, o: Self) -> Self::Mask;
     fn le(self, o: Self) -> Self::Mask;
     fn gt(self, o: Self) -> Self::Mask;
@@ -38,6 +60,8 @@ pub trait Lanes: ShScalar + Div<Output = Self> {
     /// `m ? a : b` per lane.
     fn select(m: Self::Mask, a: Self, b: Self) -> Self;
     fn all_false() -> Self::Mask;
+    /// Whether every lane of `m` is true.
+    fn all(m: Self::Mask) -> bool;
     /// Neither NaN nor ±∞.
     fn is_finite(self) -> Self::Mask;
     /// Correctly rounded square root.
@@ -96,6 +120,10 @@ impl Lanes for f32 {
     #[inline(always)]
     fn all_false() -> bool {
         false
+    }
+    #[inline(always)]
+    fn all(m: bool) -> bool {
+        m
     }
     #[inline(always)]
     fn is_finite(self) -> bool {
@@ -205,6 +233,41 @@ mod avx2 {
         }
     }
 
+    /// The 8×8 transpose of `r` (row `i` → lane `i` of every result).
+    #[inline(always)]
+    fn transpose8(r: &[__m256; 8]) -> [__m256; 8] {
+        unsafe {
+            // Pairs of rows interleaved: lanes (a0 b0 a1 b1 | a4 b4 a5 b5) and the high halves.
+            let t0 = _mm256_unpacklo_ps(r[0], r[1]);
+            let t1 = _mm256_unpackhi_ps(r[0], r[1]);
+            let t2 = _mm256_unpacklo_ps(r[2], r[3]);
+            let t3 = _mm256_unpackhi_ps(r[2], r[3]);
+            let t4 = _mm256_unpacklo_ps(r[4], r[5]);
+            let t5 = _mm256_unpackhi_ps(r[4], r[5]);
+            let t6 = _mm256_unpacklo_ps(r[6], r[7]);
+            let t7 = _mm256_unpackhi_ps(r[6], r[7]);
+            // Four rows per column: columns k (low half) and k + 4 (high half).
+            let s0 = _mm256_shuffle_ps::<0x44>(t0, t2);
+            let s1 = _mm256_shuffle_ps::<0xEE>(t0, t2);
+            let s2 = _mm256_shuffle_ps::<0x44>(t1, t3);
+            let s3 = _mm256_shuffle_ps::<0xEE>(t1, t3);
+            let s4 = _mm256_shuffle_ps::<0x44>(t4, t6);
+            let s5 = _mm256_shuffle_ps::<0xEE>(t4, t6);
+            let s6 = _mm256_shuffle_ps::<0x44>(t5, t7);
+            let s7 = _mm256_shuffle_ps::<0xEE>(t5, t7);
+            [
+                _mm256_permute2f128_ps::<0x20>(s0, s4),
+                _mm256_permute2f128_ps::<0x20>(s1, s5),
+                _mm256_permute2f128_ps::<0x20>(s2, s6),
+                _mm256_permute2f128_ps::<0x20>(s3, s7),
+                _mm256_permute2f128_ps::<0x31>(s0, s4),
+                _mm256_permute2f128_ps::<0x31>(s1, s5),
+                _mm256_permute2f128_ps::<0x31>(s2, s6),
+                _mm256_permute2f128_ps::<0x31>(s3, s7),
+            ]
+        }
+    }
+
     impl F32x8 {
         #[inline(always)]
         fn cmp<const P: i32>(self, o: F32x8) -> M8 {
@@ -228,6 +291,67 @@ mod avx2 {
         fn write(self, out: &mut [f32]) {
             let out = &mut out[..8];
             unsafe { _mm256_storeu_ps(out.as_mut_ptr(), self.0) }
+        }
+        /// Eight columns at a time: each row's eight values in one load (copied through a
+        /// zeroed buffer where `src` ends first), then an 8×8 transpose. Plain loops and
+        /// no closures over vectors: those may be compiled out of line without AVX2.
+        #[inline(always)]
+        #[allow(clippy::needless_range_loop)] // no iterators over vectors (see above)
+        fn load_columns(src: &[f32], stride: usize, out: &mut [Self]) {
+            let cols = out.len();
+            assert!(cols <= stride && 7 * stride + cols <= src.len());
+            let mut c0 = 0;
+            while c0 < cols {
+                let width = (cols - c0).min(8);
+                let mut rows = [unsafe { _mm256_setzero_ps() }; 8];
+                for l in 0..8 {
+                    let at = l * stride + c0;
+                    rows[l] = if at + 8 <= src.len() {
+                        // Values past the row's `cols` are loaded but never used.
+                        unsafe { _mm256_loadu_ps(src[at..at + 8].as_ptr()) }
+                    } else {
+                        let mut t = [0f32; 8];
+                        t[..width].copy_from_slice(&src[at..at + width]);
+                        unsafe { _mm256_loadu_ps(t.as_ptr()) }
+                    };
+                }
+                let t = transpose8(&rows);
+                for k in 0..width {
+                    out[c0 + k] = F32x8(t[k]);
+                }
+                c0 += 8;
+            }
+        }
+        /// At most 16 columns (two 8×8 transposes), then one 8-wide store per row and
+        /// block where the eight slots are the row's own or, rows being dense (`stride` =
+        /// columns), later rows' of this call, written after; a copy elsewhere. (AVX's
+        /// masked store is microcoded on AMD Zen: slower than the copy.)
+        #[inline(always)]
+        #[allow(clippy::needless_range_loop)] // no iterators over vectors (see above)
+        fn store_columns(cols: &[Self], dst: &mut [f32], stride: usize) {
+            let n = cols.len();
+            assert!(n <= 16 && n <= stride && 7 * stride + n <= dst.len());
+            let mut rows = [[unsafe { _mm256_setzero_ps() }; 8]; 2];
+            for (b, r) in rows.iter_mut().enumerate().take(n.div_ceil(8)) {
+                let mut block = [unsafe { _mm256_setzero_ps() }; 8];
+                for k in 0..(n - 8 * b).min(8) {
+                    block[k] = cols[8 * b + k].0;
+                }
+                *r = transpose8(&block);
+            }
+            for l in 0..8 {
+                for (b, r) in rows.iter().enumerate().take(n.div_ceil(8)) {
+                    let at = l * stride + 8 * b;
+                    let width = (n - 8 * b).min(8);
+                    if at + 8 <= l * stride + n || (stride == n && at + 8 <= 8 * stride) {
+                        unsafe { _mm256_storeu_ps(dst[at..at + 8].as_mut_ptr(), r[l]) };
+                    } else {
+                        let mut t = [0f32; 8];
+                        unsafe { _mm256_storeu_ps(t.as_mut_ptr(), r[l]) };
+                        dst[at..at + width].copy_from_slice(&t[..width]);
+                    }
+                }
+            }
         }
         // Ordered, non-signalling predicates: false when either side is NaN, like `<` on f32.
         #[inline(always)]
@@ -253,6 +377,10 @@ mod avx2 {
         #[inline(always)]
         fn all_false() -> M8 {
             M8(unsafe { _mm256_setzero_ps() })
+        }
+        #[inline(always)]
+        fn all(m: M8) -> bool {
+            unsafe { _mm256_movemask_ps(m.0) == 0xff }
         }
         #[inline(always)]
         fn is_finite(self) -> M8 {
@@ -440,6 +568,10 @@ mod avx512 {
             0
         }
         #[inline(always)]
+        fn all(m: __mmask16) -> bool {
+            m == 0xffff
+        }
+        #[inline(always)]
         fn is_finite(self) -> __mmask16 {
             // |x| < ∞, ordered: false for ±∞ and NaN.
             self.abs().lt(F32x16::splat(f32::INFINITY))
@@ -580,6 +712,54 @@ mod tests {
                     );
                 }
             }
+        }
+    }
+
+    /// `load_columns` against `gather` for every column count up to the stride, strides
+    /// 1 to 105 (SH degree 5's rest coefficients), with `src` ending right after the last
+    /// row's columns (the tail path) and with room after it (the direct loads).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn check_load_columns_avx2() {
+        for stride in 1..=105usize {
+            for cols in [1, 2, 3, 4, 5, 7, 8, 9, 15, 16, 17, 45, 105] {
+                if cols > stride {
+                    continue;
+                }
+                for spare in [0usize, 9] {
+                    let len = 7 * stride + cols + spare;
+                    let src: Vec<f32> = (0..len).map(|k| k as f32 * 0.5 - 3.0).collect();
+                    let mut out = vec![F32x8::splat(f32::NAN); cols];
+                    F32x8::load_columns(&src, stride, &mut out);
+                    for (k, o) in out.iter().enumerate() {
+                        let mut got = [0f32; 8];
+                        o.write(&mut got);
+                        for (l, g) in got.iter().enumerate() {
+                            assert_eq!(*g, src[l * stride + k], "stride {stride}, column {k}");
+                        }
+                    }
+                    if cols > 16 {
+                        continue;
+                    }
+                    // And back: only the columns' slots are written.
+                    let mut dst = vec![-1f32; len];
+                    F32x8::store_columns(&out, &mut dst, stride);
+                    for (i, d) in dst.iter().enumerate() {
+                        let (l, k) = (i / stride, i % stride);
+                        let want = if l < 8 && k < cols { src[i] } else { -1.0 };
+                        assert_eq!(*d, want, "store: stride {stride}, {cols} columns, slot {i}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn load_and_store_columns_match_gather() {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: AVX2 is available (checked just above).
+            unsafe { check_load_columns_avx2() };
         }
     }
 

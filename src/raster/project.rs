@@ -57,6 +57,22 @@ pub struct Splat {
     pub depth: f32,
 }
 
+/// The fields of a [`Splat`], in declaration order, as f32 values.
+const SPLAT_FLOATS: usize = 10;
+const _: () = assert!(std::mem::size_of::<Splat>() == SPLAT_FLOATS * 4);
+
+impl Splat {
+    /// The splats' fields as one f32 slice (`SPLAT_FLOATS` per splat, declaration order).
+    fn as_floats(s: &mut [Splat]) -> &mut [f32] {
+        // SAFETY: `Splat` is `repr(C)` with only f32 fields (`SPLAT_FLOATS` of them, no
+        // padding: the size is asserted above), so a slice of splats is a slice of f32 of
+        // `SPLAT_FLOATS` times the length, with f32's alignment; the borrow is carried over.
+        unsafe {
+            std::slice::from_raw_parts_mut(s.as_mut_ptr().cast::<f32>(), s.len() * SPLAT_FLOATS)
+        }
+    }
+}
+
 /// Why a Gaussian is not drawn (the report counts each).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Cull {
@@ -366,16 +382,28 @@ fn sh_color_lanes<R: Lanes>(
     let basis = sh_basis_lanes(mean, cam, degree);
     let k_used = num_coeffs(degree) - 1;
     let mut finite = dc[0].is_finite() & dc[1].is_finite() & dc[2].is_finite();
-    let mut out = [R::splat(0.0); 3];
-    for (ch, o) in out.iter_mut().enumerate() {
-        let mut acc = basis[0] * dc[ch];
-        for k in 0..k_used {
-            let coeff = R::gather(|l| rest[l * stride + k * 3 + ch]);
-            finite = finite & coeff.is_finite();
-            acc = acc + basis[k + 1] * coeff;
+    let mut acc = [basis[0] * dc[0], basis[0] * dc[1], basis[0] * dc[2]];
+    // Eight coefficients (24 columns) per load: each channel's sum still runs in k order.
+    const K_BLOCK: usize = 8;
+    let mut cols = [R::splat(0.0); 3 * K_BLOCK];
+    let mut k0 = 0;
+    while k0 < k_used {
+        let kn = (k_used - k0).min(K_BLOCK);
+        R::load_columns(&rest[3 * k0..], stride, &mut cols[..3 * kn]);
+        for k in 0..kn {
+            for ch in 0..3 {
+                let coeff = cols[3 * k + ch];
+                finite = finite & coeff.is_finite();
+                acc[ch] = acc[ch] + basis[k0 + k + 1] * coeff;
+            }
         }
-        *o = acc + R::splat(0.5);
+        k0 += K_BLOCK;
     }
+    let out = [
+        acc[0] + R::splat(0.5),
+        acc[1] + R::splat(0.5),
+        acc[2] + R::splat(0.5),
+    ];
     (out, basis, finite)
 }
 
@@ -524,6 +552,32 @@ fn store<R: Lanes>(
     radii: &mut [[i32; 2]],
     counts: &mut [u64; 7],
 ) {
+    if R::all(b.culls.ok) {
+        // Every lane visible (the common case): the fields of all lanes' splats in one
+        // transposed store.
+        counts[0] += R::N as u64;
+        let fields = [
+            b.mean2d[0],
+            b.mean2d[1],
+            b.conic[0],
+            b.conic[1],
+            b.conic[2],
+            b.opacity,
+            b.color[0],
+            b.color[1],
+            b.color[2],
+            b.depth,
+        ];
+        R::store_columns(&fields, Splat::as_floats(&mut splats[..R::N]), SPLAT_FLOATS);
+        let (rx, ry) = (lanes_of(b.radii[0]), lanes_of(b.radii[1]));
+        for l in 0..R::N {
+            radii[l] = [
+                rx[l].min(i32::MAX as f32) as i32,
+                ry[l].min(i32::MAX as f32) as i32,
+            ];
+        }
+        return;
+    }
     let ok = lanes_of(R::select(b.culls.ok, R::splat(0.0), b.culls.code));
     let v = lanes_of::<R>;
     let (mx, my) = (v(b.mean2d[0]), v(b.mean2d[1]));

@@ -52,39 +52,21 @@ pub fn tile_rect(mean: [f32; 2], radii: [i32; 2], tiles_x: usize, tiles_y: usize
     ]
 }
 
-/// Below this every f32 with a fraction converts exactly through i32; from it on every f32
-/// is an integer.
-const INTEGRAL_FROM: f32 = 16_777_216.0; // 2^24
-
-/// `clamp(floor(v), 0, hi)`, NaN → 0, without a rounding call: `v ≤ 0` or NaN clamps to 0,
-/// and for `v > 0` the floor is the truncation.
+/// `clamp(floor(v), 0, hi)`, NaN → 0, branch-free: Rust's `f32 as i64` truncates toward
+/// zero, saturates and maps NaN to 0, so for `v > 0` it is the floor, and a `v ≤ 0` gives
+/// at most 0.
 #[inline(always)]
 fn floor_clamped(v: f32, hi: usize) -> usize {
-    if v.is_nan() || v <= 0.0 {
-        return 0;
-    }
-    let f = if v < INTEGRAL_FROM {
-        v as i32 as usize
-    } else {
-        v as u64 as usize // an integer already; `as` saturates
-    };
-    f.min(hi)
+    ((v as i64).max(0) as usize).min(hi)
 }
 
-/// `clamp(ceil(v), 0, hi)`, NaN → 0: `v ≤ 0` or NaN clamps to 0 (`ceil(v) ≤ 0`), and for
-/// `v > 0` the ceiling is the truncation `t`, plus 1 when `t < v`.
+/// `clamp(ceil(v), 0, hi)`, NaN → 0, branch-free: the truncation `t`, plus 1 where `t < v`
+/// (`t as f32` is exact wherever that can hold: `|v| < 2^24`; above, `v` is an integer and
+/// `t = v`, or `t` is saturated — at +∞ the sum saturates too).
 #[inline(always)]
 fn ceil_clamped(v: f32, hi: usize) -> usize {
-    if v.is_nan() || v <= 0.0 {
-        return 0;
-    }
-    let c = if v < INTEGRAL_FROM {
-        let t = v as i32;
-        (t + ((t as f32) < v) as i32) as usize
-    } else {
-        v as u64 as usize // an integer already; `as` saturates
-    };
-    c.min(hi)
+    let t = v as i64;
+    (t.saturating_add(((t as f32) < v) as i64).max(0) as usize).min(hi)
 }
 
 /// Bin the visible splats (radii not both 0) of an image `width × height`.
