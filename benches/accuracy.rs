@@ -23,6 +23,8 @@
 //!   closing against a ray-traced plane, and the plane behind a card (depth edges);
 //! - `ssim`: the float type (f64 / f32) and window form (separable / direct 11×11) of the
 //!   loss's SSIM against the f64 direct window;
+//! - `ssim-grad`: the loss's SSIM gradient against f64 central differences of the direct
+//!   window (Richardson-extrapolated), every pixel and channel of a small image pair;
 //! - `training`: iterations with and without densification on `lounge` against the
 //!   test views' mean squared error (ground truth), checkpoints of one run each;
 //! - `qa-mask`: fine-tune iterations × SH degree 3–5 against a long SH-5 fine-tune, mean
@@ -1048,6 +1050,136 @@ fn ssim_stage(quick: bool, points: &mut Vec<Point>) {
     }
 }
 
+/// `Σ_q S_q` over the pixels `q` whose 11×11 window holds pixel `(px, py)` (channel `ch`),
+/// each windowed SSIM computed directly in f64 (zero padding): the only terms of the mean
+/// SSIM that pixel changes.
+#[allow(clippy::too_many_arguments)]
+fn ssim_local_sum(
+    x: &[f64],
+    y: &[f32],
+    w: usize,
+    h: usize,
+    c: usize,
+    ch: usize,
+    px: usize,
+    py: usize,
+) -> f64 {
+    let g: Vec<f64> = (0..11)
+        .map(|i| (-((i as f64 - 5.0).powi(2)) / (2.0 * 1.5 * 1.5)).exp())
+        .collect();
+    let norm: f64 = g.iter().sum();
+    let (c1, c2) = (0.01f64 * 0.01, 0.03f64 * 0.03);
+    let mut total = 0.0;
+    for qy in py.saturating_sub(5)..(py + 6).min(h) {
+        for qx in px.saturating_sub(5)..(px + 6).min(w) {
+            let (mut mx, mut my, mut exx, mut eyy, mut exy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+            for (ty, ky) in g.iter().enumerate() {
+                let sy = qy as isize + ty as isize - 5;
+                if sy < 0 || sy as usize >= h {
+                    continue;
+                }
+                for (tx, kx) in g.iter().enumerate() {
+                    let sx = qx as isize + tx as isize - 5;
+                    if sx < 0 || sx as usize >= w {
+                        continue;
+                    }
+                    let k = ky * kx / (norm * norm);
+                    let i = (sy as usize * w + sx as usize) * c + ch;
+                    let (a, b) = (x[i], f64::from(y[i]));
+                    mx += k * a;
+                    my += k * b;
+                    exx += k * a * a;
+                    eyy += k * b * b;
+                    exy += k * a * b;
+                }
+            }
+            let (sxx, syy, sxy) = (exx - mx * mx, eyy - my * my, exy - mx * my);
+            total += (2.0 * mx * my + c1) * (2.0 * sxy + c2)
+                / ((mx * mx + my * my + c1) * (sxx + syy + c2));
+        }
+    }
+    total
+}
+
+/// SSIM's gradient (what the loss backpropagates) against central differences of the mean
+/// SSIM in f64 with the direct 2D window, Richardson-extrapolated (steps 1e-3 and 5e-4:
+/// truncation O(h⁴)), on every pixel and channel of a small pair of images like
+/// [`ssim_stage`]'s. Only the windows that hold the pixel change, so each difference sums
+/// those (`ssim_local_sum`). Error: max |g − g_fd| / max |g_fd|.
+fn ssim_grad_stage(quick: bool, points: &mut Vec<Point>) {
+    let (w, h) = if quick { (24, 18) } else { (48, 36) };
+    let c = 3;
+    let mut u = Uniform::new(22);
+    let x: Vec<f32> = (0..w * h * c)
+        .map(|i| {
+            let (p, ch) = (i / c, i % c);
+            let (px, py) = ((p % w) as f32, (p / w) as f32);
+            (0.5 + 0.3 * (0.31 * px + ch as f32).sin() * (0.23 * py).cos() + 0.05 * u.normal())
+                .clamp(0.0, 1.0)
+        })
+        .collect();
+    let y: Vec<f32> = (0..w * h * c)
+        .map(|i| {
+            let l = if i >= c { x[i - c] } else { x[i] };
+            (0.5 * (x[i] + l) + 0.02 + 0.03 * u.normal()).clamp(0.0, 1.0)
+        })
+        .collect();
+    let n = (w * h * c) as f64;
+    let (t_fd, fd) = best(1, || {
+        let mut xd: Vec<f64> = x.iter().map(|&v| f64::from(v)).collect();
+        let mut g = vec![0.0f64; x.len()];
+        for (i, gi) in g.iter_mut().enumerate() {
+            let (p, ch) = (i / c, i % c);
+            let (px, py) = (p % w, p / w);
+            let mut diff = |step: f64| {
+                let v = xd[i];
+                xd[i] = v + step;
+                let up = ssim_local_sum(&xd, &y, w, h, c, ch, px, py);
+                xd[i] = v - step;
+                let down = ssim_local_sum(&xd, &y, w, h, c, ch, px, py);
+                xd[i] = v;
+                (up - down) / (2.0 * step) / n
+            };
+            let (d1, d2) = (diff(1e-3), diff(5e-4));
+            *gi = (4.0 * d2 - d1) / 3.0;
+        }
+        g
+    });
+    let scale = fd.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let runs = if quick { 5 } else { 3 };
+    let (t, g) = best(runs, || {
+        unseen::train::ssim::ssim(&x, &y, w, h, c, true)
+            .1
+            .expect("gradient requested")
+    });
+    let err = g
+        .iter()
+        .zip(&fd)
+        .fold(0.0f64, |m, (a, b)| m.max((f64::from(*a) - b).abs()))
+        / scale;
+    points.push(Point {
+        stage: "ssim-grad",
+        knob: format!(
+            "f64 separable, gradient rounded to f32 (train::ssim, the loss's), {w}×{h}×3 (largest |g| {scale:.1e})"
+        ),
+        default: true,
+        metric: "max |dSSIM/dx − f64 differences| / max |differences|",
+        error: err,
+        seconds: t,
+        pareto: false,
+    });
+    points.push(Point {
+        stage: "ssim-grad",
+        knob: "f64 central differences of the direct window, Richardson (the shadow itself)"
+            .to_string(),
+        default: false,
+        metric: "max |dSSIM/dx − f64 differences| / max |differences|",
+        error: 0.0,
+        seconds: t_fd,
+        pareto: false,
+    });
+}
+
 /// Mark each stage's Pareto front (less error and less time than every other point of the
 /// stage in at least one, no more in the other).
 fn mark_pareto(points: &mut [Point]) {
@@ -1192,7 +1324,7 @@ fn main() {
         (None, Some(_)) => None,
     };
     type Stage = fn(bool, &mut Vec<Point>);
-    let stages: [(&str, Stage); 10] = [
+    let stages: [(&str, Stage); 11] = [
         ("forward", forward),
         ("backward", |_, p| backward_fd(p)),
         ("exp", exp),
@@ -1201,6 +1333,7 @@ fn main() {
         ("gjk-frustums", gjk_frustums),
         ("dibr", dibr),
         ("ssim", ssim_stage),
+        ("ssim-grad", ssim_grad_stage),
         ("training", training),
         ("qa-mask", qa_mask),
     ];
@@ -1208,7 +1341,7 @@ fn main() {
         for name in names {
             assert!(
                 stages.iter().any(|(s, _)| s == name),
-                "--only: no stage {name:?} (stages: forward, backward, exp, ransac, gjk, gjk-frustums, dibr, ssim, training, qa-mask)"
+                "--only: no stage {name:?} (stages: forward, backward, exp, ransac, gjk, gjk-frustums, dibr, ssim, ssim-grad, training, qa-mask)"
             );
         }
     }
