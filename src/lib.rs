@@ -35,3 +35,6 @@ pub mod train;
 pub mod warp;
 
 pub use error::{Error, ErrorKind, Result};
+
+/// The crate's version (`Cargo.toml`), recorded in manifests and reports.
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");

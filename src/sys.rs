@@ -45,3 +45,23 @@ pub fn release_freed_memory() {
         }
     }
 }
+
+/// Run `f` in a pool of `threads` threads (`None`: the global pool). Results never depend on
+/// the count (SPEC.md §6); only the wall time does.
+pub fn with_threads<T: Send>(
+    threads: Option<usize>,
+    f: impl FnOnce() -> T + Send,
+) -> crate::error::Result<T> {
+    match threads {
+        None => Ok(f()),
+        Some(n) => {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(n.max(1))
+                .build()
+                .map_err(|e| {
+                    crate::error::Error::invalid(format!("cannot start {n} threads: {e}"))
+                })?;
+            Ok(pool.install(f))
+        }
+    }
+}

@@ -109,6 +109,38 @@ impl Camera {
         Ok(())
     }
 
+    /// A camera from intrinsics `[fx, fy, cx, cy]` and the world-to-camera transform
+    /// `x_cam = r_cw·x_world + t_cw` (`r_cw` row-major; gsplat's `viewmat`), validated. The
+    /// centre is `−r_cwᵀ·t_cw`, in f64.
+    pub fn from_world_to_camera(
+        name: impl Into<String>,
+        width: u32,
+        height: u32,
+        [fx, fy, cx, cy]: [f64; 4],
+        r_cw: [[f64; 3]; 3],
+        t_cw: [f64; 3],
+    ) -> Result<Camera> {
+        // Columns of world_from_camera = rows of camera_from_world.
+        let rotation = DMat3::from_cols(
+            DVec3::from(r_cw[0]),
+            DVec3::from(r_cw[1]),
+            DVec3::from(r_cw[2]),
+        );
+        let cam = Camera {
+            name: name.into(),
+            width,
+            height,
+            fx,
+            fy,
+            cx,
+            cy,
+            world_from_camera_rotation: rotation,
+            center: -(rotation * DVec3::from(t_cw)),
+        };
+        cam.validate()?;
+        Ok(cam)
+    }
+
     /// Rotation of `camera_from_world` (the transpose of the world_from_camera rotation).
     pub fn camera_from_world_rotation(&self) -> DMat3 {
         self.world_from_camera_rotation.transpose()

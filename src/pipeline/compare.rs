@@ -111,9 +111,17 @@ fn manifests(root: &Path) -> Result<Vec<(String, Manifest)>> {
                 // (Hidden folders are temporaries: a killed copy, a cache entry set aside.)
                 stack.push(p);
             } else if p.file_name().is_some_and(|n| n == "manifest.json") && d != root {
-                // A manifest that does not parse is damage, not something to skip.
+                // A manifest that does not parse is damage, not something to skip. The
+                // step is named by its folder (a pipeline step's manifest says the same; one
+                // written by another command, e.g. `unseen oracle`, says "").
                 let m = Manifest::read(&d)?;
-                out.push((m.step.clone(), m));
+                let rel: Vec<String> = d
+                    .strip_prefix(root)
+                    .unwrap_or(&d)
+                    .components()
+                    .map(|c| c.as_os_str().to_string_lossy().into_owned())
+                    .collect();
+                out.push((rel.join("/"), m));
             }
         }
     }
@@ -129,6 +137,8 @@ fn floats(path: &Path) -> Result<Vec<f32>> {
             .or_else(|_| read_exr(path, &["Y"]))
             .map(|i| i.data),
         "png" => read_png(path).map(|i| i.data),
+        // f32 arrays (`unseen oracle` dumps); other dtypes are compared as bytes only.
+        "npy" => crate::io::npy::read_npy_f32(path).map(|(_, v)| v),
         "ply" => {
             let (g, _) = read_ply(path)?;
             let mut v = Vec::new();

@@ -301,6 +301,38 @@ impl PipelineConfig {
         }
     }
 
+    /// The preset `name` with `overrides` (a JSON object, possibly partial: its members
+    /// replace the preset's, objects merged member by member) applied; `source` names the
+    /// overrides in errors (a file, or a caller's argument).
+    pub fn with_overrides(
+        name: &str,
+        overrides: serde_json::Value,
+        source: &std::path::Path,
+    ) -> Result<Self> {
+        fn merge(base: &mut serde_json::Value, over: serde_json::Value) {
+            match (base, over) {
+                (serde_json::Value::Object(b), serde_json::Value::Object(o)) => {
+                    for (k, v) in o {
+                        merge(b.entry(k).or_insert(serde_json::Value::Null), v);
+                    }
+                }
+                (b, o) => *b = o,
+            }
+        }
+        if !overrides.is_object() {
+            return Err(Error::parse(
+                source,
+                "a pipeline config must be a JSON object",
+            ));
+        }
+        let mut v = serde_json::to_value(Self::preset(name)?).expect("serializes");
+        merge(&mut v, overrides);
+        let c: Self = serde_json::from_value(v)
+            .map_err(|e| Error::parse(source, format!("invalid pipeline config: {e}")))?;
+        c.validate()?;
+        Ok(c)
+    }
+
     pub fn validate(&self) -> Result<()> {
         let bad = |m: String| Err(Error::invalid(m));
         if !(self.coverage_alpha > 0.0 && self.coverage_alpha <= 1.0) {

@@ -133,3 +133,46 @@ fn oracle_l1_dssim_loss() {
         loss[0]
     );
 }
+
+/// `unseen compare` on folders of oracle dumps (manifests that name no pipeline step):
+/// each dump is a step named by its folder, so a changed value is found in it. (It used
+/// the manifests' empty step name and compared the run's root instead.)
+#[test]
+fn compare_names_oracle_dumps_by_their_folder() {
+    use unseen::camera::inria::read_cameras_json;
+    use unseen::gaussian::ply::read_ply;
+    use unseen::pipeline::compare::compare;
+    let demo = reference("demo");
+    let t = super::common::TempDir::new("oracle-compare");
+    let (scene, _) = read_ply(&demo.join("scene.ply")).unwrap();
+    let cam = read_cameras_json(&demo.join("cameras.json"))
+        .unwrap()
+        .remove(0);
+    let opts = unseen::raster::RenderOptions::default();
+    for run in ["a", "b"] {
+        unseen::oracle::dump(&scene, &cam, &opts, None, &t.path().join(run).join("fwd")).unwrap();
+    }
+    let same = compare(&t.path().join("a"), &t.path().join("b"), 0.0).unwrap();
+    assert!(same.first_divergent.is_none(), "{}", same.table());
+    assert_eq!(same.steps.len(), 1);
+    assert_eq!(same.steps[0].step, "fwd");
+    let rgb = t.path().join("b/fwd/rgb.npy");
+    let (shape, mut v) = unseen::io::npy::read_npy_f32(&rgb).unwrap();
+    v[10] += 0.5;
+    unseen::io::npy::write_npy(&rgb, &v, &shape).unwrap();
+    let c = compare(&t.path().join("a"), &t.path().join("b"), 0.0).unwrap();
+    assert_eq!(c.first_divergent.as_deref(), Some("fwd"), "{}", c.table());
+    // f32 .npy arrays are compared by value.
+    let f = c.steps[0]
+        .files
+        .iter()
+        .find(|f| f.path == "rgb.npy")
+        .unwrap();
+    assert!((f.max_abs.unwrap() - 0.5).abs() < 1e-6, "{f:?}");
+    assert!(
+        compare(&t.path().join("a"), &t.path().join("b"), 0.6)
+            .unwrap()
+            .first_divergent
+            .is_none()
+    );
+}

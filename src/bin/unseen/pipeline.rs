@@ -142,49 +142,22 @@ impl Knobs {
 }
 
 fn config_from(preset: Preset, file: Option<&Path>, knobs: &Knobs) -> Result<PipelineConfig> {
-    let base = match preset {
-        Preset::Quick => PipelineConfig::quick(),
-        Preset::Paper => PipelineConfig::paper(),
+    let name = match preset {
+        Preset::Quick => "quick",
+        Preset::Paper => "paper",
     };
     let mut c = match file {
-        None => base,
+        None => PipelineConfig::preset(name)?,
         Some(p) => {
             let text = std::fs::read(p).map_err(|e| Error::io(p, e))?;
-            let mut v = serde_json::to_value(&base).expect("serializes");
             let over: serde_json::Value = serde_json::from_slice(&text)
                 .map_err(|e| Error::parse(p, format!("invalid JSON: {e}")))?;
-            merge(&mut v, over);
-            serde_json::from_value(v)
-                .map_err(|e| Error::parse(p, format!("invalid pipeline config: {e}")))?
+            PipelineConfig::with_overrides(name, over, p)?
         }
     };
     knobs.apply(&mut c)?;
     c.validate()?;
     Ok(c)
-}
-
-fn merge(base: &mut serde_json::Value, over: serde_json::Value) {
-    match (base, over) {
-        (serde_json::Value::Object(b), serde_json::Value::Object(o)) => {
-            for (k, v) in o {
-                merge(b.entry(k).or_insert(serde_json::Value::Null), v);
-            }
-        }
-        (b, o) => *b = o,
-    }
-}
-
-fn with_threads<T: Send>(threads: Option<usize>, f: impl FnOnce() -> T + Send) -> Result<T> {
-    match threads {
-        None => Ok(f()),
-        Some(n) => {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(n.max(1))
-                .build()
-                .map_err(|e| Error::invalid(format!("cannot start {n} threads: {e}")))?;
-            Ok(pool.install(f))
-        }
-    }
 }
 
 pub fn run_extrapolate(a: &ExtrapolateArgs) -> Result<()> {
@@ -201,7 +174,7 @@ pub fn run_extrapolate(a: &ExtrapolateArgs) -> Result<()> {
         scope,
         cache: a.cache.clone(),
     };
-    let out = with_threads(a.threads, || {
+    let out = unseen::sys::with_threads(a.threads, || {
         pipeline::run_with(&cfg, &inputs, &a.out, &opts, &draw)
     })??;
     if let Some(m) = &out.metrics {
@@ -414,13 +387,14 @@ pub fn run_audit(a: &AuditArgs) -> Result<()> {
             .iter()
             .find(|j| &j.name() == only)
             .ok_or_else(|| Error::invalid(format!("no job '{only}' in this audit (see --list)")))?;
-        with_threads(a.threads, || {
+        unseen::sys::with_threads(a.threads, || {
             audit::run_job(&cfg, &a.dataset, &a.out, job, &draw)
         })??;
         println!("done: {only}");
         return Ok(());
     }
-    let report = with_threads(a.threads, || audit::run(&cfg, &a.dataset, &a.out, &draw))??;
+    let report =
+        unseen::sys::with_threads(a.threads, || audit::run(&cfg, &a.dataset, &a.out, &draw))??;
     for v in &report.verdicts {
         println!(
             "{:<42} {:<11} {:+6.2} dB  {}",

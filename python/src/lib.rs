@@ -1,0 +1,610 @@
+//! `unseen._unseen`: the Python binding of the core crate (wrapped by the `unseen` package).
+//!
+//! Arrays in, arrays out: every function checks its NumPy arguments (dtype, C order, shape;
+//! a `ValueError` naming the argument and the expected shape), copies them into the core's
+//! types, releases the GIL and calls the core's public API in a pool of `threads` threads
+//! (results do not depend on the count, SPEC.md §6). No numerics live here.
+//!
+//! Parameters follow gsplat's conventions, which are the core's raw parameters: `quats`
+//! wxyz (not necessarily normalised), `scales` log scales, `opacities` logits, `sh`
+//! `(N, K, 3)` with `K = (degree + 1)²` (coefficient 0 the DC term), cameras from a 3×3
+//! `K` and a 4×4 world-to-camera `viewmat` (OpenCV axes: x right, y down, z forward).
+
+use numpy::{
+    PyArray1, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyUntypedArray,
+    PyUntypedArrayMethods, dtype,
+};
+use pyo3::exceptions::{PyOSError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::PathBuf;
+use unseen::camera::Camera;
+use unseen::gaussian::Gaussians;
+use unseen::math::sh::num_coeffs;
+use unseen::raster::backward::{GradGroups, ImageGrads, backward as core_backward};
+use unseen::raster::{Kernel, Outputs, RenderOptions, RenderPlan};
+use unseen::{Error, ErrorKind};
+
+/// A core error as a Python exception: `OSError` for the operating system's failures,
+/// `ValueError` for everything else (malformed files, invalid arguments).
+fn py_err(e: Error) -> PyErr {
+    match e.kind {
+        ErrorKind::Io => PyOSError::new_err(e.to_string()),
+        _ => PyValueError::new_err(e.to_string()),
+    }
+}
+
+/// A shape as text, `None` dimensions as their letter: `(N, 3)`.
+fn shape_text(dims: &[(Option<usize>, &str)]) -> String {
+    let parts: Vec<String> = dims
+        .iter()
+        .map(|(d, l)| d.map_or_else(|| l.to_string(), |v| v.to_string()))
+        .collect();
+    if parts.len() == 1 {
+        format!("({},)", parts[0])
+    } else {
+        format!("({})", parts.join(", "))
+    }
+}
+
+/// The values of `obj`, which must be a C-contiguous NumPy array of `T` with the shape
+/// `dims` (a `None` dimension takes any size, and every dimension of the same letter must
+/// agree with `bound`, the sizes fixed so far by letter).
+fn array<T: numpy::Element + Copy>(
+    name: &str,
+    obj: &Bound<'_, PyAny>,
+    dims: &[(Option<usize>, &str)],
+    bound: &mut Vec<(String, usize)>,
+) -> PyResult<(Vec<usize>, Vec<T>)> {
+    let py = obj.py();
+    let want = format!(
+        "{name}: expected a C-contiguous {} array of shape {}",
+        dtype::<T>(py),
+        shape_text(dims)
+    );
+    let Ok(arr) = obj.cast::<PyUntypedArray>() else {
+        return Err(PyValueError::new_err(format!(
+            "{want}, got {}",
+            obj.get_type().name()?
+        )));
+    };
+    if !arr.dtype().is_equiv_to(&dtype::<T>(py)) {
+        return Err(PyValueError::new_err(format!(
+            "{want}, got dtype {}",
+            arr.dtype()
+        )));
+    }
+    let shape = arr.shape().to_vec();
+    let mut ok = shape.len() == dims.len();
+    if ok {
+        for (&s, &(d, letter)) in shape.iter().zip(dims) {
+            match d {
+                Some(v) => ok &= s == v,
+                None => match bound.iter().find(|(l, _)| l == letter) {
+                    Some(&(_, v)) => ok &= s == v,
+                    None => bound.push((letter.to_string(), s)),
+                },
+            }
+        }
+    }
+    if !ok {
+        let fixed: Vec<String> = bound.iter().map(|(l, v)| format!("{l} = {v}")).collect();
+        return Err(PyValueError::new_err(format!(
+            "{want}{}, got shape {shape:?}",
+            if fixed.is_empty() {
+                String::new()
+            } else {
+                format!(" ({})", fixed.join(", "))
+            }
+        )));
+    }
+    if !arr.is_c_contiguous() {
+        return Err(PyValueError::new_err(format!(
+            "{want}, got a non-contiguous array (use numpy.ascontiguousarray)"
+        )));
+    }
+    let typed = arr
+        .cast::<PyArrayDyn<T>>()
+        .map_err(|_| PyValueError::new_err(want.clone()))?;
+    let ro = typed.readonly();
+    let values = ro
+        .as_slice()
+        .map_err(|_| PyValueError::new_err(want.clone()))?
+        .to_vec();
+    Ok((shape, values))
+}
+
+/// `v` as a NumPy array of `shape`.
+fn to_numpy<'py, T: numpy::Element>(
+    py: Python<'py>,
+    v: Vec<T>,
+    shape: &[usize],
+) -> PyResult<Bound<'py, PyAny>> {
+    Ok(PyArray1::from_vec(py, v).reshape(shape)?.into_any())
+}
+
+fn triples<const K: usize>(v: &[f32]) -> Vec<[f32; K]> {
+    v.chunks_exact(K)
+        .map(|c| std::array::from_fn(|i| c[i]))
+        .collect()
+}
+
+/// The scene from gsplat-convention arrays.
+fn scene(
+    means: &Bound<'_, PyAny>,
+    quats: &Bound<'_, PyAny>,
+    scales: &Bound<'_, PyAny>,
+    opacities: &Bound<'_, PyAny>,
+    sh: &Bound<'_, PyAny>,
+) -> PyResult<Gaussians> {
+    let mut b = Vec::new();
+    let (_, m) = array::<f32>("means", means, &[(None, "N"), (Some(3), "")], &mut b)?;
+    let (_, q) = array::<f32>("quats", quats, &[(None, "N"), (Some(4), "")], &mut b)?;
+    let (_, s) = array::<f32>("scales", scales, &[(None, "N"), (Some(3), "")], &mut b)?;
+    let (_, o) = array::<f32>("opacities", opacities, &[(None, "N")], &mut b)?;
+    let (shape, c) = array::<f32>("sh", sh, &[(None, "N"), (None, "K"), (Some(3), "")], &mut b)?;
+    let k = shape[1];
+    let Some(degree) = (0..=unseen::math::sh::MAX_SH_DEGREE).find(|&d| num_coeffs(d) == k) else {
+        return Err(PyValueError::new_err(format!(
+            "sh: expected K = (degree + 1)² coefficients with degree 0..=5 (1, 4, 9, 16, 25 or 36), got K = {k}"
+        )));
+    };
+    let n = shape[0];
+    let mut dc = Vec::with_capacity(n);
+    let mut rest = Vec::with_capacity(n * (k - 1) * 3);
+    for g in c.chunks_exact(k * 3) {
+        dc.push([g[0], g[1], g[2]]);
+        rest.extend_from_slice(&g[3..]);
+    }
+    let g = Gaussians {
+        means: triples(&m),
+        log_scales: triples(&s),
+        quats: triples(&q),
+        opacity_logits: o,
+        sh_dc: dc,
+        sh_rest: rest,
+        sh_degree: degree,
+    };
+    g.validate().map_err(py_err)?;
+    Ok(g)
+}
+
+fn kernel(name: &str) -> PyResult<Kernel> {
+    match name {
+        "auto" => Ok(Kernel::Auto),
+        "avx2" => Ok(Kernel::Avx2),
+        "scalar" => Ok(Kernel::Scalar),
+        _ => Err(PyValueError::new_err(format!(
+            "kernel: expected 'auto', 'avx2' or 'scalar', got {name:?}"
+        ))),
+    }
+}
+
+fn options(
+    background: [f32; 3],
+    sh_degree: Option<u32>,
+    kernel_name: &str,
+) -> PyResult<RenderOptions> {
+    if background.iter().any(|v| !v.is_finite()) {
+        return Err(PyValueError::new_err(format!(
+            "background: expected three finite values, got {background:?}"
+        )));
+    }
+    Ok(RenderOptions {
+        background,
+        sh_degree,
+        kernel: kernel(kernel_name)?,
+        ..RenderOptions::default()
+    })
+}
+
+/// A pinhole camera (no distortion). Pixel centres are at `(j + 0.5, i + 0.5)`.
+#[pyclass(frozen, name = "Camera", module = "unseen")]
+#[derive(Clone)]
+struct PyCamera {
+    inner: Camera,
+}
+
+#[pymethods]
+impl PyCamera {
+    /// A camera from intrinsics `k` (3×3: fx, fy on the diagonal, cx, cy in the last column,
+    /// no skew) and the world-to-camera matrix `viewmat` (4×4, last row 0 0 0 1), float64,
+    /// as gsplat takes them.
+    #[new]
+    #[pyo3(signature = (k, viewmat, width, height, name = "camera"))]
+    fn new(
+        k: &Bound<'_, PyAny>,
+        viewmat: &Bound<'_, PyAny>,
+        width: u32,
+        height: u32,
+        name: &str,
+    ) -> PyResult<Self> {
+        let mut b = Vec::new();
+        let (_, k) = array::<f64>("k", k, &[(Some(3), ""), (Some(3), "")], &mut b)?;
+        let (_, v) = array::<f64>("viewmat", viewmat, &[(Some(4), ""), (Some(4), "")], &mut b)?;
+        if k[1] != 0.0 || k[3] != 0.0 || k[6] != 0.0 || k[7] != 0.0 || k[8] != 1.0 {
+            return Err(PyValueError::new_err(
+                "k: expected [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] (no skew)",
+            ));
+        }
+        if v[12] != 0.0 || v[13] != 0.0 || v[14] != 0.0 || v[15] != 1.0 {
+            return Err(PyValueError::new_err(
+                "viewmat: expected a rigid world-to-camera matrix with last row [0, 0, 0, 1]",
+            ));
+        }
+        let r_cw = [[v[0], v[1], v[2]], [v[4], v[5], v[6]], [v[8], v[9], v[10]]];
+        let t = [v[3], v[7], v[11]];
+        let cam =
+            Camera::from_world_to_camera(name, width, height, [k[0], k[4], k[2], k[5]], r_cw, t)
+                .map_err(py_err)?;
+        Ok(PyCamera { inner: cam })
+    }
+
+    #[getter]
+    fn name(&self) -> &str {
+        &self.inner.name
+    }
+    #[getter]
+    fn width(&self) -> u32 {
+        self.inner.width
+    }
+    #[getter]
+    fn height(&self) -> u32 {
+        self.inner.height
+    }
+    /// The 3×3 intrinsics (float64).
+    #[getter]
+    fn k<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let c = &self.inner;
+        to_numpy(
+            py,
+            vec![c.fx, 0.0, c.cx, 0.0, c.fy, c.cy, 0.0, 0.0, 1.0],
+            &[3, 3],
+        )
+    }
+    /// The 4×4 world-to-camera matrix (float64).
+    #[getter]
+    fn viewmat<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let r = self.inner.camera_from_world_rotation();
+        let t = self.inner.camera_from_world_translation();
+        let m = vec![
+            r.x_axis.x, r.y_axis.x, r.z_axis.x, t.x, //
+            r.x_axis.y, r.y_axis.y, r.z_axis.y, t.y, //
+            r.x_axis.z, r.y_axis.z, r.z_axis.z, t.z, //
+            0.0, 0.0, 0.0, 1.0,
+        ];
+        to_numpy(py, m, &[4, 4])
+    }
+    fn __repr__(&self) -> String {
+        let c = &self.inner;
+        format!(
+            "Camera(name={:?}, width={}, height={}, fx={}, fy={}, cx={}, cy={})",
+            c.name, c.width, c.height, c.fx, c.fy, c.cx, c.cy
+        )
+    }
+}
+
+/// The cameras of an INRIA `cameras.json` (as `unseen oracle --cameras` reads them).
+#[pyfunction]
+fn load_cameras(path: PathBuf) -> PyResult<Vec<PyCamera>> {
+    let cams = unseen::camera::inria::read_cameras_json(&path).map_err(py_err)?;
+    Ok(cams.into_iter().map(|inner| PyCamera { inner }).collect())
+}
+
+/// Render `camera` (see the module docs for the conventions). Returns a dict of arrays:
+/// the images (`rgb` (H, W, 3), `alpha`, `depth`, `expected_depth`, `final_t`, `n_contrib`
+/// (H, W)) and the forward's intermediates as `unseen oracle forward` dumps them
+/// (`means2d`, `conics`, `depths`, `opacities`, `colors`, `radii`, `tile_offsets`,
+/// `tile_ids`). `outputs` limits the images computed to some of `rgb`, `alpha`, `depth`,
+/// `expected_depth` (then without `final_t` / `n_contrib`, which only the backward needs).
+#[pyfunction]
+#[pyo3(signature = (means, quats, scales, opacities, sh, camera, *, sh_degree=None, background=[0.0, 0.0, 0.0], outputs=None, kernel="auto", threads=None))]
+#[allow(clippy::too_many_arguments)]
+fn render<'py>(
+    py: Python<'py>,
+    means: &Bound<'py, PyAny>,
+    quats: &Bound<'py, PyAny>,
+    scales: &Bound<'py, PyAny>,
+    opacities: &Bound<'py, PyAny>,
+    sh: &Bound<'py, PyAny>,
+    camera: &PyCamera,
+    sh_degree: Option<u32>,
+    background: [f32; 3],
+    outputs: Option<Vec<String>>,
+    kernel: &str,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let g = scene(means, quats, scales, opacities, sh)?;
+    let mut opts = options(background, sh_degree, kernel)?;
+    opts.outputs = match &outputs {
+        None => Outputs::ALL,
+        Some(names) => {
+            let mut o = Outputs {
+                rgb: false,
+                alpha: false,
+                depth: false,
+                expected_depth: false,
+                backward_state: false,
+            };
+            for n in names {
+                match n.as_str() {
+                    "rgb" => o.rgb = true,
+                    "alpha" => o.alpha = true,
+                    "depth" => o.depth = true,
+                    "expected_depth" => o.expected_depth = true,
+                    _ => {
+                        return Err(PyValueError::new_err(format!(
+                            "outputs: expected names among 'rgb', 'alpha', 'depth', 'expected_depth', got {n:?}"
+                        )));
+                    }
+                }
+            }
+            o
+        }
+    };
+    let cam = &camera.inner;
+    let (render, projected, bins) = py
+        .detach(|| {
+            unseen::sys::with_threads(threads, || {
+                let plan = RenderPlan::new(&g, &opts);
+                unseen::raster::render_staged(&g, cam, &opts, &plan)
+            })
+        })
+        .map_err(py_err)?
+        .map_err(py_err)?;
+    let (w, h, n) = (cam.width as usize, cam.height as usize, g.len());
+    let d = PyDict::new(py);
+    let image = |v: Option<Vec<f32>>, shape: &[usize]| -> PyResult<Option<Bound<'py, PyAny>>> {
+        v.map(|v| to_numpy(py, v, shape)).transpose()
+    };
+    for (name, v, shape) in [
+        ("rgb", render.rgb, vec![h, w, 3]),
+        ("alpha", render.alpha, vec![h, w]),
+        ("depth", render.depth, vec![h, w]),
+        ("expected_depth", render.expected_depth, vec![h, w]),
+        ("final_t", render.final_t, vec![h, w]),
+    ] {
+        if let Some(a) = image(v, &shape)? {
+            d.set_item(name, a)?;
+        }
+    }
+    if let Some(c) = render.n_contrib {
+        d.set_item("n_contrib", to_numpy(py, c, &[h, w])?)?;
+    }
+    let s = &projected.splats;
+    d.set_item(
+        "means2d",
+        to_numpy(py, s.iter().flat_map(|s| s.mean).collect(), &[n, 2])?,
+    )?;
+    d.set_item(
+        "conics",
+        to_numpy(py, s.iter().flat_map(|s| s.conic).collect(), &[n, 3])?,
+    )?;
+    d.set_item(
+        "depths",
+        to_numpy(py, s.iter().map(|s| s.depth).collect(), &[n])?,
+    )?;
+    d.set_item(
+        "opacities",
+        to_numpy(py, s.iter().map(|s| s.opacity).collect(), &[n])?,
+    )?;
+    d.set_item(
+        "colors",
+        to_numpy(py, s.iter().flat_map(|s| s.color).collect(), &[n, 3])?,
+    )?;
+    d.set_item(
+        "radii",
+        to_numpy(
+            py,
+            projected.radii.iter().flatten().copied().collect(),
+            &[n, 2],
+        )?,
+    )?;
+    let offsets: Vec<u64> = bins.offsets.iter().map(|&o| o as u64).collect();
+    let len = offsets.len();
+    d.set_item("tile_offsets", to_numpy(py, offsets, &[len])?)?;
+    let len = bins.ids.len();
+    d.set_item("tile_ids", to_numpy(py, bins.ids, &[len])?)?;
+    Ok(d)
+}
+
+/// Gradients of a loss with respect to every raw parameter, given the loss's gradients
+/// with respect to the images (`grad_rgb` (H, W, 3); `grad_alpha`, `grad_depth`,
+/// `grad_expected_depth` (H, W) optional). Returns a dict: `means` (N, 3), `quats`
+/// (N, 4), `scales` (N, 3, log scales), `opacities` (N, logits), `sh` (N, K, 3),
+/// `background` (3,), `means2d` (N, 2, pixels).
+#[pyfunction]
+#[pyo3(signature = (means, quats, scales, opacities, sh, camera, grad_rgb, *, grad_alpha=None, grad_depth=None, grad_expected_depth=None, sh_degree=None, background=[0.0, 0.0, 0.0], kernel="auto", threads=None))]
+#[allow(clippy::too_many_arguments)]
+fn backward<'py>(
+    py: Python<'py>,
+    means: &Bound<'py, PyAny>,
+    quats: &Bound<'py, PyAny>,
+    scales: &Bound<'py, PyAny>,
+    opacities: &Bound<'py, PyAny>,
+    sh: &Bound<'py, PyAny>,
+    camera: &PyCamera,
+    grad_rgb: &Bound<'py, PyAny>,
+    grad_alpha: Option<&Bound<'py, PyAny>>,
+    grad_depth: Option<&Bound<'py, PyAny>>,
+    grad_expected_depth: Option<&Bound<'py, PyAny>>,
+    sh_degree: Option<u32>,
+    background: [f32; 3],
+    kernel: &str,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let g = scene(means, quats, scales, opacities, sh)?;
+    let mut opts = options(background, sh_degree, kernel)?;
+    opts.outputs = Outputs::ALL;
+    let cam = &camera.inner;
+    let (h, w) = (cam.height as usize, cam.width as usize);
+    let mut b = Vec::new();
+    let plane = [(Some(h), "H"), (Some(w), "W")];
+    let rgb = array::<f32>(
+        "grad_rgb",
+        grad_rgb,
+        &[(Some(h), "H"), (Some(w), "W"), (Some(3), "")],
+        &mut b,
+    )?
+    .1;
+    let opt_plane = |name: &str, o: Option<&Bound<'py, PyAny>>, b: &mut Vec<(String, usize)>| {
+        o.map(|a| array::<f32>(name, a, &plane, b).map(|x| x.1))
+            .transpose()
+    };
+    let v = ImageGrads {
+        rgb: Some(rgb),
+        alpha: opt_plane("grad_alpha", grad_alpha, &mut b)?,
+        depth: opt_plane("grad_depth", grad_depth, &mut b)?,
+        expected_depth: opt_plane("grad_expected_depth", grad_expected_depth, &mut b)?,
+    };
+    let grads = py
+        .detach(|| {
+            unseen::sys::with_threads(threads, || {
+                let fwd = unseen::raster::backward::render_for_backward(&g, cam, &opts)?;
+                core_backward(&g, cam, &opts, &fwd, &v, &GradGroups::ALL)
+            })
+        })
+        .map_err(py_err)?
+        .map_err(py_err)?
+        .0;
+    let n = g.len();
+    let k1 = g.rest_per_channel();
+    let mut sh_grad = Vec::with_capacity(n * (k1 + 1) * 3);
+    for (i, dc) in grads.sh_dc.iter().enumerate() {
+        sh_grad.extend_from_slice(dc);
+        sh_grad.extend_from_slice(&grads.sh_rest[i * k1 * 3..(i + 1) * k1 * 3]);
+    }
+    let d = PyDict::new(py);
+    d.set_item("means", to_numpy(py, grads.means.concat(), &[n, 3])?)?;
+    d.set_item("quats", to_numpy(py, grads.quats.concat(), &[n, 4])?)?;
+    d.set_item("scales", to_numpy(py, grads.log_scales.concat(), &[n, 3])?)?;
+    d.set_item("opacities", to_numpy(py, grads.opacity_logits, &[n])?)?;
+    d.set_item("sh", to_numpy(py, sh_grad, &[n, k1 + 1, 3])?)?;
+    d.set_item("background", to_numpy(py, grads.background.to_vec(), &[3])?)?;
+    d.set_item("means2d", to_numpy(py, grads.means2d.concat(), &[n, 2])?)?;
+    Ok(d)
+}
+
+/// A scene from an INRIA 3DGS PLY: a dict of `means`, `quats`, `scales`, `opacities`, `sh`
+/// (gsplat conventions) and `sh_degree`.
+#[pyfunction]
+fn load_ply(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyDict>> {
+    let (g, _) = unseen::gaussian::ply::read_ply(&path).map_err(py_err)?;
+    let n = g.len();
+    let k = g.rest_per_channel() + 1;
+    let mut sh = Vec::with_capacity(n * k * 3);
+    for i in 0..n {
+        sh.extend_from_slice(&g.sh_dc[i]);
+        sh.extend_from_slice(g.rest(i));
+    }
+    let d = PyDict::new(py);
+    d.set_item("means", to_numpy(py, g.means.concat(), &[n, 3])?)?;
+    d.set_item("quats", to_numpy(py, g.quats.concat(), &[n, 4])?)?;
+    d.set_item("scales", to_numpy(py, g.log_scales.concat(), &[n, 3])?)?;
+    d.set_item("opacities", to_numpy(py, g.opacity_logits, &[n])?)?;
+    d.set_item("sh", to_numpy(py, sh, &[n, k, 3])?)?;
+    d.set_item("sh_degree", g.sh_degree)?;
+    Ok(d)
+}
+
+/// Write a scene as an INRIA 3DGS PLY (atomically: no partial file on error).
+#[pyfunction]
+fn save_ply(
+    path: PathBuf,
+    means: &Bound<'_, PyAny>,
+    quats: &Bound<'_, PyAny>,
+    scales: &Bound<'_, PyAny>,
+    opacities: &Bound<'_, PyAny>,
+    sh: &Bound<'_, PyAny>,
+) -> PyResult<()> {
+    let g = scene(means, quats, scales, opacities, sh)?;
+    unseen::gaussian::ply::write_ply(&g, &path).map_err(py_err)
+}
+
+/// `unseen compare A B --tolerance T` as a JSON string (the package parses it).
+#[pyfunction]
+#[pyo3(signature = (run_a, run_b, tolerance=0.0))]
+fn compare_json(
+    py: Python<'_>,
+    run_a: PathBuf,
+    run_b: PathBuf,
+    tolerance: f64,
+) -> PyResult<String> {
+    let c = py
+        .detach(|| unseen::pipeline::compare::compare(&run_a, &run_b, tolerance))
+        .map_err(py_err)?;
+    Ok(serde_json::to_string(&c).expect("serializes"))
+}
+
+/// `unseen extrapolate`: the pipeline on a trained run. `config` is a JSON string of
+/// overrides of the preset (as `--config` files hold). Returns the final scene's path (or
+/// `None` for a run that stopped early) and the step names.
+#[pyfunction]
+#[pyo3(signature = (run, candidates, out, *, evaluation=None, dataset=None, preset="quick", config=None, resume=false, threads=None))]
+#[allow(clippy::too_many_arguments)]
+fn extrapolate(
+    py: Python<'_>,
+    run: PathBuf,
+    candidates: PathBuf,
+    out: PathBuf,
+    evaluation: Option<PathBuf>,
+    dataset: Option<PathBuf>,
+    preset: &str,
+    config: Option<String>,
+    resume: bool,
+    threads: Option<usize>,
+) -> PyResult<(Option<PathBuf>, Vec<String>)> {
+    let cfg = match config {
+        None => unseen::pipeline::config::PipelineConfig::preset(preset),
+        Some(text) => {
+            let src = std::path::Path::new("<config argument>");
+            serde_json::from_str(&text)
+                .map_err(|e| Error::parse(src, format!("invalid JSON: {e}")))
+                .and_then(|v| {
+                    unseen::pipeline::config::PipelineConfig::with_overrides(preset, v, src)
+                })
+        }
+    }
+    .map_err(py_err)?;
+    let outcome = py
+        .detach(|| {
+            unseen::sys::with_threads(threads, || {
+                let inputs = unseen::pipeline::load_inputs(
+                    &run,
+                    &candidates,
+                    evaluation.as_deref(),
+                    dataset.as_deref(),
+                )?;
+                unseen::pipeline::run(&cfg, &inputs, &out, resume, &|_| {})
+            })
+        })
+        .map_err(py_err)?
+        .map_err(py_err)?;
+    let steps = outcome.steps.iter().map(|s| s.name.clone()).collect();
+    Ok((outcome.scene, steps))
+}
+
+/// The crate version, SPEC.md's conventions version and the numerics revision (a port
+/// records them beside its goldens).
+#[pyfunction]
+fn versions() -> (String, u32, u32) {
+    (
+        unseen::VERSION.to_string(),
+        unseen::oracle::CONVENTIONS_VERSION,
+        unseen::oracle::NUMERICS_REVISION,
+    )
+}
+
+#[pymodule]
+fn _unseen(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyCamera>()?;
+    m.add_function(wrap_pyfunction!(load_cameras, m)?)?;
+    m.add_function(wrap_pyfunction!(render, m)?)?;
+    m.add_function(wrap_pyfunction!(backward, m)?)?;
+    m.add_function(wrap_pyfunction!(load_ply, m)?)?;
+    m.add_function(wrap_pyfunction!(save_ply, m)?)?;
+    m.add_function(wrap_pyfunction!(compare_json, m)?)?;
+    m.add_function(wrap_pyfunction!(extrapolate, m)?)?;
+    m.add_function(wrap_pyfunction!(versions, m)?)?;
+    Ok(())
+}
