@@ -48,8 +48,17 @@ def seeded_scene(n, degree, seed):
 
 
 def camera(width=64, height=48):
-    k = np.array([[60.0, 0.0, width / 2], [0.0, 60.0, height / 2], [0.0, 0.0, 1.0]])
-    return unseen.Camera(k, np.eye(4), width, height)
+    """A turned and moved camera (a port that transposes the viewmat, or flips a sign in
+    its translation, fails here)."""
+    a, b = 0.1, -0.15
+    r_wc = np.array([[np.cos(b), 0, np.sin(b)], [0, 1, 0], [-np.sin(b), 0, np.cos(b)]]) @ np.array(
+        [[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]]
+    )
+    center = np.array([0.2, -0.1, -0.4])
+    viewmat = np.eye(4)
+    viewmat[:3, :3], viewmat[:3, 3] = r_wc.T, -r_wc.T @ center
+    k = np.array([[60.0, 0.0, width / 2 + 0.5], [0.0, 58.0, height / 2 - 0.25], [0.0, 0.0, 1.0]])
+    return unseen.Camera(k, viewmat, width, height)
 
 
 def assert_close_to_group_max(got, want, name):

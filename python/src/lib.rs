@@ -106,10 +106,18 @@ fn array<T: numpy::Element + Copy>(
     let typed = arr
         .cast::<PyArrayDyn<T>>()
         .map_err(|_| PyValueError::new_err(want.clone()))?;
-    let ro = typed.readonly();
+    let ro = typed.try_readonly().map_err(|_| {
+        PyValueError::new_err(format!(
+            "{name}: the array is borrowed mutably elsewhere and cannot be read"
+        ))
+    })?;
     let values = ro
         .as_slice()
-        .map_err(|_| PyValueError::new_err(want.clone()))?
+        .map_err(|_| {
+            PyValueError::new_err(format!(
+                "{want}, got an unaligned array (use numpy.ascontiguousarray or a copy)"
+            ))
+        })?
         .to_vec();
     Ok((shape, values))
 }
@@ -180,16 +188,12 @@ fn kernel(name: &str) -> PyResult<Kernel> {
     }
 }
 
+/// Render options; the core checks them (a non-finite background, an SH degree above 5).
 fn options(
     background: [f32; 3],
     sh_degree: Option<u32>,
     kernel_name: &str,
 ) -> PyResult<RenderOptions> {
-    if background.iter().any(|v| !v.is_finite()) {
-        return Err(PyValueError::new_err(format!(
-            "background: expected three finite values, got {background:?}"
-        )));
-    }
     Ok(RenderOptions {
         background,
         sh_degree,
@@ -286,8 +290,10 @@ impl PyCamera {
 
 /// The cameras of an INRIA `cameras.json` (as `unseen oracle --cameras` reads them).
 #[pyfunction]
-fn load_cameras(path: PathBuf) -> PyResult<Vec<PyCamera>> {
-    let cams = unseen::camera::inria::read_cameras_json(&path).map_err(py_err)?;
+fn load_cameras(py: Python<'_>, path: PathBuf) -> PyResult<Vec<PyCamera>> {
+    let cams = py
+        .detach(|| unseen::camera::inria::read_cameras_json(&path))
+        .map_err(py_err)?;
     Ok(cams.into_iter().map(|inner| PyCamera { inner }).collect())
 }
 
@@ -489,7 +495,9 @@ fn backward<'py>(
 /// (gsplat conventions) and `sh_degree`.
 #[pyfunction]
 fn load_ply(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyDict>> {
-    let (g, _) = unseen::gaussian::ply::read_ply(&path).map_err(py_err)?;
+    let (g, _) = py
+        .detach(|| unseen::gaussian::ply::read_ply(&path))
+        .map_err(py_err)?;
     let n = g.len();
     let k = g.rest_per_channel() + 1;
     let mut sh = Vec::with_capacity(n * k * 3);
@@ -510,6 +518,7 @@ fn load_ply(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyDict>> {
 /// Write a scene as an INRIA 3DGS PLY (atomically: no partial file on error).
 #[pyfunction]
 fn save_ply(
+    py: Python<'_>,
     path: PathBuf,
     means: &Bound<'_, PyAny>,
     quats: &Bound<'_, PyAny>,
@@ -518,7 +527,8 @@ fn save_ply(
     sh: &Bound<'_, PyAny>,
 ) -> PyResult<()> {
     let g = scene(means, quats, scales, opacities, sh)?;
-    unseen::gaussian::ply::write_ply(&g, &path).map_err(py_err)
+    py.detach(|| unseen::gaussian::ply::write_ply(&g, &path))
+        .map_err(py_err)
 }
 
 /// `unseen compare A B --tolerance T` as a JSON string (the package parses it).
@@ -561,7 +571,10 @@ fn extrapolate(
             serde_json::from_str(&text)
                 .map_err(|e| Error::parse(src, format!("invalid JSON: {e}")))
                 .and_then(|v| {
-                    unseen::pipeline::config::PipelineConfig::with_overrides(preset, v, src)
+                    let c =
+                        unseen::pipeline::config::PipelineConfig::with_overrides(preset, v, src)?;
+                    c.validate().map_err(|e| e.at(src))?;
+                    Ok(c)
                 })
         }
     }

@@ -57,17 +57,32 @@ def random_scene(n, degree, seed):
     )
 
 
+def rotation(ax, ay, az):
+    """world_from_camera: rotations about x, y, z (radians), composed z·y·x."""
+    cx, sx, cy, sy, cz, sz = np.cos(ax), np.sin(ax), np.cos(ay), np.sin(ay), np.cos(az), np.sin(az)
+    rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+R_WC = rotation(0.12, -0.2, 0.07)
+CENTER = np.array([0.3, -0.2, -0.5])
+FX, FY = 38.0, 37.0
+
+
 def write_cameras(path):
-    """An INRIA cameras.json with one camera at the origin looking down +z."""
+    """An INRIA cameras.json with one turned and moved camera (rotation = world_from_camera,
+    rows; position = centre)."""
     entry = {
         "id": 0,
         "img_name": "cam",
         "width": W,
         "height": H,
-        "position": [0.0, 0.0, 0.0],
-        "rotation": [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-        "fx": 38.0,
-        "fy": 37.0,
+        "position": CENTER.tolist(),
+        "rotation": R_WC.tolist(),
+        "fx": FX,
+        "fy": FY,
     }
     path.write_text(json.dumps([entry]))
 
@@ -179,11 +194,24 @@ def test_ply_round_trip(tmp_path):
 def test_camera_from_viewmat_matches_cameras_json(dumps):
     d, s = dumps
     cam = unseen.load_cameras(d / "cameras.json")[0]
-    again = unseen.Camera(cam.k, cam.viewmat, cam.width, cam.height)
-    np.testing.assert_array_equal(again.viewmat, cam.viewmat)
-    a = unseen.render(**s, camera=cam)["rgb"]
-    b = unseen.render(**s, camera=again)["rgb"]
-    assert bits_equal(a, b)
+    # gsplat's viewmat from the camera's pose, independently of the binding.
+    r_cw = R_WC.T
+    viewmat = np.eye(4)
+    viewmat[:3, :3], viewmat[:3, 3] = r_cw, -r_cw @ CENTER
+    k = np.array([[FX, 0, W / 2], [0, FY, H / 2], [0, 0, 1]])
+    np.testing.assert_allclose(cam.viewmat, viewmat, atol=1e-15)
+    np.testing.assert_array_equal(cam.k, k)
+    again = unseen.Camera(k, viewmat, W, H)
+    np.testing.assert_allclose(again.viewmat, viewmat, atol=1e-15)
+    out = unseen.render(**s, camera=again)
+    np.testing.assert_allclose(out["rgb"], unseen.render(**s, camera=cam)["rgb"], atol=1e-6)
+    # The projected centres are the pinhole projection of the means (f32 against f64).
+    x = (r_cw @ (s["means"].astype(np.float64) - CENTER).T).T
+    uv = np.stack([FX * x[:, 0] / x[:, 2] + W / 2, FY * x[:, 1] / x[:, 2] + H / 2], 1)
+    seen = (out["radii"] > 0).any(1)
+    assert seen.sum() > 100
+    np.testing.assert_allclose(out["means2d"][seen], uv[seen], atol=2e-4)
+    np.testing.assert_allclose(out["depths"][seen], x[seen, 2], rtol=1e-6)
 
 
 def test_compare_finds_the_first_divergent_step(dumps, tmp_path):
@@ -203,6 +231,16 @@ def test_compare_finds_the_first_divergent_step(dumps, tmp_path):
     assert unseen.compare(tmp_path / "a", tmp_path / "b", tolerance=1e-2)["first_divergent"] is None
     with pytest.raises(ValueError, match="not a run directory"):
         unseen.compare(tmp_path / "a", tmp_path / "missing")
+
+
+def test_zero_gaussians_render_the_background(cam):
+    empty = random_scene(0, 0, seed=1)
+    out = unseen.render(**empty, camera=cam, background=[0.25, 0.5, 1.0])
+    assert out["rgb"].shape == (H, W, 3)
+    np.testing.assert_array_equal(out["rgb"][5, 7], np.float32([0.25, 0.5, 1.0]))
+    assert out["means2d"].shape == (0, 2)
+    g = unseen.backward(**empty, camera=cam, grad_rgb=np.ones((H, W, 3), np.float32))
+    assert g["sh"].shape == (0, 1, 3) and g["background"].tolist() == [H * W] * 3
 
 
 def test_versions():
@@ -269,6 +307,22 @@ def test_bad_cameras_are_refused():
         unseen.Camera(k, np.diag([1.0, 1.0, -1.0, 1.0]), W, H)
     with pytest.raises(ValueError, match="last row"):
         unseen.Camera(k, np.ones((4, 4)), W, H)
+
+
+def test_oversized_cameras_are_refused():
+    k = np.array([[30.0, 0, 20], [0, 30.0, 15], [0, 0, 1]])
+    with pytest.raises(ValueError, match="larger than 65536 pixels a side"):
+        unseen.Camera(k, np.eye(4), 2**32 - 1, 128)
+    with pytest.raises(ValueError, match="image size 60000x60000 is larger"):
+        unseen.Camera(k, np.eye(4), 60000, 60000)
+
+
+def test_bad_tolerance_and_single_step_folder_are_refused(dumps):
+    d, _ = dumps
+    with pytest.raises(ValueError, match="tolerance NaN must be finite"):
+        unseen.compare(d, d, tolerance=float("nan"))
+    with pytest.raises(ValueError, match="pass the folder that holds it"):
+        unseen.compare(d / "fwd", d / "fwd")
 
 
 def test_unknown_kernel_and_output_are_refused(good, cam):

@@ -18,6 +18,11 @@ use glam::{DMat3, DVec3};
 /// Cameras written with 7–9 significant digits (JSON, COLMAP text) sit around 1e-7.
 pub const ROTATION_TOLERANCE: f64 = 1e-5;
 
+/// Largest image side accepted for a camera (pixels).
+pub const MAX_IMAGE_SIDE: u32 = 1 << 16;
+/// Largest image accepted for a camera (pixels): 2^28, a 3 GiB f32 RGB render.
+pub const MAX_IMAGE_PIXELS: u64 = 1 << 28;
+
 /// The camera called `name` in `cams` (read from `file`, named in the error).
 pub fn find<'a>(cams: &'a [Camera], name: &str, file: &std::path::Path) -> Result<&'a Camera> {
     cams.iter()
@@ -75,6 +80,17 @@ impl Camera {
         if self.width == 0 || self.height == 0 {
             return bad(format!(
                 "image size {}x{} is empty",
+                self.width, self.height
+            ));
+        }
+        // A size the renderer's buffers (and its tile grid) could not hold is refused here,
+        // before anything is allocated for it.
+        if self.width.max(self.height) > MAX_IMAGE_SIDE
+            || u64::from(self.width) * u64::from(self.height) > MAX_IMAGE_PIXELS
+        {
+            return bad(format!(
+                "image size {}x{} is larger than {MAX_IMAGE_SIDE} pixels a side or \
+                 {MAX_IMAGE_PIXELS} pixels in all",
                 self.width, self.height
             ));
         }

@@ -210,6 +210,11 @@ fn diff_file(a: &Path, b: &Path, rel: &str) -> FileDiff {
 /// Compare two run directories; a file counts as divergent when it is not identical and
 /// its largest absolute difference exceeds `tolerance` (or it cannot be compared).
 pub fn compare(a: &Path, b: &Path, tolerance: f64) -> Result<Comparison> {
+    if !(tolerance.is_finite() && tolerance >= 0.0) {
+        return Err(Error::invalid(format!(
+            "the tolerance {tolerance} must be finite and ≥ 0"
+        )));
+    }
     for r in [a, b] {
         if !r.is_dir() {
             return Err(Error::invalid("not a run directory").at(r));
@@ -238,9 +243,12 @@ pub fn compare(a: &Path, b: &Path, tolerance: f64) -> Result<Comparison> {
         None => manifests(a)?,
     };
     if ma.is_empty() {
-        return Err(
-            Error::invalid("no step manifests (is this an `unseen extrapolate` run?)").at(a),
-        );
+        let hint = if a.join("manifest.json").is_file() {
+            " (a single step's folder: pass the folder that holds it)"
+        } else {
+            " (is this an `unseen extrapolate` run?)"
+        };
+        return Err(Error::invalid(format!("no step manifests{hint}")).at(a));
     }
     let mut steps = Vec::new();
     let mut first = None;

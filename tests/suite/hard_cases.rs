@@ -361,11 +361,21 @@ fn degenerate_cameras_are_clear_errors() {
     nan_fy.fy = f64::NAN;
     let mut empty = good.clone();
     empty.width = 0;
+    // Too large to render: refused before the tile grid or any image buffer is allocated.
+    let mut wide = good.clone();
+    wide.width = u32::MAX;
+    let mut huge = good.clone();
+    (huge.width, huge.height) = (60_000, 60_000);
     let opts = RenderOptions::default();
     for (cam, expect) in [
         (zero_fx, "focal length fx = 0"),
         (nan_fy, "focal length fy = NaN"),
         (empty, "image size 0x6 is empty"),
+        (
+            wide,
+            "image size 4294967295x6 is larger than 65536 pixels a side",
+        ),
+        (huge, "image size 60000x60000 is larger than"),
     ] {
         let e = render(&g, &cam, &opts).unwrap_err().to_string();
         assert!(e.contains(expect) && e.contains("default"), "{e}");

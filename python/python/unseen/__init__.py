@@ -15,7 +15,10 @@ argument       shape        meaning
 =============  ===========  =====================================================
 
 Camera axes are OpenCV's (x right, y down, z forward); pixel centres at (j + 0.5, i + 0.5).
-Every float array must be float32 and C-contiguous; a wrong dtype, order or shape raises a
+Every scene and gradient array must be float32 and C-contiguous (the camera's ``K`` and
+``viewmat`` float64); ``scales`` and ``opacities`` are the *raw* parameters (log scales,
+logits), not the activated ones gsplat's ``rasterization()`` takes. A wrong dtype, order
+or shape raises a
 ``ValueError`` naming the argument and the expected shape. The GIL is released while the
 core computes; ``threads`` sets the pool size (the bits do not depend on it).
 """

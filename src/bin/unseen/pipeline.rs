@@ -156,7 +156,11 @@ fn config_from(preset: Preset, file: Option<&Path>, knobs: &Knobs) -> Result<Pip
         }
     };
     knobs.apply(&mut c)?;
-    c.validate()?;
+    // An invalid value names the file it came from (knobs are checked as they apply).
+    c.validate().map_err(|e| match file {
+        Some(p) => e.at(p),
+        None => e,
+    })?;
     Ok(c)
 }
 
