@@ -167,6 +167,9 @@ pub fn dump(
         let k1 = scene.rest_per_channel();
         wr.put("loss", &[loss as f32], &[])?;
         wr.put("v_rgb", v.rgb.as_deref().unwrap_or_default(), &[h, w, 3])?;
+        if let Some(vd) = &v.depth {
+            wr.put("v_depth", vd, &[h, w])?;
+        }
         wr.put("grad_means", &flat(&g.means), &[n, 3])?;
         wr.put("grad_log_scales", &flat(&g.log_scales), &[n, 3])?;
         wr.put("grad_quats", &flat(&g.quats), &[n, 4])?;
