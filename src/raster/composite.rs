@@ -27,7 +27,6 @@ use super::plan::RenderPlan;
 use super::project::{ALPHA_THRESHOLD, Projected, Splat};
 use super::tile::{TILE_SIZE, TileBins};
 use crate::math::fastexp::exp;
-use crate::math::round::{ceil, floor};
 use rayon::prelude::*;
 
 /// Upper clamp of per-splat alpha (gsplat ≥ 1.5.4 and INRIA; gsplat ≤ 1.5.3 used 0.999).
@@ -90,7 +89,11 @@ struct TileSplat {
 
 /// The rows `[lo, hi)` of a tile starting at image row `y0` (with `rows` rows) that splat
 /// `gid` can reach: all rows, or with `cull_rows` those within `ry + 1` pixels of its centre
-/// (beyond, α < 1/255: SPEC.md §5.4). Shared by the forward and backward passes.
+/// (beyond, α < 1/255: SPEC.md §5.4): `lo = clamp(⌊my − ry⌋ − y0, 0, rows)`,
+/// `hi = clamp(⌈my + ry⌉ − y0 + 1, lo, rows)` with `ry = radius_y + 1`, in integers
+/// (`f32 as i64` truncates, saturates and maps NaN to 0: for a bound `≥ 0` it is the floor,
+/// and a negative one clamps to 0 either way). Shared by the forward and backward passes.
+#[inline(always)]
 pub(crate) fn splat_rows(
     p: &Projected,
     gid: usize,
@@ -103,9 +106,125 @@ pub(crate) fn splat_rows(
     }
     let my = p.splats[gid].mean[1];
     let ry = p.radii[gid][1] as f32 + 1.0;
-    let lo = (floor(my - ry) - y0 as f32).max(0.0);
-    let hi = (ceil(my + ry) - y0 as f32 + 1.0).min(rows as f32);
-    (lo as u32, if hi > lo { hi as u32 } else { lo as u32 })
+    let (top, bottom) = (my - ry, my + ry);
+    let (y0, rows) = (y0 as i64, rows as i64);
+    let lo = ((top as i64).saturating_sub(y0)).clamp(0, rows);
+    let t = bottom as i64;
+    let ceil = t.saturating_add(((t as f32) < bottom) as i64);
+    let hi = ceil.saturating_sub(y0).saturating_add(1).clamp(lo, rows);
+    (lo as u32, hi as u32)
+}
+
+/// 64-bit words of a row's membership set: one bit per position in a batch.
+const WORDS: usize = BATCH / 64;
+
+/// Which positions of a batch each tile row walks: bit `k % 64` of word `k / 64` of row
+/// `r` is set when batch splat `k` can reach row `r` (its [`splat_rows`] range holds `r`).
+type RowSets = [[u64; WORDS]; TILE_SIZE];
+
+/// The set positions of a row's membership words, ascending (front to back).
+#[derive(Clone)]
+struct Members<'a> {
+    words: &'a [u64],
+    /// Position of bit 0 of `cur`.
+    base: usize,
+    cur: u64,
+}
+
+impl<'a> Members<'a> {
+    #[inline(always)]
+    fn new(words: &'a [u64]) -> Self {
+        Members {
+            words,
+            base: 0usize.wrapping_sub(64),
+            cur: 0,
+        }
+    }
+}
+
+impl Iterator for Members<'_> {
+    type Item = usize;
+    #[inline(always)]
+    fn next(&mut self) -> Option<usize> {
+        while self.cur == 0 {
+            let (&w, rest) = self.words.split_first()?;
+            self.words = rest;
+            self.base = self.base.wrapping_add(64);
+            self.cur = w;
+        }
+        let k = self.base + self.cur.trailing_zeros() as usize;
+        self.cur &= self.cur - 1;
+        Some(k)
+    }
+}
+
+/// Transpose the per-splat row masks of a batch (`masks[k]`: bit `r` set when splat `k`
+/// reaches row `r`; entries past the batch are 0) into per-row membership words:
+/// `sets[r]` bit `k` = `masks[k]` bit `r`, for the first `words` words of each row.
+/// The reference form; [`row_sets_avx2`] and [`row_sets_avx512`] give the same words.
+#[inline(always)]
+fn row_sets(masks: &[u32; BATCH], words: usize, sets: &mut RowSets) {
+    for (r, set) in sets.iter_mut().enumerate() {
+        for (w, word) in set.iter_mut().enumerate().take(words) {
+            let mut bits = 0u64;
+            for (j, &m) in masks[64 * w..64 * w + 64].iter().enumerate() {
+                bits |= u64::from(m >> r & 1) << j;
+            }
+            *word = bits;
+        }
+    }
+}
+
+/// [`row_sets`] eight splats per instruction: each row's bit of eight masks shifted to
+/// the sign and collected by `movemask`.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn row_sets_avx2(masks: &[u32; BATCH], words: usize, sets: &mut RowSets) {
+    use std::arch::x86_64::*;
+    for w in 0..words {
+        let mut v = [_mm256_setzero_si256(); 8];
+        for (q, v) in v.iter_mut().enumerate() {
+            // SAFETY: 64·w + 8·q + 8 ≤ 64·words ≤ BATCH, the length of `masks`.
+            *v = unsafe { _mm256_loadu_si256(masks.as_ptr().add(64 * w + 8 * q).cast()) };
+        }
+        for (r, set) in sets.iter_mut().enumerate() {
+            let shift = _mm256_set1_epi32(31 - r as i32);
+            let mut bits = 0u64;
+            for (q, &v) in v.iter().enumerate() {
+                let top = _mm256_castsi256_ps(_mm256_sllv_epi32(v, shift));
+                bits |= u64::from(_mm256_movemask_ps(top) as u8) << (8 * q);
+            }
+            set[w] = bits;
+        }
+    }
+}
+
+/// [`row_sets`] sixteen splats per instruction (`vptestmd` into a mask register).
+///
+/// # Safety
+/// The CPU must support AVX-512F.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn row_sets_avx512(masks: &[u32; BATCH], words: usize, sets: &mut RowSets) {
+    use std::arch::x86_64::*;
+    for w in 0..words {
+        let mut v = [_mm512_setzero_si512(); 4];
+        for (q, v) in v.iter_mut().enumerate() {
+            // SAFETY: 64·w + 16·q + 16 ≤ 64·words ≤ BATCH, the length of `masks`.
+            *v = unsafe { _mm512_loadu_si512(masks.as_ptr().add(64 * w + 16 * q).cast()) };
+        }
+        for (r, set) in sets.iter_mut().enumerate() {
+            let bit = _mm512_set1_epi32(1 << r);
+            let mut bits = 0u64;
+            for (q, &v) in v.iter().enumerate() {
+                bits |= u64::from(_mm512_test_epi32_mask(v, bit)) << (16 * q);
+            }
+            set[w] = bits;
+        }
+    }
 }
 
 /// How many list entries ahead the gather prefetches splat data.
@@ -228,14 +347,14 @@ fn blend_lane<const DEPTH: bool, const TRACK: bool>(
 #[inline(never)]
 fn blend_group_lanes<const DEPTH: bool, const TRACK: bool>(
     list: &[TileSplat],
-    idx: &[u16],
+    sets: &[u64],
     px: &[f32; GROUP],
     py: f32,
     st: &mut Group,
 ) -> u64 {
     let mut pairs = 0;
-    for &k in idx {
-        let ts = &list[k as usize];
+    for k in Members::new(sets) {
+        let ts = &list[k];
         if st.active.iter().all(|&a| a == 0) {
             break;
         }
@@ -267,7 +386,8 @@ fn blend_group_lanes<const DEPTH: bool, const TRACK: bool>(
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
     use super::{
-        ALPHA_THRESHOLD, GROUP, Group, MAX_ALPHA, SIGMA_CLAMP, TRANSMITTANCE_STOP, TileSplat,
+        ALPHA_THRESHOLD, GROUP, Group, MAX_ALPHA, Members, SIGMA_CLAMP, TRANSMITTANCE_STOP,
+        TileSplat,
     };
     use crate::math::fastexp::exp_avx2;
     use std::arch::x86_64::*;
@@ -280,7 +400,7 @@ mod avx2 {
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn blend_group<const DEPTH: bool, const TRACK: bool>(
         list: &[TileSplat],
-        idx: &[u16],
+        sets: &[u64],
         px: &[f32; GROUP],
         py: f32,
         st: &mut Group,
@@ -308,8 +428,8 @@ mod avx2 {
             }
         }
         let mut pairs = 0;
-        for &k in idx {
-            let ts = &list[k as usize];
+        for k in Members::new(sets) {
+            let ts = &list[k];
             if _mm256_movemask_ps(_mm256_or_ps(act[0], act[1])) == 0 {
                 break;
             }
@@ -393,7 +513,8 @@ mod avx2 {
 #[cfg(target_arch = "x86_64")]
 mod avx512 {
     use super::{
-        ALPHA_THRESHOLD, GROUP, Group, MAX_ALPHA, SIGMA_CLAMP, TRANSMITTANCE_STOP, TileSplat,
+        ALPHA_THRESHOLD, GROUP, Group, MAX_ALPHA, Members, SIGMA_CLAMP, TRANSMITTANCE_STOP,
+        TileSplat,
     };
     use crate::math::fastexp::exp_avx512;
     use std::arch::x86_64::*;
@@ -403,7 +524,7 @@ mod avx512 {
     #[target_feature(enable = "avx512f")]
     pub(super) unsafe fn blend_group<const DEPTH: bool, const TRACK: bool>(
         list: &[TileSplat],
-        idx: &[u16],
+        sets: &[u64],
         px: &[f32; GROUP],
         py: f32,
         st: &mut Group,
@@ -425,8 +546,8 @@ mod avx512 {
         };
         let mut act: __mmask16 = _mm512_test_epi32_mask(active, active);
         let mut pairs = 0;
-        for &k in idx {
-            let ts = &list[k as usize];
+        for k in Members::new(sets) {
+            let ts = &list[k];
             if act == 0 {
                 break;
             }
@@ -483,16 +604,15 @@ mod avx512 {
     }
 }
 
-/// Outputs of one band of 16 image rows.
+/// One band of 16 image rows of each output image (empty slices for images not wanted).
 #[derive(Default)]
-struct BandOut {
-    rgb: Vec<f32>,
-    alpha: Vec<f32>,
-    depth: Vec<f32>,
-    expected_depth: Vec<f32>,
-    final_t: Vec<f32>,
-    n_contrib: Vec<u32>,
-    pairs: u64,
+struct BandOut<'a> {
+    rgb: &'a mut [f32],
+    alpha: &'a mut [f32],
+    depth: &'a mut [f32],
+    expected_depth: &'a mut [f32],
+    final_t: &'a mut [f32],
+    n_contrib: &'a mut [u32],
 }
 
 /// Which images to write, fixed for a whole render (a subset of what the plan computes).
@@ -516,48 +636,18 @@ fn band_impl<const DEPTH: bool, const TRACK: bool, const ISA: u8>(
     plan: &RenderPlan,
     background: [f32; 3],
     want: Want,
-) -> BandOut {
+    out: BandOut,
+) -> u64 {
     let y0 = ty * TILE_SIZE;
     let rows = TILE_SIZE.min(height - y0);
-    let npix = rows * width;
-    let mut out = BandOut {
-        rgb: if want.rgb {
-            vec![0.0; npix * 3]
-        } else {
-            Vec::new()
-        },
-        alpha: if want.alpha {
-            vec![0.0; npix]
-        } else {
-            Vec::new()
-        },
-        depth: if want.depth {
-            vec![0.0; npix]
-        } else {
-            Vec::new()
-        },
-        expected_depth: if want.expected_depth {
-            vec![0.0; npix]
-        } else {
-            Vec::new()
-        },
-        final_t: if want.backward_state {
-            vec![0.0; npix]
-        } else {
-            Vec::new()
-        },
-        n_contrib: if want.backward_state {
-            vec![0; npix]
-        } else {
-            Vec::new()
-        },
-        pairs: 0,
-    };
+    let mut pairs_total = 0;
     // Reused for every tile of the band: no allocation in the loop.
     let mut batch: Vec<TileSplat> = Vec::with_capacity(BATCH);
-    // Per tile row, the batch positions of the splats that can reach it, front to back:
-    // each row walks only those (no data-dependent skipping in the kernel).
-    let mut rows_idx: [Vec<u16>; TILE_SIZE] = std::array::from_fn(|_| Vec::with_capacity(BATCH));
+    // Per batch splat, the tile rows it can reach as a bit mask (0 past the batch), and
+    // per tile row the batch positions that reach it, front to back: each row walks only
+    // those (no data-dependent skipping in the kernel).
+    let mut masks = [0u32; BATCH];
+    let mut sets: RowSets = [[0; WORDS]; TILE_SIZE];
     let mut groups = [Group::new(0); TILE_SIZE];
     for tx in 0..bins.tiles_x {
         let x0 = tx * TILE_SIZE;
@@ -579,9 +669,6 @@ fn band_impl<const DEPTH: bool, const TRACK: bool, const ISA: u8>(
                 break;
             }
             batch.clear();
-            for r in rows_idx.iter_mut() {
-                r.clear();
-            }
             for (k, &gid) in chunk.iter().enumerate() {
                 if let Some(&ahead) = chunk.get(k + PREFETCH_AHEAD) {
                     prefetch(p, ahead as usize);
@@ -590,34 +677,45 @@ fn band_impl<const DEPTH: bool, const TRACK: bool, const ISA: u8>(
                 let (lo, hi) = splat_rows(p, gid as usize, y0, rows, plan.cull_rows);
                 if lo < hi {
                     let pos1 = (bi * BATCH + k) as u32 + 1;
-                    for r in &mut rows_idx[lo as usize..hi as usize] {
-                        r.push(batch.len() as u16);
-                    }
+                    // lo < hi ≤ 16: bits lo..hi.
+                    masks[batch.len()] = (1u32 << hi) - (1u32 << lo);
                     batch.push(TileSplat { s, pos1 });
                 }
             }
+            let words = batch.len().div_ceil(64);
+            masks[batch.len()..64 * words].fill(0);
+            #[cfg(target_arch = "x86_64")]
+            match ISA {
+                // SAFETY: ISA_AVX512 only inside `band_avx512`, entered after detection.
+                ISA_AVX512 => unsafe { row_sets_avx512(&masks, words, &mut sets) },
+                // SAFETY: ISA_AVX2 only inside `band_avx2`, entered after detection.
+                ISA_AVX2 => unsafe { row_sets_avx2(&masks, words, &mut sets) },
+                _ => row_sets(&masks, words, &mut sets),
+            }
+            #[cfg(not(target_arch = "x86_64"))]
+            row_sets(&masks, words, &mut sets);
             for row in 0..rows {
                 if !alive[row] {
                     continue;
                 }
                 let py = (y0 + row) as f32 + 0.5;
                 let st = &mut groups[row];
-                let idx = &rows_idx[row];
+                let set = &sets[row][..words];
                 #[cfg(target_arch = "x86_64")]
                 let pairs = match ISA {
                     // SAFETY: ISA_AVX512 only inside `band_avx512`, entered after detection.
                     ISA_AVX512 => unsafe {
-                        avx512::blend_group::<DEPTH, TRACK>(&batch, idx, &px, py, st)
+                        avx512::blend_group::<DEPTH, TRACK>(&batch, set, &px, py, st)
                     },
                     // SAFETY: ISA_AVX2 only inside `band_avx2`, entered after detection.
                     ISA_AVX2 => unsafe {
-                        avx2::blend_group::<DEPTH, TRACK>(&batch, idx, &px, py, st)
+                        avx2::blend_group::<DEPTH, TRACK>(&batch, set, &px, py, st)
                     },
-                    _ => blend_group_lanes::<DEPTH, TRACK>(&batch, idx, &px, py, st),
+                    _ => blend_group_lanes::<DEPTH, TRACK>(&batch, set, &px, py, st),
                 };
                 #[cfg(not(target_arch = "x86_64"))]
-                let pairs = blend_group_lanes::<DEPTH, TRACK>(&batch, &rows_idx[row], &px, py, st);
-                out.pairs += pairs;
+                let pairs = blend_group_lanes::<DEPTH, TRACK>(&batch, set, &px, py, st);
+                pairs_total += pairs;
                 alive[row] = st.active.iter().any(|&a| a != 0);
             }
         }
@@ -658,7 +756,7 @@ fn band_impl<const DEPTH: bool, const TRACK: bool, const ISA: u8>(
             }
         }
     }
-    out
+    pairs_total
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -673,8 +771,9 @@ unsafe fn band_avx2<const DEPTH: bool, const TRACK: bool>(
     plan: &RenderPlan,
     background: [f32; 3],
     want: Want,
-) -> BandOut {
-    band_impl::<DEPTH, TRACK, ISA_AVX2>(ty, width, height, p, bins, plan, background, want)
+    out: BandOut,
+) -> u64 {
+    band_impl::<DEPTH, TRACK, ISA_AVX2>(ty, width, height, p, bins, plan, background, want, out)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -689,8 +788,9 @@ unsafe fn band_avx512<const DEPTH: bool, const TRACK: bool>(
     plan: &RenderPlan,
     background: [f32; 3],
     want: Want,
-) -> BandOut {
-    band_impl::<DEPTH, TRACK, ISA_AVX512>(ty, width, height, p, bins, plan, background, want)
+    out: BandOut,
+) -> u64 {
+    band_impl::<DEPTH, TRACK, ISA_AVX512>(ty, width, height, p, bins, plan, background, want, out)
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -704,22 +804,23 @@ fn band<const DEPTH: bool, const TRACK: bool>(
     background: [f32; 3],
     want: Want,
     kernel: Kernel,
-) -> BandOut {
+    out: BandOut,
+) -> u64 {
     #[cfg(target_arch = "x86_64")]
     if kernel.avx512() {
         // SAFETY: the CPU supports AVX-512F (checked by `avx512`).
         return unsafe {
-            band_avx512::<DEPTH, TRACK>(ty, width, height, p, bins, plan, background, want)
+            band_avx512::<DEPTH, TRACK>(ty, width, height, p, bins, plan, background, want, out)
         };
     }
     #[cfg(target_arch = "x86_64")]
     if kernel.avx2() {
         // SAFETY: the CPU supports AVX2 (checked by `avx2`).
         return unsafe {
-            band_avx2::<DEPTH, TRACK>(ty, width, height, p, bins, plan, background, want)
+            band_avx2::<DEPTH, TRACK>(ty, width, height, p, bins, plan, background, want, out)
         };
     }
-    band_impl::<DEPTH, TRACK, ISA_SCALAR>(ty, width, height, p, bins, plan, background, want)
+    band_impl::<DEPTH, TRACK, ISA_SCALAR>(ty, width, height, p, bins, plan, background, want, out)
 }
 
 /// The blend kernel alone: the bound [`composite`] is measured against
@@ -742,7 +843,15 @@ pub fn bare_blend(splats: &[Splat], rows: usize, kernel: Kernel) -> u64 {
             pos1: k as u32 + 1,
         })
         .collect();
-    let idx: Vec<u16> = (0..splats.len() as u16).collect();
+    // Every row walks the whole list.
+    let mut sets = [0u64; WORDS];
+    for (w, word) in sets.iter_mut().enumerate() {
+        *word = match splats.len().saturating_sub(64 * w) {
+            0 => 0,
+            n if n >= 64 => u64::MAX,
+            n => (1u64 << n) - 1,
+        };
+    }
     let px: [f32; GROUP] = std::array::from_fn(|l| l as f32 + 0.5);
     let (avx512, avx2) = (kernel.avx512(), kernel.avx2());
     let run = |row: usize| -> u64 {
@@ -751,15 +860,15 @@ pub fn bare_blend(splats: &[Splat], rows: usize, kernel: Kernel) -> u64 {
         #[cfg(target_arch = "x86_64")]
         let pairs = if avx512 {
             // SAFETY: AVX-512F was detected above.
-            unsafe { avx512::blend_group::<false, false>(&list, &idx, &px, py, &mut st) }
+            unsafe { avx512::blend_group::<false, false>(&list, &sets, &px, py, &mut st) }
         } else if avx2 {
             // SAFETY: AVX2 was detected above.
-            unsafe { avx2::blend_group::<false, false>(&list, &idx, &px, py, &mut st) }
+            unsafe { avx2::blend_group::<false, false>(&list, &sets, &px, py, &mut st) }
         } else {
-            blend_group_lanes::<false, false>(&list, &idx, &px, py, &mut st)
+            blend_group_lanes::<false, false>(&list, &sets, &px, py, &mut st)
         };
         #[cfg(not(target_arch = "x86_64"))]
-        let pairs = blend_group_lanes::<false, false>(&list, &idx, &px, py, &mut st);
+        let pairs = blend_group_lanes::<false, false>(&list, &sets, &px, py, &mut st);
         std::hint::black_box(&st); // the final state is the kernel's only output
         pairs
     };
@@ -791,43 +900,142 @@ pub fn composite(
     kernel: Kernel,
     report: &mut RenderReport,
 ) -> CompositeOut {
-    let run = |ty: usize| match (plan.accumulate_depth, plan.track_backward_state) {
-        (false, false) => {
-            band::<false, false>(ty, width, height, p, bins, plan, background, want, kernel)
-        }
-        (true, false) => {
-            band::<true, false>(ty, width, height, p, bins, plan, background, want, kernel)
-        }
-        (false, true) => {
-            band::<false, true>(ty, width, height, p, bins, plan, background, want, kernel)
-        }
-        (true, true) => {
-            band::<true, true>(ty, width, height, p, bins, plan, background, want, kernel)
-        }
-    };
-    let bands: Vec<BandOut> = (0..bins.tiles_y).into_par_iter().map(run).collect();
     let npix = width * height;
     let mut out = CompositeOut {
-        rgb: want.rgb.then(|| Vec::with_capacity(npix * 3)),
-        alpha: want.alpha.then(|| Vec::with_capacity(npix)),
-        depth: want.depth.then(|| Vec::with_capacity(npix)),
-        expected_depth: want.expected_depth.then(|| Vec::with_capacity(npix)),
-        final_t: want.backward_state.then(|| Vec::with_capacity(npix)),
-        n_contrib: want.backward_state.then(|| Vec::with_capacity(npix)),
+        rgb: want.rgb.then(|| vec![0.0; npix * 3]),
+        alpha: want.alpha.then(|| vec![0.0; npix]),
+        depth: want.depth.then(|| vec![0.0; npix]),
+        expected_depth: want.expected_depth.then(|| vec![0.0; npix]),
+        final_t: want.backward_state.then(|| vec![0.0; npix]),
+        n_contrib: want.backward_state.then(|| vec![0; npix]),
     };
-    fn append<T: Copy>(dst: &mut Option<Vec<T>>, src: &[T]) {
-        if let Some(v) = dst {
-            v.extend_from_slice(src);
+    // Each band writes its own rows of every image: split them up front.
+    let band_rows = TILE_SIZE * width;
+    let mut bands: Vec<BandOut> = (0..bins.tiles_y).map(|_| BandOut::default()).collect();
+    fn split<'a, T>(
+        image: &'a mut Option<Vec<T>>,
+        len: usize,
+        bands: &mut [BandOut<'a>],
+        field: for<'b> fn(&'b mut BandOut<'a>) -> &'b mut &'a mut [T],
+    ) {
+        if let Some(v) = image {
+            for (band, rows) in bands.iter_mut().zip(v.chunks_mut(len)) {
+                *field(band) = rows;
+            }
         }
     }
-    for b in bands {
-        report.pairs_evaluated += b.pairs;
-        append(&mut out.rgb, &b.rgb);
-        append(&mut out.alpha, &b.alpha);
-        append(&mut out.depth, &b.depth);
-        append(&mut out.expected_depth, &b.expected_depth);
-        append(&mut out.final_t, &b.final_t);
-        append(&mut out.n_contrib, &b.n_contrib);
-    }
+    split(&mut out.rgb, 3 * band_rows, &mut bands, |b| &mut b.rgb);
+    split(&mut out.alpha, band_rows, &mut bands, |b| &mut b.alpha);
+    split(&mut out.depth, band_rows, &mut bands, |b| &mut b.depth);
+    split(&mut out.expected_depth, band_rows, &mut bands, |b| {
+        &mut b.expected_depth
+    });
+    split(&mut out.final_t, band_rows, &mut bands, |b| &mut b.final_t);
+    split(&mut out.n_contrib, band_rows, &mut bands, |b| {
+        &mut b.n_contrib
+    });
+    let run = |(ty, o): (usize, BandOut)| match (plan.accumulate_depth, plan.track_backward_state) {
+        (false, false) => band::<false, false>(
+            ty, width, height, p, bins, plan, background, want, kernel, o,
+        ),
+        (true, false) => band::<true, false>(
+            ty, width, height, p, bins, plan, background, want, kernel, o,
+        ),
+        (false, true) => band::<false, true>(
+            ty, width, height, p, bins, plan, background, want, kernel, o,
+        ),
+        (true, true) => band::<true, true>(
+            ty, width, height, p, bins, plan, background, want, kernel, o,
+        ),
+    };
+    // An integer sum: the same for any grouping.
+    report.pairs_evaluated += bands.into_par_iter().enumerate().map(run).sum::<u64>();
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::round::{ceil, floor};
+
+    /// Every form of the row-set transpose gives the same words, for random masks and every
+    /// batch fill (words past `words` untouched).
+    #[test]
+    fn row_sets_forms_agree() {
+        let mut u = crate::scene::Uniform::new(11);
+        for len in [0usize, 1, 15, 16, 63, 64, 65, 130, 255, 256] {
+            let mut masks = [0u32; BATCH];
+            for m in masks.iter_mut().take(len) {
+                let lo = (u.unit() * 16.0) as u32 % 16;
+                let hi = lo + 1 + (u.unit() * (16 - lo) as f32) as u32 % (16 - lo);
+                *m = (1u32 << hi) - (1u32 << lo);
+            }
+            let words = len.div_ceil(64);
+            let mut want: RowSets = [[7; WORDS]; TILE_SIZE];
+            row_sets(&masks, words, &mut want);
+            for (r, set) in want.iter().enumerate() {
+                for k in 0..64 * words {
+                    assert_eq!(set[k / 64] >> (k % 64) & 1, u64::from(masks[k] >> r & 1));
+                }
+                assert!(set[words..].iter().all(|&w| w == 7));
+                let members: Vec<usize> = Members::new(&set[..words]).collect();
+                let expected: Vec<usize> = (0..len).filter(|&k| masks[k] >> r & 1 == 1).collect();
+                assert_eq!(members, expected);
+            }
+            #[cfg(target_arch = "x86_64")]
+            {
+                if std::is_x86_feature_detected!("avx2") {
+                    let mut got: RowSets = [[7; WORDS]; TILE_SIZE];
+                    // SAFETY: AVX2 detected.
+                    unsafe { row_sets_avx2(&masks, words, &mut got) };
+                    assert_eq!(got, want, "avx2, {len} splats");
+                }
+                if std::is_x86_feature_detected!("avx512f") {
+                    let mut got: RowSets = [[7; WORDS]; TILE_SIZE];
+                    // SAFETY: AVX-512F detected.
+                    unsafe { row_sets_avx512(&masks, words, &mut got) };
+                    assert_eq!(got, want, "avx512, {len} splats");
+                }
+            }
+        }
+    }
+
+    /// The integer row range is the float definition `lo = max(⌊my − ry⌋ − y0, 0)`,
+    /// `hi = min(⌈my + ry⌉ − y0 + 1, rows)` (empty when `hi ≤ lo`), on edge values.
+    #[test]
+    fn splat_rows_matches_float_definition() {
+        let float_rows = |my: f32, r: i32, y0: usize, rows: usize| -> (u32, u32) {
+            let ry = r as f32 + 1.0;
+            let lo = (floor(my - ry) - y0 as f32).max(0.0);
+            let hi = (ceil(my + ry) - y0 as f32 + 1.0).min(rows as f32);
+            (lo as u32, if hi > lo { hi as u32 } else { lo as u32 })
+        };
+        let means = [
+            -1e30f32, -70000.5, -17.0, -16.5, -1.0, -0.5, -0.0, 0.0, 0.25, 0.5, 1.0, 7.5, 15.99,
+            16.0, 16.01, 31.5, 32.0, 100.7, 65535.5, 1e7, 3e7, 1e30,
+        ];
+        let radii = [0i32, 1, 2, 3, 15, 16, 17, 1000, 1 << 20, i32::MAX];
+        let mut p = Projected::default();
+        for &my in &means {
+            for &r in &radii {
+                p.splats = vec![Splat {
+                    mean: [0.0, my],
+                    ..Splat::default()
+                }];
+                p.radii = vec![[1, r]];
+                for y0 in [0usize, 16, 32, 48, 65520] {
+                    for rows in [1usize, 7, 16] {
+                        let (lo, hi) = splat_rows(&p, 0, y0, rows, true);
+                        let (flo, fhi) = float_rows(my, r, y0, rows);
+                        let empty = flo >= fhi;
+                        assert_eq!(lo >= hi, empty, "my {my} r {r} y0 {y0} rows {rows}");
+                        if !empty {
+                            assert_eq!((lo, hi), (flo, fhi), "my {my} r {r} y0 {y0}");
+                        }
+                        assert!(hi as usize <= rows);
+                    }
+                }
+            }
+        }
+    }
 }
