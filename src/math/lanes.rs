@@ -496,6 +496,49 @@ mod avx512 {
         }
     }
 
+    /// The 16×16 transpose of `r` (row `i` → lane `i` of every result): pairs of rows
+    /// interleaved within 128-bit lanes, then four rows per column in each 128-bit lane,
+    /// then the 128-bit lanes of four row groups gathered in two lane shuffles.
+    #[inline(always)]
+    #[allow(clippy::needless_range_loop)] // no iterators over vectors (see `F32x8`)
+    fn transpose16(r: &[__m512; 16]) -> [__m512; 16] {
+        unsafe {
+            let mut t = [_mm512_setzero_ps(); 16];
+            for i in 0..8 {
+                t[2 * i] = _mm512_unpacklo_ps(r[2 * i], r[2 * i + 1]);
+                t[2 * i + 1] = _mm512_unpackhi_ps(r[2 * i], r[2 * i + 1]);
+            }
+            // u[4i + j]: rows 4i..4i + 4 of columns j, j + 4, j + 8, j + 12 (one per 128-bit
+            // lane).
+            let mut u = [_mm512_setzero_ps(); 16];
+            for i in 0..4 {
+                u[4 * i] = _mm512_shuffle_ps::<0x44>(t[4 * i], t[4 * i + 2]);
+                u[4 * i + 1] = _mm512_shuffle_ps::<0xEE>(t[4 * i], t[4 * i + 2]);
+                u[4 * i + 2] = _mm512_shuffle_ps::<0x44>(t[4 * i + 1], t[4 * i + 3]);
+                u[4 * i + 3] = _mm512_shuffle_ps::<0xEE>(t[4 * i + 1], t[4 * i + 3]);
+            }
+            let mut c = [_mm512_setzero_ps(); 16];
+            for j in 0..4 {
+                // Rows 0..8 (v) and 8..16 (w) of columns j, j + 8 (lo) and j + 4, j + 12 (hi).
+                let v_lo = _mm512_shuffle_f32x4::<0x88>(u[j], u[4 + j]);
+                let v_hi = _mm512_shuffle_f32x4::<0xDD>(u[j], u[4 + j]);
+                let w_lo = _mm512_shuffle_f32x4::<0x88>(u[8 + j], u[12 + j]);
+                let w_hi = _mm512_shuffle_f32x4::<0xDD>(u[8 + j], u[12 + j]);
+                c[j] = _mm512_shuffle_f32x4::<0x88>(v_lo, w_lo);
+                c[j + 8] = _mm512_shuffle_f32x4::<0xDD>(v_lo, w_lo);
+                c[j + 4] = _mm512_shuffle_f32x4::<0x88>(v_hi, w_hi);
+                c[j + 12] = _mm512_shuffle_f32x4::<0xDD>(v_hi, w_hi);
+            }
+            c
+        }
+    }
+
+    /// The low `n ≤ 16` lanes.
+    #[inline(always)]
+    fn low_lanes(n: usize) -> __mmask16 {
+        ((1u32 << n) - 1) as __mmask16
+    }
+
     impl F32x16 {
         #[inline(always)]
         fn cmp<const P: i32>(self, o: F32x16) -> __mmask16 {
@@ -541,6 +584,52 @@ mod avx512 {
         fn write(self, out: &mut [f32]) {
             let out = &mut out[..16];
             unsafe { _mm512_storeu_ps(out.as_mut_ptr(), self.0) }
+        }
+        /// Sixteen columns at a time: each row's sixteen values in one load (masked to the
+        /// row's own values where `src` ends first: masked-off lanes are not read), then a
+        /// 16×16 transpose.
+        #[inline(always)]
+        #[allow(clippy::needless_range_loop)] // no iterators over vectors (see `F32x8`)
+        fn load_columns(src: &[f32], stride: usize, out: &mut [Self]) {
+            let cols = out.len();
+            assert!(cols <= stride && 15 * stride + cols <= src.len());
+            let mut c0 = 0;
+            while c0 < cols {
+                let width = (cols - c0).min(16);
+                let mut rows = [unsafe { _mm512_setzero_ps() }; 16];
+                for l in 0..16 {
+                    let at = l * stride + c0;
+                    rows[l] = if at + 16 <= src.len() {
+                        // Values past the row's `cols` are loaded but never used.
+                        unsafe { _mm512_loadu_ps(src[at..at + 16].as_ptr()) }
+                    } else {
+                        let part = &src[at..at + width];
+                        unsafe { _mm512_maskz_loadu_ps(low_lanes(width), part.as_ptr()) }
+                    };
+                }
+                let t = transpose16(&rows);
+                for k in 0..width {
+                    out[c0 + k] = F32x16(t[k]);
+                }
+                c0 += 16;
+            }
+        }
+        /// At most 16 columns: one 16×16 transpose, then one masked store per row (only
+        /// the row's `n` slots are written).
+        #[inline(always)]
+        #[allow(clippy::needless_range_loop)] // no iterators over vectors (see `F32x8`)
+        fn store_columns(cols: &[Self], dst: &mut [f32], stride: usize) {
+            let n = cols.len();
+            assert!(n <= 16 && n <= stride && 15 * stride + n <= dst.len());
+            let mut block = [unsafe { _mm512_setzero_ps() }; 16];
+            for k in 0..n {
+                block[k] = cols[k].0;
+            }
+            let rows = transpose16(&block);
+            for l in 0..16 {
+                let row = &mut dst[l * stride..l * stride + n];
+                unsafe { _mm512_mask_storeu_ps(row.as_mut_ptr(), low_lanes(n), rows[l]) };
+            }
         }
         // Ordered, non-signalling predicates: false when either side is NaN, like `<` on f32.
         #[inline(always)]
@@ -717,36 +806,36 @@ mod tests {
 
     /// `load_columns` against `gather` for every column count up to the stride, strides
     /// 1 to 105 (SH degree 5's rest coefficients), with `src` ending right after the last
-    /// row's columns (the tail path) and with room after it (the direct loads).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn check_load_columns_avx2() {
+    /// row's columns (the tail path) and with room after it (the direct loads); and
+    /// `store_columns` back, writing only the columns' slots.
+    #[inline(always)]
+    fn check_columns<R: Lanes>() {
+        let n = R::N;
         for stride in 1..=105usize {
-            for cols in [1, 2, 3, 4, 5, 7, 8, 9, 15, 16, 17, 45, 105] {
+            for cols in [1, 2, 3, 4, 5, 7, 8, 9, 10, 15, 16, 17, 24, 45, 105] {
                 if cols > stride {
                     continue;
                 }
-                for spare in [0usize, 9] {
-                    let len = 7 * stride + cols + spare;
+                for spare in [0usize, 9, 17] {
+                    let len = (n - 1) * stride + cols + spare;
                     let src: Vec<f32> = (0..len).map(|k| k as f32 * 0.5 - 3.0).collect();
-                    let mut out = vec![F32x8::splat(f32::NAN); cols];
-                    F32x8::load_columns(&src, stride, &mut out);
+                    let mut out = vec![R::splat(f32::NAN); cols];
+                    R::load_columns(&src, stride, &mut out);
                     for (k, o) in out.iter().enumerate() {
-                        let mut got = [0f32; 8];
+                        let mut got = [0f32; 16];
                         o.write(&mut got);
-                        for (l, g) in got.iter().enumerate() {
+                        for (l, g) in got.iter().enumerate().take(n) {
                             assert_eq!(*g, src[l * stride + k], "stride {stride}, column {k}");
                         }
                     }
                     if cols > 16 {
                         continue;
                     }
-                    // And back: only the columns' slots are written.
                     let mut dst = vec![-1f32; len];
-                    F32x8::store_columns(&out, &mut dst, stride);
+                    R::store_columns(&out, &mut dst, stride);
                     for (i, d) in dst.iter().enumerate() {
                         let (l, k) = (i / stride, i % stride);
-                        let want = if l < 8 && k < cols { src[i] } else { -1.0 };
+                        let want = if l < n && k < cols { src[i] } else { -1.0 };
                         assert_eq!(*d, want, "store: stride {stride}, {cols} columns, slot {i}");
                     }
                 }
@@ -754,12 +843,30 @@ mod tests {
         }
     }
 
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn check_columns_avx2() {
+        check_columns::<F32x8>();
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    fn check_columns_avx512() {
+        check_columns::<F32x16>();
+    }
+
     #[test]
     fn load_and_store_columns_match_gather() {
+        check_columns::<f32>();
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") {
             // SAFETY: AVX2 is available (checked just above).
-            unsafe { check_load_columns_avx2() };
+            unsafe { check_columns_avx2() };
+        }
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx512f") {
+            // SAFETY: AVX-512F is available (checked just above).
+            unsafe { check_columns_avx512() };
         }
     }
 
