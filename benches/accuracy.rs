@@ -7,6 +7,10 @@
 //! of the stage has both less error and less time. Stages (SPEC.md §5.10):
 //! - `forward`: an SH-5 scene rendered in f32 at SH degree 0–5 (and every kernel form at 5)
 //!   against the f64 twin of the forward at degree 5 (`tests/suite/twin.rs`), and the twin;
+//! - `cutoffs`: the blend's cut-offs (`raster::Cutoffs`: alpha threshold 1/255, 1/1000,
+//!   none; transmittance stop 1e-4, 1e-6, none) in f32 against exact blending — the f64
+//!   twin with neither cut-off (and, unlike the rasterizer, no 3.33σ extent and no σ
+//!   clamp) — on the forward stage's scene at SH 3;
 //! - `backward`: f32 gradients of every raw parameter against f64 central differences of
 //!   the twin, on a smooth scene;
 //! - `exp`: our Cephes `exp` (what the blend uses), the platform's `f32::exp`, and `f64::exp`
@@ -116,6 +120,68 @@ fn forward(quick: bool, points: &mut Vec<Point>) {
     points.push(Point {
         stage: "forward",
         knob: "f64 twin at SH 5 (the shadow itself)".into(),
+        default: false,
+        metric,
+        error: 0.0,
+        seconds: t64,
+        pareto: false,
+    });
+}
+
+fn cutoffs(quick: bool, points: &mut Vec<Point>) {
+    use unseen::raster::Cutoffs;
+    let (n, w, h) = if quick {
+        (3000, 96, 72)
+    } else {
+        (20000, 192, 144)
+    };
+    let cam = default_camera(w, h);
+    let bg = [0.1f32, 0.2, 0.3];
+    let scene = random_scene(n, 3, 7, 0.01, 0.25);
+    let p = twin::flatten(&scene);
+    let (t64, exact) = best(1, || {
+        twin::forward64_cut(&scene, &p, &cam, bg.map(f64::from), 0.0, 0.0)
+    });
+    let metric = "max |rgb − f64 exact blending|";
+    let knobs: [(f32, &str, f32, &str); 6] = [
+        (255.0, "1/255", 1e-4, "1e-4"),
+        (1000.0, "1/1000", 1e-4, "1e-4"),
+        (255.0, "1/255", 1e-6, "1e-6"),
+        (1000.0, "1/1000", 1e-6, "1e-6"),
+        (f32::INFINITY, "0", 1e-6, "1e-6"),
+        (f32::INFINITY, "0", 0.0, "0"),
+    ];
+    for (inv, iname, stop, sname) in knobs {
+        let opts = RenderOptions {
+            background: bg,
+            outputs: Outputs::RGB,
+            cutoffs: Cutoffs {
+                inv_alpha_threshold: inv,
+                transmittance_stop: stop,
+            },
+            ..Default::default()
+        };
+        let (t, r) = best(5, || render(&scene, &cam, &opts).expect("renders"));
+        let err = r
+            .rgb
+            .expect("rgb")
+            .iter()
+            .zip(&exact[0])
+            .map(|(&a, &b)| (a as f64 - b).abs())
+            .fold(0.0, f64::max);
+        points.push(Point {
+            stage: "cutoffs",
+            knob: format!("f32, alpha threshold {iname}, transmittance stop {sname}"),
+            default: opts.cutoffs == Cutoffs::GSPLAT,
+            metric,
+            error: err,
+            seconds: t,
+            pareto: false,
+        });
+    }
+    points.push(Point {
+        stage: "cutoffs",
+        knob: "f64 exact blending (the shadow itself)".into(),
         default: false,
         metric,
         error: 0.0,
@@ -1324,8 +1390,9 @@ fn main() {
         (None, Some(_)) => None,
     };
     type Stage = fn(bool, &mut Vec<Point>);
-    let stages: [(&str, Stage); 11] = [
+    let stages: [(&str, Stage); 12] = [
         ("forward", forward),
+        ("cutoffs", cutoffs),
         ("backward", |_, p| backward_fd(p)),
         ("exp", exp),
         ("ransac", alignment),
@@ -1341,7 +1408,7 @@ fn main() {
         for name in names {
             assert!(
                 stages.iter().any(|(s, _)| s == name),
-                "--only: no stage {name:?} (stages: forward, backward, exp, ransac, gjk, gjk-frustums, dibr, ssim, ssim-grad, training, qa-mask)"
+                "--only: no stage {name:?} (stages: forward, cutoffs, backward, exp, ransac, gjk, gjk-frustums, dibr, ssim, ssim-grad, training, qa-mask)"
             );
         }
     }

@@ -249,6 +249,29 @@ pub(crate) fn prefetch(p: &Projected, gid: usize) {
     }
 }
 
+/// The cut-offs as the kernels compare them (from [`crate::raster::Cutoffs`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Cut {
+    /// Smallest blended α.
+    pub alpha: f32,
+    /// Transmittance at or below which blending stops.
+    pub stop: f32,
+}
+
+impl Cut {
+    pub(crate) fn new(c: &crate::raster::Cutoffs) -> Cut {
+        Cut {
+            alpha: c.alpha_threshold(),
+            stop: c.transmittance_stop,
+        }
+    }
+    /// gsplat's.
+    const GSPLAT: Cut = Cut {
+        alpha: ALPHA_THRESHOLD,
+        stop: TRANSMITTANCE_STOP,
+    };
+}
+
 /// Blend state of a group of pixels (one tile row).
 #[derive(Clone, Copy)]
 struct Group {
@@ -310,6 +333,7 @@ pub(crate) fn splat_alpha(s: &Splat, dx: f32, dy: f32) -> SplatAlpha {
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn blend_lane<const DEPTH: bool, const TRACK: bool>(
+    cut: &Cut,
     s: &Splat,
     dx: f32,
     dy: f32,
@@ -325,8 +349,8 @@ fn blend_lane<const DEPTH: bool, const TRACK: bool>(
     let SplatAlpha { sigma, alpha, .. } = splat_alpha(s, dx, dy);
     let t0 = *t;
     let nt = t0 * (1.0 - alpha);
-    let valid = (*active != 0) & (sigma >= 0.0) & (alpha >= ALPHA_THRESHOLD);
-    let stop = valid & (nt <= TRANSMITTANCE_STOP);
+    let valid = (*active != 0) & (sigma >= 0.0) & (alpha >= cut.alpha);
+    let stop = valid & (nt <= cut.stop);
     let blend = valid & !stop;
     let w = alpha * t0;
     *r = if blend { *r + s.color[0] * w } else { *r };
@@ -351,6 +375,7 @@ fn blend_group_lanes<const DEPTH: bool, const TRACK: bool>(
     px: &[f32; GROUP],
     py: f32,
     st: &mut Group,
+    cut: &Cut,
 ) -> u64 {
     let mut pairs = 0;
     for k in Members::new(sets) {
@@ -364,6 +389,7 @@ fn blend_group_lanes<const DEPTH: bool, const TRACK: bool>(
         for l in 0..GROUP {
             let dx = ts.s.mean[0] - px[l];
             blend_lane::<DEPTH, TRACK>(
+                cut,
                 &ts.s,
                 dx,
                 dy,
@@ -385,10 +411,7 @@ fn blend_group_lanes<const DEPTH: bool, const TRACK: bool>(
 /// the group's state held in registers for the whole walk.
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use super::{
-        ALPHA_THRESHOLD, GROUP, Group, MAX_ALPHA, Members, SIGMA_CLAMP, TRANSMITTANCE_STOP,
-        TileSplat,
-    };
+    use super::{Cut, GROUP, Group, MAX_ALPHA, Members, SIGMA_CLAMP, TileSplat};
     use crate::math::fastexp::exp_avx2;
     use std::arch::x86_64::*;
 
@@ -404,9 +427,11 @@ mod avx2 {
         px: &[f32; GROUP],
         py: f32,
         st: &mut Group,
+        cut: &Cut,
     ) -> u64 {
         let c = |x: f32| _mm256_set1_ps(x);
         let zero = _mm256_setzero_ps();
+        let (threshold, stop_at) = (c(cut.alpha), c(cut.stop));
         let (mut pxv, mut t, mut r, mut g, mut b, mut d) = (
             [zero; H], [zero; H], [zero; H], [zero; H], [zero; H], [zero; H],
         );
@@ -459,17 +484,14 @@ mod avx2 {
                     act[h],
                     _mm256_and_ps(
                         _mm256_cmp_ps::<_CMP_GE_OQ>(sigma, zero),
-                        _mm256_cmp_ps::<_CMP_GE_OQ>(alphas[h], c(ALPHA_THRESHOLD)),
+                        _mm256_cmp_ps::<_CMP_GE_OQ>(alphas[h], threshold),
                     ),
                 );
             }
             for h in 0..H {
                 let (alpha, valid) = (alphas[h], valids[h]);
                 let nt = _mm256_mul_ps(t[h], _mm256_sub_ps(c(1.0), alpha));
-                let stop = _mm256_and_ps(
-                    valid,
-                    _mm256_cmp_ps::<_CMP_LE_OQ>(nt, c(TRANSMITTANCE_STOP)),
-                );
+                let stop = _mm256_and_ps(valid, _mm256_cmp_ps::<_CMP_LE_OQ>(nt, stop_at));
                 let blend = _mm256_andnot_ps(stop, valid);
                 let w = _mm256_mul_ps(alpha, t[h]);
                 let acc = |v: __m256, k: f32| {
@@ -512,10 +534,7 @@ mod avx2 {
 /// the operations those of [`avx2::blend_group`] one for one, masks in mask registers.
 #[cfg(target_arch = "x86_64")]
 mod avx512 {
-    use super::{
-        ALPHA_THRESHOLD, GROUP, Group, MAX_ALPHA, Members, SIGMA_CLAMP, TRANSMITTANCE_STOP,
-        TileSplat,
-    };
+    use super::{Cut, GROUP, Group, MAX_ALPHA, Members, SIGMA_CLAMP, TileSplat};
     use crate::math::fastexp::exp_avx512;
     use std::arch::x86_64::*;
 
@@ -528,9 +547,11 @@ mod avx512 {
         px: &[f32; GROUP],
         py: f32,
         st: &mut Group,
+        cut: &Cut,
     ) -> u64 {
         let c = |x: f32| _mm512_set1_ps(x);
         let zero = _mm512_setzero_ps();
+        let (threshold, stop_at) = (c(cut.alpha), c(cut.stop));
         // SAFETY: every array read or written here has exactly GROUP = 16 lanes.
         let (pxv, mut t, mut r, mut g, mut b, mut d, mut n, active) = unsafe {
             (
@@ -567,9 +588,9 @@ mod avx512 {
             let e = unsafe { exp_avx512(_mm512_castsi512_ps(neg)) };
             let alpha = _mm512_min_ps(_mm512_mul_ps(c(s.opacity), e), c(MAX_ALPHA));
             let valid = _mm512_mask_cmp_ps_mask::<_CMP_GE_OQ>(act, sigma, zero)
-                & _mm512_cmp_ps_mask::<_CMP_GE_OQ>(alpha, c(ALPHA_THRESHOLD));
+                & _mm512_cmp_ps_mask::<_CMP_GE_OQ>(alpha, threshold);
             let nt = _mm512_mul_ps(t, _mm512_sub_ps(c(1.0), alpha));
-            let stop = _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(valid, nt, c(TRANSMITTANCE_STOP));
+            let stop = _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(valid, nt, stop_at);
             let blend = valid & !stop;
             let w = _mm512_mul_ps(alpha, t);
             let acc = |v: __m512, k: f32| {
@@ -641,6 +662,7 @@ fn band_impl<const DEPTH: bool, const TRACK: bool, const ISA: u8>(
     let y0 = ty * TILE_SIZE;
     let rows = TILE_SIZE.min(height - y0);
     let mut pairs_total = 0;
+    let cut = Cut::new(&plan.cutoffs);
     // Reused for every tile of the band: no allocation in the loop.
     let mut batch: Vec<TileSplat> = Vec::with_capacity(BATCH);
     // Per batch splat, the tile rows it can reach as a bit mask (0 past the batch), and
@@ -705,16 +727,16 @@ fn band_impl<const DEPTH: bool, const TRACK: bool, const ISA: u8>(
                 let pairs = match ISA {
                     // SAFETY: ISA_AVX512 only inside `band_avx512`, entered after detection.
                     ISA_AVX512 => unsafe {
-                        avx512::blend_group::<DEPTH, TRACK>(&batch, set, &px, py, st)
+                        avx512::blend_group::<DEPTH, TRACK>(&batch, set, &px, py, st, &cut)
                     },
                     // SAFETY: ISA_AVX2 only inside `band_avx2`, entered after detection.
                     ISA_AVX2 => unsafe {
-                        avx2::blend_group::<DEPTH, TRACK>(&batch, set, &px, py, st)
+                        avx2::blend_group::<DEPTH, TRACK>(&batch, set, &px, py, st, &cut)
                     },
-                    _ => blend_group_lanes::<DEPTH, TRACK>(&batch, set, &px, py, st),
+                    _ => blend_group_lanes::<DEPTH, TRACK>(&batch, set, &px, py, st, &cut),
                 };
                 #[cfg(not(target_arch = "x86_64"))]
-                let pairs = blend_group_lanes::<DEPTH, TRACK>(&batch, set, &px, py, st);
+                let pairs = blend_group_lanes::<DEPTH, TRACK>(&batch, set, &px, py, st, &cut);
                 pairs_total += pairs;
                 alive[row] = st.active.iter().any(|&a| a != 0);
             }
@@ -860,15 +882,19 @@ pub fn bare_blend(splats: &[Splat], rows: usize, kernel: Kernel) -> u64 {
         #[cfg(target_arch = "x86_64")]
         let pairs = if avx512 {
             // SAFETY: AVX-512F was detected above.
-            unsafe { avx512::blend_group::<false, false>(&list, &sets, &px, py, &mut st) }
+            unsafe {
+                avx512::blend_group::<false, false>(&list, &sets, &px, py, &mut st, &Cut::GSPLAT)
+            }
         } else if avx2 {
             // SAFETY: AVX2 was detected above.
-            unsafe { avx2::blend_group::<false, false>(&list, &sets, &px, py, &mut st) }
+            unsafe {
+                avx2::blend_group::<false, false>(&list, &sets, &px, py, &mut st, &Cut::GSPLAT)
+            }
         } else {
-            blend_group_lanes::<false, false>(&list, &sets, &px, py, &mut st)
+            blend_group_lanes::<false, false>(&list, &sets, &px, py, &mut st, &Cut::GSPLAT)
         };
         #[cfg(not(target_arch = "x86_64"))]
-        let pairs = blend_group_lanes::<false, false>(&list, &sets, &px, py, &mut st);
+        let pairs = blend_group_lanes::<false, false>(&list, &sets, &px, py, &mut st, &Cut::GSPLAT);
         std::hint::black_box(&st); // the final state is the kernel's only output
         pairs
     };

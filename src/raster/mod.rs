@@ -30,6 +30,40 @@ pub struct RenderOptions {
     /// gsplat's antialiased mode (opacity × `sqrt(det₀/det)`); off like INRIA.
     pub antialiased: bool,
     pub kernel: Kernel,
+    /// Where blending is cut off: gsplat's values by default. Other values are a
+    /// forward-only knob (the accuracy bench's); the backward refuses them.
+    pub cutoffs: Cutoffs,
+}
+
+/// The blend's cut-offs (SPEC.md §5.4–5.5): gsplat's `ALPHA_THRESHOLD = 1/255` (with the
+/// opacity cull and the radius `√(2·ln(255·o))` σ that follow from it) and the
+/// transmittance stop `1e-4`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Cutoffs {
+    /// The reciprocal of the smallest α that is blended (255). `f32::INFINITY` blends every
+    /// α > 0 (each splat then reaches its 3.33σ extent).
+    pub inv_alpha_threshold: f32,
+    /// Blending stops before a splat that would bring transmittance to this or below
+    /// (1e-4); 0 stops only where transmittance reaches 0.
+    pub transmittance_stop: f32,
+}
+
+impl Cutoffs {
+    /// gsplat's and INRIA's.
+    pub const GSPLAT: Cutoffs = Cutoffs {
+        inv_alpha_threshold: 255.0,
+        transmittance_stop: composite::TRANSMITTANCE_STOP,
+    };
+    /// The smallest blended α, `1/inv_alpha_threshold` (exactly `ALPHA_THRESHOLD` by default).
+    pub fn alpha_threshold(&self) -> f32 {
+        1.0 / self.inv_alpha_threshold
+    }
+}
+
+impl Default for Cutoffs {
+    fn default() -> Self {
+        Cutoffs::GSPLAT
+    }
 }
 
 impl Default for RenderOptions {
@@ -40,6 +74,7 @@ impl Default for RenderOptions {
             outputs: Outputs::RGB,
             antialiased: false,
             kernel: Kernel::Auto,
+            cutoffs: Cutoffs::GSPLAT,
         }
     }
 }
@@ -93,6 +128,20 @@ fn check_options(scene: &Gaussians, opts: &RenderOptions) -> Result<()> {
         && d > MAX_SH_DEGREE
     {
         return Err(Error::invalid(format!("SH degree {d} > {MAX_SH_DEGREE}")));
+    }
+    let Cutoffs {
+        inv_alpha_threshold: inv,
+        transmittance_stop: stop,
+    } = opts.cutoffs;
+    if inv.is_nan() || inv < 1.0 {
+        return Err(Error::invalid(format!(
+            "inverse alpha threshold {inv} is not ≥ 1 (or +∞)"
+        )));
+    }
+    if !(0.0..1.0).contains(&stop) {
+        return Err(Error::invalid(format!(
+            "transmittance stop {stop} is not in [0, 1)"
+        )));
     }
     Ok(())
 }

@@ -11,7 +11,7 @@
 //! | background term `T·bg` | background is exactly black | `C + T·0 = C` for `C ≥ 0` |
 //! | rows of a tile outside a Gaussian's radius + 1 px | always | `α < 1/255` there (SPEC.md §5.4) |
 
-use super::RenderOptions;
+use super::{Cutoffs, RenderOptions};
 use crate::gaussian::Gaussians;
 
 /// The outputs a caller may ask for.
@@ -51,7 +51,7 @@ impl Default for Outputs {
 }
 
 /// The work a render will do.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderPlan {
     /// SH degree actually evaluated.
     pub sh_degree: u32,
@@ -60,6 +60,8 @@ pub struct RenderPlan {
     pub apply_background: bool,
     /// Skip tile rows a Gaussian cannot reach. Off only in tests that prove it exact.
     pub cull_rows: bool,
+    /// Where blending is cut off (the caller's [`RenderOptions::cutoffs`]).
+    pub cutoffs: Cutoffs,
 }
 
 impl RenderPlan {
@@ -87,6 +89,7 @@ impl RenderPlan {
             track_backward_state: opts.outputs.backward_state,
             apply_background: opts.background != [0.0; 3],
             cull_rows: true,
+            cutoffs: opts.cutoffs,
         }
     }
 
@@ -101,6 +104,7 @@ impl RenderPlan {
             track_backward_state: true,
             apply_background: true,
             cull_rows: false,
+            cutoffs: opts.cutoffs,
         }
     }
 }

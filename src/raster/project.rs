@@ -13,7 +13,8 @@
 //!    computed as a product with `1/det` (glm's `inverse`).
 //! 6. `mean2d = (fx·x·(1/z) + cx, fy·y·(1/z) + cy)`.
 //! 7. `o = sigmoid(logit)` (times `sqrt(max(0, det₀/det))` in antialiased mode); cull if
-//!    `o < 1/255`. `k = min(3.33, sqrt(2·ln(255·o)))`, `r = (ceil(k·√a), ceil(k·√c))`;
+//!    `o < 1/255`. `k = min(3.33, sqrt(2·ln(255·o)))`, `r = (ceil(k·√a), ceil(k·√c))`
+//!    (255 is `Cutoffs::inv_alpha_threshold`, a forward-only knob);
 //!    cull if both radii are 0 or the box `mean2d ± r` misses the image.
 //! 8. Colour: `dir = (μ − C)/|μ − C|`, `rgb = max(Σ_k coeff_k·Y_k(dir) + 0.5, 0)`.
 //!
@@ -448,6 +449,7 @@ fn project_block<R: Lanes>(
     cam: &CameraF32,
     degree: u32,
     antialiased: bool,
+    inv_alpha: f32,
 ) -> Block<R> {
     let c = R::splat;
     let mean = gather3(&g.means[i..i + R::N]);
@@ -486,8 +488,10 @@ fn project_block<R: Lanes>(
         let ratio = det_orig / det;
         opacity = opacity * R::select(ratio.gt(c(0.0)), ratio.sqrt(), c(0.0));
     }
-    culls.check(opacity.lt(c(ALPHA_THRESHOLD)), Cull::LowOpacity);
-    let ext = (c(2.0) * (opacity * c(255.0)).ln()).sqrt();
+    // `inv_alpha` = 1/threshold (255 by default: `1/inv_alpha` is then exactly
+    // `ALPHA_THRESHOLD`; ∞ blends every α > 0 and gives every splat the 3.33σ extent).
+    culls.check(opacity.lt(c(1.0 / inv_alpha)), Cull::LowOpacity);
+    let ext = (c(2.0) * (opacity * c(inv_alpha)).ln()).sqrt();
     let ext = R::select(ext.lt(c(MAX_EXTENT_SIGMA)), ext, c(MAX_EXTENT_SIGMA));
     let rx = (ext * a.sqrt()).ceil();
     let ry = (ext * cc.sqrt()).ceil();
@@ -612,7 +616,8 @@ pub fn project_one(
     plan: &RenderPlan,
     antialiased: bool,
 ) -> Result<(Splat, [i32; 2]), Cull> {
-    let b = project_block::<f32>(g, i, cam, plan.sh_degree, antialiased);
+    let inv = plan.cutoffs.inv_alpha_threshold;
+    let b = project_block::<f32>(g, i, cam, plan.sh_degree, antialiased, inv);
     b.culls.result()?;
     let (mut splat, mut radii, mut counts) = ([Splat::default()], [[0, 0]], [0; 7]);
     store(&b, &mut splat, &mut radii, &mut counts);
@@ -629,6 +634,7 @@ fn project_range<R: Lanes>(
     cam: &CameraF32,
     degree: u32,
     antialiased: bool,
+    inv_alpha: f32,
     splats: &mut [Splat],
     radii: &mut [[i32; 2]],
     counts: &mut [u64; 7],
@@ -636,11 +642,11 @@ fn project_range<R: Lanes>(
     let n = splats.len();
     let full = n - n % R::N;
     for k in (0..full).step_by(R::N) {
-        let b = project_block::<R>(g, first + k, cam, degree, antialiased);
+        let b = project_block::<R>(g, first + k, cam, degree, antialiased, inv_alpha);
         store(&b, &mut splats[k..], &mut radii[k..], counts);
     }
     for k in full..n {
-        let b = project_block::<f32>(g, first + k, cam, degree, antialiased);
+        let b = project_block::<f32>(g, first + k, cam, degree, antialiased, inv_alpha);
         store(&b, &mut splats[k..], &mut radii[k..], counts);
     }
 }
@@ -658,11 +664,22 @@ unsafe fn project_range_avx2(
     cam: &CameraF32,
     degree: u32,
     antialiased: bool,
+    inv_alpha: f32,
     splats: &mut [Splat],
     radii: &mut [[i32; 2]],
     counts: &mut [u64; 7],
 ) {
-    project_range::<F32x8>(g, first, cam, degree, antialiased, splats, radii, counts)
+    project_range::<F32x8>(
+        g,
+        first,
+        cam,
+        degree,
+        antialiased,
+        inv_alpha,
+        splats,
+        radii,
+        counts,
+    )
 }
 
 /// [`project_range`] sixteen Gaussians per instruction.
@@ -678,11 +695,22 @@ unsafe fn project_range_avx512(
     cam: &CameraF32,
     degree: u32,
     antialiased: bool,
+    inv_alpha: f32,
     splats: &mut [Splat],
     radii: &mut [[i32; 2]],
     counts: &mut [u64; 7],
 ) {
-    project_range::<F32x16>(g, first, cam, degree, antialiased, splats, radii, counts)
+    project_range::<F32x16>(
+        g,
+        first,
+        cam,
+        degree,
+        antialiased,
+        inv_alpha,
+        splats,
+        radii,
+        counts,
+    )
 }
 
 /// Project every Gaussian (parallel over fixed chunks; output order is the input order).
@@ -704,7 +732,11 @@ pub fn project(
     };
     #[cfg(target_arch = "x86_64")]
     let (avx512, avx2) = (opts.kernel.avx512(), opts.kernel.avx2());
-    let (degree, aa) = (plan.sh_degree, opts.antialiased);
+    let (degree, aa, inv) = (
+        plan.sh_degree,
+        opts.antialiased,
+        plan.cutoffs.inv_alpha_threshold,
+    );
     // Fixed chunks, written in place; per-chunk cull counts are integers, so their sum does
     // not depend on how chunks map to threads.
     const CHUNK: usize = 4096;
@@ -719,16 +751,20 @@ pub fn project(
             #[cfg(target_arch = "x86_64")]
             if avx512 {
                 // SAFETY: AVX-512F was detected just above.
-                unsafe { project_range_avx512(g, first, &cam, degree, aa, splats, radii, &mut c) };
+                unsafe {
+                    project_range_avx512(g, first, &cam, degree, aa, inv, splats, radii, &mut c)
+                };
                 return c;
             }
             #[cfg(target_arch = "x86_64")]
             if avx2 {
                 // SAFETY: AVX2 was detected just above.
-                unsafe { project_range_avx2(g, first, &cam, degree, aa, splats, radii, &mut c) };
+                unsafe {
+                    project_range_avx2(g, first, &cam, degree, aa, inv, splats, radii, &mut c)
+                };
                 return c;
             }
-            project_range::<f32>(g, first, &cam, degree, aa, splats, radii, &mut c);
+            project_range::<f32>(g, first, &cam, degree, aa, inv, splats, radii, &mut c);
             c
         })
         .collect();

@@ -416,3 +416,117 @@ fn projection_simd_matches_scalar_bitwise() {
         }
     }
 }
+
+/// Cut-offs other than gsplat's (a forward-only knob, SPEC.md §5.5): every kernel form
+/// gives the same bits under each, the knob changes the image, and the backward refuses it.
+#[test]
+fn cutoffs_are_the_same_in_every_kernel() {
+    use unseen::raster::Cutoffs;
+    let scene = random_scene(2000, 3, 5, 0.01, 0.2);
+    let cam = default_camera(80, 56);
+    let render_with = |cutoffs: Cutoffs, kernel: Kernel| {
+        let opts = RenderOptions {
+            background: [0.1, 0.2, 0.3],
+            outputs: Outputs::ALL,
+            kernel,
+            cutoffs,
+            ..RenderOptions::default()
+        };
+        render(&scene, &cam, &opts).unwrap()
+    };
+    let gsplat = render_with(Cutoffs::GSPLAT, Kernel::Auto);
+    for (inv_alpha_threshold, transmittance_stop) in
+        [(1000.0, 1e-4), (255.0, 1e-6), (f32::INFINITY, 0.0)]
+    {
+        let cutoffs = Cutoffs {
+            inv_alpha_threshold,
+            transmittance_stop,
+        };
+        let reference = render_with(cutoffs, Kernel::Scalar);
+        for kernel in [Kernel::Avx2, Kernel::Auto] {
+            let r = render_with(cutoffs, kernel);
+            assert_eq!(
+                bits(r.rgb.as_ref().unwrap()),
+                bits(reference.rgb.as_ref().unwrap())
+            );
+            assert_eq!(
+                bits(r.depth.as_ref().unwrap()),
+                bits(reference.depth.as_ref().unwrap())
+            );
+            assert_eq!(r.n_contrib, reference.n_contrib, "{cutoffs:?}, {kernel:?}");
+        }
+        assert_ne!(
+            bits(reference.rgb.as_ref().unwrap()),
+            bits(gsplat.rgb.as_ref().unwrap()),
+            "{cutoffs:?} changed nothing"
+        );
+        let opts = RenderOptions {
+            cutoffs,
+            ..RenderOptions::default()
+        };
+        let err = unseen::raster::backward::render_for_backward(&scene, &cam, &opts)
+            .err()
+            .expect("the backward refuses other cut-offs");
+        assert!(err.to_string().contains("cut-offs"), "{err}");
+    }
+    for (inv, stop) in [(0.5, 1e-4), (f32::NAN, 1e-4), (255.0, 1.0), (255.0, -1e-9)] {
+        let opts = RenderOptions {
+            cutoffs: Cutoffs {
+                inv_alpha_threshold: inv,
+                transmittance_stop: stop,
+            },
+            ..RenderOptions::default()
+        };
+        assert!(
+            render(&scene, &cam, &opts).is_err(),
+            "{inv}, {stop} accepted"
+        );
+    }
+}
+
+/// With a lower alpha threshold and transmittance stop, the f32 render still agrees with
+/// the f64 twin given the same cut-offs to [`CUTOFF_TWIN_ATOL`] where the 3.33σ extent
+/// cannot bind (opacities ≤ 0.2: `0.2·e^(−3.33²/2) < 1/1000`, so the threshold, not the
+/// extent, ends every splat, as in the twin).
+#[test]
+fn lower_cutoffs_agree_with_the_f64_twin() {
+    use super::twin::{flatten, forward64_cut};
+    use unseen::raster::Cutoffs;
+    /// f32 rounding of the blend sums (the default cut-offs give 1.8e-6 on the accuracy
+    /// bench's scene, `reference_data/accuracy/`), with a margin of 10.
+    const CUTOFF_TWIN_ATOL: f64 = 2e-5;
+    let mut scene = random_scene(1500, 3, 9, 0.01, 0.2);
+    let cap = (0.2f32 / 0.8).ln();
+    for l in scene.opacity_logits.iter_mut() {
+        *l = l.min(cap);
+    }
+    let cam = default_camera(64, 48);
+    let bg = [0.1f32, 0.2, 0.3];
+    for (inv, stop) in [(1000.0f32, 1e-6f32), (255.0, 1e-6), (1000.0, 1e-4)] {
+        let opts = RenderOptions {
+            background: bg,
+            cutoffs: Cutoffs {
+                inv_alpha_threshold: inv,
+                transmittance_stop: stop,
+            },
+            ..RenderOptions::default()
+        };
+        let r = render(&scene, &cam, &opts).unwrap();
+        let twin = forward64_cut(
+            &scene,
+            &flatten(&scene),
+            &cam,
+            bg.map(f64::from),
+            f64::from(1.0 / inv),
+            f64::from(stop),
+        );
+        let err = r
+            .rgb
+            .unwrap()
+            .iter()
+            .zip(&twin[0])
+            .map(|(&a, &b)| (f64::from(a) - b).abs())
+            .fold(0.0, f64::max);
+        assert!(err <= CUTOFF_TWIN_ATOL, "1/{inv}, stop {stop}: {err:e}");
+    }
+}

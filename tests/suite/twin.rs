@@ -9,6 +9,20 @@ use unseen::scene::Uniform;
 /// The forward in f64, per pixel over all Gaussians (no tiles), the same rules as the
 /// f32 rasterizer (SPEC.md §5). Returns rgb (interleaved), alpha, D, ED.
 pub fn forward64(g: &Gaussians, p: &[f64], cam: &Camera, bg: [f64; 3]) -> [Vec<f64>; 4] {
+    forward64_cut(g, p, cam, bg, 1.0 / 255.0, 1e-4)
+}
+
+/// [`forward64`] with other cut-offs: the smallest blended α (and opacity cull) and the
+/// transmittance stop (`0, 0`: every α > 0 blended, no early stop — exact blending; the
+/// twin has no extent cut-off and no σ clamp).
+pub fn forward64_cut(
+    g: &Gaussians,
+    p: &[f64],
+    cam: &Camera,
+    bg: [f64; 3],
+    alpha_threshold: f64,
+    transmittance_stop: f64,
+) -> [Vec<f64>; 4] {
     let n = g.len();
     let k1 = g.rest_per_channel();
     let stride = 14 + 3 * k1;
@@ -97,7 +111,7 @@ pub fn forward64(g: &Gaussians, p: &[f64], cam: &Camera, bg: [f64; 3]) -> [Vec<f
         let (a, b, c) = (cov[0][0] + 0.3, cov[0][1], cov[1][1] + 0.3);
         let det = a * c - b * b;
         let o = 1.0 / (1.0 + (-q[10]).exp());
-        if det.is_nan() || det <= 0.0 || o < 1.0 / 255.0 {
+        if det.is_nan() || det <= 0.0 || o < alpha_threshold {
             continue;
         }
         let d = [
@@ -147,11 +161,11 @@ pub fn forward64(g: &Gaussians, p: &[f64], cam: &Camera, bg: [f64; 3]) -> [Vec<f
             let (dx, dy) = (s.m[0] - px, s.m[1] - py);
             let sigma = 0.5 * (s.con[0] * dx * dx + s.con[2] * dy * dy) + s.con[1] * dx * dy;
             let alpha = (s.o * (-sigma).exp()).min(0.99);
-            if sigma < 0.0 || alpha < 1.0 / 255.0 {
+            if sigma < 0.0 || alpha < alpha_threshold {
                 continue;
             }
             let nt = tt * (1.0 - alpha);
-            if nt <= 1e-4 {
+            if nt <= transmittance_stop {
                 break;
             }
             for (c, sc) in col.iter_mut().zip(s.c) {

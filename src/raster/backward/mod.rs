@@ -47,6 +47,12 @@ pub fn render_for_backward(
             "the backward pass of the antialiased mode is not implemented",
         ));
     }
+    if opts.cutoffs != crate::raster::Cutoffs::GSPLAT {
+        return Err(Error::invalid(format!(
+            "the backward pass uses gsplat's cut-offs only (asked for {:?})",
+            opts.cutoffs
+        )));
+    }
     let mut o = opts.clone();
     o.outputs.backward_state = true;
     // ED's gradient needs D itself.
