@@ -240,17 +240,14 @@ impl RowBound {
 
     /// The halves (bit `h`: lanes `8h..8h+8`) of the row at offset `dy` (as the kernel
     /// computes it) where some pixel may blend.
+    /// Branch-free (a NaN room keeps both halves, a negative one none: selects at the
+    /// end), so that [`RowBound::halves_rows`] vectorizes over rows.
+    #[inline(always)]
     fn halves(&self, dy: f32) -> u32 {
         let dy = f64::from(dy);
         let dy2 = dy * dy;
         let smin = self.coef * dy2;
         let room = self.limit + 1e-6 * (self.a_dx2 + self.c * dy2 + smin.abs()) - smin;
-        if room.is_nan() {
-            return 0b11;
-        }
-        if room < 0.0 {
-            return 0;
-        }
         // Pixel centres p with |p − (mean + B·dy/A)| ≤ w may blend, w = √(2·room/A) +
         // ROW_SLACK. Half h holds such a p iff its pixel centres [first, last] lie within w
         // of the centre, i.e. d = max(first − centre, centre − last) − ROW_SLACK is ≤ 0 or
@@ -266,7 +263,20 @@ impl RowBound {
             let keep = d.is_nan() | (d <= 0.0) | (self.a * d * d <= two_room);
             m |= u32::from(keep) << h;
         }
-        m
+        let m = if room < 0.0 { 0 } else { m };
+        if room.is_nan() { 0b11 } else { m }
+    }
+
+    /// [`RowBound::halves`] of every row of a tile starting at image row `y0`, for a splat
+    /// centred at row coordinate `my` (row `r` at `dy = my − (y0 + r + 0.5)`, as the kernel
+    /// computes it): one fixed-length loop the compiler vectorizes.
+    #[inline(always)]
+    fn halves_rows(&self, my: f32, y0: usize) -> [u32; TILE_SIZE] {
+        let mut out = [0u32; TILE_SIZE];
+        for (r, o) in out.iter_mut().enumerate() {
+            *o = self.halves(my - ((y0 + r) as f32 + 0.5));
+        }
+        out
     }
 }
 
@@ -732,6 +742,7 @@ mod avx512 {
 }
 
 #[allow(clippy::too_many_arguments)]
+#[inline(always)]
 fn band<const ISA: u8, const GEOMETRY: bool>(
     ty: usize,
     width: usize,
@@ -835,6 +846,9 @@ fn band<const ISA: u8, const GEOMETRY: bool>(
             let i = list.len() as u32;
             debug_assert!(i <= VISIT_INDEX);
             let reach = halves(clo, chi);
+            let row_halves = bound
+                .as_ref()
+                .map_or([0b11; TILE_SIZE], |b| b.halves_rows(s.mean[1], y0));
             let mut walked = false;
             for row in lo as usize..hi as usize {
                 // The work unit counts every visit before the row's last blended splat,
@@ -854,8 +868,7 @@ fn band<const ISA: u8, const GEOMETRY: bool>(
                 if (pos as u32) >= n {
                     continue;
                 }
-                let py = (y0 + row) as f32 + 0.5;
-                let m = bound.as_ref().map_or(0b11, |b| b.halves(s.mean[1] - py)) & reach;
+                let m = row_halves[row] & reach;
                 if m != 0 {
                     rows_idx[row].push(i | m << 30);
                     walked = true;
@@ -898,6 +911,46 @@ fn band<const ISA: u8, const GEOMETRY: bool>(
         );
     }
     out
+}
+
+/// [`band`] compiled for AVX-512F (its list building too, not only the row kernel).
+///
+/// # Safety
+/// The CPU must support AVX-512F.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn band_avx512<const GEOMETRY: bool>(
+    ty: usize,
+    width: usize,
+    height: usize,
+    p: &Projected,
+    bins: &TileBins,
+    cull_rows: bool,
+    background: [f32; 3],
+    g: &PixelGrads,
+) -> BandGrads {
+    band::<ISA_AVX512, GEOMETRY>(ty, width, height, p, bins, cull_rows, background, g)
+}
+
+/// [`band`] compiled for AVX2.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn band_avx2<const GEOMETRY: bool>(
+    ty: usize,
+    width: usize,
+    height: usize,
+    p: &Projected,
+    bins: &TileBins,
+    cull_rows: bool,
+    background: [f32; 3],
+    g: &PixelGrads,
+) -> BandGrads {
+    band::<ISA_AVX2, GEOMETRY>(ty, width, height, p, bins, cull_rows, background, g)
 }
 
 /// One pixel's upstream gradients with ED folded in: (T_final, v_rgb, v_alpha, v_D).
@@ -949,10 +1002,20 @@ pub fn composite_backward(
     };
     let (w, h, bkg) = (width, height, background);
     let run = |ty: usize| match (isa, geometry) {
-        (ISA_AVX512, true) => band::<ISA_AVX512, true>(ty, w, h, p, bins, cull_rows, bkg, g),
-        (ISA_AVX512, false) => band::<ISA_AVX512, false>(ty, w, h, p, bins, cull_rows, bkg, g),
-        (ISA_AVX2, true) => band::<ISA_AVX2, true>(ty, w, h, p, bins, cull_rows, bkg, g),
-        (ISA_AVX2, false) => band::<ISA_AVX2, false>(ty, w, h, p, bins, cull_rows, bkg, g),
+        // SAFETY: ISA_AVX512 only when the CPU has AVX-512F (`Kernel::avx512` checked it).
+        #[cfg(target_arch = "x86_64")]
+        (ISA_AVX512, true) => unsafe { band_avx512::<true>(ty, w, h, p, bins, cull_rows, bkg, g) },
+        // SAFETY: as above.
+        #[cfg(target_arch = "x86_64")]
+        (ISA_AVX512, false) => unsafe {
+            band_avx512::<false>(ty, w, h, p, bins, cull_rows, bkg, g)
+        },
+        // SAFETY: ISA_AVX2 only when the CPU has AVX2 (`Kernel::avx2` checked it).
+        #[cfg(target_arch = "x86_64")]
+        (ISA_AVX2, true) => unsafe { band_avx2::<true>(ty, w, h, p, bins, cull_rows, bkg, g) },
+        // SAFETY: as above.
+        #[cfg(target_arch = "x86_64")]
+        (ISA_AVX2, false) => unsafe { band_avx2::<false>(ty, w, h, p, bins, cull_rows, bkg, g) },
         (_, true) => band::<ISA_SCALAR, true>(ty, w, h, p, bins, cull_rows, bkg, g),
         (_, false) => band::<ISA_SCALAR, false>(ty, w, h, p, bins, cull_rows, bkg, g),
     };
