@@ -710,3 +710,45 @@ fn cli_inpaint_and_depth() {
     assert!(!st.status.success() && err.contains("hint"), "{err}");
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// `unseen render --alpha-threshold / --transmittance-stop` (the forward cut-offs,
+/// SPEC.md §5.4): gsplat's values given explicitly give the default's bytes, others change
+/// the image, bad values are refused with the flag's problem named.
+#[test]
+fn cli_render_cutoffs() {
+    let demo = reference("demo");
+    let run = |extra: &[&str]| {
+        let out = out_dir("render-cutoffs");
+        let st = unseen()
+            .arg("render")
+            .arg(demo.join("scene.ply"))
+            .arg("--cameras")
+            .arg(demo.join("cameras.json"))
+            .args(["--camera", "view_03", "--out"])
+            .arg(&out)
+            .args(extra)
+            .output()
+            .unwrap();
+        let png = st
+            .status
+            .success()
+            .then(|| std::fs::read(out.join("view_03.png")).unwrap());
+        (png, String::from_utf8_lossy(&st.stderr).into_owned())
+    };
+    let (default, _) = run(&[]);
+    let default = default.expect("default render");
+    let (explicit, _) = run(&["--alpha-threshold", "1/255", "--transmittance-stop", "1e-4"]);
+    assert_eq!(explicit.as_deref(), Some(&default[..]));
+    let (exact, err) = run(&["--alpha-threshold", "0", "--transmittance-stop", "0"]);
+    let exact = exact.unwrap_or_else(|| panic!("{err}"));
+    assert_ne!(exact, default, "no cut-offs changed nothing");
+    for (flags, needle) in [
+        (["--alpha-threshold", "0.5"], "1/N"),
+        (["--alpha-threshold", "1/0.5"], "N ≥ 1"),
+        (["--transmittance-stop", "1.5"], "transmittance stop"),
+    ] {
+        let (png, err) = run(&flags);
+        assert!(png.is_none(), "{flags:?} accepted");
+        assert!(err.contains(needle), "{flags:?}: {err}");
+    }
+}

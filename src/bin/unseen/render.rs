@@ -12,7 +12,7 @@ use unseen::io::image::{ImageF32, write_exr, write_png};
 use unseen::qamask::{
     QaMaskConfig, heat_map, opacity_mask, read_mask_dir, render_qa_mask, scale_mask,
 };
-use unseen::raster::{Outputs, RenderOptions, render};
+use unseen::raster::{Cutoffs, Outputs, RenderOptions, render};
 
 #[derive(Args)]
 pub struct RenderArgs {
@@ -42,6 +42,32 @@ pub struct RenderArgs {
     /// <name>.mask.png (heat map).
     #[arg(long)]
     mask: Option<String>,
+    /// Smallest alpha that is blended, as 1/N or 0 (every α > 0): gsplat's 1/255 by
+    /// default. A forward-only knob for images (--mask renders keep gsplat's; SPEC.md §5.4).
+    #[arg(long, default_value = "1/255", value_parser = parse_alpha_threshold)]
+    alpha_threshold: f32,
+    /// Blending stops before a splat that would bring transmittance to this or below:
+    /// gsplat's 1e-4 by default, 0 for never early. A forward-only knob for images.
+    #[arg(long, default_value_t = Cutoffs::GSPLAT.transmittance_stop)]
+    transmittance_stop: f32,
+}
+
+/// `1/N` (N ≥ 1, or `inf`) or `0` as the reciprocal threshold `N` (`0` → +∞), so that
+/// `1/255` keeps gsplat's bits (the rasterizer uses `N` itself).
+pub fn parse_alpha_threshold(s: &str) -> std::result::Result<f32, String> {
+    let t = s.trim();
+    if t == "0" {
+        return Ok(f32::INFINITY);
+    }
+    let n = t
+        .strip_prefix("1/")
+        .and_then(|n| n.trim().parse::<f32>().ok())
+        .ok_or_else(|| format!("expected 1/N or 0, got '{s}'"))?;
+    if n >= 1.0 {
+        Ok(n)
+    } else {
+        Err(format!("expected 1/N with N ≥ 1, got '{s}'"))
+    }
 }
 
 #[derive(Args)]
@@ -329,6 +355,8 @@ pub fn run_render_command(a: RenderArgs) -> Result<()> {
         background,
         outputs,
         mask,
+        alpha_threshold,
+        transmittance_stop,
     } = a;
     let mut cams = inria::read_cameras_json(&cameras)?;
     if let Some(name) = camera {
@@ -354,6 +382,10 @@ pub fn run_render_command(a: RenderArgs) -> Result<()> {
         background,
         sh_degree,
         outputs: Outputs { rgb: true, ..exr },
+        cutoffs: Cutoffs {
+            inv_alpha_threshold: alpha_threshold,
+            transmittance_stop,
+        },
         ..RenderOptions::default()
     };
     let files = run_render(&Job {
