@@ -41,7 +41,7 @@ pub struct RenderOptions {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Cutoffs {
     /// The reciprocal of the smallest α that is blended (255). `f32::INFINITY` blends every
-    /// α > 0 (each splat then reaches its 3.33σ extent).
+    /// α > 0 (each splat then reaches its 3.33σ extent; an opacity of 0 is culled).
     pub inv_alpha_threshold: f32,
     /// Blending stops before a splat that would bring transmittance to this or below
     /// (1e-4); 0 stops only where transmittance reaches 0.
@@ -54,9 +54,39 @@ impl Cutoffs {
         inv_alpha_threshold: 255.0,
         transmittance_stop: composite::TRANSMITTANCE_STOP,
     };
-    /// The smallest blended α, `1/inv_alpha_threshold` (exactly `ALPHA_THRESHOLD` by default).
+    /// The smallest blended α: `1/inv_alpha_threshold` (exactly `ALPHA_THRESHOLD` by
+    /// default), or the smallest positive f32 for +∞ (every α > 0 is blended, an α of 0
+    /// is not).
     pub fn alpha_threshold(&self) -> f32 {
-        1.0 / self.inv_alpha_threshold
+        project::alpha_floor(self.inv_alpha_threshold)
+    }
+
+    /// Whether row culling is exact (SPEC.md §5.4): the radius `√(2·ln(N·o))`σ reaches
+    /// every pixel with α ≥ 1/N only while the 3.33σ cap cannot bind, i.e. `N·o ≤ e^(3.33²/2)
+    /// ≈ 255.9` for every `o ≤ 1`: `N ≤ 255`. With a lower threshold the render evaluates
+    /// every row of each tile it bins (the tiles themselves still come from the capped
+    /// radius, as in gsplat).
+    pub fn rows_cull_exactly(&self) -> bool {
+        self.inv_alpha_threshold <= 255.0
+    }
+
+    /// `Ok` for `N ≥ 1` or +∞ and a stop in [0, 1).
+    fn check(&self) -> Result<()> {
+        let Cutoffs {
+            inv_alpha_threshold: inv,
+            transmittance_stop: stop,
+        } = *self;
+        if inv.is_nan() || inv < 1.0 {
+            return Err(Error::invalid(format!(
+                "inverse alpha threshold {inv} is not ≥ 1 (or +∞)"
+            )));
+        }
+        if !(0.0..1.0).contains(&stop) {
+            return Err(Error::invalid(format!(
+                "transmittance stop {stop} is not in [0, 1)"
+            )));
+        }
+        Ok(())
     }
 }
 
@@ -129,21 +159,7 @@ fn check_options(scene: &Gaussians, opts: &RenderOptions) -> Result<()> {
     {
         return Err(Error::invalid(format!("SH degree {d} > {MAX_SH_DEGREE}")));
     }
-    let Cutoffs {
-        inv_alpha_threshold: inv,
-        transmittance_stop: stop,
-    } = opts.cutoffs;
-    if inv.is_nan() || inv < 1.0 {
-        return Err(Error::invalid(format!(
-            "inverse alpha threshold {inv} is not ≥ 1 (or +∞)"
-        )));
-    }
-    if !(0.0..1.0).contains(&stop) {
-        return Err(Error::invalid(format!(
-            "transmittance stop {stop} is not in [0, 1)"
-        )));
-    }
-    Ok(())
+    opts.cutoffs.check()
 }
 
 /// Render `scene` from `cam` with the minimal plan for `opts`.
@@ -170,6 +186,7 @@ pub fn render_staged(
     plan: &RenderPlan,
 ) -> Result<(Render, project::Projected, tile::TileBins)> {
     check_options(scene, opts)?;
+    plan.cutoffs.check()?;
     cam.validate()?;
     let (w, h) = (cam.width as usize, cam.height as usize);
     let mut report = RenderReport::default();

@@ -9,7 +9,7 @@
 //! | SH bands above the highest non-zero band | always | `0·Y` adds ±0, and `+0.5` erases the sign of a zero |
 //! | per-pixel `final_t` / `n_contrib` bookkeeping | not requested (inference) | bookkeeping only |
 //! | background term `T·bg` | background is exactly black | `C + T·0 = C` for `C ≥ 0` |
-//! | rows of a tile outside a Gaussian's radius + 1 px | always | `α < 1/255` there (SPEC.md §5.4) |
+//! | rows of a tile outside a Gaussian's radius + 1 px | unless a lower alpha threshold lets the 3.33σ cap bind | `α < 1/255` there (SPEC.md §5.4) |
 
 use super::{Cutoffs, RenderOptions};
 use crate::gaussian::Gaussians;
@@ -88,7 +88,7 @@ impl RenderPlan {
             accumulate_depth: opts.outputs.depth || opts.outputs.expected_depth,
             track_backward_state: opts.outputs.backward_state,
             apply_background: opts.background != [0.0; 3],
-            cull_rows: true,
+            cull_rows: opts.cutoffs.rows_cull_exactly(),
             cutoffs: opts.cutoffs,
         }
     }

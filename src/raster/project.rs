@@ -441,6 +441,15 @@ struct Block<R: Lanes> {
     culls: Culls<R>,
 }
 
+/// The smallest blended α for `1/inv_alpha`: the threshold itself, or the smallest
+/// positive f32 where it is 0 (`inv_alpha = +∞`), so that "α ≥ threshold" means "α > 0"
+/// there (an α of exactly 0 is not blended and an opacity of 0 is culled). `1/255` by
+/// default, bit for bit `ALPHA_THRESHOLD`.
+#[inline(always)]
+pub(crate) fn alpha_floor(inv_alpha: f32) -> f32 {
+    (1.0 / inv_alpha).max(f32::from_bits(1))
+}
+
 /// Project Gaussians `i .. i + R::N` (steps 1–8 of the module docs, all lanes at once).
 #[inline(always)]
 fn project_block<R: Lanes>(
@@ -488,9 +497,9 @@ fn project_block<R: Lanes>(
         let ratio = det_orig / det;
         opacity = opacity * R::select(ratio.gt(c(0.0)), ratio.sqrt(), c(0.0));
     }
-    // `inv_alpha` = 1/threshold (255 by default: `1/inv_alpha` is then exactly
+    // `inv_alpha` = 1/threshold (255 by default: the floor is then exactly
     // `ALPHA_THRESHOLD`; ∞ blends every α > 0 and gives every splat the 3.33σ extent).
-    culls.check(opacity.lt(c(1.0 / inv_alpha)), Cull::LowOpacity);
+    culls.check(opacity.lt(c(alpha_floor(inv_alpha))), Cull::LowOpacity);
     let ext = (c(2.0) * (opacity * c(inv_alpha)).ln()).sqrt();
     let ext = R::select(ext.lt(c(MAX_EXTENT_SIGMA)), ext, c(MAX_EXTENT_SIGMA));
     let rx = (ext * a.sqrt()).ceil();

@@ -530,3 +530,58 @@ fn lower_cutoffs_agree_with_the_f64_twin() {
         assert!(err <= CUTOFF_TWIN_ATOL, "1/{inv}, stop {stop}: {err:e}");
     }
 }
+
+/// Under a lower alpha threshold the 3.33σ cap can bind (`N·o > 255.9`), so row culling
+/// would skip rows where α ≥ 1/N: the minimal plan then evaluates every row of a binned
+/// tile, and still gives the full plan's bits (SPEC.md §5.4, review of issue #15's knob).
+/// Plans with invalid cut-offs are refused; without a threshold α must still be > 0.
+#[test]
+fn cutoffs_keep_plan_skips_exact() {
+    use unseen::raster::Cutoffs;
+    let cam = default_camera(96, 80);
+    let mut scene = random_scene(1500, 2, 13, 0.01, 0.3);
+    for (k, l) in scene.opacity_logits.iter_mut().enumerate() {
+        if k % 3 == 0 {
+            *l = 2.5; // o ≈ 0.92: 1000·o is far past the cap
+        }
+    }
+    for inv in [255.0, 1000.0, f32::INFINITY] {
+        let opts = RenderOptions {
+            background: [0.2, 0.7, 1.0],
+            outputs: Outputs::ALL,
+            cutoffs: Cutoffs {
+                inv_alpha_threshold: inv,
+                transmittance_stop: 1e-6,
+            },
+            ..Default::default()
+        };
+        assert_eq!(RenderPlan::new(&scene, &opts).cull_rows, inv <= 255.0);
+        let minimal = render(&scene, &cam, &opts).unwrap();
+        let full = render_with_plan(&scene, &cam, &opts, &RenderPlan::full(&scene, &opts)).unwrap();
+        for (a, b) in [
+            (&minimal.rgb, &full.rgb),
+            (&minimal.alpha, &full.alpha),
+            (&minimal.depth, &full.depth),
+        ] {
+            assert_eq!(
+                bits(a.as_ref().unwrap()),
+                bits(b.as_ref().unwrap()),
+                "1/{inv}"
+            );
+        }
+        assert_eq!(minimal.n_contrib, full.n_contrib, "1/{inv}");
+    }
+    // A plan's own cut-offs are checked too.
+    let opts = RenderOptions::default();
+    let mut plan = RenderPlan::new(&scene, &opts);
+    plan.cutoffs.inv_alpha_threshold = f32::NAN;
+    assert!(render_with_plan(&scene, &cam, &opts, &plan).is_err());
+    // Without a threshold "α ≥ threshold" is "α > 0": the threshold is the smallest
+    // positive f32, so an α (or opacity) of exactly 0 is never blended.
+    let none = Cutoffs {
+        inv_alpha_threshold: f32::INFINITY,
+        transmittance_stop: 0.0,
+    };
+    assert_eq!(none.alpha_threshold(), f32::from_bits(1));
+    assert_eq!(Cutoffs::GSPLAT.alpha_threshold(), 1.0 / 255.0);
+}
