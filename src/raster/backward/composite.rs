@@ -766,7 +766,9 @@ fn band<const ISA: u8, const GEOMETRY: bool>(
     let mut acc: Vec<Acc> = Vec::new();
     let mut gids: Vec<u32> = Vec::new();
     let mut states = [RowState::default(); TILE_SIZE];
-    let mut range_n = [[[0u32; LANES + 1]; LANES]; TILE_SIZE];
+    // `range_n[a][b][row]`: the largest n of columns [a, b) of the row (rows contiguous, so
+    // that a splat's 16 rows are one load).
+    let mut range_n = [[[0u32; TILE_SIZE]; LANES + 1]; LANES];
     for tx in 0..bins.tiles_x {
         let t = ty * bins.tiles_x + tx;
         let x0 = tx * TILE_SIZE;
@@ -795,12 +797,12 @@ fn band<const ISA: u8, const GEOMETRY: bool>(
             }
             row_n[row] = st.n.iter().copied().max().unwrap_or(0);
             // The largest n of every column range [a, b) of the row.
-            for (a, r) in range_n[row].iter_mut().enumerate() {
+            for (a, r) in range_n.iter_mut().enumerate() {
                 let mut m = 0;
-                r[a] = 0;
+                r[a][row] = 0;
                 for b in a..LANES {
                     m = m.max(st.n[b]);
-                    r[b + 1] = m;
+                    r[b + 1][row] = m;
                 }
             }
         }
@@ -849,30 +851,32 @@ fn band<const ISA: u8, const GEOMETRY: bool>(
             let row_halves = bound
                 .as_ref()
                 .map_or([0b11; TILE_SIZE], |b| b.halves_rows(s.mean[1], y0));
-            let mut walked = false;
-            for row in lo as usize..hi as usize {
-                // The work unit counts every visit before the row's last blended splat,
-                // skipped or not (the same count for every kernel and plan).
-                out.pairs += if (pos as u32) < row_n[row] {
-                    LANES as u64
-                } else {
-                    0
-                };
-                let n = if !cull_rows {
-                    row_n[row]
-                } else if clo < chi {
-                    range_n[row][clo][chi]
-                } else {
-                    0
-                };
-                if (pos as u32) >= n {
-                    continue;
-                }
-                let m = row_halves[row] & reach;
-                if m != 0 {
-                    rows_idx[row].push(i | m << 30);
-                    walked = true;
-                }
+            // Per row, branch-free over all 16 rows: whether the visit is counted (before the
+            // row's last blended splat: the work unit counts every such visit, skipped or not,
+            // the same count for every kernel and plan) and whether it is kept (a pixel of
+            // the row within the splat's x reach gets as far as this splat, and the row may
+            // meet the ellipse in a half the splat reaches).
+            let n_rows = if !cull_rows {
+                row_n
+            } else if clo < chi {
+                range_n[clo][chi]
+            } else {
+                [0; TILE_SIZE]
+            };
+            let pos32 = pos as u32;
+            let (mut counted, mut keep) = (0u64, 0u32);
+            for row in 0..TILE_SIZE {
+                let within = (row as u32 >= lo) & ((row as u32) < hi);
+                counted += u64::from(within & (pos32 < row_n[row]));
+                let kept = within & (pos32 < n_rows[row]) & (row_halves[row] & reach != 0);
+                keep |= u32::from(kept) << row;
+            }
+            out.pairs += counted * LANES as u64;
+            let walked = keep != 0;
+            while keep != 0 {
+                let row = keep.trailing_zeros() as usize;
+                keep &= keep - 1;
+                rows_idx[row].push(i | (row_halves[row] & reach) << 30);
             }
             if walked {
                 list.push(Entry {
