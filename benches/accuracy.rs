@@ -50,6 +50,8 @@ use common::best;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
+use unseen::camera::Camera;
+use unseen::gaussian::Gaussians;
 use unseen::math::fastexp;
 use unseen::pipeline::compare::ulp_distance;
 use unseen::raster::{Kernel, Outputs, RenderOptions, render};
@@ -67,17 +69,25 @@ struct Point {
     pareto: bool,
 }
 
-fn forward(quick: bool, points: &mut Vec<Point>) {
+/// The scene of SH degree `degree`, camera and background of the `forward` and `cutoffs`
+/// stages.
+fn forward_setup(quick: bool, degree: u32) -> (Gaussians, Camera, [f32; 3]) {
     let (n, w, h) = if quick {
         (3000, 96, 72)
     } else {
         (20000, 192, 144)
     };
-    let cam = default_camera(w, h);
-    let bg = [0.1f32, 0.2, 0.3];
+    (
+        random_scene(n, degree, 7, 0.01, 0.25),
+        default_camera(w, h),
+        [0.1, 0.2, 0.3],
+    )
+}
+
+fn forward(quick: bool, points: &mut Vec<Point>) {
     // One scene of SH degree 5 against its full-degree f64 twin: rendering at a lower
     // degree (`RenderOptions::sh_degree`) trades the truncated bands' colour for time.
-    let scene = random_scene(n, 5, 7, 0.01, 0.25);
+    let (scene, cam, bg) = forward_setup(quick, 5);
     let p = twin::flatten(&scene);
     let (t64, reference) = best(1, || twin::forward64(&scene, &p, &cam, bg.map(f64::from)));
     let metric = "max |rgb − f64 twin of SH 5|";
@@ -130,14 +140,7 @@ fn forward(quick: bool, points: &mut Vec<Point>) {
 
 fn cutoffs(quick: bool, points: &mut Vec<Point>) {
     use unseen::raster::Cutoffs;
-    let (n, w, h) = if quick {
-        (3000, 96, 72)
-    } else {
-        (20000, 192, 144)
-    };
-    let cam = default_camera(w, h);
-    let bg = [0.1f32, 0.2, 0.3];
-    let scene = random_scene(n, 3, 7, 0.01, 0.25);
+    let (scene, cam, bg) = forward_setup(quick, 3);
     let p = twin::flatten(&scene);
     let (t64, exact) = best(1, || {
         twin::forward64_cut(&scene, &p, &cam, bg.map(f64::from), 0.0, 0.0)
@@ -682,7 +685,6 @@ fn gjk_knobs(
 /// different set there, so read the two together).
 fn dibr(quick: bool, points: &mut Vec<Point>) {
     use glam::{DMat3, DVec3};
-    use unseen::camera::Camera;
     use unseen::io::image::ImageF32;
     use unseen::warp::dibr::{Footprint, WarpOptions, warp};
     let (w, h) = if quick {
@@ -875,7 +877,6 @@ fn dibr(quick: bool, points: &mut Vec<Point>) {
 /// on the in-distribution test views, where the mask goes towards 0). Time: the fine-tune
 /// alone.
 fn qa_mask(quick: bool, points: &mut Vec<Point>) {
-    use unseen::camera::Camera;
     use unseen::qamask::{QaMaskConfig, fine_tune, mask_scene, render_qa_mask};
     use unseen::train::trainer::{TrainConfig, Trainer};
     let (resolution, train_its, reference_its, budgets): (u32, u32, u32, &[u32]) = if quick {
