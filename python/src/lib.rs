@@ -22,7 +22,7 @@ use unseen::camera::Camera;
 use unseen::gaussian::Gaussians;
 use unseen::math::sh::num_coeffs;
 use unseen::raster::backward::{GradGroups, ImageGrads, backward as core_backward};
-use unseen::raster::{Kernel, Outputs, RenderOptions, RenderPlan};
+use unseen::raster::{Cutoffs, Kernel, Outputs, RenderOptions, RenderPlan};
 use unseen::{Error, ErrorKind};
 
 /// A core error as a Python exception: `OSError` for the operating system's failures,
@@ -303,8 +303,10 @@ fn load_cameras(py: Python<'_>, path: PathBuf) -> PyResult<Vec<PyCamera>> {
 /// (`means2d`, `conics`, `depths`, `opacities`, `colors`, `radii`, `tile_offsets`,
 /// `tile_ids`). `outputs` limits the images computed to some of `rgb`, `alpha`, `depth`,
 /// `expected_depth` (then without `final_t` / `n_contrib`, which only the backward needs).
+/// `inv_alpha_threshold` (255: gsplat's α ≥ 1/255; `inf`: every α > 0) and
+/// `transmittance_stop` (1e-4) are the blend's cut-offs, a forward-only knob (SPEC.md §5.4).
 #[pyfunction]
-#[pyo3(signature = (means, quats, scales, opacities, sh, camera, *, sh_degree=None, background=[0.0, 0.0, 0.0], outputs=None, kernel="auto", threads=None))]
+#[pyo3(signature = (means, quats, scales, opacities, sh, camera, *, sh_degree=None, background=[0.0, 0.0, 0.0], outputs=None, kernel="auto", threads=None, inv_alpha_threshold=255.0, transmittance_stop=1e-4))]
 #[allow(clippy::too_many_arguments)]
 fn render<'py>(
     py: Python<'py>,
@@ -319,9 +321,16 @@ fn render<'py>(
     outputs: Option<Vec<String>>,
     kernel: &str,
     threads: Option<usize>,
+    inv_alpha_threshold: f32,
+    transmittance_stop: f32,
 ) -> PyResult<Bound<'py, PyDict>> {
     let g = scene(means, quats, scales, opacities, sh)?;
     let mut opts = options(background, sh_degree, kernel)?;
+    // The forward cut-offs; the core checks them when it renders.
+    opts.cutoffs = Cutoffs {
+        inv_alpha_threshold,
+        transmittance_stop,
+    };
     opts.outputs = match &outputs {
         None => Outputs::ALL,
         Some(names) => {

@@ -406,3 +406,21 @@ def test_extrapolate_equals_the_cli_run(tmp_path):
         unseen.extrapolate(tmp_path / "run", lounge / "candidates.json", tmp_path / "bad",
                            config={"qa_iterations": "many"}, **views)
     assert not (tmp_path / "bad").exists()
+
+
+def test_cutoffs_are_a_forward_knob(dumps):
+    """The blend's cut-offs (SPEC.md §5.4): gsplat's given explicitly give the default's
+    bits, others change the image, bad values are refused."""
+    d, s = dumps
+    cam = unseen.load_cameras(d / "cameras.json")[0]
+    default = unseen.render(**s, camera=cam, outputs=["rgb"])["rgb"]
+    explicit = unseen.render(**s, camera=cam, outputs=["rgb"], inv_alpha_threshold=255.0,
+                             transmittance_stop=1e-4)["rgb"]
+    assert default.tobytes() == explicit.tobytes()
+    for inv, stop in [(1000.0, 1e-4), (float("inf"), 0.0)]:
+        rgb = unseen.render(**s, camera=cam, outputs=["rgb"], inv_alpha_threshold=inv,
+                            transmittance_stop=stop)["rgb"]
+        assert np.isfinite(rgb).all() and rgb.tobytes() != default.tobytes()
+    for inv, stop in [(0.5, 1e-4), (float("nan"), 1e-4), (255.0, 1.0)]:
+        with pytest.raises(ValueError):
+            unseen.render(**s, camera=cam, inv_alpha_threshold=inv, transmittance_stop=stop)
