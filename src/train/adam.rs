@@ -18,6 +18,7 @@
 
 use crate::error::{Error, Result};
 use crate::gaussian::{Gaussians, Param};
+use crate::math::Isa;
 use rayon::prelude::*;
 
 /// Adam's constants (INRIA: PyTorch defaults with `eps = 1e-15`).
@@ -92,31 +93,6 @@ fn update(x: &mut [f32], m: &mut [f32], v: &mut [f32], g: &[f32], k: StepScalars
         *v = k.b2 * *v + k.ob2 * (g * g);
         let denom = v.sqrt() / k.bc2_sqrt + k.eps;
         *x -= k.step_size * (*m / denom);
-    }
-}
-
-/// The widest vector unit the CPU offers for [`update`] (detected once per step).
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
-enum Isa {
-    Baseline,
-    #[cfg(target_arch = "x86_64")]
-    Avx2,
-    #[cfg(target_arch = "x86_64")]
-    Avx512,
-}
-
-impl Isa {
-    fn detect() -> Isa {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::is_x86_feature_detected!("avx512f") {
-                return Isa::Avx512;
-            }
-            if std::is_x86_feature_detected!("avx2") {
-                return Isa::Avx2;
-            }
-        }
-        Isa::Baseline
     }
 }
 

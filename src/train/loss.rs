@@ -127,24 +127,26 @@ pub fn image_loss(inp: &LossInput, weights: &LossWeights) -> Result<LossOutput> 
     let m = |p: usize| inp.mask.map_or(1.0, |m| m[p]);
     let n = (npix * 3) as f64;
     let mut terms = LossTerms::default();
-    let mut grad_rgb = vec![0f32; npix * 3];
     let (gl1, gl2) = (weights.l1 / n as f32, weights.l2 * 2.0 / n as f32);
-    let (mut s1, mut s2) = (0f64, 0f64);
-    for p in 0..npix {
-        let mp = m(p);
-        for c in 0..3 {
-            let i = p * 3 + c;
-            let d = mp * (inp.rgb[i] - inp.target_rgb[i]);
-            s1 += d.abs() as f64;
-            s2 += (d as f64) * (d as f64);
-            // d(M·x)/dx = M.
-            grad_rgb[i] = mp * (gl1 * sign(d) + gl2 * d);
+    // The L1/L2 terms on this thread while the SSIM runs beside them.
+    let norms = || {
+        let mut grad_rgb = vec![0f32; npix * 3];
+        let (mut s1, mut s2) = (0f64, 0f64);
+        for p in 0..npix {
+            let mp = m(p);
+            for c in 0..3 {
+                let i = p * 3 + c;
+                let d = mp * (inp.rgb[i] - inp.target_rgb[i]);
+                s1 += d.abs() as f64;
+                s2 += (d as f64) * (d as f64);
+                // d(M·x)/dx = M.
+                grad_rgb[i] = mp * (gl1 * sign(d) + gl2 * d);
+            }
         }
-    }
-    terms.l1 = s1 / n;
-    terms.l2 = s2 / n;
-    if weights.dssim != 0.0 {
-        let (s, g) = match inp.mask {
+        (grad_rgb, s1, s2)
+    };
+    let structure = || {
+        (weights.dssim != 0.0).then(|| match inp.mask {
             None => ssim(inp.rgb, inp.target_rgb, w, h, 3, true),
             Some(mask) => {
                 let scale = |img: &[f32]| -> Vec<f32> {
@@ -155,7 +157,12 @@ pub fn image_loss(inp: &LossInput, weights: &LossWeights) -> Result<LossOutput> 
                 };
                 ssim(&scale(inp.rgb), &scale(inp.target_rgb), w, h, 3, true)
             }
-        };
+        })
+    };
+    let ((mut grad_rgb, s1, s2), structure) = rayon::join(norms, structure);
+    terms.l1 = s1 / n;
+    terms.l2 = s2 / n;
+    if let Some((s, g)) = structure {
         terms.dssim = 1.0 - s;
         for (i, (gr, gs)) in grad_rgb
             .iter_mut()

@@ -8,6 +8,9 @@
 //! per pixel, `dS̄/dx = (G⊛∂S/∂μx + 2x·G⊛∂S/∂E_xx + y·G⊛∂S/∂E_xy) / N`, the window being
 //! symmetric so that its adjoint (with zero padding) is itself.
 
+use crate::math::Isa;
+use rayon::prelude::*;
+
 /// Window size and standard deviation (INRIA `ssim(window_size=11)`, `gaussian(11, 1.5)`).
 pub const SSIM_WINDOW: usize = 11;
 pub const SSIM_SIGMA: f64 = 1.5;
@@ -26,83 +29,169 @@ fn kernel() -> [f64; SSIM_WINDOW] {
     k.map(|v| v / s)
 }
 
-/// Separable Gaussian blur with zero padding of `n` planes of `w × h` values stored one
-/// after the other: horizontal pass, then vertical. Every output value is
-/// `Σ_t k[t]·v[t]` over the in-range taps in ascending `t`, accumulated from 0 — the loops
-/// run over `x` innermost so they vectorize without changing any element's order of
-/// operations (separate multiply and add, never fused), so the AVX2 build of the same code,
-/// chosen at run time, gives the same bits. Planes are independent parallel tasks (a fixed
-/// partition).
-fn blur_planes(src: &[f64], w: usize, h: usize, k: &[f64; SSIM_WINDOW]) -> Vec<f64> {
-    use rayon::prelude::*;
-    let n = w * h;
-    let mut out = vec![0.0; src.len()];
-    #[cfg(target_arch = "x86_64")]
-    let avx2 = std::arch::is_x86_feature_detected!("avx2");
-    out.par_chunks_mut(n)
-        .zip(src.par_chunks(n))
-        .for_each(|(dst, plane)| {
-            let mut tmp = vec![0.0; n];
-            #[cfg(target_arch = "x86_64")]
-            if avx2 {
-                // SAFETY: AVX2 was detected at run time.
-                unsafe { blur_plane_avx2(dst, plane, &mut tmp, w, h, k) };
-                return;
-            }
-            blur_plane(dst, plane, &mut tmp, w, h, k);
-        });
-    out
-}
+/// Image rows per parallel task: a fixed partition (every value is computed on its own, so
+/// none depends on it or on the thread count).
+const TASK_ROWS: usize = 8;
+/// Window radius (taps `t = 0..11` sit at offsets `t − 5`).
+const RADIUS: usize = SSIM_WINDOW / 2;
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn blur_plane_avx2(
-    dst: &mut [f64],
-    plane: &[f64],
-    tmp: &mut [f64],
-    w: usize,
-    h: usize,
-    k: &[f64; SSIM_WINDOW],
-) {
-    blur_plane(dst, plane, tmp, w, h, k)
-}
-
+/// `out[x] = Σ_t k[t]·src[t][x]`, the taps in ascending `t` accumulated from 0, separate
+/// multiply and add (never fused): the one definition of a blur output. The loop over `x`
+/// is innermost once the eleven taps are unrolled, so it vectorizes without changing any
+/// element's order of operations; compiled per instruction set by [`taps_for`].
+///
+/// Zero padding is a zero source row (vertical) or zeros beside the row (horizontal): the
+/// accumulator starts at +0.0 and so is never −0.0, and adding `k·0 = +0.0` leaves any
+/// other value unchanged — the same bits as skipping the out-of-range taps.
 #[inline(always)]
-fn blur_plane(
-    dst: &mut [f64],
-    plane: &[f64],
-    tmp: &mut [f64],
-    w: usize,
-    h: usize,
+#[allow(clippy::needless_range_loop)] // t and j index the kernel, rows and block together
+fn taps(src: &[&[f64]; SSIM_WINDOW], k: &[f64; SSIM_WINDOW], out: &mut [f64]) {
+    let n = out.len();
+    let s: [&[f64]; SSIM_WINDOW] = std::array::from_fn(|t| &src[t][..n]);
+    // Blocks of TAP_BLOCK outputs keep that many independent sums in flight (one sum's
+    // chain of eleven dependent adds would leave the adder idle), then the tail one by one.
+    let full = n - n % TAP_BLOCK;
+    for (b, o) in out[..full].chunks_exact_mut(TAP_BLOCK).enumerate() {
+        let x0 = b * TAP_BLOCK;
+        let mut acc = [0.0; TAP_BLOCK];
+        for t in 0..SSIM_WINDOW {
+            let row = &s[t][x0..x0 + TAP_BLOCK];
+            for j in 0..TAP_BLOCK {
+                acc[j] += k[t] * row[j];
+            }
+        }
+        o.copy_from_slice(&acc);
+    }
+    for x in full..n {
+        let mut acc = 0.0;
+        for t in 0..SSIM_WINDOW {
+            acc += k[t] * s[t][x];
+        }
+        out[x] = acc;
+    }
+}
+
+/// Outputs [`taps`] computes together: four AVX-512F registers of f64.
+const TAP_BLOCK: usize = 32;
+
+/// [`taps`] compiled for `isa`.
+fn taps_for(isa: Isa, src: &[&[f64]; SSIM_WINDOW], k: &[f64; SSIM_WINDOW], out: &mut [f64]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        #[target_feature(enable = "avx2")]
+        fn avx2(src: &[&[f64]; SSIM_WINDOW], k: &[f64; SSIM_WINDOW], out: &mut [f64]) {
+            taps(src, k, out)
+        }
+        #[target_feature(enable = "avx512f")]
+        fn avx512(src: &[&[f64]; SSIM_WINDOW], k: &[f64; SSIM_WINDOW], out: &mut [f64]) {
+            taps(src, k, out)
+        }
+        match isa {
+            // SAFETY: `isa` comes from `Isa::detect`, which saw the feature.
+            Isa::Avx512 => return unsafe { avx512(src, k, out) },
+            // SAFETY: as above.
+            Isa::Avx2 => return unsafe { avx2(src, k, out) },
+            Isa::Baseline => {}
+        }
+    }
+    taps(src, k, out)
+}
+
+/// The horizontal pass over `q` quantities of a `w`-wide image into `out`, laid out
+/// `[y][q][x]` (every value written):
+/// quantity `qi` of row `y` is filled into a zero-padded row by `fill(y, qi, row)`, then
+/// blurred along x.
+fn horizontal<F>(isa: Isa, (w, q): (usize, usize), k: &[f64; SSIM_WINDOW], fill: F, out: &mut [f64])
+where
+    F: Fn(usize, usize, &mut [f64]) + Sync,
+{
+    out.par_chunks_mut(TASK_ROWS * q * w)
+        .enumerate()
+        .for_each(|(task, chunk)| {
+            let mut pad = vec![0.0; w + 2 * RADIUS];
+            for (j, row) in chunk.chunks_exact_mut(q * w).enumerate() {
+                let y = task * TASK_ROWS + j;
+                for (qi, dst) in row.chunks_exact_mut(w).enumerate() {
+                    fill(y, qi, &mut pad[RADIUS..RADIUS + w]);
+                    let src = std::array::from_fn(|t| &pad[t..t + w]);
+                    taps_for(isa, &src, k, dst);
+                }
+            }
+        });
+}
+
+/// The vertical pass of quantity `qi` at output row `y` over a horizontal pass `hz`
+/// (`[y][q][x]`), rows outside the image read from `zeros`.
+#[allow(clippy::too_many_arguments)]
+fn vertical(
+    isa: Isa,
+    hz: &[f64],
+    (w, h, q): (usize, usize, usize),
+    y: usize,
+    qi: usize,
     k: &[f64; SSIM_WINDOW],
+    zeros: &[f64],
+    out: &mut [f64],
 ) {
-    let r = (SSIM_WINDOW / 2) as isize;
-    for (row_out, row_in) in tmp.chunks_exact_mut(w).zip(plane.chunks_exact(w)) {
-        for (t, &kv) in k.iter().enumerate() {
-            let off = t as isize - r;
-            let lo = (-off).max(0) as usize;
-            let hi = (w as isize - off).clamp(0, w as isize) as usize;
-            if lo >= hi {
-                continue;
-            }
-            let src_row = &row_in[(lo as isize + off) as usize..(hi as isize + off) as usize];
-            for (o, &v) in row_out[lo..hi].iter_mut().zip(src_row) {
-                *o += kv * v;
-            }
+    let src = std::array::from_fn(|t| match (y + t).checked_sub(RADIUS) {
+        Some(yy) if yy < h => &hz[(yy * q + qi) * w..(yy * q + qi + 1) * w],
+        _ => zeros,
+    });
+    taps_for(isa, &src, k, out)
+}
+
+/// Per pixel of a row, from the blurred moments `m = [μx, μy, E_xx, E_yy, E_xy]`: the SSIM
+/// value into `v` and, with `GRAD`, the derivative planes `dS/dμx` (with the `μx` terms of
+/// `σxx`, `σxy` folded in), `dS/dE_xx`, `dS/dE_xy` into `d`. Compiled per instruction set by
+/// [`pixels_for`]; the same operations per element at any width.
+#[inline(always)]
+fn pixels<const GRAD: bool>(m: &[&[f64]; 5], v: &mut [f64], d: &mut [&mut [f64]; 3]) {
+    let n = v.len();
+    let [mx, my, exx, eyy, exy] = m.map(|r| &r[..n]);
+    let [d0, d1, d2] = d;
+    let len = if GRAD { n } else { 0 };
+    let (d0, d1, d2) = (&mut d0[..len], &mut d1[..len], &mut d2[..len]);
+    for p in 0..n {
+        let (ux, uy) = (mx[p], my[p]);
+        let (sxx, syy, sxy) = (exx[p] - ux * ux, eyy[p] - uy * uy, exy[p] - ux * uy);
+        let a1 = 2.0 * ux * uy + SSIM_C1;
+        let a2 = 2.0 * sxy + SSIM_C2;
+        let b1 = ux * ux + uy * uy + SSIM_C1;
+        let b2 = sxx + syy + SSIM_C2;
+        v[p] = a1 * a2 / (b1 * b2);
+        if GRAD {
+            let ds_dsxx = -a1 * a2 / (b1 * b2 * b2);
+            let ds_dsxy = 2.0 * a1 / (b1 * b2);
+            d0[p] = 2.0 * uy * a2 / (b1 * b2) - 2.0 * ux * a1 * a2 / (b1 * b1 * b2)
+                + ds_dsxx * (-2.0 * ux)
+                + ds_dsxy * (-uy);
+            d1[p] = ds_dsxx;
+            d2[p] = ds_dsxy;
         }
     }
-    for (y, row_out) in dst.chunks_exact_mut(w).enumerate() {
-        for (t, &kv) in k.iter().enumerate() {
-            let yy = y as isize + t as isize - r;
-            if yy < 0 || yy >= h as isize {
-                continue;
-            }
-            let src_row = &tmp[yy as usize * w..(yy as usize + 1) * w];
-            for (o, &v) in row_out.iter_mut().zip(src_row) {
-                *o += kv * v;
-            }
+}
+
+/// [`pixels`] compiled for `isa`.
+fn pixels_for<const GRAD: bool>(isa: Isa, m: &[&[f64]; 5], v: &mut [f64], d: &mut [&mut [f64]; 3]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        #[target_feature(enable = "avx2")]
+        fn avx2<const G: bool>(m: &[&[f64]; 5], v: &mut [f64], d: &mut [&mut [f64]; 3]) {
+            pixels::<G>(m, v, d)
+        }
+        #[target_feature(enable = "avx512f")]
+        fn avx512<const G: bool>(m: &[&[f64]; 5], v: &mut [f64], d: &mut [&mut [f64]; 3]) {
+            pixels::<G>(m, v, d)
+        }
+        match isa {
+            // SAFETY: `isa` comes from `Isa::detect`, which saw the feature.
+            Isa::Avx512 => return unsafe { avx512::<GRAD>(m, v, d) },
+            // SAFETY: as above.
+            Isa::Avx2 => return unsafe { avx2::<GRAD>(m, v, d) },
+            Isa::Baseline => {}
         }
     }
+    pixels::<GRAD>(m, v, d)
 }
 
 /// Mean SSIM of `x` against `y` (interleaved, `c` channels) and, if `grad`, dSSIM/dx.
@@ -133,78 +222,146 @@ fn ssim_impl(
     h: usize,
     c: usize,
     grad: bool,
-    mut map: Option<&mut [f64]>,
+    map: Option<&mut [f64]>,
+) -> (f64, Option<Vec<f32>>) {
+    ssim_with(Isa::detect(), x, y, (w, h, c), grad, map)
+}
+
+/// [`ssim_impl`] with the row kernels compiled for `isa`. Five passes, the heavy ones
+/// parallel over [`TASK_ROWS`]-row tasks: (1) the horizontal blur of the 5 moments of each
+/// channel (`x, y, x², y², xy`); (2) per row their vertical blur and the per-pixel SSIM and
+/// derivative planes; (3) the mean in channel-then-pixel order (f64, sequential); with the
+/// gradient, (4) the horizontal and (5) the vertical blur of the derivative planes,
+/// combined into `dS̄/dx` per value.
+fn ssim_with(
+    isa: Isa,
+    x: &[f32],
+    y: &[f32],
+    (w, h, c): (usize, usize, usize),
+    grad: bool,
+    map: Option<&mut [f64]>,
 ) -> (f64, Option<Vec<f32>>) {
     assert_eq!(x.len(), w * h * c);
     assert_eq!(y.len(), w * h * c);
     let k = kernel();
     let np = w * h;
     let n = (np * c) as f64;
-    // Planes, channel by channel: x, y, x², y², x·y.
-    let mut planes = vec![0.0; 5 * c * np];
-    for ch in 0..c {
-        let base = 5 * ch * np;
-        for p in 0..np {
-            let (a, b) = (x[p * c + ch] as f64, y[p * c + ch] as f64);
-            planes[base + p] = a;
-            planes[base + np + p] = b;
-            planes[base + 2 * np + p] = a * a;
-            planes[base + 3 * np + p] = b * b;
-            planes[base + 4 * np + p] = a * b;
-        }
+    if x.is_empty() {
+        return (0.0 / n, grad.then(Vec::new));
     }
-    let blurred = blur_planes(&planes, w, h, &k);
-    // Per channel: the SSIM map's sum (in pixel order) and, for the gradient, the three
-    // derivative planes dS/dμx, dS/dE_xx, dS/dE_xy.
-    let mut total = 0.0;
-    let mut deriv = if grad {
-        vec![0.0; 3 * c * np]
-    } else {
-        Vec::new()
-    };
-    for ch in 0..c {
-        let b = &blurred[5 * ch * np..5 * (ch + 1) * np];
-        let (mx, my, exx, eyy, exy) = (
-            &b[..np],
-            &b[np..2 * np],
-            &b[2 * np..3 * np],
-            &b[3 * np..4 * np],
-            &b[4 * np..],
-        );
-        for p in 0..np {
-            let (ux, uy) = (mx[p], my[p]);
-            let (sxx, syy, sxy) = (exx[p] - ux * ux, eyy[p] - uy * uy, exy[p] - ux * uy);
-            let a1 = 2.0 * ux * uy + SSIM_C1;
-            let a2 = 2.0 * sxy + SSIM_C2;
-            let b1 = ux * ux + uy * uy + SSIM_C1;
-            let b2 = sxx + syy + SSIM_C2;
-            let v = a1 * a2 / (b1 * b2);
-            total += v;
-            if let Some(m) = map.as_deref_mut() {
-                m[p] += v / c as f64;
+    let zeros = vec![0.0; w];
+    // The channels apart, in f64: `[ch][p]`.
+    let planes = |img: &[f32]| -> Vec<f64> {
+        let mut out = vec![0.0; img.len()];
+        for (p, px) in img.chunks_exact(c).enumerate() {
+            for (ch, &v) in px.iter().enumerate() {
+                out[ch * np + p] = v as f64;
             }
-            if grad {
-                let ds_dsxx = -a1 * a2 / (b1 * b2 * b2);
-                let ds_dsxy = 2.0 * a1 / (b1 * b2);
-                let d = &mut deriv[3 * ch * np..3 * (ch + 1) * np];
-                d[p] = 2.0 * uy * a2 / (b1 * b2) - 2.0 * ux * a1 * a2 / (b1 * b1 * b2)
-                    + ds_dsxx * (-2.0 * ux)
-                    + ds_dsxy * (-uy);
-                d[np + p] = ds_dsxx;
-                d[2 * np + p] = ds_dsxy;
+        }
+        out
+    };
+    let (xp, yp) = (planes(x), planes(y));
+    // (1) Moments: quantity `5·ch + j`, j = x, y, x², y², x·y.
+    let q = 5 * c;
+    let mut hz = vec![0.0; h * q * w];
+    let fill = |row: usize, qi: usize, dst: &mut [f64]| {
+        let (ch, j) = (qi / 5, qi % 5);
+        let at = (ch * h + row) * w;
+        let (a, b) = (&xp[at..at + w], &yp[at..at + w]);
+        match j {
+            0 => dst.copy_from_slice(a),
+            1 => dst.copy_from_slice(b),
+            2 => dst.iter_mut().zip(a).for_each(|(o, a)| *o = a * a),
+            3 => dst.iter_mut().zip(b).for_each(|(o, b)| *o = b * b),
+            _ => dst
+                .iter_mut()
+                .zip(a.iter().zip(b))
+                .for_each(|(o, (a, b))| *o = a * b),
+        }
+    };
+    horizontal(isa, (w, q), &k, fill, &mut hz);
+    // (2) Per row: the SSIM map `[y][ch][x]` and the derivative planes `[y][3·ch + j][x]`.
+    let mut values = vec![0.0; h * c * w];
+    let mut deriv = vec![0.0; if grad { h * 3 * c * w } else { 0 }];
+    let task = |t: usize, vals: &mut [f64], ders: &mut [f64]| {
+        let mut moments = vec![0.0; 5 * w];
+        for (j, vrow) in vals.chunks_exact_mut(c * w).enumerate() {
+            let row = t * TASK_ROWS + j;
+            for (ch, v) in vrow.chunks_exact_mut(w).enumerate() {
+                for (i, m) in moments.chunks_exact_mut(w).enumerate() {
+                    vertical(isa, &hz, (w, h, q), row, 5 * ch + i, &k, &zeros, m);
+                }
+                let m: [&[f64]; 5] = std::array::from_fn(|i| &moments[i * w..(i + 1) * w]);
+                if grad {
+                    let base = (j * 3 * c + 3 * ch) * w;
+                    let (d0, rest) = ders[base..base + 3 * w].split_at_mut(w);
+                    let (d1, d2) = rest.split_at_mut(w);
+                    pixels_for::<true>(isa, &m, v, &mut [d0, d1, d2]);
+                } else {
+                    pixels_for::<false>(isa, &m, v, &mut [&mut [], &mut [], &mut []]);
+                }
+            }
+        }
+    };
+    if grad {
+        values
+            .par_chunks_mut(TASK_ROWS * c * w)
+            .zip(deriv.par_chunks_mut(TASK_ROWS * 3 * c * w))
+            .enumerate()
+            .for_each(|(t, (vals, ders))| task(t, vals, ders));
+    } else {
+        values
+            .par_chunks_mut(TASK_ROWS * c * w)
+            .enumerate()
+            .for_each(|(t, vals)| task(t, vals, &mut []));
+    }
+    // (3) The mean, channel by channel in pixel order; the map's mean over channels.
+    let mut total = 0.0;
+    let mut map = map;
+    for ch in 0..c {
+        for row in 0..h {
+            let v = &values[(row * c + ch) * w..(row * c + ch + 1) * w];
+            for (col, &s) in v.iter().enumerate() {
+                total += s;
+                if let Some(m) = map.as_deref_mut() {
+                    m[row * w + col] += s / c as f64;
+                }
             }
         }
     }
     let g = grad.then(|| {
-        let bd = blur_planes(&deriv, w, h, &k);
+        // (4) The derivative planes blurred along x, (5) along y and combined.
+        let qd = 3 * c;
+        // Into the moments' storage (no longer needed, and larger).
+        let mut hd = hz;
+        hd.truncate(h * qd * w);
+        let fill = |row: usize, qi: usize, dst: &mut [f64]| {
+            dst.copy_from_slice(&deriv[(row * qd + qi) * w..(row * qd + qi + 1) * w]);
+        };
+        horizontal(isa, (w, qd), &k, fill, &mut hd);
         let mut g = vec![0f32; x.len()];
-        for ch in 0..c {
-            let d = &bd[3 * ch * np..3 * (ch + 1) * np];
-            for p in 0..np {
-                let (xs, ys) = (x[p * c + ch] as f64, y[p * c + ch] as f64);
-                g[p * c + ch] = ((d[p] + 2.0 * xs * d[np + p] + ys * d[2 * np + p]) / n) as f32;
-            }
-        }
+        g.par_chunks_mut(TASK_ROWS * w * c)
+            .enumerate()
+            .for_each(|(t, gs)| {
+                let mut b = vec![0.0; 3 * w];
+                for (j, grow) in gs.chunks_exact_mut(w * c).enumerate() {
+                    let row = t * TASK_ROWS + j;
+                    for ch in 0..c {
+                        for (i, bi) in b.chunks_exact_mut(w).enumerate() {
+                            vertical(isa, &hd, (w, h, qd), row, 3 * ch + i, &k, &zeros, bi);
+                        }
+                        let (b0, rest) = b.split_at(w);
+                        let (b1, b2) = rest.split_at(w);
+                        let at = (ch * h + row) * w;
+                        let (xs, ys) = (&xp[at..at + w], &yp[at..at + w]);
+                        for col in 0..w {
+                            // Vectorizes; the interleaved f32 store does not hold it back.
+                            let v = (b0[col] + 2.0 * xs[col] * b1[col] + ys[col] * b2[col]) / n;
+                            grow[col * c + ch] = v as f32;
+                        }
+                    }
+                }
+            });
         g
     });
     (total / n, g)
@@ -215,16 +372,34 @@ mod tests {
     use super::*;
     use crate::scene::Uniform;
 
+    /// One plane blurred by the passes [`ssim_with`] uses: horizontal, then vertical.
+    fn blur(isa: Isa, img: &[f64], w: usize, h: usize) -> Vec<f64> {
+        let k = kernel();
+        let mut hz = vec![f64::NAN; w * h];
+        horizontal(
+            isa,
+            (w, 1),
+            &k,
+            |y, _, dst| dst.copy_from_slice(&img[y * w..(y + 1) * w]),
+            &mut hz,
+        );
+        let zeros = vec![0.0; w];
+        let mut out = vec![f64::NAN; w * h];
+        for (y, row) in out.chunks_exact_mut(w).enumerate() {
+            vertical(isa, &hz, (w, h, 1), y, 0, &k, &zeros, row);
+        }
+        out
+    }
+
     /// The separable, vectorized blur equals a direct 2D window sum (f64, any order) to
     /// rounding, including the zero-padded borders.
     #[test]
     fn separable_blur_matches_direct_2d_window() {
-        let (w, h) = (23, 17);
-        let mut u = Uniform::new(4);
-        let img: Vec<f64> = (0..2 * w * h).map(|_| u.unit() as f64).collect();
-        let k = kernel();
-        let fast = blur_planes(&img, w, h, &k);
-        for p in 0..2 {
+        for (w, h) in [(23, 17), (40, 3), (1, 12)] {
+            let mut u = Uniform::new(4);
+            let img: Vec<f64> = (0..w * h).map(|_| u.unit() as f64).collect();
+            let k = kernel();
+            let fast = blur(Isa::detect(), &img, w, h);
             for y in 0..h {
                 for x in 0..w {
                     let mut acc = 0.0;
@@ -233,35 +408,153 @@ mod tests {
                             let (yy, xx) =
                                 (y as isize + ty as isize - 5, x as isize + tx as isize - 5);
                             if (0..h as isize).contains(&yy) && (0..w as isize).contains(&xx) {
-                                acc += ky * kx * img[p * w * h + yy as usize * w + xx as usize];
+                                acc += ky * kx * img[yy as usize * w + xx as usize];
                             }
                         }
                     }
-                    let got = fast[p * w * h + y * w + x];
-                    assert!((got - acc).abs() < 1e-14, "({p},{x},{y}): {got} vs {acc}");
+                    let got = fast[y * w + x];
+                    assert!(
+                        (got - acc).abs() < 1e-14,
+                        "{w}x{h} ({x},{y}): {got} vs {acc}"
+                    );
                 }
             }
         }
     }
 
-    /// The AVX2 build of the blur gives the bits of the generic build.
-    #[cfg(target_arch = "x86_64")]
-    #[test]
-    fn avx2_blur_is_bit_identical() {
-        if !std::arch::is_x86_feature_detected!("avx2") {
-            return;
-        }
-        let (w, h) = (37, 29);
-        let mut u = Uniform::new(8);
-        let img: Vec<f64> = (0..w * h).map(|_| u.unit() as f64 * 3.0 - 1.0).collect();
+    /// The SSIM as first written (session 1): every plane blurred on its own by skipping the
+    /// out-of-range taps, one multiply-add pass per tap over a zeroed row, then the
+    /// per-pixel formulas in one loop. The reference whose bits [`ssim_with`] must keep.
+    fn ssim_reference(
+        x: &[f32],
+        y: &[f32],
+        w: usize,
+        h: usize,
+        c: usize,
+    ) -> (f64, Vec<f32>, Vec<f64>) {
         let k = kernel();
-        let (mut a, mut b, mut t) = (vec![0.0; w * h], vec![0.0; w * h], vec![0.0; w * h]);
-        blur_plane(&mut a, &img, &mut t, w, h, &k);
-        t.fill(0.0);
-        // SAFETY: AVX2 detected above.
-        unsafe { blur_plane_avx2(&mut b, &img, &mut t, w, h, &k) };
-        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-        assert_eq!(bits(&a), bits(&b));
+        let r = RADIUS as isize;
+        let blur = |plane: &[f64]| -> Vec<f64> {
+            let mut tmp = vec![0.0; w * h];
+            for (row_out, row_in) in tmp.chunks_exact_mut(w).zip(plane.chunks_exact(w)) {
+                for (t, &kv) in k.iter().enumerate() {
+                    let off = t as isize - r;
+                    for xo in 0..w as isize {
+                        if (0..w as isize).contains(&(xo + off)) {
+                            row_out[xo as usize] += kv * row_in[(xo + off) as usize];
+                        }
+                    }
+                }
+            }
+            let mut dst = vec![0.0; w * h];
+            for (yo, row_out) in dst.chunks_exact_mut(w).enumerate() {
+                for (t, &kv) in k.iter().enumerate() {
+                    let yy = yo as isize + t as isize - r;
+                    if yy < 0 || yy >= h as isize {
+                        continue;
+                    }
+                    for (o, &v) in row_out.iter_mut().zip(&tmp[yy as usize * w..][..w]) {
+                        *o += kv * v;
+                    }
+                }
+            }
+            dst
+        };
+        let np = w * h;
+        let n = (np * c) as f64;
+        let (mut total, mut map, mut g) = (0.0, vec![0.0; np], vec![0f32; x.len()]);
+        for ch in 0..c {
+            let a: Vec<f64> = (0..np).map(|p| x[p * c + ch] as f64).collect();
+            let b: Vec<f64> = (0..np).map(|p| y[p * c + ch] as f64).collect();
+            let prod = |u: &[f64], v: &[f64]| -> Vec<f64> {
+                u.iter().zip(v).map(|(u, v)| u * v).collect()
+            };
+            let (mx, my) = (blur(&a), blur(&b));
+            let (exx, eyy, exy) = (
+                blur(&prod(&a, &a)),
+                blur(&prod(&b, &b)),
+                blur(&prod(&a, &b)),
+            );
+            let mut d = vec![vec![0.0; np]; 3];
+            for p in 0..np {
+                let (ux, uy) = (mx[p], my[p]);
+                let (sxx, syy, sxy) = (exx[p] - ux * ux, eyy[p] - uy * uy, exy[p] - ux * uy);
+                let a1 = 2.0 * ux * uy + SSIM_C1;
+                let a2 = 2.0 * sxy + SSIM_C2;
+                let b1 = ux * ux + uy * uy + SSIM_C1;
+                let b2 = sxx + syy + SSIM_C2;
+                let v = a1 * a2 / (b1 * b2);
+                total += v;
+                map[p] += v / c as f64;
+                let ds_dsxx = -a1 * a2 / (b1 * b2 * b2);
+                let ds_dsxy = 2.0 * a1 / (b1 * b2);
+                d[0][p] = 2.0 * uy * a2 / (b1 * b2) - 2.0 * ux * a1 * a2 / (b1 * b1 * b2)
+                    + ds_dsxx * (-2.0 * ux)
+                    + ds_dsxy * (-uy);
+                d[1][p] = ds_dsxx;
+                d[2][p] = ds_dsxy;
+            }
+            let bd: Vec<Vec<f64>> = d.iter().map(|p| blur(p)).collect();
+            for p in 0..np {
+                let (xs, ys) = (a[p], b[p]);
+                g[p * c + ch] = ((bd[0][p] + 2.0 * xs * bd[1][p] + ys * bd[2][p]) / n) as f32;
+            }
+        }
+        (total / n, g, map)
+    }
+
+    /// The row-blocked, per-instruction-set, parallel SSIM gives the reference's bits —
+    /// value, gradient and map — on sizes below, at and around the window and the tap
+    /// block, for 1–3 channels, under every instruction set the CPU has and 1 or 2 threads.
+    #[test]
+    fn ssim_keeps_the_reference_bits_in_every_form() {
+        let mut isas = vec![Isa::Baseline];
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::is_x86_feature_detected!("avx2") {
+                isas.push(Isa::Avx2);
+            }
+            if std::is_x86_feature_detected!("avx512f") {
+                isas.push(Isa::Avx512);
+            }
+        }
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        let bits64 = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        let mut u = Uniform::new(11);
+        for (w, h, c) in [
+            (1, 1, 3),
+            (5, 3, 1),
+            (11, 11, 3),
+            (33, 9, 2),
+            (70, 19, 3),
+            (37, 29, 3),
+        ] {
+            let x: Vec<f32> = (0..w * h * c).map(|_| u.unit()).collect();
+            let y: Vec<f32> = x
+                .iter()
+                .map(|v| (v + 0.4 * (u.unit() - 0.5)).clamp(0.0, 1.0))
+                .collect();
+            let (s, g, map) = ssim_reference(&x, &y, w, h, c);
+            for &isa in &isas {
+                for threads in [1, 2] {
+                    let pool = rayon::ThreadPoolBuilder::new()
+                        .num_threads(threads)
+                        .build()
+                        .unwrap();
+                    let (s2, g2, map2) = pool.install(|| {
+                        let mut map2 = vec![0.0; w * h];
+                        let (s2, g2) = ssim_with(isa, &x, &y, (w, h, c), true, Some(&mut map2));
+                        (s2, g2.unwrap(), map2)
+                    });
+                    let at = format!("{w}x{h}x{c} {isa:?} {threads} threads");
+                    assert_eq!(s.to_bits(), s2.to_bits(), "{at}: {s} vs {s2}");
+                    assert_eq!(bits(&g), bits(&g2), "{at}");
+                    assert_eq!(bits64(&map), bits64(&map2), "{at}");
+                    let (s3, none) = ssim_with(isa, &x, &y, (w, h, c), false, None);
+                    assert_eq!((s.to_bits(), none), (s3.to_bits(), None), "{at}");
+                }
+            }
+        }
     }
 
     #[test]

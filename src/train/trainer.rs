@@ -397,28 +397,29 @@ impl<'a> Trainer<'a> {
         let fwd = render_for_backward(&self.gaussians, cam, &opts)?;
         lap(&mut self.times.forward);
         let rgb = fwd.render.rgb.as_deref().expect("rgb rendered");
-        let out = image_loss(
-            &LossInput {
-                width: cam.width as usize,
-                height: cam.height as usize,
-                rgb,
-                target_rgb: &view.image.data,
-                depth: if use_depth {
-                    fwd.render.expected_depth.as_deref()
-                } else {
-                    None
-                },
-                target_depth: if use_depth {
-                    view.depth.as_deref()
-                } else {
-                    None
-                },
-                mask,
+        let input = LossInput {
+            width: cam.width as usize,
+            height: cam.height as usize,
+            rgb,
+            target_rgb: &view.image.data,
+            depth: if use_depth {
+                fwd.render.expected_depth.as_deref()
+            } else {
+                None
             },
-            &self.config.loss,
-        )
-        .map_err(|e| Error::invalid(format!("view '{}': {}", cam.name, e.message)))?;
-        let p = psnr(rgb, &view.image.data);
+            target_depth: if use_depth {
+                view.depth.as_deref()
+            } else {
+                None
+            },
+            mask,
+        };
+        // The progress PSNR beside the loss (both only read the render).
+        let (out, p) = rayon::join(
+            || image_loss(&input, &self.config.loss),
+            || psnr(rgb, &view.image.data),
+        );
+        let out = out.map_err(|e| Error::invalid(format!("view '{}': {}", cam.name, e.message)))?;
         lap(&mut self.times.loss);
         let v = ImageGrads {
             rgb: Some(out.grad_rgb),
