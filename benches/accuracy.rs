@@ -455,9 +455,10 @@ fn lounge(resolution: u32) -> unseen::dataset::Dataset {
 }
 
 /// Training on `lounge` (resolution 1/2 quick, 1 full): checkpoints of one run per setting
-/// (densification on, the INRIA default, and off), scored on the test views (INRIA's every
-/// 8th training view) by their mean squared error against the ground truth images; time is
-/// the run's wall time up to the checkpoint.
+/// (densification on, the INRIA default, and off; and the default trained on images of
+/// half that size, INRIA's `-r`), all scored on the test views (INRIA's every 8th training
+/// view) at the bench's resolution by their mean squared error against the ground truth
+/// images; time is the run's wall time up to the checkpoint.
 fn training(quick: bool, points: &mut Vec<Point>) {
     use unseen::dataset::Split;
     use unseen::train::trainer::{TrainConfig, Trainer};
@@ -468,16 +469,25 @@ fn training(quick: bool, points: &mut Vec<Point>) {
         &[500, 1000, 2000, 4000, 7000]
     };
     let data = lounge(resolution);
-    for densify in [true, false] {
+    let coarse = lounge(2 * resolution);
+    let size = |d: &unseen::dataset::Dataset| {
+        let c = &d.views[0].camera;
+        format!("{}×{}", c.width, c.height)
+    };
+    // (training images, densification): the recipe at the bench's resolution, without
+    // densification, and on images of half that size — every run scored on the test
+    // views at the bench's resolution.
+    for (train_data, densify) in [(&data, true), (&data, false), (&coarse, true)] {
         let defaults = TrainConfig::default();
+        let halved = std::ptr::eq(train_data, &coarse);
         let cfg = TrainConfig {
             iterations: *checkpoints.last().expect("checkpoints"),
             save_iterations: vec![],
-            resolution,
+            resolution: if halved { 2 * resolution } else { resolution },
             densify: if densify { defaults.densify } else { None },
             ..defaults
         };
-        let mut t = Trainer::new(&data, cfg.clone()).expect("trainer");
+        let mut t = Trainer::new(train_data, cfg.clone()).expect("trainer");
         let mut seconds = 0.0;
         let mut done = 0;
         for &c in checkpoints {
@@ -495,16 +505,22 @@ fn training(quick: bool, points: &mut Vec<Point>) {
                 .map(|v| 10f64.powf(-v.psnr / 10.0))
                 .sum::<f64>()
                 / r.views.len() as f64;
+            let images = if halved {
+                format!(", trained on {} images", size(train_data))
+            } else {
+                String::new()
+            };
             points.push(Point {
                 stage: "training",
                 knob: format!(
-                    "{c} iterations, densification {}, {} Gaussians, test PSNR {:.2} dB",
+                    "{c} iterations, densification {}{images}, {} Gaussians, test PSNR {:.2} dB at {}",
                     if densify { "on" } else { "off" },
                     t.gaussians.len(),
-                    r.mean_psnr
+                    r.mean_psnr,
+                    size(&data),
                 ),
                 // The recipe's setting; the iteration count is the user's budget.
-                default: densify,
+                default: densify && !halved,
                 metric: "test-view MSE",
                 error: mse,
                 seconds,
