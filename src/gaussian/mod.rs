@@ -31,6 +31,35 @@ pub struct Gaussians {
     pub sh_degree: u32,
 }
 
+/// Gaussians `base .. base + means.len()` of a set, borrowed mutably
+/// ([`Gaussians::chunks_mut`]).
+#[derive(Debug)]
+pub struct GaussiansChunk<'a> {
+    pub means: &'a mut [[f32; 3]],
+    pub log_scales: &'a mut [[f32; 3]],
+    pub quats: &'a mut [[f32; 4]],
+    pub opacity_logits: &'a mut [f32],
+    pub sh_dc: &'a mut [[f32; 3]],
+    /// `rest_per` values per Gaussian.
+    pub sh_rest: &'a mut [f32],
+    pub rest_per: usize,
+    pub base: usize,
+}
+
+impl GaussiansChunk<'_> {
+    /// One parameter group, flat (the layout of [`Gaussians::param`]).
+    pub fn param_mut(&mut self, p: Param) -> &mut [f32] {
+        match p {
+            Param::Means => self.means.as_flattened_mut(),
+            Param::ShDc => self.sh_dc.as_flattened_mut(),
+            Param::ShRest => self.sh_rest,
+            Param::OpacityLogits => self.opacity_logits,
+            Param::LogScales => self.log_scales.as_flattened_mut(),
+            Param::Quats => self.quats.as_flattened_mut(),
+        }
+    }
+}
+
 impl Gaussians {
     /// An empty set with the given SH degree.
     pub fn new(sh_degree: u32) -> Result<Self> {
@@ -189,6 +218,43 @@ impl Gaussians {
             Param::LogScales => self.log_scales.as_flattened_mut(),
             Param::Quats => self.quats.as_flattened_mut(),
         }
+    }
+
+    /// The parameters split into consecutive chunks of `len` Gaussians (the last may be
+    /// shorter), each borrowed mutably on its own, so that chunks can be updated in
+    /// parallel.
+    pub fn chunks_mut(&mut self, len: usize) -> Vec<GaussiansChunk<'_>> {
+        assert!(len > 0, "chunk length");
+        let rest_per = self.rest_per_channel() * 3;
+        let mut out = Vec::with_capacity(self.len().div_ceil(len));
+        let mut means = &mut self.means[..];
+        let mut log_scales = &mut self.log_scales[..];
+        let mut quats = &mut self.quats[..];
+        let mut opacity_logits = &mut self.opacity_logits[..];
+        let mut sh_dc = &mut self.sh_dc[..];
+        let mut sh_rest = &mut self.sh_rest[..];
+        let mut base = 0;
+        while !means.is_empty() {
+            let k = len.min(means.len());
+            // Split each array's head off (`take` leaves an empty slice behind).
+            fn head<'a, T>(v: &mut &'a mut [T], k: usize) -> &'a mut [T] {
+                let (a, b) = std::mem::take(v).split_at_mut(k);
+                *v = b;
+                a
+            }
+            out.push(GaussiansChunk {
+                means: head(&mut means, k),
+                log_scales: head(&mut log_scales, k),
+                quats: head(&mut quats, k),
+                opacity_logits: head(&mut opacity_logits, k),
+                sh_dc: head(&mut sh_dc, k),
+                sh_rest: head(&mut sh_rest, k * rest_per),
+                rest_per,
+                base,
+            });
+            base += k;
+        }
+        out
     }
 
     /// `n` Gaussians with every parameter 0 (the layout of optimizer moments).

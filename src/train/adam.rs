@@ -17,8 +17,9 @@
 //! theirs, the step count is kept).
 
 use crate::error::{Error, Result};
-use crate::gaussian::{Gaussians, Param};
+use crate::gaussian::{Gaussians, GaussiansChunk, Param};
 use crate::math::Isa;
+use crate::raster::backward::project::{CHUNK, ChunkGrads, GradSink, ParamView};
 use rayon::prelude::*;
 
 /// Adam's constants (INRIA: PyTorch defaults with `eps = 1e-15`).
@@ -73,7 +74,7 @@ const CHUNK_ROWS: usize = 256;
 
 /// The scalars of one step, the same for every element.
 #[derive(Clone, Copy)]
-struct StepScalars {
+pub(crate) struct StepScalars {
     b1: f32,
     b2: f32,
     ob1: f32,
@@ -218,6 +219,57 @@ impl Adam {
         self.step_impl(params, p, lr, Grad::Chunks(grad), visible);
     }
 
+    /// Advance group `p`'s step counter and bias-correction products and return the
+    /// scalars of its update with learning rate `lr`: the first half of every step, shared
+    /// by [`Adam::step`] and the fused chunks of [`Adam::fused_chunks`].
+    pub(crate) fn begin(&mut self, p: Param, lr: f32) -> StepScalars {
+        let c = self.config;
+        let s = &mut self.steps[group_index(p)];
+        s.t += 1;
+        s.beta1_pow *= c.beta1 as f64;
+        s.beta2_pow *= c.beta2 as f64;
+        let step_size = (lr as f64 / (1.0 - s.beta1_pow)) as f32;
+        let bc2_sqrt = (1.0 - s.beta2_pow).sqrt() as f32;
+        StepScalars {
+            b1: c.beta1,
+            b2: c.beta2,
+            ob1: 1.0 - c.beta1,
+            ob2: 1.0 - c.beta2,
+            eps: c.eps,
+            bc2_sqrt,
+            step_size,
+        }
+    }
+
+    /// The scene and its moments in chunks of [`CHUNK`] Gaussians that take their
+    /// projection gradients straight into the update ([`project_backward_apply`]): group
+    /// `p` is updated with `steps[i]` where `Param::ALL[i] = p` (from [`Adam::begin`]) and
+    /// left alone where that is `None`. Every element gets the operations of
+    /// [`Adam::step`] (dense), so the bits are the same; the scene's gradient arrays are
+    /// never written or read back (SPEC.md §14.2).
+    ///
+    /// [`project_backward_apply`]: crate::raster::backward::project::project_backward_apply
+    pub(crate) fn fused_chunks<'a>(
+        &'a mut self,
+        params: &'a mut Gaussians,
+        steps: [Option<StepScalars>; 6],
+    ) -> Vec<AdamChunk<'a>> {
+        let isa = Isa::detect();
+        params
+            .chunks_mut(CHUNK)
+            .into_iter()
+            .zip(self.m.chunks_mut(CHUNK))
+            .zip(self.v.chunks_mut(CHUNK))
+            .map(|((params, m), v)| AdamChunk {
+                params,
+                m,
+                v,
+                steps,
+                isa,
+            })
+            .collect()
+    }
+
     fn step_impl(
         &mut self,
         params: &mut Gaussians,
@@ -229,22 +281,7 @@ impl Adam {
         if let Some(vis) = visible {
             assert_eq!(vis.len(), params.len(), "visibility length");
         }
-        let c = self.config;
-        let s = &mut self.steps[group_index(p)];
-        s.t += 1;
-        s.beta1_pow *= c.beta1 as f64;
-        s.beta2_pow *= c.beta2 as f64;
-        let step_size = (lr as f64 / (1.0 - s.beta1_pow)) as f32;
-        let bc2_sqrt = (1.0 - s.beta2_pow).sqrt() as f32;
-        let k = StepScalars {
-            b1: c.beta1,
-            b2: c.beta2,
-            ob1: 1.0 - c.beta1,
-            ob2: 1.0 - c.beta2,
-            eps: c.eps,
-            bc2_sqrt,
-            step_size,
-        };
+        let k = self.begin(p, lr);
         let isa = Isa::detect();
         let row = (params.param(p).len() / params.len().max(1)).max(1);
         let chunk = row * CHUNK_ROWS;
@@ -310,6 +347,43 @@ impl Adam {
         self.m.append(&z);
         self.v.append(&z);
         Ok(())
+    }
+}
+
+/// A chunk of Gaussians with its moments ([`Adam::fused_chunks`]).
+pub(crate) struct AdamChunk<'a> {
+    params: GaussiansChunk<'a>,
+    m: GaussiansChunk<'a>,
+    v: GaussiansChunk<'a>,
+    steps: [Option<StepScalars>; 6],
+    isa: Isa,
+}
+
+impl GradSink for AdamChunk<'_> {
+    fn params(&self) -> ParamView<'_> {
+        let p = &self.params;
+        ParamView {
+            means: p.means,
+            log_scales: p.log_scales,
+            quats: p.quats,
+            opacity_logits: p.opacity_logits,
+            sh_rest: p.sh_rest,
+            rest_per: p.rest_per,
+            base: p.base,
+        }
+    }
+
+    fn take(&mut self, grads: &ChunkGrads) {
+        for (p, k) in Param::ALL.into_iter().zip(self.steps) {
+            if let Some(k) = k {
+                let (x, m, v) = (
+                    self.params.param_mut(p),
+                    self.m.param_mut(p),
+                    self.v.param_mut(p),
+                );
+                update_dispatch(self.isa, x, m, v, grads.param(p), k);
+            }
+        }
     }
 }
 

@@ -505,7 +505,8 @@ mod tests {
 
     /// The row-blocked, per-instruction-set, parallel SSIM gives the reference's bits —
     /// value, gradient and map — on sizes below, at and around the window and the tap
-    /// block, for 1–3 channels, under every instruction set the CPU has and 1 or 2 threads.
+    /// block (and at multiples of both the tap block and the task rows), for 1–3 channels,
+    /// under every instruction set the CPU has and 1 or 2 threads.
     #[test]
     fn ssim_keeps_the_reference_bits_in_every_form() {
         let mut isas = vec![Isa::Baseline];
@@ -528,6 +529,7 @@ mod tests {
             (33, 9, 2),
             (70, 19, 3),
             (37, 29, 3),
+            (64, 16, 3),
         ] {
             let x: Vec<f32> = (0..w * h * c).map(|_| u.unit()).collect();
             let y: Vec<f32> = x
@@ -550,8 +552,10 @@ mod tests {
                     assert_eq!(s.to_bits(), s2.to_bits(), "{at}: {s} vs {s2}");
                     assert_eq!(bits(&g), bits(&g2), "{at}");
                     assert_eq!(bits64(&map), bits64(&map2), "{at}");
-                    let (s3, none) = ssim_with(isa, &x, &y, (w, h, c), false, None);
+                    let mut map3 = vec![0.0; w * h];
+                    let (s3, none) = ssim_with(isa, &x, &y, (w, h, c), false, Some(&mut map3));
                     assert_eq!((s.to_bits(), none), (s3.to_bits(), None), "{at}");
+                    assert_eq!(bits64(&map), bits64(&map3), "{at}");
                 }
             }
         }

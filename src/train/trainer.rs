@@ -15,7 +15,7 @@ use crate::gaussian::{Gaussians, Param};
 use crate::math::fastexp::ln;
 use crate::math::sh::{SH_C0, num_coeffs};
 use crate::raster::backward::{
-    GradGroups, Gradients, ImageGrads, backward_into, render_for_backward,
+    GradGroups, Gradients, ImageGrads, backward_apply, backward_into, render_for_backward,
 };
 use crate::raster::{Outputs, RenderOptions};
 use crate::scene::Uniform;
@@ -245,8 +245,21 @@ pub struct Trainer<'a> {
     pub(crate) stack: Vec<usize>,
     pub(crate) loss_ema: f64,
     pub(crate) psnr_ema: f64,
+    /// Whether Adam takes the projection backward's gradients chunk by chunk (the
+    /// default), or the gradients go into arrays first and Adam steps each group over them
+    /// (the reference form: the same bits, `fused_adam_keeps_the_bits_of_separate_steps`).
+    pub fused_adam: bool,
     /// The backward's output, reused across iterations.
     grads: Gradients,
+}
+
+/// What an iteration does besides its gradient step ([`Trainer::schedule`]).
+#[derive(Clone, Copy, Debug, Default)]
+struct Schedule {
+    /// Record densification statistics.
+    stats: bool,
+    densify: bool,
+    reset: bool,
 }
 
 /// Seed of a stage's generator: the run seed mixed with the stage name (FNV-1a), so
@@ -316,6 +329,7 @@ impl<'a> Trainer<'a> {
             stack: Vec::new(),
             loss_ema: 0.0,
             psnr_ema: 0.0,
+            fused_adam: true,
             grads: Gradients::default(),
         })
     }
@@ -334,6 +348,29 @@ impl<'a> Trainer<'a> {
             Param::OpacityLogits => l.opacity,
             Param::LogScales => l.scaling,
             Param::Quats => l.rotation,
+        }
+    }
+
+    /// What iteration `it` does besides the gradient step, known before it runs (INRIA's
+    /// schedule): whether it records densification statistics, densifies, and resets the
+    /// opacities. Nothing after the last iteration could recover from a reset or use a
+    /// densification, so the last iteration does neither (INRIA's defaults, 7000 and 30000
+    /// iterations, never end on one; a 3000-iteration run would otherwise save Gaussians
+    /// whose opacity was just capped at 0.01). INRIA also resets once at `from_iter` when
+    /// training on white.
+    fn schedule(&self, it: u32, groups: &GradGroups) -> Schedule {
+        let Some(d) = self.config.densify else {
+            return Schedule::default();
+        };
+        let last = it == self.config.iterations;
+        let stats = it < d.until_iter && groups.geometry() && !last;
+        let white_start = self.config.background == [1.0; 3] && it == d.from_iter;
+        Schedule {
+            stats,
+            densify: stats && it > d.from_iter && d.interval > 0 && it.is_multiple_of(d.interval),
+            reset: stats
+                && ((d.opacity_reset_interval > 0 && it.is_multiple_of(d.opacity_reset_interval))
+                    || white_start),
         }
     }
 
@@ -427,46 +464,56 @@ impl<'a> Trainer<'a> {
             ..Default::default()
         };
         let groups = self.groups();
+        let plan = self.schedule(it, &groups);
         // Taken for the iteration, put back after Adam (lost only with an error).
         let mut grads = std::mem::take(&mut self.grads);
-        let pairs = backward_into(&self.gaussians, cam, &opts, &fwd, &v, &groups, &mut grads)?;
+        // Unless the iteration densifies or resets opacities (both change the scene between
+        // the backward and Adam) or Adam is sparse, Adam takes each chunk's gradients as the
+        // projection backward makes them: the same bits, and the scene's gradient arrays
+        // are neither written nor read back (SPEC.md §14.2).
+        let fused = self.fused_adam && !self.config.adam.sparse && !plan.densify && !plan.reset;
+        let pairs = if fused {
+            let lrs = Param::ALL.map(|p| self.lr(p, it));
+            let frozen = Param::ALL.map(|p| self.config.frozen.contains(&p));
+            let mut steps = [None; 6];
+            for (i, p) in Param::ALL.into_iter().enumerate() {
+                if !frozen[i] {
+                    steps[i] = Some(self.adam.begin(p, lrs[i]));
+                }
+            }
+            let mut chunks = self.adam.fused_chunks(&mut self.gaussians, steps);
+            backward_apply(cam, &opts, &fwd, &v, &groups, &mut chunks, &mut grads)?
+        } else {
+            backward_into(&self.gaussians, cam, &opts, &fwd, &v, &groups, &mut grads)?
+        };
         lap(&mut self.times.backward);
 
         let mut densified = None;
         let mut reset = false;
-        if let Some(d) = self.config.densify {
-            // Nothing after the last iteration could recover from a reset or use a
-            // densification, so the last iteration does neither (INRIA's defaults, 7000 and
-            // 30000 iterations, never end on one; a 3000-iteration run would otherwise save
-            // Gaussians whose opacity was just capped at 0.01).
-            let last = it == self.config.iterations;
-            if it < d.until_iter && groups.geometry() && !last {
-                self.stats
-                    .add_view(&grads.means2d_ndc, &fwd.projected.radii);
-                if it > d.from_iter && d.interval > 0 && it.is_multiple_of(d.interval) {
-                    let world_prune = it > d.opacity_reset_interval;
-                    densified = Some(densify_and_prune(
-                        &mut self.gaussians,
-                        &mut self.adam,
-                        &mut self.stats,
-                        &d,
-                        self.extent,
-                        world_prune,
-                        &mut self.rng,
-                    )?);
-                }
-                // INRIA also resets once at `from_iter` when training on white.
-                let white_start = self.config.background == [1.0; 3] && it == d.from_iter;
-                if (d.opacity_reset_interval > 0 && it.is_multiple_of(d.opacity_reset_interval))
-                    || white_start
-                {
-                    reset_opacity(&mut self.gaussians, &mut self.adam, d.opacity_reset_value);
-                    reset = true;
-                }
+        if let Some(d) = self.config.densify
+            && plan.stats
+        {
+            self.stats
+                .add_view(&grads.means2d_ndc, &fwd.projected.radii);
+            if plan.densify {
+                let world_prune = it > d.opacity_reset_interval;
+                densified = Some(densify_and_prune(
+                    &mut self.gaussians,
+                    &mut self.adam,
+                    &mut self.stats,
+                    &d,
+                    self.extent,
+                    world_prune,
+                    &mut self.rng,
+                )?);
+            }
+            if plan.reset {
+                reset_opacity(&mut self.gaussians, &mut self.adam, d.opacity_reset_value);
+                reset = true;
             }
         }
         lap(&mut self.times.densify);
-        if densified.is_none() {
+        if densified.is_none() && !fused {
             let visible: Option<Vec<bool>> = self.config.adam.sparse.then(|| {
                 let radii = &fwd.projected.radii;
                 radii.iter().map(|r| *r != [0, 0]).collect()

@@ -95,6 +95,68 @@ pub fn backward_into(
     groups: &GradGroups,
     grads: &mut Gradients,
 ) -> Result<u64> {
+    let cg = blend_backward(cam, opts, fwd, v, groups)?;
+    let camf = CameraF32::new(cam);
+    project::project_backward_into(
+        scene,
+        &camf,
+        &fwd.projected,
+        &fwd.plan,
+        groups,
+        &cg.splats,
+        opts.kernel,
+        grads,
+    );
+    if groups.background {
+        grads.background = cg.background;
+    }
+    Ok(cg.pairs)
+}
+
+/// [`backward_into`] whose parameter gradients go chunk by chunk to `sinks` (the scene's
+/// chunks of [`project::CHUNK`] Gaussians, which also hold the parameters the projection
+/// backward reads: [`project::project_backward_apply`]) instead of into arrays; `grads`
+/// gets only the screen-space mean gradients and the background's. The same gradients,
+/// bit for bit.
+#[allow(clippy::too_many_arguments)]
+pub fn backward_apply<S: project::GradSink>(
+    cam: &Camera,
+    opts: &RenderOptions,
+    fwd: &ForwardState,
+    v: &ImageGrads,
+    groups: &GradGroups,
+    sinks: &mut [S],
+    grads: &mut Gradients,
+) -> Result<u64> {
+    let cg = blend_backward(cam, opts, fwd, v, groups)?;
+    let camf = CameraF32::new(cam);
+    project::screen_grads(&camf, &cg.splats, grads);
+    grads.background = if groups.background {
+        cg.background
+    } else {
+        [0.0; 3]
+    };
+    project::project_backward_apply(
+        &camf,
+        &fwd.projected,
+        &fwd.plan,
+        groups,
+        &cg.splats,
+        opts.kernel,
+        sinks,
+    );
+    Ok(cg.pairs)
+}
+
+/// The blend's backward (after checking the image gradients against the view and the
+/// forward state): per-Gaussian splat gradients, the background's, the pairs walked.
+fn blend_backward(
+    cam: &Camera,
+    opts: &RenderOptions,
+    fwd: &ForwardState,
+    v: &ImageGrads,
+    groups: &GradGroups,
+) -> Result<composite::CompositeGrads> {
     let (w, h) = (cam.width as usize, cam.height as usize);
     let npix = w * h;
     for (name, img, ch) in [
@@ -134,7 +196,7 @@ pub fn backward_into(
         n_contrib,
         depth,
     };
-    let cg = composite::composite_backward(
+    Ok(composite::composite_backward(
         w,
         h,
         &fwd.projected,
@@ -144,20 +206,5 @@ pub fn backward_into(
         &pg,
         groups.geometry(),
         opts.kernel,
-    );
-    let camf = CameraF32::new(cam);
-    project::project_backward_into(
-        scene,
-        &camf,
-        &fwd.projected,
-        &fwd.plan,
-        groups,
-        &cg.splats,
-        opts.kernel,
-        grads,
-    );
-    if groups.background {
-        grads.background = cg.background;
-    }
-    Ok(cg.pairs)
+    ))
 }

@@ -85,6 +85,80 @@ pub struct Gradients {
     pub means2d_ndc: Vec<[f32; 2]>,
 }
 
+/// The parameters the projection backward reads, of Gaussians `base ..` (a whole set, or
+/// one chunk of it): entry `i` of each slice is Gaussian `base + i`.
+#[derive(Clone, Copy, Debug)]
+pub struct ParamView<'a> {
+    pub means: &'a [[f32; 3]],
+    pub log_scales: &'a [[f32; 3]],
+    pub quats: &'a [[f32; 4]],
+    pub opacity_logits: &'a [f32],
+    /// `rest_per` values per Gaussian, laid out like [`Gaussians::sh_rest`].
+    pub sh_rest: &'a [f32],
+    pub rest_per: usize,
+    pub base: usize,
+}
+
+impl<'a> ParamView<'a> {
+    /// All of `g`.
+    pub fn of(g: &'a Gaussians) -> Self {
+        ParamView {
+            means: &g.means,
+            log_scales: &g.log_scales,
+            quats: &g.quats,
+            opacity_logits: &g.opacity_logits,
+            sh_rest: &g.sh_rest,
+            rest_per: g.rest_per_channel() * 3,
+            base: 0,
+        }
+    }
+
+    /// The rest coefficients of Gaussian `i` (an absolute index).
+    #[inline(always)]
+    fn rest(&self, i: usize) -> &[f32] {
+        let j = i - self.base;
+        &self.sh_rest[j * self.rest_per..(j + 1) * self.rest_per]
+    }
+}
+
+/// The gradients of one chunk of Gaussians, laid out like their parameters (entry `k` is
+/// the chunk's Gaussian `k`), as [`project_backward_apply`] hands them over.
+pub struct ChunkGrads<'a> {
+    pub means: &'a [[f32; 3]],
+    pub log_scales: &'a [[f32; 3]],
+    pub quats: &'a [[f32; 4]],
+    pub opacity_logits: &'a [f32],
+    pub sh_dc: &'a [[f32; 3]],
+    pub sh_rest: &'a [f32],
+}
+
+impl ChunkGrads<'_> {
+    /// The flat gradient of one parameter group (the layout of [`Gaussians::param`]).
+    pub fn param(&self, p: Param) -> &[f32] {
+        match p {
+            Param::Means => self.means.as_flattened(),
+            Param::ShDc => self.sh_dc.as_flattened(),
+            Param::ShRest => self.sh_rest,
+            Param::OpacityLogits => self.opacity_logits,
+            Param::LogScales => self.log_scales.as_flattened(),
+            Param::Quats => self.quats.as_flattened(),
+        }
+    }
+}
+
+/// Where [`project_backward_apply`] delivers a chunk's gradients: the chunk's parameters
+/// (read by the backward) and what to do with its gradients (an optimizer step, say), so
+/// the gradients of a whole scene are never stored.
+pub trait GradSink: Send {
+    /// The parameters of the chunk (`base`: its first Gaussian).
+    fn params(&self) -> ParamView<'_>;
+    /// Take the chunk's gradients, after the backward has read its parameters.
+    fn take(&mut self, grads: &ChunkGrads);
+}
+
+/// Gaussians per parallel chunk of the projection backward: a fixed partition.
+pub const CHUNK: usize = 1024;
+
 /// One chunk of the outputs (entry `k` is Gaussian `first + k`); `rest` holds `rest_per`
 /// values per Gaussian.
 struct OutChunk<'a> {
@@ -105,7 +179,7 @@ struct OutChunk<'a> {
 #[inline(always)]
 #[allow(clippy::too_many_arguments, clippy::needless_range_loop)] // a, b index matrices
 fn backward_block<R: Lanes>(
-    g: &Gaussians,
+    g: &ParamView,
     first: usize,
     cam: &CameraF32,
     degree: u32,
@@ -122,7 +196,9 @@ fn backward_block<R: Lanes>(
         return;
     }
     let k_used = num_coeffs(degree) - 1;
-    let mean = gather3::<R>(&g.means[first..first + n]);
+    // Offset of the block in the view's slices.
+    let at = first - g.base;
+    let mean = gather3::<R>(&g.means[at..at + n]);
     // The forward's basis, by the forward's own code (lanes give the scalar bits).
     let basis_lanes = sh_basis_lanes(mean, cam, degree);
     let mut basis = [[0f32; 16]; MAX_SH_COEFFS];
@@ -179,14 +255,14 @@ fn backward_block<R: Lanes>(
     let zero = c(0.0);
     // The forward quantities the chain needs, recomputed by the forward's own code; a lane
     // it culls there was culled in the forward too (radii are (0, 0)).
-    let quats = &g.quats[first..first + n];
+    let quats = &g.quats[at..at + n];
     let q = [
         R::gather(|l| quats[l][0]),
         R::gather(|l| quats[l][1]),
         R::gather(|l| quats[l][2]),
         R::gather(|l| quats[l][3]),
     ];
-    let ls = gather3::<R>(&g.log_scales[first..first + n]);
+    let ls = gather3::<R>(&g.log_scales[at..at + n]);
     let mut culls = Culls::new();
     let geo = geometry_lanes(mean, q, ls, cam, &mut culls);
     let geo_ok = lanes_of(R::select(culls.ok, c(1.0), zero));
@@ -319,7 +395,7 @@ fn backward_block<R: Lanes>(
         }
     }
     if groups.opacities {
-        let logits = &g.opacity_logits[first..first + n];
+        let logits = &g.opacity_logits[at..at + n];
         let o = c(1.0) / (c(1.0) + (-R::gather(|l| logits[l])).exp()); // fastexp::sigmoid
         let v = lanes_of(R::gather(|l| sg[l].opacity) * o * (c(1.0) - o));
         for l in 0..n {
@@ -418,7 +494,7 @@ impl OutChunk<'_> {
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn backward_range<R: Lanes>(
-    g: &Gaussians,
+    g: &ParamView,
     first: usize,
     cam: &CameraF32,
     degree: u32,
@@ -465,7 +541,7 @@ fn backward_range<R: Lanes>(
 #[target_feature(enable = "avx2")]
 #[allow(clippy::too_many_arguments)]
 unsafe fn backward_range_avx2(
-    g: &Gaussians,
+    g: &ParamView,
     first: usize,
     cam: &CameraF32,
     degree: u32,
@@ -485,7 +561,7 @@ unsafe fn backward_range_avx2(
 #[target_feature(enable = "avx512f")]
 #[allow(clippy::too_many_arguments)]
 unsafe fn backward_range_avx512(
-    g: &Gaussians,
+    g: &ParamView,
     first: usize,
     cam: &CameraF32,
     degree: u32,
@@ -540,23 +616,10 @@ pub fn project_backward_into(
     out.sh_dc.resize(n, [0.0; 3]);
     out.sh_rest.resize(n * k1 * 3, 0.0);
     out.background = [0.0; 3];
-    out.means2d.clear();
-    out.means2d.extend(splat_grads.iter().map(|s| s.mean2d));
-    out.means2d_ndc.clear();
-    out.means2d_ndc.extend(splat_grads.iter().map(|s| {
-        [
-            s.mean2d[0] * 0.5 * cam.width as f32,
-            s.mean2d[1] * 0.5 * cam.height as f32,
-        ]
-    }));
-    #[cfg(target_arch = "x86_64")]
-    let (avx512, avx2) = (kernel.avx512(), kernel.avx2());
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = kernel;
+    screen_grads(cam, splat_grads, out);
     let degree = plan.sh_degree;
     // Fixed chunks of Gaussians written in place. Degree 0 has no rest coefficients: a
     // placeholder of one value per Gaussian keeps the chunks aligned.
-    const CHUNK: usize = 1024;
     let rest_per = (k1 * 3).max(1);
     let mut placeholder = if k1 == 0 { vec![0f32; n] } else { Vec::new() };
     let rest: &mut [f32] = if k1 == 0 {
@@ -564,6 +627,7 @@ pub fn project_backward_into(
     } else {
         &mut out.sh_rest
     };
+    let view = ParamView::of(g);
     out.means
         .par_chunks_mut(CHUNK)
         .zip(out.log_scales.par_chunks_mut(CHUNK))
@@ -583,23 +647,128 @@ pub fn project_backward_into(
                     rest,
                     rest_per,
                 };
-                let first = ci * CHUNK;
-                let (sg, r) = (splat_grads, fwd);
-                #[cfg(target_arch = "x86_64")]
-                if avx512 {
-                    // SAFETY: AVX-512F was detected (`Kernel::avx512`).
-                    unsafe { backward_range_avx512(g, first, cam, degree, groups, sg, r, &mut o) };
-                    return;
-                }
-                #[cfg(target_arch = "x86_64")]
-                if avx2 {
-                    // SAFETY: AVX2 was detected (`Kernel::avx2`).
-                    unsafe { backward_range_avx2(g, first, cam, degree, groups, sg, r, &mut o) };
-                    return;
-                }
-                backward_range::<f32>(g, first, cam, degree, groups, sg, r, &mut o);
+                let (sg, first) = (splat_grads, ci * CHUNK);
+                range_for(kernel, &view, first, cam, degree, groups, sg, fwd, &mut o);
             },
         );
+}
+
+/// The screen-space mean gradients of `out` (pixels, and INRIA's NDC units for
+/// densification) from the splat gradients.
+pub(crate) fn screen_grads(cam: &CameraF32, splat_grads: &[SplatGrad], out: &mut Gradients) {
+    out.means2d.clear();
+    out.means2d.extend(splat_grads.iter().map(|s| s.mean2d));
+    out.means2d_ndc.clear();
+    out.means2d_ndc.extend(splat_grads.iter().map(|s| {
+        [
+            s.mean2d[0] * 0.5 * cam.width as f32,
+            s.mean2d[1] * 0.5 * cam.height as f32,
+        ]
+    }));
+}
+
+/// [`backward_range`] in the lane width `kernel` chooses (sixteen Gaussians per AVX-512F
+/// instruction, eight per AVX2 instruction, or one); all give the same bits.
+#[allow(clippy::too_many_arguments)]
+fn range_for(
+    kernel: Kernel,
+    g: &ParamView,
+    first: usize,
+    cam: &CameraF32,
+    degree: u32,
+    groups: &GradGroups,
+    sg: &[SplatGrad],
+    fwd: &Projected,
+    out: &mut OutChunk,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if kernel.avx512() {
+        // SAFETY: AVX-512F was detected (`Kernel::avx512`).
+        unsafe { backward_range_avx512(g, first, cam, degree, groups, sg, fwd, out) };
+        return;
+    }
+    #[cfg(target_arch = "x86_64")]
+    if kernel.avx2() {
+        // SAFETY: AVX2 was detected (`Kernel::avx2`).
+        unsafe { backward_range_avx2(g, first, cam, degree, groups, sg, fwd, out) };
+        return;
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = kernel;
+    backward_range::<f32>(g, first, cam, degree, groups, sg, fwd, out);
+}
+
+/// One chunk's gradient arrays, reused by a task for every chunk it takes.
+#[derive(Default)]
+struct ChunkBuf {
+    means: Vec<[f32; 3]>,
+    log_scales: Vec<[f32; 3]>,
+    quats: Vec<[f32; 4]>,
+    opacity: Vec<f32>,
+    sh_dc: Vec<[f32; 3]>,
+    rest: Vec<f32>,
+}
+
+/// [`project_backward_into`] that hands each chunk's gradients to its sink instead of
+/// storing them: the same gradients, bit for bit, each computed into a buffer of the task
+/// (in cache) right before `sink.take` uses it. `sinks` are the scene's chunks of
+/// [`CHUNK`] Gaussians in order (the last may be shorter); `splat_grads` and `fwd` cover the
+/// whole scene. Gaussians are independent, so chunks run in parallel.
+#[allow(clippy::too_many_arguments)]
+pub fn project_backward_apply<S: GradSink>(
+    cam: &CameraF32,
+    fwd: &Projected,
+    plan: &RenderPlan,
+    groups: &GradGroups,
+    splat_grads: &[SplatGrad],
+    kernel: Kernel,
+    sinks: &mut [S],
+) {
+    use rayon::prelude::*;
+    let degree = plan.sh_degree;
+    sinks
+        .par_iter_mut()
+        .for_each_init(ChunkBuf::default, |buf, sink| {
+            let view = sink.params();
+            let (first, n) = (view.base, view.means.len());
+            debug_assert!(first.is_multiple_of(CHUNK) && n <= CHUNK);
+            let rest_per = view.rest_per.max(1);
+            buf.means.resize(n, [0.0; 3]);
+            buf.log_scales.resize(n, [0.0; 3]);
+            buf.quats.resize(n, [0.0; 4]);
+            buf.opacity.resize(n, 0.0);
+            buf.sh_dc.resize(n, [0.0; 3]);
+            buf.rest.resize(n * rest_per, 0.0);
+            let mut o = OutChunk {
+                means: &mut buf.means,
+                log_scales: &mut buf.log_scales,
+                quats: &mut buf.quats,
+                opacity: &mut buf.opacity,
+                sh_dc: &mut buf.sh_dc,
+                rest: &mut buf.rest,
+                rest_per,
+            };
+            range_for(
+                kernel,
+                &view,
+                first,
+                cam,
+                degree,
+                groups,
+                splat_grads,
+                fwd,
+                &mut o,
+            );
+            let grads = ChunkGrads {
+                means: &buf.means,
+                log_scales: &buf.log_scales,
+                quats: &buf.quats,
+                opacity_logits: &buf.opacity,
+                sh_dc: &buf.sh_dc,
+                sh_rest: &buf.rest[..n * view.rest_per],
+            };
+            sink.take(&grads);
+        });
 }
 
 impl Gradients {
