@@ -114,9 +114,10 @@ pub struct CompositeGrads {
 }
 
 struct BandGrads {
-    /// `(Gaussian, gradient)` per intersection some row of its tile walked, in `bins.ids`
-    /// order (the others would add +0.0).
-    inter: Vec<(u32, SplatGrad)>,
+    /// The Gaussian and its gradient per intersection some row of its tile walked, in
+    /// `bins.ids` order (the others would add +0.0).
+    gids: Vec<u32>,
+    grads: Vec<SplatGrad>,
     background: [f64; 3],
     pairs: u64,
 }
@@ -396,6 +397,33 @@ fn reduce<const GEOMETRY: bool>(acc: &Acc) -> SplatGrad {
         gr.opacity = sum8(&acc[9]);
     }
     gr
+}
+
+/// [`reduce`] with the first eight fields in one AVX2 register: an 8×8 transpose of their
+/// accumulators makes lane `j` of row `r` field `j`'s accumulator `r`, and the rows are
+/// added in [`sum8`]'s tree (`((r0 + r4) + (r2 + r6)) + ((r1 + r5) + (r3 + r7))`), so every
+/// field gets the same additions in the same order: the same bits.
+///
+/// Only inside a band compiled for AVX2 or AVX-512F (it uses AVX2 instructions).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn reduce_lanes<const GEOMETRY: bool>(acc: &Acc) -> SplatGrad {
+    use crate::math::lanes::{F32x8, Lanes};
+    if !GEOMETRY {
+        return reduce::<false>(acc);
+    }
+    let mut r = [F32x8::splat(0.0); HALF];
+    F32x8::load_columns(acc[..HALF].as_flattened(), HALF, &mut r);
+    let sums = ((r[0] + r[4]) + (r[2] + r[6])) + ((r[1] + r[5]) + (r[3] + r[7]));
+    let mut f = [0f32; 16];
+    sums.write(&mut f);
+    SplatGrad {
+        color: [f[0], f[1], f[2]],
+        depth: f[3],
+        conic: [f[4], f[5], f[6]],
+        mean2d: [f[7], sum8(&acc[8])],
+        opacity: sum8(&acc[9]),
+    }
 }
 
 /// Walk one row back to front over the entries `idx` (ascending; walked in reverse), lane by
@@ -756,7 +784,8 @@ fn band<const ISA: u8, const GEOMETRY: bool>(
     let y0 = ty * TILE_SIZE;
     let rows = TILE_SIZE.min(height - y0);
     let mut out = BandGrads {
-        inter: Vec::new(),
+        gids: Vec::new(),
+        grads: Vec::new(),
         background: [0.0; 3],
         pairs: 0,
     };
@@ -908,11 +937,17 @@ fn band<const ISA: u8, const GEOMETRY: bool>(
             #[cfg(not(target_arch = "x86_64"))]
             row_lanes::<GEOMETRY>(&list, idx, &px, py, st, &mut acc);
         }
-        out.inter.extend(
-            gids.iter()
-                .zip(&acc)
-                .map(|(&gid, a)| (gid, reduce::<GEOMETRY>(a))),
-        );
+        out.gids.extend_from_slice(&gids);
+        #[cfg(target_arch = "x86_64")]
+        if ISA != ISA_SCALAR {
+            // A loop in this function (compiled for the ISA), not an iterator adaptor: a
+            // generic `fold` may be compiled out of line without AVX2.
+            for a in &acc {
+                out.grads.push(reduce_lanes::<GEOMETRY>(a));
+            }
+            continue;
+        }
+        out.grads.extend(acc.iter().map(reduce::<GEOMETRY>));
     }
     out
 }
@@ -1025,14 +1060,27 @@ pub fn composite_backward(
     };
     let bands: Vec<BandGrads> = (0..bins.tiles_y).into_par_iter().map(run).collect();
     let mut splats = vec![SplatGrad::default(); p.splats.len()];
+    // Sum per Gaussian in tile order. Only walked intersections are listed: the others
+    // would add +0.0 to accumulators that are never −0.0. Ranges of Gaussians in parallel,
+    // each scanning every band in order: each Gaussian gets its additions in tile order
+    // whatever the ranges are, so the bits do not depend on the partition.
+    let per = p.splats.len().div_ceil(rayon::current_num_threads()).max(1);
+    splats
+        .par_chunks_mut(per)
+        .enumerate()
+        .for_each(|(ci, out)| {
+            let lo = ci * per;
+            for b in &bands {
+                for (&gid, gr) in b.gids.iter().zip(&b.grads) {
+                    if let Some(s) = (gid as usize).checked_sub(lo).and_then(|k| out.get_mut(k)) {
+                        s.add(gr);
+                    }
+                }
+            }
+        });
     let mut bg = [0f64; 3];
     let mut pairs = 0;
-    // Sum per Gaussian in tile order. Only walked intersections are listed: the others
-    // would add +0.0 to accumulators that are never −0.0.
     for b in &bands {
-        for (gid, gr) in &b.inter {
-            splats[*gid as usize].add(gr);
-        }
         for (acc, v) in bg.iter_mut().zip(b.background) {
             *acc += v;
         }
