@@ -53,6 +53,27 @@ pub trait Lanes: ShScalar + Div<Output = Self> {
             }
         }
     }
+    /// Columns of `N` dense rows of `S ≤ 4` values (`[f32; S]` structures, as the scene's
+    /// means, scales, rotations and DC colours are stored): lane `l` of column `k` ←
+    /// `src[l·S + k]`, for `src` of at least `N·S` values. [`Lanes::load_columns`] with
+    /// `stride = S`, done with `S` full-width loads and in-register permutes.
+    #[inline(always)]
+    fn load_dense<const S: usize>(src: &[f32]) -> [Self; S] {
+        let src = &src[..Self::N * S];
+        std::array::from_fn(|k| Self::gather(|l| src[l * S + k]))
+    }
+    /// `out[l] = [a, b]` of lane `l` saturated to i32 as Rust's `v.min(i32::MAX as f32) as
+    /// i32` does (truncation toward zero; `≥ 2³¹` and NaN give `i32::MAX`, `≤ −2³¹`
+    /// `i32::MIN`), for `l < N`.
+    #[inline(always)]
+    fn store_i32_pairs(a: Self, b: Self, out: &mut [[i32; 2]]) {
+        let (mut x, mut y) = ([0f32; 16], [0f32; 16]);
+        a.write(&mut x);
+        b.write(&mut y);
+        for (l, o) in out[..Self::N].iter_mut().enumerate() {
+            *o = [saturate_i32(x[l]), saturate_i32(y[l])];
+        }
+    }
     fn lt(self, o: Self) -> Self::Mask;
     fn le(self, o: Self) -> Self::Mask;
     fn gt(self, o: Self) -> Self::Mask;
@@ -79,6 +100,12 @@ pub trait Lanes: ShScalar + Div<Output = Self> {
         let v = Self::select(self.lt(lo), lo, self);
         Self::select(v.gt(hi), hi, v)
     }
+}
+
+/// `v.min(i32::MAX as f32) as i32`: what [`Lanes::store_i32_pairs`] stores.
+#[inline(always)]
+pub fn saturate_i32(v: f32) -> i32 {
+    v.min(i32::MAX as f32) as i32
 }
 
 impl Lanes for f32 {
@@ -320,6 +347,54 @@ mod avx2 {
                     out[c0 + k] = F32x8(t[k]);
                 }
                 c0 += 8;
+            }
+        }
+        /// `S` loads of 8 values; each column gathered from them by one lane permute per
+        /// load and blends.
+        #[inline(always)]
+        #[allow(clippy::needless_range_loop)] // no iterators over vectors (see above)
+        fn load_dense<const S: usize>(src: &[f32]) -> [Self; S] {
+            assert!((1..=4).contains(&S) && src.len() >= 8 * S);
+            let mut regs = [unsafe { _mm256_setzero_ps() }; 4];
+            for j in 0..S {
+                regs[j] = unsafe { _mm256_loadu_ps(src[8 * j..8 * j + 8].as_ptr()) };
+            }
+            let mut out = [F32x8::splat(0.0); S];
+            for k in 0..S {
+                // Lane `l` takes flat value `S·l + k`: register `(S·l + k)/8`, lane
+                // `(S·l + k) mod 8` (the permute reads the index's low three bits).
+                let flat: [i32; 8] = std::array::from_fn(|l| (S * l + k) as i32);
+                let idx = unsafe { _mm256_loadu_si256(flat.as_ptr().cast()) };
+                let mut v = unsafe { _mm256_permutevar8x32_ps(regs[0], idx) };
+                for j in 1..S {
+                    let from_j: [i32; 8] =
+                        std::array::from_fn(|l| if flat[l] as usize / 8 == j { -1 } else { 0 });
+                    let m = unsafe { _mm256_loadu_si256(from_j.as_ptr().cast()) };
+                    let p = unsafe { _mm256_permutevar8x32_ps(regs[j], idx) };
+                    v = unsafe { _mm256_blendv_ps(v, p, _mm256_castsi256_ps(m)) };
+                }
+                out[k] = F32x8(v);
+            }
+            out
+        }
+        /// Truncating conversions (`vcvttps2dq`: out of range and NaN give `i32::MIN`),
+        /// `i32::MAX` where the value is not below 2³¹, then the two interleaved.
+        #[inline(always)]
+        fn store_i32_pairs(a: Self, b: Self, out: &mut [[i32; 2]]) {
+            let out = &mut out[..8];
+            let sat = |v: F32x8| unsafe {
+                let t = _mm256_cvttps_epi32(v.0);
+                let big = _mm256_cmp_ps::<_CMP_NLT_UQ>(v.0, _mm256_set1_ps(2_147_483_648.0));
+                _mm256_blendv_epi8(t, _mm256_set1_epi32(i32::MAX), _mm256_castps_si256(big))
+            };
+            let (x, y) = (sat(a), sat(b));
+            unsafe {
+                // Per 128-bit half: [x0 y0 x1 y1], [x2 y2 x3 y3] (and lanes 4–7 above).
+                let lo = _mm256_unpacklo_epi32(x, y);
+                let hi = _mm256_unpackhi_epi32(x, y);
+                let p = out.as_mut_ptr().cast::<__m256i>();
+                _mm256_storeu_si256(p, _mm256_permute2x128_si256::<0x20>(lo, hi));
+                _mm256_storeu_si256(p.add(1), _mm256_permute2x128_si256::<0x31>(lo, hi));
             }
         }
         /// At most 16 columns (two 8×8 transposes), then one 8-wide store per row and
@@ -614,6 +689,55 @@ mod avx512 {
                 c0 += 16;
             }
         }
+        /// `S` loads of 16 values; each column gathered from them by two-register permutes
+        /// (one per pair of loads) and a masked move.
+        #[inline(always)]
+        #[allow(clippy::needless_range_loop)] // no iterators over vectors (see `F32x8`)
+        fn load_dense<const S: usize>(src: &[f32]) -> [Self; S] {
+            assert!((1..=4).contains(&S) && src.len() >= 16 * S);
+            let mut regs = [unsafe { _mm512_setzero_ps() }; 4];
+            for j in 0..S {
+                regs[j] = unsafe { _mm512_loadu_ps(src[16 * j..16 * j + 16].as_ptr()) };
+            }
+            let mut out = [F32x16::splat(0.0); S];
+            for k in 0..S {
+                // Lane `l` takes flat value `S·l + k`: from the pair of loads `(0, 1)` below
+                // 32, `(2, 3)` from 32 on (the permute reads the index's low five bits).
+                let flat: [i32; 16] = std::array::from_fn(|l| (S * l + k) as i32);
+                let idx = unsafe { _mm512_loadu_si512(flat.as_ptr().cast()) };
+                let mut v = unsafe { _mm512_permutex2var_ps(regs[0], idx, regs[1]) };
+                if 15 * S + k >= 32 {
+                    let high = (0..16).fold(0u16, |m, l| m | ((flat[l] >= 32) as u16) << l);
+                    let p = unsafe { _mm512_permutex2var_ps(regs[2], idx, regs[3]) };
+                    v = unsafe { _mm512_mask_mov_ps(v, high, p) };
+                }
+                out[k] = F32x16(v);
+            }
+            out
+        }
+        /// Truncating conversions (`vcvttps2dq`: out of range and NaN give `i32::MIN`),
+        /// `i32::MAX` where the value is not below 2³¹, then the two interleaved.
+        #[inline(always)]
+        fn store_i32_pairs(a: Self, b: Self, out: &mut [[i32; 2]]) {
+            let out = &mut out[..16];
+            let sat = |v: F32x16| unsafe {
+                let t = _mm512_cvttps_epi32(v.0);
+                let big = _mm512_cmp_ps_mask::<_CMP_NLT_UQ>(v.0, _mm512_set1_ps(2_147_483_648.0));
+                _mm512_mask_mov_epi32(t, big, _mm512_set1_epi32(i32::MAX))
+            };
+            let (x, y) = (sat(a), sat(b));
+            unsafe {
+                // Per 128-bit block b: [x4b y4b x4b+1 y4b+1] and [x4b+2 y4b+2 x4b+3 y4b+3];
+                // the stores take blocks (lo0, hi0, lo1, hi1) and (lo2, hi2, lo3, hi3).
+                let lo = _mm512_unpacklo_epi32(x, y);
+                let hi = _mm512_unpackhi_epi32(x, y);
+                let first = _mm512_setr_epi64(0, 1, 8, 9, 2, 3, 10, 11);
+                let second = _mm512_setr_epi64(4, 5, 12, 13, 6, 7, 14, 15);
+                let p = out.as_mut_ptr().cast::<__m512i>();
+                _mm512_storeu_si512(p, _mm512_permutex2var_epi64(lo, first, hi));
+                _mm512_storeu_si512(p.add(1), _mm512_permutex2var_epi64(lo, second, hi));
+            }
+        }
         /// At most 16 columns: one 16×16 transpose, then one masked store per row (only
         /// the row's `n` slots are written).
         #[inline(always)]
@@ -843,21 +967,75 @@ mod tests {
         }
     }
 
+    /// `load_dense` against `gather` for 1 to 4 values per row, with `src` exactly
+    /// `N·S` long and longer; `store_i32_pairs` against `saturate_i32` on `samples()`
+    /// (NaN, ±∞, ±2³¹ and neighbours included).
+    #[inline(always)]
+    fn check_dense<R: Lanes>() {
+        fn dense<R: Lanes, const S: usize>() {
+            for spare in [0usize, 5] {
+                let src: Vec<f32> = (0..R::N * S + spare).map(|k| k as f32 - 7.25).collect();
+                let got = R::load_dense::<S>(&src);
+                for (k, c) in got.iter().enumerate() {
+                    let mut lanes = [0f32; 16];
+                    c.write(&mut lanes);
+                    for (l, v) in lanes.iter().enumerate().take(R::N) {
+                        assert_eq!(*v, src[l * S + k], "{S} per row, column {k}, lane {l}");
+                    }
+                }
+            }
+        }
+        dense::<R, 1>();
+        dense::<R, 2>();
+        dense::<R, 3>();
+        dense::<R, 4>();
+        let mut xs = samples();
+        let two31 = 2_147_483_648.0f32;
+        xs.extend([
+            two31,
+            -two31,
+            f32::from_bits(two31.to_bits() - 1),
+            -f32::from_bits(two31.to_bits() - 1),
+        ]);
+        xs.extend([
+            f32::from_bits(two31.to_bits() + 1),
+            3.0e9,
+            -3.0e9,
+            1e19,
+            -1e19,
+            7.9,
+            -7.9,
+        ]);
+        for chunk in xs.chunks_exact(R::N) {
+            let a = R::gather(|l| chunk[l]);
+            let b = R::gather(|l| -chunk[R::N - 1 - l]);
+            let mut out = [[0i32; 2]; 16];
+            R::store_i32_pairs(a, b, &mut out);
+            for l in 0..R::N {
+                let want = [saturate_i32(chunk[l]), saturate_i32(-chunk[R::N - 1 - l])];
+                assert_eq!(out[l], want, "lane {l} of {chunk:?}");
+            }
+        }
+    }
+
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     fn check_columns_avx2() {
         check_columns::<F32x8>();
+        check_dense::<F32x8>();
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
     fn check_columns_avx512() {
         check_columns::<F32x16>();
+        check_dense::<F32x16>();
     }
 
     #[test]
     fn load_and_store_columns_match_gather() {
         check_columns::<f32>();
+        check_dense::<f32>();
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") {
             // SAFETY: AVX2 is available (checked just above).

@@ -25,9 +25,9 @@ use super::plan::RenderPlan;
 use super::{RenderOptions, RenderReport};
 use crate::camera::Camera;
 use crate::gaussian::Gaussians;
-use crate::math::lanes::Lanes;
 #[cfg(target_arch = "x86_64")]
 use crate::math::lanes::{F32x8, F32x16};
+use crate::math::lanes::{Lanes, saturate_i32};
 use crate::math::sh::{MAX_SH_COEFFS, SH_C0, num_coeffs, sh_basis};
 use rayon::prelude::*;
 
@@ -462,16 +462,9 @@ fn project_block<R: Lanes>(
 ) -> Block<R> {
     let c = R::splat;
     let mean = gather3(&g.means[i..i + R::N]);
-    let quats = &g.quats[i..i + R::N];
-    let quat = [
-        R::gather(|l| quats[l][0]),
-        R::gather(|l| quats[l][1]),
-        R::gather(|l| quats[l][2]),
-        R::gather(|l| quats[l][3]),
-    ];
+    let quat = R::load_dense::<4>(g.quats[i..i + R::N].as_flattened());
     let log_scale = gather3(&g.log_scales[i..i + R::N]);
-    let logits = &g.opacity_logits[i..i + R::N];
-    let logit = R::gather(|l| logits[l]);
+    let [logit] = R::load_dense::<1>(&g.opacity_logits[i..i + R::N]);
     let stride = g.rest_per_channel() * 3;
     let rest = &g.sh_rest[i * stride..(i + R::N) * stride];
 
@@ -538,14 +531,10 @@ fn project_block<R: Lanes>(
     }
 }
 
-/// Lanes `l` of `v[l]` (one slice entry per lane).
+/// Lanes `l` of `v[l]` (one slice entry per lane; `v` holds `R::N` of them).
 #[inline(always)]
 pub(crate) fn gather3<R: Lanes>(v: &[[f32; 3]]) -> [R; 3] {
-    [
-        R::gather(|l| v[l][0]),
-        R::gather(|l| v[l][1]),
-        R::gather(|l| v[l][2]),
-    ]
+    R::load_dense::<3>(v.as_flattened())
 }
 
 /// Lanes as an array (the first `R::N` entries).
@@ -582,13 +571,7 @@ fn store<R: Lanes>(
             b.depth,
         ];
         R::store_columns(&fields, Splat::as_floats(&mut splats[..R::N]), SPLAT_FLOATS);
-        let (rx, ry) = (lanes_of(b.radii[0]), lanes_of(b.radii[1]));
-        for l in 0..R::N {
-            radii[l] = [
-                rx[l].min(i32::MAX as f32) as i32,
-                ry[l].min(i32::MAX as f32) as i32,
-            ];
-        }
+        R::store_i32_pairs(b.radii[0], b.radii[1], radii);
         return;
     }
     let ok = lanes_of(R::select(b.culls.ok, R::splat(0.0), b.culls.code));
@@ -609,10 +592,7 @@ fn store<R: Lanes>(
                 depth: depth[l],
             };
             // Radii are at most ~1e19 here; saturate to i32 for storage.
-            radii[l] = [
-                rx[l].min(i32::MAX as f32) as i32,
-                ry[l].min(i32::MAX as f32) as i32,
-            ];
+            radii[l] = [saturate_i32(rx[l]), saturate_i32(ry[l])];
         }
     }
 }

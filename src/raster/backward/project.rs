@@ -255,13 +255,7 @@ fn backward_block<R: Lanes>(
     let zero = c(0.0);
     // The forward quantities the chain needs, recomputed by the forward's own code; a lane
     // it culls there was culled in the forward too (radii are (0, 0)).
-    let quats = &g.quats[at..at + n];
-    let q = [
-        R::gather(|l| quats[l][0]),
-        R::gather(|l| quats[l][1]),
-        R::gather(|l| quats[l][2]),
-        R::gather(|l| quats[l][3]),
-    ];
+    let q = R::load_dense::<4>(g.quats[at..at + n].as_flattened());
     let ls = gather3::<R>(&g.log_scales[at..at + n]);
     let mut culls = Culls::new();
     let geo = geometry_lanes(mean, q, ls, cam, &mut culls);
@@ -395,8 +389,8 @@ fn backward_block<R: Lanes>(
         }
     }
     if groups.opacities {
-        let logits = &g.opacity_logits[at..at + n];
-        let o = c(1.0) / (c(1.0) + (-R::gather(|l| logits[l])).exp()); // fastexp::sigmoid
+        let [logit] = R::load_dense::<1>(&g.opacity_logits[at..at + n]);
+        let o = c(1.0) / (c(1.0) + (-logit).exp()); // fastexp::sigmoid
         let v = lanes_of(R::gather(|l| sg[l].opacity) * o * (c(1.0) - o));
         for l in 0..n {
             if visible[l] && geo_ok[l] != 0.0 {
