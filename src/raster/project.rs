@@ -59,11 +59,16 @@ pub struct Splat {
 }
 
 /// The fields of a [`Splat`], in declaration order, as f32 values.
-const SPLAT_FLOATS: usize = 10;
+pub const SPLAT_FLOATS: usize = 10;
 const _: () = assert!(std::mem::size_of::<Splat>() == SPLAT_FLOATS * 4);
 
 impl Splat {
     /// The splats' fields as one f32 slice (`SPLAT_FLOATS` per splat, declaration order).
+    pub fn floats(s: &[Splat]) -> &[f32] {
+        // SAFETY: as in `as_floats`, for a shared borrow.
+        unsafe { std::slice::from_raw_parts(s.as_ptr().cast::<f32>(), s.len() * SPLAT_FLOATS) }
+    }
+    /// [`Splat::floats`], mutable.
     fn as_floats(s: &mut [Splat]) -> &mut [f32] {
         // SAFETY: `Splat` is `repr(C)` with only f32 fields (`SPLAT_FLOATS` of them, no
         // padding: the size is asserted above), so a slice of splats is a slice of f32 of

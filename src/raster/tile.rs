@@ -11,9 +11,10 @@
 //! bit for bit for any thread count. [`bin_into`] reuses its buffers across frames.
 //!
 //! The parallel scatters write through a shared pointer to slots the prefix sums make
-//! disjoint ([`Shared`], bounds-checked; the one `unsafe` here).
+//! disjoint ([`Shared`], bounds-checked); that and the AVX-512F record pass are the
+//! `unsafe` here.
 
-use super::project::Projected;
+use super::project::{Projected, SPLAT_FLOATS, Splat};
 use rayon::prelude::*;
 
 /// Tile edge in pixels (gsplat, INRIA `BLOCK_X = BLOCK_Y = 16`).
@@ -107,7 +108,7 @@ pub struct BinScratch {
 }
 
 /// A tile rectangle packed into a u64: `x0 | x1 << bx | y0 << 2bx | y1 << (2bx + by)`.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug)]
 struct Packing {
     bx: u32,
     by: u32,
@@ -117,9 +118,10 @@ impl Packing {
     fn new(tiles_x: usize, tiles_y: usize) -> Self {
         let bx = usize::BITS - tiles_x.leading_zeros();
         let by = usize::BITS - tiles_y.leading_zeros();
-        // Fails only for grids of more than 2^30 tiles (2^38 pixels).
+        // Fails only for grids of more than ~2^30 tiles (2^38 pixels); bit 63 is
+        // `TRASH`.
         assert!(
-            2 * (bx + by) <= 64,
+            2 * (bx + by) <= 63,
             "tile grid {tiles_x}×{tiles_y} too large"
         );
         Packing { bx, by }
@@ -144,15 +146,17 @@ impl Packing {
 /// [`bin`] into `out`, reusing `out`'s and `scratch`'s buffers (no allocation once they
 /// are large enough).
 ///
-/// 1. Per fixed chunk of Gaussians (parallel): count the visible ones; an exclusive prefix
-///    sum gives each chunk its first slot; then write, in index order, one record per
-///    visible splat (`depth_bits << 32 | index`, its packed tile rectangle), and reduce
-///    the minimum and maximum depth bits.
+/// 1. Per fixed chunk of Gaussians (parallel): one record per Gaussian, in index order
+///    (`depth_bits << 32 | index`, its packed tile rectangle, flagged [`TRASH`] if the
+///    splat is culled; sixteen per AVX-512F instruction where the CPU has it, the same
+///    records), and the minimum and maximum depth bits and the count of the visible ones.
 /// 2. Stable LSD radix sort of the records on `depth_bits − min` (only the bits the range
-///    needs: `⌈bits/11⌉` passes of equal width ≤ 11 bits). Each pass: per-chunk
-///    histograms (parallel), an exclusive prefix sum in (digit, chunk) order giving each
-///    chunk its write cursor per digit, a parallel scatter. Stability over index-ordered
-///    input makes the order (depth bits, Gaussian index).
+///    needs: `⌈bits/11⌉` passes of equal width ≤ 11 bits), which also drops the culled
+///    records: the first pass puts them in a last bucket and cuts it off (a pass is made
+///    for that alone when there are no bits to sort). Each pass: per-chunk histograms
+///    (parallel), an exclusive prefix sum in (digit, chunk) order giving each chunk its
+///    write cursor per digit, a parallel scatter. Stability over index-ordered input makes
+///    the order (depth bits, Gaussian index).
 /// 3. Per fixed chunk of the sorted records (parallel): count per tile (branch-free, on a
 ///    grid of 2D differences); an exclusive prefix sum in (tile, chunk) order gives the
 ///    tile offsets and each chunk's write cursor per tile; a parallel scatter writes each
@@ -186,58 +190,41 @@ pub fn bin_into(
     );
     let packing = Packing::new(tiles_x, tiles_y);
 
-    // 1. One record per visible splat, in index order.
-    let visible = |r: &[i32; 2]| r[0] > 0 || r[1] > 0;
-    let n_chunks = p.radii.len().div_ceil(CHUNK);
-    reset(counts, n_chunks);
-    p.radii
-        .par_chunks(CHUNK)
-        .zip(counts.par_iter_mut())
-        .for_each(|(r, c)| *c = r.iter().filter(|r| visible(r)).count());
-    let n = exclusive_prefix_sum(counts);
-    resize(recs, n);
-    let recs_w = Shared::new(recs);
-    let (min, max) = (0..n_chunks)
-        .into_par_iter()
-        .map(|c| {
-            let (mut lo, mut hi) = (u32::MAX, 0u32);
-            let mut slot = counts[c];
-            let first = c * CHUNK;
-            let last = (first + CHUNK).min(p.radii.len());
-            for (i, (&r, s)) in p.radii[first..last]
-                .iter()
-                .zip(&p.splats[first..last])
-                .enumerate()
-            {
-                if !visible(&r) {
-                    continue;
-                }
-                let d = s.depth.to_bits();
-                let [x0, x1, y0, y1] = tile_rect(s.mean, r, tiles_x, tiles_y);
-                // Negative radii could invert the rectangle: it is then empty.
-                let rect = packing.pack([x0, x1.max(x0), y0, y1.max(y0)]);
-                // SAFETY: chunk `c` writes the slots `counts[c]..counts[c + 1]` (its visible
-                // count, from the prefix sum above), disjoint from every other chunk's and
-                // `< n`, the length of `recs`.
-                unsafe { recs_w.write(slot, [(d as u64) << 32 | (first + i) as u64, rect]) };
-                slot += 1;
-                lo = lo.min(d);
-                hi = hi.max(d);
+    // 1. One record per Gaussian, in index order; culled ones marked for the trash.
+    assert_eq!(
+        p.splats.len(),
+        p.radii.len(),
+        "splats and radii differ in length"
+    );
+    let n_all = p.radii.len();
+    resize(recs, n_all);
+    #[cfg(target_arch = "x86_64")]
+    let avx512 = std::arch::is_x86_feature_detected!("avx512f");
+    let (min, max, n) = recs
+        .par_chunks_mut(CHUNK)
+        .zip(p.radii.par_chunks(CHUNK).zip(p.splats.par_chunks(CHUNK)))
+        .enumerate()
+        .map(|(c, (out, (radii, splats)))| {
+            let grid = (packing, tiles_x, tiles_y);
+            #[cfg(target_arch = "x86_64")]
+            if avx512 {
+                // SAFETY: AVX-512F was detected just above.
+                return unsafe { records_avx512(splats, radii, c * CHUNK, grid, out) };
             }
-            (lo, hi)
+            records(splats, radii, c * CHUNK, grid, out)
         })
-        .reduce(|| (u32::MAX, 0), |a, b| (a.0.min(b.0), a.1.max(b.1)));
+        .reduce(
+            || (u32::MAX, 0, 0),
+            |a, b| (a.0.min(b.0), a.1.max(b.1), a.2 + b.2),
+        );
 
     // 2. Sort by (depth bits, Gaussian index).
-    if n > 1 {
-        radix_sort(
-            recs,
-            recs_tmp,
-            counts,
-            min,
-            32 - (max - min).leading_zeros(),
-        );
-    }
+    let bits = if n > 1 {
+        32 - (max - min).leading_zeros()
+    } else {
+        0
+    };
+    radix_sort(recs, recs_tmp, counts, min, bits, n);
 
     // 3. Per-tile counts per chunk of the sorted records, then the scatter. The counts
     // are taken branch-free on a (tiles_x + 1) × (tiles_y + 1) grid of 2D differences
@@ -306,30 +293,214 @@ pub fn bin_into(
         });
 }
 
+/// Whether a splat is drawn (radii not both 0).
+#[inline(always)]
+fn visible(r: &[i32; 2]) -> bool {
+    r[0] > 0 || r[1] > 0
+}
+
+/// The record of splat `gid`: `[depth_bits << 32 | gid, packed tile rectangle]`, the
+/// rectangle flagged [`TRASH`] when the splat is culled.
+#[inline(always)]
+fn record(s: &Splat, r: [i32; 2], gid: usize, (packing, tiles_x, tiles_y): Grid) -> [u64; 2] {
+    let [x0, x1, y0, y1] = tile_rect(s.mean, r, tiles_x, tiles_y);
+    // Negative radii could invert the rectangle: it is then empty.
+    let rect = packing.pack([x0, x1.max(x0), y0, y1.max(y0)]) | u64::from(!visible(&r)) << 63;
+    [u64::from(s.depth.to_bits()) << 32 | gid as u64, rect]
+}
+
+/// The tile grid: its packing and size.
+type Grid = (Packing, usize, usize);
+
+/// [`record`] of every splat of a chunk starting at Gaussian `first`, into `out`; returns
+/// the smallest and largest depth bits of the visible ones and their count.
+fn records(
+    splats: &[Splat],
+    radii: &[[i32; 2]],
+    first: usize,
+    grid: Grid,
+    out: &mut [[u64; 2]],
+) -> (u32, u32, usize) {
+    let (mut lo, mut hi, mut count) = (u32::MAX, 0u32, 0usize);
+    for (i, (o, (s, &r))) in out.iter_mut().zip(splats.iter().zip(radii)).enumerate() {
+        *o = record(s, r, first + i, grid);
+        let (vis, d) = (visible(&r), s.depth.to_bits());
+        lo = if vis { lo.min(d) } else { lo };
+        hi = if vis { hi.max(d) } else { hi };
+        count += usize::from(vis);
+    }
+    (lo, hi, count)
+}
+
+/// [`records`], sixteen splats per AVX-512F instruction (the tail one at a time): the same
+/// records. The splats' centres and depths are loaded by a 16×16 transpose, the radii by a
+/// permute; the clamps happen in f32 before the conversions (`clamp(floor(v), 0, hi)` is
+/// `trunc(clamp(v, 0, hi))`, NaN → 0 by `max`'s operand order, as `tile_rect`'s saturating
+/// casts give), the packing in 64-bit lanes.
+///
+/// # Safety
+/// The CPU must support AVX-512F.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[allow(clippy::needless_range_loop)] // no iterators over vectors (see `math::lanes`)
+unsafe fn records_avx512(
+    splats: &[Splat],
+    radii: &[[i32; 2]],
+    first: usize,
+    grid: Grid,
+    out: &mut [[u64; 2]],
+) -> (u32, u32, usize) {
+    use crate::math::lanes::{F32x16, Lanes};
+    use std::arch::x86_64::*;
+    let (packing, tiles_x, tiles_y) = grid;
+    let n = splats.len().min(radii.len()).min(out.len());
+    let full = n - n % 16;
+    let floats = Splat::floats(&splats[..n]);
+    let (mut lo, mut hi, mut count) = (u32::MAX, 0u32, 0usize);
+    // SAFETY (every intrinsic below): AVX-512F is available (the caller's contract); the
+    // loads and stores are of slices of exactly the length they touch.
+    unsafe {
+        let zero = _mm512_setzero_ps();
+        let tile = _mm512_set1_ps(TILE_SIZE as f32);
+        let (hx, hy) = (
+            _mm512_set1_ps(tiles_x as f32),
+            _mm512_set1_ps(tiles_y as f32),
+        );
+        let even = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
+        let odd = _mm512_add_epi32(even, _mm512_set1_epi32(1));
+        let shift = |k: u32| _mm_cvtsi32_si128(k as i32);
+        let (s_x1, s_y0, s_y1) = (
+            shift(packing.bx),
+            shift(2 * packing.bx),
+            shift(2 * packing.bx + packing.by),
+        );
+        let trash = _mm512_set1_epi64(TRASH as i64);
+        let first_pair = _mm512_setr_epi64(0, 1, 8, 9, 2, 3, 10, 11);
+        let second_pair = _mm512_setr_epi64(4, 5, 12, 13, 6, 7, 14, 15);
+        let mut vlo = _mm512_set1_epi32(-1);
+        let mut vhi = _mm512_setzero_si512();
+        let mut cols = [F32x16::splat(0.0); SPLAT_FLOATS];
+        for k in (0..full).step_by(16) {
+            F32x16::load_columns(&floats[k * SPLAT_FLOATS..], SPLAT_FLOATS, &mut cols);
+            let (mx, my, depth) = (cols[0].0, cols[1].0, _mm512_castps_si512(cols[9].0));
+            let rp = radii[k..k + 16].as_flattened().as_ptr();
+            let (r0, r1) = (
+                _mm512_loadu_si512(rp.cast()),
+                _mm512_loadu_si512(rp.add(16).cast()),
+            );
+            let (rx, ry) = (
+                _mm512_permutex2var_epi32(r0, even, r1),
+                _mm512_permutex2var_epi32(r0, odd, r1),
+            );
+            let vis = _mm512_cmpgt_epi32_mask(rx, _mm512_setzero_si512())
+                | _mm512_cmpgt_epi32_mask(ry, _mm512_setzero_si512());
+            let (rxf, ryf) = (_mm512_cvtepi32_ps(rx), _mm512_cvtepi32_ps(ry));
+            // clamp(v, 0, hi): `max(v, 0)` gives 0 for a NaN v (its second operand).
+            let clamp = |v: __m512, hi: __m512| _mm512_min_ps(_mm512_max_ps(v, zero), hi);
+            let down = |v: __m512| _mm512_cvttps_epi32(v);
+            let up = |v: __m512| {
+                _mm512_cvttps_epi32(_mm512_roundscale_ps::<
+                    { _MM_FROUND_TO_POS_INF | _MM_FROUND_NO_EXC },
+                >(v))
+            };
+            let x0 = down(clamp(_mm512_div_ps(_mm512_sub_ps(mx, rxf), tile), hx));
+            let x1 = _mm512_max_epi32(
+                up(clamp(_mm512_div_ps(_mm512_add_ps(mx, rxf), tile), hx)),
+                x0,
+            );
+            let y0 = down(clamp(_mm512_div_ps(_mm512_sub_ps(my, ryf), tile), hy));
+            let y1 = _mm512_max_epi32(
+                up(clamp(_mm512_div_ps(_mm512_add_ps(my, ryf), tile), hy)),
+                y0,
+            );
+            vlo = _mm512_mask_min_epu32(vlo, vis, vlo, depth);
+            vhi = _mm512_mask_max_epu32(vhi, vis, vhi, depth);
+            count += vis.count_ones() as usize;
+            for half in 0..2 {
+                let wide = |v: __m512i| {
+                    _mm512_cvtepu32_epi64(if half == 0 {
+                        _mm512_castsi512_si256(v)
+                    } else {
+                        _mm512_extracti64x4_epi64::<1>(v)
+                    })
+                };
+                let rect = _mm512_or_si512(
+                    _mm512_or_si512(wide(x0), _mm512_sll_epi64(wide(x1), s_x1)),
+                    _mm512_or_si512(
+                        _mm512_sll_epi64(wide(y0), s_y0),
+                        _mm512_sll_epi64(wide(y1), s_y1),
+                    ),
+                );
+                let culled = !(vis >> (8 * half)) as u8;
+                let rect = _mm512_mask_or_epi64(rect, culled, rect, trash);
+                let gid = _mm512_add_epi64(
+                    _mm512_set1_epi64((first + k + 8 * half) as i64),
+                    _mm512_setr_epi64(0, 1, 2, 3, 4, 5, 6, 7),
+                );
+                let key = _mm512_or_si512(_mm512_slli_epi64::<32>(wide(depth)), gid);
+                let (a, b) = (
+                    _mm512_unpacklo_epi64(key, rect),
+                    _mm512_unpackhi_epi64(key, rect),
+                );
+                let dst = out[k + 8 * half..k + 8 * half + 8]
+                    .as_flattened_mut()
+                    .as_mut_ptr();
+                _mm512_storeu_si512(dst.cast(), _mm512_permutex2var_epi64(a, first_pair, b));
+                _mm512_storeu_si512(
+                    dst.add(8).cast(),
+                    _mm512_permutex2var_epi64(a, second_pair, b),
+                );
+            }
+        }
+        let (mut l16, mut h16) = ([0u32; 16], [0u32; 16]);
+        _mm512_storeu_si512(l16.as_mut_ptr().cast(), vlo);
+        _mm512_storeu_si512(h16.as_mut_ptr().cast(), vhi);
+        for l in 0..16 {
+            lo = lo.min(l16[l]);
+            hi = hi.max(h16[l]);
+        }
+    }
+    let (tlo, thi, tcount) = records(
+        &splats[full..n],
+        &radii[full..n],
+        first + full,
+        grid,
+        &mut out[full..n],
+    );
+    (lo.min(tlo), hi.max(thi), count + tcount)
+}
+
+/// The trash flag of a record's rectangle word: the Gaussian is culled.
+const TRASH: u64 = 1 << 63;
+
 /// Stable LSD radix sort of `recs` on the key `(rec[0] >> 32) − min`, of which only the
-/// low `bits` bits may be set. `tmp` and `counts` are work buffers.
+/// low `bits` bits may be set, that also drops the records flagged [`TRASH`] (`visible`
+/// records are not): the first pass puts them in a last bucket, cut off after it.
 fn radix_sort(
     recs: &mut Vec<[u64; 2]>,
     tmp: &mut Vec<[u64; 2]>,
     counts: &mut Vec<usize>,
     min: u32,
     bits: u32,
+    visible: usize,
 ) {
     let n = recs.len();
-    if bits == 0 {
+    let passes = bits.div_ceil(MAX_DIGIT_BITS).max(u32::from(visible < n));
+    if passes == 0 {
         return;
     }
-    let passes = bits.div_ceil(MAX_DIGIT_BITS);
     let width = bits.div_ceil(passes);
-    let buckets = 1usize << width;
-    let mask = buckets as u32 - 1;
-    let len = chunk_len(n);
-    let n_chunks = n.div_ceil(len);
+    let buckets = (1usize << width) + 1;
+    let mask = (1u32 << width) - 1;
     resize(tmp, n);
     for pass in 0..passes {
+        let n = recs.len();
+        let len = chunk_len(n);
+        let n_chunks = n.div_ceil(len);
         let shift = pass * width;
         let digit = move |r: &[u64; 2]| {
-            ((((r[0] >> 32) as u32).wrapping_sub(min) >> shift) & mask) as usize
+            let d = ((((r[0] >> 32) as u32).wrapping_sub(min) >> shift) & mask) as usize;
+            if r[1] & TRASH != 0 { buckets - 1 } else { d }
         };
         reset(counts, n_chunks * buckets);
         recs.par_chunks(len)
@@ -353,35 +524,24 @@ fn radix_sort(
             }
             trivial |= acc - start == n;
         }
-        if trivial {
-            continue;
+        if !trivial {
+            let dst = Shared::new(tmp);
+            recs.par_chunks(len)
+                .zip(counts.par_chunks_mut(buckets))
+                .for_each(|(chunk, cur)| {
+                    for r in chunk {
+                        let d = digit(r);
+                        // SAFETY: chunk `c` writes digit `d` at `cursor[c][d]..cursor[c][d] +
+                        // hist[c][d]`, ranges disjoint across (chunk, digit) pairs by the prefix
+                        // sum, all `< n`, the length of `tmp`.
+                        unsafe { dst.write(cur[d], *r) };
+                        cur[d] += 1;
+                    }
+                });
+            std::mem::swap(recs, tmp);
         }
-        let dst = Shared::new(tmp);
-        recs.par_chunks(len)
-            .zip(counts.par_chunks_mut(buckets))
-            .for_each(|(chunk, cur)| {
-                for r in chunk {
-                    let d = digit(r);
-                    // SAFETY: chunk `c` writes digit `d` at `cursor[c][d]..cursor[c][d] +
-                    // hist[c][d]`, ranges disjoint across (chunk, digit) pairs by the prefix
-                    // sum, all `< n`, the length of `tmp`.
-                    unsafe { dst.write(cur[d], *r) };
-                    cur[d] += 1;
-                }
-            });
-        std::mem::swap(recs, tmp);
+        recs.truncate(visible);
     }
-}
-
-/// Exclusive prefix sum in place; returns the total.
-fn exclusive_prefix_sum(v: &mut [usize]) -> usize {
-    let mut acc = 0;
-    for x in v {
-        let c = *x;
-        *x = acc;
-        acc += c;
-    }
-    acc
 }
 
 /// `v` of length `len`, all zeros.
@@ -428,5 +588,71 @@ impl<T: Copy> Shared<T> {
         assert!(i < self.len);
         // SAFETY: in bounds and unaliased (the caller's contract).
         unsafe { self.ptr.add(i).write(v) }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Uniform;
+
+    /// The AVX-512F record pass against the scalar one, bit for bit: centres off the grid,
+    /// on tile boundaries, NaN, ±∞ and beyond i32; radii culled, one-sided, negative,
+    /// huge and `i32::MIN`/`MAX`; arbitrary depth bits; lengths with and without a tail;
+    /// grids from 1×1 to 1000×3 tiles.
+    #[test]
+    fn record_pass_forms_agree() {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            let mut u = Uniform::new(11);
+            let specials = [
+                f32::NAN,
+                f32::INFINITY,
+                f32::NEG_INFINITY,
+                3e9,
+                -3e9,
+                -0.0,
+                16.0,
+            ];
+            for (tiles_x, tiles_y) in [(1, 1), (16, 16), (64, 48), (1000, 3)] {
+                let grid = (Packing::new(tiles_x, tiles_y), tiles_x, tiles_y);
+                let (w, h) = ((tiles_x * 16) as f32, (tiles_y * 16) as f32);
+                for n in [0usize, 1, 15, 16, 17, 100, 333] {
+                    let splats: Vec<Splat> = (0..n)
+                        .map(|_| {
+                            let mut coord = |extent: f32| match u.below(8) {
+                                0 => specials[u.below(specials.len() as u32) as usize],
+                                1 => (16 * u.below(70)) as f32,
+                                _ => u.range(-40.0, extent + 40.0),
+                            };
+                            let mean = [coord(w), coord(h)];
+                            Splat {
+                                mean,
+                                depth: f32::from_bits(u.below(1 << 16) << 16 | u.below(1 << 16)),
+                                ..Splat::default()
+                            }
+                        })
+                        .collect();
+                    let radii: Vec<[i32; 2]> = (0..n)
+                        .map(|_| {
+                            let mut r = || match u.below(10) {
+                                0 => 0,
+                                1 => -(u.below(50) as i32),
+                                2 => [i32::MAX, i32::MIN, 1 << 20, 1 << 25][u.below(4) as usize],
+                                _ => u.below(300) as i32,
+                            };
+                            [r(), r()]
+                        })
+                        .collect();
+                    let mut want = vec![[0u64; 2]; n];
+                    let mut got = vec![[1u64; 2]; n];
+                    let a = records(&splats, &radii, 5, grid, &mut want);
+                    // SAFETY: AVX-512F is available (checked above).
+                    let b = unsafe { records_avx512(&splats, &radii, 5, grid, &mut got) };
+                    assert_eq!(a, b, "{n} splats, {tiles_x}×{tiles_y} tiles");
+                    assert_eq!(want, got, "{n} splats, {tiles_x}×{tiles_y} tiles");
+                }
+            }
+        }
     }
 }
