@@ -30,6 +30,7 @@ use crate::math::lanes::{F32x8, F32x16};
 use crate::math::lanes::{Lanes, saturate_i32};
 use crate::math::sh::{MAX_SH_COEFFS, SH_C0, num_coeffs, sh_basis};
 use rayon::prelude::*;
+use std::mem::MaybeUninit;
 
 /// Near clipping plane in camera z (gsplat `near_plane` default).
 pub const NEAR_PLANE: f32 = 0.01;
@@ -720,10 +721,9 @@ pub fn project(
 ) -> Projected {
     let cam = CameraF32::new(cam);
     let n = g.len();
-    let mut out = Projected {
-        splats: vec![Splat::default(); n],
-        radii: vec![[0, 0]; n],
-    };
+    // Each chunk's task initialises its own slots just before projecting into them (in
+    // its cache, in parallel; not a serial memset of the whole arrays first).
+    let (mut splats, mut radii) = (Vec::with_capacity(n), Vec::with_capacity(n));
     #[cfg(target_arch = "x86_64")]
     let (avx512, avx2) = (opts.kernel.avx512(), opts.kernel.avx2());
     let (degree, aa, inv) = (
@@ -734,12 +734,12 @@ pub fn project(
     // Fixed chunks, written in place; per-chunk cull counts are integers, so their sum does
     // not depend on how chunks map to threads.
     const CHUNK: usize = 4096;
-    let counts: Vec<[u64; 7]> = out
-        .splats
+    let counts: Vec<[u64; 7]> = splats.spare_capacity_mut()[..n]
         .par_chunks_mut(CHUNK)
-        .zip(out.radii.par_chunks_mut(CHUNK))
+        .zip(radii.spare_capacity_mut()[..n].par_chunks_mut(CHUNK))
         .enumerate()
         .map(|(ci, (splats, radii))| {
+            let (splats, radii) = (init_default(splats), init_default(radii));
             let mut c = [0u64; 7];
             let first = ci * CHUNK;
             #[cfg(target_arch = "x86_64")]
@@ -762,6 +762,12 @@ pub fn project(
             c
         })
         .collect();
+    // SAFETY: the tasks above initialised every slot `..n` of both (`init_default`).
+    unsafe {
+        splats.set_len(n);
+        radii.set_len(n);
+    }
+    let out = Projected { splats, radii };
     for c in counts {
         report.visible += c[0];
         report.non_finite += c[1 + Cull::NonFinite as usize];
@@ -772,6 +778,15 @@ pub fn project(
         report.off_screen += c[1 + Cull::OffScreen as usize];
     }
     out
+}
+
+/// `s` with every slot set to `T::default()`, as an initialised slice.
+fn init_default<T: Default>(s: &mut [MaybeUninit<T>]) -> &mut [T] {
+    for v in s.iter_mut() {
+        v.write(T::default());
+    }
+    // SAFETY: every element was just initialised; `MaybeUninit<T>` has `T`'s layout.
+    unsafe { &mut *(s as *mut [MaybeUninit<T>] as *mut [T]) }
 }
 
 /// `C0` as f32, for callers that convert colours to DC coefficients.
