@@ -66,8 +66,10 @@ use rayon::prelude::*;
 /// Floor of `1 − α` when recovering transmittance (gsplat). With α ≤ 0.99 it never binds.
 pub const RECOVER_EPS: f32 = 1e-6;
 
-/// Gradient of the loss with respect to one projected splat.
+/// Gradient of the loss with respect to one projected splat (the fields of a [`Splat`],
+/// in its order).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[repr(C)]
 pub struct SplatGrad {
     pub mean2d: [f32; 2],
     pub conic: [f32; 3],
@@ -78,7 +80,16 @@ pub struct SplatGrad {
     pub depth: f32,
 }
 
+const _: () = assert!(size_of::<SplatGrad>() == size_of::<Splat>());
+
 impl SplatGrad {
+    /// The gradients' fields as one f32 slice (as [`Splat::floats`]).
+    pub fn floats(s: &[SplatGrad]) -> &[f32] {
+        // SAFETY: `SplatGrad` is `repr(C)` with only f32 fields and no padding (its size is
+        // a `Splat`'s, ten f32), so a slice of them is a slice of f32 of ten times the
+        // length, with f32's alignment; the borrow is carried over.
+        unsafe { std::slice::from_raw_parts(s.as_ptr().cast::<f32>(), s.len() * 10) }
+    }
     fn add(&mut self, o: &SplatGrad) {
         for k in 0..2 {
             self.mean2d[k] += o.mean2d[k];

@@ -25,8 +25,24 @@ use crate::math::sh::{Dual3, MAX_SH_COEFFS, ShScalar, num_coeffs, sh_basis};
 use crate::raster::composite::Kernel;
 use crate::raster::plan::RenderPlan;
 use crate::raster::project::{
-    CameraF32, Culls, EPS2D, Geometry, Projected, dot3, gather3, geometry_lanes, lanes_of,
-    mat3_mul, sh_basis_lanes, transpose,
+    CameraF32, Culls, EPS2D, Geometry, Projected, SPLAT_FLOATS, Splat, dot3, gather3,
+    geometry_lanes, lanes_of, mat3_mul, sh_basis_lanes, transpose,
+};
+
+/// Field offsets (in f32) of a [`Splat`] and a [`SplatGrad`], which share their layout.
+const MEAN: usize = 0;
+const CONIC: usize = 2;
+const OPACITY: usize = 5;
+const COLOR: usize = 6;
+const DEPTH: usize = 9;
+const _: () = {
+    use std::mem::offset_of;
+    assert!(offset_of!(Splat, mean) == 4 * MEAN && offset_of!(SplatGrad, mean2d) == 4 * MEAN);
+    assert!(offset_of!(Splat, conic) == 4 * CONIC && offset_of!(SplatGrad, conic) == 4 * CONIC);
+    assert!(offset_of!(Splat, opacity) == 4 * OPACITY);
+    assert!(offset_of!(SplatGrad, opacity) == 4 * OPACITY);
+    assert!(offset_of!(Splat, color) == 4 * COLOR && offset_of!(SplatGrad, color) == 4 * COLOR);
+    assert!(offset_of!(Splat, depth) == 4 * DEPTH && offset_of!(SplatGrad, depth) == 4 * DEPTH);
 };
 
 /// Which raw parameter groups need gradients. Skipped groups come back as zeros and cost
@@ -112,13 +128,6 @@ impl<'a> ParamView<'a> {
             base: 0,
         }
     }
-
-    /// The rest coefficients of Gaussian `i` (an absolute index).
-    #[inline(always)]
-    fn rest(&self, i: usize) -> &[f32] {
-        let j = i - self.base;
-        &self.sh_rest[j * self.rest_per..(j + 1) * self.rest_per]
-    }
 }
 
 /// The gradients of one chunk of Gaussians, laid out like their parameters (entry `k` is
@@ -199,60 +208,70 @@ fn backward_block<R: Lanes>(
     // Offset of the block in the view's slices.
     let at = first - g.base;
     let mean = gather3::<R>(&g.means[at..at + n]);
+    let c = R::splat;
+    let zero = c(0.0);
     // The forward's basis, by the forward's own code (lanes give the scalar bits).
-    let basis_lanes = sh_basis_lanes(mean, cam, degree);
-    let mut basis = [[0f32; 16]; MAX_SH_COEFFS];
-    for (b, &v) in basis.iter_mut().zip(&basis_lanes).take(k_used + 1) {
-        *b = lanes_of(v);
+    let basis = sh_basis_lanes(mean, cam, degree);
+    // The splats' gradients and the forward's colours, field by field.
+    let mut grad = [zero; SPLAT_FLOATS];
+    R::load_columns(SplatGrad::floats(&sg[..n]), SPLAT_FLOATS, &mut grad);
+    let mut colour = [zero; 3];
+    let fwd_floats = Splat::floats(&fwd.splats[first..first + n]);
+    R::load_columns(&fwd_floats[COLOR..], SPLAT_FLOATS, &mut colour);
+    let vis = R::gather(|l| if visible[l] { 1.0 } else { 0.0 }).gt(zero);
+    // The colour gradient where the forward's clamp was open (colour > 0 ⇔ the SH sum
+    // > 0) in a visible lane, else 0; the products of culled lanes are selected to the +0.0
+    // their entries already hold.
+    let v: [R; 3] =
+        std::array::from_fn(|ch| R::select(colour[ch].gt(zero) & vis, grad[COLOR + ch], zero));
+    if groups.sh_dc {
+        let cols = v.map(|v| R::select(vis, basis[0] * v, zero));
+        R::store_columns(&cols, out.sh_dc[k..k + n].as_flattened_mut(), 3);
     }
-    // Per lane, in scalar (the coefficients are read once, in memory order): the SH
-    // coefficient gradients `Y_k·v_c` where the forward's clamp was open (colour > 0 ⇔ the
-    // SH sum > 0), and the weights `w_k = Σ_c coeff_kc·v_c` of the direction term.
-    let mut w = [[0f32; 16]; MAX_SH_COEFFS - 1];
-    let mut flows = [0f32; 16];
-    for l in 0..n {
-        if !visible[l] {
-            continue;
-        }
-        let i = first + l;
-        let colour = fwd.splats[i].color;
-        let v: [f32; 3] = std::array::from_fn(|ch| {
-            if colour[ch] > 0.0 {
-                sg[l].color[ch]
-            } else {
-                0.0
+    // The coefficient gradients `Y_k·v_c`, column by column in the rows' layout, sixteen
+    // columns per transposed store.
+    if groups.sh_rest {
+        let stride = out.rest_per;
+        let dst = &mut out.rest[k * stride..(k + n) * stride];
+        let total = 3 * k_used;
+        let mut cols = [zero; 16];
+        let mut c0 = 0;
+        while c0 < total {
+            let width = (total - c0).min(16);
+            for (q, col) in cols.iter_mut().enumerate().take(width) {
+                let (j, ch) = ((c0 + q) / 3, (c0 + q) % 3);
+                *col = R::select(vis, basis[j + 1] * v[ch], zero);
             }
-        });
-        if groups.sh_dc {
-            let y0 = basis[0][l];
-            out.sh_dc[k + l] = [y0 * v[0], y0 * v[1], y0 * v[2]];
+            R::store_columns(&cols[..width], &mut dst[c0..], stride);
+            c0 += 16;
         }
-        if groups.sh_rest {
-            let r = &mut out.rest[(k + l) * out.rest_per..];
-            for j in 0..k_used {
-                for ch in 0..3 {
-                    r[j * 3 + ch] = basis[j + 1][l] * v[ch];
-                }
+    }
+    // The weights `w_k = Σ_c coeff_kc·v_c` of the direction term, the coefficients loaded
+    // as the forward loads them (eight per step), and where a colour gradient flows.
+    let mut w = [zero; MAX_SH_COEFFS - 1];
+    let mut flows = R::all_false();
+    if groups.means {
+        let stride = g.rest_per;
+        let rest = &g.sh_rest[at * stride..(at + n) * stride];
+        let mut cols = [zero; 24];
+        let mut j0 = 0;
+        while j0 < k_used {
+            let jn = (k_used - j0).min(8);
+            R::load_columns(&rest[3 * j0..], stride, &mut cols[..3 * jn]);
+            for j in 0..jn {
+                let cf = &cols[3 * j..3 * j + 3];
+                w[j0 + j] = (cf[0] * v[0] + cf[1] * v[1]) + cf[2] * v[2];
             }
+            j0 += 8;
         }
-        if groups.means {
-            let rest = g.rest(i);
-            for j in 0..k_used {
-                let cf = &rest[j * 3..j * 3 + 3];
-                w[j][l] = (cf[0] * v[0] + cf[1] * v[1]) + cf[2] * v[2];
-            }
-            flows[l] = if v.iter().any(|&x| x != 0.0) {
-                1.0
-            } else {
-                0.0
-            };
+        // `v ≠ 0` (NaN included): not both `≥ 0` and `≤ 0`.
+        for vc in v {
+            flows = flows | !(vc.ge(zero) & vc.le(zero));
         }
     }
     if !groups.geometry() {
         return;
     }
-    let c = R::splat;
-    let zero = c(0.0);
     // The forward quantities the chain needs, recomputed by the forward's own code; a lane
     // it culls there was culled in the forward too (radii are (0, 0)).
     let q = R::load_dense::<4>(g.quats[at..at + n].as_flattened());
@@ -281,11 +300,8 @@ fn backward_block<R: Lanes>(
     let inv_det = c(1.0) / (a_ * c_ - b_ * b_);
     let ci = [[c_ * inv_det, -b_ * inv_det], [-b_ * inv_det, a_ * inv_det]];
     // v_Σ2d = −Σ⁻¹·G·Σ⁻¹ with G the symmetric gradient of the conic.
-    let half_b = c(0.5) * R::gather(|l| sg[l].conic[1]);
-    let gm = [
-        [R::gather(|l| sg[l].conic[0]), half_b],
-        [half_b, R::gather(|l| sg[l].conic[2])],
-    ];
+    let half_b = c(0.5) * grad[CONIC + 1];
+    let gm = [[grad[CONIC], half_b], [half_b, grad[CONIC + 2]]];
     let mut tmp = [[zero; 2]; 2];
     for a in 0..2 {
         for b in 0..2 {
@@ -321,14 +337,11 @@ fn backward_block<R: Lanes>(
     }
     // Camera-space mean.
     let (fx, fy) = (c(cam.fx), c(cam.fy));
-    let v_m2d = [
-        R::gather(|l| sg[l].mean2d[0]),
-        R::gather(|l| sg[l].mean2d[1]),
-    ];
+    let v_m2d = [grad[MEAN], grad[MEAN + 1]];
     let mut v_t = [
         v_m2d[0] * fx * rz,
         v_m2d[1] * fy * rz,
-        -(v_m2d[0] * fx * x + v_m2d[1] * fy * y) * rz2 + R::gather(|l| sg[l].depth),
+        -(v_m2d[0] * fx * x + v_m2d[1] * fy * y) * rz2 + grad[DEPTH],
     ];
     let v_tx = v_j[0][2] * (c(-cam.fx) * rz2);
     let v_ty = v_j[1][2] * (c(-cam.fy) * rz2);
@@ -369,13 +382,12 @@ fn backward_block<R: Lanes>(
             sh_basis(degree, ux, uy, Dual3::var(dir[2], 2), &mut yk);
             let mut v_dir = [zero; 3];
             for kk in 1..=k_used {
-                let wk = R::gather(|l| w[kk - 1][l]);
+                let wk = w[kk - 1];
                 for a in 0..3 {
                     v_dir[a] = v_dir[a] + wk * yk[kk].d[a];
                 }
             }
             let dd = dot3(dir, v_dir);
-            let flows = R::gather(|l| flows[l]).gt(zero);
             for a in 0..3 {
                 let v = v_mu[a] + (v_dir[a] - dir[a] * dd) / len;
                 v_mu[a] = R::select(flows, v, v_mu[a]);
@@ -391,7 +403,7 @@ fn backward_block<R: Lanes>(
     if groups.opacities {
         let [logit] = R::load_dense::<1>(&g.opacity_logits[at..at + n]);
         let o = c(1.0) / (c(1.0) + (-logit).exp()); // fastexp::sigmoid
-        let v = lanes_of(R::gather(|l| sg[l].opacity) * o * (c(1.0) - o));
+        let v = lanes_of(grad[OPACITY] * o * (c(1.0) - o));
         for l in 0..n {
             if visible[l] && geo_ok[l] != 0.0 {
                 out.opacity[k + l] = v[l];
