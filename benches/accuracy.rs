@@ -464,7 +464,7 @@ fn training(quick: bool, points: &mut Vec<Point>) {
     use unseen::train::trainer::{TrainConfig, Trainer};
     let resolution = if quick { 2 } else { 1 };
     let checkpoints: &[u32] = if quick {
-        &[250, 500, 1000, 2000]
+        &[250, 500, 1000, 2000, 4000, 7000]
     } else {
         &[500, 1000, 2000, 4000, 7000]
     };
