@@ -334,9 +334,11 @@ fn records(
 
 /// [`records`], sixteen splats per AVX-512F instruction (the tail one at a time): the same
 /// records. The splats' centres and depths are loaded by a 16×16 transpose, the radii by a
-/// permute; the clamps happen in f32 before the conversions (`clamp(floor(v), 0, hi)` is
-/// `trunc(clamp(v, 0, hi))`, NaN → 0 by `max`'s operand order, as `tile_rect`'s saturating
-/// casts give), the packing in 64-bit lanes.
+/// permute; the clamps below 0 and above 2^30 (exact in f32, above every grid [`Packing`]
+/// accepts) happen in f32 before the conversions, the clamp to the grid after them in
+/// integers (`clamp(floor(v), 0, hi)` is `min(trunc(clamp(v, 0, 2^30)), hi)` for an integer
+/// `hi ≤ 2^30`, NaN → 0 by `max`'s operand order, as `tile_rect`'s saturating casts give;
+/// a grid edge itself may not be an f32 above 2^24), the packing in 64-bit lanes.
 ///
 /// # Safety
 /// The CPU must support AVX-512F.
@@ -362,9 +364,10 @@ unsafe fn records_avx512(
     unsafe {
         let zero = _mm512_setzero_ps();
         let tile = _mm512_set1_ps(TILE_SIZE as f32);
+        let limit = _mm512_set1_ps((1u32 << 30) as f32);
         let (hx, hy) = (
-            _mm512_set1_ps(tiles_x as f32),
-            _mm512_set1_ps(tiles_y as f32),
+            _mm512_set1_epi32(tiles_x as i32),
+            _mm512_set1_epi32(tiles_y as i32),
         );
         let even = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
         let odd = _mm512_add_epi32(even, _mm512_set1_epi32(1));
@@ -395,24 +398,18 @@ unsafe fn records_avx512(
             let vis = _mm512_cmpgt_epi32_mask(rx, _mm512_setzero_si512())
                 | _mm512_cmpgt_epi32_mask(ry, _mm512_setzero_si512());
             let (rxf, ryf) = (_mm512_cvtepi32_ps(rx), _mm512_cvtepi32_ps(ry));
-            // clamp(v, 0, hi): `max(v, 0)` gives 0 for a NaN v (its second operand).
-            let clamp = |v: __m512, hi: __m512| _mm512_min_ps(_mm512_max_ps(v, zero), hi);
-            let down = |v: __m512| _mm512_cvttps_epi32(v);
-            let up = |v: __m512| {
-                _mm512_cvttps_epi32(_mm512_roundscale_ps::<
-                    { _MM_FROUND_TO_POS_INF | _MM_FROUND_NO_EXC },
-                >(v))
+            // clamp(v, 0, 2^30): `max(v, 0)` gives 0 for a NaN v (its second operand).
+            let clamp = |v: __m512| _mm512_min_ps(_mm512_max_ps(v, zero), limit);
+            let down = |v: __m512, hi: __m512i| _mm512_min_epi32(_mm512_cvttps_epi32(clamp(v)), hi);
+            let up = |v: __m512, hi: __m512i| {
+                let c =
+                    _mm512_roundscale_ps::<{ _MM_FROUND_TO_POS_INF | _MM_FROUND_NO_EXC }>(clamp(v));
+                _mm512_min_epi32(_mm512_cvttps_epi32(c), hi)
             };
-            let x0 = down(clamp(_mm512_div_ps(_mm512_sub_ps(mx, rxf), tile), hx));
-            let x1 = _mm512_max_epi32(
-                up(clamp(_mm512_div_ps(_mm512_add_ps(mx, rxf), tile), hx)),
-                x0,
-            );
-            let y0 = down(clamp(_mm512_div_ps(_mm512_sub_ps(my, ryf), tile), hy));
-            let y1 = _mm512_max_epi32(
-                up(clamp(_mm512_div_ps(_mm512_add_ps(my, ryf), tile), hy)),
-                y0,
-            );
+            let x0 = down(_mm512_div_ps(_mm512_sub_ps(mx, rxf), tile), hx);
+            let x1 = _mm512_max_epi32(up(_mm512_div_ps(_mm512_add_ps(mx, rxf), tile), hx), x0);
+            let y0 = down(_mm512_div_ps(_mm512_sub_ps(my, ryf), tile), hy);
+            let y1 = _mm512_max_epi32(up(_mm512_div_ps(_mm512_add_ps(my, ryf), tile), hy), y0);
             vlo = _mm512_mask_min_epu32(vlo, vis, vlo, depth);
             vhi = _mm512_mask_max_epu32(vhi, vis, vhi, depth);
             count += vis.count_ones() as usize;
@@ -614,7 +611,17 @@ mod tests {
                 -0.0,
                 16.0,
             ];
-            for (tiles_x, tiles_y) in [(1, 1), (16, 16), (64, 48), (1000, 3)] {
+            // Grid edges above 2^24 are not f32 values (review finding: a clamp to
+            // `tiles_x as f32` lost a column or overshot the grid there).
+            let huge = (1 << 24) + 1;
+            for (tiles_x, tiles_y) in [
+                (1, 1),
+                (16, 16),
+                (64, 48),
+                (1000, 3),
+                (huge, 1),
+                (3, huge + 2),
+            ] {
                 let grid = (Packing::new(tiles_x, tiles_y), tiles_x, tiles_y);
                 let (w, h) = ((tiles_x * 16) as f32, (tiles_y * 16) as f32);
                 for n in [0usize, 1, 15, 16, 17, 100, 333] {
@@ -623,6 +630,8 @@ mod tests {
                             let mut coord = |extent: f32| match u.below(8) {
                                 0 => specials[u.below(specials.len() as u32) as usize],
                                 1 => (16 * u.below(70)) as f32,
+                                // At and past the grid's far edge.
+                                2 => extent + u.range(-64.0, 64.0),
                                 _ => u.range(-40.0, extent + 40.0),
                             };
                             let mean = [coord(w), coord(h)];
