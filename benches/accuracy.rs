@@ -11,6 +11,8 @@
 //!   none; transmittance stop 1e-4, 1e-6, none) in f32 against exact blending — the f64
 //!   twin with neither cut-off (and, unlike the rasterizer, no 3.33σ extent and no σ
 //!   clamp) — on the forward stage's scene at SH 3;
+//! - `blend`: 16×16 tile lists against one list for the whole image (the same bits), and
+//!   f32 against f64 accumulation, against the f64 twin, on the same scene;
 //! - `backward`: f32 gradients of every raw parameter against f64 central differences of
 //!   the twin, on a smooth scene;
 //! - `exp`: our Cephes `exp` (what the blend uses), the platform's `f32::exp`, and `f64::exp`
@@ -185,6 +187,100 @@ fn cutoffs(quick: bool, points: &mut Vec<Point>) {
     points.push(Point {
         stage: "cutoffs",
         knob: "f64 exact blending (the shadow itself)".into(),
+        default: false,
+        metric,
+        error: 0.0,
+        seconds: t64,
+        pareto: false,
+    });
+}
+
+/// The blend's structure: tile lists against one list for the whole image, and f32
+/// against f64 accumulation (transmittance and sums; α stays f32), on the `cutoffs`
+/// stage's scene at SH 3 with gsplat's cut-offs, against the f64 twin of the whole forward
+/// (`twin::forward64`). The untiled forms are `twin::blend_untiled` (plain scalar loops
+/// over the splats the projection gives), so their times compare with each other and with
+/// the scalar kernel, not with the vector kernels.
+fn blend(quick: bool, points: &mut Vec<Point>) {
+    use unseen::raster::project::project;
+    use unseen::raster::{RenderPlan, RenderReport};
+    let (scene, cam, bg) = forward_setup(quick, 3);
+    let p = twin::flatten(&scene);
+    let (t64, reference) = best(1, || twin::forward64(&scene, &p, &cam, bg.map(f64::from)));
+    let metric = "max |rgb − f64 twin|";
+    let err = |rgb: &mut dyn Iterator<Item = f64>| {
+        rgb.zip(&reference[0])
+            .map(|(a, &b)| (a - b).abs())
+            .fold(0.0, f64::max)
+    };
+    let mean_err = |rgb: &mut dyn Iterator<Item = f64>| {
+        rgb.zip(&reference[0])
+            .map(|(a, &b)| (a - b).abs())
+            .sum::<f64>()
+            / reference[0].len() as f64
+    };
+    let mut tiled = Vec::new();
+    for (kernel, kname) in [(Kernel::Auto, "auto"), (Kernel::Scalar, "scalar")] {
+        let opts = RenderOptions {
+            background: bg,
+            outputs: Outputs::RGB,
+            kernel,
+            ..Default::default()
+        };
+        let (t, r) = best(5, || render(&scene, &cam, &opts).expect("renders"));
+        tiled = r.rgb.expect("rgb");
+        points.push(Point {
+            stage: "blend",
+            knob: format!("16×16 tiles, f32 accumulation, kernel {kname} (the rasterizer)"),
+            default: kernel == Kernel::Auto,
+            metric,
+            error: err(&mut tiled.iter().map(|&v| f64::from(v))),
+            seconds: t,
+            pareto: false,
+        });
+    }
+    let opts = RenderOptions {
+        background: bg,
+        outputs: Outputs::RGB,
+        ..Default::default()
+    };
+    let plan = RenderPlan::new(&scene, &opts);
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    let project = || project(&scene, &cam, &plan, &opts, &mut RenderReport::default());
+    let (t32, out32) = best(3, || twin::blend_untiled::<f32>(&project(), w, h, bg));
+    assert_eq!(
+        out32[0].iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+        tiled.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+        "the tiles changed the image (test `tiles_change_no_output_bit`)"
+    );
+    points.push(Point {
+        stage: "blend",
+        knob: format!(
+            "no tiles (one list for the image), f32 accumulation, scalar: the same bits (mean {:.2e})",
+            mean_err(&mut out32[0].iter().map(|&v| f64::from(v)))
+        ),
+        default: false,
+        metric,
+        error: err(&mut out32[0].iter().map(|&v| f64::from(v))),
+        seconds: t32,
+        pareto: false,
+    });
+    let (tmix, out64) = best(3, || twin::blend_untiled::<f64>(&project(), w, h, bg));
+    points.push(Point {
+        stage: "blend",
+        knob: format!(
+            "no tiles, f32 α, f64 accumulation, scalar (mean {:.2e})",
+            mean_err(&mut out64[0].iter().copied())
+        ),
+        default: false,
+        metric,
+        error: err(&mut out64[0].iter().copied()),
+        seconds: tmix,
+        pareto: false,
+    });
+    points.push(Point {
+        stage: "blend",
+        knob: "f64 twin (the shadow itself)".into(),
         default: false,
         metric,
         error: 0.0,
@@ -454,7 +550,8 @@ fn lounge(resolution: u32) -> unseen::dataset::Dataset {
     .expect("bundled scene")
 }
 
-/// Training on `lounge` (resolution 1/2 quick, 1 full): checkpoints of one run per setting
+/// Training on `lounge` at resolution 1/2 (80×60; quick to 7000 iterations, full to
+/// 30 000): checkpoints of one run per setting
 /// (densification on, the INRIA default, and off; and the default trained on images of
 /// half that size, INRIA's `-r`), all scored on the test views (INRIA's every 8th training
 /// view) at the bench's resolution by their mean squared error against the ground truth
@@ -462,11 +559,13 @@ fn lounge(resolution: u32) -> unseen::dataset::Dataset {
 fn training(quick: bool, points: &mut Vec<Point>) {
     use unseen::dataset::Split;
     use unseen::train::trainer::{TrainConfig, Trainer};
-    let resolution = if quick { 2 } else { 1 };
+    // The same images in both modes (res. 1 to 30 000 iterations would take hours on one
+    // thread); the full run goes on to INRIA's 30 000.
+    let resolution = 2;
     let checkpoints: &[u32] = if quick {
         &[250, 500, 1000, 2000, 4000, 7000]
     } else {
-        &[500, 1000, 2000, 4000, 7000]
+        &[250, 500, 1000, 2000, 4000, 7000, 15_000, 30_000]
     };
     let data = lounge(resolution);
     let coarse = lounge(2 * resolution);
@@ -891,14 +990,16 @@ fn dibr(quick: bool, points: &mut Vec<Point>) {
 /// full resolution). Error: mean |mask − reference mask| over the held-out views' pixels,
 /// views no training camera saw, as the pipeline's generated views (the knob also gives it
 /// on the in-distribution test views, where the mask goes towards 0). Time: the fine-tune
-/// alone.
+/// alone, up to the checkpoint.
 fn qa_mask(quick: bool, points: &mut Vec<Point>) {
     use unseen::qamask::{QaMaskConfig, fine_tune, mask_scene, render_qa_mask};
     use unseen::train::trainer::{TrainConfig, Trainer};
-    let (resolution, train_its, reference_its, budgets): (u32, u32, u32, &[u32]) = if quick {
-        (2, 1000, 20_000, &[100, 300, 1000, 3000])
+    // Budgets of every degree, and the SH-5 run's longer ones on the way to the reference.
+    type Budgets = (u32, u32, u32, &'static [u32], &'static [u32]);
+    let (resolution, train_its, reference_its, budgets, long_budgets): Budgets = if quick {
+        (2, 1000, 20_000, &[100, 300, 1000, 3000, 5000], &[10_000])
     } else {
-        (1, 7000, 20_000, &[1000, 3000, 10_000])
+        (1, 7000, 20_000, &[1000, 3000, 5000, 10_000], &[])
     };
     let data = lounge(resolution);
     let mut t = Trainer::new(
@@ -922,23 +1023,39 @@ fn qa_mask(quick: bool, points: &mut Vec<Point>) {
             .collect()
     };
     let (train, heldout, test) = (cams(&data.train), cams(&data.heldout), cams(&data.test));
-    let run = |degree: u32, iterations: u32| {
+    let masks = |scene: &Gaussians, cfg: &QaMaskConfig, views: &[Camera]| -> Vec<f32> {
+        views
+            .iter()
+            .flat_map(|c| render_qa_mask(scene, c, cfg).expect("mask"))
+            .collect()
+    };
+    // One fine-tune per degree, to its longest budget; shorter budgets are its checkpoints
+    // (the same bits as fine-tunes of that length, test
+    // `qa_mask_fine_tune_checkpoints_are_shorter_fine_tunes`), timed up to the checkpoint
+    // without the masks rendered there. Per checkpoint: (iterations, seconds, held-out
+    // masks, test-view masks).
+    type Checkpoint = (u32, f64, Vec<f32>, Vec<f32>);
+    let run = |degree: u32, checkpoints: &[u32]| -> Vec<Checkpoint> {
         let cfg = QaMaskConfig {
             sh_degree: degree,
-            iterations,
+            iterations: *checkpoints.last().expect("checkpoints"),
             ..QaMaskConfig::default()
         };
         let mut scene = mask_scene(&trained, &cfg).expect("mask scene");
+        let mut out = Vec::new();
+        let mut aside = 0.0;
         let t0 = Instant::now();
-        fine_tune(&mut scene, &train, &cfg, &mut |_| {}).expect("fine-tune");
-        let seconds = t0.elapsed().as_secs_f64();
-        let masks = |views: &[Camera]| -> Vec<f32> {
-            views
-                .iter()
-                .flat_map(|c| render_qa_mask(&scene, c, &cfg).expect("mask"))
-                .collect()
-        };
-        (seconds, masks(&heldout), masks(&test))
+        fine_tune(&mut scene, &train, &cfg, &mut |p| {
+            if checkpoints.contains(&p.iteration) {
+                let seconds = t0.elapsed().as_secs_f64() - aside;
+                let t1 = Instant::now();
+                let (h, t) = (masks(p.scene, &cfg, &heldout), masks(p.scene, &cfg, &test));
+                out.push((p.iteration, seconds, h, t));
+                aside += t1.elapsed().as_secs_f64();
+            }
+        })
+        .expect("fine-tune");
+        out
     };
     let mean_diff = |a: &[f32], b: &[f32]| {
         a.iter()
@@ -947,11 +1064,23 @@ fn qa_mask(quick: bool, points: &mut Vec<Point>) {
             .sum::<f64>()
             / b.len() as f64
     };
-    let (ref_seconds, reference, reference_test) = run(5, reference_its);
     let default = QaMaskConfig::default();
+    let metric = "mean |mask − long SH-5 mask| (held-out pixels)";
+    let mut runs = Vec::new();
     for degree in [3, 4, 5] {
-        for &iterations in budgets {
-            let (seconds, masks, masks_test) = run(degree, iterations);
+        let mut checkpoints = budgets.to_vec();
+        if degree == 5 {
+            checkpoints.extend(long_budgets);
+            checkpoints.push(reference_its);
+        }
+        runs.push((degree, run(degree, &checkpoints)));
+    }
+    let (_, ref_seconds, reference, reference_test) = runs[2].1.last().cloned().expect("reference");
+    for (degree, checkpoints) in runs {
+        for (iterations, seconds, masks, masks_test) in checkpoints {
+            if degree == 5 && iterations == reference_its {
+                continue;
+            }
             points.push(Point {
                 stage: "qa-mask",
                 knob: format!(
@@ -959,7 +1088,7 @@ fn qa_mask(quick: bool, points: &mut Vec<Point>) {
                     mean_diff(&masks_test, &reference_test)
                 ),
                 default: degree == default.sh_degree && iterations == default.iterations,
-                metric: "mean |mask − long SH-5 mask| (held-out pixels)",
+                metric,
                 error: mean_diff(&masks, &reference),
                 seconds,
                 pareto: false,
@@ -973,7 +1102,7 @@ fn qa_mask(quick: bool, points: &mut Vec<Point>) {
             trained.len()
         ),
         default: reference_its == default.iterations,
-        metric: "mean |mask − long SH-5 mask| (held-out pixels)",
+        metric,
         error: 0.0,
         seconds: ref_seconds,
         pareto: false,
@@ -1290,10 +1419,9 @@ fn csv(points: &[Point]) -> String {
     s
 }
 
-fn markdown(points: &[Point], quick: bool) -> String {
+fn markdown(points: &[Point], made_by: &str) -> String {
     let mut s = format!(
-        "# Accuracy against time\n\nMade by `cargo bench --bench accuracy{}` (one thread, best of several runs; errors are exact maxima over the inputs). *Pareto*: no other point of the stage has less error and less time. *Default*: what the crate ships. SPEC.md §5.10 says why each default sits where it does.\n",
-        if quick { " -- --quick" } else { "" }
+        "# Accuracy against time\n\nMade by `{made_by}` (one thread, best of several runs; errors are exact maxima over the inputs). *Pareto*: no other point of the stage has less error and less time. *Default*: what the crate ships. SPEC.md §5.10 says why each default sits where it does.\n",
     );
     let mut stage = "";
     for p in points {
@@ -1407,9 +1535,10 @@ fn main() {
         (None, Some(_)) => None,
     };
     type Stage = fn(bool, &mut Vec<Point>);
-    let stages: [(&str, Stage); 12] = [
+    let stages: [(&str, Stage); 13] = [
         ("forward", forward),
         ("cutoffs", cutoffs),
+        ("blend", blend),
         ("backward", |_, p| backward_fd(p)),
         ("exp", exp),
         ("ransac", alignment),
@@ -1425,7 +1554,7 @@ fn main() {
         for name in names {
             assert!(
                 stages.iter().any(|(s, _)| s == name),
-                "--only: no stage {name:?} (stages: forward, cutoffs, backward, exp, ransac, gjk, gjk-frustums, dibr, ssim, ssim-grad, training, qa-mask)"
+                "--only: no stage {name:?} (stages: forward, cutoffs, blend, backward, exp, ransac, gjk, gjk-frustums, dibr, ssim, ssim-grad, training, qa-mask)"
             );
         }
     }
@@ -1442,7 +1571,18 @@ fn main() {
         }
     });
     mark_pareto(&mut points);
-    let md = markdown(&points, quick);
+    let mut made_by = String::from("cargo bench --bench accuracy --");
+    if quick {
+        made_by += " --quick";
+    }
+    if let Some(names) = &only {
+        made_by += &format!(" --only {}", names.join(","));
+    }
+    if let (Some(dir), Some(_)) = (value("--out"), &only) {
+        made_by += &format!(" --out {dir}");
+    }
+    let made_by = made_by.trim_end_matches(" --");
+    let md = markdown(&points, made_by);
     print!("{md}");
     let Some(out) = out else { return };
     std::fs::create_dir_all(&out).expect("output folder");

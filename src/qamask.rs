@@ -145,11 +145,15 @@ pub fn render_qa_mask(scene: &Gaussians, cam: &Camera, cfg: &QaMaskConfig) -> Re
 }
 
 /// Progress of the fine-tune.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct FineTuneProgress {
+#[derive(Clone, Copy, Debug)]
+pub struct FineTuneProgress<'a> {
     pub iteration: u32,
     pub iterations: u32,
     pub loss: f64,
+    /// The scene after this iteration: the same bits as a fine-tune of `iteration`
+    /// iterations (no step depends on the budget; test
+    /// `qa_mask_fine_tune_checkpoints_are_shorter_fine_tunes`).
+    pub scene: &'a Gaussians,
 }
 
 /// Steps 2–3: fine-tune `scene` (a [`mask_scene`]) towards `target` on `views`, only SH
@@ -235,6 +239,7 @@ pub fn fine_tune(
             iteration: it,
             iterations: cfg.iterations,
             loss,
+            scene,
         });
     }
     Ok(loss)

@@ -291,3 +291,32 @@ fn qa_mask_detects_badly_reconstructed_pixels() {
     assert_eq!(names, ["qa-3", "opacity", "scale"]);
     assert!(report.bad_fraction > 0.0 && report.bad_fraction < 1.0);
 }
+
+/// The scene a fine-tune hands its progress callback at iteration k is the k-iteration
+/// fine-tune's, bit for bit (nothing in a step depends on the budget): the accuracy bench
+/// reads shorter budgets off one long run.
+#[test]
+fn qa_mask_fine_tune_checkpoints_are_shorter_fine_tunes() {
+    let (d, g) = fixture();
+    let train = cams(d, Split::Train);
+    let long = short_cfg(250, 3);
+    let start = mask_scene(g, &long).unwrap();
+    let mut seen = Vec::new();
+    let mut s = start.clone();
+    fine_tune(&mut s, &train, &long, &mut |p| {
+        if p.iteration % 100 == 0 || p.iteration == 1 {
+            seen.push((p.iteration, p.scene.clone()));
+        }
+    })
+    .unwrap();
+    assert_eq!(seen.len(), 3);
+    for (k, at_k) in &seen {
+        let mut short = start.clone();
+        fine_tune(&mut short, &train, &short_cfg(*k, 3), &mut |_| {}).unwrap();
+        assert!(
+            short == *at_k,
+            "checkpoint {k} differs from a {k}-iteration fine-tune"
+        );
+        assert!(short != start, "iteration {k} changed nothing");
+    }
+}

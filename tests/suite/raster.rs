@@ -585,3 +585,76 @@ fn cutoffs_keep_plan_skips_exact() {
     assert_eq!(none.alpha_threshold(), f32::from_bits(1));
     assert_eq!(Cutoffs::GSPLAT.alpha_threshold(), 1.0 / 255.0);
 }
+
+/// The tile size is not an accuracy knob (SPEC.md §5.3): every output but `n_contrib` is
+/// the blend over one list for the whole image (`twin::blend_untiled::<f32>`: the same f32
+/// arithmetic, every visible splat at every pixel, no tiles, no row culling), bit for bit —
+/// so any tile size gives these bits. Scenes: small and large splats (lists of one to
+/// hundreds of tiles), elongated ones (the rectangle is the bound that must not cut off a
+/// pixel with α ≥ 1/255), splats around the image border, and a dense opaque pile where
+/// pixels stop at the transmittance floor; an image size that is no multiple of 16.
+#[test]
+fn tiles_change_no_output_bit() {
+    use super::twin::blend_untiled;
+    use unseen::raster::render_staged;
+    let cam = default_camera(93, 61);
+    let elongated = {
+        let mut g = random_scene(1500, 1, 5, 0.001, 0.5);
+        for ls in g.log_scales.iter_mut() {
+            ls[0] += 2.0;
+            ls[2] -= 3.0;
+        }
+        g
+    };
+    let border = {
+        let mut g = random_scene(800, 2, 9, 0.005, 0.1);
+        for m in g.means.iter_mut() {
+            // x/z and y/z near the frustum's edges (60° horizontal field of view).
+            m[0] = m[0].signum() * 0.58 * m[2] + 0.02 * m[0];
+        }
+        g
+    };
+    let dense = {
+        let mut g = random_scene(3000, 0, 11, 0.02, 0.2);
+        g.opacity_logits.iter_mut().for_each(|o| *o = o.abs() + 4.0);
+        g
+    };
+    let scenes = [
+        ("small", random_scene(3000, 3, 3, 0.002, 0.02)),
+        ("large", random_scene(600, 2, 4, 0.05, 0.6)),
+        ("elongated", elongated),
+        ("border", border),
+        ("dense", dense),
+    ];
+    for (name, scene) in &scenes {
+        for bg in [[0.0; 3], [0.2, 0.7, 1.0]] {
+            let opts = all_outputs(bg);
+            let plan = RenderPlan::new(scene, &opts);
+            let (r, projected, _) = render_staged(scene, &cam, &opts, &plan).unwrap();
+            let [rgb, alpha, depth, ed, t] =
+                blend_untiled::<f32>(&projected, cam.width as usize, cam.height as usize, bg);
+            let what = format!("scene {name}, bg {bg:?}");
+            assert_eq!(bits(r.rgb.as_ref().unwrap()), bits(&rgb), "rgb, {what}");
+            assert_eq!(
+                bits(r.alpha.as_ref().unwrap()),
+                bits(&alpha),
+                "alpha, {what}"
+            );
+            assert_eq!(
+                bits(r.depth.as_ref().unwrap()),
+                bits(&depth),
+                "depth, {what}"
+            );
+            assert_eq!(
+                bits(r.expected_depth.as_ref().unwrap()),
+                bits(&ed),
+                "ED, {what}"
+            );
+            assert_eq!(
+                bits(r.final_t.as_ref().unwrap()),
+                bits(&t),
+                "final T, {what}"
+            );
+        }
+    }
+}

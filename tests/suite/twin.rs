@@ -224,3 +224,99 @@ pub fn smooth_scene(degree: u32, seed: u64) -> Gaussians {
     }
     g
 }
+
+/// The float type the untiled blend accumulates in: f32 is the rasterizer's arithmetic,
+/// f64 the knob "f64 accumulation" (α still in f32).
+pub trait Accum:
+    Copy
+    + PartialOrd
+    + std::ops::Add<Output = Self>
+    + std::ops::Sub<Output = Self>
+    + std::ops::Mul<Output = Self>
+    + std::ops::Div<Output = Self>
+{
+    fn of(v: f32) -> Self;
+}
+impl Accum for f32 {
+    fn of(v: f32) -> Self {
+        v
+    }
+}
+impl Accum for f64 {
+    fn of(v: f32) -> Self {
+        f64::from(v)
+    }
+}
+
+/// The blend of SPEC.md §5.4 with no tiles: per pixel over every visible splat of `p` in
+/// the total order (camera z bits, index), σ and α in f32 exactly as the rasterizer's
+/// (`exp` the crate's own), transmittance and sums in `A`. With `A = f32` it is the
+/// rasterizer's arithmetic with the tile lists replaced by one list for the whole image
+/// (the rasterizer must give the same bits: the tile size changes no output but
+/// `n_contrib`); with `A = f64` it is the knob "f64 accumulation". Default cut-offs.
+/// Returns rgb (interleaved), alpha, D, ED, final T.
+pub fn blend_untiled<A: Accum>(
+    p: &unseen::raster::project::Projected,
+    width: usize,
+    height: usize,
+    bg: [f32; 3],
+) -> [Vec<A>; 5] {
+    use unseen::math::fastexp::exp;
+    use unseen::raster::composite::{
+        EXPECTED_DEPTH_EPS, MAX_ALPHA, SIGMA_CLAMP, TRANSMITTANCE_STOP,
+    };
+    use unseen::raster::project::ALPHA_THRESHOLD;
+    let mut order: Vec<usize> = (0..p.radii.len())
+        .filter(|&i| p.radii[i][0] > 0 || p.radii[i][1] > 0)
+        .collect();
+    order.sort_by_key(|&i| (p.splats[i].depth.to_bits(), i));
+    let splats: Vec<_> = order.iter().map(|&i| p.splats[i]).collect();
+    let npix = width * height;
+    let zero = A::of(0.0);
+    let mut out = [
+        vec![zero; npix * 3],
+        vec![zero; npix],
+        vec![zero; npix],
+        vec![zero; npix],
+        vec![zero; npix],
+    ];
+    for pi in 0..npix {
+        let (px, py) = ((pi % width) as f32 + 0.5, (pi / width) as f32 + 0.5);
+        let (mut t, mut c, mut d) = (A::of(1.0), [zero; 3], zero);
+        for s in &splats {
+            let (dx, dy) = (s.mean[0] - px, s.mean[1] - py);
+            let sigma = 0.5 * (s.conic[0] * dx * dx + s.conic[2] * dy * dy) + s.conic[1] * dx * dy;
+            let e = exp(-(if sigma < SIGMA_CLAMP {
+                sigma
+            } else {
+                SIGMA_CLAMP
+            }));
+            let a = s.opacity * e;
+            let alpha = if a < MAX_ALPHA { a } else { MAX_ALPHA };
+            if !(sigma >= 0.0 && alpha >= ALPHA_THRESHOLD) {
+                continue;
+            }
+            let a = A::of(alpha);
+            let nt = t * (A::of(1.0) - a);
+            if nt <= A::of(TRANSMITTANCE_STOP) {
+                break;
+            }
+            let w = a * t;
+            for (ck, &sk) in c.iter_mut().zip(&s.color) {
+                *ck = *ck + A::of(sk) * w;
+            }
+            d = d + A::of(s.depth) * w;
+            t = nt;
+        }
+        for k in 0..3 {
+            out[0][pi * 3 + k] = c[k] + t * A::of(bg[k]);
+        }
+        let alpha = A::of(1.0) - t;
+        out[1][pi] = alpha;
+        out[2][pi] = d;
+        let eps = A::of(EXPECTED_DEPTH_EPS);
+        out[3][pi] = d / if alpha > eps { alpha } else { eps };
+        out[4][pi] = t;
+    }
+    out
+}
