@@ -82,18 +82,134 @@ pub(crate) struct StepScalars {
     eps: f32,
     bc2_sqrt: f32,
     step_size: f32,
+    /// Bits of the largest |x| a decaying moment's step might move (see [`update`]):
+    /// `2²⁵·(|step_size|·2⁻¹²⁶/ε·(1 + 2⁻¹⁰) + 2⁻¹⁴⁹)` rounded to f32 (+∞ when it is not
+    /// finite: then no |x| qualifies).
+    x_min_bits: u32,
+}
+
+impl StepScalars {
+    fn new(b1: f32, b2: f32, eps: f32, bc2_sqrt: f32, step_size: f32) -> StepScalars {
+        let bound = f64::from(step_size).abs() * 2f64.powi(-126) / f64::from(eps)
+            * (1.0 + 2f64.powi(-10))
+            + 2f64.powi(-149);
+        let x_min = (2f64.powi(25) * bound) as f32;
+        let x_min = if x_min.is_finite() {
+            x_min.next_up()
+        } else {
+            f32::INFINITY
+        };
+        StepScalars {
+            b1,
+            b2,
+            ob1: 1.0 - b1,
+            ob2: 1.0 - b2,
+            eps,
+            bc2_sqrt,
+            step_size,
+            x_min_bits: x_min.to_bits(),
+        }
+    }
 }
 
 /// The Adam update of a run of elements (module docs), in the reference order. Zipped
 /// slices (no index checks) so the loop vectorizes; every element does the same IEEE
-/// operations whatever the vector width, so the bits do not depend on it.
+/// operations whatever the vector width, so the bits do not depend on it. [`update`] calls
+/// it for all but blocks of decaying moments.
 #[inline(always)]
-fn update(x: &mut [f32], m: &mut [f32], v: &mut [f32], g: &[f32], k: StepScalars) {
+fn update_plain(x: &mut [f32], m: &mut [f32], v: &mut [f32], g: &[f32], k: StepScalars) {
     for (((x, m), v), &g) in x.iter_mut().zip(m.iter_mut()).zip(v.iter_mut()).zip(g) {
         *m = k.b1 * *m + k.ob1 * g;
         *v = k.b2 * *v + k.ob2 * (g * g);
         let denom = v.sqrt() / k.bc2_sqrt + k.eps;
         *x -= k.step_size * (*m / denom);
+    }
+}
+
+/// Whether f32 bits are those of a subnormal (zero excluded).
+#[inline(always)]
+fn subnormal(b: u32) -> bool {
+    (b & 0x7FFF_FFFF).wrapping_sub(1) < 0x007F_FFFF
+}
+
+/// Elements per block of [`update`] (larger blocks measured slower).
+const BLOCK: usize = 64;
+
+/// [`update_plain`]'s bits, without subnormal arithmetic where a first moment decays.
+///
+/// A moment whose gradient stays exactly 0 (a Gaussian no view sees, a colour held at the
+/// clamp) decays by β1 per step through the subnormals, and x86 runs every vector
+/// instruction with a subnormal operand or result through a microcode assist (≈ 100+
+/// cycles): late in a QA-Mask fine-tune (SPEC.md §14.2) the update ran ~5× slower. A lane
+/// is a *decaying moment* when m is subnormal, g = ±0, x is finite with |x| above
+/// `x_min_bits` and v is finite. Per block of [`BLOCK`] elements (told by the bits alone: a
+/// float comparison could take an assist itself): no subnormal m → the plain update; every
+/// subnormal of x, m, v, g a decaying moment → [`update_decaying`]; otherwise the plain
+/// update (the same bits at the assists' pace; rare).
+#[inline(always)]
+fn update(x: &mut [f32], m: &mut [f32], v: &mut [f32], g: &[f32], k: StepScalars) {
+    let blocks = x
+        .chunks_mut(BLOCK)
+        .zip(m.chunks_mut(BLOCK))
+        .zip(v.chunks_mut(BLOCK))
+        .zip(g.chunks(BLOCK));
+    for (((x, m), v), g) in blocks {
+        let mut decay = m
+            .iter()
+            .fold(0u32, |a, m| a | u32::from(subnormal(m.to_bits())))
+            != 0;
+        if decay {
+            for (((x, m), v), g) in x.iter().zip(m.iter()).zip(v.iter()).zip(g) {
+                let (xb, mb, vb, gb) = (x.to_bits(), m.to_bits(), v.to_bits(), g.to_bits());
+                let other = subnormal(xb) | subnormal(vb) | subnormal(gb);
+                decay &= !(other | (subnormal(mb) & !decaying(xb, vb, gb, k)));
+            }
+        }
+        if decay {
+            update_decaying(x, m, v, g, k);
+        } else {
+            update_plain(x, m, v, g, k);
+        }
+    }
+}
+
+/// Whether a lane with a subnormal m (and bits `xb`, `vb`, `gb`) is a decaying moment.
+#[inline(always)]
+fn decaying(xb: u32, vb: u32, gb: u32, k: StepScalars) -> bool {
+    let ax = xb & 0x7FFF_FFFF;
+    (gb << 1 == 0) & (ax > k.x_min_bits) & (ax < 0x7F80_0000) & (vb & 0x7F80_0000 != 0x7F80_0000)
+}
+
+/// The plain update on a block whose subnormals are all decaying moments (see [`update`]),
+/// the same bits without an operation on a subnormal. Those lanes run the plain arithmetic
+/// with m = +0 and then take, as m, β1·m on the subnormal grid — `m = i·2⁻¹⁴⁹`, so
+/// RN(β1·m) = RNE(β1·i)·2⁻¹⁴⁹ with `β1·i` exact in f64 (24 × 23 bits) and rounded to an
+/// integer by adding and subtracting 1.5·2⁵² — plus `(1 − β1)·g = ±0` (a nonzero sum is
+/// RN(β1·m); a zero one is −0 only when both are −0). Their x is unchanged, as in the plain
+/// update: |m'| < 2⁻¹²⁶ and the denominator is ≥ ε, so the step is below
+/// `step_size·2⁻¹²⁶/ε`, which `x_min_bits` keeps under half of x's spacing; with m = +0
+/// the plain arithmetic subtracts ±0 from x ≠ 0, which also gives x. Their v is the plain
+/// arithmetic's (g·g = +0 either way).
+#[inline(always)]
+fn update_decaying(x: &mut [f32], m: &mut [f32], v: &mut [f32], g: &[f32], k: StepScalars) {
+    const ROUND: f64 = 6_755_399_441_055_744.0; // 1.5·2^52: RNE to an integer below 2^51
+    let b1 = f64::from(k.b1);
+    for (((x, m), v), &g) in x.iter_mut().zip(m.iter_mut()).zip(v.iter_mut()).zip(g) {
+        let mb = m.to_bits();
+        let special = subnormal(mb);
+        let m_in = if special { 0.0 } else { *m };
+        let m_new = k.b1 * m_in + k.ob1 * g;
+        *v = k.b2 * *v + k.ob2 * (g * g);
+        let denom = v.sqrt() / k.bc2_sqrt + k.eps;
+        *x -= k.step_size * (m_new / denom);
+        let j = ((f64::from(mb & 0x007F_FFFF) * b1 + ROUND) - ROUND) as u32;
+        let sign = mb & 0x8000_0000;
+        let decayed = if j != 0 { sign | j } else { sign & g.to_bits() };
+        *m = if special {
+            f32::from_bits(decayed)
+        } else {
+            m_new
+        };
     }
 }
 
@@ -230,15 +346,7 @@ impl Adam {
         s.beta2_pow *= c.beta2 as f64;
         let step_size = (lr as f64 / (1.0 - s.beta1_pow)) as f32;
         let bc2_sqrt = (1.0 - s.beta2_pow).sqrt() as f32;
-        StepScalars {
-            b1: c.beta1,
-            b2: c.beta2,
-            ob1: 1.0 - c.beta1,
-            ob2: 1.0 - c.beta2,
-            eps: c.eps,
-            bc2_sqrt,
-            step_size,
-        }
+        StepScalars::new(c.beta1, c.beta2, c.eps, bc2_sqrt, step_size)
     }
 
     /// The scene and its moments in chunks of [`CHUNK`] Gaussians that take their
@@ -424,15 +532,7 @@ mod tests {
     /// lengths that leave remainders for every width).
     #[test]
     fn update_is_bit_identical_across_vector_widths() {
-        let k = StepScalars {
-            b1: 0.9,
-            b2: 0.999,
-            ob1: 0.1,
-            ob2: 1.0 - 0.999,
-            eps: 1e-15,
-            bc2_sqrt: 0.0316,
-            step_size: 0.0123,
-        };
+        let k = StepScalars::new(0.9, 0.999, 1e-15, 0.0316, 0.0123);
         let n = 1037;
         let val = |i: usize, s: f32| (i as f32 * s).sin() * 10f32.powi((i % 13) as i32 - 6);
         let x0: Vec<f32> = (0..n).map(|i| val(i, 0.37)).collect();
@@ -450,6 +550,125 @@ mod tests {
         if std::is_x86_feature_detected!("avx2") {
             assert_eq!(run(Isa::Avx2), reference);
         }
+    }
+
+    /// The update with decaying moments taken apart ([`update`], [`update_decaying`]) gives
+    /// [`update_plain`]'s bits: blocks of normal values of every magnitude, subnormal first
+    /// moments with ±0 gradients (the decaying case) of every sign and size, and the cases
+    /// that must fall back (a subnormal m with a nonzero gradient, subnormal x, v or g, an
+    /// x too small to keep, x or v not finite, signed zeros), for several β1, step sizes
+    /// (0, negative, huge) and ε, at every vector width.
+    #[test]
+    fn decaying_moments_give_the_plain_bits() {
+        use crate::scene::Uniform;
+        let mut u = Uniform::new(41);
+        let sub = |u: &mut Uniform| {
+            let sign = if u.unit() < 0.5 { 0x8000_0000 } else { 0 };
+            // Mantissas across their range: 1, small, mid, 2^23 − 1.
+            let mant = match u.below(4) {
+                0 => 1 + u.below(4),
+                1 => 1 + u.below(1 << 10),
+                2 => 1 + u.below((1 << 23) - 1),
+                _ => (1 << 23) - 1 - u.below(3),
+            };
+            f32::from_bits(sign | mant)
+        };
+        // Normal values of every magnitude (1e-30 … 1e6), never subnormal.
+        let normal = |u: &mut Uniform| {
+            let e = u.range(-30.0, 6.0);
+            (u.unit() + 0.5) * 10f32.powf(e) * if u.unit() < 0.5 { -1.0 } else { 1.0 }
+        };
+        let bits = |a: &[f32]| a.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
+        let mut decayed = 0;
+        for case in 0..400 {
+            let (b1, step, eps) = match case % 8 {
+                0 => (0.9, 0.0123, 1e-15),
+                1 => (0.5, 3e-4, 1e-15),
+                2 => (0.0, 0.0123, 1e-15),
+                3 => (0.999, -0.02, 1e-8),
+                4 => (0.9, 0.0, 1e-15),
+                5 => (0.9, 1e10, 1e-15),
+                6 => (0.9, 0.0123, 1e-40),
+                _ => (0.9, 1e-30, 1.0),
+            };
+            let k = StepScalars::new(b1, 0.999, eps, 0.0316, step);
+            let n = 1 + u.below(200) as usize;
+            // Mostly decaying lanes among normal ones; now and then a lane that must fall
+            // back, so both paths and the classification are exercised.
+            let rare = case % 3 == 0;
+            let (mut x, mut m, mut v, mut g) =
+                (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+            for i in 0..n {
+                x[i] = normal(&mut u);
+                m[i] = normal(&mut u);
+                v[i] = normal(&mut u).abs();
+                g[i] = normal(&mut u);
+                if u.unit() < 0.4 {
+                    m[i] = sub(&mut u);
+                    g[i] = if u.unit() < 0.5 { 0.0 } else { -0.0 };
+                    x[i] = (u.unit() - 0.5) * 10f32.powf(u.range(-10.0, 3.0));
+                    if case % 3 == 1 && u.unit() < 0.2 {
+                        // The largest steps (v = 0: the denominator is ε) against x of
+                        // every size down to the normal floor: some are moved by them.
+                        v[i] = 0.0;
+                        x[i] = (u.unit() + 0.5) * 10f32.powf(u.range(-37.0, -10.0));
+                    }
+                }
+                if rare && u.unit() < 0.03 {
+                    match u.below(9) {
+                        0 => g[i] = normal(&mut u),
+                        1 => g[i] = sub(&mut u),
+                        2 => v[i] = sub(&mut u).abs(),
+                        3 => x[i] = sub(&mut u),
+                        4 => x[i] = 1e-36,
+                        5 => x[i] = [f32::NAN, f32::INFINITY, -0.0, 0.0][u.below(4) as usize],
+                        6 => v[i] = [f32::NAN, f32::INFINITY, 0.0][u.below(3) as usize],
+                        7 => {
+                            m[i] =
+                                [f32::MIN_POSITIVE, -f32::MIN_POSITIVE * 1.05][u.below(2) as usize]
+                        }
+                        _ => m[i] = -0.0,
+                    }
+                }
+            }
+            let plain = {
+                let (mut x, mut m, mut v) = (x.clone(), m.clone(), v.clone());
+                update_plain(&mut x, &mut m, &mut v, &g, k);
+                [bits(&x), bits(&m), bits(&v)]
+            };
+            let isas = [Isa::Baseline, Isa::detect()];
+            for isa in isas {
+                let (mut x, mut m, mut v) = (x.clone(), m.clone(), v.clone());
+                update_dispatch(isa, &mut x, &mut m, &mut v, &g, k);
+                assert_eq!(
+                    [bits(&x), bits(&m), bits(&v)],
+                    plain,
+                    "case {case}, {isa:?}"
+                );
+            }
+            let decaying_only = (0..n).all(|i| {
+                let (xb, mb, vb, gb) = (
+                    x[i].to_bits(),
+                    m[i].to_bits(),
+                    v[i].to_bits(),
+                    g[i].to_bits(),
+                );
+                !(subnormal(xb) | subnormal(vb) | subnormal(gb))
+                    && (!subnormal(mb) || decaying(xb, vb, gb, k))
+            });
+            if decaying_only {
+                // Only normal values and decaying moments: the decaying form itself.
+                let (mut x2, mut m2, mut v2) = (x.clone(), m.clone(), v.clone());
+                update_decaying(&mut x2, &mut m2, &mut v2, &g, k);
+                assert_eq!(
+                    [bits(&x2), bits(&m2), bits(&v2)],
+                    plain,
+                    "case {case}, decaying"
+                );
+                decayed += 1;
+            }
+        }
+        assert!(decayed > 100, "{decayed} blocks of decaying moments");
     }
 
     /// `step_with` with `visible` gives the bits of `step_sparse` with the same gradient and
