@@ -82,16 +82,21 @@ pub(crate) struct StepScalars {
     eps: f32,
     bc2_sqrt: f32,
     step_size: f32,
-    /// Bits of the largest |x| a decaying moment's step might move (see [`update`]):
-    /// `2²⁵·(|step_size|·2⁻¹²⁶/ε·(1 + 2⁻¹⁰) + 2⁻¹⁴⁹)` rounded to f32 (+∞ when it is not
-    /// finite: then no |x| qualifies).
+    /// A decaying moment's step cannot move an x with |x| strictly above this (bits; see
+    /// [`update`]): `2²⁵·(|step_size|·(2⁻¹²⁶/ε·(1 + 2⁻¹⁰) + 2⁻¹⁴⁹) + 2⁻¹⁴⁹)` rounded to f32
+    /// and one ulp up (+∞ when it is not finite — a NaN or infinite step size —: then no x
+    /// qualifies).
     x_min_bits: u32,
 }
 
 impl StepScalars {
     fn new(b1: f32, b2: f32, eps: f32, bc2_sqrt: f32, step_size: f32) -> StepScalars {
-        let bound = f64::from(step_size).abs() * 2f64.powi(-126) / f64::from(eps)
-            * (1.0 + 2f64.powi(-10))
+        // |δ| for |m'| < 2⁻¹²⁶ and a denominator ≥ ε (`bc2_sqrt ≥ 0`, as `begin` gives): the
+        // quotient and the product each rounded (relative 2⁻²³ in the normal range,
+        // absolute 2⁻¹⁵⁰ in the subnormal one, taken as 2⁻¹⁴⁹).
+        let step = f64::from(step_size).abs();
+        let bound = step
+            * (2f64.powi(-126) / f64::from(eps) * (1.0 + 2f64.powi(-10)) + 2f64.powi(-149))
             + 2f64.powi(-149);
         let x_min = (2f64.powi(25) * bound) as f32;
         let x_min = if x_min.is_finite() {
@@ -140,7 +145,8 @@ const BLOCK: usize = 64;
 /// A moment whose gradient stays exactly 0 (a Gaussian no view sees, a colour held at the
 /// clamp) decays by β1 per step through the subnormals, and x86 runs every vector
 /// instruction with a subnormal operand or result through a microcode assist (≈ 100+
-/// cycles): late in a QA-Mask fine-tune (SPEC.md §14.2) the update ran ~5× slower. A lane
+/// cycles): late in a QA-Mask fine-tune (SPEC.md §14.2) the update ran ~5× slower. The
+/// equivalence assumes the default floating-point environment (no FTZ/DAZ). A lane
 /// is a *decaying moment* when m is subnormal, g = ±0, x is finite with |x| above
 /// `x_min_bits` and v is finite. Per block of [`BLOCK`] elements (told by the bits alone: a
 /// float comparison could take an assist itself): no subnormal m → the plain update; every
@@ -185,11 +191,11 @@ fn decaying(xb: u32, vb: u32, gb: u32, k: StepScalars) -> bool {
 /// with m = +0 and then take, as m, β1·m on the subnormal grid — `m = i·2⁻¹⁴⁹`, so
 /// RN(β1·m) = RNE(β1·i)·2⁻¹⁴⁹ with `β1·i` exact in f64 (24 × 23 bits) and rounded to an
 /// integer by adding and subtracting 1.5·2⁵² — plus `(1 − β1)·g = ±0` (a nonzero sum is
-/// RN(β1·m); a zero one is −0 only when both are −0). Their x is unchanged, as in the plain
-/// update: |m'| < 2⁻¹²⁶ and the denominator is ≥ ε, so the step is below
-/// `step_size·2⁻¹²⁶/ε`, which `x_min_bits` keeps under half of x's spacing; with m = +0
-/// the plain arithmetic subtracts ±0 from x ≠ 0, which also gives x. Their v is the plain
-/// arithmetic's (g·g = +0 either way).
+/// RN(β1·m), of sign sign(β1)·sign(m); a zero one is −0 only when both are −0). Their x is
+/// unchanged, as in the plain update: |m'| < 2⁻¹²⁶ and the denominator is ≥ ε, so the step
+/// is below `step_size·2⁻¹²⁶/ε` (with rounding), which `x_min_bits` keeps under half of x's
+/// spacing; with m = +0 the plain arithmetic subtracts ±0 from x ≠ 0, which also gives x.
+/// Their v is the plain arithmetic's (g·g = +0 either way).
 #[inline(always)]
 fn update_decaying(x: &mut [f32], m: &mut [f32], v: &mut [f32], g: &[f32], k: StepScalars) {
     const ROUND: f64 = 6_755_399_441_055_744.0; // 1.5·2^52: RNE to an integer below 2^51
@@ -203,7 +209,8 @@ fn update_decaying(x: &mut [f32], m: &mut [f32], v: &mut [f32], g: &[f32], k: St
         let denom = v.sqrt() / k.bc2_sqrt + k.eps;
         *x -= k.step_size * (m_new / denom);
         let j = ((f64::from(mb & 0x007F_FFFF) * b1 + ROUND) - ROUND) as u32;
-        let sign = mb & 0x8000_0000;
+        // The product's sign (β1 may be −0, which the config accepts).
+        let sign = (mb ^ k.b1.to_bits()) & 0x8000_0000;
         let decayed = if j != 0 { sign | j } else { sign & g.to_bits() };
         *m = if special {
             f32::from_bits(decayed)
@@ -581,7 +588,8 @@ mod tests {
         let bits = |a: &[f32]| a.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
         let mut decayed = 0;
         for case in 0..400 {
-            let (b1, step, eps) = match case % 8 {
+            let (b1, step, eps) = match case % 9 {
+                8 => (-0.0, 0.0123, 1e-15),
                 0 => (0.9, 0.0123, 1e-15),
                 1 => (0.5, 3e-4, 1e-15),
                 2 => (0.0, 0.0123, 1e-15),
