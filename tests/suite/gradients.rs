@@ -424,12 +424,15 @@ fn backward_simd_and_scalar_are_bit_identical() {
 /// Gaussians (behind the camera, off screen), visible Gaussians beyond the Jacobian's clamp
 /// in x and in y, Gaussians without colour gradient, Gaussians marked visible whose
 /// geometry fails (SH gradients only), a count that leaves a remainder, and four group
-/// sets.
+/// sets. The scalar form is itself held to the backward of each Gaussian alone (a scene of
+/// one): the backward stages the visible Gaussians of a chunk side by side, and a wrong
+/// entry, a culled Gaussian's nonzero entry or a row spilling onto its neighbour's would
+/// show there.
 #[test]
 fn projection_backward_simd_matches_scalar_bitwise() {
     use unseen::raster::backward::composite::SplatGrad;
     use unseen::raster::backward::project::project_backward;
-    use unseen::raster::project::{CameraF32, project};
+    use unseen::raster::project::{CameraF32, Projected, project};
     use unseen::raster::{Kernel, RenderPlan, RenderReport};
     #[cfg(target_arch = "x86_64")]
     eprintln!(
@@ -511,6 +514,44 @@ fn projection_backward_simd_matches_scalar_bitwise() {
             let run = |k| project_backward(&scene, &camf, fwd, &plan, g, &splats, k);
             let reference = run(Kernel::Scalar);
             assert!(reference.means.iter().flatten().any(|&v| v != 0.0) == g.means);
+            let rest = scene.rest_per_channel() * 3;
+            for i in (0..scene.len()).step_by(3) {
+                let one = scene.select(&[i]);
+                let fwd_one = Projected {
+                    splats: vec![fwd.splats[i]],
+                    radii: vec![fwd.radii[i]],
+                };
+                let alone = project_backward(
+                    &one,
+                    &camf,
+                    &fwd_one,
+                    &plan,
+                    g,
+                    &splats[i..=i],
+                    Kernel::Scalar,
+                );
+                let entry = |r: &Gradients, k: usize| {
+                    grads_bits(&Gradients {
+                        means: vec![r.means[k]],
+                        log_scales: vec![r.log_scales[k]],
+                        quats: vec![r.quats[k]],
+                        opacity_logits: vec![r.opacity_logits[k]],
+                        sh_dc: vec![r.sh_dc[k]],
+                        sh_rest: r.sh_rest[k * rest..(k + 1) * rest].to_vec(),
+                        ..Gradients::default()
+                    })
+                };
+                assert!(
+                    entry(&reference, i) == entry(&alone, 0),
+                    "Gaussian {i} in the scene vs alone, degree {degree} (plan {plan_degree}), {g:?}"
+                );
+                if fwd.radii[i] == [0, 0] {
+                    assert!(
+                        entry(&alone, 0).iter().all(|&b| b == 0),
+                        "culled {i} not +0.0"
+                    );
+                }
+            }
             for kernel in [Kernel::Auto, Kernel::Avx2] {
                 assert!(
                     grads_bits(&run(kernel)) == grads_bits(&reference),

@@ -194,13 +194,14 @@ fn backward_block<R: Lanes>(
     degree: u32,
     groups: &GradGroups,
     sg: &[SplatGrad],
-    fwd: &Projected,
+    splats: &[Splat],
+    radii: &[[i32; 2]],
     out: &mut OutChunk,
     k: usize,
 ) {
     let n = R::N;
     out.zero(k, n);
-    let visible: [bool; 16] = std::array::from_fn(|l| l < n && fwd.radii[first + l] != [0, 0]);
+    let visible: [bool; 16] = std::array::from_fn(|l| l < n && radii[first + l] != [0, 0]);
     if !visible.contains(&true) {
         return;
     }
@@ -216,7 +217,7 @@ fn backward_block<R: Lanes>(
     let mut grad = [zero; SPLAT_FLOATS];
     R::load_columns(SplatGrad::floats(&sg[..n]), SPLAT_FLOATS, &mut grad);
     let mut colour = [zero; 3];
-    let fwd_floats = Splat::floats(&fwd.splats[first..first + n]);
+    let fwd_floats = Splat::floats(&splats[first..first + n]);
     R::load_columns(&fwd_floats[COLOR..], SPLAT_FLOATS, &mut colour);
     let vis = R::gather(|l| if visible[l] { 1.0 } else { 0.0 }).gt(zero);
     // The colour gradient where the forward's clamp was open (colour > 0 ⇔ the SH sum
@@ -496,7 +497,65 @@ impl OutChunk<'_> {
     }
 }
 
-/// [`backward_block`] over a chunk: `R::N` Gaussians at a time, the remainder one at a time.
+/// Rest coefficients per Gaussian at most (SH degree 5), rounded up to whole copy chunks.
+const MAX_REST: usize = (3 * (MAX_SH_COEFFS - 1)).div_ceil(COPY) * COPY;
+
+/// Floats per copy chunk of a staged row (one 64-byte move).
+const COPY: usize = 16;
+
+/// Copy row `src` (its first `len` values are the row) into `dst`, whose length is `len`
+/// rounded up to [`COPY`], in whole chunks: values past `len` are those that follow the
+/// row in `src` (its next row), or zeros where `src` ends. Fixed-size chunks compile to
+/// vector moves; a variable-length `copy_from_slice` is a call into `memmove`, which at
+/// these sizes cost as much as the backward of the row.
+#[inline(always)]
+fn copy_padded(dst: &mut [f32], src: &[f32], len: usize) {
+    for (c, d) in dst.chunks_exact_mut(COPY).enumerate() {
+        let at = c * COPY;
+        match src.get(at..at + COPY) {
+            Some(s) => d.copy_from_slice(s),
+            None => {
+                for (j, v) in d.iter_mut().enumerate() {
+                    *v = if at + j < len { src[at + j] } else { 0.0 };
+                }
+            }
+        }
+    }
+}
+
+/// The inputs of one block of the visible Gaussians of a chunk, copied side by side so
+/// that [`backward_block`] reads them as consecutive Gaussians; `slot[l]` is lane `l`'s
+/// entry in the chunk.
+struct Staged {
+    slot: [usize; 16],
+    means: [[f32; 3]; 16],
+    log_scales: [[f32; 3]; 16],
+    quats: [[f32; 4]; 16],
+    logits: [f32; 16],
+    rest: [f32; 16 * MAX_REST],
+    splats: [Splat; 16],
+    radii: [[i32; 2]; 16],
+    sg: [SplatGrad; 16],
+}
+
+/// The outputs of one staged block, entry `l` for lane `l`.
+struct StagedOut {
+    means: [[f32; 3]; 16],
+    log_scales: [[f32; 3]; 16],
+    quats: [[f32; 4]; 16],
+    opacity: [f32; 16],
+    sh_dc: [[f32; 3]; 16],
+    rest: [f32; 16 * MAX_REST],
+}
+
+/// [`backward_block`] over a chunk, `R::N` consecutive Gaussians at a time where the
+/// forward culled none of them; elsewhere (about half of a scene's Gaussians are culled
+/// from a training view: off screen or behind the camera, and in a block of sixteen one
+/// of them almost always is) the entries are zeroed and only the visible Gaussians are
+/// staged side by side ([`Staged`]), `R::N` per block, their gradients copied to their
+/// entries; a partly filled staged block's other lanes hold earlier inputs (or zeros),
+/// whose outputs are not copied. A lane's result depends only on its own inputs, so this
+/// gives the bits of every Gaussian's own block (and of the scalar form).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn backward_range<R: Lanes>(
@@ -510,32 +569,151 @@ fn backward_range<R: Lanes>(
     out: &mut OutChunk,
 ) {
     let n = out.means.len();
-    let full = n - n % R::N;
-    for k in (0..full).step_by(R::N) {
-        backward_block::<R>(
-            g,
-            first + k,
-            cam,
-            degree,
-            groups,
-            &sg[first + k..],
-            fwd,
-            out,
-            k,
+    // Staged rows are padded to whole copy chunks (the block reads only a row's first
+    // `3·k_used ≤ rest_per` values, so the stride may be wider).
+    let (rest_in, rest_out) = (g.rest_per, out.rest_per);
+    let (pad_in, pad_out) = (
+        rest_in.div_ceil(COPY) * COPY,
+        rest_out.div_ceil(COPY) * COPY,
+    );
+    debug_assert!(pad_in <= MAX_REST && pad_out <= MAX_REST);
+    let mut st = Staged {
+        slot: [0; 16],
+        means: [[0.0; 3]; 16],
+        log_scales: [[0.0; 3]; 16],
+        quats: [[0.0; 4]; 16],
+        logits: [0.0; 16],
+        rest: [0.0; 16 * MAX_REST],
+        splats: [Splat::default(); 16],
+        radii: [[0; 2]; 16],
+        sg: [SplatGrad::default(); 16],
+    };
+    let mut so = StagedOut {
+        means: [[0.0; 3]; 16],
+        log_scales: [[0.0; 3]; 16],
+        quats: [[0.0; 4]; 16],
+        opacity: [0.0; 16],
+        sh_dc: [[0.0; 3]; 16],
+        rest: [0.0; 16 * MAX_REST],
+    };
+    // Staged entries are copied out in ascending order, each before any later entry is
+    // written: a staged block is run before the next direct block, and a row's copy may
+    // spill zeros onto the head of the next entries' rows (see `run_staged`).
+    let mut used = 0;
+    let mut k = 0;
+    while k < n {
+        let width = R::N.min(n - k);
+        let visible = |l: usize| fwd.radii[first + k + l] != [0, 0];
+        if width == R::N && (0..width).all(visible) {
+            if used > 0 {
+                run_staged::<R>(
+                    &st, used, &mut so, out, cam, degree, groups, pad_in, pad_out,
+                );
+                used = 0;
+            }
+            backward_block::<R>(
+                g,
+                first + k,
+                cam,
+                degree,
+                groups,
+                &sg[first + k..],
+                &fwd.splats,
+                &fwd.radii,
+                out,
+                k,
+            );
+            k += width;
+            continue;
+        }
+        out.zero(k, width);
+        for l in (0..width).filter(|&l| visible(l)) {
+            let (i, at) = (first + k + l, first + k + l - g.base);
+            st.slot[used] = k + l;
+            st.means[used] = g.means[at];
+            st.log_scales[used] = g.log_scales[at];
+            st.quats[used] = g.quats[at];
+            st.logits[used] = g.opacity_logits[at];
+            copy_padded(
+                &mut st.rest[used * pad_in..(used + 1) * pad_in],
+                &g.sh_rest[at * rest_in..],
+                rest_in,
+            );
+            st.splats[used] = fwd.splats[i];
+            st.radii[used] = fwd.radii[i];
+            st.sg[used] = sg[i];
+            used += 1;
+            if used == R::N {
+                run_staged::<R>(
+                    &st, used, &mut so, out, cam, degree, groups, pad_in, pad_out,
+                );
+                used = 0;
+            }
+        }
+        k += width;
+    }
+    if used > 0 {
+        run_staged::<R>(
+            &st, used, &mut so, out, cam, degree, groups, pad_in, pad_out,
         );
     }
-    for k in full..n {
-        backward_block::<f32>(
-            g,
-            first + k,
-            cam,
-            degree,
-            groups,
-            &sg[first + k..],
-            fwd,
-            out,
-            k,
-        );
+}
+
+/// [`backward_block`] on a staged block, its first `used` lanes' gradients copied to their
+/// chunk entries. A function, not a closure: a closure in a `#[target_feature]` function is
+/// compiled without the feature and would call every vector intrinsic out of line.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn run_staged<R: Lanes>(
+    st: &Staged,
+    used: usize,
+    so: &mut StagedOut,
+    out: &mut OutChunk,
+    cam: &CameraF32,
+    degree: u32,
+    groups: &GradGroups,
+    pad_in: usize,
+    pad_out: usize,
+) {
+    let view = ParamView {
+        means: &st.means[..R::N],
+        log_scales: &st.log_scales[..R::N],
+        quats: &st.quats[..R::N],
+        opacity_logits: &st.logits[..R::N],
+        sh_rest: &st.rest[..R::N * pad_in],
+        rest_per: pad_in,
+        base: 0,
+    };
+    let mut o = OutChunk {
+        means: &mut so.means[..R::N],
+        log_scales: &mut so.log_scales[..R::N],
+        quats: &mut so.quats[..R::N],
+        opacity: &mut so.opacity[..R::N],
+        sh_dc: &mut so.sh_dc[..R::N],
+        rest: &mut so.rest[..R::N * pad_out],
+        rest_per: pad_out,
+    };
+    backward_block::<R>(
+        &view, 0, cam, degree, groups, &st.sg, &st.splats, &st.radii, &mut o, 0,
+    );
+    // Lanes in ascending entry order: a row's padding spills zeros (the staged row's
+    // values past `rest_per`: the block zeroed them and writes at most `rest_per`) onto the
+    // head of the next entries' rows, which are zero already or are written after it.
+    let rest_out = out.rest_per;
+    for l in 0..used {
+        let k = st.slot[l];
+        out.means[k] = so.means[l];
+        out.log_scales[k] = so.log_scales[l];
+        out.quats[k] = so.quats[l];
+        out.opacity[k] = so.opacity[l];
+        out.sh_dc[k] = so.sh_dc[l];
+        let row = &so.rest[l * pad_out..(l + 1) * pad_out];
+        let dst = &mut out.rest[k * rest_out..];
+        if dst.len() >= pad_out {
+            copy_padded(&mut dst[..pad_out], row, pad_out);
+        } else {
+            dst[..rest_out].copy_from_slice(&row[..rest_out]);
+        }
     }
 }
 
