@@ -155,7 +155,7 @@ fn main() {
                             let t0 = Instant::now();
                             let p = project(&scene, &cam, &plan, &opts, &mut rep);
                             let t1 = Instant::now();
-                            let b = bin(&p, w as usize, h as usize);
+                            let b = bin(&p, w as usize, h as usize, kernel);
                             let t2 = Instant::now();
                             let out = composite(
                                 w as usize,

@@ -191,7 +191,7 @@ pub fn render_staged(
     let (w, h) = (cam.width as usize, cam.height as usize);
     let mut report = RenderReport::default();
     let projected = project::project(scene, cam, plan, opts, &mut report);
-    let bins = tile::bin(&projected, w, h);
+    let bins = tile::bin(&projected, w, h, opts.kernel);
     report.intersections = bins.intersections() as u64;
     let o = opts.outputs;
     let want = composite::Want {

@@ -14,6 +14,7 @@
 //! disjoint ([`Shared`], bounds-checked); that and the AVX-512F record pass are the
 //! `unsafe` here.
 
+use super::composite::Kernel;
 use super::project::{Projected, SPLAT_FLOATS, Splat};
 use rayon::prelude::*;
 
@@ -70,12 +71,21 @@ fn ceil_clamped(v: f32, hi: usize) -> usize {
     (t.saturating_add(((t as f32) < v) as i64).max(0) as usize).min(hi)
 }
 
-/// Bin the visible splats (radii not both 0) of an image `width × height`.
+/// Bin the visible splats (radii not both 0) of an image `width × height`. `kernel`
+/// chooses the record pass's form (sixteen splats per AVX-512F instruction with
+/// `Kernel::Auto` where the CPU has it, else one at a time); both give the same lists.
 ///
 /// Allocates its result and work area; [`bin_into`] reuses both across frames.
-pub fn bin(p: &Projected, width: usize, height: usize) -> TileBins {
+pub fn bin(p: &Projected, width: usize, height: usize, kernel: Kernel) -> TileBins {
     let mut out = TileBins::default();
-    bin_into(p, width, height, &mut BinScratch::default(), &mut out);
+    bin_into(
+        p,
+        width,
+        height,
+        kernel,
+        &mut BinScratch::default(),
+        &mut out,
+    );
     out
 }
 
@@ -165,6 +175,7 @@ pub fn bin_into(
     p: &Projected,
     width: usize,
     height: usize,
+    kernel: Kernel,
     scratch: &mut BinScratch,
     out: &mut TileBins,
 ) {
@@ -199,7 +210,9 @@ pub fn bin_into(
     let n_all = p.radii.len();
     resize(recs, n_all);
     #[cfg(target_arch = "x86_64")]
-    let avx512 = std::arch::is_x86_feature_detected!("avx512f");
+    let avx512 = kernel.avx512();
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = kernel;
     let (min, max, n) = recs
         .par_chunks_mut(CHUNK)
         .zip(p.radii.par_chunks(CHUNK).zip(p.splats.par_chunks(CHUNK)))
@@ -208,7 +221,7 @@ pub fn bin_into(
             let grid = (packing, tiles_x, tiles_y);
             #[cfg(target_arch = "x86_64")]
             if avx512 {
-                // SAFETY: AVX-512F was detected just above.
+                // SAFETY: AVX-512F was detected (`Kernel::avx512`).
                 return unsafe { records_avx512(splats, radii, c * CHUNK, grid, out) };
             }
             records(splats, radii, c * CHUNK, grid, out)

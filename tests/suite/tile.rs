@@ -1,6 +1,7 @@
 //! Tile binning (`raster::tile::bin`, `bin_into`) against the obvious sort + scatter, on
 //! seeded random projections, for 1, 2 and 3 rayon threads.
 use super::common::with_threads;
+use unseen::raster::Kernel;
 use unseen::raster::project::{Projected, Splat};
 use unseen::raster::tile::{BinScratch, TILE_SIZE, TileBins, bin, bin_into, tile_rect};
 use unseen::scene::Uniform;
@@ -186,9 +187,16 @@ fn bin_matches_reference_sort_and_scatter() {
                     "case {i}: {} splats, {w}×{h}, {d:?}, {threads} threads",
                     p.radii.len()
                 );
-                assert_same(&bin(p, *w, *h), &want, &what);
-                bin_into(p, *w, *h, &mut scratch, &mut out);
-                assert_same(&out, &want, &format!("{what}, bin_into"));
+                // Both record-pass forms (AVX-512F where the CPU has it, and scalar).
+                for kernel in [Kernel::Auto, Kernel::Scalar] {
+                    assert_same(
+                        &bin(p, *w, *h, kernel),
+                        &want,
+                        &format!("{what}, {kernel:?}"),
+                    );
+                    bin_into(p, *w, *h, kernel, &mut scratch, &mut out);
+                    assert_same(&out, &want, &format!("{what}, {kernel:?}, bin_into"));
+                }
             }
         });
     }
