@@ -21,6 +21,7 @@
 //! A Gaussian with a non-finite parameter (among those the plan uses), or whose camera-space
 //! mean or colour overflows f32, is skipped and counted as `non_finite`.
 
+use super::composite::Kernel;
 use super::plan::RenderPlan;
 use super::{RenderOptions, RenderReport};
 use crate::camera::Camera;
@@ -374,6 +375,32 @@ pub(crate) fn sh_basis_lanes<R: Lanes>(
     basis
 }
 
+/// Rest coefficients per Gaussian at most (SH degree 5), rounded up to whole copy chunks.
+pub(crate) const MAX_REST: usize = (3 * (MAX_SH_COEFFS - 1)).div_ceil(COPY) * COPY;
+
+/// Floats per copy chunk of a staged row (one 64-byte move).
+pub(crate) const COPY: usize = 16;
+
+/// Copy row `src` (its first `len` values are the row) into `dst`, whose length is `len`
+/// rounded up to [`COPY`], in whole chunks: values past `len` are those that follow the
+/// row in `src` (its next row), or zeros where `src` ends. Fixed-size chunks compile to
+/// vector moves; a variable-length `copy_from_slice` is a call into `memmove`, which at
+/// these sizes cost as much as the backward of the row.
+#[inline(always)]
+pub(crate) fn copy_padded(dst: &mut [f32], src: &[f32], len: usize) {
+    for (c, d) in dst.chunks_exact_mut(COPY).enumerate() {
+        let at = c * COPY;
+        match src.get(at..at + COPY) {
+            Some(s) => d.copy_from_slice(s),
+            None => {
+                for (j, v) in d.iter_mut().enumerate() {
+                    *v = if at + j < len { src[at + j] } else { 0.0 };
+                }
+            }
+        }
+    }
+}
+
 /// SH colour sums `Σ_k coeff_k·Y_k(dir) + 0.5` per channel (before the clamp at 0) and the
 /// basis. Lane `l`'s rest coefficients are `rest[l·stride ..]` (layout of
 /// `Gaussians::sh_rest`). Also returns whether every coefficient used is finite.
@@ -424,16 +451,146 @@ pub(crate) fn sh_view_basis(
     sh_basis_lanes(g.means[i], cam, degree)
 }
 
-/// SH colour sums `Σ_k coeff_k·Y_k(dir) + 0.5` per channel (before the clamp at 0) and the
-/// basis, `dir = (μ − C)/|μ − C|`. Shared by the forward and backward passes.
-pub(crate) fn sh_color(
+/// SH colour sums (before the clamp) of Gaussians `first + k` into `raw[k]` where
+/// `visible[k]`, +0.0 elsewhere: the projection's colour code (`sh_color_lanes`), whose
+/// lanes give the bits of its one-lane form, `R::N` visible Gaussians per block, staged
+/// side by side (means, DC, rest rows padded to whole copy chunks).
+#[inline(always)]
+fn sh_colors_range<R: Lanes>(
     g: &Gaussians,
-    i: usize,
+    first: usize,
+    visible: &[bool],
     cam: &CameraF32,
     degree: u32,
-) -> ([f32; 3], [f32; MAX_SH_COEFFS]) {
-    let (raw, basis, _) = sh_color_lanes(g.means[i], cam, degree, g.sh_dc[i], g.rest(i), 0);
-    (raw, basis)
+    raw: &mut [[f32; 3]],
+) {
+    let rest_per = g.rest_per_channel() * 3;
+    let pad = rest_per.div_ceil(COPY) * COPY;
+    let mut st = StagedSh {
+        slot: [0; 16],
+        means: [[0.0; 3]; 16],
+        dc: [[0.0; 3]; 16],
+        rest: [0.0; 16 * MAX_REST],
+    };
+    let mut used = 0;
+    for k in 0..raw.len() {
+        raw[k] = [0.0; 3];
+        if !visible[k] {
+            continue;
+        }
+        let i = first + k;
+        st.slot[used] = k;
+        st.means[used] = g.means[i];
+        st.dc[used] = g.sh_dc[i];
+        copy_padded(
+            &mut st.rest[used * pad..(used + 1) * pad],
+            &g.sh_rest[i * rest_per..],
+            rest_per,
+        );
+        used += 1;
+        if used == R::N {
+            st.colors::<R>(used, pad, cam, degree, raw);
+            used = 0;
+        }
+    }
+    if used > 0 {
+        st.colors::<R>(used, pad, cam, degree, raw);
+    }
+}
+
+/// Up to sixteen Gaussians staged for [`sh_colors_range`]; `slot[l]` is lane `l`'s entry.
+struct StagedSh {
+    slot: [usize; 16],
+    means: [[f32; 3]; 16],
+    dc: [[f32; 3]; 16],
+    rest: [f32; 16 * MAX_REST],
+}
+
+impl StagedSh {
+    /// The colour sums of the first `used` lanes into their entries (the other lanes hold
+    /// earlier inputs or zeros; their sums are not copied).
+    #[inline(always)]
+    fn colors<R: Lanes>(
+        &self,
+        used: usize,
+        pad: usize,
+        cam: &CameraF32,
+        degree: u32,
+        raw: &mut [[f32; 3]],
+    ) {
+        let mean = gather3::<R>(&self.means[..R::N]);
+        let dc = gather3::<R>(&self.dc[..R::N]);
+        let (sum, _, _) = sh_color_lanes(mean, cam, degree, dc, &self.rest[..R::N * pad], pad);
+        let s = sum.map(lanes_of);
+        for l in 0..used {
+            raw[self.slot[l]] = [s[0][l], s[1][l], s[2][l]];
+        }
+    }
+}
+
+/// [`sh_colors_range`] sixteen Gaussians per instruction.
+///
+/// # Safety
+/// The CPU must support AVX-512F.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn sh_colors_avx512(
+    g: &Gaussians,
+    first: usize,
+    visible: &[bool],
+    cam: &CameraF32,
+    degree: u32,
+    raw: &mut [[f32; 3]],
+) {
+    sh_colors_range::<F32x16>(g, first, visible, cam, degree, raw)
+}
+
+/// [`sh_colors_range`] eight Gaussians per instruction.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn sh_colors_avx2(
+    g: &Gaussians,
+    first: usize,
+    visible: &[bool],
+    cam: &CameraF32,
+    degree: u32,
+    raw: &mut [[f32; 3]],
+) {
+    sh_colors_range::<F32x8>(g, first, visible, cam, degree, raw)
+}
+
+/// SH colour sums (before the clamp) of the visible Gaussians `first ..
+/// first + raw.len()` (`visible[k]` for entry `k`; +0.0 for the others), in the lane width
+/// `kernel` chooses; every form gives the bits of the one-lane form (the projection's
+/// colour, `project_one`).
+pub(crate) fn sh_colors(
+    g: &Gaussians,
+    first: usize,
+    visible: &[bool],
+    cam: &CameraF32,
+    degree: u32,
+    kernel: Kernel,
+    raw: &mut [[f32; 3]],
+) {
+    assert_eq!(visible.len(), raw.len());
+    #[cfg(target_arch = "x86_64")]
+    if kernel.avx512() {
+        // SAFETY: AVX-512F was detected (`Kernel::avx512`).
+        unsafe { sh_colors_avx512(g, first, visible, cam, degree, raw) };
+        return;
+    }
+    #[cfg(target_arch = "x86_64")]
+    if kernel.avx2() {
+        // SAFETY: AVX2 was detected (`Kernel::avx2`).
+        unsafe { sh_colors_avx2(g, first, visible, cam, degree, raw) };
+        return;
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = kernel;
+    sh_colors_range::<f32>(g, first, visible, cam, degree, raw);
 }
 
 /// The projection of `R::N` consecutive Gaussians, one per lane.

@@ -671,10 +671,22 @@ fn frozen_replay_matches_full_render_and_backward() {
     use unseen::train::adam::{Adam, AdamConfig};
     let cam = default_camera(203, 117);
     let mut scene = random_scene(20_000, 3, 21, 0.003, 0.3);
-    // The replay's SH backward has an AVX2 loop (`Kernel::Auto`) and the scalar one.
+    // Culled Gaussians among the visible ones (behind the camera, off screen), in runs and
+    // alone.
+    for i in 0..scene.len() {
+        if i % 5 == 1 || (i / 40) % 3 == 0 {
+            scene.means[i][2] = -2.0;
+        } else if i % 7 == 2 {
+            scene.means[i][0] = 40.0;
+        }
+    }
+    // The replay's SH backward has an AVX2 loop (`Kernel::Auto`) and the scalar one; its
+    // colours are evaluated in the kernel's lanes (AVX-512F, AVX2 or one at a time) for the
+    // visible Gaussians only, staged side by side.
     let cases = [
         ([0.0; 3], Kernel::Auto),
         ([0.3, 0.6, 0.9], Kernel::Auto),
+        ([0.3, 0.6, 0.9], Kernel::Avx2),
         ([0.3, 0.6, 0.9], Kernel::Scalar),
     ];
     for (bg, kernel) in cases {
@@ -684,6 +696,8 @@ fn frozen_replay_matches_full_render_and_backward() {
             ..Default::default()
         };
         let frozen = FrozenBlend::record(&scene, &cam, &opts).unwrap();
+        let culled = frozen.visible().iter().filter(|v| !**v).count();
+        assert!(culled > 8000 && culled < 14_000, "{culled} culled");
         let mut u = Uniform::new(9);
         for v in scene.sh_rest.iter_mut() {
             *v += u.range(-0.1, 0.1);

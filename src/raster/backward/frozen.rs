@@ -26,7 +26,7 @@ use crate::math::sh::num_coeffs;
 use crate::raster::composite::{Kernel, splat_alpha, splat_rows};
 use crate::raster::plan::RenderPlan;
 use crate::raster::project::{
-    ALPHA_THRESHOLD, CameraF32, Projected, Splat, sh_color, sh_view_basis,
+    ALPHA_THRESHOLD, CameraF32, Projected, Splat, sh_colors, sh_view_basis,
 };
 use crate::raster::tile::{TILE_SIZE, TileBins};
 use crate::raster::{Outputs, RenderOptions};
@@ -278,18 +278,20 @@ impl FrozenBlend {
         let degree = self.plan.sh_degree;
         ws.raw.resize(scene.len(), [0.0; 3]);
         ws.colors.resize(scene.len(), [0.0; 3]);
+        // Fixed chunks; the visible Gaussians of each in lanes (`sh_colors`: the
+        // projection's colour code, the same bits in every lane width).
+        const CHUNK: usize = 1024;
         ws.raw
-            .par_iter_mut()
-            .zip(ws.colors.par_iter_mut())
+            .par_chunks_mut(CHUNK)
+            .zip(ws.colors.par_chunks_mut(CHUNK))
             .enumerate()
-            .with_min_len(1024)
-            .for_each(|(i, (raw, col))| {
-                if !self.visible[i] {
-                    (*raw, *col) = ([0.0; 3], [0.0; 3]);
-                    return;
+            .for_each(|(c, (raw, col))| {
+                let first = c * CHUNK;
+                let visible = &self.visible[first..first + raw.len()];
+                sh_colors(scene, first, visible, &self.cam, degree, self.kernel, raw);
+                for (col, raw) in col.iter_mut().zip(raw.iter()) {
+                    *col = raw.map(|v| if v > 0.0 { v } else { 0.0 });
                 }
-                *raw = sh_color(scene, i, &self.cam, degree).0;
-                *col = raw.map(|v| if v > 0.0 { v } else { 0.0 });
             });
         ws.record = self.id;
     }

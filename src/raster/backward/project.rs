@@ -25,8 +25,8 @@ use crate::math::sh::{Dual3, MAX_SH_COEFFS, ShScalar, num_coeffs, sh_basis};
 use crate::raster::composite::Kernel;
 use crate::raster::plan::RenderPlan;
 use crate::raster::project::{
-    CameraF32, Culls, EPS2D, Geometry, Projected, SPLAT_FLOATS, Splat, dot3, gather3,
-    geometry_lanes, lanes_of, mat3_mul, sh_basis_lanes, transpose,
+    COPY, CameraF32, Culls, EPS2D, Geometry, MAX_REST, Projected, SPLAT_FLOATS, Splat, copy_padded,
+    dot3, gather3, geometry_lanes, lanes_of, mat3_mul, sh_basis_lanes, transpose,
 };
 
 /// Field offsets (in f32) of a [`Splat`] and a [`SplatGrad`], which share their layout.
@@ -497,32 +497,6 @@ impl OutChunk<'_> {
     }
 }
 
-/// Rest coefficients per Gaussian at most (SH degree 5), rounded up to whole copy chunks.
-const MAX_REST: usize = (3 * (MAX_SH_COEFFS - 1)).div_ceil(COPY) * COPY;
-
-/// Floats per copy chunk of a staged row (one 64-byte move).
-const COPY: usize = 16;
-
-/// Copy row `src` (its first `len` values are the row) into `dst`, whose length is `len`
-/// rounded up to [`COPY`], in whole chunks: values past `len` are those that follow the
-/// row in `src` (its next row), or zeros where `src` ends. Fixed-size chunks compile to
-/// vector moves; a variable-length `copy_from_slice` is a call into `memmove`, which at
-/// these sizes cost as much as the backward of the row.
-#[inline(always)]
-fn copy_padded(dst: &mut [f32], src: &[f32], len: usize) {
-    for (c, d) in dst.chunks_exact_mut(COPY).enumerate() {
-        let at = c * COPY;
-        match src.get(at..at + COPY) {
-            Some(s) => d.copy_from_slice(s),
-            None => {
-                for (j, v) in d.iter_mut().enumerate() {
-                    *v = if at + j < len { src[at + j] } else { 0.0 };
-                }
-            }
-        }
-    }
-}
-
 /// The inputs of one block of the visible Gaussians of a chunk, copied side by side so
 /// that [`backward_block`] reads them as consecutive Gaussians; `slot[l]` is lane `l`'s
 /// entry in the chunk.
@@ -576,7 +550,10 @@ fn backward_range<R: Lanes>(
         rest_in.div_ceil(COPY) * COPY,
         rest_out.div_ceil(COPY) * COPY,
     );
-    debug_assert!(pad_in <= MAX_REST && pad_out <= MAX_REST);
+    assert!(
+        pad_in <= MAX_REST && pad_out <= MAX_REST,
+        "{rest_in} / {rest_out} rest values per Gaussian: more than SH degree 5 has"
+    );
     let mut st = Staged {
         slot: [0; 16],
         means: [[0.0; 3]; 16],
