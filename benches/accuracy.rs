@@ -34,7 +34,9 @@
 //! - `training`: iterations with and without densification on `lounge` against the
 //!   test views' mean squared error (ground truth), checkpoints of one run each;
 //! - `qa-mask`: fine-tune iterations × SH degree 3–5 against a long SH-5 fine-tune, mean
-//!   mask difference on the held-out views.
+//!   mask difference on the held-out views;
+//! - `pipeline` (full runs only): the `quick` and `paper` presets on the demo's original,
+//!   extrapolated-pixel error on the evaluation poses after each stage against the time.
 //!
 //! Times are the best of several runs on one thread; errors are exact maxima over the
 //! inputs used. `--only` prints the chosen stages and writes files only with `--out`.
@@ -626,6 +628,123 @@ fn training(quick: bool, points: &mut Vec<Point>) {
                 pareto: false,
             });
         }
+    }
+}
+
+/// The pipeline's presets (`quick`, `paper`; SPEC.md §20) on the demo's original scene
+/// (`lounge`'s train half, 1500 iterations at 80×60, as `unseen demo`), extrapolated into
+/// the held-out half: after each stage (stage 1, stage 2, interpolation) the evaluation
+/// poses' extrapolated pixels scored against the ground truth (error `10^(−PSNR/10)`, the
+/// PSNR's mean squared error), time the original's training and the pipeline's step costs
+/// up to that stage (the evaluation excluded). Full runs only (`paper` takes over
+/// an hour on one thread); the quick preset's rows are the demo's report.
+fn pipeline_presets(quick: bool, points: &mut Vec<Point>) {
+    use unseen::pipeline::{self, Event, PipelineConfig, RunOptions, rundir::TIMING_FILE};
+    use unseen::train::run::{Checkpointing, train_run};
+    use unseen::train::trainer::TrainConfig;
+    if quick {
+        eprintln!("pipeline: full runs only (the paper preset takes over an hour)");
+        return;
+    }
+    let scene =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("reference_data/scenes/lounge");
+    let dir = Scratch::new("pipeline");
+    let original = dir.0.join("original");
+    let tc = TrainConfig {
+        iterations: 1500,
+        resolution: 2,
+        save_iterations: vec![],
+        ..TrainConfig::default()
+    };
+    let t0 = Instant::now();
+    train_run(
+        &scene,
+        &original,
+        &tc,
+        None,
+        Checkpointing::default(),
+        &mut |_| {},
+    )
+    .expect("original scene");
+    let original_seconds = t0.elapsed().as_secs_f64();
+    let inputs = pipeline::load_inputs(
+        &original,
+        &scene.join("candidates.json"),
+        Some(&scene.join("evaluation.json")),
+        Some(&scene),
+    )
+    .expect("inputs");
+    let log = |e: Event| {
+        if let Event::StepFinished { step, seconds } = e {
+            eprintln!("   {step}: {seconds:.1} s");
+        }
+    };
+    for preset in ["quick", "paper"] {
+        let cfg = PipelineConfig::preset(preset).expect("preset");
+        let out = dir.0.join(preset);
+        let outcome = pipeline::run_with(&cfg, &inputs, &out, &RunOptions::default(), &log)
+            .expect("pipeline run");
+        let metrics = outcome.metrics.expect("evaluation poses");
+        let cost = |s: &unseen::pipeline::rundir::StepDone| {
+            let b = std::fs::read(s.dir.join(TIMING_FILE)).expect("step cost");
+            serde_json::from_slice::<unseen::io::Cost>(&b)
+                .expect("cost.json")
+                .seconds
+        };
+        let stage_of = |name: &str| name.split('/').next().unwrap_or("").to_string();
+        for row in &metrics.rows {
+            // The original is the same for both presets: one row.
+            if row.scene == "original" && preset != "quick" {
+                continue;
+            }
+            // The original's training, then the steps up to the last of this stage (the
+            // views and QA-Mask fine-tunes before it included, the evaluation's excluded).
+            let steps = outcome
+                .steps
+                .iter()
+                .rposition(|s| stage_of(&s.name) == row.scene)
+                .map_or(0, |last| last + 1);
+            let seconds = original_seconds
+                + outcome.steps[..steps]
+                    .iter()
+                    .filter(|s| stage_of(&s.name) != "eval")
+                    .map(cost)
+                    .sum::<f64>();
+            let knob = if row.scene == "original" {
+                "the original (1500 iterations)".to_string()
+            } else {
+                format!("preset {preset}, after {}", row.scene)
+            };
+            points.push(Point {
+                stage: "pipeline",
+                knob: format!(
+                    "{knob}: extrapolated PSNR {:.2} dB, existing {:.2} dB, train-half {:.2} dB, {} Gaussians",
+                    row.psnr_extrapolated, row.psnr_existing, row.psnr_train_half, row.gaussians
+                ),
+                default: preset == "paper" && row.scene != "original",
+                metric: "extrapolated-pixel MSE",
+                error: 10f64.powf(-row.psnr_extrapolated / 10.0),
+                seconds,
+                pareto: false,
+            });
+        }
+    }
+}
+
+/// A temporary folder removed when dropped (also when a stage panics).
+struct Scratch(PathBuf);
+
+impl Scratch {
+    fn new(name: &str) -> Scratch {
+        let p = std::env::temp_dir().join(format!("unseen-accuracy-{name}-{}", std::process::id()));
+        std::fs::create_dir_all(&p).expect("scratch folder");
+        Scratch(p)
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
     }
 }
 
@@ -1535,7 +1654,7 @@ fn main() {
         (None, Some(_)) => None,
     };
     type Stage = fn(bool, &mut Vec<Point>);
-    let stages: [(&str, Stage); 13] = [
+    let stages: [(&str, Stage); 14] = [
         ("forward", forward),
         ("cutoffs", cutoffs),
         ("blend", blend),
@@ -1549,12 +1668,13 @@ fn main() {
         ("ssim-grad", ssim_grad_stage),
         ("training", training),
         ("qa-mask", qa_mask),
+        ("pipeline", pipeline_presets),
     ];
     if let Some(names) = &only {
         for name in names {
             assert!(
                 stages.iter().any(|(s, _)| s == name),
-                "--only: no stage {name:?} (stages: forward, cutoffs, blend, backward, exp, ransac, gjk, gjk-frustums, dibr, ssim, ssim-grad, training, qa-mask)"
+                "--only: no stage {name:?} (stages: forward, cutoffs, blend, backward, exp, ransac, gjk, gjk-frustums, dibr, ssim, ssim-grad, training, qa-mask, pipeline)"
             );
         }
     }
