@@ -18,8 +18,11 @@
 //!    cull if both radii are 0 or the box `mean2d ± r` misses the image.
 //! 8. Colour: `dir = (μ − C)/|μ − C|`, `rgb = max(Σ_k coeff_k·Y_k(dir) + 0.5, 0)`.
 //!
-//! A Gaussian with a non-finite parameter (among those the plan uses), or whose camera-space
-//! mean or colour overflows f32, is skipped and counted as `non_finite`.
+//! A Gaussian with a non-finite mean, scale, quaternion or opacity logit, or whose
+//! camera-space mean overflows f32, is skipped and counted as `non_finite` (the first check
+//! of all). Step 8 runs only for the Gaussians that pass steps 1–7, so no SH row of a culled
+//! Gaussian is read; a colour sum that is not finite (a non-finite coefficient among those
+//! the plan uses, or an overflow) skips the Gaussian then, as `non_finite` (the last check).
 
 use super::composite::Kernel;
 use super::plan::RenderPlan;
@@ -401,9 +404,12 @@ pub(crate) fn copy_padded(dst: &mut [f32], src: &[f32], len: usize) {
     }
 }
 
-/// SH colour sums `Σ_k coeff_k·Y_k(dir) + 0.5` per channel (before the clamp at 0) and the
-/// basis. Lane `l`'s rest coefficients are `rest[l·stride ..]` (layout of
-/// `Gaussians::sh_rest`). Also returns whether every coefficient used is finite.
+/// SH colour sums `Σ_k coeff_k·Y_k(dir) + 0.5` per channel (before the clamp at 0). Lane
+/// `l`'s rest coefficients are `rest[l·stride ..]` (layout of `Gaussians::sh_rest`: the
+/// first `3·(num_coeffs(degree) − 1)` of a row are the ones `degree` uses). A sum is finite
+/// exactly when every coefficient it uses is finite and nothing overflowed: a non-finite
+/// coefficient makes its product, and so the sum, ±∞ or NaN (∞·0 is NaN), and finite
+/// additions keep a sum non-finite.
 #[inline(always)]
 fn sh_color_lanes<R: Lanes>(
     mean: [R; 3],
@@ -412,10 +418,9 @@ fn sh_color_lanes<R: Lanes>(
     dc: [R; 3],
     rest: &[f32],
     stride: usize,
-) -> ([R; 3], [R; MAX_SH_COEFFS], R::Mask) {
+) -> [R; 3] {
     let basis = sh_basis_lanes(mean, cam, degree);
     let k_used = num_coeffs(degree) - 1;
-    let mut finite = dc[0].is_finite() & dc[1].is_finite() & dc[2].is_finite();
     let mut acc = [basis[0] * dc[0], basis[0] * dc[1], basis[0] * dc[2]];
     // Eight coefficients (24 columns) per load: each channel's sum still runs in k order.
     const K_BLOCK: usize = 8;
@@ -426,19 +431,16 @@ fn sh_color_lanes<R: Lanes>(
         R::load_columns(&rest[3 * k0..], stride, &mut cols[..3 * kn]);
         for k in 0..kn {
             for ch in 0..3 {
-                let coeff = cols[3 * k + ch];
-                finite = finite & coeff.is_finite();
-                acc[ch] = acc[ch] + basis[k0 + k + 1] * coeff;
+                acc[ch] = acc[ch] + basis[k0 + k + 1] * cols[3 * k + ch];
             }
         }
         k0 += K_BLOCK;
     }
-    let out = [
+    [
         acc[0] + R::splat(0.5),
         acc[1] + R::splat(0.5),
         acc[2] + R::splat(0.5),
-    ];
-    (out, basis, finite)
+    ]
 }
 
 /// The SH basis (up to `degree`) at Gaussian `i`'s view direction `(μ − C)/|μ − C|`.
@@ -452,9 +454,8 @@ pub(crate) fn sh_view_basis(
 }
 
 /// SH colour sums (before the clamp) of Gaussians `first + k` into `raw[k]` where
-/// `visible[k]`, +0.0 elsewhere: the projection's colour code (`sh_color_lanes`), whose
-/// lanes give the bits of its one-lane form, `R::N` visible Gaussians per block, staged
-/// side by side (means, DC, rest rows padded to whole copy chunks).
+/// `visible[k]`, +0.0 elsewhere: the projection's colour code, `R::N` visible Gaussians
+/// per block, staged side by side ([`StagedSh`]).
 #[inline(always)]
 fn sh_colors_range<R: Lanes>(
     g: &Gaussians,
@@ -464,42 +465,26 @@ fn sh_colors_range<R: Lanes>(
     degree: u32,
     raw: &mut [[f32; 3]],
 ) {
-    let rest_per = g.rest_per_channel() * 3;
-    let pad = rest_per.div_ceil(COPY) * COPY;
-    let mut st = StagedSh {
-        slot: [0; 16],
-        means: [[0.0; 3]; 16],
-        dc: [[0.0; 3]; 16],
-        rest: [0.0; 16 * MAX_REST],
-    };
-    let mut used = 0;
+    let mut st = StagedSh::new(g, degree);
     for k in 0..raw.len() {
         raw[k] = [0.0; 3];
-        if !visible[k] {
-            continue;
-        }
-        let i = first + k;
-        st.slot[used] = k;
-        st.means[used] = g.means[i];
-        st.dc[used] = g.sh_dc[i];
-        copy_padded(
-            &mut st.rest[used * pad..(used + 1) * pad],
-            &g.sh_rest[i * rest_per..],
-            rest_per,
-        );
-        used += 1;
-        if used == R::N {
-            st.colors::<R>(used, pad, cam, degree, raw);
-            used = 0;
+        if visible[k] && st.push(g, first + k, k) == R::N {
+            st.flush::<R>(cam, degree, |slot, sum| raw[slot] = sum);
         }
     }
-    if used > 0 {
-        st.colors::<R>(used, pad, cam, degree, raw);
-    }
+    st.flush::<R>(cam, degree, |slot, sum| raw[slot] = sum);
 }
 
-/// Up to sixteen Gaussians staged for [`sh_colors_range`]; `slot[l]` is lane `l`'s entry.
-struct StagedSh {
+/// Up to sixteen Gaussians staged side by side for their SH colour in lanes: the means,
+/// DC and the rest coefficients the degree uses (copied in whole [`COPY`] chunks, a row
+/// every `pad` floats), and each one's entry (`slot`) in the caller's output.
+pub(crate) struct StagedSh {
+    used: usize,
+    /// Floats of a row the degree uses, and that rounded up to whole chunks.
+    len: usize,
+    pad: usize,
+    /// Floats per row of `Gaussians::sh_rest`.
+    stride: usize,
     slot: [usize; 16],
     means: [[f32; 3]; 16],
     dc: [[f32; 3]; 16],
@@ -507,24 +492,62 @@ struct StagedSh {
 }
 
 impl StagedSh {
-    /// The colour sums of the first `used` lanes into their entries (the other lanes hold
-    /// earlier inputs or zeros; their sums are not copied).
+    /// Empty, for `g`'s rows at SH `degree`.
     #[inline(always)]
-    fn colors<R: Lanes>(
-        &self,
-        used: usize,
-        pad: usize,
+    pub(crate) fn new(g: &Gaussians, degree: u32) -> Self {
+        let len = 3 * (num_coeffs(degree) - 1);
+        let stride = g.rest_per_channel() * 3;
+        assert!(len <= stride, "SH degree {degree} beyond the scene's");
+        StagedSh {
+            used: 0,
+            len,
+            pad: len.div_ceil(COPY) * COPY,
+            stride,
+            slot: [0; 16],
+            means: [[0.0; 3]; 16],
+            dc: [[0.0; 3]; 16],
+            rest: [0.0; 16 * MAX_REST],
+        }
+    }
+
+    /// Stage Gaussian `i` for entry `slot`; returns how many are staged (at most 16: the
+    /// caller flushes at its lane count).
+    #[inline(always)]
+    pub(crate) fn push(&mut self, g: &Gaussians, i: usize, slot: usize) -> usize {
+        let u = self.used;
+        self.slot[u] = slot;
+        self.means[u] = g.means[i];
+        self.dc[u] = g.sh_dc[i];
+        copy_padded(
+            &mut self.rest[u * self.pad..(u + 1) * self.pad],
+            &g.sh_rest[i * self.stride..],
+            self.len,
+        );
+        self.used = u + 1;
+        self.used
+    }
+
+    /// The colour sums of the staged Gaussians in `R::N` lanes (the lanes past the staged
+    /// ones hold earlier inputs or zeros and are not reported): `out(slot, sum)` for each,
+    /// in staging order; then empty.
+    #[inline(always)]
+    pub(crate) fn flush<R: Lanes>(
+        &mut self,
         cam: &CameraF32,
         degree: u32,
-        raw: &mut [[f32; 3]],
+        mut out: impl FnMut(usize, [f32; 3]),
     ) {
+        if self.used == 0 {
+            return;
+        }
         let mean = gather3::<R>(&self.means[..R::N]);
         let dc = gather3::<R>(&self.dc[..R::N]);
-        let (sum, _, _) = sh_color_lanes(mean, cam, degree, dc, &self.rest[..R::N * pad], pad);
-        let s = sum.map(lanes_of);
-        for l in 0..used {
-            raw[self.slot[l]] = [s[0][l], s[1][l], s[2][l]];
+        let rest = &self.rest[..R::N * self.pad];
+        let s = sh_color_lanes(mean, cam, degree, dc, rest, self.pad).map(lanes_of);
+        for (l, &slot) in self.slot[..self.used].iter().enumerate() {
+            out(slot, [s[0][l], s[1][l], s[2][l]]);
         }
+        self.used = 0;
     }
 }
 
@@ -595,6 +618,8 @@ pub(crate) fn sh_colors(
 
 /// The projection of `R::N` consecutive Gaussians, one per lane.
 struct Block<R: Lanes> {
+    /// World-space mean (for the view direction of the colour).
+    world: [R; 3],
     mean2d: [R; 2],
     conic: [R; 3],
     opacity: R,
@@ -613,13 +638,13 @@ pub(crate) fn alpha_floor(inv_alpha: f32) -> f32 {
     (1.0 / inv_alpha).max(f32::from_bits(1))
 }
 
-/// Project Gaussians `i .. i + R::N` (steps 1–8 of the module docs, all lanes at once).
+/// Project Gaussians `i .. i + R::N`, steps 1–7 of the module docs, all lanes at once; the
+/// colour (step 8) is left at 0 for [`color_block`] or a [`StagedSh`].
 #[inline(always)]
 fn project_block<R: Lanes>(
     g: &Gaussians,
     i: usize,
     cam: &CameraF32,
-    degree: u32,
     antialiased: bool,
     inv_alpha: f32,
 ) -> Block<R> {
@@ -628,8 +653,6 @@ fn project_block<R: Lanes>(
     let quat = R::load_dense::<4>(g.quats[i..i + R::N].as_flattened());
     let log_scale = gather3(&g.log_scales[i..i + R::N]);
     let [logit] = R::load_dense::<1>(&g.opacity_logits[i..i + R::N]);
-    let stride = g.rest_per_channel() * 3;
-    let rest = &g.sh_rest[i * stride..(i + R::N) * stride];
 
     let mut culls = Culls::new();
     let geo = geometry_lanes(mean, quat, log_scale, cam, &mut culls);
@@ -666,16 +689,8 @@ fn project_block<R: Lanes>(
         | (mean2d[1] + ry).le(c(0.0))
         | (mean2d[1] - ry).ge(h);
     culls.check(off, Cull::OffScreen);
-    // 8. Colour.
-    let dc = gather3(&g.sh_dc[i..i + R::N]);
-    let (raw, _, coeffs_finite) = sh_color_lanes(mean, cam, degree, dc, rest, stride);
-    let clamp0 = |v: R| R::select(v.gt(c(0.0)), v, c(0.0));
-    let color = [clamp0(raw[0]), clamp0(raw[1]), clamp0(raw[2])];
-    // Finite but huge SH coefficients overflow here.
-    let color_finite = color[0].is_finite() & color[1].is_finite() & color[2].is_finite();
-    culls.check(!color_finite, Cull::NonFinite);
-    // A non-finite parameter among those used is the first check of all.
-    let mut params_finite = coeffs_finite & logit.is_finite();
+    // A non-finite parameter of the geometry is the first check of all.
+    let mut params_finite = logit.is_finite();
     for k in 0..3 {
         params_finite = params_finite & mean[k].is_finite() & log_scale[k].is_finite();
     }
@@ -684,14 +699,45 @@ fn project_block<R: Lanes>(
     }
     culls.check_first(!params_finite, Cull::NonFinite);
     Block {
+        world: mean,
         mean2d,
         conic,
         opacity,
-        color,
+        color: [c(0.0); 3],
         depth: z,
         radii: [rx, ry],
         culls,
     }
+}
+
+/// Step 8 for every lane of `b` (Gaussians `i .. i + R::N`, read in place): the colour
+/// `max(sum, 0)`, or the lane culled as `NonFinite` where its sum is not finite (the last
+/// check, made only where the colour is computed).
+#[inline(always)]
+fn color_block<R: Lanes>(b: &mut Block<R>, g: &Gaussians, i: usize, cam: &CameraF32, degree: u32) {
+    let stride = g.rest_per_channel() * 3;
+    let rest = &g.sh_rest[i * stride..(i + R::N) * stride];
+    let dc = gather3(&g.sh_dc[i..i + R::N]);
+    let sum = sh_color_lanes(b.world, cam, degree, dc, rest, stride);
+    let finite = sum[0].is_finite() & sum[1].is_finite() & sum[2].is_finite();
+    b.culls.check(!finite, Cull::NonFinite);
+    b.color = [clamp0(sum[0]), clamp0(sum[1]), clamp0(sum[2])];
+}
+
+/// `max(v, 0)` per lane (NaN → 0).
+#[inline(always)]
+fn clamp0<R: Lanes>(v: R) -> R {
+    let zero = R::splat(0.0);
+    R::select(v.gt(zero), v, zero)
+}
+
+/// The colour `max(sum, 0)` of one staged Gaussian (a [`StagedSh`] sum), `None` where the
+/// sum is not finite: [`color_block`]'s arithmetic for one lane.
+#[inline(always)]
+fn clamped_color(sum: [f32; 3]) -> Option<[f32; 3]> {
+    sum.iter()
+        .all(|v| v.is_finite())
+        .then(|| sum.map(clamp0::<f32>))
 }
 
 /// Lanes `l` of `v[l]` (one slice entry per lane; `v` holds `R::N` of them).
@@ -769,7 +815,10 @@ pub fn project_one(
     antialiased: bool,
 ) -> Result<(Splat, [i32; 2]), Cull> {
     let inv = plan.cutoffs.inv_alpha_threshold;
-    let b = project_block::<f32>(g, i, cam, plan.sh_degree, antialiased, inv);
+    let mut b = project_block::<f32>(g, i, cam, antialiased, inv);
+    if b.culls.ok {
+        color_block(&mut b, g, i, cam, plan.sh_degree);
+    }
     b.culls.result()?;
     let (mut splat, mut radii, mut counts) = ([Splat::default()], [[0, 0]], [0; 7]);
     store(&b, &mut splat, &mut radii, &mut counts);
@@ -777,7 +826,9 @@ pub fn project_one(
 }
 
 /// Project Gaussians `first ..` into `splats`/`radii`, `R::N` at a time, the remainder one
-/// at a time.
+/// at a time. The colour is computed only for Gaussians that survive steps 1–7: in place
+/// for a block whose lanes all survive, else staged with the survivors of later blocks, so
+/// that a culled Gaussian's SH coefficients are never read.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn project_range<R: Lanes>(
@@ -793,13 +844,54 @@ fn project_range<R: Lanes>(
 ) {
     let n = splats.len();
     let full = n - n % R::N;
+    let mut st = StagedSh::new(g, degree);
     for k in (0..full).step_by(R::N) {
-        let b = project_block::<R>(g, first + k, cam, degree, antialiased, inv_alpha);
+        let mut b = project_block::<R>(g, first + k, cam, antialiased, inv_alpha);
+        if R::all(b.culls.ok) {
+            color_block(&mut b, g, first + k, cam, degree);
+            store(&b, &mut splats[k..], &mut radii[k..], counts);
+            continue;
+        }
+        store(&b, &mut splats[k..], &mut radii[k..], counts);
+        let ok = lanes_of(R::select(b.culls.ok, R::splat(1.0), R::splat(0.0)));
+        for (l, &ok) in ok[..R::N].iter().enumerate() {
+            if ok != 0.0 && st.push(g, first + k + l, k + l) == R::N {
+                st.flush::<R>(cam, degree, |k, sum| {
+                    set_color(k, sum, splats, radii, counts)
+                });
+            }
+        }
+    }
+    st.flush::<R>(cam, degree, |k, sum| {
+        set_color(k, sum, splats, radii, counts)
+    });
+    for k in full..n {
+        let mut b = project_block::<f32>(g, first + k, cam, antialiased, inv_alpha);
+        if b.culls.ok {
+            color_block(&mut b, g, first + k, cam, degree);
+        }
         store(&b, &mut splats[k..], &mut radii[k..], counts);
     }
-    for k in full..n {
-        let b = project_block::<f32>(g, first + k, cam, degree, antialiased, inv_alpha);
-        store(&b, &mut splats[k..], &mut radii[k..], counts);
+}
+
+/// Entry `k`'s colour from its staged sum; where the sum is not finite the Gaussian is
+/// culled after all (`NonFinite`; its slot back to the culled state, its count moved).
+#[inline(always)]
+fn set_color(
+    k: usize,
+    sum: [f32; 3],
+    splats: &mut [Splat],
+    radii: &mut [[i32; 2]],
+    counts: &mut [u64; 7],
+) {
+    match clamped_color(sum) {
+        Some(color) => splats[k].color = color,
+        None => {
+            splats[k] = Splat::default();
+            radii[k] = [0, 0];
+            counts[0] -= 1;
+            counts[1 + Cull::NonFinite as usize] += 1;
+        }
     }
 }
 

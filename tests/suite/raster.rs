@@ -138,6 +138,68 @@ fn gaussians_behind_camera_or_near_plane_contribute_nothing() {
     assert_all_finite(&r, "near plane");
 }
 
+/// The colour (and so every SH coefficient) is read and checked only for Gaussians that
+/// pass the geometric culls (SPEC.md §5.1): a non-finite coefficient is counted
+/// `non_finite` in view, but as the cull that comes first elsewhere, in every kernel form
+/// and at the ends of a block of lanes (33 Gaussians: two AVX-512F blocks and a tail).
+#[test]
+fn colour_is_checked_only_where_it_is_computed() {
+    let cam = default_camera(64, 48);
+    for kernel in [Kernel::Auto, Kernel::Avx2, Kernel::Scalar] {
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            for at in [0, 5, 15, 16, 31, 32] {
+                let mut g = Gaussians::new(3).unwrap();
+                let rest = vec![0.1; g.rest_per_channel() * 3];
+                let q = [1.0, 0.0, 0.0, 0.0];
+                let mut expect = [0u64; 4]; // visible, non_finite, near, off screen
+                for i in 0..33 {
+                    // In view, behind the near plane, off screen, in view, …
+                    let mean = match i % 4 {
+                        1 => [0.0, 0.0, -3.0],
+                        2 => [50.0, 0.0, 3.0],
+                        _ => [0.1 * (i as f32 - 16.0) / 16.0, 0.0, 3.0],
+                    };
+                    let (mut dc, mut r) = ([0.2; 3], rest.clone());
+                    if i == at || i % 7 == 3 {
+                        if i % 2 == 0 {
+                            dc[i % 3] = bad;
+                        } else {
+                            r[(5 * i) % rest.len()] = bad;
+                        }
+                    }
+                    let poisoned = !(dc.iter().chain(&r).all(|v| v.is_finite()));
+                    let slot = match (i % 4, poisoned) {
+                        (1, _) => 2,
+                        (2, _) => 3,
+                        (_, true) => 1,
+                        (_, false) => 0,
+                    };
+                    expect[slot] += 1;
+                    g.push(mean, [-3.0; 3], q, 2.0, dc, &r);
+                }
+                let opts = RenderOptions {
+                    kernel,
+                    ..all_outputs([0.0; 3])
+                };
+                let r = render(&g, &cam, &opts).unwrap();
+                let case = format!("{kernel:?} {bad} at {at}");
+                assert_all_finite(&r, &case);
+                let rep = r.report;
+                assert_eq!(
+                    [
+                        rep.visible,
+                        rep.non_finite,
+                        rep.behind_near_plane,
+                        rep.off_screen
+                    ],
+                    expect,
+                    "{case}: {rep:?}"
+                );
+            }
+        }
+    }
+}
+
 /// Scales 1e-12 and 1e6, zero quaternions, NaN/Inf in every parameter, opacity 0 and 1,
 /// means at the image corners, 1×1 and 4096×1 images: no NaN or Inf in any output, and the
 /// bad Gaussians are skipped and counted.
@@ -158,7 +220,11 @@ fn hard_cases_produce_finite_outputs() {
     g.push([3e38, 3e38, 3e38], [0.0; 3], q, 1.0, [0.5; 3], &rest); // beyond the far plane
     let huge = vec![f32::MAX; rest.len()];
     g.push([0.0, 0.0, 3.0], [-1.0; 3], q, 1.0, [f32::MAX; 3], &huge); // colour overflows
-    let n_overflow = 1;
+    // Towards −∞: clamped at 0 it would look finite (it was drawn black before the sum
+    // itself was checked).
+    let neg = vec![-f32::MAX; rest.len()];
+    g.push([0.0, 0.0, 3.0], [-1.0; 3], q, 1.0, [-f32::MAX; 3], &neg);
+    let n_overflow = 2;
     let n_good = g.len() - n_overflow; // includes the far one
     let bad = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY];
     let mut n_bad = 0;
