@@ -223,10 +223,17 @@ fn backward_block<R: Lanes>(
     // The colour gradient where the forward's clamp was open (colour > 0 ⇔ the SH sum
     // > 0) in a visible lane, else 0; the products of culled lanes are selected to the +0.0
     // their entries already hold.
-    let v: [R; 3] =
-        std::array::from_fn(|ch| R::select(colour[ch].gt(zero) & vis, grad[COLOR + ch], zero));
+    // Explicit arrays, not `array::from_fn`/`map` with closures: those may stay out of
+    // line, compiled without the instruction set (`math::lanes`).
+    let mut v = [zero; 3];
+    for ch in 0..3 {
+        v[ch] = R::select(colour[ch].gt(zero) & vis, grad[COLOR + ch], zero);
+    }
     if groups.sh_dc {
-        let cols = v.map(|v| R::select(vis, basis[0] * v, zero));
+        let mut cols = [zero; 3];
+        for ch in 0..3 {
+            cols[ch] = R::select(vis, basis[0] * v[ch], zero);
+        }
         R::store_columns(&cols, out.sh_dc[k..k + n].as_flattened_mut(), 3);
     }
     // The coefficient gradients `Y_k·v_c`, column by column in the rows' layout, sixteen
