@@ -238,6 +238,9 @@ pub fn bin_into(
         0
     };
     radix_sort(recs, recs_tmp, counts, min, bits, n);
+    // The sorted visible records (the buffer keeps its length: refilling a tail cut off
+    // here would cost a memset of the culled records' share every frame).
+    let recs = &recs[..n];
 
     // 3. Per-tile counts per chunk of the sorted records, then the scatter. The counts
     // are taken branch-free on a (tiles_x + 1) × (tiles_y + 1) grid of 2D differences
@@ -485,7 +488,8 @@ const TRASH: u64 = 1 << 63;
 
 /// Stable LSD radix sort of `recs` on the key `(rec[0] >> 32) − min`, of which only the
 /// low `bits` bits may be set, that also drops the records flagged [`TRASH`] (`visible`
-/// records are not): the first pass puts them in a last bucket, cut off after it.
+/// records are not): the first pass puts them in a last bucket, cut off after it. The sorted
+/// records are `recs[..visible]`; the buffers keep their lengths.
 fn radix_sort(
     recs: &mut Vec<[u64; 2]>,
     tmp: &mut Vec<[u64; 2]>,
@@ -494,7 +498,7 @@ fn radix_sort(
     bits: u32,
     visible: usize,
 ) {
-    let n = recs.len();
+    let mut n = recs.len();
     let passes = bits.div_ceil(MAX_DIGIT_BITS).max(u32::from(visible < n));
     if passes == 0 {
         return;
@@ -504,7 +508,6 @@ fn radix_sort(
     let mask = (1u32 << width) - 1;
     resize(tmp, n);
     for pass in 0..passes {
-        let n = recs.len();
         let len = chunk_len(n);
         let n_chunks = n.div_ceil(len);
         let shift = pass * width;
@@ -513,7 +516,8 @@ fn radix_sort(
             if r[1] & TRASH != 0 { buckets - 1 } else { d }
         };
         reset(counts, n_chunks * buckets);
-        recs.par_chunks(len)
+        recs[..n]
+            .par_chunks(len)
             .zip(counts.par_chunks_mut(buckets))
             .for_each(|(chunk, h)| {
                 for r in chunk {
@@ -536,21 +540,22 @@ fn radix_sort(
         }
         if !trivial {
             let dst = Shared::new(tmp);
-            recs.par_chunks(len)
+            recs[..n]
+                .par_chunks(len)
                 .zip(counts.par_chunks_mut(buckets))
                 .for_each(|(chunk, cur)| {
                     for r in chunk {
                         let d = digit(r);
                         // SAFETY: chunk `c` writes digit `d` at `cursor[c][d]..cursor[c][d] +
                         // hist[c][d]`, ranges disjoint across (chunk, digit) pairs by the prefix
-                        // sum, all `< n`, the length of `tmp`.
+                        // sum, all `< n` ≤ the length of `tmp`.
                         unsafe { dst.write(cur[d], *r) };
                         cur[d] += 1;
                     }
                 });
             std::mem::swap(recs, tmp);
         }
-        recs.truncate(visible);
+        n = visible;
     }
 }
 
