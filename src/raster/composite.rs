@@ -25,9 +25,10 @@
 use super::RenderReport;
 use super::plan::RenderPlan;
 use super::project::{ALPHA_THRESHOLD, Projected, Splat};
-use super::tile::{TILE_SIZE, TileBins};
+use super::tile::{Shared, TILE_SIZE, TileBins};
 use crate::math::fastexp::exp;
 use rayon::prelude::*;
+use std::ops::Range;
 
 /// Upper clamp of per-splat alpha (gsplat ≥ 1.5.4 and INRIA; gsplat ≤ 1.5.3 used 0.999).
 pub const MAX_ALPHA: f32 = 0.99;
@@ -625,15 +626,22 @@ mod avx512 {
     }
 }
 
-/// One band of 16 image rows of each output image (empty slices for images not wanted).
-#[derive(Default)]
-struct BandOut<'a> {
-    rgb: &'a mut [f32],
-    alpha: &'a mut [f32],
-    depth: &'a mut [f32],
-    expected_depth: &'a mut [f32],
-    final_t: &'a mut [f32],
-    n_contrib: &'a mut [u32],
+/// Most tasks of [`composite`] and of its backward: runs of whole tiles, many more than
+/// threads, so that cheap and dear parts of the image even out between threads (bands of
+/// tile rows were too coarse at the pipeline's 80×60: four bands for two threads). No
+/// result depends on the split: each tile is computed alone, and results merge in tile
+/// order.
+pub(crate) const MAX_TASKS: usize = 64;
+
+/// The output images, shared by the tasks of [`composite`], each of which writes only the
+/// pixels of its own tiles (empty for images not wanted).
+struct Images {
+    rgb: Shared<f32>,
+    alpha: Shared<f32>,
+    depth: Shared<f32>,
+    expected_depth: Shared<f32>,
+    final_t: Shared<f32>,
+    n_contrib: Shared<u32>,
 }
 
 /// Which images to write, fixed for a whole render (a subset of what the plan computes).
@@ -648,8 +656,8 @@ pub struct Want {
 
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn band_impl<const DEPTH: bool, const TRACK: bool, const ISA: u8>(
-    ty: usize,
+fn tiles_impl<const DEPTH: bool, const TRACK: bool, const ISA: u8>(
+    run: Range<usize>,
     width: usize,
     height: usize,
     p: &Projected,
@@ -657,13 +665,11 @@ fn band_impl<const DEPTH: bool, const TRACK: bool, const ISA: u8>(
     plan: &RenderPlan,
     background: [f32; 3],
     want: Want,
-    out: BandOut,
+    out: &Images,
 ) -> u64 {
-    let y0 = ty * TILE_SIZE;
-    let rows = TILE_SIZE.min(height - y0);
     let mut pairs_total = 0;
     let cut = Cut::new(&plan.cutoffs);
-    // Reused for every tile of the band: no allocation in the loop.
+    // Reused for every tile of the run: no allocation in the loop.
     let mut batch: Vec<TileSplat> = Vec::with_capacity(BATCH);
     // Per batch splat, the tile rows it can reach as a bit mask (0 past the batch), and
     // per tile row the batch positions that reach it, front to back: each row walks only
@@ -671,8 +677,10 @@ fn band_impl<const DEPTH: bool, const TRACK: bool, const ISA: u8>(
     let mut masks = [0u32; BATCH];
     let mut sets: RowSets = [[0; WORDS]; TILE_SIZE];
     let mut groups = [Group::new(0); TILE_SIZE];
-    for tx in 0..bins.tiles_x {
-        let x0 = tx * TILE_SIZE;
+    for t in run {
+        let (ty, tx) = (t / bins.tiles_x, t % bins.tiles_x);
+        let (y0, x0) = (ty * TILE_SIZE, tx * TILE_SIZE);
+        let rows = TILE_SIZE.min(height - y0);
         let cols = TILE_SIZE.min(width - x0);
         let mut px = [0f32; GROUP];
         for (l, v) in px.iter_mut().enumerate() {
@@ -685,7 +693,7 @@ fn band_impl<const DEPTH: bool, const TRACK: bool, const ISA: u8>(
         alive[..rows].fill(cols > 0);
         // Gather the tile's list a batch at a time, like gsplat's shared-memory batches: rows
         // usually stop long before the end of a long list, so most splats are never loaded.
-        let list = bins.tile(ty * bins.tiles_x + tx);
+        let list = bins.tile(t);
         for (bi, chunk) in list.chunks(BATCH).enumerate() {
             if !alive.iter().any(|&a| a) {
                 break;
@@ -708,9 +716,9 @@ fn band_impl<const DEPTH: bool, const TRACK: bool, const ISA: u8>(
             masks[batch.len()..64 * words].fill(0);
             #[cfg(target_arch = "x86_64")]
             match ISA {
-                // SAFETY: ISA_AVX512 only inside `band_avx512`, entered after detection.
+                // SAFETY: ISA_AVX512 only inside `tiles_avx512`, entered after detection.
                 ISA_AVX512 => unsafe { row_sets_avx512(&masks, words, &mut sets) },
-                // SAFETY: ISA_AVX2 only inside `band_avx2`, entered after detection.
+                // SAFETY: ISA_AVX2 only inside `tiles_avx2`, entered after detection.
                 ISA_AVX2 => unsafe { row_sets_avx2(&masks, words, &mut sets) },
                 _ => row_sets(&masks, words, &mut sets),
             }
@@ -725,11 +733,11 @@ fn band_impl<const DEPTH: bool, const TRACK: bool, const ISA: u8>(
                 let set = &sets[row][..words];
                 #[cfg(target_arch = "x86_64")]
                 let pairs = match ISA {
-                    // SAFETY: ISA_AVX512 only inside `band_avx512`, entered after detection.
+                    // SAFETY: ISA_AVX512 only inside `tiles_avx512`, entered after detection.
                     ISA_AVX512 => unsafe {
                         avx512::blend_group::<DEPTH, TRACK>(&batch, set, &px, py, st, &cut)
                     },
-                    // SAFETY: ISA_AVX2 only inside `band_avx2`, entered after detection.
+                    // SAFETY: ISA_AVX2 only inside `tiles_avx2`, entered after detection.
                     ISA_AVX2 => unsafe {
                         avx2::blend_group::<DEPTH, TRACK>(&batch, set, &px, py, st, &cut)
                     },
@@ -741,27 +749,30 @@ fn band_impl<const DEPTH: bool, const TRACK: bool, const ISA: u8>(
                 alive[row] = st.active.iter().any(|&a| a != 0);
             }
         }
-        // Write the tile's pixels into the band.
+        // Write the tile's pixels.
+        // SAFETY (every `write` below): pixel `i` lies in tile `t`, which only this task
+        // writes ([`composite`] hands each tile to exactly one task); `write` checks bounds.
         for (row, st) in groups.iter().enumerate().take(rows) {
             for l in 0..cols {
-                let i = row * width + x0 + l;
+                let i = (y0 + row) * width + x0 + l;
                 let t = st.t[l];
                 if want.rgb {
                     let c = [st.r[l], st.g[l], st.b[l]];
                     for k in 0..3 {
-                        out.rgb[i * 3 + k] = if plan.apply_background {
+                        let v = if plan.apply_background {
                             c[k] + t * background[k]
                         } else {
                             c[k]
                         };
+                        unsafe { out.rgb.write(i * 3 + k, v) };
                     }
                 }
                 let alpha = 1.0 - t;
                 if want.alpha {
-                    out.alpha[i] = alpha;
+                    unsafe { out.alpha.write(i, alpha) };
                 }
                 if want.depth {
-                    out.depth[i] = st.d[l];
+                    unsafe { out.depth.write(i, st.d[l]) };
                 }
                 if want.expected_depth {
                     let den = if alpha > EXPECTED_DEPTH_EPS {
@@ -769,11 +780,11 @@ fn band_impl<const DEPTH: bool, const TRACK: bool, const ISA: u8>(
                     } else {
                         EXPECTED_DEPTH_EPS
                     };
-                    out.expected_depth[i] = st.d[l] / den;
+                    unsafe { out.expected_depth.write(i, st.d[l] / den) };
                 }
                 if want.backward_state {
-                    out.final_t[i] = t;
-                    out.n_contrib[i] = st.n[l];
+                    unsafe { out.final_t.write(i, t) };
+                    unsafe { out.n_contrib.write(i, st.n[l]) };
                 }
             }
         }
@@ -784,8 +795,8 @@ fn band_impl<const DEPTH: bool, const TRACK: bool, const ISA: u8>(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 #[allow(clippy::too_many_arguments)]
-unsafe fn band_avx2<const DEPTH: bool, const TRACK: bool>(
-    ty: usize,
+unsafe fn tiles_avx2<const DEPTH: bool, const TRACK: bool>(
+    run: Range<usize>,
     width: usize,
     height: usize,
     p: &Projected,
@@ -793,16 +804,16 @@ unsafe fn band_avx2<const DEPTH: bool, const TRACK: bool>(
     plan: &RenderPlan,
     background: [f32; 3],
     want: Want,
-    out: BandOut,
+    out: &Images,
 ) -> u64 {
-    band_impl::<DEPTH, TRACK, ISA_AVX2>(ty, width, height, p, bins, plan, background, want, out)
+    tiles_impl::<DEPTH, TRACK, ISA_AVX2>(run, width, height, p, bins, plan, background, want, out)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
 #[allow(clippy::too_many_arguments)]
-unsafe fn band_avx512<const DEPTH: bool, const TRACK: bool>(
-    ty: usize,
+unsafe fn tiles_avx512<const DEPTH: bool, const TRACK: bool>(
+    run: Range<usize>,
     width: usize,
     height: usize,
     p: &Projected,
@@ -810,14 +821,14 @@ unsafe fn band_avx512<const DEPTH: bool, const TRACK: bool>(
     plan: &RenderPlan,
     background: [f32; 3],
     want: Want,
-    out: BandOut,
+    out: &Images,
 ) -> u64 {
-    band_impl::<DEPTH, TRACK, ISA_AVX512>(ty, width, height, p, bins, plan, background, want, out)
+    tiles_impl::<DEPTH, TRACK, ISA_AVX512>(run, width, height, p, bins, plan, background, want, out)
 }
 
 #[allow(clippy::too_many_arguments)]
-fn band<const DEPTH: bool, const TRACK: bool>(
-    ty: usize,
+fn tiles<const DEPTH: bool, const TRACK: bool>(
+    run: Range<usize>,
     width: usize,
     height: usize,
     p: &Projected,
@@ -826,23 +837,23 @@ fn band<const DEPTH: bool, const TRACK: bool>(
     background: [f32; 3],
     want: Want,
     kernel: Kernel,
-    out: BandOut,
+    out: &Images,
 ) -> u64 {
     #[cfg(target_arch = "x86_64")]
     if kernel.avx512() {
         // SAFETY: the CPU supports AVX-512F (checked by `avx512`).
         return unsafe {
-            band_avx512::<DEPTH, TRACK>(ty, width, height, p, bins, plan, background, want, out)
+            tiles_avx512::<DEPTH, TRACK>(run, width, height, p, bins, plan, background, want, out)
         };
     }
     #[cfg(target_arch = "x86_64")]
     if kernel.avx2() {
         // SAFETY: the CPU supports AVX2 (checked by `avx2`).
         return unsafe {
-            band_avx2::<DEPTH, TRACK>(ty, width, height, p, bins, plan, background, want, out)
+            tiles_avx2::<DEPTH, TRACK>(run, width, height, p, bins, plan, background, want, out)
         };
     }
-    band_impl::<DEPTH, TRACK, ISA_SCALAR>(ty, width, height, p, bins, plan, background, want, out)
+    tiles_impl::<DEPTH, TRACK, ISA_SCALAR>(run, width, height, p, bins, plan, background, want, out)
 }
 
 /// The blend kernel alone: the bound [`composite`] is measured against
@@ -912,8 +923,8 @@ pub struct CompositeOut {
     pub n_contrib: Option<Vec<u32>>,
 }
 
-/// Blend all tiles. Parallel over bands of 16 rows; each band's pixels are computed by one
-/// task in a fixed order, so the output does not depend on the thread count.
+/// Blend all tiles. Parallel over runs of tiles ([`MAX_TASKS`] at most); each tile's pixels
+/// are computed by one task on their own, so the output does not depend on the thread count.
 #[allow(clippy::too_many_arguments)]
 pub fn composite(
     width: usize,
@@ -935,47 +946,32 @@ pub fn composite(
         final_t: want.backward_state.then(|| vec![0.0; npix]),
         n_contrib: want.backward_state.then(|| vec![0; npix]),
     };
-    // Each band writes its own rows of every image: split them up front.
-    let band_rows = TILE_SIZE * width;
-    let mut bands: Vec<BandOut> = (0..bins.tiles_y).map(|_| BandOut::default()).collect();
-    fn split<'a, T>(
-        image: &'a mut Option<Vec<T>>,
-        len: usize,
-        bands: &mut [BandOut<'a>],
-        field: for<'b> fn(&'b mut BandOut<'a>) -> &'b mut &'a mut [T],
-    ) {
-        if let Some(v) = image {
-            for (band, rows) in bands.iter_mut().zip(v.chunks_mut(len)) {
-                *field(band) = rows;
-            }
+    // Runs of whole tiles, many more than threads (bands of tiles were too coarse to share
+    // out at small images); each writes only its tiles' pixels.
+    let shared = |v: &mut Option<Vec<f32>>| Shared::new(v.as_deref_mut().unwrap_or_default());
+    let images = Images {
+        rgb: shared(&mut out.rgb),
+        alpha: shared(&mut out.alpha),
+        depth: shared(&mut out.depth),
+        expected_depth: shared(&mut out.expected_depth),
+        final_t: shared(&mut out.final_t),
+        n_contrib: Shared::new(out.n_contrib.as_deref_mut().unwrap_or_default()),
+    };
+    let n_tiles = bins.tiles_x * bins.tiles_y;
+    let per = n_tiles.div_ceil(MAX_TASKS).max(1);
+    let run = |k: usize| {
+        let r = k * per..((k + 1) * per).min(n_tiles);
+        let (w, h, bg, o) = (width, height, background, &images);
+        match (plan.accumulate_depth, plan.track_backward_state) {
+            (false, false) => tiles::<false, false>(r, w, h, p, bins, plan, bg, want, kernel, o),
+            (true, false) => tiles::<true, false>(r, w, h, p, bins, plan, bg, want, kernel, o),
+            (false, true) => tiles::<false, true>(r, w, h, p, bins, plan, bg, want, kernel, o),
+            (true, true) => tiles::<true, true>(r, w, h, p, bins, plan, bg, want, kernel, o),
         }
-    }
-    split(&mut out.rgb, 3 * band_rows, &mut bands, |b| &mut b.rgb);
-    split(&mut out.alpha, band_rows, &mut bands, |b| &mut b.alpha);
-    split(&mut out.depth, band_rows, &mut bands, |b| &mut b.depth);
-    split(&mut out.expected_depth, band_rows, &mut bands, |b| {
-        &mut b.expected_depth
-    });
-    split(&mut out.final_t, band_rows, &mut bands, |b| &mut b.final_t);
-    split(&mut out.n_contrib, band_rows, &mut bands, |b| {
-        &mut b.n_contrib
-    });
-    let run = |(ty, o): (usize, BandOut)| match (plan.accumulate_depth, plan.track_backward_state) {
-        (false, false) => band::<false, false>(
-            ty, width, height, p, bins, plan, background, want, kernel, o,
-        ),
-        (true, false) => band::<true, false>(
-            ty, width, height, p, bins, plan, background, want, kernel, o,
-        ),
-        (false, true) => band::<false, true>(
-            ty, width, height, p, bins, plan, background, want, kernel, o,
-        ),
-        (true, true) => band::<true, true>(
-            ty, width, height, p, bins, plan, background, want, kernel, o,
-        ),
     };
     // An integer sum: the same for any grouping.
-    report.pairs_evaluated += bands.into_par_iter().enumerate().map(run).sum::<u64>();
+    let tasks = n_tiles.div_ceil(per);
+    report.pairs_evaluated += (0..tasks).into_par_iter().map(run).sum::<u64>();
     out
 }
 

@@ -961,6 +961,10 @@ unsafe fn project_range_avx512(
 /// `opts.kernel` chooses the lane width: sixteen Gaussians per AVX-512F instruction where
 /// the CPU has it (`Kernel::Auto`), eight per AVX2 instruction (`Kernel::Auto` without
 /// AVX-512F, `Kernel::Avx2`), one at a time with `Kernel::Scalar`; all give the same bits.
+///
+/// # Panics
+/// If `plan.sh_degree` is above the scene's SH degree (`RenderPlan::new` never makes such a
+/// plan).
 pub fn project(
     g: &Gaussians,
     cam: &Camera,

@@ -579,7 +579,7 @@ fn resize<T: Copy + Default>(v: &mut Vec<T>, len: usize) {
 /// A slice's base pointer shared by the threads of a parallel scatter, each writing
 /// indices no other thread touches (the callers' SAFETY comments say why).
 #[derive(Clone, Copy)]
-struct Shared<T> {
+pub(crate) struct Shared<T> {
     ptr: *mut T,
     len: usize,
 }
@@ -590,7 +590,7 @@ unsafe impl<T: Send> Send for Shared<T> {}
 unsafe impl<T: Send> Sync for Shared<T> {}
 
 impl<T: Copy> Shared<T> {
-    fn new(v: &mut [T]) -> Self {
+    pub(crate) fn new(v: &mut [T]) -> Self {
         Shared {
             ptr: v.as_mut_ptr(),
             len: v.len(),
@@ -599,7 +599,7 @@ impl<T: Copy> Shared<T> {
     /// # Safety
     /// `i < len`, and no other thread reads or writes index `i` while the slice is shared.
     #[inline(always)]
-    unsafe fn write(self, i: usize, v: T) {
+    pub(crate) unsafe fn write(self, i: usize, v: T) {
         assert!(i < self.len);
         // SAFETY: in bounds and unaliased (the caller's contract).
         unsafe { self.ptr.add(i).write(v) }

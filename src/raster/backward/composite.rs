@@ -55,10 +55,10 @@
 //! real tile lists, SPEC.md §5.8).
 
 use crate::math::round::{ceil, floor};
-use crate::raster::composite::Kernel;
 use crate::raster::composite::{
     EXPECTED_DEPTH_EPS, MAX_ALPHA, SIGMA_CLAMP, SplatAlpha, splat_alpha, splat_rows,
 };
+use crate::raster::composite::{Kernel, MAX_TASKS};
 use crate::raster::project::{ALPHA_THRESHOLD, Projected, Splat};
 use crate::raster::tile::{TILE_SIZE, TileBins};
 use rayon::prelude::*;
@@ -124,12 +124,12 @@ pub struct CompositeGrads {
     pub pairs: u64,
 }
 
-struct BandGrads {
+/// The gradients of one task's run of tiles.
+struct TileGrads {
     /// The Gaussian and its gradient per intersection some row of its tile walked, in
     /// `bins.ids` order (the others would add +0.0).
     gids: Vec<u32>,
     grads: Vec<SplatGrad>,
-    background: [f64; 3],
     pairs: u64,
 }
 
@@ -780,10 +780,11 @@ mod avx512 {
     }
 }
 
+/// The backward of tiles `tiles` (flat indices, row-major) into `out`, in tile order.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn band<const ISA: u8, const GEOMETRY: bool>(
-    ty: usize,
+fn tiles<const ISA: u8, const GEOMETRY: bool>(
+    tiles: std::ops::Range<usize>,
     width: usize,
     height: usize,
     p: &Projected,
@@ -791,16 +792,13 @@ fn band<const ISA: u8, const GEOMETRY: bool>(
     cull_rows: bool,
     background: [f32; 3],
     g: &PixelGrads,
-) -> BandGrads {
-    let y0 = ty * TILE_SIZE;
-    let rows = TILE_SIZE.min(height - y0);
-    let mut out = BandGrads {
+) -> TileGrads {
+    let mut out = TileGrads {
         gids: Vec::new(),
         grads: Vec::new(),
-        background: [0.0; 3],
         pairs: 0,
     };
-    // Reused for every tile of the band: no allocation in the loop once warm.
+    // Reused for every tile of the run: no allocation in the loop once warm.
     let mut list: Vec<Entry> = Vec::new();
     let mut rows_idx: [Vec<u32>; TILE_SIZE] = std::array::from_fn(|_| Vec::new());
     let mut acc: Vec<Acc> = Vec::new();
@@ -809,8 +807,10 @@ fn band<const ISA: u8, const GEOMETRY: bool>(
     // `range_n[a][b][row]`: the largest n of columns [a, b) of the row (rows contiguous, so
     // that a splat's 16 rows are one load).
     let mut range_n = [[[0u32; TILE_SIZE]; LANES + 1]; LANES];
-    for tx in 0..bins.tiles_x {
-        let t = ty * bins.tiles_x + tx;
+    for t in tiles {
+        let (ty, tx) = (t / bins.tiles_x, t % bins.tiles_x);
+        let y0 = ty * TILE_SIZE;
+        let rows = TILE_SIZE.min(height - y0);
         let x0 = tx * TILE_SIZE;
         let cols = TILE_SIZE.min(width - x0);
         let ids = bins.tile(t);
@@ -827,7 +827,6 @@ fn band<const ISA: u8, const GEOMETRY: bool>(
                 st.t_final[l] = tf;
                 for (k, &v) in v_rgb.iter().enumerate() {
                     st.v[k][l] = v;
-                    out.background[k] += (tf * v) as f64;
                 }
                 st.v_alpha[l] = v_alpha;
                 st.v_d[l] = v_d;
@@ -963,15 +962,15 @@ fn band<const ISA: u8, const GEOMETRY: bool>(
     out
 }
 
-/// [`band`] compiled for AVX-512F (its list building too, not only the row kernel).
+/// [`tiles`] compiled for AVX-512F (its list building too, not only the row kernel).
 ///
 /// # Safety
 /// The CPU must support AVX-512F.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
 #[allow(clippy::too_many_arguments)]
-unsafe fn band_avx512<const GEOMETRY: bool>(
-    ty: usize,
+unsafe fn tiles_avx512<const GEOMETRY: bool>(
+    run: std::ops::Range<usize>,
     width: usize,
     height: usize,
     p: &Projected,
@@ -979,19 +978,19 @@ unsafe fn band_avx512<const GEOMETRY: bool>(
     cull_rows: bool,
     background: [f32; 3],
     g: &PixelGrads,
-) -> BandGrads {
-    band::<ISA_AVX512, GEOMETRY>(ty, width, height, p, bins, cull_rows, background, g)
+) -> TileGrads {
+    tiles::<ISA_AVX512, GEOMETRY>(run, width, height, p, bins, cull_rows, background, g)
 }
 
-/// [`band`] compiled for AVX2.
+/// [`tiles`] compiled for AVX2.
 ///
 /// # Safety
 /// The CPU must support AVX2.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 #[allow(clippy::too_many_arguments)]
-unsafe fn band_avx2<const GEOMETRY: bool>(
-    ty: usize,
+unsafe fn tiles_avx2<const GEOMETRY: bool>(
+    run: std::ops::Range<usize>,
     width: usize,
     height: usize,
     p: &Projected,
@@ -999,8 +998,8 @@ unsafe fn band_avx2<const GEOMETRY: bool>(
     cull_rows: bool,
     background: [f32; 3],
     g: &PixelGrads,
-) -> BandGrads {
-    band::<ISA_AVX2, GEOMETRY>(ty, width, height, p, bins, cull_rows, background, g)
+) -> TileGrads {
+    tiles::<ISA_AVX2, GEOMETRY>(run, width, height, p, bins, cull_rows, background, g)
 }
 
 /// One pixel's upstream gradients with ED folded in: (T_final, v_rgb, v_alpha, v_D).
@@ -1030,6 +1029,38 @@ fn upstream(g: &PixelGrads, i: usize) -> (f32, [f32; 3], f32, f32) {
     (t_final, v_rgb, v_alpha, v_d)
 }
 
+/// The background's gradient `Σ_pixels T_final·v_rgb`, summed in f64 per band of tile rows
+/// (tiles in order, each tile's rows, each row's columns), the bands' sums added in order.
+fn background_grad(width: usize, height: usize, bins: &TileBins, g: &PixelGrads) -> [f64; 3] {
+    let Some(v_rgb) = g.v_rgb else {
+        return [0.0; 3];
+    };
+    let band = |ty: usize| {
+        let mut bg = [0f64; 3];
+        let y0 = ty * TILE_SIZE;
+        for tx in 0..bins.tiles_x {
+            let x0 = tx * TILE_SIZE;
+            for y in y0..(y0 + TILE_SIZE).min(height) {
+                for x in x0..(x0 + TILE_SIZE).min(width) {
+                    let i = y * width + x;
+                    for (k, b) in bg.iter_mut().enumerate() {
+                        *b += (g.final_t[i] * v_rgb[3 * i + k]) as f64;
+                    }
+                }
+            }
+        }
+        bg
+    };
+    let bands: Vec<[f64; 3]> = (0..bins.tiles_y).into_par_iter().map(band).collect();
+    let mut bg = [0f64; 3];
+    for b in bands {
+        for (acc, v) in bg.iter_mut().zip(b) {
+            *acc += v;
+        }
+    }
+    bg
+}
+
 /// Backward of [`crate::raster::composite::composite`]: per-Gaussian splat gradients.
 #[allow(clippy::too_many_arguments)]
 pub fn composite_backward(
@@ -1051,37 +1082,42 @@ pub fn composite_backward(
         ISA_SCALAR
     };
     let (w, h, bkg) = (width, height, background);
-    let run = |ty: usize| match (isa, geometry) {
+    let run = |r: std::ops::Range<usize>| match (isa, geometry) {
         // SAFETY: ISA_AVX512 only when the CPU has AVX-512F (`Kernel::avx512` checked it).
         #[cfg(target_arch = "x86_64")]
-        (ISA_AVX512, true) => unsafe { band_avx512::<true>(ty, w, h, p, bins, cull_rows, bkg, g) },
+        (ISA_AVX512, true) => unsafe { tiles_avx512::<true>(r, w, h, p, bins, cull_rows, bkg, g) },
         // SAFETY: as above.
         #[cfg(target_arch = "x86_64")]
         (ISA_AVX512, false) => unsafe {
-            band_avx512::<false>(ty, w, h, p, bins, cull_rows, bkg, g)
+            tiles_avx512::<false>(r, w, h, p, bins, cull_rows, bkg, g)
         },
         // SAFETY: ISA_AVX2 only when the CPU has AVX2 (`Kernel::avx2` checked it).
         #[cfg(target_arch = "x86_64")]
-        (ISA_AVX2, true) => unsafe { band_avx2::<true>(ty, w, h, p, bins, cull_rows, bkg, g) },
+        (ISA_AVX2, true) => unsafe { tiles_avx2::<true>(r, w, h, p, bins, cull_rows, bkg, g) },
         // SAFETY: as above.
         #[cfg(target_arch = "x86_64")]
-        (ISA_AVX2, false) => unsafe { band_avx2::<false>(ty, w, h, p, bins, cull_rows, bkg, g) },
-        (_, true) => band::<ISA_SCALAR, true>(ty, w, h, p, bins, cull_rows, bkg, g),
-        (_, false) => band::<ISA_SCALAR, false>(ty, w, h, p, bins, cull_rows, bkg, g),
+        (ISA_AVX2, false) => unsafe { tiles_avx2::<false>(r, w, h, p, bins, cull_rows, bkg, g) },
+        (_, true) => tiles::<ISA_SCALAR, true>(r, w, h, p, bins, cull_rows, bkg, g),
+        (_, false) => tiles::<ISA_SCALAR, false>(r, w, h, p, bins, cull_rows, bkg, g),
     };
-    let bands: Vec<BandGrads> = (0..bins.tiles_y).into_par_iter().map(run).collect();
+    let n_tiles = bins.tiles_x * bins.tiles_y;
+    let per = n_tiles.div_ceil(MAX_TASKS).max(1);
+    let parts: Vec<TileGrads> = (0..n_tiles.div_ceil(per))
+        .into_par_iter()
+        .map(|k| run(k * per..((k + 1) * per).min(n_tiles)))
+        .collect();
     let mut splats = vec![SplatGrad::default(); p.splats.len()];
     // Sum per Gaussian in tile order. Only walked intersections are listed: the others
     // would add +0.0 to accumulators that are never −0.0. Ranges of Gaussians in parallel,
-    // each scanning every band in order: each Gaussian gets its additions in tile order
-    // whatever the ranges are, so the bits do not depend on the partition.
+    // each scanning every run of tiles in order: each Gaussian gets its additions in tile
+    // order whatever the ranges are, so the bits do not depend on the partition.
     let per = p.splats.len().div_ceil(rayon::current_num_threads()).max(1);
     splats
         .par_chunks_mut(per)
         .enumerate()
         .for_each(|(ci, out)| {
             let lo = ci * per;
-            for b in &bands {
+            for b in &parts {
                 for (&gid, gr) in b.gids.iter().zip(&b.grads) {
                     if let Some(s) = (gid as usize).checked_sub(lo).and_then(|k| out.get_mut(k)) {
                         s.add(gr);
@@ -1089,14 +1125,8 @@ pub fn composite_backward(
                 }
             }
         });
-    let mut bg = [0f64; 3];
-    let mut pairs = 0;
-    for b in &bands {
-        for (acc, v) in bg.iter_mut().zip(b.background) {
-            *acc += v;
-        }
-        pairs += b.pairs;
-    }
+    let pairs = parts.iter().map(|b| b.pairs).sum();
+    let bg = background_grad(width, height, bins, g);
     CompositeGrads {
         splats,
         background: bg.map(|v| v as f32),
