@@ -124,6 +124,7 @@ fn main() {
                                 &fwd.projected,
                                 &fwd.bins,
                                 fwd.plan.cull_rows,
+                                fwd.plan.conventions.max_alpha(),
                                 opts.background,
                                 &pg,
                                 groups.geometry(),

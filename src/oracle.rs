@@ -190,7 +190,12 @@ pub fn dump(
         "gaussians": n,
         "sh_degree": scene.sh_degree,
         "background": opts.background,
+        "conventions": opts.conventions.name(),
     });
-    Manifest::new(&format!("oracle {command}"), "", inputs, wr.entries).write(dir)?;
+    let manifest = Manifest {
+        conventions: Some(opts.conventions.name().to_string()),
+        ..Manifest::new(&format!("oracle {command}"), "", inputs, wr.entries)
+    };
+    manifest.write(dir)?;
     Ok(())
 }

@@ -22,7 +22,8 @@ use unseen::camera::Camera;
 use unseen::gaussian::Gaussians;
 use unseen::math::sh::num_coeffs;
 use unseen::raster::backward::{GradGroups, ImageGrads, backward as core_backward};
-use unseen::raster::{Cutoffs, Kernel, Outputs, RenderOptions, RenderPlan};
+use unseen::raster::decisions::{Decisions, Margins, decisions};
+use unseen::raster::{Conventions, Cutoffs, Kernel, Outputs, RenderOptions, RenderPlan};
 use unseen::{Error, ErrorKind};
 
 /// A core error as a Python exception: `OSError` for the operating system's failures,
@@ -193,13 +194,83 @@ fn options(
     background: [f32; 3],
     sh_degree: Option<u32>,
     kernel_name: &str,
+    conventions: &str,
 ) -> PyResult<RenderOptions> {
     Ok(RenderOptions {
         background,
         sh_degree,
         kernel: kernel(kernel_name)?,
+        conventions: Conventions::parse(conventions)
+            .map_err(|e| PyValueError::new_err(format!("conventions: {e}")))?,
         ..RenderOptions::default()
     })
+}
+
+/// The decision diagnostics as a dict of arrays (SPEC.md §8.1).
+fn decisions_dict<'py>(py: Python<'py>, d: Decisions) -> PyResult<Bound<'py, PyDict>> {
+    let (h, w, n) = (d.height, d.width, d.gaussian_flags.len());
+    let out = PyDict::new(py);
+    out.set_item("pixel_flags", to_numpy(py, d.pixel_flags, &[h, w])?)?;
+    out.set_item("alpha_margin", to_numpy(py, d.alpha_margin, &[h, w])?)?;
+    out.set_item(
+        "transmittance_margin",
+        to_numpy(py, d.transmittance_margin, &[h, w])?,
+    )?;
+    out.set_item("depth_margin", to_numpy(py, d.depth_margin, &[h, w])?)?;
+    out.set_item("clamp_margin", to_numpy(py, d.clamp_margin, &[h, w])?)?;
+    out.set_item("alpha_error", to_numpy(py, d.alpha_error, &[h, w])?)?;
+    out.set_item("rgb_error", to_numpy(py, d.rgb_error, &[h, w])?)?;
+    out.set_item("gaussian_flags", to_numpy(py, d.gaussian_flags, &[n])?)?;
+    let m = PyDict::new(py);
+    m.set_item("sigma", d.margins.sigma)?;
+    m.set_item("alpha", d.margins.alpha)?;
+    m.set_item("transmittance", d.margins.transmittance)?;
+    m.set_item("depth", d.margins.depth)?;
+    out.set_item("margins", m)?;
+    Ok(out)
+}
+
+/// Margins from an optional dict `{"sigma": .., "alpha": .., "transmittance": .., "depth": ..}`.
+fn margins(d: Option<&Bound<'_, PyDict>>) -> PyResult<Margins> {
+    let mut m = Margins::default();
+    if let Some(d) = d {
+        for (k, v) in d.iter() {
+            let key: String = k.extract()?;
+            let v: f32 = v.extract()?;
+            match key.as_str() {
+                "sigma" => m.sigma = v,
+                "alpha" => m.alpha = v,
+                "transmittance" => m.transmittance = v,
+                "depth" => m.depth = v,
+                _ => {
+                    return Err(PyValueError::new_err(format!(
+                        "margins: expected keys among 'sigma', 'alpha', 'transmittance', 'depth', got {key:?}"
+                    )));
+                }
+            }
+        }
+    }
+    Ok(m)
+}
+
+/// An `n × n` matrix of float64 or float32 (gsplat's dtype), as f64 (exact).
+fn matrix(name: &str, obj: &Bound<'_, PyAny>, n: usize) -> PyResult<Vec<f64>> {
+    let dims = [(Some(n), ""), (Some(n), "")];
+    let is_f32 = obj
+        .cast::<PyUntypedArray>()
+        .is_ok_and(|a| a.dtype().is_equiv_to(&dtype::<f32>(obj.py())));
+    if is_f32 {
+        let (_, v) = array::<f32>(name, obj, &dims, &mut Vec::new())?;
+        return Ok(v.into_iter().map(f64::from).collect());
+    }
+    array::<f64>(name, obj, &dims, &mut Vec::new())
+        .map(|(_, v)| v)
+        .map_err(|e| {
+            PyValueError::new_err(
+                e.to_string()
+                    .replace("float64 array", "float64 (or float32) array"),
+            )
+        })
 }
 
 /// A pinhole camera (no distortion). Pixel centres are at `(j + 0.5, i + 0.5)`.
@@ -212,8 +283,8 @@ struct PyCamera {
 #[pymethods]
 impl PyCamera {
     /// A camera from intrinsics `k` (3×3: fx, fy on the diagonal, cx, cy in the last column,
-    /// no skew) and the world-to-camera matrix `viewmat` (4×4, last row 0 0 0 1), float64,
-    /// as gsplat takes them.
+    /// no skew) and the world-to-camera matrix `viewmat` (4×4, last row 0 0 0 1), float64
+    /// or float32 (gsplat's dtype; widened exactly), as gsplat takes them.
     #[new]
     #[pyo3(signature = (k, viewmat, width, height, name = "camera"))]
     fn new(
@@ -223,9 +294,8 @@ impl PyCamera {
         height: u32,
         name: &str,
     ) -> PyResult<Self> {
-        let mut b = Vec::new();
-        let (_, k) = array::<f64>("k", k, &[(Some(3), ""), (Some(3), "")], &mut b)?;
-        let (_, v) = array::<f64>("viewmat", viewmat, &[(Some(4), ""), (Some(4), "")], &mut b)?;
+        let k = matrix("k", k, 3)?;
+        let v = matrix("viewmat", viewmat, 4)?;
         if k[1] != 0.0 || k[3] != 0.0 || k[6] != 0.0 || k[7] != 0.0 || k[8] != 1.0 {
             return Err(PyValueError::new_err(
                 "k: expected [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] (no skew)",
@@ -306,7 +376,7 @@ fn load_cameras(py: Python<'_>, path: PathBuf) -> PyResult<Vec<PyCamera>> {
 /// `inv_alpha_threshold` (255: gsplat's α ≥ 1/255; `inf`: every α > 0) and
 /// `transmittance_stop` (1e-4) are the blend's cut-offs, a forward-only knob (SPEC.md §5.4).
 #[pyfunction]
-#[pyo3(signature = (means, quats, scales, opacities, sh, camera, *, sh_degree=None, background=[0.0, 0.0, 0.0], outputs=None, kernel="auto", threads=None, inv_alpha_threshold=255.0, transmittance_stop=1e-4))]
+#[pyo3(signature = (means, quats, scales, opacities, sh, camera, *, sh_degree=None, background=[0.0, 0.0, 0.0], outputs=None, kernel="auto", threads=None, inv_alpha_threshold=255.0, transmittance_stop=1e-4, conventions="inria", diagnostics=false, margins=None))]
 #[allow(clippy::too_many_arguments)]
 fn render<'py>(
     py: Python<'py>,
@@ -323,9 +393,13 @@ fn render<'py>(
     threads: Option<usize>,
     inv_alpha_threshold: f32,
     transmittance_stop: f32,
+    conventions: &str,
+    diagnostics: bool,
+    margins: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let g = scene(means, quats, scales, opacities, sh)?;
-    let mut opts = options(background, sh_degree, kernel)?;
+    let mut opts = options(background, sh_degree, kernel, conventions)?;
+    let margins = self::margins(margins)?;
     // The forward cut-offs; the core checks them when it renders.
     opts.cutoffs = Cutoffs {
         inv_alpha_threshold,
@@ -358,11 +432,17 @@ fn render<'py>(
         }
     };
     let cam = &camera.inner;
-    let (render, projected, bins) = py
+    let ((render, projected, bins), diag) = py
         .detach(|| {
             unseen::sys::with_threads(threads, || {
                 let plan = RenderPlan::new(&g, &opts);
-                unseen::raster::render_staged(&g, cam, &opts, &plan)
+                let staged = unseen::raster::render_staged(&g, cam, &opts, &plan)?;
+                let diag = if diagnostics {
+                    Some(decisions(&g, cam, &opts, &margins)?)
+                } else {
+                    None
+                };
+                Ok((staged, diag))
             })
         })
         .map_err(py_err)?
@@ -420,6 +500,9 @@ fn render<'py>(
     d.set_item("tile_offsets", to_numpy(py, offsets, &[len])?)?;
     let len = bins.ids.len();
     d.set_item("tile_ids", to_numpy(py, bins.ids, &[len])?)?;
+    if let Some(diag) = diag {
+        d.set_item("diagnostics", decisions_dict(py, diag)?)?;
+    }
     Ok(d)
 }
 
@@ -429,7 +512,7 @@ fn render<'py>(
 /// (N, 4), `scales` (N, 3, log scales), `opacities` (N, logits), `sh` (N, K, 3),
 /// `background` (3,), `means2d` (N, 2, pixels).
 #[pyfunction]
-#[pyo3(signature = (means, quats, scales, opacities, sh, camera, grad_rgb, *, grad_alpha=None, grad_depth=None, grad_expected_depth=None, sh_degree=None, background=[0.0, 0.0, 0.0], kernel="auto", threads=None))]
+#[pyo3(signature = (means, quats, scales, opacities, sh, camera, grad_rgb, *, grad_alpha=None, grad_depth=None, grad_expected_depth=None, sh_degree=None, background=[0.0, 0.0, 0.0], kernel="auto", threads=None, conventions="inria"))]
 #[allow(clippy::too_many_arguments)]
 fn backward<'py>(
     py: Python<'py>,
@@ -447,9 +530,10 @@ fn backward<'py>(
     background: [f32; 3],
     kernel: &str,
     threads: Option<usize>,
+    conventions: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
     let g = scene(means, quats, scales, opacities, sh)?;
-    let mut opts = options(background, sh_degree, kernel)?;
+    let mut opts = options(background, sh_degree, kernel, conventions)?;
     opts.outputs = Outputs::ALL;
     let cam = &camera.inner;
     let (h, w) = (cam.height as usize, cam.width as usize);

@@ -45,6 +45,11 @@ impl FileEntry {
 pub struct Manifest {
     pub crate_version: String,
     pub conventions_version: u32,
+    /// The convention profile of the renders behind the files (SPEC.md §5.2), when it is
+    /// not the default `inria` (absent: `inria`; so manifests of default runs keep their
+    /// bytes).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub conventions: Option<String>,
     /// [`crate::oracle::NUMERICS_REVISION`] of the binary that wrote it (0: written before
     /// the field existed): outputs are bit-reproducible by a binary of the same revision.
     #[serde(default)]
@@ -72,6 +77,7 @@ impl Manifest {
         Manifest {
             crate_version: env!("CARGO_PKG_VERSION").into(),
             conventions_version: crate::oracle::CONVENTIONS_VERSION,
+            conventions: None,
             numerics_revision: crate::oracle::NUMERICS_REVISION,
             command: command.into(),
             step: step.into(),

@@ -16,6 +16,7 @@
 
 pub mod classical;
 pub mod morph;
+#[cfg(feature = "onnx")]
 pub mod onnx;
 pub mod telea;
 
@@ -153,6 +154,16 @@ fn onnx_card(name: &str) -> Option<&Path> {
     name.strip_prefix("onnx:").map(Path::new)
 }
 
+/// The error of an `onnx:` slot in a build without the `onnx` feature.
+#[cfg(not(feature = "onnx"))]
+fn without_onnx(card: &Path) -> Error {
+    Error::invalid(
+        "this build has no ONNX support (the Python binding and builds without the `onnx` \
+         feature); run the model with the `unseen` command line",
+    )
+    .at(card)
+}
+
 fn unknown(slot: &str, name: &str, known: &str) -> Error {
     Error::invalid(format!(
         "unknown {slot} '{name}' (known: {known}, or onnx:CARD.json)"
@@ -162,7 +173,10 @@ fn unknown(slot: &str, name: &str, known: &str) -> Error {
 /// The inpainter called `name`: `telea` (radius 3) or `onnx:CARD.json`.
 pub fn inpainter(name: &str) -> Result<Box<dyn Inpainter>> {
     if let Some(card) = onnx_card(name) {
+        #[cfg(feature = "onnx")]
         return Ok(Box::new(onnx::OnnxInpainter::load(card)?));
+        #[cfg(not(feature = "onnx"))]
+        return Err(without_onnx(card));
     }
     match name {
         "telea" => Ok(Box::new(classical::Telea::default())),
@@ -173,7 +187,10 @@ pub fn inpainter(name: &str) -> Result<Box<dyn Inpainter>> {
 /// The depth estimator called `name`: `depth-fill` or `onnx:CARD.json`.
 pub fn depth_estimator(name: &str) -> Result<Box<dyn DepthEstimator>> {
     if let Some(card) = onnx_card(name) {
+        #[cfg(feature = "onnx")]
         return Ok(Box::new(onnx::OnnxDepth::load(card)?));
+        #[cfg(not(feature = "onnx"))]
+        return Err(without_onnx(card));
     }
     match name {
         "depth-fill" => Ok(Box::new(classical::DepthFill::default())),
@@ -185,7 +202,10 @@ pub fn depth_estimator(name: &str) -> Result<Box<dyn DepthEstimator>> {
 /// `onnx:CARD.json` (an image model run per frame).
 pub fn video_depth_estimator(name: &str) -> Result<Box<dyn VideoDepthEstimator>> {
     if let Some(card) = onnx_card(name) {
+        #[cfg(feature = "onnx")]
         return Ok(Box::new(onnx::OnnxDepth::load(card)?));
+        #[cfg(not(feature = "onnx"))]
+        return Err(without_onnx(card));
     }
     match name {
         "depth-fill" => Ok(Box::new(classical::DepthFill::default())),
@@ -196,7 +216,10 @@ pub fn video_depth_estimator(name: &str) -> Result<Box<dyn VideoDepthEstimator>>
 /// The artifact fixer called `name`: `identity`, `bilateral` or `onnx:CARD.json`.
 pub fn artifact_fixer(name: &str) -> Result<Box<dyn ArtifactFixer>> {
     if let Some(card) = onnx_card(name) {
+        #[cfg(feature = "onnx")]
         return Ok(Box::new(onnx::OnnxFixer::load(card)?));
+        #[cfg(not(feature = "onnx"))]
+        return Err(without_onnx(card));
     }
     match name {
         "identity" => Ok(Box::new(classical::Identity)),

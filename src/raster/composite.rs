@@ -30,8 +30,10 @@ use crate::math::fastexp::exp;
 use rayon::prelude::*;
 use std::ops::Range;
 
-/// Upper clamp of per-splat alpha (gsplat ≥ 1.5.4 and INRIA; gsplat ≤ 1.5.3 used 0.999).
+/// Upper clamp of per-splat alpha (INRIA and gsplat ≥ 1.5.4: [`super::Conventions::Inria`]).
 pub const MAX_ALPHA: f32 = 0.99;
+/// Upper clamp of per-splat alpha in gsplat 1.0–1.5.3 ([`super::Conventions::Gsplat`]).
+pub const MAX_ALPHA_GSPLAT: f32 = 0.999;
 /// Blending stops before a splat that would bring transmittance to this or below.
 pub const TRANSMITTANCE_STOP: f32 = 1e-4;
 /// σ is clamped here before `exp` (exact: see the module docs).
@@ -250,26 +252,31 @@ pub(crate) fn prefetch(p: &Projected, gid: usize) {
     }
 }
 
-/// The cut-offs as the kernels compare them (from [`crate::raster::Cutoffs`]).
+/// The cut-offs and the α clamp as the kernels compare them (from
+/// [`crate::raster::Cutoffs`] and [`crate::raster::Conventions`]).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Cut {
     /// Smallest blended α.
     pub alpha: f32,
     /// Transmittance at or below which blending stops.
     pub stop: f32,
+    /// Upper clamp of α.
+    pub max_alpha: f32,
 }
 
 impl Cut {
-    pub(crate) fn new(c: &crate::raster::Cutoffs) -> Cut {
+    pub(crate) fn new(plan: &RenderPlan) -> Cut {
         Cut {
-            alpha: c.alpha_threshold(),
-            stop: c.transmittance_stop,
+            alpha: plan.cutoffs.alpha_threshold(),
+            stop: plan.cutoffs.transmittance_stop,
+            max_alpha: plan.conventions.max_alpha(),
         }
     }
-    /// gsplat's.
+    /// gsplat's cut-offs, INRIA's clamp (the defaults).
     const GSPLAT: Cut = Cut {
         alpha: ALPHA_THRESHOLD,
         stop: TRANSMITTANCE_STOP,
+        max_alpha: MAX_ALPHA,
     };
 }
 
@@ -315,10 +322,11 @@ pub(crate) struct SplatAlpha {
     pub alpha: f32,
 }
 
-/// σ and α of a splat at offset `(dx, dy)`: the one scalar definition shared by the forward
-/// and backward passes (the AVX2 kernels mirror it operation for operation).
+/// σ and α of a splat at offset `(dx, dy)` under the α clamp `max_alpha`: the one scalar
+/// definition shared by the forward and backward passes (the AVX2 kernels mirror it
+/// operation for operation).
 #[inline(always)]
-pub(crate) fn splat_alpha(s: &Splat, dx: f32, dy: f32) -> SplatAlpha {
+pub(crate) fn splat_alpha(s: &Splat, dx: f32, dy: f32, max_alpha: f32) -> SplatAlpha {
     let sigma = 0.5 * (s.conic[0] * dx * dx + s.conic[2] * dy * dy) + s.conic[1] * dx * dy;
     let e = exp(-(if sigma < SIGMA_CLAMP {
         sigma
@@ -326,7 +334,7 @@ pub(crate) fn splat_alpha(s: &Splat, dx: f32, dy: f32) -> SplatAlpha {
         SIGMA_CLAMP
     }));
     let a = s.opacity * e;
-    let alpha = if a < MAX_ALPHA { a } else { MAX_ALPHA };
+    let alpha = if a < max_alpha { a } else { max_alpha };
     SplatAlpha { sigma, e, a, alpha }
 }
 
@@ -347,7 +355,7 @@ fn blend_lane<const DEPTH: bool, const TRACK: bool>(
     n: &mut u32,
     active: &mut u32,
 ) {
-    let SplatAlpha { sigma, alpha, .. } = splat_alpha(s, dx, dy);
+    let SplatAlpha { sigma, alpha, .. } = splat_alpha(s, dx, dy, cut.max_alpha);
     let t0 = *t;
     let nt = t0 * (1.0 - alpha);
     let valid = (*active != 0) & (sigma >= 0.0) & (alpha >= cut.alpha);
@@ -412,7 +420,7 @@ fn blend_group_lanes<const DEPTH: bool, const TRACK: bool>(
 /// the group's state held in registers for the whole walk.
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use super::{Cut, GROUP, Group, MAX_ALPHA, Members, SIGMA_CLAMP, TileSplat};
+    use super::{Cut, GROUP, Group, Members, SIGMA_CLAMP, TileSplat};
     use crate::math::fastexp::exp_avx2;
     use std::arch::x86_64::*;
 
@@ -432,7 +440,7 @@ mod avx2 {
     ) -> u64 {
         let c = |x: f32| _mm256_set1_ps(x);
         let zero = _mm256_setzero_ps();
-        let (threshold, stop_at) = (c(cut.alpha), c(cut.stop));
+        let (threshold, stop_at, clamp) = (c(cut.alpha), c(cut.stop), c(cut.max_alpha));
         let (mut pxv, mut t, mut r, mut g, mut b, mut d) = (
             [zero; H], [zero; H], [zero; H], [zero; H], [zero; H], [zero; H],
         );
@@ -480,7 +488,7 @@ mod avx2 {
                 let clamped = _mm256_min_ps(sigma, c(SIGMA_CLAMP));
                 // SAFETY: this function runs only on CPUs with AVX2.
                 let e = unsafe { exp_avx2(_mm256_xor_ps(clamped, c(-0.0))) };
-                alphas[h] = _mm256_min_ps(_mm256_mul_ps(op, e), c(MAX_ALPHA));
+                alphas[h] = _mm256_min_ps(_mm256_mul_ps(op, e), clamp);
                 valids[h] = _mm256_and_ps(
                     act[h],
                     _mm256_and_ps(
@@ -535,7 +543,7 @@ mod avx2 {
 /// the operations those of [`avx2::blend_group`] one for one, masks in mask registers.
 #[cfg(target_arch = "x86_64")]
 mod avx512 {
-    use super::{Cut, GROUP, Group, MAX_ALPHA, Members, SIGMA_CLAMP, TileSplat};
+    use super::{Cut, GROUP, Group, Members, SIGMA_CLAMP, TileSplat};
     use crate::math::fastexp::exp_avx512;
     use std::arch::x86_64::*;
 
@@ -552,7 +560,7 @@ mod avx512 {
     ) -> u64 {
         let c = |x: f32| _mm512_set1_ps(x);
         let zero = _mm512_setzero_ps();
-        let (threshold, stop_at) = (c(cut.alpha), c(cut.stop));
+        let (threshold, stop_at, clamp) = (c(cut.alpha), c(cut.stop), c(cut.max_alpha));
         // SAFETY: every array read or written here has exactly GROUP = 16 lanes.
         let (pxv, mut t, mut r, mut g, mut b, mut d, mut n, active) = unsafe {
             (
@@ -587,7 +595,7 @@ mod avx512 {
             let neg = _mm512_xor_si512(_mm512_castps_si512(clamped), _mm512_set1_epi32(i32::MIN));
             // SAFETY: this function runs only on CPUs with AVX-512F.
             let e = unsafe { exp_avx512(_mm512_castsi512_ps(neg)) };
-            let alpha = _mm512_min_ps(_mm512_mul_ps(c(s.opacity), e), c(MAX_ALPHA));
+            let alpha = _mm512_min_ps(_mm512_mul_ps(c(s.opacity), e), clamp);
             let valid = _mm512_mask_cmp_ps_mask::<_CMP_GE_OQ>(act, sigma, zero)
                 & _mm512_cmp_ps_mask::<_CMP_GE_OQ>(alpha, threshold);
             let nt = _mm512_mul_ps(t, _mm512_sub_ps(c(1.0), alpha));
@@ -668,7 +676,7 @@ fn tiles_impl<const DEPTH: bool, const TRACK: bool, const ISA: u8>(
     out: &Images,
 ) -> u64 {
     let mut pairs_total = 0;
-    let cut = Cut::new(&plan.cutoffs);
+    let cut = Cut::new(plan);
     // Reused for every tile of the run: no allocation in the loop.
     let mut batch: Vec<TileSplat> = Vec::with_capacity(BATCH);
     // Per batch splat, the tile rows it can reach as a bit mask (0 past the batch), and

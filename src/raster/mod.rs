@@ -7,6 +7,7 @@
 
 pub mod backward;
 pub mod composite;
+pub mod decisions;
 pub mod plan;
 pub mod project;
 pub mod tile;
@@ -33,6 +34,69 @@ pub struct RenderOptions {
     /// Where blending is cut off: gsplat's values by default. Other values are a
     /// forward-only knob (the accuracy bench's); the backward refuses them.
     pub cutoffs: Cutoffs,
+    /// Which published renderer's constants the render follows (SPEC.md §5.2): INRIA's
+    /// (the default, which training and the pipeline use) or gsplat ≤ 1.5.3's. Unlike the
+    /// cut-offs, both hold in the forward and the backward.
+    pub conventions: Conventions,
+}
+
+/// A convention profile: the constants in which published 3DGS renderers differ and that a
+/// port must match (SPEC.md §5.2). Today only the upper clamp of α differs.
+///
+/// | profile | α clamp | source |
+/// |---|---|---|
+/// | `inria` | 0.99 | INRIA `diff-gaussian-rasterization` `forward.cu` (`min(0.99f, …)`), gsplat ≥ 1.5.4 |
+/// | `gsplat` | 0.999 | gsplat 1.0–1.5.3 `RasterizeToPixels3DGSFwd.cu` / `Bwd.cu` (`min(0.999f, …)`, the backward's `opac·vis <= 0.999f`) |
+///
+/// Everything else is the same in both: gsplat's near plane (0.01), ε2d, Jacobian guard,
+/// opacity-aware radius, 1/255 threshold and exclusive 1e-4 stop (SPEC.md §5.2).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Conventions {
+    /// α clamp 0.99 (INRIA; gsplat ≥ 1.5.4).
+    #[default]
+    Inria,
+    /// α clamp 0.999 (gsplat 1.0–1.5.3).
+    Gsplat,
+}
+
+impl Conventions {
+    /// Every profile, in a fixed order.
+    pub const ALL: [Conventions; 2] = [Conventions::Inria, Conventions::Gsplat];
+
+    /// The upper clamp of a splat's α (`α = min(max_alpha, o·exp(−σ))`); the backward
+    /// passes no opacity or geometry gradient where `o·exp(−σ)` exceeds it.
+    pub const fn max_alpha(self) -> f32 {
+        match self {
+            Conventions::Inria => composite::MAX_ALPHA,
+            Conventions::Gsplat => composite::MAX_ALPHA_GSPLAT,
+        }
+    }
+
+    /// The profile's name in files and on the command line: `inria` or `gsplat`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Conventions::Inria => "inria",
+            Conventions::Gsplat => "gsplat",
+        }
+    }
+
+    /// The profile called `name` (`inria` or `gsplat`).
+    pub fn parse(name: &str) -> Result<Conventions> {
+        Conventions::ALL
+            .into_iter()
+            .find(|c| c.name() == name)
+            .ok_or_else(|| {
+                Error::invalid(format!(
+                    "unknown conventions '{name}' (known: inria, gsplat)"
+                ))
+            })
+    }
+}
+
+impl std::fmt::Display for Conventions {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
 }
 
 /// The blend's cut-offs (SPEC.md §5.4–5.5): gsplat's `ALPHA_THRESHOLD = 1/255` (with the
@@ -105,6 +169,7 @@ impl Default for RenderOptions {
             antialiased: false,
             kernel: Kernel::Auto,
             cutoffs: Cutoffs::GSPLAT,
+            conventions: Conventions::Inria,
         }
     }
 }

@@ -11,7 +11,7 @@
 //! | background term `T·bg` | background is exactly black | `C + T·0 = C` for `C ≥ 0` |
 //! | rows of a tile outside a Gaussian's radius + 1 px | unless a lower alpha threshold lets the 3.33σ cap bind | `α < 1/255` there (SPEC.md §5.4) |
 
-use super::{Cutoffs, RenderOptions};
+use super::{Conventions, Cutoffs, RenderOptions};
 use crate::gaussian::Gaussians;
 
 /// The outputs a caller may ask for.
@@ -62,6 +62,8 @@ pub struct RenderPlan {
     pub cull_rows: bool,
     /// Where blending is cut off (the caller's [`RenderOptions::cutoffs`]).
     pub cutoffs: Cutoffs,
+    /// The caller's [`RenderOptions::conventions`] (the α clamp).
+    pub conventions: Conventions,
 }
 
 impl RenderPlan {
@@ -90,6 +92,7 @@ impl RenderPlan {
             apply_background: opts.background != [0.0; 3],
             cull_rows: opts.cutoffs.rows_cull_exactly(),
             cutoffs: opts.cutoffs,
+            conventions: opts.conventions,
         }
     }
 
@@ -105,6 +108,7 @@ impl RenderPlan {
             apply_background: true,
             cull_rows: false,
             cutoffs: opts.cutoffs,
+            conventions: opts.conventions,
         }
     }
 }

@@ -634,6 +634,7 @@ fn backward_skips_are_bit_identical() {
                         &fwd.projected,
                         &fwd.bins,
                         cull,
+                        fwd.plan.conventions.max_alpha(),
                         opts.background,
                         &pg,
                         geometry,

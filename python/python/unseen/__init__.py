@@ -16,11 +16,17 @@ argument       shape        meaning
 
 Camera axes are OpenCV's (x right, y down, z forward); pixel centres at (j + 0.5, i + 0.5).
 Every scene and gradient array must be float32 and C-contiguous (the camera's ``K`` and
-``viewmat`` float64); ``scales`` and ``opacities`` are the *raw* parameters (log scales,
+``viewmat`` float64 or float32); ``scales`` and ``opacities`` are the *raw* parameters (log scales,
 logits), not the activated ones gsplat's ``rasterization()`` takes. A wrong dtype, order
 or shape raises a
 ``ValueError`` naming the argument and the expected shape. The GIL is released while the
 core computes; ``threads`` sets the pool size (the bits do not depend on it).
+
+``conventions`` (``render``, ``backward``) is the convention profile: ``"inria"`` (α clamp
+0.99: INRIA, gsplat ≥ 1.5.4; the default) or ``"gsplat"`` (0.999: gsplat 1.0–1.5.3).
+``render(..., diagnostics=True)`` also returns, under ``"diagnostics"``, where each pixel's
+and Gaussian's discrete decisions came near their thresholds (SPEC.md §8.1);
+``unseen.testing`` builds a port's pytest checks on it.
 """
 
 import json as _json

@@ -12,7 +12,7 @@ use unseen::io::image::{ImageF32, write_exr, write_png};
 use unseen::qamask::{
     QaMaskConfig, heat_map, opacity_mask, read_mask_dir, render_qa_mask, scale_mask,
 };
-use unseen::raster::{Cutoffs, Outputs, RenderOptions, render};
+use unseen::raster::{Conventions, Cutoffs, Outputs, RenderOptions, render};
 
 #[derive(Args)]
 pub struct RenderArgs {
@@ -50,6 +50,15 @@ pub struct RenderArgs {
     /// gsplat's 1e-4 by default, 0 for never early. A forward-only knob for images.
     #[arg(long, default_value_t = Cutoffs::GSPLAT.transmittance_stop)]
     transmittance_stop: f32,
+    /// Convention profile: `inria` (α clamp 0.99, INRIA and gsplat ≥ 1.5.4) or `gsplat`
+    /// (α clamp 0.999, gsplat 1.0–1.5.3) (SPEC.md §5.2).
+    #[arg(long, default_value = "inria", value_parser = parse_conventions)]
+    conventions: Conventions,
+}
+
+/// `inria` or `gsplat` (SPEC.md §5.2).
+pub fn parse_conventions(s: &str) -> std::result::Result<Conventions, String> {
+    Conventions::parse(s).map_err(|e| e.to_string())
 }
 
 /// `1/N` (N ≥ 1, or `inf`) or `0` as the reciprocal threshold `N` (`0` → +∞), so that
@@ -93,6 +102,10 @@ pub struct OracleScene {
     /// Background colour, linear.
     #[arg(long, default_value = "0,0,0", value_parser = parse_rgb)]
     background: [f32; 3],
+    /// Convention profile: `inria` (α clamp 0.99) or `gsplat` (0.999, gsplat 1.0–1.5.3);
+    /// recorded in the dump's manifest (SPEC.md §5.2, §12).
+    #[arg(long, default_value = "inria", value_parser = parse_conventions)]
+    conventions: Conventions,
 }
 
 #[derive(Subcommand)]
@@ -253,6 +266,7 @@ fn run_oracle(c: &OracleScene, targets: Option<(&Path, &str, Option<&Path>)>) ->
     };
     let opts = RenderOptions {
         background: c.background,
+        conventions: c.conventions,
         ..RenderOptions::default()
     };
     let Some((target, loss, depth)) = targets else {
@@ -357,6 +371,7 @@ pub fn run_render_command(a: RenderArgs) -> Result<()> {
         mask,
         alpha_threshold,
         transmittance_stop,
+        conventions,
     } = a;
     let mut cams = inria::read_cameras_json(&cameras)?;
     if let Some(name) = camera {
@@ -386,6 +401,7 @@ pub fn run_render_command(a: RenderArgs) -> Result<()> {
             inv_alpha_threshold: alpha_threshold,
             transmittance_stop,
         },
+        conventions,
         ..RenderOptions::default()
     };
     let files = run_render(&Job {

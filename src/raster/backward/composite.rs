@@ -56,7 +56,7 @@
 
 use crate::math::round::{ceil, floor};
 use crate::raster::composite::{
-    EXPECTED_DEPTH_EPS, MAX_ALPHA, SIGMA_CLAMP, SplatAlpha, splat_alpha, splat_rows,
+    EXPECTED_DEPTH_EPS, SIGMA_CLAMP, SplatAlpha, splat_alpha, splat_rows,
 };
 use crate::raster::composite::{Kernel, MAX_TASKS};
 use crate::raster::project::{ALPHA_THRESHOLD, Projected, Splat};
@@ -321,6 +321,7 @@ pub(crate) fn recover(t_behind: f32, alpha: f32) -> (f32, f32, f32) {
 #[inline(always)]
 #[allow(clippy::too_many_arguments, clippy::needless_range_loop)] // k, l index parallel arrays
 fn lane<const GEOMETRY: bool>(
+    max_alpha: f32,
     s: &Splat,
     pos: u32,
     px: f32,
@@ -331,7 +332,7 @@ fn lane<const GEOMETRY: bool>(
 ) {
     let dx = s.mean[0] - px;
     let dy = s.mean[1] - py;
-    let SplatAlpha { sigma, e, a, alpha } = splat_alpha(s, dx, dy);
+    let SplatAlpha { sigma, e, a, alpha } = splat_alpha(s, dx, dy, max_alpha);
     let valid = (pos < st.n[l]) & (sigma >= 0.0) & (alpha >= ALPHA_THRESHOLD);
     let (ra, t, fac) = recover(st.t[l], alpha);
     for k in 0..3 {
@@ -346,7 +347,7 @@ fn lane<const GEOMETRY: bool>(
             + tf * ra * st.v_alpha[l]
             - tf * ra * st.bg_dot[l];
         c[3][l] = if valid { fac * st.v_d[l] } else { 0.0 };
-        let open = valid & (a <= MAX_ALPHA);
+        let open = valid & (a <= max_alpha);
         let v_sigma = -a * v_a;
         c[4][l] = if open { 0.5 * v_sigma * dx * dx } else { 0.0 };
         c[5][l] = if open { v_sigma * dx * dy } else { 0.0 };
@@ -441,6 +442,7 @@ fn reduce_lanes<const GEOMETRY: bool>(acc: &Acc) -> SplatGrad {
 /// lane, every lane evaluated (the reference form).
 #[inline(never)]
 fn row_lanes<const GEOMETRY: bool>(
+    max_alpha: f32,
     list: &[Entry],
     idx: &[u32],
     px: &[f32; LANES],
@@ -453,7 +455,7 @@ fn row_lanes<const GEOMETRY: bool>(
         let i = v & VISIT_INDEX;
         let Entry { s, pos } = &list[i as usize];
         for (l, &x) in px.iter().enumerate() {
-            lane::<GEOMETRY>(s, *pos, x, py, st, l, &mut c);
+            lane::<GEOMETRY>(max_alpha, s, *pos, x, py, st, l, &mut c);
         }
         add_row::<GEOMETRY>(&mut acc[i as usize], &c);
     }
@@ -464,8 +466,8 @@ fn row_lanes<const GEOMETRY: bool>(
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
     use super::{
-        ALPHA_THRESHOLD, Acc, Entry, LANES, MAX_ALPHA, NC, RECOVER_EPS, RowState, SIGMA_CLAMP,
-        VISIT_INDEX, fields,
+        ALPHA_THRESHOLD, Acc, Entry, LANES, NC, RECOVER_EPS, RowState, SIGMA_CLAMP, VISIT_INDEX,
+        fields,
     };
     use crate::math::fastexp::exp_avx2;
     use std::arch::x86_64::*;
@@ -475,6 +477,7 @@ mod avx2 {
     #[target_feature(enable = "avx2")]
     #[allow(clippy::needless_range_loop)] // h and k index parallel register arrays
     pub(super) unsafe fn row<const GEOMETRY: bool>(
+        max_alpha: f32,
         list: &[Entry],
         idx: &[u32],
         px: &[f32; LANES],
@@ -538,7 +541,7 @@ mod avx2 {
                 // SAFETY: AVX2 is available in this function.
                 let e = unsafe { exp_avx2(_mm256_xor_ps(clamped, c(-0.0))) };
                 let a = _mm256_mul_ps(c(s.opacity), e);
-                let alpha = _mm256_min_ps(a, c(MAX_ALPHA));
+                let alpha = _mm256_min_ps(a, c(max_alpha));
                 valids[h] = _mm256_and_ps(
                     active,
                     _mm256_and_ps(
@@ -583,7 +586,7 @@ mod avx2 {
                     v_a = _mm256_add_ps(v_a, _mm256_mul_ps(tfra, va[h]));
                     v_a = _mm256_sub_ps(v_a, _mm256_mul_ps(tfra, bgd[h]));
                     cv[3][h] = sel(valid, _mm256_mul_ps(fac, vd[h]));
-                    let open = _mm256_and_ps(valid, _mm256_cmp_ps::<_CMP_LE_OQ>(a, c(MAX_ALPHA)));
+                    let open = _mm256_and_ps(valid, _mm256_cmp_ps::<_CMP_LE_OQ>(a, c(max_alpha)));
                     let v_sigma = _mm256_mul_ps(_mm256_xor_ps(a, c(-0.0)), v_a);
                     let dyy = dyv;
                     cv[4][h] = sel(
@@ -638,8 +641,8 @@ mod avx2 {
 #[cfg(target_arch = "x86_64")]
 mod avx512 {
     use super::{
-        ALPHA_THRESHOLD, Acc, Entry, LANES, MAX_ALPHA, NC, RECOVER_EPS, RowState, SIGMA_CLAMP,
-        VISIT_INDEX, fields,
+        ALPHA_THRESHOLD, Acc, Entry, LANES, NC, RECOVER_EPS, RowState, SIGMA_CLAMP, VISIT_INDEX,
+        fields,
     };
     use crate::math::fastexp::exp_avx512;
     use std::arch::x86_64::*;
@@ -649,6 +652,7 @@ mod avx512 {
     #[target_feature(enable = "avx512f")]
     #[allow(clippy::needless_range_loop)] // k indexes parallel register arrays
     pub(super) unsafe fn row<const GEOMETRY: bool>(
+        max_alpha: f32,
         list: &[Entry],
         idx: &[u32],
         px: &[f32; LANES],
@@ -704,7 +708,7 @@ mod avx512 {
             // SAFETY: AVX-512F is available in this function.
             let e = unsafe { exp_avx512(neg(clamped)) };
             let a = _mm512_mul_ps(c(s.opacity), e);
-            let alpha = _mm512_min_ps(a, c(MAX_ALPHA));
+            let alpha = _mm512_min_ps(a, c(max_alpha));
             let valid = _mm512_mask_cmp_ps_mask::<_CMP_GE_OQ>(active, sigma, zero)
                 & _mm512_cmp_ps_mask::<_CMP_GE_OQ>(alpha, c(ALPHA_THRESHOLD));
             let mut cv = [zero; NC];
@@ -734,7 +738,7 @@ mod avx512 {
                 v_a = _mm512_add_ps(v_a, _mm512_mul_ps(tfra, va));
                 v_a = _mm512_sub_ps(v_a, _mm512_mul_ps(tfra, bgd));
                 cv[3] = sel(valid, _mm512_mul_ps(fac, vd));
-                let open = _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(valid, a, c(MAX_ALPHA));
+                let open = _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(valid, a, c(max_alpha));
                 let v_sigma = _mm512_mul_ps(neg(a), v_a);
                 cv[4] = sel(
                     open,
@@ -790,6 +794,7 @@ fn tiles<const ISA: u8, const GEOMETRY: bool>(
     p: &Projected,
     bins: &TileBins,
     cull_rows: bool,
+    max_alpha: f32,
     background: [f32; 3],
     g: &PixelGrads,
 ) -> TileGrads {
@@ -937,15 +942,15 @@ fn tiles<const ISA: u8, const GEOMETRY: bool>(
             #[cfg(target_arch = "x86_64")]
             if ISA == ISA_AVX512 {
                 // SAFETY: ISA_AVX512 only when the CPU has AVX-512F (checked by the caller).
-                unsafe { avx512::row::<GEOMETRY>(&list, idx, &px, py, st, &mut acc) }
+                unsafe { avx512::row::<GEOMETRY>(max_alpha, &list, idx, &px, py, st, &mut acc) }
             } else if ISA == ISA_AVX2 {
                 // SAFETY: ISA_AVX2 only when the CPU has AVX2 (checked by the caller).
-                unsafe { avx2::row::<GEOMETRY>(&list, idx, &px, py, st, &mut acc) }
+                unsafe { avx2::row::<GEOMETRY>(max_alpha, &list, idx, &px, py, st, &mut acc) }
             } else {
-                row_lanes::<GEOMETRY>(&list, idx, &px, py, st, &mut acc)
+                row_lanes::<GEOMETRY>(max_alpha, &list, idx, &px, py, st, &mut acc)
             }
             #[cfg(not(target_arch = "x86_64"))]
-            row_lanes::<GEOMETRY>(&list, idx, &px, py, st, &mut acc);
+            row_lanes::<GEOMETRY>(max_alpha, &list, idx, &px, py, st, &mut acc);
         }
         out.gids.extend_from_slice(&gids);
         #[cfg(target_arch = "x86_64")]
@@ -976,10 +981,13 @@ unsafe fn tiles_avx512<const GEOMETRY: bool>(
     p: &Projected,
     bins: &TileBins,
     cull_rows: bool,
+    max_alpha: f32,
     background: [f32; 3],
     g: &PixelGrads,
 ) -> TileGrads {
-    tiles::<ISA_AVX512, GEOMETRY>(run, width, height, p, bins, cull_rows, background, g)
+    tiles::<ISA_AVX512, GEOMETRY>(
+        run, width, height, p, bins, cull_rows, max_alpha, background, g,
+    )
 }
 
 /// [`tiles`] compiled for AVX2.
@@ -996,10 +1004,13 @@ unsafe fn tiles_avx2<const GEOMETRY: bool>(
     p: &Projected,
     bins: &TileBins,
     cull_rows: bool,
+    max_alpha: f32,
     background: [f32; 3],
     g: &PixelGrads,
 ) -> TileGrads {
-    tiles::<ISA_AVX2, GEOMETRY>(run, width, height, p, bins, cull_rows, background, g)
+    tiles::<ISA_AVX2, GEOMETRY>(
+        run, width, height, p, bins, cull_rows, max_alpha, background, g,
+    )
 }
 
 /// One pixel's upstream gradients with ED folded in: (T_final, v_rgb, v_alpha, v_D).
@@ -1069,6 +1080,7 @@ pub fn composite_backward(
     p: &Projected,
     bins: &TileBins,
     cull_rows: bool,
+    max_alpha: f32,
     background: [f32; 3],
     g: &PixelGrads,
     geometry: bool,
@@ -1081,24 +1093,28 @@ pub fn composite_backward(
     } else {
         ISA_SCALAR
     };
-    let (w, h, bkg) = (width, height, background);
+    let (w, h, bkg, ma) = (width, height, background, max_alpha);
     let run = |r: std::ops::Range<usize>| match (isa, geometry) {
         // SAFETY: ISA_AVX512 only when the CPU has AVX-512F (`Kernel::avx512` checked it).
         #[cfg(target_arch = "x86_64")]
-        (ISA_AVX512, true) => unsafe { tiles_avx512::<true>(r, w, h, p, bins, cull_rows, bkg, g) },
+        (ISA_AVX512, true) => unsafe {
+            tiles_avx512::<true>(r, w, h, p, bins, cull_rows, ma, bkg, g)
+        },
         // SAFETY: as above.
         #[cfg(target_arch = "x86_64")]
         (ISA_AVX512, false) => unsafe {
-            tiles_avx512::<false>(r, w, h, p, bins, cull_rows, bkg, g)
+            tiles_avx512::<false>(r, w, h, p, bins, cull_rows, ma, bkg, g)
         },
         // SAFETY: ISA_AVX2 only when the CPU has AVX2 (`Kernel::avx2` checked it).
         #[cfg(target_arch = "x86_64")]
-        (ISA_AVX2, true) => unsafe { tiles_avx2::<true>(r, w, h, p, bins, cull_rows, bkg, g) },
+        (ISA_AVX2, true) => unsafe { tiles_avx2::<true>(r, w, h, p, bins, cull_rows, ma, bkg, g) },
         // SAFETY: as above.
         #[cfg(target_arch = "x86_64")]
-        (ISA_AVX2, false) => unsafe { tiles_avx2::<false>(r, w, h, p, bins, cull_rows, bkg, g) },
-        (_, true) => tiles::<ISA_SCALAR, true>(r, w, h, p, bins, cull_rows, bkg, g),
-        (_, false) => tiles::<ISA_SCALAR, false>(r, w, h, p, bins, cull_rows, bkg, g),
+        (ISA_AVX2, false) => unsafe {
+            tiles_avx2::<false>(r, w, h, p, bins, cull_rows, ma, bkg, g)
+        },
+        (_, true) => tiles::<ISA_SCALAR, true>(r, w, h, p, bins, cull_rows, ma, bkg, g),
+        (_, false) => tiles::<ISA_SCALAR, false>(r, w, h, p, bins, cull_rows, ma, bkg, g),
     };
     let n_tiles = bins.tiles_x * bins.tiles_y;
     let per = n_tiles.div_ceil(MAX_TASKS).max(1);

@@ -140,6 +140,7 @@ impl FrozenBlend {
         let final_t = fwd.render.final_t.expect("backward state");
         let n_contrib = fwd.render.n_contrib.as_ref().expect("backward state");
         let cull = fwd.plan.cull_rows;
+        let max_alpha = fwd.plan.conventions.max_alpha();
         if bins.ids.len() > u32::MAX as usize {
             return Err(Error::invalid(format!(
                 "{} tile intersections: a frozen-blend record indexes them in 32 bits",
@@ -180,7 +181,7 @@ impl FrozenBlend {
                             let mut a = [0f32; LANES];
                             for l in 0..cols {
                                 let px = (x0 + l) as f32 + 0.5;
-                                let sa = splat_alpha(s, s.mean[0] - px, s.mean[1] - py);
+                                let sa = splat_alpha(s, s.mean[0] - px, s.mean[1] - py, max_alpha);
                                 let valid = ((pos as u32) < n[l])
                                     & (sa.sigma >= 0.0)
                                     & (sa.alpha >= ALPHA_THRESHOLD);

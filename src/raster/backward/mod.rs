@@ -202,6 +202,7 @@ fn blend_backward(
         &fwd.projected,
         &fwd.bins,
         fwd.plan.cull_rows,
+        fwd.plan.conventions.max_alpha(),
         opts.background,
         &pg,
         groups.geometry(),

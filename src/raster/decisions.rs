@@ -1,0 +1,365 @@
+//! Where a render's discrete decisions lie near their thresholds (SPEC.md §8.1): the pixels
+//! and Gaussians at which a *correct* float32 port may decide the other way, so that a
+//! port harness can set them aside instead of failing a correct port (or loosening every
+//! tolerance until a wrong one passes).
+//!
+//! The forward pass takes four discrete decisions per (pixel, splat) — σ < 0, α < 1/255,
+//! `T·(1 − α) ≤ 1e-4`, the depth order — and one kink, the α clamp, where the forward is
+//! continuous but the backward switches the opacity and geometry gradients off. A port
+//! whose α differs from ours by a relative δ (another `exp`, another summation order, FMA)
+//! decides each of them the same way unless the value lies within about δ of the
+//! threshold. [`decisions`] replays the render's blend, bit for bit (the same splats, the
+//! same scalar arithmetic as every kernel form, the same lists), and records per pixel how
+//! close each decision came (relative margins) and flags the pixels within
+//! [`Margins`]; per Gaussian it flags the projection's decisions (opacity cull, near
+//! plane, Jacobian guard) within their margins.
+//!
+//! A Gaussian our projection culls for an opacity just under 1/255 may be kept by a port;
+//! the replay therefore projects with the threshold lowered by the α margin, so such a
+//! Gaussian's pixels are seen (its α there is under 1/255 in our arithmetic: a skip, as
+//! in the render, and a flag where it comes within the margin). The replay costs one
+//! scalar walk of the tile lists: a diagnostic, not a render path.
+
+use super::composite::{SplatAlpha, splat_alpha};
+use super::project::{ALPHA_THRESHOLD, FAR_PLANE, JACOBIAN_GUARD, NEAR_PLANE};
+use super::tile::TILE_SIZE;
+use super::{RenderOptions, RenderPlan, RenderReport};
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::gaussian::Gaussians;
+use rayon::prelude::*;
+
+/// Pixel flag: some splat's α lies within the α margin of the 1/255 threshold.
+pub const PIXEL_ALPHA_THRESHOLD: u8 = 1;
+/// Pixel flag: some `T·(1 − α)` lies within the transmittance margin of the 1e-4 stop.
+pub const PIXEL_TRANSMITTANCE_STOP: u8 = 2;
+/// Pixel flag: two consecutive blended splats (or the last blended one and the splat that
+/// stopped the walk) have depths within the tie margin: a port may order them otherwise.
+pub const PIXEL_DEPTH_TIE: u8 = 4;
+/// Pixel flag: some blended splat's unclamped `o·exp(−σ)` lies within the α margin of the
+/// clamp: the forward is continuous there, the backward's opacity and geometry gradients
+/// are not.
+pub const PIXEL_ALPHA_CLAMP: u8 = 8;
+/// Pixel flag: some splat's σ is within rounding of 0 (the `σ < 0` skip may flip).
+pub const PIXEL_SIGMA_SIGN: u8 = 16;
+/// Pixel note (not a decision): some blended splat's α is at the clamp.
+pub const PIXEL_CLAMPED: u8 = 32;
+
+/// The flags that make a pixel's forward outputs ambiguous.
+pub const PIXEL_FORWARD_FLAGS: u8 =
+    PIXEL_ALPHA_THRESHOLD | PIXEL_TRANSMITTANCE_STOP | PIXEL_DEPTH_TIE | PIXEL_SIGMA_SIGN;
+/// The flags that make a pixel's contribution to the gradients ambiguous.
+pub const PIXEL_BACKWARD_FLAGS: u8 = PIXEL_FORWARD_FLAGS | PIXEL_ALPHA_CLAMP;
+
+/// Gaussian flag: its opacity lies within the α margin of the 1/255 cull.
+pub const GAUSSIAN_OPACITY_CULL: u8 = 1;
+/// Gaussian flag: its camera z lies within the depth margin of the near or far plane.
+pub const GAUSSIAN_DEPTH_CULL: u8 = 2;
+/// Gaussian flag: its `x/z` or `y/z` lies within the α margin of the Jacobian guard's
+/// clamp (SPEC.md §5.1): the mean's gradient has a kink there.
+pub const GAUSSIAN_JACOBIAN_CLAMP: u8 = 4;
+
+/// How far a correct float32 port's values may lie from ours: a decision whose value is
+/// within this distance of its threshold counts as ambiguous. A splat's α at a pixel may
+/// differ by the relative `e_α(σ) = sigma·σ + alpha` (σ's error grows with σ; at σ ≈ 0
+/// only `exp` and the product with the opacity round).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Margins {
+    /// Relative error of σ. Default 2e-5: SPEC.md §8 measured that f32 and f64 (Dr.Jit)
+    /// take other branches of α ≥ 1/255 only within 2e-5 (relative) of it, i.e. σ within
+    /// 2e-5 absolute at σ = ln 255 ≈ 5.5 (3.6e-6 relative); two f32 implementations are
+    /// each that far from f64 (×2), with a safety factor of 2.5 for near-plane scenes,
+    /// whose projection rounds more.
+    pub sigma: f32,
+    /// Relative error of α where σ ≈ 0, of the opacity against its 1/255 cull, and of
+    /// `x/z`, `y/z` against the Jacobian guard: 1e-6 (8 ulps: `exp`, the sigmoid, one
+    /// product, one quotient, each ≤ 2 ulps in either implementation).
+    pub alpha: f32,
+    /// `T·(1 − α)` against the stop, on top of T's propagated error (each blended splat
+    /// adds `α/(1 − α)·e_α(σ)`, the factor `1 − α` carrying α's error amplified near the
+    /// clamp, plus 2⁻²³ for the product's rounding): 1e-5.
+    pub transmittance: f32,
+    /// Two depths `z₁ ≤ z₂` tie when `z₂ − z₁ ≤ depth·z₂`: 5e-7 (4 f32 ulps; `R·μ + t`
+    /// in another order or with FMA moves z by a few ulps of its terms, which are of z's
+    /// size unless the camera sits far from the origin). Also the margin of z against the
+    /// near and far planes.
+    pub depth: f32,
+}
+
+impl Default for Margins {
+    fn default() -> Self {
+        Margins {
+            sigma: 2e-5,
+            alpha: 1e-6,
+            transmittance: 1e-5,
+            depth: 5e-7,
+        }
+    }
+}
+
+impl Margins {
+    /// The relative error bound of a port's α at σ: `sigma·|σ| + alpha`.
+    pub fn alpha_error(&self, sigma: f32) -> f32 {
+        self.sigma * sigma.abs() + self.alpha
+    }
+
+    fn check(&self) -> Result<()> {
+        for (name, v) in [
+            ("sigma", self.sigma),
+            ("alpha", self.alpha),
+            ("transmittance", self.transmittance),
+            ("depth", self.depth),
+        ] {
+            if !(v.is_finite() && (0.0..0.01).contains(&v)) {
+                return Err(Error::invalid(format!(
+                    "decision margin {name} = {v} is not in [0, 0.01)"
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Per pixel and per Gaussian: how close each decision came, and the flags.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Decisions {
+    pub width: usize,
+    pub height: usize,
+    /// Per pixel, row-major: `PIXEL_*` bits.
+    pub pixel_flags: Vec<u8>,
+    /// Per pixel: the smallest `|α/threshold − 1| − e_α(σ)` over the splats the pixel
+    /// evaluated (until its stop); +∞ when it evaluated none (≤ 0: within the error).
+    pub alpha_margin: Vec<f32>,
+    /// Per pixel: the smallest `|T·(1 − α)/stop − 1|` over the splats that passed the α
+    /// test, minus the running bound of T's relative error there (negative: within it).
+    pub transmittance_margin: Vec<f32>,
+    /// Per pixel: the smallest relative depth gap `(z₂ − z₁)/z₂` between consecutive
+    /// blended splats (and the stopping one), minus the tie margin; +∞ when fewer than two.
+    pub depth_margin: Vec<f32>,
+    /// Per pixel: the smallest `|o·exp(−σ)/clamp − 1| − e_α(σ)` over the blended splats.
+    pub clamp_margin: Vec<f32>,
+    /// Per pixel: a first-order bound of how far a port's alpha may lie from ours when its
+    /// splat αs differ by `e_α(σ)`: `Σ_k T_k·α_k·e_α(σ_k)` over the blended splats (the
+    /// derivative of `1 − T` with respect to `ln α_k` is `T_final·α_k/(1 − α_k) ≤
+    /// T_k·α_k`).
+    pub alpha_error: Vec<f32>,
+    /// Per pixel: the same bound for each rgb channel: `alpha_error` times the largest
+    /// colour channel among the blended splats and the background (`∂C/∂α_k =
+    /// T_k·(c_k − S_k)`, `S_k` the normalised colour behind k, both within [0, that max]).
+    pub rgb_error: Vec<f32>,
+    /// Per Gaussian: `GAUSSIAN_*` bits.
+    pub gaussian_flags: Vec<u8>,
+    /// The margins the flags were set with.
+    pub margins: Margins,
+}
+
+impl Decisions {
+    /// The number of pixels with any of `mask`'s flags.
+    pub fn count_pixels(&self, mask: u8) -> usize {
+        self.pixel_flags.iter().filter(|&&f| f & mask != 0).count()
+    }
+}
+
+/// What one pixel's walk found.
+struct PixelWalk {
+    flags: u8,
+    /// `Σ T_k·α_k·e_α(σ_k)` and the largest colour channel (with the background).
+    sensitivity: f32,
+    color_max: f32,
+    alpha: f32,
+    transmittance: f32,
+    depth: f32,
+    clamp: f32,
+}
+
+/// `|v/t − 1|` in f64 (exact enough for a margin, and no overflow).
+fn rel(v: f32, t: f32) -> f32 {
+    (f64::from(v) / f64::from(t) - 1.0).abs() as f32
+}
+
+/// Replay the blend of `scene` from `cam` under `opts` (default cut-offs only, as the
+/// backward) and report its near decisions.
+pub fn decisions(
+    scene: &Gaussians,
+    cam: &Camera,
+    opts: &RenderOptions,
+    margins: &Margins,
+) -> Result<Decisions> {
+    margins.check()?;
+    if opts.cutoffs != super::Cutoffs::GSPLAT {
+        return Err(Error::invalid(format!(
+            "decision diagnostics use gsplat's cut-offs only (asked for {:?})",
+            opts.cutoffs
+        )));
+    }
+    super::check_options(scene, opts)?;
+    cam.validate()?;
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    // The render's own plan (its SH degree gives the same colours), projected with the
+    // opacity cull lowered by twice the α error at σ = 0 (a culled Gaussian reaches
+    // 1/255 in a port only where σ ≈ 0): Gaussians just under 1/255 are listed too
+    // (every listed splat's α is still tested against 1/255 in the walk, as in the render).
+    let plan = RenderPlan::new(scene, opts);
+    let relaxed = RenderPlan {
+        cutoffs: super::Cutoffs {
+            inv_alpha_threshold: 255.0 / (1.0 - 2.0 * margins.alpha),
+            ..plan.cutoffs
+        },
+        ..plan
+    };
+    let mut report = RenderReport::default();
+    let p = super::project::project(scene, cam, &relaxed, opts, &mut report);
+    let bins = super::tile::bin(&p, w, h, opts.kernel);
+    let (thr, stop, clamp) = (
+        ALPHA_THRESHOLD,
+        plan.cutoffs.transmittance_stop,
+        plan.conventions.max_alpha(),
+    );
+    let m = *margins;
+    let bg_max = opts.background.iter().fold(0.0f32, |a, &b| a.max(b.abs()));
+    let walk = |i: usize, j: usize| -> PixelWalk {
+        let t = (i / TILE_SIZE) * bins.tiles_x + j / TILE_SIZE;
+        let (px, py) = (j as f32 + 0.5, i as f32 + 0.5);
+        let mut out = PixelWalk {
+            flags: 0,
+            sensitivity: 0.0,
+            color_max: bg_max,
+            alpha: f32::INFINITY,
+            transmittance: f32::INFINITY,
+            depth: f32::INFINITY,
+            clamp: f32::INFINITY,
+        };
+        let mut tr = 1.0f32;
+        // Running bound of T's relative error against a port's.
+        let mut t_err = 0.0f64;
+        let mut prev_depth: Option<f32> = None;
+        for &gid in bins.tile(t) {
+            let s = &p.splats[gid as usize];
+            let (dx, dy) = (s.mean[0] - px, s.mean[1] - py);
+            let SplatAlpha {
+                sigma, a, alpha, ..
+            } = splat_alpha(s, dx, dy, clamp);
+            // σ's rounding: a few ulps of the sum of its terms' magnitudes.
+            let scale = 0.5 * (s.conic[0].abs() * dx * dx + s.conic[2].abs() * dy * dy)
+                + (s.conic[1] * dx * dy).abs();
+            if sigma.abs() <= 8.0 * f32::EPSILON * scale {
+                out.flags |= PIXEL_SIGMA_SIGN;
+            }
+            if sigma < 0.0 {
+                continue;
+            }
+            let err = m.alpha_error(sigma);
+            let am = rel(alpha, thr) - err;
+            out.alpha = out.alpha.min(am);
+            if am <= 0.0 {
+                out.flags |= PIXEL_ALPHA_THRESHOLD;
+            }
+            if alpha < thr {
+                continue;
+            }
+            let nt = tr * (1.0 - alpha);
+            let bound = t_err + f64::from(alpha / (1.0 - alpha)) * f64::from(err);
+            let tm = rel(nt, stop) - bound as f32 - m.transmittance;
+            out.transmittance = out.transmittance.min(tm);
+            if tm <= 0.0 {
+                out.flags |= PIXEL_TRANSMITTANCE_STOP;
+            }
+            if let Some(z) = prev_depth {
+                let (lo, hi) = if z <= s.depth {
+                    (z, s.depth)
+                } else {
+                    (s.depth, z)
+                };
+                let gap = ((f64::from(hi) - f64::from(lo)) / f64::from(hi).abs()) as f32;
+                let dm = gap - m.depth;
+                out.depth = out.depth.min(dm);
+                if dm <= 0.0 {
+                    out.flags |= PIXEL_DEPTH_TIE;
+                }
+            }
+            if nt <= stop {
+                break;
+            }
+            let cm = rel(a, clamp) - err;
+            out.clamp = out.clamp.min(cm);
+            if cm <= 0.0 {
+                out.flags |= PIXEL_ALPHA_CLAMP;
+            }
+            if a >= clamp {
+                out.flags |= PIXEL_CLAMPED;
+            }
+            out.sensitivity += tr * alpha * err;
+            out.color_max = out
+                .color_max
+                .max(s.color[0].max(s.color[1]).max(s.color[2]));
+            tr = nt;
+            t_err = bound + f64::from(f32::EPSILON);
+            prev_depth = Some(s.depth);
+        }
+        out
+    };
+    let walks: Vec<PixelWalk> = (0..h)
+        .into_par_iter()
+        .flat_map_iter(|i| (0..w).map(move |j| (i, j)))
+        .map(|(i, j)| walk(i, j))
+        .collect();
+    let gaussian_flags = gaussian_decisions(scene, cam, &m);
+    Ok(Decisions {
+        width: w,
+        height: h,
+        pixel_flags: walks.iter().map(|p| p.flags).collect(),
+        alpha_margin: walks.iter().map(|p| p.alpha).collect(),
+        transmittance_margin: walks.iter().map(|p| p.transmittance).collect(),
+        depth_margin: walks.iter().map(|p| p.depth).collect(),
+        clamp_margin: walks.iter().map(|p| p.clamp).collect(),
+        alpha_error: walks.iter().map(|p| p.sensitivity).collect(),
+        rgb_error: walks.iter().map(|p| p.sensitivity * p.color_max).collect(),
+        gaussian_flags,
+        margins: m,
+    })
+}
+
+/// The projection's decisions per Gaussian, in f64 (only a flag's margin depends on them):
+/// the opacity cull, the near and far planes, the Jacobian guard's clamp of `x/z`, `y/z`.
+fn gaussian_decisions(scene: &Gaussians, cam: &Camera, m: &Margins) -> Vec<u8> {
+    let r = cam.camera_from_world_rotation();
+    let t = cam.camera_from_world_translation();
+    let (w, h) = (f64::from(cam.width), f64::from(cam.height));
+    let guard = f64::from(JACOBIAN_GUARD);
+    let lim_x = (
+        cam.cx / cam.fx + guard * 0.5 * w / cam.fx,
+        (w - cam.cx) / cam.fx + guard * 0.5 * w / cam.fx,
+    );
+    let lim_y = (
+        cam.cy / cam.fy + guard * 0.5 * h / cam.fy,
+        (h - cam.cy) / cam.fy + guard * 0.5 * h / cam.fy,
+    );
+    let near = |v: f64, t: f64, margin: f32| ((v / t) - 1.0).abs() <= f64::from(margin);
+    (0..scene.len())
+        .into_par_iter()
+        .map(|i| {
+            let mut f = 0;
+            let o = 1.0 / (1.0 + (-f64::from(scene.opacity_logits[i])).exp());
+            if near(o, f64::from(ALPHA_THRESHOLD), m.alpha) {
+                f |= GAUSSIAN_OPACITY_CULL;
+            }
+            let mu = scene.means[i].map(f64::from);
+            let c = r * glam::DVec3::from(mu) + t;
+            if near(c.z, f64::from(NEAR_PLANE), m.depth) || near(c.z, f64::from(FAR_PLANE), m.depth)
+            {
+                f |= GAUSSIAN_DEPTH_CULL;
+            }
+            if c.z > 0.0 {
+                let (u, v) = (c.x / c.z, c.y / c.z);
+                if near(-u, lim_x.0, m.alpha)
+                    || near(u, lim_x.1, m.alpha)
+                    || near(-v, lim_y.0, m.alpha)
+                    || near(v, lim_y.1, m.alpha)
+                {
+                    f |= GAUSSIAN_JACOBIAN_CLAMP;
+                }
+            }
+            f
+        })
+        .collect()
+}
