@@ -224,13 +224,15 @@ fn decisions_dict<'py>(py: Python<'py>, d: Decisions) -> PyResult<Bound<'py, PyD
     let m = PyDict::new(py);
     m.set_item("sigma", d.margins.sigma)?;
     m.set_item("alpha", d.margins.alpha)?;
+    m.set_item("mean2d", d.margins.mean2d)?;
     m.set_item("transmittance", d.margins.transmittance)?;
     m.set_item("depth", d.margins.depth)?;
+    m.set_item("recovery", d.margins.recovery)?;
     out.set_item("margins", m)?;
     Ok(out)
 }
 
-/// Margins from an optional dict `{"sigma": .., "alpha": .., "transmittance": .., "depth": ..}`.
+/// Margins from an optional dict `{"sigma": .., "alpha": .., "mean2d": .., "transmittance": .., "depth": ..}`.
 fn margins(d: Option<&Bound<'_, PyDict>>) -> PyResult<Margins> {
     let mut m = Margins::default();
     if let Some(d) = d {
@@ -240,11 +242,13 @@ fn margins(d: Option<&Bound<'_, PyDict>>) -> PyResult<Margins> {
             match key.as_str() {
                 "sigma" => m.sigma = v,
                 "alpha" => m.alpha = v,
+                "mean2d" => m.mean2d = v,
                 "transmittance" => m.transmittance = v,
                 "depth" => m.depth = v,
+                "recovery" => m.recovery = v,
                 _ => {
                     return Err(PyValueError::new_err(format!(
-                        "margins: expected keys among 'sigma', 'alpha', 'transmittance', 'depth', got {key:?}"
+                        "margins: expected keys among 'sigma', 'alpha', 'mean2d', 'transmittance', 'depth', 'recovery', got {key:?}"
                     )));
                 }
             }

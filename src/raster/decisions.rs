@@ -44,12 +44,18 @@ pub const PIXEL_ALPHA_CLAMP: u8 = 8;
 pub const PIXEL_SIGMA_SIGN: u8 = 16;
 /// Pixel note (not a decision): some blended splat's α is at the clamp.
 pub const PIXEL_CLAMPED: u8 = 32;
+/// Pixel flag (backward only): the transmittance the backward recovers by dividing by
+/// `1 − α` (gsplat's formulation, and ours) carries a propagated relative error above the
+/// recovery margin: an α near the clamp amplifies α's error by `α/(1 − α)` (up to 999
+/// under gsplat's 0.999), so two correct implementations' gradients from this pixel
+/// differ by more than the gradient tolerance.
+pub const PIXEL_RECOVERY: u8 = 64;
 
 /// The flags that make a pixel's forward outputs ambiguous.
 pub const PIXEL_FORWARD_FLAGS: u8 =
     PIXEL_ALPHA_THRESHOLD | PIXEL_TRANSMITTANCE_STOP | PIXEL_DEPTH_TIE | PIXEL_SIGMA_SIGN;
 /// The flags that make a pixel's contribution to the gradients ambiguous.
-pub const PIXEL_BACKWARD_FLAGS: u8 = PIXEL_FORWARD_FLAGS | PIXEL_ALPHA_CLAMP;
+pub const PIXEL_BACKWARD_FLAGS: u8 = PIXEL_FORWARD_FLAGS | PIXEL_ALPHA_CLAMP | PIXEL_RECOVERY;
 
 /// Gaussian flag: its opacity lies within the α margin of the 1/255 cull.
 pub const GAUSSIAN_OPACITY_CULL: u8 = 1;
@@ -61,8 +67,9 @@ pub const GAUSSIAN_JACOBIAN_CLAMP: u8 = 4;
 
 /// How far a correct float32 port's values may lie from ours: a decision whose value is
 /// within this distance of its threshold counts as ambiguous. A splat's α at a pixel may
-/// differ by the relative `e_α(σ) = sigma·σ + alpha` (σ's error grows with σ; at σ ≈ 0
-/// only `exp` and the product with the opacity round).
+/// differ by the relative `e_α = sigma·|σ|₊ + alpha`, `|σ|₊` the sum of the magnitudes of
+/// σ's terms (σ's error grows with them; where they vanish only `exp` and the product with
+/// the opacity round).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Margins {
     /// Relative error of σ. Default 2e-5: SPEC.md §8 measured that f32 and f64 (Dr.Jit)
@@ -76,14 +83,28 @@ pub struct Margins {
     /// product, one quotient, each ≤ 2 ulps in either implementation).
     pub alpha: f32,
     /// `T·(1 − α)` against the stop, on top of T's propagated error (each blended splat
-    /// adds `α/(1 − α)·e_α(σ)`, the factor `1 − α` carrying α's error amplified near the
+    /// adds `α/(1 − α)·e_α`, the factor `1 − α` carrying α's error amplified near the
     /// clamp, plus 2⁻²³ for the product's rounding): 1e-5.
     pub transmittance: f32,
+    /// Relative error of the projected mean's pixel coordinates: 2.4e-7 (2 f32 ulps, one
+    /// per implementation; measured: a 10k-Gaussian 256×256 scene's means2d are within
+    /// 1 ulp of their f64 value). A splat of conic `(A, B, C)` then moves σ by
+    /// `|A·dx + B·dy|·δmx + |B·dx + C·dy|·δmy`: 2e-5 for a tight splat around pixel 170.
+    pub mean2d: f32,
     /// Two depths `z₁ ≤ z₂` tie when `z₂ − z₁ ≤ depth·z₂`: 5e-7 (4 f32 ulps; `R·μ + t`
     /// in another order or with FMA moves z by a few ulps of its terms, which are of z's
     /// size unless the camera sits far from the origin). Also the margin of z against the
     /// near and far planes.
     pub depth: f32,
+    /// The largest relative error of the transmittance the backward recovers, `Σ α/(1 −
+    /// α)·alpha` over the blended splats (α's own rounding amplified by the division by
+    /// `1 − α`; the σ part of `e_α` is a bound for rare threshold flips, not the typical
+    /// error), at which a pixel still feeds the gradient comparison: 4e-4, ten times the
+    /// gradient tolerance of unseen.testing (`GRAD_RTOL`): a pixel's share of a Gaussian's
+    /// gradient is rarely more than a tenth of it. So a pixel is left out once its
+    /// splats reach `Σ α/(1 − α) > 400` — one α above 0.9975 (only gsplat's clamp allows
+    /// it) or several near 0.99.
+    pub recovery: f32,
 }
 
 impl Default for Margins {
@@ -91,6 +112,8 @@ impl Default for Margins {
         Margins {
             sigma: 2e-5,
             alpha: 1e-6,
+            mean2d: 2.4e-7,
+            recovery: 4e-4,
             transmittance: 1e-5,
             depth: 5e-7,
         }
@@ -98,17 +121,23 @@ impl Default for Margins {
 }
 
 impl Margins {
-    /// The relative error bound of a port's α at σ: `sigma·|σ| + alpha`.
-    pub fn alpha_error(&self, sigma: f32) -> f32 {
-        self.sigma * sigma.abs() + self.alpha
+    /// The relative error bound of a port's α (the absolute error of σ, plus α's own
+    /// rounding) where σ's terms have the magnitude `terms` (`½(|A|·dx² + |C|·dy²) +
+    /// |B·dx·dy|`, which is σ unless `B·dx·dy` cancels part of it, as across elongated
+    /// splats) and the mean's rounding moves σ by `shift` (`|∂σ/∂mx|·mean2d·|mx| +
+    /// |∂σ/∂my|·mean2d·|my|`): `sigma·terms + shift + alpha`.
+    pub fn alpha_error(&self, terms: f32, shift: f32) -> f32 {
+        self.sigma * terms + shift + self.alpha
     }
 
     fn check(&self) -> Result<()> {
         for (name, v) in [
             ("sigma", self.sigma),
             ("alpha", self.alpha),
+            ("mean2d", self.mean2d),
             ("transmittance", self.transmittance),
             ("depth", self.depth),
+            ("recovery", self.recovery),
         ] {
             if !(v.is_finite() && (0.0..0.01).contains(&v)) {
                 return Err(Error::invalid(format!(
@@ -127,7 +156,7 @@ pub struct Decisions {
     pub height: usize,
     /// Per pixel, row-major: `PIXEL_*` bits.
     pub pixel_flags: Vec<u8>,
-    /// Per pixel: the smallest `|α/threshold − 1| − e_α(σ)` over the splats the pixel
+    /// Per pixel: the smallest `|α/threshold − 1| − e_α` over the splats the pixel
     /// evaluated (until its stop); +∞ when it evaluated none (≤ 0: within the error).
     pub alpha_margin: Vec<f32>,
     /// Per pixel: the smallest `|T·(1 − α)/stop − 1|` over the splats that passed the α
@@ -136,10 +165,10 @@ pub struct Decisions {
     /// Per pixel: the smallest relative depth gap `(z₂ − z₁)/z₂` between consecutive
     /// blended splats (and the stopping one), minus the tie margin; +∞ when fewer than two.
     pub depth_margin: Vec<f32>,
-    /// Per pixel: the smallest `|o·exp(−σ)/clamp − 1| − e_α(σ)` over the blended splats.
+    /// Per pixel: the smallest `|o·exp(−σ)/clamp − 1| − e_α` over the blended splats.
     pub clamp_margin: Vec<f32>,
     /// Per pixel: a first-order bound of how far a port's alpha may lie from ours when its
-    /// splat αs differ by `e_α(σ)`: `Σ_k T_k·α_k·e_α(σ_k)` over the blended splats (the
+    /// splat αs differ by `e_α`: `Σ_k T_k·α_k·e_α,k` over the blended splats (the
     /// derivative of `1 − T` with respect to `ln α_k` is `T_final·α_k/(1 − α_k) ≤
     /// T_k·α_k`).
     pub alpha_error: Vec<f32>,
@@ -163,7 +192,7 @@ impl Decisions {
 /// What one pixel's walk found.
 struct PixelWalk {
     flags: u8,
-    /// `Σ T_k·α_k·e_α(σ_k)` and the largest colour channel (with the background).
+    /// `Σ T_k·α_k·e_α,k` and the largest colour channel (with the background).
     sensitivity: f32,
     color_max: f32,
     alpha: f32,
@@ -233,6 +262,9 @@ pub fn decisions(
         // Running bound of T's relative error against a port's.
         let mut t_err = 0.0f64;
         let mut prev_depth: Option<f32> = None;
+        // `Σ α/(1 − α)` over the blended splats: how much the backward's division by
+        // `1 − α` amplifies α's own rounding in the recovered transmittance.
+        let mut amplification = 0.0f64;
         for &gid in bins.tile(t) {
             let s = &p.splats[gid as usize];
             let (dx, dy) = (s.mean[0] - px, s.mean[1] - py);
@@ -242,13 +274,17 @@ pub fn decisions(
             // σ's rounding: a few ulps of the sum of its terms' magnitudes.
             let scale = 0.5 * (s.conic[0].abs() * dx * dx + s.conic[2].abs() * dy * dy)
                 + (s.conic[1] * dx * dy).abs();
-            if sigma.abs() <= 8.0 * f32::EPSILON * scale {
+            // (σ = 0 with no terms is the exact centre: 0 in any implementation.)
+            if scale > 0.0 && sigma.abs() <= 8.0 * f32::EPSILON * scale {
                 out.flags |= PIXEL_SIGMA_SIGN;
             }
             if sigma < 0.0 {
                 continue;
             }
-            let err = m.alpha_error(sigma);
+            let shift = m.mean2d
+                * ((s.conic[0] * dx + s.conic[1] * dy).abs() * s.mean[0].abs()
+                    + (s.conic[1] * dx + s.conic[2] * dy).abs() * s.mean[1].abs());
+            let err = m.alpha_error(scale, shift);
             let am = rel(alpha, thr) - err;
             out.alpha = out.alpha.min(am);
             if am <= 0.0 {
@@ -289,12 +325,16 @@ pub fn decisions(
                 out.flags |= PIXEL_CLAMPED;
             }
             out.sensitivity += tr * alpha * err;
+            amplification += f64::from(alpha / (1.0 - alpha));
             out.color_max = out
                 .color_max
                 .max(s.color[0].max(s.color[1]).max(s.color[2]));
             tr = nt;
             t_err = bound + f64::from(f32::EPSILON);
             prev_depth = Some(s.depth);
+        }
+        if amplification * f64::from(m.alpha) > f64::from(m.recovery) {
+            out.flags |= PIXEL_RECOVERY;
         }
         out
     };

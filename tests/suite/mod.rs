@@ -3,6 +3,7 @@ mod bad_input;
 mod cli;
 mod collide;
 mod common;
+mod conventions;
 mod dibr;
 mod golden_drjit;
 mod golden_grad;
