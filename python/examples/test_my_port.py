@@ -44,11 +44,18 @@ def port_backward(scene, camera, grad_rgb):
 def test_forward_matches_the_oracle(family, camera_dtype):
     scene, camera = testing.scene(4000, 3, seed=1, width=128, height=96, family=family,
                                   dtype=camera_dtype)
-    report = testing.compare_render(port_render, scene, camera, conventions=CONVENTIONS)
-    assert report.excluded_fraction <= testing.MAX_EXCLUDED_FRACTION
+    # The hard family is ambiguous by design (SPEC.md §5.9's cases): a looser bound.
+    bound = (testing.HARD_MAX_EXCLUDED_FRACTION if family == "hard"
+             else testing.MAX_EXCLUDED_FRACTION)
+    report = testing.compare_render(port_render, scene, camera, conventions=CONVENTIONS,
+                                    max_excluded_fraction=bound)
+    assert report.excluded_fraction <= bound
 
 
 @pytest.mark.parametrize("family", testing.FAMILIES)
 def test_backward_matches_the_oracle(family):
     scene, camera = testing.scene(1500, 3, seed=2, width=80, height=64, family=family)
-    testing.compare_backward(port_backward, scene, camera, conventions=CONVENTIONS, seed=3)
+    bound = (testing.HARD_MAX_EXCLUDED_FRACTION if family == "hard"
+             else testing.MAX_EXCLUDED_FRACTION)
+    testing.compare_backward(port_backward, scene, camera, conventions=CONVENTIONS, seed=3,
+                             max_excluded_fraction=bound)

@@ -424,3 +424,51 @@ def test_cutoffs_are_a_forward_knob(dumps):
     for inv, stop in [(0.5, 1e-4), (float("nan"), 1e-4), (255.0, 1.0)]:
         with pytest.raises(ValueError):
             unseen.render(**s, camera=cam, inv_alpha_threshold=inv, transmittance_stop=stop)
+
+
+def test_float32_cameras_equal_float64_ones(good):
+    """gsplat passes K and viewmat as float32: widened exactly, the same camera."""
+    k = np.array([[30.25, 0, 20.5], [0, 29.75, 15.0], [0, 0, 1]])
+    a, b = 0.1, -0.2
+    vm = np.eye(4)
+    vm[:3, :3] = [[np.cos(b), 0, np.sin(b)], [0, 1, 0], [-np.sin(b), 0, np.cos(b)]]
+    vm[:3, :3] = vm[:3, :3] @ [[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]]
+    vm[:3, 3] = [0.1, -0.05, 0.2]
+    k32, vm32 = k.astype(np.float32), vm.astype(np.float32)
+    c32 = unseen.Camera(k32, vm32, W, H)
+    c64 = unseen.Camera(k32.astype(np.float64), vm32.astype(np.float64), W, H)
+    assert c32.k.dtype == np.float64 and np.array_equal(c32.viewmat, c64.viewmat)
+    r32 = unseen.render(**good, camera=c32)["rgb"]
+    assert r32.tobytes() == unseen.render(**good, camera=c64)["rgb"].tobytes()
+    with pytest.raises(ValueError, match=r"k: expected a C-contiguous float64 \(or float32\) array"):
+        unseen.Camera(k.astype(np.int64), vm, W, H)
+
+
+def test_conventions_reach_forward_and_backward(cam):
+    """An opaque Gaussian: α at the profile's clamp (0.99 inria, 0.999 gsplat)."""
+    s = dict(means=np.float32([[0, 0, 3]]), quats=np.float32([[1, 0, 0, 0]]),
+             scales=np.float32([[8, 8, 8]]), opacities=np.float32([100]),
+             sh=np.zeros((1, 1, 3), np.float32))
+    for conv, clamp in (("inria", 0.99), ("gsplat", 0.999)):
+        out = unseen.render(**s, camera=cam, conventions=conv)
+        assert (out["alpha"] == np.float32(1) - (np.float32(1) - np.float32(clamp))).all()
+        g = unseen.backward(**s, camera=cam, conventions=conv,
+                            grad_rgb=np.ones((H, W, 3), np.float32))
+        assert g["opacities"][0] == 0.0  # α at the clamp everywhere it is drawn
+    with pytest.raises(ValueError, match="conventions: unknown conventions 'cuda'"):
+        unseen.render(**s, camera=cam, conventions="cuda")
+
+
+def test_diagnostics_flag_decisions_and_leave_the_render_alone(good, cam):
+    plain = unseen.render(**good, camera=cam)
+    out = unseen.render(**good, camera=cam, diagnostics=True, margins={"depth": 1e-6})
+    assert out["rgb"].tobytes() == plain["rgb"].tobytes()
+    d = out["diagnostics"]
+    assert d["pixel_flags"].shape == (H, W) and d["pixel_flags"].dtype == np.uint8
+    assert d["rgb_error"].shape == (H, W) and (d["rgb_error"] >= 0).all()
+    assert d["gaussian_flags"].shape == (10,)
+    assert d["margins"]["depth"] == np.float32(1e-6) and d["margins"]["sigma"] > 0
+    with pytest.raises(ValueError, match="margins: expected keys"):
+        unseen.render(**good, camera=cam, diagnostics=True, margins={"alpah": 1e-6})
+    with pytest.raises(ValueError, match="decision margin sigma"):
+        unseen.render(**good, camera=cam, diagnostics=True, margins={"sigma": 0.5})

@@ -4,7 +4,7 @@
 //!
 //! ```text
 //! d = mean − p;  σ = 0.5·(A·dx·dx + C·dy·dy) + B·dx·dy;           skip if σ < 0
-//! α = min(0.99, o·exp(−min(σ, 30)));                               skip if α < 1/255
+//! α = min(MAX_α, o·exp(−min(σ, 30)));  MAX_α 0.99 or 0.999 (profile) skip if α < 1/255
 //! T' = T·(1 − α);  if T' ≤ 1e-4: stop before blending (exclusive)
 //! w = α·T;  C += c·w;  D += z·w;  T = T'
 //! ```
