@@ -598,8 +598,15 @@ fn training(quick: bool, points: &mut Vec<Point>) {
                 done += 1;
             }
             seconds += t0.elapsed().as_secs_f64();
-            let r = unseen::eval::evaluate(&t.gaussians, &data, Split::Test, cfg.background, None)
-                .expect("evaluates");
+            let r = unseen::eval::evaluate(
+                &t.gaussians,
+                &data,
+                Split::Test,
+                cfg.background,
+                cfg.conventions,
+                None,
+            )
+            .expect("evaluates");
             let mse = r
                 .views
                 .iter()

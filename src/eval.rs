@@ -8,7 +8,7 @@ use crate::error::Result;
 use crate::gaussian::Gaussians;
 use crate::io::create_dir_all;
 use crate::io::image::{ImageF32, write_png};
-use crate::raster::{RenderOptions, render};
+use crate::raster::{Conventions, RenderOptions, render};
 use crate::train::loss::psnr;
 use crate::train::ssim::ssim;
 use std::path::Path;
@@ -54,13 +54,15 @@ pub fn side_by_side(rgb: &[f32], gt: &[f32], w: usize, h: usize) -> Result<Image
     ImageF32::new(2 * w, h, 3, both)
 }
 
-/// Render every view of `split`, score it, and when `out` is given write
+/// Render every view of `split` (with the `background` and convention profile the scene
+/// was trained with), score it, and when `out` is given write
 /// `out/<name>.png` with the render (left) beside the ground truth (right).
 pub fn evaluate(
     g: &Gaussians,
     data: &Dataset,
     split: Split,
     background: [f32; 3],
+    conventions: Conventions,
     out: Option<&Path>,
 ) -> Result<EvalReport> {
     if data.split(split).is_empty() {
@@ -74,6 +76,7 @@ pub fn evaluate(
     }
     let opts = RenderOptions {
         background,
+        conventions,
         ..RenderOptions::default()
     };
     let mut views = Vec::new();
@@ -140,6 +143,7 @@ pub fn evaluate_run(
         &data,
         split,
         cfg.background,
+        cfg.conventions,
         Some(&run.join("eval").join(&name)),
     )?;
     let path = run.join("eval.json");

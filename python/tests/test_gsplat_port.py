@@ -15,7 +15,6 @@ import os
 import numpy as np
 import pytest
 
-import unseen
 from unseen import testing as ut
 
 try:

@@ -122,6 +122,8 @@ def main():
             json.dump(dict(case=name, gaussians=n, visible=nvis, sh_degree=deg, width=w, height=h,
                            background=list(bg), loss=float(loss[0]), ambiguous_pixels=int(amb.sum()),
                            tool=f"drjit {dr.__version__} (LLVM AD backend, float64)",
+                           # The convention profile (SPEC.md §5.2): ALPHA_MAX = 0.99 is `inria`'s clamp.
+                           conventions="inria",
                            generator="reference_data/generate/make_grad_goldens.py"), f, indent=1)
         print(f"{name}: loss {float(loss[0]):.6e}, {int(amb.sum())} ambiguous pixels")
 

@@ -244,6 +244,8 @@ def main():
         meta = dict(case=name, gaussians=n, visible=nvis, sh_degree=deg, width=w, height=h,
                     background=list(bg), ambiguous_pixels=int(amb.sum()),
                     tool=f"drjit {dr.__version__} (LLVM backend, float64)",
+                    # The convention profile (SPEC.md §5.2): ALPHA_MAX = 0.99 is `inria`'s clamp.
+                    conventions="inria",
                     generator="reference_data/generate/make_raster_goldens.py")
         with open(os.path.join(d, "meta.json"), "w") as f:
             json.dump(meta, f, indent=1)

@@ -50,7 +50,10 @@ pub struct RenderOptions {
 ///
 /// Everything else is the same in both: gsplat's near plane (0.01), ε2d, Jacobian guard,
 /// opacity-aware radius, 1/255 threshold and exclusive 1e-4 stop (SPEC.md §5.2).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
 pub enum Conventions {
     /// α clamp 0.99 (INRIA; gsplat ≥ 1.5.4).
     #[default]
@@ -70,6 +73,12 @@ impl Conventions {
             Conventions::Inria => composite::MAX_ALPHA,
             Conventions::Gsplat => composite::MAX_ALPHA_GSPLAT,
         }
+    }
+
+    /// Whether this is the default profile (`inria`): configurations leave it out of their
+    /// files, so files written before profiles existed keep their bytes.
+    pub fn is_default(&self) -> bool {
+        *self == Conventions::Inria
     }
 
     /// The profile's name in files and on the command line: `inria` or `gsplat`.

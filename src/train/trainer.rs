@@ -17,7 +17,7 @@ use crate::math::sh::{SH_C0, num_coeffs};
 use crate::raster::backward::{
     GradGroups, Gradients, ImageGrads, backward_apply, backward_into, render_for_backward,
 };
-use crate::raster::{Outputs, RenderOptions};
+use crate::raster::{Conventions, Outputs, RenderOptions};
 use crate::scene::Uniform;
 use crate::train::adam::{Adam, AdamConfig, ExpSchedule};
 use crate::train::densify::{
@@ -83,6 +83,10 @@ pub struct TrainConfig {
     /// Dataset loading: integer downscale and INRIA's test hold-out.
     pub resolution: u32,
     pub test_every: u32,
+    /// The convention profile every render of the run follows (SPEC.md §5.2); left out of
+    /// the file when it is the default `inria`, so older run directories keep their bytes.
+    #[serde(skip_serializing_if = "Conventions::is_default")]
+    pub conventions: Conventions,
 }
 
 impl Default for TrainConfig {
@@ -102,6 +106,7 @@ impl Default for TrainConfig {
             save_iterations: vec![7_000, 30_000],
             resolution: 1,
             test_every: 8,
+            conventions: Conventions::Inria,
         }
     }
 }
@@ -113,6 +118,7 @@ pub struct TrainOverrides {
     pub seed: Option<u64>,
     pub resolution: Option<u32>,
     pub sh_degree: Option<u32>,
+    pub conventions: Option<Conventions>,
 }
 
 impl TrainConfig {
@@ -141,6 +147,9 @@ impl TrainConfig {
         }
         if let Some(v) = flags.sh_degree {
             c.sh_degree = v;
+        }
+        if let Some(v) = flags.conventions {
+            c.conventions = v;
         }
         Ok(c)
     }
@@ -407,6 +416,7 @@ impl<'a> Trainer<'a> {
                 expected_depth: depth,
                 ..Outputs::default()
             },
+            conventions: self.config.conventions,
             ..RenderOptions::default()
         }
     }

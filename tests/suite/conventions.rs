@@ -350,3 +350,49 @@ fn oracle_dump_records_its_profile() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("inria, gsplat"));
 }
+
+/// A training run follows its configuration's profile: the file records a non-default
+/// one (a default run's config keeps its bytes), and training under gsplat's clamp gives
+/// another scene where opacities pass 0.99.
+#[test]
+fn training_runs_under_their_configured_profile() {
+    use unseen::train::trainer::{TrainConfig, TrainOverrides, Trainer};
+    let default = serde_json::to_value(TrainConfig::default()).unwrap();
+    assert!(default.get("conventions").is_none());
+    let gsplat = TrainConfig::from_file_and_flags(
+        None,
+        &TrainOverrides {
+            conventions: Some(Conventions::Gsplat),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let text = serde_json::to_string(&gsplat).unwrap();
+    assert!(text.contains(r#""conventions":"gsplat""#), "{text}");
+    assert_eq!(serde_json::from_str::<TrainConfig>(&text).unwrap(), gsplat);
+    let d = unseen::dataset::load(
+        &reference("scenes/lounge"),
+        &unseen::dataset::LoadOptions {
+            resolution: 4,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    // The point-cloud initialisation with opacities of 0.9975: the clamps bind at once.
+    let cfg = super::common::short_train_config(20);
+    let mut init = Trainer::new(&d, cfg.clone()).unwrap().gaussians;
+    init.opacity_logits.iter_mut().for_each(|o| *o = 6.0);
+    let run = |c| {
+        let cfg = TrainConfig {
+            conventions: c,
+            ..cfg.clone()
+        };
+        let mut t = Trainer::from_gaussians(&d, cfg, init.clone(), 0).unwrap();
+        assert_eq!(t.render_options(false).conventions, c);
+        while t.iteration < 20 {
+            t.step().unwrap();
+        }
+        unseen::gaussian::ply::ply_bytes(&t.gaussians).unwrap()
+    };
+    assert!(run(Conventions::Inria) != run(Conventions::Gsplat));
+}

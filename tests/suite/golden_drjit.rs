@@ -4,7 +4,7 @@ use super::common::{case_dirs, reference};
 use unseen::camera::inria::read_cameras_json;
 use unseen::gaussian::ply::read_ply;
 use unseen::io::image::read_exr;
-use unseen::raster::{Outputs, RenderOptions, render};
+use unseen::raster::{Conventions, Outputs, RenderOptions, render};
 
 /// Colour and alpha: |ours − Dr.Jit f64| ≤ atol + rtol·|ref|. gsplat's own tests use
 /// atol 1e-5, rtol 1.3e-6 (f32 CUDA vs f32 PyTorch); against an f64 reference our f32
@@ -57,9 +57,15 @@ fn drjit_forward_goldens() {
             .collect();
         let (scene, _) = read_ply(&dir.join("scene.ply")).unwrap();
         let cam = &read_cameras_json(&dir.join("cameras.json")).unwrap()[0];
+        // Every golden states its convention profile (SPEC.md §5.2).
+        let conventions = meta["conventions"]
+            .as_str()
+            .map(|c| Conventions::parse(c).unwrap())
+            .expect("meta.json states its conventions");
         let opts = RenderOptions {
             background: [bg[0], bg[1], bg[2]],
             outputs: Outputs::ALL,
+            conventions,
             ..Default::default()
         };
         let r = render(&scene, cam, &opts).unwrap();

@@ -4,7 +4,7 @@ use super::common::case_dirs;
 use unseen::camera::inria::read_cameras_json;
 use unseen::gaussian::ply::read_ply;
 use unseen::raster::backward::{GradGroups, ImageGrads, backward, render_for_backward};
-use unseen::raster::{Outputs, RenderOptions};
+use unseen::raster::{Conventions, Outputs, RenderOptions};
 
 fn f32s(v: &serde_json::Value) -> Vec<f32> {
     v.as_array()
@@ -45,9 +45,15 @@ fn drjit_ad_gradients() {
         let (scene, _) = read_ply(&dir.join("scene.ply")).unwrap();
         degrees.push(scene.sh_degree);
         let cam = &read_cameras_json(&dir.join("cameras.json")).unwrap()[0];
+        // Every golden states its convention profile (SPEC.md §5.2).
+        let conventions = meta["conventions"]
+            .as_str()
+            .map(|c| Conventions::parse(c).unwrap())
+            .expect("meta.json states its conventions");
         let opts = RenderOptions {
             background: [bg[0], bg[1], bg[2]],
             outputs: Outputs::ALL,
+            conventions,
             ..Default::default()
         };
         let fwd = render_for_backward(&scene, cam, &opts).unwrap();

@@ -419,7 +419,15 @@ fn short_training_beats_the_psnr_floor() {
         .chunks(k1 * 3)
         .any(|r| r[8 * 3..].iter().any(|&v| v != 0.0));
     assert!(band3, "band 3 never trained");
-    let r = unseen::eval::evaluate(&t.gaussians, &d, Split::Test, [0.0; 3], None).unwrap();
+    let r = unseen::eval::evaluate(
+        &t.gaussians,
+        &d,
+        Split::Test,
+        [0.0; 3],
+        Default::default(),
+        None,
+    )
+    .unwrap();
     assert!(r.mean_psnr > 24.0, "test PSNR {:.2} dB", r.mean_psnr);
 }
 

@@ -42,6 +42,10 @@ pub struct TrainArgs {
     /// Flags override it.
     #[arg(long)]
     config: Option<PathBuf>,
+    /// Convention profile of every render of the run: `inria` (α clamp 0.99, the default)
+    /// or `gsplat` (0.999, gsplat 1.0–1.5.3); recorded in OUT/config.json (SPEC.md §5.2).
+    #[arg(long, value_parser = crate::render::parse_conventions)]
+    conventions: Option<unseen::raster::Conventions>,
     /// Fine-tune the latest scene of this run instead of starting from the point cloud.
     #[arg(long)]
     init: Option<PathBuf>,
@@ -60,7 +64,7 @@ pub struct TrainArgs {
     /// Continue the interrupted run in OUT from its last checkpoint, with OUT/config.json
     /// (give the same DATASET, --init, --mask and --mask-dir): the result has the same bits
     /// as an uninterrupted run.
-    #[arg(long, conflicts_with_all = ["iterations", "seed", "resolution", "sh_degree", "config"])]
+    #[arg(long, conflicts_with_all = ["iterations", "seed", "resolution", "sh_degree", "config", "conventions"])]
     resume: bool,
 }
 
@@ -131,6 +135,7 @@ pub fn run_train(a: TrainArgs) -> Result<()> {
         resolution,
         sh_degree,
         config,
+        conventions,
         init,
         mask,
         mask_dir,
@@ -147,6 +152,7 @@ pub fn run_train(a: TrainArgs) -> Result<()> {
                 seed,
                 resolution,
                 sh_degree,
+                conventions,
             },
         )?
     };
