@@ -259,6 +259,17 @@ def _hypotheses(scene, camera, conventions):
     return out
 
 
+def _named(best, base):
+    """The best hypothesis `(text, failing values left)` as the likely cause, if it
+    explains at least half of the `base` failing values (a mistake rarely explains all of
+    them: one that moves pixels also moves which decisions are set aside, and the Jacobian
+    guard depends on the principal point), with the share it explains."""
+    text, left = best
+    if not text or not base or left > 0.5 * base:
+        return ""
+    return text if left == 0 else f"{text} (explains {1 - left / base:.1%} of the failing values)"
+
+
 def _render_failures(got, want, keys):
     """The port's failing values against an oracle render made with diagnostics, with
     the comparison's own rules (flagged pixels set aside, the α-error allowance)."""
@@ -276,8 +287,8 @@ def _render_failures(got, want, keys):
 
 def _diagnose_render(got, scene, camera, conventions, background, keys, threads, margins,
                      base_fail):
-    """The known mistake under which the oracle reproduces the port, if one explains all
-    but 1 % of the failing values."""
+    """The known mistake under which the oracle reproduces the port best, if it explains
+    at least half of the failing values."""
     best = ("", base_fail)
     for text, s, cam, kw in _hypotheses(scene, camera, conventions):
         kw = dict(conventions=conventions, **kw) if "conventions" not in kw else kw
@@ -295,7 +306,7 @@ def _diagnose_render(got, scene, camera, conventions, background, keys, threads,
         fails = _render_failures(got, want, keys)
         if fails < best[1]:
             best = (text, fails)
-    return best[0] if best[0] and best[1] <= 0.01 * base_fail else ""
+    return _named(best, base_fail)
 
 
 def _as_scene(scene):
@@ -464,9 +475,7 @@ def compare_backward(port_backward, scene, camera, grad_rgb=None, *, conventions
                 fails += f.count if f else 0
             if fails < best[1]:
                 best = (text, fails)
-        # Named only where it explains all but 1 % of the failing gradients (a mistake
-        # that moves pixels also moves which decisions the masked gradient avoids).
-        report.likely_cause = best[0] if base and best[1] <= 0.01 * base else ""
+        report.likely_cause = _named(best, base)
     if check and not report.ok:
         raise AssertionError(report.message())
     return report
@@ -507,8 +516,10 @@ def _unproject(camera, u, v, z):
 
 
 def _camera_points(rng, camera, n, z_lo, z_hi, spread=1.0):
-    """`n` world points whose camera z is uniform in [z_lo, z_hi] and that project within
-    `spread` × the image (beyond it the Jacobian guard and the off-screen cull act)."""
+    """`n` world points whose camera z is uniform in [z_lo, z_hi] and whose pixel
+    coordinates are uniform over the image widened by `spread/2` of its size on each side
+    (beyond 0.15 of it the Jacobian guard clamps, beyond a footprint the off-screen cull
+    acts)."""
     z = rng.uniform(z_lo, z_hi, n)
     u = rng.uniform(-0.5 * spread, 1 + 0.5 * spread, n) * camera.width
     v = rng.uniform(-0.5 * spread, 1 + 0.5 * spread, n) * camera.height
