@@ -55,10 +55,11 @@ DEPTHS_RTOL, OPACITIES_RTOL = 1e-5, 1e-5
 #: decision before the comparison itself fails: a port's mistake confined to fewer pixels,
 #: all near a decision, could not be told from float noise anyway.
 MAX_EXCLUDED_FRACTION = 2e-2
-#: The bound for the ``hard`` scene family, ambiguous by design (exact depth ties, huge and
-#: elongated Gaussians whose σ crosses the 1/255 band slowly or cancels to ≈ 0): measured
-#: 3–18 % set aside at 128×96 and 256×256.
-HARD_MAX_EXCLUDED_FRACTION = 0.25
+#: The bound for the ``hard`` scene family, ambiguous by design (exact depth ties, elongated
+#: Gaussians whose σ cancels to ≈ 0, Gaussians of scale 1e3 whose means project ~1e5 px
+#: away, so that the mean's rounding moves σ everywhere): measured 3–45 % set aside at
+#: 128×96 and 256×256 (seeds 0–3). There the harness checks what it can judge.
+HARD_MAX_EXCLUDED_FRACTION = 0.5
 
 # -- Decision flags (the values of unseen's raster::decisions) ---------------------------
 
