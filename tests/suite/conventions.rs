@@ -396,3 +396,48 @@ fn training_runs_under_their_configured_profile() {
     };
     assert!(run(Conventions::Inria) != run(Conventions::Gsplat));
 }
+
+/// `unseen train --conventions gsplat` records the profile in the run's config (its key),
+/// `--resume` refuses to change it, and the pipeline refuses such a run (its steps render
+/// `inria`).
+#[test]
+fn cli_train_records_its_profile_and_the_pipeline_refuses_another() {
+    let scene = reference("scenes/lounge");
+    let dir = TempDir::new("train-profile");
+    let run = dir.path().join("run");
+    let o = Command::new(env!("CARGO_BIN_EXE_unseen"))
+        .arg("train")
+        .arg(&scene)
+        .arg("--out")
+        .arg(&run)
+        .args([
+            "--iterations",
+            "5",
+            "--resolution",
+            "8",
+            "--conventions",
+            "gsplat",
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let cfg = unseen::train::run::read_config(&run).unwrap();
+    assert_eq!(cfg.conventions, Conventions::Gsplat);
+    let o = Command::new(env!("CARGO_BIN_EXE_unseen"))
+        .arg("train")
+        .arg(&scene)
+        .arg("--out")
+        .arg(&run)
+        .args(["--resume", "--conventions", "inria"])
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = unseen::pipeline::load_inputs(&run, &scene.join("candidates.json"), None, None)
+        .err()
+        .expect("a gsplat run is refused")
+        .to_string();
+    assert!(
+        err.contains("conventions 'gsplat'") && err.contains("config.json"),
+        "{err}"
+    );
+}
