@@ -220,6 +220,7 @@ fn decisions_dict<'py>(py: Python<'py>, d: Decisions) -> PyResult<Bound<'py, PyD
     out.set_item("clamp_margin", to_numpy(py, d.clamp_margin, &[h, w])?)?;
     out.set_item("alpha_error", to_numpy(py, d.alpha_error, &[h, w])?)?;
     out.set_item("rgb_error", to_numpy(py, d.rgb_error, &[h, w])?)?;
+    out.set_item("depth_error", to_numpy(py, d.depth_error, &[h, w])?)?;
     out.set_item("gaussian_flags", to_numpy(py, d.gaussian_flags, &[n])?)?;
     let m = PyDict::new(py);
     m.set_item("sigma", d.margins.sigma)?;
@@ -232,7 +233,8 @@ fn decisions_dict<'py>(py: Python<'py>, d: Decisions) -> PyResult<Bound<'py, PyD
     Ok(out)
 }
 
-/// Margins from an optional dict `{"sigma": .., "alpha": .., "mean2d": .., "transmittance": .., "depth": ..}`.
+/// Margins from an optional dict `{"sigma": .., "alpha": .., "mean2d": .., "transmittance": ..,
+/// "depth": .., "recovery": ..}` (SPEC.md §8.1).
 fn margins(d: Option<&Bound<'_, PyDict>>) -> PyResult<Margins> {
     let mut m = Margins::default();
     if let Some(d) = d {

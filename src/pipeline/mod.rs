@@ -158,16 +158,8 @@ pub fn load_inputs(
     if !run.join("config.json").is_file() {
         return Err(Error::invalid("not an `unseen train` run directory (no config.json)").at(run));
     }
+    crate::train::run::require_default_conventions(run, "the pipeline")?;
     let cfg = read_config(run)?;
-    if !cfg.conventions.is_default() {
-        // Every pipeline step renders under `inria` (SPEC.md §5.2): a scene trained under
-        // another clamp would be judged and fine-tuned under one it was not made for.
-        return Err(Error::invalid(format!(
-            "the run was trained under conventions '{}'; the pipeline runs 'inria' only",
-            cfg.conventions
-        ))
-        .at(&run.join("config.json")));
-    }
     let (_, ply) = latest_ply(run)?;
     let bytes = std::fs::read(&ply).map_err(|e| Error::io(&ply, e))?;
     let scene_sha256 = sha256_hex(&bytes);

@@ -317,7 +317,7 @@ pub(crate) struct SplatAlpha {
     pub sigma: f32,
     /// `exp(−min(σ, 30))`.
     pub e: f32,
-    /// `o·e` before the 0.99 clamp.
+    /// `o·e` before the α clamp (0.99 or 0.999 by profile).
     pub a: f32,
     pub alpha: f32,
 }

@@ -9,7 +9,8 @@
 //! whose α differs from ours by a relative δ (another `exp`, another summation order, FMA)
 //! decides each of them the same way unless the value lies within about δ of the
 //! threshold. [`decisions`] replays the render's blend, bit for bit (the same splats, the
-//! same scalar arithmetic as every kernel form, the same lists), and records per pixel how
+//! same scalar arithmetic as every kernel form, the same lists plus the Gaussians just
+//! under the opacity cull), and records per pixel how
 //! close each decision came (relative margins) and flags the pixels within
 //! [`Margins`]; per Gaussian it flags the projection's decisions (opacity cull, near
 //! plane, Jacobian guard) within their margins.
@@ -102,8 +103,9 @@ pub struct Margins {
     /// error), at which a pixel still feeds the gradient comparison: 4e-4, ten times the
     /// gradient tolerance of unseen.testing (`GRAD_RTOL`): a pixel's share of a Gaussian's
     /// gradient is rarely more than a tenth of it. So a pixel is left out once its
-    /// splats reach `Σ α/(1 − α) > 400` — one α above 0.9975 (only gsplat's clamp allows
-    /// it) or several near 0.99.
+    /// splats reach `Σ α/(1 − α) > 400`: only an α above 0.9975 gets there (gsplat's
+    /// clamp allows it; two αs of 0.99 already stop the walk, so under `inria` the sum
+    /// stays below ≈ 198).
     pub recovery: f32,
 }
 
@@ -176,6 +178,9 @@ pub struct Decisions {
     /// colour channel among the blended splats and the background (`∂C/∂α_k =
     /// T_k·(c_k − S_k)`, `S_k` the normalised colour behind k, both within [0, that max]).
     pub rgb_error: Vec<f32>,
+    /// Per pixel: the same bound for the accumulated depth D: `alpha_error` times the
+    /// largest depth among the blended splats (`∂D/∂α_k = T_k·(z_k − S^z_k)`).
+    pub depth_error: Vec<f32>,
     /// Per Gaussian: `GAUSSIAN_*` bits.
     pub gaussian_flags: Vec<u8>,
     /// The margins the flags were set with.
@@ -195,6 +200,8 @@ struct PixelWalk {
     /// `Σ T_k·α_k·e_α,k` and the largest colour channel (with the background).
     sensitivity: f32,
     color_max: f32,
+    /// The largest depth among the blended splats.
+    depth_max: f32,
     alpha: f32,
     transmittance: f32,
     depth: f32,
@@ -253,6 +260,7 @@ pub fn decisions(
             flags: 0,
             sensitivity: 0.0,
             color_max: bg_max,
+            depth_max: 0.0,
             alpha: f32::INFINITY,
             transmittance: f32::INFINITY,
             depth: f32::INFINITY,
@@ -265,7 +273,8 @@ pub fn decisions(
         // `Σ α/(1 − α)` over the blended splats: how much the backward's division by
         // `1 − α` amplifies α's own rounding in the recovered transmittance.
         let mut amplification = 0.0f64;
-        for &gid in bins.tile(t) {
+        let list = bins.tile(t);
+        for (k, &gid) in list.iter().enumerate() {
             let s = &p.splats[gid as usize];
             let (dx, dy) = (s.mean[0] - px, s.mean[1] - py);
             let SplatAlpha {
@@ -314,6 +323,25 @@ pub fn decisions(
                 }
             }
             if nt <= stop {
+                // A port that orders a following splat of (nearly) the same depth first
+                // blends it before deciding on this one: a tie with any that follows
+                // within the margin and passes the α test (lists are sorted by depth).
+                for &next in &list[k + 1..] {
+                    let n = &p.splats[next as usize];
+                    let gap = (f64::from(n.depth) - f64::from(s.depth)) / f64::from(n.depth);
+                    if gap > f64::from(m.depth) {
+                        break;
+                    }
+                    let (ndx, ndy) = (n.mean[0] - px, n.mean[1] - py);
+                    let na = splat_alpha(n, ndx, ndy, clamp);
+                    let nterms = 0.5
+                        * (n.conic[0].abs() * ndx * ndx + n.conic[2].abs() * ndy * ndy)
+                        + (n.conic[1] * ndx * ndy).abs();
+                    if na.sigma >= 0.0 && na.alpha >= thr * (1.0 - m.alpha_error(nterms, 0.0)) {
+                        out.flags |= PIXEL_DEPTH_TIE;
+                        out.depth = out.depth.min(gap as f32 - m.depth);
+                    }
+                }
                 break;
             }
             let cm = rel(a, clamp) - err;
@@ -329,6 +357,7 @@ pub fn decisions(
             out.color_max = out
                 .color_max
                 .max(s.color[0].max(s.color[1]).max(s.color[2]));
+            out.depth_max = out.depth_max.max(s.depth);
             tr = nt;
             t_err = bound + f64::from(f32::EPSILON);
             prev_depth = Some(s.depth);
@@ -354,6 +383,7 @@ pub fn decisions(
         clamp_margin: walks.iter().map(|p| p.clamp).collect(),
         alpha_error: walks.iter().map(|p| p.sensitivity).collect(),
         rgb_error: walks.iter().map(|p| p.sensitivity * p.color_max).collect(),
+        depth_error: walks.iter().map(|p| p.sensitivity * p.depth_max).collect(),
         gaussian_flags,
         margins: m,
     })

@@ -67,6 +67,21 @@ pub fn read_config(run: &Path) -> Result<TrainConfig> {
     serde_json::from_slice(&text).map_err(|e| Error::parse(&p, format!("invalid config: {e}")))
 }
 
+/// `Ok` when the run at `run` was trained under the default convention profile; the
+/// QA-Mask, the mask audit and the pipeline render `inria` only (SPEC.md §5.2), and would
+/// judge or fine-tune a scene under a clamp it was not trained for.
+pub fn require_default_conventions(run: &Path, what: &str) -> Result<()> {
+    let cfg = read_config(run)?;
+    if cfg.conventions.is_default() {
+        return Ok(());
+    }
+    Err(Error::invalid(format!(
+        "the run was trained under conventions '{}'; {what} runs 'inria' only",
+        cfg.conventions
+    ))
+    .at(&run.join("config.json")))
+}
+
 /// Load a dataset the way a run's config says.
 pub fn load_dataset(dir: &Path, config: &TrainConfig) -> Result<Dataset> {
     dataset::load(

@@ -398,8 +398,8 @@ fn training_runs_under_their_configured_profile() {
 }
 
 /// `unseen train --conventions gsplat` records the profile in the run's config (its key),
-/// `--resume` refuses to change it, and the pipeline refuses such a run (its steps render
-/// `inria`).
+/// `--resume` refuses to change it, and the pipeline, `unseen qa-mask` and `unseen
+/// mask-audit` refuse such a run (they render `inria`).
 #[test]
 fn cli_train_records_its_profile_and_the_pipeline_refuses_another() {
     let scene = reference("scenes/lounge");

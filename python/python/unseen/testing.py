@@ -112,9 +112,14 @@ class Failure:
     port: float
     oracle: float
     #: The decision flags at that place ("" when none).
-    near: str
+    near: str = ""
+    #: For a failure that is not a value beyond a tolerance (a missing output, a wrong
+    #: shape, too much set aside): what is wrong, in words.
+    note: str = ""
 
     def line(self):
+        if self.note:
+            return f"{self.quantity}: {self.note}"
         loc = ", ".join(str(int(i)) for i in self.where)
         near = f"; near a decision: {self.near}" if self.near else "; not near a decision"
         return (
@@ -140,6 +145,8 @@ class Report:
     likely_cause: str = ""
     #: The bound on the excluded fractions this comparison used.
     bound: float = MAX_EXCLUDED_FRACTION
+    #: Whether the known mistakes were tried (a failure of values beyond tolerance).
+    diagnosed: bool = False
 
     @property
     def ok(self):
@@ -155,7 +162,7 @@ class Report:
         )
         if self.likely_cause:
             lines.append(f"  likely cause: {self.likely_cause}")
-        elif self.failures:
+        elif self.diagnosed:
             lines.append("  likely cause: none of the known mistakes reproduces the port's output")
         return "\n".join(lines)
 
@@ -170,11 +177,15 @@ def _check(quantity, got, want, atol, rtol, exclude, flags, kinds, rel_to_max=0.
     worst place; `extra` (broadcast like `exclude`) adds a per-entry allowance."""
     got = np.asarray(got)
     if got.shape != want.shape:
-        return Failure(quantity, 1, 1, f"shape {want.shape}", (), float("nan"), float("nan"),
-                       f"the port returned shape {got.shape}")
+        return Failure(quantity, 1, 1, "", (), math.nan, math.nan,
+                       note=f"the port returned shape {got.shape}, the oracle {want.shape}")
     g = got.astype(np.float64)
     w = want.astype(np.float64)
-    scale = float(np.abs(w).max()) if w.size else 0.0
+    kept = np.abs(w)
+    if exclude is not None:  # the group's largest entry among those compared
+        ex = exclude.reshape(exclude.shape + (1,) * (w.ndim - exclude.ndim))
+        kept = np.where(ex, 0.0, kept)
+    scale = float(kept.max()) if w.size else 0.0
     bound = atol + rel_to_max * scale + rtol * np.abs(w)
     if extra is not None:
         bound = bound + extra.reshape(extra.shape + (1,) * (w.ndim - extra.ndim))
@@ -275,13 +286,12 @@ def _render_failures(got, want, keys):
     """The port's failing values against an oracle render made with diagnostics, with
     the comparison's own rules (flagged pixels set aside, the α-error allowance)."""
     diag = want["diagnostics"]
-    flags = diag["pixel_flags"]
-    exclude = (flags & PIXEL_FORWARD_FLAGS) != 0
+    exclude = (diag["pixel_flags"] & PIXEL_FORWARD_FLAGS) != 0
     fails = 0
     for key in keys:
-        atol, rtol = (DEPTH_ATOL, DEPTH_RTOL) if key == "depth" else (COLOR_ATOL, COLOR_RTOL)
-        extra = {"rgb": diag["rgb_error"], "alpha": diag["alpha_error"]}.get(key)
-        f = _check(key, got[key], want[key], atol, rtol, exclude, None, None, extra=extra)
+        atol, rtol, allowance = _ALLOWANCE[key]
+        f = _check(key, got[key], want[key], atol, rtol, exclude, None, None,
+                   extra=diag[allowance])
         fails += f.count if f else 0
     return fails
 
@@ -300,14 +310,33 @@ def _diagnose_render(got, scene, camera, conventions, background, keys, threads,
         except ValueError:
             continue
         if "diagnostics" not in want:  # a cut-off hypothesis: plain tolerances
-            want["diagnostics"] = dict(
-                pixel_flags=np.zeros(want["alpha"].shape, np.uint8),
-                rgb_error=np.zeros(want["alpha"].shape, np.float32),
-                alpha_error=np.zeros(want["alpha"].shape, np.float32))
+            zero = np.zeros(want["alpha"].shape, np.float32)
+            want["diagnostics"] = dict(pixel_flags=zero.astype(np.uint8), rgb_error=zero,
+                                       alpha_error=zero, depth_error=zero)
         fails = _render_failures(got, want, keys)
         if fails < best[1]:
             best = (text, fails)
     return _named(best, base_fail)
+
+
+#: Per image output: atol, rtol and the per-pixel α-error allowance of the diagnostics.
+_ALLOWANCE = {
+    "rgb": (COLOR_ATOL, COLOR_RTOL, "rgb_error"),
+    "alpha": (COLOR_ATOL, COLOR_RTOL, "alpha_error"),
+    "depth": (DEPTH_ATOL, DEPTH_RTOL, "depth_error"),
+}
+
+
+def _check_excluded(report, bound, margins):
+    """A failure for each share set aside beyond `bound` (pixels, Gaussians)."""
+    report.bound = bound
+    for frac, what in ((report.excluded_fraction, "pixels"),
+                       (report.excluded_gaussian_fraction, "Gaussians")):
+        if frac > bound:
+            report.failures.append(Failure(
+                f"excluded {what}", 1, 1, "", (), math.nan, math.nan,
+                note=f"{frac:.2%} set aside near a decision, more than the bound {bound:.0%}: "
+                     f"the scene is too ambiguous to judge a port (margins {margins})"))
 
 
 def _as_scene(scene):
@@ -324,13 +353,16 @@ def compare_render(port, scene, camera, *, conventions="inria", background=(0.0,
 
     ``port`` is a callable ``port(scene, camera) -> dict`` (or the dict itself) holding
     ``rgb`` (H, W, 3) and ``alpha`` (H, W), optionally ``depth`` (H, W, accumulated camera
-    z) and the per-Gaussian intermediates ``means2d`` (N, 2), ``conics`` (N, 3),
+    z; compared when ``outputs`` names it) and the per-Gaussian intermediates ``means2d`` (N, 2), ``conics`` (N, 3),
     ``colors`` (N, 3), ``depths`` (N,), ``opacities`` (N,) (compared on the Gaussians both
     sides draw). ``scene`` holds ``means, quats, scales, opacities, sh`` in gsplat's raw
     conventions; ``camera`` is a ``unseen.Camera``. Raises ``AssertionError`` with every
     failing quantity when ``check`` (else returns the report either way).
     """
     scene = _as_scene(scene)
+    unknown = [k for k in outputs if k not in _ALLOWANCE]
+    if unknown:
+        raise ValueError(f"outputs: expected names among {sorted(_ALLOWANCE)}, got {unknown}")
     bg = [float(v) for v in background]
     want = render(**scene, camera=camera, background=bg, conventions=conventions,
                   diagnostics=True, margins=margins, threads=threads)
@@ -352,16 +384,15 @@ def compare_render(port, scene, camera, *, conventions="inria", background=(0.0,
     keys = [k for k in outputs if k in got]
     for key in outputs:
         if key not in got:
-            report.failures.append(Failure(key, 1, 1, "present", (), math.nan, math.nan,
-                                           "the port returned no such output"))
+            report.failures.append(Failure(key, 1, 1, "", (), math.nan, math.nan,
+                                           note="the port returned no such output"))
             continue
-        atol, rtol = (DEPTH_ATOL, DEPTH_RTOL) if key == "depth" else (COLOR_ATOL, COLOR_RTOL)
-        extra = {"rgb": diag["rgb_error"], "alpha": diag["alpha_error"]}.get(key)
-        f = _check(key, got[key], want[key], atol, rtol, exclude, flags, _PIXEL_KINDS,
-                   extra=extra)
-        if f and extra is not None:
-            f.tolerance += " + the pixel's α-error bound"
+        atol, rtol, allowance = _ALLOWANCE[key]
+        # Forward-flagged pixels are set aside, so the worst one can carry only notes.
+        f = _check(key, got[key], want[key], atol, rtol, exclude, flags & PIXEL_FORWARD_FLAGS,
+                   _PIXEL_KINDS, extra=diag[allowance])
         if f:
+            f.tolerance += " + the pixel's α-error bound"
             report.failures.append(f)
     drawn = (want["radii"] > 0).all(axis=1) & (gflags == 0)
     if "radii" in got:
@@ -386,17 +417,13 @@ def compare_render(port, scene, camera, *, conventions="inria", background=(0.0,
                 f.tolerance = f"{CONICS_REL_TO_MAX:g}·max|conic of the Gaussian|"
                 report.failures.append(f)
         else:
-            report.failures.append(Failure("conics", 1, 1, f"shape {wc.shape}", (), math.nan,
-                                           math.nan, f"the port returned shape {g.shape}"))
-    report.bound = max_excluded_fraction
-    if report.excluded_fraction > max_excluded_fraction:
-        report.failures.append(Failure(
-            "excluded pixels", int(exclude.sum()), exclude.size,
-            f"at most {max_excluded_fraction:.0%} near a decision", (), report.excluded_fraction,
-            max_excluded_fraction, "the scene is too ambiguous to judge a port (margins "
-            f"{diag['margins']})"))
-    base = sum(f.count for f in report.failures if f.quantity in keys)
+            report.failures.append(Failure(
+                "conics", 1, 1, "", (), math.nan, math.nan,
+                note=f"the port returned shape {g.shape}, the oracle {wc.shape}"))
+    _check_excluded(report, max_excluded_fraction, diag["margins"])
+    base = sum(f.count for f in report.failures if f.quantity in keys and not f.note)
     if base and diagnose:
+        report.diagnosed = True
         report.likely_cause = _diagnose_render(got, scene, camera, conventions, bg, keys,
                                                threads, margins, base)
     if check and not report.ok:
@@ -442,22 +469,17 @@ def compare_backward(port_backward, scene, camera, grad_rgb=None, *, conventions
     )
     for key in _GRAD_KEYS:
         if key not in got:
-            report.failures.append(Failure(f"grad {key}", 1, 1, "present", (), math.nan,
-                                           math.nan, "the port returned no such gradient"))
+            report.failures.append(Failure(f"grad {key}", 1, 1, "", (), math.nan, math.nan,
+                                           note="the port returned no such gradient"))
             continue
         f = _check(f"grad {key}", got[key], want[key], 0.0, GRAD_RTOL, skip, gflags,
                    _GAUSSIAN_KINDS, GRAD_REL_TO_MAX)
         if f:
             report.failures.append(f)
-    report.bound = max_excluded_fraction
-    for frac, what in ((report.excluded_fraction, "pixels"),
-                       (report.excluded_gaussian_fraction, "Gaussians")):
-        if frac > max_excluded_fraction:
-            report.failures.append(Failure(
-                f"excluded {what}", 1, 1, f"at most {max_excluded_fraction:.0%}", (), frac,
-                max_excluded_fraction, "the scene is too ambiguous to judge a port"))
-    if report.failures and diagnose:
-        base = sum(f.count for f in report.failures if f.quantity.startswith("grad"))
+    _check_excluded(report, max_excluded_fraction, diag["margins"])
+    base = sum(f.count for f in report.failures if f.quantity.startswith("grad") and not f.note)
+    if base and diagnose:
+        report.diagnosed = True
         best = ("", base)
         for text, s, cam, kw in _hypotheses(scene, camera, conventions):
             if set(kw) - {"conventions"}:

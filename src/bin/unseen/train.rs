@@ -16,6 +16,7 @@ use unseen::qamask::{
 use unseen::train::loss::LossWeights;
 use unseen::train::run::{
     Checkpointing, Init, load_dataset, read_config, read_run_scene, read_train_views,
+    require_default_conventions,
 };
 use unseen::train::trainer::{TrainConfig, TrainOverrides};
 
@@ -233,6 +234,7 @@ pub fn run_qa_mask(a: QaMaskArgs) -> Result<()> {
     if let Some(lr) = lr {
         cfg.lr_sh_rest = lr;
     }
+    require_default_conventions(&run, "the QA-Mask")?;
     let (it, trained) = read_run_scene(&run, None)?;
     let names = read_train_views(&run)?;
     let all = inria::read_cameras_json(&run.join("cameras.json"))?;
@@ -286,6 +288,7 @@ pub fn run_mask_audit(a: MaskAuditArgs) -> Result<()> {
         lr,
         out,
     } = a;
+    require_default_conventions(&run, "the mask audit")?;
     let cfg = read_config(&run)?;
     let data = load_dataset(&dataset, &cfg)?;
     let (it, trained) = read_run_scene(&run, None)?;

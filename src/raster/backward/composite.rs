@@ -8,7 +8,7 @@
 //!   v_c  += fac·v_rgb;   v_z += fac·v_D
 //!   v_α   = Σ_k (c_k·T − buf_k·ra)·v_rgb_k + (z·T − buf_z·ra)·v_D
 //!           + T_final·ra·v_alpha − T_final·ra·(bg · v_rgb)
-//!   if o·e ≤ 0.99 (no gradient through the clamp):
+//!   if o·e ≤ MAX_α (0.99 or 0.999 by profile; no gradient through the clamp):
 //!       v_σ = −α·v_α;  v_conic += (½v_σ·dx², v_σ·dx·dy, ½v_σ·dy²)
 //!       v_mean2d += v_σ·(A·dx + B·dy, B·dx + C·dy);  v_o += e·v_α
 //!   buf += c·fac;  buf_z += z·fac
@@ -63,7 +63,7 @@ use crate::raster::project::{ALPHA_THRESHOLD, Projected, Splat};
 use crate::raster::tile::{TILE_SIZE, TileBins};
 use rayon::prelude::*;
 
-/// Floor of `1 − α` when recovering transmittance (gsplat). With α ≤ 0.99 it never binds.
+/// Floor of `1 − α` when recovering transmittance (gsplat). With α ≤ 0.999 it never binds.
 pub const RECOVER_EPS: f32 = 1e-6;
 
 /// Gradient of the loss with respect to one projected splat (the fields of a [`Splat`],
