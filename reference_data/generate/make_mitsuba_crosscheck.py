@@ -20,7 +20,7 @@ import numpy as np
 from common import SH_C0, ensure_dir, look_at, write_cameras_json, write_exr, write_inria_ply
 
 mi.set_variant("llvm_ad_rgb")
-dr.set_thread_count(2)  # a one-thread process deadlocks in OpenEXR (REFERENCE.md §I)
+dr.set_thread_count(2)  # a one-thread process deadlocks in OpenEXR (seen with Mitsuba 3.9.1 / Dr.Jit 1.5.0 on these machines)
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 OUT = os.path.normpath(os.path.join(HERE, "..", "mitsuba", "ellipsoids"))

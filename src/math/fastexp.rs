@@ -1,6 +1,6 @@
 //! The crate's own `exp` and `ln` for `f32`.
 //!
-//! The rasterizer must not depend on the platform's libm (DESIGN.md §4): `f32::exp` may
+//! The rasterizer must not depend on the platform's libm (SPEC.md §6–7): `f32::exp` may
 //! differ by an ulp between glibc, musl, macOS and a GPU's `__expf`. These functions use only
 //! IEEE-754 additions, multiplications, comparisons and bit manipulation, in a fixed order and
 //! without fused multiply-add, so they give the same bits on every platform and in every SIMD

@@ -1,7 +1,7 @@
 //! Real spherical harmonics, degrees 0..=5, in the basis and ordering of 3DGS / gsplat.
 //!
 //! Real SH with the Condon–Shortley phase, evaluated on a unit direction `(x, y, z)` as
-//! polynomials (REFERENCE.md §B; degrees 4–5 from Sloan, "Efficient Spherical Harmonic
+//! polynomials (degrees 0–3 as INRIA's `utils/sh_utils.py`; degrees 4–5 from Sloan, "Efficient Spherical Harmonic
 //! Evaluation", JCGT 2013). Coefficient `k` of degree `l` and order `m` sits at
 //! `k = l² + l + m`; a degree-`L` colour has `(L+1)²` coefficients per channel.
 //!

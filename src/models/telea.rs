@@ -1,6 +1,6 @@
 //! Telea's fast-marching inpainting (A. Telea, "An Image Inpainting Technique Based on the
 //! Fast Marching Method", JGT 2004), with the arithmetic of OpenCV 5.0's
-//! `cv::inpaint(..., INPAINT_TELEA)` (SPEC.md §19; REFERENCE.md §F) so that results can be
+//! `cv::inpaint(..., INPAINT_TELEA)` (`modules/photo/src/inpaint.cpp`; SPEC.md §19.1) so that results can be
 //! compared pixel for pixel.
 //!
 //! The image is embedded in a grid with a one-pixel border (grid `(i, j)` = image

@@ -6,7 +6,7 @@
 //! `L = λ1‖M⊙(Ip−Igt)‖₁ + λ2·(1 − SSIM(M⊙Ip, M⊙Igt)) + λ3‖M⊙(Dp−Dgt)‖₁`
 //!
 //! with a per-pixel weight map `M` (one value per pixel, shared by the channels). The paper
-//! writes `+λ2·SSIM`; the trained quantity is the D-SSIM term (REFERENCE.md §C). Norms are
+//! writes `+λ2·SSIM`; the trained quantity is the D-SSIM term (INRIA `train.py` minimises `1 − ssim`). Norms are
 //! means, as INRIA's `l1_loss`: the RGB terms over all `W·H·3` values, the depth term over
 //! the pixels whose target depth is finite and positive (Mitsuba writes 0 where a ray
 //! misses). Sums are accumulated in f64 in pixel order, so the value does not depend on

@@ -272,7 +272,7 @@ struct Schedule {
 }
 
 /// Seed of a stage's generator: the run seed mixed with the stage name (FNV-1a), so
-/// stages draw independent streams (DESIGN.md §4).
+/// stages draw independent streams (SPEC.md §6).
 pub fn stage_seed(seed: u64, stage: &str) -> u64 {
     let mut h = 0xcbf2_9ce4_8422_2325u64 ^ seed;
     for b in stage.bytes() {

@@ -1,5 +1,5 @@
 //! Backward of the blend (mirrors `raster::composite`), gsplat's formulation
-//! (`RasterizeToPixels3DGSBwd.cu`, REFERENCE.md §A):
+//! (gsplat v1.5.3 `RasterizeToPixels3DGSBwd.cu`):
 //!
 //! ```text
 //! walk back from n_contrib with T = T_final, buf = 0 (per channel and depth)
