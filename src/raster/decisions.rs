@@ -22,7 +22,7 @@
 //! scalar walk of the tile lists: a diagnostic, not a render path.
 
 use super::composite::{SplatAlpha, splat_alpha};
-use super::project::{ALPHA_THRESHOLD, FAR_PLANE, JACOBIAN_GUARD, NEAR_PLANE};
+use super::project::{ALPHA_THRESHOLD, FAR_PLANE, JACOBIAN_GUARD, NEAR_PLANE, Splat};
 use super::tile::TILE_SIZE;
 use super::{RenderOptions, RenderPlan, RenderReport};
 use crate::camera::Camera;
@@ -187,13 +187,6 @@ pub struct Decisions {
     pub margins: Margins,
 }
 
-impl Decisions {
-    /// The number of pixels with any of `mask`'s flags.
-    pub fn count_pixels(&self, mask: u8) -> usize {
-        self.pixel_flags.iter().filter(|&&f| f & mask != 0).count()
-    }
-}
-
 /// What one pixel's walk found.
 struct PixelWalk {
     flags: u8,
@@ -206,6 +199,12 @@ struct PixelWalk {
     transmittance: f32,
     depth: f32,
     clamp: f32,
+}
+
+/// The magnitude of σ's terms at offset `(dx, dy)`: `½(|A|·dx² + |C|·dy²) + |B·dx·dy|`
+/// (σ itself unless `B·dx·dy` cancels part of it); σ's rounding scales with it.
+fn sigma_terms(s: &Splat, dx: f32, dy: f32) -> f32 {
+    0.5 * (s.conic[0].abs() * dx * dx + s.conic[2].abs() * dy * dy) + (s.conic[1] * dx * dy).abs()
 }
 
 /// `|v/t − 1|` in f64 (exact enough for a margin, and no overflow).
@@ -281,8 +280,7 @@ pub fn decisions(
                 sigma, a, alpha, ..
             } = splat_alpha(s, dx, dy, clamp);
             // σ's rounding: a few ulps of the sum of its terms' magnitudes.
-            let scale = 0.5 * (s.conic[0].abs() * dx * dx + s.conic[2].abs() * dy * dy)
-                + (s.conic[1] * dx * dy).abs();
+            let scale = sigma_terms(s, dx, dy);
             // (σ = 0 with no terms is the exact centre: 0 in any implementation.)
             if scale > 0.0 && sigma.abs() <= 8.0 * f32::EPSILON * scale {
                 out.flags |= PIXEL_SIGMA_SIGN;
@@ -334,10 +332,8 @@ pub fn decisions(
                     }
                     let (ndx, ndy) = (n.mean[0] - px, n.mean[1] - py);
                     let na = splat_alpha(n, ndx, ndy, clamp);
-                    let nterms = 0.5
-                        * (n.conic[0].abs() * ndx * ndx + n.conic[2].abs() * ndy * ndy)
-                        + (n.conic[1] * ndx * ndy).abs();
-                    if na.sigma >= 0.0 && na.alpha >= thr * (1.0 - m.alpha_error(nterms, 0.0)) {
+                    let nerr = m.alpha_error(sigma_terms(n, ndx, ndy), 0.0);
+                    if na.sigma >= 0.0 && na.alpha >= thr * (1.0 - nerr) {
                         out.flags |= PIXEL_DEPTH_TIE;
                         out.depth = out.depth.min(gap as f32 - m.depth);
                     }
