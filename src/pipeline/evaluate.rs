@@ -55,6 +55,48 @@ pub struct Row {
     #[serde(with = "nan_null")]
     pub ssim_train_half: f64,
     pub gaussians: usize,
+    /// Per evaluation view, the sums the pooled metrics are made of (in evaluation order),
+    /// so that pooled PSNR over any subset of views, and a bootstrap over views, can be
+    /// computed later (SPEC.md §20.7). Empty in files written before it was recorded.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub views: Vec<ViewRecord>,
+}
+
+/// One evaluation view's sums, per pixel class.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ViewRecord {
+    pub view: String,
+    pub all: ClassSums,
+    pub existing: ClassSums,
+    pub extrapolated: ClassSums,
+}
+
+/// Sums over the pixels of one class of one view: PSNR over a set of views is
+/// `−10·log10(Σ squared_error / (3·Σ pixels))`, SSIM `Σ ssim_sum / Σ pixels`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ClassSums {
+    pub pixels: u64,
+    /// Σ over the class's pixels and the three channels of (render − truth)², both
+    /// clamped to [0, 1].
+    pub squared_error: f64,
+    /// Σ over the class's pixels of the SSIM map (11×11 Gaussian window, σ 1.5).
+    pub ssim_sum: f64,
+}
+
+impl ClassSums {
+    /// Pooled PSNR of a set of views' sums (NaN with no pixel, +∞ with no error).
+    pub fn psnr<'a>(sums: impl IntoIterator<Item = &'a ClassSums>) -> f64 {
+        let (mut se, mut n) = (0f64, 0u64);
+        for s in sums {
+            se += s.squared_error;
+            n += s.pixels;
+        }
+        if n == 0 {
+            f64::NAN
+        } else {
+            -10.0 * (se / (3 * n) as f64).log10()
+        }
+    }
 }
 
 /// The metric table, one row per stage.
@@ -199,7 +241,10 @@ pub fn run(
             None => (inputs.scene.clone(), inputs.scene_sha256.clone()),
             Some(s) => (super::recon::scene_of(s)?, s.digest.clone()),
         };
-        let key = serde_json::json!({"scene": digest, "masks": masks.digest});
+        // `records`: the metrics carry per-view sums (a step cached before they were
+        // recorded is not reused).
+        let key =
+            serde_json::json!({"scene": digest, "masks": masks.digest, "records": "per-view"});
         let st = dir.step(&format!("eval/{name}"), key, on_event, |w| {
             let row = score(inputs, &scene, name, &existing, w)?;
             w.json("metrics.json", &row)?;
@@ -238,6 +283,7 @@ fn score(
     // Pool squared errors and SSIM values over all evaluation pixels of each class.
     let (mut se, mut n) = ([0f64; 3], [0usize; 3]);
     let (mut ss, mut sn) = ([0f64; 3], [0usize; 3]);
+    let mut views = Vec::with_capacity(inputs.evaluation.len());
     for (k, &i) in inputs.evaluation.iter().enumerate() {
         let v = &data.views[i];
         let (wd, ht) = (v.image.width, v.image.height);
@@ -248,18 +294,31 @@ fn score(
             .map(|x| x.clamp(0.0, 1.0))
             .collect();
         let map = ssim_map(&rgb, &v.image.data, wd, ht, 3);
+        // The pooled sums run over all views in pixel order (their bits are the metrics'
+        // since revision 1); the view's own sums beside them.
+        let mut own = [ClassSums::default(); 3];
         for p in 0..wd * ht {
             let class = if existing[k][p] { 1 } else { 2 };
             for cls in [0, class] {
                 for c in 0..3 {
                     let d = (rgb[p * 3 + c] - v.image.data[p * 3 + c].clamp(0.0, 1.0)) as f64;
                     se[cls] += d * d;
+                    own[cls].squared_error += d * d;
                 }
                 n[cls] += 3;
                 ss[cls] += map[p];
                 sn[cls] += 1;
+                own[cls].pixels += 1;
+                own[cls].ssim_sum += map[p];
             }
         }
+        let [all, existing_sums, extrapolated] = own;
+        views.push(ViewRecord {
+            view: v.camera.name.clone(),
+            all,
+            existing: existing_sums,
+            extrapolated,
+        });
         if k < 4 {
             let img = crate::eval::side_by_side(&rgb, &v.image.data, wd, ht)?;
             w.put(&format!("{}.png", stem(&v.camera.name)), |p| {
@@ -316,5 +375,6 @@ fn score(
             ts / nt
         },
         gaussians: scene.len(),
+        views,
     })
 }

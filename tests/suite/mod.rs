@@ -1,4 +1,5 @@
 mod align;
+mod audit_rule;
 mod bad_input;
 mod cli;
 mod collide;

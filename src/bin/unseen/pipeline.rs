@@ -332,9 +332,19 @@ pub struct AuditArgs {
     /// (default: quick classical,truth-low; paper all four).
     #[arg(long, value_delimiter = ',')]
     generators: Vec<String>,
-    /// Seeds 0..K (default: quick 1, paper 3).
+    /// The seeds of this batch: `K` (seeds 0 to K−1) or `A..B` (seeds A to B−1; default:
+    /// quick 1, paper 3). The report pools them with the samples already in the folder
+    /// (`samples.json`) and in `--merge` files: seeds accumulate.
+    #[arg(long, value_parser = parse_seeds)]
+    seeds: Option<std::ops::Range<u32>>,
+    /// Pool the samples of another audit (its `samples.json`, or an `audit.json` of an
+    /// earlier version) into the report; repeatable. Refused when it measures another
+    /// dataset, preset or original-scene training.
     #[arg(long)]
-    seeds: Option<u32>,
+    merge: Vec<PathBuf>,
+    /// Run no job: write the report of the samples in the folder and in `--merge` files.
+    #[arg(long, conflicts_with_all = ["only", "list"])]
+    report_only: bool,
     /// Training iterations of the original scene (default: quick 1500, paper 30000).
     #[arg(long)]
     train_iterations: Option<u32>,
@@ -348,6 +358,23 @@ pub struct AuditArgs {
     /// Worker threads (default: all cores); results are the same bits for any count.
     #[arg(long)]
     threads: Option<usize>,
+}
+
+/// `--seeds`: `K` (0..K) or `A..B`, not empty.
+fn parse_seeds(s: &str) -> std::result::Result<std::ops::Range<u32>, String> {
+    let num = |t: &str| {
+        t.trim()
+            .parse::<u32>()
+            .map_err(|_| format!("'{t}' is not a seed number (seeds are K or A..B)"))
+    };
+    let r = match s.split_once("..") {
+        Some((a, b)) => num(a)?..num(b)?,
+        None => 0..num(s)?,
+    };
+    if r.is_empty() {
+        return Err(format!("the seed range '{s}' is empty"));
+    }
+    Ok(r)
 }
 
 /// `unseen audit`: every job (or one), then the report.
@@ -371,8 +398,8 @@ pub fn run_audit(a: &AuditArgs) -> Result<()> {
             .map(|g| GeneratorKind::by_name(g))
             .collect::<Result<_>>()?;
     }
-    if let Some(k) = a.seeds {
-        cfg.seeds = k;
+    if let Some(k) = &a.seeds {
+        cfg.seeds = k.clone();
     }
     if let Some(n) = a.train_iterations {
         cfg.train_iterations = n;
@@ -397,8 +424,13 @@ pub fn run_audit(a: &AuditArgs) -> Result<()> {
         println!("done: {only}");
         return Ok(());
     }
-    let report =
-        unseen::sys::with_threads(a.threads, || audit::run(&cfg, &a.dataset, &a.out, &draw))??;
+    let report = if a.report_only {
+        audit::report(&cfg, &a.dataset, &a.out, &a.merge)?
+    } else {
+        unseen::sys::with_threads(a.threads, || {
+            audit::run(&cfg, &a.dataset, &a.out, &a.merge, &draw)
+        })??
+    };
     for v in &report.verdicts {
         println!(
             "{:<42} {:<11} {:+6.2} dB  {}",

@@ -15,13 +15,17 @@
 //! direction is reported. A claim "A does not hurt B's metric" holds unless
 //! `mean(d) < −2·std(d)`.
 
-use super::evaluate::{Row, Summary};
+use super::evaluate::{ClassSums, Row, Summary, ViewRecord};
 use super::{Event, Inconsistency, MaskSource, PipelineConfig, RunOptions, SlotNames};
 use crate::error::{Error, Result};
 use crate::train::checkpoint::checkpoint_path;
 use crate::train::run::{Checkpointing, latest_ply, read_config, train_run};
 use crate::train::trainer::TrainConfig;
 use std::path::{Path, PathBuf};
+
+pub mod samples;
+pub mod stats;
+pub use samples::Samples;
 
 /// One ablation of the paper (or the full method).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -141,6 +145,14 @@ impl GeneratorKind {
         Ok(())
     }
 
+    /// The family of Holm's correction: `classical` or `truth` (every level).
+    pub fn family(self) -> &'static str {
+        match self {
+            GeneratorKind::Classical => "classical",
+            GeneratorKind::Truth(_) => "truth",
+        }
+    }
+
     /// Position on the inconsistency axis (classical: none).
     fn level(self) -> Option<usize> {
         match self {
@@ -158,8 +170,9 @@ pub struct AuditConfig {
     pub base: PipelineConfig,
     pub variants: Vec<Variant>,
     pub generators: Vec<GeneratorKind>,
-    /// Seeds `0..seeds` (original scene and pipeline alike).
-    pub seeds: u32,
+    /// The seeds of this batch (original scene and pipeline alike); batches of other
+    /// seeds pool in the report ([`samples`]).
+    pub seeds: std::ops::Range<u32>,
     /// Training of the original scene on the dataset's training half.
     pub train_iterations: u32,
     pub train_resolution: u32,
@@ -173,7 +186,7 @@ impl AuditConfig {
             base: PipelineConfig::quick(),
             variants: Variant::ALL.to_vec(),
             generators: vec![GeneratorKind::Classical, GeneratorKind::Truth("low")],
-            seeds: 1,
+            seeds: 0..1,
             train_iterations: 1500,
             train_resolution: 2,
         }
@@ -191,7 +204,7 @@ impl AuditConfig {
                 GeneratorKind::Truth("low"),
                 GeneratorKind::Truth("high"),
             ],
-            seeds: 3,
+            seeds: 0..3,
             train_iterations: 30_000,
             train_resolution: 1,
         }
@@ -209,7 +222,7 @@ impl AuditConfig {
     }
 
     pub fn validate(&self) -> Result<()> {
-        if self.variants.is_empty() || self.generators.is_empty() || self.seeds == 0 {
+        if self.variants.is_empty() || self.generators.is_empty() || self.seeds.is_empty() {
             return Err(Error::invalid(
                 "an audit needs at least one variant, one generator and one seed",
             ));
@@ -232,6 +245,11 @@ impl AuditConfig {
     }
 
     /// The pipeline configuration of one job.
+    /// [`config_digest`] of a job's configuration.
+    pub fn config_digest(&self, generator: GeneratorKind, variant: Variant) -> Result<String> {
+        Ok(config_digest(&self.pipeline_config(generator, variant, 0)?))
+    }
+
     pub fn pipeline_config(
         &self,
         generator: GeneratorKind,
@@ -254,6 +272,16 @@ impl AuditConfig {
             ..TrainConfig::default()
         }
     }
+}
+
+/// SHA-256 of a pipeline configuration's JSON with its seed set to 0: what one
+/// (generator, variant) cell runs for every seed.
+pub fn config_digest(c: &PipelineConfig) -> String {
+    let c = PipelineConfig {
+        seed: 0,
+        ..c.clone()
+    };
+    crate::io::sha256_hex(&serde_json::to_vec(&c).expect("serializes"))
 }
 
 /// One job of an audit: the original scene of a seed, or a pipeline run.
@@ -286,8 +314,12 @@ impl Job {
 
 /// Every job of `cfg`, originals first (a run needs its seed's original scene).
 pub fn jobs(cfg: &AuditConfig) -> Vec<Job> {
-    let mut v: Vec<Job> = (0..cfg.seeds).map(|seed| Job::Original { seed }).collect();
-    for seed in 0..cfg.seeds {
+    let mut v: Vec<Job> = cfg
+        .seeds
+        .clone()
+        .map(|seed| Job::Original { seed })
+        .collect();
+    for seed in cfg.seeds.clone() {
         for &generator in &cfg.generators {
             for &variant in &cfg.variants {
                 v.push(Job::Run {
@@ -301,12 +333,25 @@ pub fn jobs(cfg: &AuditConfig) -> Vec<Job> {
     v
 }
 
-/// The measured outcome of one pipeline job.
-#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+/// The measured outcome of one pipeline job: one sample of the audit.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct JobResult {
     pub generator: String,
     pub variant: String,
     pub seed: u32,
+    /// The binary that computed it ([`crate::oracle::NUMERICS_REVISION`], crate version):
+    /// a sample of another revision is another draw of the chaotic training, pooled as
+    /// one more sample unless it has the same bits ([`samples`]). 0 / empty in job files
+    /// written before it was recorded (the audit's own revision applies).
+    #[serde(default)]
+    pub numerics_revision: u32,
+    #[serde(default)]
+    pub crate_version: String,
+    /// [`config_digest`] of the job's pipeline configuration: samples of another
+    /// configuration of the same (generator, variant) are not pooled. Empty in job files
+    /// written before it was recorded (taken as this binary's).
+    #[serde(default)]
+    pub config: String,
     /// The original scene's metrics on the evaluation poses.
     pub original: Row,
     /// The final scene's (the last stage the variant runs).
@@ -316,8 +361,8 @@ pub struct JobResult {
     pub stage_seconds: std::collections::BTreeMap<String, f64>,
     /// Every step of the job's run, in run order, with its manifest digest (equal digests
     /// are one computation, shared through the cache) and its compute seconds. Empty in
-    /// job files written before it was recorded.
-    #[serde(default)]
+    /// job files written before it was recorded, and in pooled samples.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub steps: Vec<StepCost>,
 }
 
@@ -461,6 +506,9 @@ pub fn run_job(
                 generator: generator.name(),
                 variant: variant.name().into(),
                 seed,
+                numerics_revision: crate::oracle::NUMERICS_REVISION,
+                crate_version: env!("CARGO_PKG_VERSION").into(),
+                config: config_digest(&pc),
                 original: first,
                 last,
                 stage_seconds,
@@ -599,6 +647,15 @@ impl Metric {
         }
     }
 
+    /// The per-view sums of the metric's pixel class.
+    fn class(self, v: &ViewRecord) -> &ClassSums {
+        match self {
+            Metric::PsnrAll => &v.all,
+            Metric::PsnrExisting => &v.existing,
+            Metric::PsnrExtrapolated => &v.extrapolated,
+        }
+    }
+
     fn label(self) -> &'static str {
         match self {
             Metric::PsnrAll => "PSNR all",
@@ -710,21 +767,42 @@ pub const CLAIMS: [Claim; 11] = [
     },
 ];
 
-/// A claim tested under one generator.
+/// A claim tested under one generator (SPEC.md §21.2).
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Verdict {
     #[serde(flatten)]
     pub claim: Claim,
     pub generator: String,
-    /// Seeds with both runs.
+    /// The Holm family: the room × generator family (`classical`, `truth`).
+    pub family: String,
+    /// Paired units (a seed at a numerics revision) with both runs and a finite
+    /// difference, and the revisions among them.
     pub seeds: usize,
-    /// Mean and sample standard deviation of `full − variant` over the seeds (std is NaN,
-    /// `null` in JSON, with one seed).
+    pub revisions: Vec<u32>,
+    /// Mean and sample standard deviation of `full − variant` over the units (std is NaN,
+    /// `null` in JSON, with one).
     pub mean_diff: f64,
     #[serde(with = "super::evaluate::nan_null")]
     pub std_diff: f64,
-    /// `holds`, `does not hold`, `within noise`, or with one seed `agrees (1 seed)` /
-    /// `disagrees (1 seed)`.
+    /// The value the test compares Δ with: 0, or `−margin` for a "does not hurt" claim.
+    pub null: f64,
+    /// The interval (two-sided, level `1 − α`, before the family's correction) and how it
+    /// was computed; absent with one unit.
+    pub method: Option<stats::Method>,
+    pub ci: Option<[f64; 2]>,
+    /// Holm-adjusted two-sided p-value of the null value.
+    #[serde(with = "super::evaluate::nan_null")]
+    pub p_holm: f64,
+    /// The smallest true distance from the null value found with the rule's power at the
+    /// family's first Holm level, for the measured spread.
+    #[serde(with = "super::evaluate::nan_null")]
+    pub min_detectable: f64,
+    /// Percentile interval of a bootstrap over units, then over the evaluation views of
+    /// each unit (pooled PSNR of the resampled views), over the `hierarchical_units`
+    /// units with per-view records; absent with fewer than two.
+    pub hierarchical: Option<[f64; 2]>,
+    pub hierarchical_units: usize,
+    /// `holds`, `contradicted`, `inconclusive`, or `inconclusive (1 seed)`.
     pub verdict: String,
 }
 
@@ -739,98 +817,279 @@ fn mean_std(v: &[f64]) -> (f64, f64) {
     (m, var.sqrt())
 }
 
-/// The verdict of `d = full − variant` from its mean and sample std over `seeds` seeds
-/// (SPEC.md §21.2).
-pub fn verdict(direction: Direction, mean: f64, std: f64, seeds: usize) -> String {
-    if seeds < 2 {
-        let agrees = match direction {
-            Direction::Beats => mean > 0.0,
-            Direction::DoesNotHurt => mean >= 0.0,
-        };
-        return if agrees {
-            "agrees (1 seed)"
-        } else {
-            "disagrees (1 seed)"
-        }
-        .into();
-    }
-    let (above, below) = (mean > 2.0 * std, mean < -2.0 * std);
-    match direction {
-        Direction::Beats if above => "holds",
-        Direction::Beats if below => "does not hold",
-        Direction::Beats => "within noise",
-        Direction::DoesNotHurt if below => "does not hold",
-        Direction::DoesNotHurt => "holds",
-    }
-    .into()
+/// A stable seed for a claim's bootstraps: the first 64 bits of SHA-256 of its names.
+fn bootstrap_seed(claim: &Claim, generator: &str, what: &str) -> u64 {
+    let h = crate::io::sha256_hex(format!("{what}\0{}\0{generator}", claim.id).as_bytes());
+    u64::from_str_radix(&h[..16], 16).expect("hex")
 }
 
-/// Every claim whose variant was run, per generator.
-pub fn verdicts(cfg: &AuditConfig, results: &[JobResult]) -> Vec<Verdict> {
-    let find = |g: &str, v: Variant, seed: u32| {
-        results
-            .iter()
-            .find(|r| r.generator == g && r.variant == v.name() && r.seed == seed)
+/// Replicates of the hierarchical bootstrap.
+pub const HIERARCHICAL_REPLICATES: usize = 2000;
+
+/// The hierarchical bootstrap's 95 % percentile interval of the mean paired difference
+/// of `metric`: units resampled with replacement, then each unit's evaluation views
+/// (the same views for both runs of the pair), the metric recomputed as pooled PSNR of
+/// the resampled views. Units without per-view records (or with different view lists)
+/// are left out; `None` below two units.
+fn hierarchical(
+    pairs: &[Pair],
+    metric: Metric,
+    alpha: f64,
+    seed: u64,
+) -> (Option<[f64; 2]>, usize) {
+    let units: Vec<(&[ViewRecord], &[ViewRecord])> = pairs
+        .iter()
+        .map(|p| (&p.full.last.views[..], &p.variant.last.views[..]))
+        .filter(|(a, b)| {
+            !a.is_empty()
+                && a.len() == b.len()
+                && a.iter().zip(b.iter()).all(|(x, y)| x.view == y.view)
+        })
+        .collect();
+    let n = units.len();
+    if n < 2 {
+        return (None, n);
+    }
+    let mut u = crate::scene::Uniform::new(seed);
+    let mut reps = Vec::with_capacity(HIERARCHICAL_REPLICATES);
+    let mut picks: Vec<usize> = Vec::new();
+    for _ in 0..HIERARCHICAL_REPLICATES {
+        let (mut sum, mut count) = (0.0, 0usize);
+        for _ in 0..n {
+            let (a, b) = units[u.below(n as u32) as usize];
+            picks.clear();
+            picks.extend((0..a.len()).map(|_| u.below(a.len() as u32) as usize));
+            let pa = ClassSums::psnr(picks.iter().map(|&i| metric.class(&a[i])));
+            let pb = ClassSums::psnr(picks.iter().map(|&i| metric.class(&b[i])));
+            let d = pa - pb;
+            if d.is_finite() {
+                sum += d;
+                count += 1;
+            }
+        }
+        if count > 0 {
+            reps.push(sum / count as f64);
+        }
+    }
+    if reps.is_empty() {
+        return (None, n);
+    }
+    reps.sort_by(f64::total_cmp);
+    let at = |q: f64| {
+        let h = q * (reps.len() - 1) as f64;
+        let i = h.floor() as usize;
+        let j = (i + 1).min(reps.len() - 1);
+        reps[i] + (h - i as f64) * (reps[j] - reps[i])
     };
-    let mut out = Vec::new();
+    (Some([at(alpha / 2.0), at(1.0 - alpha / 2.0)]), n)
+}
+
+/// One unit of the audit: a seed at a numerics revision (SPEC.md §21.2).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Pair<'a> {
+    pub seed: u32,
+    pub revision: u32,
+    pub full: &'a JobResult,
+    pub variant: &'a JobResult,
+}
+
+/// The pairs (full, `variant`) of `generator` in `pool`: both runs of one seed at one
+/// numerics revision, in (seed, revision) order. A pair whose two samples another
+/// revision reproduced bit for bit (a revision that did not change these runs) is the
+/// same draw and counted once, at its lowest revision.
+pub fn pairs<'a>(pool: &'a [JobResult], generator: &str, variant: Variant) -> Vec<Pair<'a>> {
+    let cell = |v: Variant| {
+        pool.iter()
+            .filter(move |r| r.generator == generator && r.variant == v.name())
+    };
+    let mut out: Vec<Pair<'a>> = Vec::new();
+    for full in cell(Variant::Full) {
+        let Some(other) = cell(variant)
+            .find(|r| r.seed == full.seed && r.numerics_revision == full.numerics_revision)
+        else {
+            continue;
+        };
+        out.push(Pair {
+            seed: full.seed,
+            revision: full.numerics_revision,
+            full,
+            variant: other,
+        });
+    }
+    out.sort_by_key(|p| (p.seed, p.revision));
+    let bits = |r: &JobResult| serde_json::to_string(&r.last).expect("serializes");
+    let mut kept: Vec<Pair<'a>> = Vec::new();
+    for p in out {
+        let same = kept.iter().any(|q| {
+            q.seed == p.seed && bits(q.full) == bits(p.full) && bits(q.variant) == bits(p.variant)
+        });
+        if !same {
+            kept.push(p);
+        }
+    }
+    kept
+}
+
+/// Every claim whose variant was run, per generator, judged by `rule` within each
+/// generator family (SPEC.md §21.2).
+pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Vec<Verdict> {
+    struct Cell<'a> {
+        claim: Claim,
+        generator: GeneratorKind,
+        pairs: Vec<Pair<'a>>,
+        diffs: Vec<f64>,
+    }
+    let mut cells = Vec::new();
     for claim in CLAIMS {
         if !cfg.variants.contains(&claim.variant) {
             continue;
         }
-        for g in &cfg.generators {
-            let g = g.name();
-            let d: Vec<f64> = (0..cfg.seeds)
-                .filter_map(|s| {
-                    let (a, b) = (find(&g, Variant::Full, s)?, find(&g, claim.variant, s)?);
-                    let d = claim.metric.of(&a.last) - claim.metric.of(&b.last);
-                    d.is_finite().then_some(d)
+        for &generator in &cfg.generators {
+            let pairs: Vec<Pair> = pairs(pool, &generator.name(), claim.variant)
+                .into_iter()
+                .filter(|p| {
+                    let d = claim.metric.of(&p.full.last) - claim.metric.of(&p.variant.last);
+                    d.is_finite()
                 })
                 .collect();
-            if d.is_empty() {
+            if pairs.is_empty() {
                 continue;
             }
-            let (mean, std) = mean_std(&d);
-            out.push(Verdict {
+            let diffs = pairs
+                .iter()
+                .map(|p| claim.metric.of(&p.full.last) - claim.metric.of(&p.variant.last))
+                .collect();
+            cells.push(Cell {
                 claim,
-                generator: g,
-                seeds: d.len(),
-                mean_diff: mean,
-                std_diff: std,
-                verdict: verdict(claim.direction, mean, std, d.len()),
+                generator,
+                pairs,
+                diffs,
             });
         }
     }
-    out
+    let null = |c: &Claim| match c.direction {
+        Direction::Beats => 0.0,
+        Direction::DoesNotHurt => -rule.margin,
+    };
+    let mut out: Vec<Option<Verdict>> = cells.iter().map(|_| None).collect();
+    for family in ["classical", "truth"] {
+        let members: Vec<usize> = (0..cells.len())
+            .filter(|&i| cells[i].generator.family() == family)
+            .collect();
+        let data: Vec<stats::ClaimData> = members
+            .iter()
+            .map(|&i| {
+                let c = &cells[i];
+                stats::ClaimData {
+                    diffs: &c.diffs,
+                    null: null(&c.claim),
+                    seed: bootstrap_seed(&c.claim, &c.generator.name(), "bca"),
+                }
+            })
+            .collect();
+        for (&i, j) in members.iter().zip(rule.judge(&data)) {
+            let c = &cells[i];
+            let g = c.generator.name();
+            let (mean, std) = mean_std(&c.diffs);
+            let mut revisions: Vec<u32> = c.pairs.iter().map(|p| p.revision).collect();
+            revisions.sort_unstable();
+            revisions.dedup();
+            let (hier, hier_units) = hierarchical(
+                &c.pairs,
+                c.claim.metric,
+                rule.alpha,
+                bootstrap_seed(&c.claim, &g, "hierarchical"),
+            );
+            let verdict = if j.test.is_none() {
+                "inconclusive (1 seed)".to_string()
+            } else {
+                j.outcome.word().to_string()
+            };
+            out[i] = Some(Verdict {
+                claim: c.claim,
+                family: family.into(),
+                generator: g,
+                seeds: c.diffs.len(),
+                revisions,
+                mean_diff: mean,
+                std_diff: std,
+                null: null(&c.claim),
+                method: j.test.map(|t| t.method),
+                ci: j.test.map(|t| [t.lo, t.hi]),
+                p_holm: j.p_holm,
+                min_detectable: j.min_detectable(rule),
+                hierarchical: hier,
+                hierarchical_units: hier_units,
+                verdict,
+            });
+        }
+    }
+    out.into_iter().flatten().collect()
 }
 
 /// What `audit.json` holds.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Report {
-    /// The binary that made it: the same crate version and numerics revision
-    /// ([`crate::oracle::NUMERICS_REVISION`]) give the same bits for the same seeds.
+    /// The binary that made the report: samples of other revisions are pooled (each
+    /// sample names its own, in `samples.json`).
     pub crate_version: String,
     pub numerics_revision: u32,
-    pub dataset: String,
-    pub preset: String,
-    pub seeds: u32,
+    #[serde(flatten)]
+    pub provenance: samples::Provenance,
+    /// Distinct seeds and numerics revisions of the pooled samples.
+    pub seeds: Vec<u32>,
+    pub revisions: Vec<u32>,
+    pub samples: usize,
     pub generators: Vec<String>,
     pub variants: Vec<String>,
-    pub train_iterations: u32,
-    pub train_resolution: u32,
-    pub results: Vec<JobResult>,
+    /// The verdict rule's parameters.
+    pub rule: stats::Rule,
     pub verdicts: Vec<Verdict>,
+    /// This batch's job results (with their steps): what the step cache saved.
+    #[serde(skip)]
+    pub results: Vec<JobResult>,
+    /// Every pooled sample.
+    #[serde(skip)]
+    pub pool: Vec<JobResult>,
 }
 
-/// Run every job of `cfg` that is not done (each resumes its own folder), then write
-/// `DIR/audit.json`, `DIR/audit.md` and `DIR/inconsistency.svg`.
+/// The samples an audit of `cfg` in `dir` pools with its own batch: `dir`'s
+/// [`samples::SAMPLES_FILE`] and every `merge` file (another audit's samples, or an
+/// `audit.json` of an earlier version). Read before any job runs, so that a file that
+/// cannot be pooled fails the audit at once.
+fn gather(cfg: &AuditConfig, dataset: &Path, dir: &Path, merge: &[PathBuf]) -> Result<Samples> {
+    let mut pool = Samples::new(samples::Provenance {
+        dataset: samples::dataset_name(dataset),
+        dataset_digest: samples::dataset_digest(dataset)?,
+        preset: cfg.base.preset.clone(),
+        train_iterations: cfg.train_iterations,
+        train_resolution: cfg.train_resolution,
+    });
+    let own = dir.join(samples::SAMPLES_FILE);
+    let mut files: Vec<PathBuf> = merge.to_vec();
+    if own.is_file() {
+        files.insert(0, own);
+    }
+    for f in files {
+        let s = Samples::read(&f)?;
+        pool.pool(s, &f)?;
+    }
+    Ok(pool)
+}
+
+/// Run every job of `cfg` that is not done (each resumes its own folder), pool the
+/// results with the samples already in `dir` and in `merge` files, then write
+/// `DIR/samples.json`, `DIR/audit.json`, `DIR/audit.md` and `DIR/inconsistency.svg`.
 pub fn run(
     cfg: &AuditConfig,
     dataset: &Path,
     dir: &Path,
+    merge: &[PathBuf],
     on_event: &(dyn Fn(Event) + Sync),
 ) -> Result<Report> {
     cfg.validate()?;
     check_inputs(dataset, dir)?;
+    let pool = gather(cfg, dataset, dir, merge)?;
     crate::io::create_dir_all(dir)?;
     let mut results = Vec::new();
     for job in jobs(cfg) {
@@ -838,22 +1097,58 @@ pub fn run(
             results.push(r);
         }
     }
+    finish(cfg, dir, pool, results)
+}
+
+/// The report of the samples in `dir` and `merge` files alone (no job runs).
+pub fn report(cfg: &AuditConfig, dataset: &Path, dir: &Path, merge: &[PathBuf]) -> Result<Report> {
+    cfg.validate()?;
+    check_inputs(dataset, dir)?;
+    let pool = gather(cfg, dataset, dir, merge)?;
+    if pool.samples.is_empty() {
+        return Err(Error::invalid(format!(
+            "no samples to report (no {} here and no --merge file)",
+            samples::SAMPLES_FILE
+        ))
+        .at(dir));
+    }
+    crate::io::create_dir_all(dir)?;
+    finish(cfg, dir, pool, Vec::new())
+}
+
+fn finish(
+    cfg: &AuditConfig,
+    dir: &Path,
+    mut pool: Samples,
+    results: Vec<JobResult>,
+) -> Result<Report> {
+    for r in &results {
+        pool.insert(r.clone());
+    }
+    pool.write(&dir.join(samples::SAMPLES_FILE))?;
+    let rule = stats::Rule::default();
+    let (seeds, revisions) = pool.seeds_and_revisions();
+    let names = |mut v: Vec<String>| {
+        v.dedup();
+        v
+    };
     let report = Report {
         crate_version: env!("CARGO_PKG_VERSION").into(),
         numerics_revision: crate::oracle::NUMERICS_REVISION,
-        dataset: dataset.display().to_string(),
-        preset: cfg.base.preset.clone(),
-        seeds: cfg.seeds,
-        generators: cfg.generators.iter().map(|g| g.name()).collect(),
-        variants: cfg.variants.iter().map(|v| v.name().to_string()).collect(),
-        train_iterations: cfg.train_iterations,
-        train_resolution: cfg.train_resolution,
-        verdicts: verdicts(cfg, &results),
+        provenance: pool.provenance.clone(),
+        seeds,
+        revisions,
+        samples: pool.samples.len(),
+        generators: names(cfg.generators.iter().map(|g| g.name()).collect()),
+        variants: names(cfg.variants.iter().map(|v| v.name().to_string()).collect()),
+        verdicts: verdicts(cfg, &pool.samples, &rule),
+        rule,
         results,
+        pool: pool.samples,
     };
     let json = serde_json::to_string_pretty(&report).expect("serializes") + "\n";
     crate::io::write_text(&dir.join("audit.json"), &json)?;
-    crate::io::write_text(&dir.join("inconsistency.svg"), &plot(cfg, &report.results))?;
+    crate::io::write_text(&dir.join("inconsistency.svg"), &plot(cfg, &report.pool))?;
     crate::io::write_text(&dir.join("audit.md"), &markdown(cfg, &report))?;
     Ok(report)
 }
@@ -869,12 +1164,39 @@ fn stat(results: &[&JobResult], f: impl Fn(&JobResult) -> f64, digits: usize) ->
     }
 }
 
-/// The results of one (generator, variant), seeds in order.
+/// The distinct samples of one (generator, variant) in pool order (a sample another
+/// revision reproduced bit for bit counts once).
 fn group<'a>(results: &'a [JobResult], generator: &str, variant: Variant) -> Vec<&'a JobResult> {
-    results
+    let bits = |r: &JobResult| serde_json::to_string(&r.last).expect("serializes");
+    let mut out: Vec<&JobResult> = Vec::new();
+    for r in results
         .iter()
         .filter(|r| r.generator == generator && r.variant == variant.name())
-        .collect()
+    {
+        if !out.iter().any(|o| o.seed == r.seed && bits(o) == bits(r)) {
+            out.push(r);
+        }
+    }
+    out
+}
+
+/// `0–11, 14` for seeds 0..=11 and 14.
+fn seed_ranges(seeds: &[u32]) -> String {
+    let mut parts = Vec::new();
+    let mut i = 0;
+    while i < seeds.len() {
+        let mut j = i;
+        while j + 1 < seeds.len() && seeds[j + 1] == seeds[j] + 1 {
+            j += 1;
+        }
+        parts.push(if j > i {
+            format!("{}–{}", seeds[i], seeds[j])
+        } else {
+            seeds[i].to_string()
+        });
+        i = j + 1;
+    }
+    parts.join(", ")
 }
 
 /// The six metric cells of a table row (PSNR existing, extrapolated, all; SSIM existing,
@@ -893,37 +1215,73 @@ fn metric_cells(rows: &[&JobResult], pick: impl Fn(&JobResult) -> &Row) -> Strin
 
 /// `audit.md`.
 pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
+    let revisions: Vec<String> = report.revisions.iter().map(|r| r.to_string()).collect();
     let mut s = format!(
-        "# Audit of the paper's claims\n\nDataset `{}`; preset `{}`; seeds {}; original scene: {} iterations at resolution 1/{} on the training half. Metrics on the evaluation poses, pixels split into *existing* (seen by the training half) and *extrapolated*; mean ± sample std over seeds. Made by `unseen audit` (SPEC.md §21), crate {} at numerics revision {} (a binary of the same revision gives the same bits for the same seeds).\n\n",
-        report.dataset,
-        report.preset,
-        report.seeds,
-        report.train_iterations,
-        report.train_resolution,
+        "# Audit of the paper's claims\n\nDataset `{}`; preset `{}`; {} seeds ({}) in {} samples at numerics revision{} {}; original scene: {} iterations at resolution 1/{} on the training half. Metrics on the evaluation poses, pixels split into *existing* (seen by the training half) and *extrapolated*. Made by `unseen audit` (SPEC.md §21), crate {} at numerics revision {}; the samples are in `samples.json` (a later batch of seeds adds to them).\n\n",
+        report.provenance.dataset,
+        report.provenance.preset,
+        report.seeds.len(),
+        seed_ranges(&report.seeds),
+        report.samples,
+        if revisions.len() > 1 { "s" } else { "" },
+        revisions.join(", "),
+        report.provenance.train_iterations,
+        report.provenance.train_resolution,
         report.crate_version,
         report.numerics_revision
     );
-    s += "## Claims\n\nΔ = full − variant, in dB. A claim *holds* where Δ exceeds 2 std of its per-seed values in the claimed direction, *does not hold* where it exceeds 2 std the other way, and is *within noise* otherwise; with one seed only the direction is given. The paper's numbers are from ScanNet++ / Mip-NeRF 360 with diffusion generators: compare directions, not values.\n\n| claim | metric | paper | generator | Δ (dB) | verdict |\n|---|---|---|---|---|---|\n";
-    for v in &report.verdicts {
-        let d = if v.std_diff.is_nan() {
-            format!("{:+.2}", v.mean_diff)
+    let r = &report.rule;
+    s += &format!(
+        "## Claims\n\n**How to read this.** Δ = full − variant (dB), one value per seed: both runs of a seed start from the same original scene with the same random numbers, so Δ is paired; the same seed at another numerics revision is another draw (a sample another revision reproduced bit for bit counts once). *95 % CI*: Student's t with n − 1 degrees of freedom below {} seeds, a BCa bootstrap over seeds ({} replicates, seeded) from {}. A claim that the full method is better **holds** when Δ is significantly above 0 and is **contradicted** when it is significantly below; a claim that the full method *does not hurt* (non-inferiority) holds when Δ is significantly above −{} dB (the margin) and is contradicted when significantly below it. *Significantly*: the two-sided p-value of that null value, after Holm's correction over the claims of the same generator family (classical; truth at every level) on this dataset, is below α = {}. Otherwise **inconclusive**: the *MDE* column is the smallest true distance from the null value that this many seeds find with {:.0} % power at the family's strictest Holm level, for the measured spread — an effect smaller than that could be there. *Hierarchical*: a 95 % percentile interval from resampling seeds, then each seed's evaluation views (pooled PSNR), over the seeds with per-view records: wider than the seed CI where views disagree. The paper's numbers are from ScanNet++ / Mip-NeRF 360 with diffusion generators: compare directions, not values.\n\n| claim | metric | paper | generator | n | Δ (dB) | 95 % CI | hierarchical | p (Holm) | MDE (dB) | verdict |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+        r.bootstrap_from,
+        r.replicates,
+        r.bootstrap_from,
+        r.margin,
+        r.alpha,
+        100.0 * r.power
+    );
+    let interval = |ci: Option<[f64; 2]>| {
+        ci.map_or_else(
+            || "–".to_string(),
+            |[lo, hi]| format!("[{lo:+.2}, {hi:+.2}]"),
+        )
+    };
+    let num = |x: f64, digits: usize| {
+        if x.is_finite() {
+            format!("{x:.digits$}")
         } else {
-            format!("{:+.2} ± {:.2}", v.mean_diff, v.std_diff)
+            "–".into()
+        }
+    };
+    for v in &report.verdicts {
+        let null = if v.null != 0.0 {
+            format!(" (vs {:+.1})", v.null)
+        } else {
+            String::new()
         };
         s += &format!(
-            "| {} | {} | {} | {} | {} | **{}** |\n",
+            "| {} | {} | {} | {} | {} | {:+.2}{null} | {} | {} | {} | {} | **{}** |\n",
             v.claim.id,
             v.claim.metric.label(),
             v.claim.paper,
             v.generator,
-            d,
+            v.seeds,
+            v.mean_diff,
+            interval(v.ci),
+            interval(v.hierarchical),
+            if v.p_holm.is_finite() {
+                format!("{:.3}", v.p_holm)
+            } else {
+                "–".into()
+            },
+            num(v.min_detectable, 2),
             v.verdict
         );
     }
     s += "\n## Every variant\n\n| generator | variant | PSNR existing | PSNR extrapolated | PSNR all | SSIM existing | SSIM extrapolated | train-half PSNR | compute (s) |\n|---|---|---|---|---|---|---|---|---|\n";
     for g in &cfg.generators {
         let g = g.name();
-        let rows = group(&report.results, &g, Variant::Full);
+        let rows = group(&report.pool, &g, Variant::Full);
         if !rows.is_empty() {
             s += &format!(
                 "| {g} | *original scene* | {} | |\n",
@@ -931,7 +1289,7 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
             );
         }
         for v in &cfg.variants {
-            let rows = group(&report.results, &g, *v);
+            let rows = group(&report.pool, &g, *v);
             if rows.is_empty() {
                 continue;
             }
@@ -960,7 +1318,7 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
     for g in &cfg.generators {
         let g = g.name();
         for v in &cfg.variants {
-            let rows = group(&report.results, &g, *v);
+            let rows = group(&report.pool, &g, *v);
             if rows.is_empty() {
                 continue;
             }
