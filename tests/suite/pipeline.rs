@@ -835,6 +835,45 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
     assert!(computed.into_inner().unwrap().is_empty());
     let bits = |r: &audit::Report| serde_json::to_string(&r.results).unwrap();
     assert_eq!(bits(&report), bits(&again));
+    // The samples alone, pooled into another folder, give the same verdicts.
+    let verdicts = |r: &audit::Report| serde_json::to_string(&r.verdicts).unwrap();
+    let samples = dir.join(audit::samples::SAMPLES_FILE);
+    let elsewhere = t.path().join("elsewhere");
+    let pooled = audit::report(&cfg, &lounge(), &elsewhere, &[samples.clone()]).unwrap();
+    assert_eq!(verdicts(&pooled), verdicts(&report));
+    assert_eq!(pooled.samples, 4);
+    // Samples of another original-scene training are not pooled (nothing written).
+    let other = AuditConfig {
+        train_iterations: 301,
+        ..cfg.clone()
+    };
+    let e = audit::report(
+        &other,
+        &lounge(),
+        &t.path().join("refused"),
+        &[samples.clone()],
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("trained 300 iterations") && e.contains("samples.json"),
+        "{e}"
+    );
+    assert!(!t.path().join("refused").exists());
+    // A second batch of seeds adds to the first.
+    let more = AuditConfig {
+        seeds: 2..3,
+        ..cfg.clone()
+    };
+    let grown = audit::run(&more, &lounge(), &dir, &[], &quiet).unwrap();
+    assert_eq!((grown.seeds.clone(), grown.samples), (vec![0, 1, 2], 6));
+    assert!(
+        grown.verdicts.iter().all(|v| v.seeds == 3),
+        "{:?}",
+        grown.verdicts
+    );
+    let md = std::fs::read_to_string(dir.join("audit.md")).unwrap();
+    assert!(md.contains("3 seeds (0–2) in 6 samples"), "{md}");
 }
 
 /// A sample of the audit with the given PSNR (all classes) of its final scene.
@@ -1041,6 +1080,34 @@ fn cli_audit_bad_input_is_one_clear_error() {
             "unknown job",
             vec![lounge.clone().into(), "--only".into(), "runs/x".into()],
             "no job 'runs/x'",
+        ),
+        (
+            "empty seed range",
+            vec![lounge.clone().into(), "--seeds".into(), "3..3".into()],
+            "the seed range '3..3' is empty",
+        ),
+        (
+            "merge file missing",
+            vec![
+                lounge.clone().into(),
+                "--merge".into(),
+                t.path().join("nowhere.json").into(),
+            ],
+            "nowhere.json",
+        ),
+        (
+            "merge file not samples",
+            vec![
+                lounge.clone().into(),
+                "--merge".into(),
+                a_file.clone().into(),
+            ],
+            "not JSON",
+        ),
+        (
+            "report of nothing",
+            vec![lounge.clone().into(), "--report-only".into()],
+            "no samples to report",
         ),
     ];
     for (what, args, words) in cases {

@@ -335,8 +335,8 @@ pub struct AuditArgs {
     /// The seeds of this batch: `K` (seeds 0 to K−1) or `A..B` (seeds A to B−1; default:
     /// quick 1, paper 3). The report pools them with the samples already in the folder
     /// (`samples.json`) and in `--merge` files: seeds accumulate.
-    #[arg(long, value_parser = parse_seeds)]
-    seeds: Option<std::ops::Range<u32>>,
+    #[arg(long)]
+    seeds: Option<String>,
     /// Pool the samples of another audit (its `samples.json`, or an `audit.json` of an
     /// earlier version) into the report; repeatable. Refused when it measures another
     /// dataset, preset or original-scene training.
@@ -399,7 +399,7 @@ pub fn run_audit(a: &AuditArgs) -> Result<()> {
             .collect::<Result<_>>()?;
     }
     if let Some(k) = &a.seeds {
-        cfg.seeds = k.clone();
+        cfg.seeds = parse_seeds(k).map_err(Error::invalid)?;
     }
     if let Some(n) = a.train_iterations {
         cfg.train_iterations = n;

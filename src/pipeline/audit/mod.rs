@@ -786,10 +786,12 @@ pub struct Verdict {
     pub std_diff: f64,
     /// The value the test compares Δ with: 0, or `−margin` for a "does not hurt" claim.
     pub null: f64,
-    /// The interval (two-sided, level `1 − α`, before the family's correction) and how it
-    /// was computed; absent with one unit.
+    /// The t interval (two-sided, level `1 − α`, before the family's correction) and what
+    /// the p-value comes from; absent with one unit.
     pub method: Option<stats::Method>,
     pub ci: Option<[f64; 2]>,
+    /// The BCa interval (from [`stats::Rule::bootstrap_from`] units).
+    pub bca: Option<[f64; 2]>,
     /// Holm-adjusted two-sided p-value of the null value.
     #[serde(with = "super::evaluate::nan_null")]
     pub p_holm: f64,
@@ -1016,6 +1018,7 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
                 null: null(&c.claim),
                 method: j.test.map(|t| t.method),
                 ci: j.test.map(|t| [t.lo, t.hi]),
+                bca: j.test.and_then(|t| t.bca),
                 p_holm: j.p_holm,
                 min_detectable: j.min_detectable(rule),
                 hierarchical: hier,
@@ -1232,10 +1235,9 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
     );
     let r = &report.rule;
     s += &format!(
-        "## Claims\n\n**How to read this.** Δ = full − variant (dB), one value per seed: both runs of a seed start from the same original scene with the same random numbers, so Δ is paired; the same seed at another numerics revision is another draw (a sample another revision reproduced bit for bit counts once). *95 % CI*: Student's t with n − 1 degrees of freedom below {} seeds, a BCa bootstrap over seeds ({} replicates, seeded) from {}. A claim that the full method is better **holds** when Δ is significantly above 0 and is **contradicted** when it is significantly below; a claim that the full method *does not hurt* (non-inferiority) holds when Δ is significantly above −{} dB (the margin) and is contradicted when significantly below it. *Significantly*: the two-sided p-value of that null value, after Holm's correction over the claims of the same generator family (classical; truth at every level) on this dataset, is below α = {}. Otherwise **inconclusive**: the *MDE* column is the smallest true distance from the null value that this many seeds find with {:.0} % power at the family's strictest Holm level, for the measured spread — an effect smaller than that could be there. *Hierarchical*: a 95 % percentile interval from resampling seeds, then each seed's evaluation views (pooled PSNR), over the seeds with per-view records: wider than the seed CI where views disagree. The paper's numbers are from ScanNet++ / Mip-NeRF 360 with diffusion generators: compare directions, not values.\n\n| claim | metric | paper | generator | n | Δ (dB) | 95 % CI | hierarchical | p (Holm) | MDE (dB) | verdict |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "## Claims\n\n**How to read this.** Δ = full − variant (dB), one value per seed: both runs of a seed start from the same original scene with the same random numbers, so Δ is paired; the same seed at another numerics revision is another draw (a sample another revision reproduced bit for bit counts once). *95 % CI*: Student's t with n − 1 degrees of freedom; from {} seeds a verdict also needs the BCa bootstrap over seeds ({} replicates, seeded; its interval in *BCa*) to agree, since the bootstrap alone is too liberal at these sizes (SPEC.md §21.2). A claim that the full method is better **holds** when Δ is significantly above 0 and is **contradicted** when it is significantly below; a claim that the full method *does not hurt* (non-inferiority) holds when Δ is significantly above −{} dB (the margin) and is contradicted when significantly below it. *Significantly*: the two-sided p-value of that null value, after Holm's correction over the claims of the same generator family (classical; truth at every level) on this dataset, is below α = {}. Otherwise **inconclusive**: the *MDE* column is the smallest true distance from the null value that this many seeds find with {:.0} % power at the family's strictest Holm level, for the measured spread — an effect smaller than that could be there. *Hierarchical*: a 95 % percentile interval from resampling seeds, then each seed's evaluation views (pooled PSNR), over the seeds with per-view records: wider than the seed CI where views disagree. The paper's numbers are from ScanNet++ / Mip-NeRF 360 with diffusion generators: compare directions, not values.\n\n| claim | metric | paper | generator | n | Δ (dB) | 95 % CI | BCa | hierarchical | p (Holm) | MDE (dB) | verdict |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
         r.bootstrap_from,
         r.replicates,
-        r.bootstrap_from,
         r.margin,
         r.alpha,
         100.0 * r.power
@@ -1260,7 +1262,7 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
             String::new()
         };
         s += &format!(
-            "| {} | {} | {} | {} | {} | {:+.2}{null} | {} | {} | {} | {} | **{}** |\n",
+            "| {} | {} | {} | {} | {} | {:+.2}{null} | {} | {} | {} | {} | {} | **{}** |\n",
             v.claim.id,
             v.claim.metric.label(),
             v.claim.paper,
@@ -1268,6 +1270,7 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
             v.seeds,
             v.mean_diff,
             interval(v.ci),
+            interval(v.bca),
             interval(v.hierarchical),
             if v.p_holm.is_finite() {
                 format!("{:.3}", v.p_holm)
