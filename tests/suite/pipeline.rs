@@ -839,7 +839,8 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
     let verdicts = |r: &audit::Report| serde_json::to_string(&r.verdicts).unwrap();
     let samples = dir.join(audit::samples::SAMPLES_FILE);
     let elsewhere = t.path().join("elsewhere");
-    let pooled = audit::report(&cfg, &lounge(), &elsewhere, &[samples.clone()]).unwrap();
+    let pooled =
+        audit::report(&cfg, &lounge(), &elsewhere, std::slice::from_ref(&samples)).unwrap();
     assert_eq!(verdicts(&pooled), verdicts(&report));
     assert_eq!(pooled.samples, 4);
     // Samples of another original-scene training are not pooled (nothing written).
@@ -851,7 +852,7 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
         &other,
         &lounge(),
         &t.path().join("refused"),
-        &[samples.clone()],
+        std::slice::from_ref(&samples),
     )
     .unwrap_err()
     .to_string();
