@@ -1378,9 +1378,8 @@ pub fn plot(cfg: &AuditConfig, results: &[JobResult]) -> String {
         .collect();
     // Mean and std over seeds of one (generator, variant, metric).
     let point = |g: GeneratorKind, v: Variant, m: Metric| {
-        let vals: Vec<f64> = results
+        let vals: Vec<f64> = group(results, &g.name(), v)
             .iter()
-            .filter(|r| r.generator == g.name() && r.variant == v.name())
             .map(|r| m.of(&r.last))
             .filter(|x| x.is_finite())
             .collect();
