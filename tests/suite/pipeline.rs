@@ -799,6 +799,9 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
     for v in &report.verdicts {
         assert_eq!(v.seeds, 2);
         assert!(v.mean_diff.is_finite() && v.std_diff.is_finite(), "{v:?}");
+        // Both seeds have per-view records: the seeds-then-views bootstrap runs.
+        let [lo, hi] = v.hierarchical.unwrap();
+        assert!(lo <= hi && v.hierarchical_units == 2, "{v:?}");
         assert!(
             ["holds", "contradicted", "inconclusive"].contains(&v.verdict.as_str()),
             "{v:?}"
