@@ -1,5 +1,7 @@
-//! Any bytes as a training config, a pipeline config and a run manifest (the JSON files a
-//! user or a previous run hands us): parsed and validated, or a clear error; never a panic.
+//! Any bytes as a training config, a pipeline config, a run manifest and an audit's samples
+//! (the JSON files a user or a previous run hands us): parsed and validated, or a clear
+//! error; never a panic. Samples that parse are judged (the audit's statistics on
+//! arbitrary values).
 #![no_main]
 use libfuzzer_sys::fuzz_target;
 #[path = "common.rs"]
@@ -16,4 +18,13 @@ fuzz_target!(|data: &[u8]| {
     let _ = unseen::io::manifest::Manifest::read(p.parent().unwrap());
     let p = common::file_with("config.json", data);
     let _ = unseen::train::run::read_config(p.parent().unwrap());
+    let p = common::file_with("samples.json", data);
+    if let Ok(s) = unseen::pipeline::audit::Samples::read(&p) {
+        use unseen::pipeline::audit::{AuditConfig, stats::Rule, verdicts};
+        let rule = Rule {
+            replicates: 100,
+            ..Rule::default()
+        };
+        let _ = verdicts(&AuditConfig::quick(), &s.samples, &rule);
+    }
 });

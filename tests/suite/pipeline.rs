@@ -1155,3 +1155,67 @@ fn cli_audit_bad_input_is_one_clear_error() {
     assert!(jobs.contains("runs/truth-low/even_views/seed-0"));
     assert!(!t.path().join("listed").exists());
 }
+
+/// `samples.json` read back: the same samples; damaged (truncated anywhere, another
+/// format, a sample listed twice or without its revision), a clear error naming the file;
+/// extreme values parse and are judged without a panic.
+#[test]
+fn audit_samples_round_trip_and_damaged_files_are_clear_errors() {
+    use unseen::pipeline::audit::samples::{Provenance, Samples};
+    use unseen::pipeline::audit::{AuditConfig, stats::Rule, verdicts};
+    let t = TempDir::new("pipeline-audit-samples");
+    let mut s = Samples::new(Provenance {
+        dataset: "lounge".into(),
+        dataset_digest: "ab".repeat(32),
+        preset: "quick".into(),
+        train_iterations: 1500,
+        train_resolution: 2,
+    });
+    for seed in 0..3 {
+        s.insert(sample("full", seed, 4, 20.0 + seed as f64 * 0.1));
+        s.insert(sample("no_qa_mask", seed, 4, 20.0));
+    }
+    let path = t.path().join("samples.json");
+    s.write(&path).unwrap();
+    assert_eq!(Samples::read(&path).unwrap(), s);
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert_eq!(
+        text.lines().filter(|l| l.contains("\"seed\"")).count(),
+        6,
+        "one per line"
+    );
+    let bad = t.path().join("bad.json");
+    let mut cases: Vec<(String, String)> = (1..text.len())
+        .step_by(41)
+        .filter(|&i| text.is_char_boundary(i))
+        .map(|i| (format!("cut at {i}"), text[..i].to_string()))
+        .collect();
+    cases.push((
+        "format".into(),
+        text.replace("unseen-audit-samples/1", "unseen-audit-samples/9"),
+    ));
+    cases.push((
+        "revision 0".into(),
+        text.replacen("\"numerics_revision\":4", "\"numerics_revision\":0", 1),
+    ));
+    cases.push(("twice".into(), text.replacen("\"seed\":1", "\"seed\":0", 2)));
+    for (what, body) in cases {
+        std::fs::write(&bad, body).unwrap();
+        let e = Samples::read(&bad).unwrap_err().to_string();
+        assert!(e.contains("bad.json"), "{what}: {e}");
+    }
+    // Extreme values: parse, and the statistics do not panic.
+    let mut s2 = s.clone();
+    s2.insert(sample("full", u32::MAX, 4, 1e308));
+    s2.insert(sample("no_qa_mask", u32::MAX, 4, -1e308));
+    s2.insert(sample("full", u32::MAX - 1, 4, f64::NAN));
+    s2.insert(sample("no_qa_mask", u32::MAX - 1, 4, 0.0));
+    s2.write(&path).unwrap();
+    let back = Samples::read(&path).unwrap();
+    let cfg = AuditConfig {
+        generators: vec![unseen::pipeline::audit::GeneratorKind::Truth("low")],
+        ..AuditConfig::quick()
+    };
+    let v = verdicts(&cfg, &back.samples, &Rule::default());
+    assert!(!v.is_empty());
+}

@@ -1189,7 +1189,7 @@ fn seed_ranges(seeds: &[u32]) -> String {
     let mut i = 0;
     while i < seeds.len() {
         let mut j = i;
-        while j + 1 < seeds.len() && seeds[j + 1] == seeds[j] + 1 {
+        while j + 1 < seeds.len() && seeds[j].checked_add(1) == Some(seeds[j + 1]) {
             j += 1;
         }
         parts.push(if j > i {

@@ -190,11 +190,12 @@ impl Samples {
             && !b.dataset_digest.is_empty()
             && a.dataset_digest != b.dataset_digest
         {
+            let short = |d: &str| d.chars().take(12).collect::<String>();
             Some(format!(
                 "dataset '{}' with other content (digest {}…, not {}…)",
                 b.dataset,
-                &b.dataset_digest[..12.min(b.dataset_digest.len())],
-                &a.dataset_digest[..12.min(a.dataset_digest.len())]
+                short(&b.dataset_digest),
+                short(&a.dataset_digest)
             ))
         } else if a.preset != b.preset {
             Some(format!("preset '{}', not '{}'", b.preset, a.preset))
