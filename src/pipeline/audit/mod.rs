@@ -897,8 +897,9 @@ pub struct Pair<'a> {
 
 /// The pairs (full, `variant`) of `generator` in `pool`: both runs of one seed at one
 /// numerics revision, in (seed, revision) order. A pair whose two samples another
-/// revision reproduced bit for bit (a revision that did not change these runs) is the
-/// same draw and counted once, at its lowest revision.
+/// revision reproduced bit for bit (a revision that did not change these runs; metrics
+/// compared, per-view records aside) is the same draw and counted once, at its newest
+/// revision.
 pub fn pairs<'a>(pool: &'a [JobResult], generator: &str, variant: Variant) -> Vec<Pair<'a>> {
     let cell = |v: Variant| {
         pool.iter()
@@ -918,8 +919,10 @@ pub fn pairs<'a>(pool: &'a [JobResult], generator: &str, variant: Variant) -> Ve
             variant: other,
         });
     }
-    out.sort_by_key(|p| (p.seed, p.revision));
-    let bits = |r: &JobResult| serde_json::to_string(&r.last).expect("serializes");
+    // Newest revision first, so that of two bit-identical draws the one kept is the newer
+    // (which carries the per-view records of later versions).
+    out.sort_by_key(|p| (p.seed, std::cmp::Reverse(p.revision)));
+    let bits = |r: &JobResult| serde_json::to_string(&metrics_only(&r.last)).expect("serializes");
     let mut kept: Vec<Pair<'a>> = Vec::new();
     for p in out {
         let same = kept.iter().any(|q| {
@@ -929,7 +932,17 @@ pub fn pairs<'a>(pool: &'a [JobResult], generator: &str, variant: Variant) -> Ve
             kept.push(p);
         }
     }
+    kept.sort_by_key(|p| (p.seed, p.revision));
     kept
+}
+
+/// A row's metrics without its per-view records (what two draws are compared on: a sample
+/// written before the records existed has the same metrics bits without them).
+fn metrics_only(r: &Row) -> Row {
+    Row {
+        views: Vec::new(),
+        ..r.clone()
+    }
 }
 
 /// Every claim whose variant was run, per generator, judged by `rule` within each
@@ -1170,7 +1183,7 @@ fn stat(results: &[&JobResult], f: impl Fn(&JobResult) -> f64, digits: usize) ->
 /// The distinct samples of one (generator, variant) in pool order (a sample another
 /// revision reproduced bit for bit counts once).
 fn group<'a>(results: &'a [JobResult], generator: &str, variant: Variant) -> Vec<&'a JobResult> {
-    let bits = |r: &JobResult| serde_json::to_string(&r.last).expect("serializes");
+    let bits = |r: &JobResult| serde_json::to_string(&metrics_only(&r.last)).expect("serializes");
     let mut out: Vec<&JobResult> = Vec::new();
     for r in results
         .iter()
