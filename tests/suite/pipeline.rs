@@ -944,10 +944,24 @@ fn audit_verdicts_pool_seeds_and_revisions_and_test_non_inferiority() {
     assert_eq!(ni.verdict, "inconclusive", "{ni:?}");
     let [lo, hi] = ni.ci.unwrap();
     assert!(lo < -0.2 && hi > -0.2 && ni.min_detectable > 0.5, "{ni:?}");
-    // The same three seeds recomputed at revision 4 with the same bits: one draw each.
+    // The same three seeds recomputed at revision 4 with the same metrics bits (and the
+    // per-view records revision 3 did not write): one draw each.
+    let record = |psnr: f64| unseen::pipeline::evaluate::ViewRecord {
+        view: "v".into(),
+        all: unseen::pipeline::evaluate::ClassSums {
+            pixels: 1,
+            squared_error: 3.0 * 10f64.powf(-psnr / 10.0),
+            ssim_sum: 0.5,
+        },
+        existing: Default::default(),
+        extrapolated: Default::default(),
+    };
     for (seed, d) in [(0, -0.2), (1, -0.7), (2, -1.15)] {
-        pool.push(sample("full", seed, 4, 20.0 + d));
-        pool.push(sample("no_qa_mask", seed, 4, 20.0));
+        for (variant, psnr) in [("full", 20.0 + d), ("no_qa_mask", 20.0)] {
+            let mut s = sample(variant, seed, 4, psnr);
+            s.last.views.push(record(psnr));
+            pool.push(s);
+        }
     }
     let again = claim(
         &verdicts(&cfg, &pool, &rule),
@@ -958,6 +972,8 @@ fn audit_verdicts_pool_seeds_and_revisions_and_test_non_inferiority() {
         (3, vec![4]),
         "{again:?}"
     );
+    // The draw kept is the one with the records: the views bootstrap runs on all three.
+    assert_eq!(again.hierarchical_units, 3, "{again:?}");
     // Nine more seeds at revision 4 and four of the first seeds at revision 5 (other
     // bits: another draw): sixteen units, a loss beyond the margin is contradicted.
     for seed in 3..12 {
