@@ -918,7 +918,8 @@ fn sample(
 /// The verdicts of pooled samples (SPEC.md §21.2): a unit is a seed at a revision, a pair
 /// another revision reproduced bit for bit counts once, a "does not hurt" claim is tested
 /// against the margin (the lounge case of the old rule, −0.68 ± 0.45 dB over 3 seeds, is
-/// no longer *holds*), and an effect many seeds pin down holds.
+/// no longer *holds*), and a loss beyond the margin that sixteen units pin down is
+/// *contradicted*.
 #[test]
 fn audit_verdicts_pool_seeds_and_revisions_and_test_non_inferiority() {
     use unseen::pipeline::audit::{AuditConfig, GeneratorKind, Variant, stats::Rule, verdicts};
@@ -983,9 +984,13 @@ fn audit_verdicts_pool_seeds_and_revisions_and_test_non_inferiority() {
     }
     for seed in 0..4 {
         let d = -0.6 - 0.03 * seed as f64;
-        pool.push(sample("full", seed, 5, 20.0 + d));
-        pool.push(sample("no_qa_mask", seed, 5, 20.0));
+        pool.push(sample("full", seed, 5, 20.1 + d));
+        pool.push(sample("no_qa_mask", seed, 5, 20.1));
     }
+    // A revision that changed only one run of a pair gives no independent draw: seed 4 at
+    // revision 5 shares its no_qa_mask run with revision 4's and is not counted.
+    pool.push(sample("full", 4, 5, 19.0));
+    pool.push(sample("no_qa_mask", 4, 5, 20.0));
     let v = verdicts(&cfg, &pool, &rule);
     let ni = claim(&v, "QA-Mask does not hurt extrapolation");
     assert_eq!((ni.seeds, ni.revisions.clone()), (16, vec![4, 5]), "{ni:?}");

@@ -9,11 +9,12 @@
 //! ([`super::RunOptions::cache`]), so a step whose inputs several variants share (the
 //! views, the per-view generation, a QA-Mask of a given degree) is computed once.
 //!
-//! A claim "A beats B" is tested on the per-seed paired differences `d = A − B`: it
-//! *holds* when `mean(d) > 2·std(d)`, *does not hold* when `mean(d) < −2·std(d)`, and is
-//! *within noise* otherwise; with one seed there is no noise estimate and only the
-//! direction is reported. A claim "A does not hurt B's metric" holds unless
-//! `mean(d) < −2·std(d)`.
+//! A claim is tested on the paired differences `d = full − variant` of the metric over
+//! units (a seed at a numerics revision; [`samples`] pools batches of seeds): *holds* /
+//! *contradicted* when significantly above / below its null value (0, or the
+//! non-inferiority margin below 0 for "does not hurt") after Holm's correction within the
+//! generator family, else *inconclusive* with the minimum detectable effect ([`stats`],
+//! SPEC.md §21.2).
 
 use super::evaluate::{ClassSums, Row, Summary, ViewRecord};
 use super::{Event, Inconsistency, MaskSource, PipelineConfig, RunOptions, SlotNames};
@@ -244,12 +245,12 @@ impl AuditConfig {
         Ok(())
     }
 
-    /// The pipeline configuration of one job.
     /// [`config_digest`] of a job's configuration.
     pub fn config_digest(&self, generator: GeneratorKind, variant: Variant) -> Result<String> {
         Ok(config_digest(&self.pipeline_config(generator, variant, 0)?))
     }
 
+    /// The pipeline configuration of one job.
     pub fn pipeline_config(
         &self,
         generator: GeneratorKind,
@@ -896,10 +897,10 @@ pub struct Pair<'a> {
 }
 
 /// The pairs (full, `variant`) of `generator` in `pool`: both runs of one seed at one
-/// numerics revision, in (seed, revision) order. A pair whose two samples another
-/// revision reproduced bit for bit (a revision that did not change these runs; metrics
-/// compared, per-view records aside) is the same draw and counted once, at its newest
-/// revision.
+/// numerics revision, in (seed, revision) order. Pairs of one seed at several revisions
+/// count once, at the newest revision, when either run is bit for bit the same (a
+/// revision that did not change it; metrics compared, per-view records aside): an
+/// independent draw needs both runs to differ.
 pub fn pairs<'a>(pool: &'a [JobResult], generator: &str, variant: Variant) -> Vec<Pair<'a>> {
     let cell = |v: Variant| {
         pool.iter()
@@ -925,8 +926,10 @@ pub fn pairs<'a>(pool: &'a [JobResult], generator: &str, variant: Variant) -> Ve
     let bits = |r: &JobResult| serde_json::to_string(&metrics_only(&r.last)).expect("serializes");
     let mut kept: Vec<Pair<'a>> = Vec::new();
     for p in out {
+        // Another revision's pair is an independent draw only if neither run reproduces
+        // the kept pair's: a pair sharing one run with it would be correlated with it.
         let same = kept.iter().any(|q| {
-            q.seed == p.seed && bits(q.full) == bits(p.full) && bits(q.variant) == bits(p.variant)
+            q.seed == p.seed && (bits(q.full) == bits(p.full) || bits(q.variant) == bits(p.variant))
         });
         if !same {
             kept.push(p);
@@ -960,8 +963,19 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
             continue;
         }
         for &generator in &cfg.generators {
+            // Samples of another pipeline configuration of these cells measure something
+            // else ([`JobResult::config`]; empty: recorded before, taken as this one's).
+            let (full_cfg, variant_cfg) = match (
+                cfg.config_digest(generator, Variant::Full),
+                cfg.config_digest(generator, claim.variant),
+            ) {
+                (Ok(a), Ok(b)) => (a, b),
+                _ => continue,
+            };
+            let same_config = |r: &JobResult, want: &str| r.config.is_empty() || r.config == want;
             let pairs: Vec<Pair> = pairs(pool, &generator.name(), claim.variant)
                 .into_iter()
+                .filter(|p| same_config(p.full, &full_cfg) && same_config(p.variant, &variant_cfg))
                 .filter(|p| {
                     let d = claim.metric.of(&p.full.last) - claim.metric.of(&p.variant.last);
                     d.is_finite()
@@ -1056,6 +1070,9 @@ pub struct Report {
     pub seeds: Vec<u32>,
     pub revisions: Vec<u32>,
     pub samples: usize,
+    /// Samples of another pipeline configuration of their (generator, variant) than this
+    /// binary's: kept in `samples.json`, left out of every verdict.
+    pub other_config: usize,
     pub generators: Vec<String>,
     pub variants: Vec<String>,
     /// The verdict rule's parameters.
@@ -1148,19 +1165,33 @@ fn finish(
         v.dedup();
         v
     };
+    // Samples of another configuration of their cell than this binary's are kept in the
+    // file and left out of everything reported.
+    let other = |r: &JobResult| {
+        let (Ok(g), Ok(v)) = (
+            GeneratorKind::by_name(&r.generator),
+            Variant::by_name(&r.variant),
+        ) else {
+            return false;
+        };
+        !r.config.is_empty() && cfg.config_digest(g, v).is_ok_and(|d| d != r.config)
+    };
+    let total = pool.samples.len();
+    let usable: Vec<JobResult> = pool.samples.into_iter().filter(|r| !other(r)).collect();
     let report = Report {
         crate_version: env!("CARGO_PKG_VERSION").into(),
         numerics_revision: crate::oracle::NUMERICS_REVISION,
         provenance: pool.provenance.clone(),
         seeds,
         revisions,
-        samples: pool.samples.len(),
+        samples: usable.len(),
+        other_config: total - usable.len(),
         generators: names(cfg.generators.iter().map(|g| g.name()).collect()),
         variants: names(cfg.variants.iter().map(|v| v.name().to_string()).collect()),
-        verdicts: verdicts(cfg, &pool.samples, &rule),
+        verdicts: verdicts(cfg, &usable, &rule),
         rule,
         results,
-        pool: pool.samples,
+        pool: usable,
     };
     let json = serde_json::to_string_pretty(&report).expect("serializes") + "\n";
     crate::io::write_text(&dir.join("audit.json"), &json)?;
@@ -1246,6 +1277,12 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
         report.crate_version,
         report.numerics_revision
     );
+    if report.other_config > 0 {
+        s += &format!(
+            "**{} samples ran another pipeline configuration** than this binary's for their generator and variant (another version of the preset): kept in `samples.json`, left out of every verdict and table.\n\n",
+            report.other_config
+        );
+    }
     let r = &report.rule;
     s += &format!(
         "## Claims\n\n**How to read this.** Δ = full − variant (dB), one value per seed: both runs of a seed start from the same original scene with the same random numbers, so Δ is paired; the same seed at another numerics revision is another draw (a sample another revision reproduced bit for bit counts once). *95 % CI*: Student's t with n − 1 degrees of freedom; from {} seeds a verdict also needs the BCa bootstrap over seeds ({} replicates, seeded; its interval in *BCa*) to agree, since the bootstrap alone is too liberal at these sizes (SPEC.md §21.2). A claim that the full method is better **holds** when Δ is significantly above 0 and is **contradicted** when it is significantly below; a claim that the full method *does not hurt* (non-inferiority) holds when Δ is significantly above −{} dB (the margin) and is contradicted when significantly below it. *Significantly*: the two-sided p-value of that null value, after Holm's correction over the claims of the same generator family (classical; truth at every level) on this dataset, is below α = {}. Otherwise **inconclusive**: the *MDE* column is the smallest true distance from the null value that this many seeds find with {:.0} % power at the family's strictest Holm level, for the measured spread — an effect smaller than that could be there. *Hierarchical*: a 95 % percentile interval from resampling seeds, then each seed's evaluation views (pooled PSNR), over the seeds with per-view records: wider than the seed CI where views disagree. The paper's numbers are from ScanNet++ / Mip-NeRF 360 with diffusion generators: compare directions, not values.\n\n| claim | metric | paper | generator | n | Δ (dB) | 95 % CI | BCa | hierarchical | p (Holm) | MDE (dB) | verdict |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",

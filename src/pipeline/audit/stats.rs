@@ -90,17 +90,21 @@ pub fn student_t_quantile(p: f64, df: u32) -> f64 {
     if p > 0.5 { x } else { -x }
 }
 
-/// The complementary error function, |relative error| ≲ 1e-14: the positive series
-/// `erf x = (2/√π) e^(−x²) Σ 2ⁿ x^(2n+1) / (1·3···(2n+1))` (A&S 7.1.6) below 3, the
-/// continued fraction of A&S 7.1.14 above.
+/// The complementary error function, |relative error| ≲ 1e-13: the positive series
+/// `erf x = (2/√π) e^(−x²) Σ 2ⁿ x^(2n+1) / (1·3···(2n+1))` (A&S 7.1.6) below 1, the
+/// continued fraction of A&S 7.1.14 from 1 (where `1 − erf` would lose digits; ≤ 200
+/// terms there).
 pub fn erfc(x: f64) -> f64 {
     if x.is_nan() {
         return f64::NAN;
     }
+    if x == f64::INFINITY {
+        return 0.0;
+    }
     if x < 0.0 {
         return 2.0 - erfc(-x);
     }
-    if x < 3.0 {
+    if x < 1.0 {
         let x2 = x * x;
         let (mut term, mut sum) = (x, x);
         let mut k = 0.0;
@@ -153,7 +157,15 @@ fn normal_pdf(x: f64) -> f64 {
 /// bracket.
 pub fn normal_quantile(p: f64) -> f64 {
     assert!(p > 0.0 && p < 1.0, "a quantile needs 0 < p < 1");
-    let (mut lo, mut hi, mut x) = (-40.0f64, 40.0f64, 0.0f64);
+    // Start in the right tail region: |x| ≈ √(−2 ln min(p, 1 − p)) (Newton from 0 would
+    // crawl into a far tail in steps of ~1/|x|).
+    let tail = p.min(1.0 - p);
+    let start = if tail < 0.1 {
+        (-2.0 * tail.ln()).sqrt().copysign(p - 0.5)
+    } else {
+        0.0
+    };
+    let (mut lo, mut hi, mut x) = (-40.0f64, 40.0f64, start);
     for _ in 0..200 {
         let f = normal_cdf(x) - p;
         if f == 0.0 {
@@ -311,13 +323,9 @@ impl Rule {
         let mean = d.iter().sum::<f64>() / nf;
         let ss: f64 = d.iter().map(|x| (x - mean) * (x - mean)).sum();
         let sd = (ss / (nf - 1.0)).sqrt();
-        if sd == 0.0 {
-            // Every seed gave the same difference: no spread to test against.
-            let (above, below) = match mean.partial_cmp(&null) {
-                Some(std::cmp::Ordering::Greater) => (0.0, 1.0),
-                Some(std::cmp::Ordering::Less) => (1.0, 0.0),
-                _ => (1.0, 1.0),
-            };
+        if sd == 0.0 || !sd.is_finite() {
+            // Every seed gave the same difference (or the spread overflows): nothing to
+            // measure the mean against, so no verdict either way.
             return Some(Test {
                 n,
                 mean,
@@ -326,8 +334,8 @@ impl Rule {
                 lo: mean,
                 hi: mean,
                 bca: None,
-                p_above: above,
-                p_below: below,
+                p_above: 1.0,
+                p_below: 1.0,
             });
         }
         let se = sd / nf.sqrt();
@@ -346,6 +354,9 @@ impl Rule {
         };
         if n >= self.bootstrap_from {
             let (interval, p_above) = self.bca(d, mean, ss, null, seed);
+            // A bootstrap that could not be computed (an overflowing spread) agrees with
+            // nothing.
+            let p_above = if p_above.is_nan() { 1.0 } else { p_above };
             test.method = Method::StudentTAndBca;
             test.bca = Some(interval);
             test.p_above = test.p_above.max(p_above);
@@ -385,10 +396,32 @@ impl Rule {
         };
         let zq = normal_quantile(1.0 - self.alpha / 2.0);
         // The nominal level at which the lower endpoint is the null value: with
-        // w = Φ⁻¹(fraction below θ₀), z0 + u/(1 − a·u) = w for u = z0 + z.
-        let c = normal_quantile(frac(null)) - z0;
-        let z_null = c / (1.0 + a * c) - z0;
-        ([endpoint(-zq), endpoint(zq)], normal_cdf(z_null))
+        // w = Φ⁻¹(fraction below θ₀), z0 + u/(1 − a·u) = w for u = z0 + z. The fraction is
+        // not clamped here: a null beyond every replicate takes the limit w = ∓∞ (else
+        // the p-value would have a floor of ~1/B that no Holm level below it could
+        // clear), and where `1 + a·c ≤ 0` no nominal level reaches the null: p is 0 or 1.
+        let below = reps.partition_point(|&r| r < null);
+        let not_above = reps.partition_point(|&r| r <= null);
+        let q = (below as f64 + 0.5 * (not_above - below) as f64) / b as f64;
+        let w = if q <= 0.0 {
+            f64::NEG_INFINITY
+        } else if q >= 1.0 {
+            f64::INFINITY
+        } else {
+            normal_quantile(q)
+        };
+        let c = w - z0;
+        let denominator = 1.0 + a * c;
+        let p = if denominator <= 0.0 {
+            if c < 0.0 { 0.0 } else { 1.0 }
+        } else if c.is_infinite() {
+            // c/(1 + a·c) → 1/a (or c itself when a = 0).
+            let u = if a != 0.0 { 1.0 / a } else { c };
+            normal_cdf(u - z0)
+        } else {
+            normal_cdf(c / denominator - z0)
+        };
+        ([endpoint(-zq), endpoint(zq)], p)
     }
 
     /// Judge a family of claims: each claim's test of its null value, Holm's step-down
@@ -456,7 +489,7 @@ pub fn holm(p: &[f64]) -> Vec<f64> {
 /// Power of the two-sided one-sample t test at level `alpha` with `n` samples when the
 /// true mean is `lambda` standard errors from the null value, in the direction of the
 /// claim: `P(T′ > t(1−α/2, n−1))` for the noncentral T′, by integrating
-/// `Φ(λ − c·s)` against the density of `s = √(χ²ᵥ/ν)` (Simpson, 4 000 panels).
+/// `Φ(λ − c·s)` against the density of `s = √(χ²ᵥ/ν)` (Simpson, ≥ 4 000 panels).
 pub fn t_power(n: usize, lambda: f64, alpha: f64) -> f64 {
     assert!(n >= 2);
     let nu = (n - 1) as u32;
@@ -470,8 +503,12 @@ pub fn t_power(n: usize, lambda: f64, alpha: f64) -> f64 {
         }
         (ln_k + (nuf - 1.0) * s.ln() - 0.5 * nuf * s * s).exp()
     };
-    let top = 1.0 + 40.0 / nuf.sqrt();
-    let panels = 4000;
+    // The density is below e^(−40) of its peak beyond `top`; Φ(λ − c·s) turns from 1 to 0
+    // over ~1/c in s, which the panels resolve with ≥ 20 points.
+    let top = 1.0 + 9.0 / nuf.sqrt();
+    let panels = (4000usize)
+        .max((20.0 * c * top).ceil() as usize)
+        .next_multiple_of(2);
     let h = top / panels as f64;
     let mut sum = 0.0;
     for i in 0..=panels {
@@ -552,9 +589,22 @@ mod tests {
                 "z({p}) = {got}, want {want}"
             );
         }
-        // erfc's two branches meet at 3; erfc(3) = 2.209049699858544e-05.
-        assert!((erfc(3.0) / 2.209049699858544e-05 - 1.0).abs() < 1e-13);
-        assert!((erfc(2.999999999999) / erfc(3.0) - 1.0).abs() < 1e-10);
+        // erfc in both branches (they meet at 1) and its limits; SciPy's values.
+        for (x, want) in [
+            (3.0, 2.2090496998585445e-05),
+            (0.5, 0.4795001221869535),
+            (1.0, 0.15729920705028516),
+            (2.5, 0.00040695201744495886),
+            (10.0, 2.0884875837625446e-45),
+        ] {
+            assert!(
+                (erfc(x) / want - 1.0).abs() < 1e-13,
+                "erfc({x}) = {}",
+                erfc(x)
+            );
+        }
+        assert_eq!((erfc(f64::INFINITY), erfc(f64::NEG_INFINITY)), (0.0, 2.0));
+        assert!((normal_quantile(1e-300) + 37.0470962993612).abs() < 1e-9);
     }
 
     #[test]
