@@ -91,6 +91,18 @@ fn se(p: f64) -> f64 {
     (p * (1.0 - p) / AUDITS as f64).sqrt()
 }
 
+/// Claims of the differences `d` with null value 0, seeded from audit `k`.
+fn family(d: &[Vec<f64>], k: usize) -> Vec<ClaimData<'_>> {
+    d.iter()
+        .enumerate()
+        .map(|(i, d)| ClaimData {
+            diffs: d,
+            null: 0.0,
+            seed: (k * d.len() + i) as u64,
+        })
+        .collect()
+}
+
 /// Every calibration check the rule fails, in words.
 fn calibrate(rule: RuleFn) -> Vec<String> {
     let r = Rule::default();
@@ -185,15 +197,7 @@ fn calibrate(rule: RuleFn) -> Vec<String> {
                 d
             })
             .collect();
-        let family: Vec<ClaimData> = d
-            .iter()
-            .enumerate()
-            .map(|(i, d)| ClaimData {
-                diffs: d,
-                null: 0.0,
-                seed: (k * 11 + i) as u64,
-            })
-            .collect();
+        let family = family(&d, k);
         missed += rule(&family)
             .iter()
             .filter(|o| **o != Outcome::Holds)
@@ -211,15 +215,7 @@ fn calibrate(rule: RuleFn) -> Vec<String> {
         let d: Vec<Vec<f64>> = (0..11)
             .map(|_| draw(&mut u, Shape::Normal, 12, 0.0, 0.33))
             .collect();
-        let family: Vec<ClaimData> = d
-            .iter()
-            .enumerate()
-            .map(|(i, d)| ClaimData {
-                diffs: d,
-                null: 0.0,
-                seed: (k * 11 + i) as u64,
-            })
-            .collect();
+        let family = family(&d, k);
         if rule(&family).iter().any(|o| *o != Outcome::Inconclusive) {
             any += 1;
         }

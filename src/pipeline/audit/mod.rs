@@ -878,12 +878,7 @@ fn hierarchical(
         return (None, n);
     }
     reps.sort_by(f64::total_cmp);
-    let at = |q: f64| {
-        let h = q * (reps.len() - 1) as f64;
-        let i = h.floor() as usize;
-        let j = (i + 1).min(reps.len() - 1);
-        reps[i] + (h - i as f64) * (reps[j] - reps[i])
-    };
+    let at = |q: f64| stats::quantile_sorted(&reps, q);
     (Some([at(alpha / 2.0), at(1.0 - alpha / 2.0)]), n)
 }
 

@@ -387,13 +387,8 @@ impl Rule {
         let cube: f64 = d.iter().map(|x| (x - mean).powi(3)).sum();
         let a = cube / (6.0 * ss.powf(1.5));
         // The replicate quantile at BCa's adjusted level for nominal z.
-        let endpoint = |z: f64| {
-            let level = normal_cdf(z0 + (z0 + z) / (1.0 - a * (z0 + z)));
-            let h = level.clamp(0.0, 1.0) * (b - 1) as f64;
-            let i = (h.floor() as usize).min(b - 1);
-            let j = (i + 1).min(b - 1);
-            reps[i] + (h - i as f64) * (reps[j] - reps[i])
-        };
+        let endpoint =
+            |z: f64| quantile_sorted(&reps, normal_cdf(z0 + (z0 + z) / (1.0 - a * (z0 + z))));
         let zq = normal_quantile(1.0 - self.alpha / 2.0);
         // The nominal level at which the lower endpoint is the null value: with
         // w = Φ⁻¹(fraction below θ₀), z0 + u/(1 − a·u) = w for u = z0 + z. The fraction is
@@ -469,6 +464,16 @@ impl Judgement {
             min_detectable_effect(t.n, t.sd, rule.alpha / self.family_tests as f64, rule.power)
         })
     }
+}
+
+/// The `level`-quantile of ascending `sorted` (non-empty) by linear interpolation between
+/// order statistics (position `level·(n − 1)`; a NaN level gives the first).
+pub fn quantile_sorted(sorted: &[f64], level: f64) -> f64 {
+    let n = sorted.len();
+    let h = level.clamp(0.0, 1.0) * (n - 1) as f64;
+    let i = (h.floor() as usize).min(n - 1);
+    let j = (i + 1).min(n - 1);
+    sorted[i] + (h - i as f64) * (sorted[j] - sorted[i])
 }
 
 /// Holm's step-down adjustment of p-values (NaN entries are not tests and stay NaN):
