@@ -976,7 +976,8 @@ fn audit_verdicts_pool_seeds_and_revisions_and_test_non_inferiority() {
     // The draw kept is the one with the records: the views bootstrap runs on all three.
     assert_eq!(again.hierarchical_units, 3, "{again:?}");
     // Nine more seeds at revision 4 and four of the first seeds at revision 5 (other
-    // bits: another draw): sixteen units, a loss beyond the margin is contradicted.
+    // bits: another draw of those seeds, averaged into them): twelve units, a loss beyond
+    // the margin is contradicted.
     for seed in 3..12 {
         let d = -0.68 + 0.05 * (seed as f64 - 7.5);
         pool.push(sample("full", seed, 4, 20.0 + d));
@@ -993,7 +994,17 @@ fn audit_verdicts_pool_seeds_and_revisions_and_test_non_inferiority() {
     pool.push(sample("no_qa_mask", 4, 5, 20.0));
     let v = verdicts(&cfg, &pool, &rule);
     let ni = claim(&v, "QA-Mask does not hurt extrapolation");
-    assert_eq!((ni.seeds, ni.revisions.clone()), (16, vec![4, 5]), "{ni:?}");
+    assert_eq!((ni.seeds, ni.revisions.clone()), (12, vec![4, 5]), "{ni:?}");
+    // Seed 0's unit is the mean of its two draws (−0.2 at revision 4, −0.6 at 5): the
+    // twelve units' mean is the mean of the seed means.
+    let pairs = unseen::pipeline::audit::pairs(&pool, "truth-low", Variant::NoQaMask);
+    let means = unseen::pipeline::audit::seed_means(
+        &pairs,
+        unseen::pipeline::audit::Metric::PsnrExtrapolated,
+    );
+    assert_eq!(means.len(), 12);
+    assert!((means[0] + 0.4).abs() < 1e-9, "{means:?}");
+    assert!((ni.mean_diff - means.iter().sum::<f64>() / 12.0).abs() < 1e-12);
     assert_eq!(
         ni.method,
         Some(unseen::pipeline::audit::stats::Method::StudentTAndBca)
