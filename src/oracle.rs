@@ -22,8 +22,9 @@ pub const CONVENTIONS_VERSION: u32 = 1;
 /// current code would not reproduce bit for bit. History: 1 before issue #13; 2 the
 /// backward blend's lane-pair summation order; 3 the f32 SH direction derivative; 4 GJK's
 /// verdict on its certified lower bound (differs only where GJK stalls on nearly parallel
-/// faces).
-pub const NUMERICS_REVISION: u32 = 4;
+/// faces); 5 depth supervision on the generated views only (the original views' dataset
+/// depth became the non-paper switch `original_view_depth`).
+pub const NUMERICS_REVISION: u32 = 5;
 
 /// Image losses the oracle can differentiate.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

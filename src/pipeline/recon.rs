@@ -1,7 +1,9 @@
 //! The reconstruction every stage ends with (SPEC.md §20.5): fine-tune a scene on the
-//! original training views (full weight, their depth) plus generated views weighted per
-//! pixel by the mask of the scene being updated (paper Eq. 7) and, where a generated
-//! view only partly holds content (DIBR propagation), by its coverage.
+//! original training views (full weight; their dataset depth only under the non-paper
+//! switch `original_view_depth`) plus generated views weighted per pixel by the mask of
+//! the scene being updated (paper Eq. 7) and, where a generated view only partly holds
+//! content (DIBR propagation), by its coverage; depth supervision (Eq. 7's third term)
+//! applies to the generated views' depth priors.
 //!
 //! The weights apply to the *generated* supervision only: a mask computed on the original
 //! scene is ≈ 0 on the original views, so weighting them would silence the data the scene
@@ -119,6 +121,10 @@ pub fn recon_key(
     m.insert("qa".into(), serde_json::json!(qa.map(|s| &s.digest)));
     m.insert("mask_source".into(), serde_json::json!(config.mask_source));
     m.insert("loss".into(), serde_json::json!(config.recon_loss()));
+    m.insert(
+        "original_view_depth".into(),
+        serde_json::json!(config.supervises_original_depth()),
+    );
     m.insert("recon".into(), serde_json::json!(recon));
     m.insert("seed".into(), serde_json::json!(config.seed));
     key
@@ -133,6 +139,25 @@ pub struct Refresh<'f> {
     pub every: u32,
     /// Current render at a camera → new target.
     pub fix: &'f (dyn Fn(&Camera, &ImageF32) -> Result<ImageF32> + Sync),
+}
+
+/// The original training views a reconstruction trains on: image and camera, and their
+/// dataset depth only under the non-paper switch (`supervises_original_depth`).
+pub fn original_views(config: &PipelineConfig, inputs: &Inputs) -> Vec<View> {
+    let keep = config.supervises_original_depth();
+    inputs
+        .data
+        .train
+        .iter()
+        .map(|&i| {
+            let v = &inputs.data.views[i];
+            View {
+                camera: v.camera.clone(),
+                image: v.image.clone(),
+                depth: v.depth.clone().filter(|_| keep),
+            }
+        })
+        .collect()
 }
 
 /// Fine-tune `init` on the original training views and `generated`, write `scene.ply`
@@ -168,12 +193,7 @@ pub fn reconstruct_refreshing(
     w: &mut StepWriter,
     on_event: &(dyn Fn(Event) + Sync),
 ) -> Result<Gaussians> {
-    let mut views: Vec<View> = inputs
-        .data
-        .train
-        .iter()
-        .map(|&i| inputs.data.views[i].clone())
-        .collect();
+    let mut views = original_views(config, inputs);
     let n_orig = views.len();
     let mut masks: Vec<Option<Vec<f32>>> = vec![None; n_orig];
     let mut summary = Vec::new();
@@ -287,6 +307,7 @@ pub fn reconstruct_refreshing(
         "supervision.json",
         &serde_json::json!({
             "original_views": n_orig,
+            "original_views_depth": config.supervises_original_depth(),
             "generated": summary,
             "iterations": recon.iterations,
             "refreshed": refreshed,

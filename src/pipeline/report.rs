@@ -18,7 +18,7 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
     let mut md = String::from("# unseen: scene extrapolation\n\n");
     md += &format!(
         "Preset `{}`, slots: inpaint `{}`, depth `{}`, video `{}`, video depth `{}`, fixer `{}`{}; \
-         mask `{}`, depth supervision {}, DIBR propagation {}, independent view detection {}, \
+         mask `{}`, depth supervision {}{}, DIBR propagation {}, independent view detection {}, \
          interpolation {}. The whole configuration is `{prefix}/config.json`.\n\n",
         config.preset,
         config.slots.inpaint,
@@ -41,6 +41,11 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
             .and_then(|v| v.as_str().map(str::to_string))
             .unwrap_or_default(),
         config.depth_supervision,
+        if config.supervises_original_depth() {
+            " (**also on the original views' dataset depth: not in the paper**)"
+        } else {
+            ""
+        },
         config.propagation,
         config.independent_detection,
         config.interpolation,

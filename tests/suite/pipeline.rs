@@ -907,7 +907,13 @@ fn sample(
         seed,
         numerics_revision: revision,
         crate_version: "0.1.0".into(),
-        config: String::new(),
+        config: unseen::pipeline::audit::AuditConfig::preset("quick")
+            .unwrap()
+            .config_digest(
+                unseen::pipeline::audit::GeneratorKind::by_name("truth-low").unwrap(),
+                unseen::pipeline::audit::Variant::by_name(variant).unwrap(),
+            )
+            .unwrap(),
         original: row.clone(),
         last: row,
         stage_seconds: Default::default(),
@@ -1246,4 +1252,65 @@ fn audit_samples_round_trip_and_damaged_files_are_clear_errors() {
     };
     let v = verdicts(&cfg, &back.samples, &Rule::default());
     assert!(!v.is_empty());
+}
+
+/// Depth supervision is the paper's: the generated views' depth priors, not the dataset's
+/// depth of the original views (which the lounge has, and which the paper's method never
+/// sees). The labelled switch `original_view_depth` adds them back, and a run with it
+/// differs from one without (so the trainer does consume what the list carries).
+#[test]
+fn depth_supervision_reaches_the_generated_views_only_unless_the_non_paper_switch() {
+    use unseen::pipeline::recon::original_views;
+    let t = TempDir::new("pipeline-original-depth");
+    let run = tiny_run(t.path());
+    let inp = inputs(&run);
+    assert!(
+        inp.data
+            .train
+            .iter()
+            .all(|&i| inp.data.views[i].depth.is_some()),
+        "the test needs a dataset with depth on its training views"
+    );
+    let paper = PipelineConfig {
+        interpolation: false,
+        ..tiny_config()
+    };
+    assert!(paper.depth_supervision && !paper.original_view_depth);
+    let switched = PipelineConfig {
+        original_view_depth: true,
+        ..paper.clone()
+    };
+    let no_depth = PipelineConfig {
+        depth_supervision: false,
+        ..switched.clone()
+    };
+    assert!(
+        original_views(&paper, &inp)
+            .iter()
+            .all(|v| v.depth.is_none())
+    );
+    assert!(
+        original_views(&switched, &inp)
+            .iter()
+            .all(|v| v.depth.is_some())
+    );
+    assert!(
+        original_views(&no_depth, &inp)
+            .iter()
+            .all(|v| v.depth.is_none())
+    );
+    let scene = |cfg: &PipelineConfig, name: &str| {
+        let out = t.path().join(name);
+        pipeline::run(cfg, &inp, &out, false, &quiet).unwrap();
+        let sup: serde_json::Value = serde_json::from_slice(
+            &std::fs::read(out.join("stage1/recon/supervision.json")).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(
+            sup["original_views_depth"],
+            cfg.depth_supervision && cfg.original_view_depth
+        );
+        std::fs::read(out.join("stage1/recon/scene.ply")).unwrap()
+    };
+    assert_ne!(scene(&paper, "paper"), scene(&switched, "switched"));
 }

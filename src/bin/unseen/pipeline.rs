@@ -106,6 +106,10 @@ pub struct Knobs {
     no_independent_detection: bool,
     #[arg(long)]
     no_interpolation: bool,
+    /// Not in the paper: with depth supervision, also supervise the original training
+    /// views with the dataset's depth (the paper supervises the generated views' priors).
+    #[arg(long)]
+    original_view_depth: bool,
 }
 
 impl Knobs {
@@ -137,6 +141,7 @@ impl Knobs {
         c.propagation &= !self.no_propagation;
         c.independent_detection &= !self.no_independent_detection;
         c.interpolation &= !self.no_interpolation;
+        c.original_view_depth |= self.original_view_depth;
         Ok(())
     }
 }

@@ -994,7 +994,8 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
         }
         for &generator in &cfg.generators {
             // Samples of another pipeline configuration of these cells measure something
-            // else ([`JobResult::config`]; empty: recorded before, taken as this one's).
+            // else ([`JobResult::config`]; empty: recorded before configurations were, by a
+            // binary whose method revision 5 changed, so another one).
             let (full_cfg, variant_cfg) = match (
                 cfg.config_digest(generator, Variant::Full),
                 cfg.config_digest(generator, claim.variant),
@@ -1002,7 +1003,7 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
                 (Ok(a), Ok(b)) => (a, b),
                 _ => continue,
             };
-            let same_config = |r: &JobResult, want: &str| r.config.is_empty() || r.config == want;
+            let same_config = |r: &JobResult, want: &str| r.config == want;
             let pairs: Vec<Pair> = pairs(pool, &generator.name(), claim.variant)
                 .into_iter()
                 .filter(|p| same_config(p.full, &full_cfg) && same_config(p.variant, &variant_cfg))
@@ -1201,7 +1202,7 @@ fn finish(
         ) else {
             return false;
         };
-        !r.config.is_empty() && cfg.config_digest(g, v).is_ok_and(|d| d != r.config)
+        cfg.config_digest(g, v).is_ok_and(|d| d != r.config)
     };
     let total = pool.samples.len();
     let usable: Vec<JobResult> = pool.samples.into_iter().filter(|r| !other(r)).collect();
