@@ -23,7 +23,8 @@ pub const CONVENTIONS_VERSION: u32 = 1;
 /// backward blend's lane-pair summation order; 3 the f32 SH direction derivative; 4 GJK's
 /// verdict on its certified lower bound (differs only where GJK stalls on nearly parallel
 /// faces); 5 depth supervision on the generated views only (the original views' dataset
-/// depth became the non-paper switch `original_view_depth`).
+/// depth became the non-paper switch `original_view_depth`), Eq. 4's mean as
+/// `r₀ + Σ(rⱼ − r₀)/n` (exact for equal ranges).
 pub const NUMERICS_REVISION: u32 = 5;
 
 /// Image losses the oracle can differentiate.

@@ -15,7 +15,7 @@ use super::rundir::{RunDir, StepDone};
 use super::stage1::{Stage1, independent_supervision, load_video, video_supervision};
 use super::stage2::made_clips;
 use super::stage2::{Stage2, keyframes, neighbour_pairs};
-use super::views::{Views, render_rgba};
+use super::views::{Views, render_rgb};
 use super::{Event, Inputs, PipelineConfig, load_image, save_image, stem};
 use crate::error::Result;
 use std::collections::BTreeMap;
@@ -50,7 +50,7 @@ pub fn run(
         // The fixer poses, in order: the keyframes, then each clip's intermediate frames.
         let mut cams: Vec<crate::camera::Camera> = Vec::new();
         for k in &keys {
-            let (rgb, _, _) = render_rgba(&s2_scene, &k.camera, inputs.background)?;
+            let rgb = render_rgb(&s2_scene, &k.camera, inputs.background)?;
             let fixed = gens.fix(&k.camera, &rgb, None)?;
             save_image(w, &format!("{}/render", stem(&k.camera.name)), &rgb)?;
             save_image(w, &format!("{}/fixed", stem(&k.camera.name)), &fixed)?;
@@ -62,7 +62,7 @@ pub fn run(
             let n = v.cameras.len();
             for j in 1..n.saturating_sub(1) {
                 let cam = &v.cameras[j];
-                let (rgb, _, _) = render_rgba(&s2_scene, cam, inputs.background)?;
+                let rgb = render_rgb(&s2_scene, cam, inputs.background)?;
                 let fixed = gens.fix(cam, &rgb, Some((&keys[a].camera, &keys[b].camera, j, n)))?;
                 save_image(w, &format!("{}/render", stem(&cam.name)), &rgb)?;
                 save_image(w, &format!("{}/fixed", stem(&cam.name)), &fixed)?;

@@ -276,8 +276,7 @@ pub fn reconstruct_refreshing(
             if it > 0 && r.every > 0 && it % r.every == 0 {
                 for &k in &r.views {
                     let cam = &generated[k].camera;
-                    let (rgb, _, _) =
-                        super::views::render_rgba(&trainer.gaussians, cam, inputs.background)?;
+                    let rgb = super::views::render_rgb(&trainer.gaussians, cam, inputs.background)?;
                     trainer.replace_image(n_orig + k, (r.fix)(cam, &rgb)?)?;
                 }
                 refreshed += 1;

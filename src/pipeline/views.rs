@@ -194,7 +194,26 @@ pub fn warp_depth(depth: &[f32], from: &Camera, to: &Camera) -> Result<Vec<f32>>
     Ok(w.depth)
 }
 
-/// Render RGB and alpha.
+/// Render RGB alone (what the fixer reads): the same RGB bits as [`render_rgba`] without
+/// the depth accumulation (`raster::plan`'s skips are exact).
+pub fn render_rgb(
+    scene: &crate::gaussian::Gaussians,
+    cam: &Camera,
+    background: [f32; 3],
+) -> Result<ImageF32> {
+    let r = render(
+        scene,
+        cam,
+        &RenderOptions {
+            background,
+            outputs: Outputs::RGB,
+            ..RenderOptions::default()
+        },
+    )?;
+    ImageF32::new(r.width, r.height, 3, r.rgb.expect("rgb"))
+}
+
+/// Render RGB, alpha and expected depth.
 pub fn render_rgba(
     scene: &crate::gaussian::Gaussians,
     cam: &Camera,
