@@ -89,6 +89,27 @@ pub struct Inconsistency {
     pub patches: u32,
     /// Side of a patch as a fraction of the image's shorter side.
     pub patch_size: f32,
+    /// Relative-depth mode ([`TruthDepth::Relative`]): per-frame jitter of a clip's map,
+    /// the scale drawn from `1 ± depth_flicker` and the shift from `± depth_flicker · D̄`.
+    pub depth_flicker: f32,
+    /// Relative-depth mode: the largest `|κ|` of the monotone distortion
+    /// `g(x) = x + κ·x(x − 1)/(x + 1)` of the disparity `x = D/D̄` (slope ≥ 1 − |κ|).
+    pub depth_distortion: f32,
+}
+
+/// What the ground-truth generator's depth slots return (SPEC.md §20.6).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TruthDepth {
+    /// The candidate's metric camera-z depth: alignment (Eq. 2, 5, stage 2) has nothing to
+    /// recover.
+    #[default]
+    Metric,
+    /// **Labelled mode, not a model**: what a monocular or video depth model returns —
+    /// disparity up to a seeded affine map (one per image; one per clip, with per-frame
+    /// flicker), mildly and monotonically distorted, at the inconsistency level's
+    /// `depth_flicker` / `depth_distortion`.
+    Relative,
 }
 
 impl Default for Inconsistency {
@@ -105,6 +126,8 @@ impl Inconsistency {
         shift_px: 0.0,
         patches: 0,
         patch_size: 0.0,
+        depth_flicker: 0.0,
+        depth_distortion: 0.0,
     };
     pub const LOW: Inconsistency = Inconsistency {
         gain: 0.03,
@@ -113,6 +136,8 @@ impl Inconsistency {
         shift_px: 0.25,
         patches: 0,
         patch_size: 0.0,
+        depth_flicker: 0.01,
+        depth_distortion: 0.05,
     };
     pub const HIGH: Inconsistency = Inconsistency {
         gain: 0.10,
@@ -121,6 +146,8 @@ impl Inconsistency {
         shift_px: 1.0,
         patches: 2,
         patch_size: 0.1,
+        depth_flicker: 0.03,
+        depth_distortion: 0.15,
     };
 
     /// `none`, `low` or `high`.
@@ -182,6 +209,8 @@ pub struct PipelineConfig {
     pub slots: SlotNames,
     /// Degradation of the ground-truth generator (ignored by the other slots).
     pub inconsistency: Inconsistency,
+    /// The ground-truth generator's depth: metric (default) or the labelled relative mode.
+    pub truth_depth: TruthDepth,
 
     // ---- independent view detection (§3.2)
     /// A candidate pixel is to be inpainted when the scene's alpha there is below this.
@@ -249,6 +278,7 @@ impl PipelineConfig {
             seed: 0,
             slots: SlotNames::default(),
             inconsistency: Inconsistency::NONE,
+            truth_depth: TruthDepth::Metric,
             coverage_alpha: 0.5,
             inpaintings: 3,
             independent_detection: true,

@@ -10,7 +10,7 @@
 //! [`Inconsistency`] — colour gain and offset, blur, sub-pixel misalignment, hallucinated
 //! patches — the controlled variable of the paper's mechanism claims.
 
-use super::config::{Inconsistency, SlotNames};
+use super::config::{Inconsistency, SlotNames, TruthDepth};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::io::image::ImageF32;
@@ -38,6 +38,7 @@ pub struct GroundTruth {
     poses: BTreeMap<String, Truth>,
     inconsistency: Inconsistency,
     seed: u64,
+    depth: TruthDepth,
 }
 
 impl GroundTruth {
@@ -50,6 +51,42 @@ impl GroundTruth {
                 .collect(),
             inconsistency,
             seed,
+            depth: TruthDepth::Metric,
+        }
+    }
+
+    /// The same store answering depth in `mode`.
+    pub fn with_depth(self, mode: TruthDepth) -> Self {
+        GroundTruth {
+            depth: mode,
+            ..self
+        }
+    }
+
+    /// The relative-depth map of the call `key` on metric depth `frames`.
+    pub fn relative_map(&self, key: &str, frames: &[&[f32]]) -> RelativeMap {
+        let seed = stage_seed(self.seed, &format!("truth-depth:{key}"));
+        let first = frames.first().copied().unwrap_or(&[]);
+        RelativeMap::draw(&self.inconsistency, seed, frames.len(), first)
+    }
+
+    /// Metric depth `frames` as the depth slots return them: unchanged (metric mode), or as
+    /// disparity through the seeded [`RelativeMap`] of `key` (one map for all the frames).
+    pub fn answer_depth(&self, frames: &[&[f32]], key: &str) -> (DepthKind, Vec<Vec<f32>>) {
+        match self.depth {
+            TruthDepth::Metric => (
+                DepthKind::Depth,
+                frames.iter().map(|f| f.to_vec()).collect(),
+            ),
+            TruthDepth::Relative => {
+                let map = self.relative_map(key, frames);
+                let maps = frames
+                    .iter()
+                    .enumerate()
+                    .map(|(k, f)| map.apply(k, f))
+                    .collect();
+                (DepthKind::Disparity, maps)
+            }
         }
     }
 
@@ -198,6 +235,79 @@ pub fn degrade(img: &ImageF32, inc: &Inconsistency, seed: u64) -> ImageF32 {
     }
 }
 
+/// The relative-depth mode's map of one call (SPEC.md §20.6): metric depth `d` becomes
+/// `R_k = a_k · D̄ · g(D/D̄) + b_k` for frame `k`, with `D = 1/d` (0 where `d` is unknown),
+/// `D̄` the mean disparity of frame 0's known pixels, `g(x) = x + κ·x(x − 1)/(x + 1)`
+/// (monotone: slope ≥ 1 − |κ|; the identity at κ = 0), `a_k = a·(1 + ε_k)` and
+/// `b_k = b + a·D̄·δ_k`. No transcendental function, so the bits are the same on every
+/// platform.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RelativeMap {
+    /// `a`: drawn as `1 + 4u` or `1/(1 + 4u)` with equal odds (in `[0.2, 5]`).
+    pub scale: f64,
+    /// `b = a·D̄·β`, `β` drawn from `[−0.2, 0.5]`.
+    pub shift: f64,
+    /// `D̄`.
+    pub mean_disparity: f64,
+    /// `κ`, drawn from `± depth_distortion`.
+    pub kappa: f64,
+    /// `(ε_k, δ_k)` per frame, drawn from `± depth_flicker`.
+    pub flicker: Vec<(f64, f64)>,
+}
+
+impl RelativeMap {
+    /// The map for `frames` frames whose first has metric depth `first` (its `D̄`).
+    pub fn draw(inc: &Inconsistency, seed: u64, frames: usize, first: &[f32]) -> RelativeMap {
+        let mut u = Uniform::new(seed);
+        let up = u.unit_f64() < 0.5;
+        let m = 1.0 + 4.0 * u.unit_f64();
+        let scale = if up { m } else { 1.0 / m };
+        let beta = -0.2 + 0.7 * u.unit_f64();
+        let (mut sum, mut n) = (0f64, 0usize);
+        for &d in first {
+            if d.is_finite() && d > 0.0 {
+                sum += 1.0 / d as f64;
+                n += 1;
+            }
+        }
+        let mean_disparity = if n > 0 { sum / n as f64 } else { 1.0 };
+        let sym = |u: &mut Uniform, r: f32| (2.0 * u.unit_f64() - 1.0) * r as f64;
+        let kappa = sym(&mut u, inc.depth_distortion);
+        let flicker = (0..frames)
+            .map(|_| {
+                let e = sym(&mut u, inc.depth_flicker);
+                (e, sym(&mut u, inc.depth_flicker))
+            })
+            .collect();
+        RelativeMap {
+            scale,
+            shift: scale * mean_disparity * beta,
+            mean_disparity,
+            kappa,
+            flicker,
+        }
+    }
+
+    /// Frame `k`'s relative map of metric depth `depth`.
+    pub fn apply(&self, k: usize, depth: &[f32]) -> Vec<f32> {
+        let (e, dl) = self.flicker[k];
+        let a = self.scale * (1.0 + e);
+        let b = self.shift + self.scale * self.mean_disparity * dl;
+        depth
+            .iter()
+            .map(|&d| {
+                let x = if d.is_finite() && d > 0.0 {
+                    1.0 / d as f64 / self.mean_disparity
+                } else {
+                    0.0
+                };
+                let g = x + self.kappa * x * (x - 1.0) / (x + 1.0);
+                (a * self.mean_disparity * g + b) as f32
+            })
+            .collect()
+    }
+}
+
 enum Slot<T: ?Sized> {
     Model(Box<T>),
     Truth,
@@ -279,7 +389,11 @@ impl Generators {
         if truth {
             m.insert(
                 "truth".into(),
-                serde_json::json!({"inconsistency": config.inconsistency, "seed": config.seed}),
+                serde_json::json!({
+                    "inconsistency": config.inconsistency,
+                    "seed": config.seed,
+                    "depth": config.truth_depth,
+                }),
             );
         }
         serde_json::Value::Object(m)
@@ -335,12 +449,20 @@ impl Generators {
             Slot::Model(m) => m.estimate(image, Some(hint)).map_err(|e| {
                 Error::invalid(format!("view '{}': depth: {}", cam.name, e.message))
             })?,
-            Slot::Truth => DepthMap {
-                width: image.width,
-                height: image.height,
-                kind: DepthKind::Depth,
-                values: self.gt().get(&cam.name)?.depth.clone(),
-            },
+            Slot::Truth => {
+                // One map per image: a model's scale and shift follow its input, so two
+                // inpaintings of one view get two maps.
+                let key = image_key(cam, image);
+                let (kind, mut maps) = self
+                    .gt()
+                    .answer_depth(&[&self.gt().get(&cam.name)?.depth], &key);
+                DepthMap {
+                    width: image.width,
+                    height: image.height,
+                    kind,
+                    values: maps.swap_remove(0),
+                }
+            }
         };
         check_depth(&d, image, &cam.name)?;
         Ok(d)
@@ -411,14 +533,17 @@ impl Generators {
                 let depths = video.depths.as_ref().ok_or_else(|| {
                     Error::invalid("the truth video has no depths (video slot is not 'truth')")
                 })?;
-                depths
-                    .iter()
+                // One map per clip (its end cameras name it), jittered per frame.
+                let key = clip_key(video);
+                let frames: Vec<&[f32]> = depths.iter().map(Vec::as_slice).collect();
+                let (kind, maps) = self.gt().answer_depth(&frames, &key);
+                maps.into_iter()
                     .zip(&video.frames)
-                    .map(|(d, f)| DepthMap {
+                    .map(|(values, f)| DepthMap {
                         width: f.width,
                         height: f.height,
-                        kind: DepthKind::Depth,
-                        values: d.clone(),
+                        kind,
+                        values,
                     })
                     .collect()
             }
@@ -505,4 +630,19 @@ fn check_depth(d: &DepthMap, like: &ImageF32, view: &str) -> Result<()> {
         )));
     }
     Ok(())
+}
+
+/// The relative-depth key of a single-image depth call: the view and the image's content,
+/// so two inpaintings of one view get two maps (a model's scale follows its input).
+pub fn image_key(cam: &Camera, image: &ImageF32) -> String {
+    let bytes: Vec<u8> = image.data.iter().flat_map(|v| v.to_le_bytes()).collect();
+    format!("{}:{}", cam.name, crate::io::sha256_hex(&bytes))
+}
+
+/// The relative-depth key of a clip: its end cameras.
+pub fn clip_key(video: &Video) -> String {
+    match (video.cameras.first(), video.cameras.last()) {
+        (Some(a), Some(b)) => format!("clip:{}->{}", a.name, b.name),
+        _ => "clip".to_string(),
+    }
 }

@@ -27,7 +27,7 @@ pub mod stage1;
 pub mod stage2;
 pub mod views;
 
-pub use config::{Inconsistency, MaskSource, PipelineConfig, ReconConfig, SlotNames};
+pub use config::{Inconsistency, MaskSource, PipelineConfig, ReconConfig, SlotNames, TruthDepth};
 
 use crate::camera::Camera;
 use crate::camera::inria::read_cameras_json;
@@ -428,11 +428,10 @@ fn run_in(
     let config_text = serde_json::to_string_pretty(config).expect("config serializes") + "\n";
     crate::io::write_text(&out.join("config.json"), &config_text)?;
     let truth = if config.slots.uses_truth() {
-        Some(GroundTruth::new(
-            candidate_truth(inputs)?,
-            config.inconsistency,
-            config.seed,
-        ))
+        Some(
+            GroundTruth::new(candidate_truth(inputs)?, config.inconsistency, config.seed)
+                .with_depth(config.truth_depth),
+        )
     } else {
         None
     };

@@ -28,8 +28,13 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
         config.slots.fixer,
         if config.slots.uses_truth() {
             format!(
-                " (**ground-truth generator**: an upper bound, inconsistency {})",
-                config.inconsistency.name()
+                " (**ground-truth generator**: an upper bound, inconsistency {}{})",
+                config.inconsistency.name(),
+                match config.truth_depth {
+                    super::TruthDepth::Metric => "",
+                    super::TruthDepth::Relative =>
+                        ", **relative depth**: disparity under a seeded affine map per image and clip",
+                }
             )
         } else {
             " (the classical defaults unless named otherwise; `--generator truth` gives the \

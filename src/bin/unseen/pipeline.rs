@@ -9,7 +9,7 @@ use unseen::error::{Error, Result};
 use unseen::pipeline::compare::compare;
 use unseen::pipeline::{
     self, Inconsistency, Inputs, MaskSource, PipelineConfig, RunOptions, Scope, SlotNames,
-    load_inputs,
+    TruthDepth, load_inputs,
 };
 use unseen::train::run::{Checkpointing, train_run};
 use unseen::train::trainer::TrainConfig;
@@ -34,6 +34,16 @@ pub enum Level {
     None,
     Low,
     High,
+}
+
+/// The ground-truth generator's depth (labelled modes, SPEC.md §20.6).
+#[derive(Clone, Copy, ValueEnum)]
+pub enum TruthDepthArg {
+    /// Metric camera-z depth (default).
+    Metric,
+    /// Disparity up to a seeded affine map per image / per clip, with flicker and a mild
+    /// distortion at the inconsistency level: what a depth model returns.
+    Relative,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -93,6 +103,9 @@ pub struct Knobs {
     /// Inconsistency of the ground-truth generator.
     #[arg(long, value_enum)]
     inconsistency: Option<Level>,
+    /// Depth of the ground-truth generator's depth slots.
+    #[arg(long, value_enum)]
+    truth_depth: Option<TruthDepthArg>,
     #[arg(long, value_enum)]
     mask: Option<MaskArg>,
     #[arg(long)]
@@ -126,6 +139,12 @@ impl Knobs {
                 Level::Low => "low",
                 Level::High => "high",
             })?;
+        }
+        if let Some(d) = self.truth_depth {
+            c.truth_depth = match d {
+                TruthDepthArg::Metric => TruthDepth::Metric,
+                TruthDepthArg::Relative => TruthDepth::Relative,
+            };
         }
         if let Some(m) = self.mask {
             c.mask_source = match m {
