@@ -97,6 +97,42 @@ pub struct Inconsistency {
     pub depth_distortion: f32,
 }
 
+/// The ground-truth generator's hallucination of content no training view saw (SPEC.md
+/// §20.6): **a labelled mode, not a model**. Generated content in such pixels differs from
+/// call to call (seeded per call) and is consistent within one call's output, so two
+/// overlapping independent generations conflict as diffusion outputs do.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Hallucination {
+    /// The truth (default).
+    #[default]
+    None,
+    /// Half the truth, half a seeded world-space texture; one painted object.
+    Low,
+    /// The seeded texture alone; three painted objects.
+    High,
+}
+
+impl Hallucination {
+    /// Weight of the hallucinated colour against the truth.
+    pub fn mix(self) -> f32 {
+        match self {
+            Hallucination::None => 0.0,
+            Hallucination::Low => 0.5,
+            Hallucination::High => 1.0,
+        }
+    }
+
+    /// Painted objects (spheres in world space) per call.
+    pub fn objects(self) -> usize {
+        match self {
+            Hallucination::None => 0,
+            Hallucination::Low => 1,
+            Hallucination::High => 3,
+        }
+    }
+}
+
 /// What the ground-truth generator's depth slots return (SPEC.md §20.6).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -211,6 +247,8 @@ pub struct PipelineConfig {
     pub inconsistency: Inconsistency,
     /// The ground-truth generator's depth: metric (default) or the labelled relative mode.
     pub truth_depth: TruthDepth,
+    /// The ground-truth generator's hallucination of unseen content (labelled mode).
+    pub hallucination: Hallucination,
 
     // ---- independent view detection (§3.2)
     /// A candidate pixel is to be inpainted when the scene's alpha there is below this.
@@ -279,6 +317,7 @@ impl PipelineConfig {
             slots: SlotNames::default(),
             inconsistency: Inconsistency::NONE,
             truth_depth: TruthDepth::Metric,
+            hallucination: Hallucination::None,
             coverage_alpha: 0.5,
             inpaintings: 3,
             independent_detection: true,

@@ -10,7 +10,7 @@
 //! [`Inconsistency`] — colour gain and offset, blur, sub-pixel misalignment, hallucinated
 //! patches — the controlled variable of the paper's mechanism claims.
 
-use super::config::{Inconsistency, SlotNames, TruthDepth};
+use super::config::{Hallucination, Inconsistency, SlotNames, TruthDepth};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::io::image::ImageF32;
@@ -39,6 +39,9 @@ pub struct GroundTruth {
     inconsistency: Inconsistency,
     seed: u64,
     depth: TruthDepth,
+    hallucination: Hallucination,
+    /// The training views' cameras and depths (what was seen), when hallucinating.
+    seen: Vec<(Camera, Vec<f32>)>,
 }
 
 impl GroundTruth {
@@ -52,6 +55,68 @@ impl GroundTruth {
             inconsistency,
             seed,
             depth: TruthDepth::Metric,
+            hallucination: Hallucination::None,
+            seen: Vec::new(),
+        }
+    }
+
+    /// The same store hallucinating at `level`; `seen`: the training views' cameras and
+    /// depths (a pixel whose surface point none of them sees is unseen).
+    pub fn hallucinating(self, level: Hallucination, seen: Vec<(Camera, Vec<f32>)>) -> Self {
+        GroundTruth {
+            hallucination: level,
+            seen,
+            ..self
+        }
+    }
+
+    /// Whether this store hallucinates unseen content.
+    pub fn hallucinates(&self) -> bool {
+        self.hallucination != Hallucination::None && !self.seen.is_empty()
+    }
+
+    /// The pixels of `cam` (truth depth `depth`) that no training view saw.
+    pub fn unseen(&self, cam: &Camera, depth: &[f32]) -> Vec<bool> {
+        let train: Vec<(&Camera, &[f32])> =
+            self.seen.iter().map(|(c, d)| (c, d.as_slice())).collect();
+        super::evaluate::existing_pixels(cam, depth, &train)
+            .into_iter()
+            .map(|e| !e)
+            .collect()
+    }
+
+    /// Replace the colour of `pixels` of `img` (seen from `cam`, truth depth `depth`) by
+    /// this call's hallucinated content (stream `truth-hallucination:<key>`), mixed with
+    /// what is there by the level's weight.
+    pub fn hallucinate(
+        &self,
+        cam: &Camera,
+        depth: &[f32],
+        pixels: &[bool],
+        img: &mut ImageF32,
+        key: &str,
+    ) {
+        if self.hallucination == Hallucination::None {
+            return;
+        }
+        let points: Vec<(usize, glam::DVec3)> = pixels
+            .iter()
+            .enumerate()
+            .filter(|&(p, &m)| m && depth[p].is_finite() && depth[p] > 0.0)
+            .map(|(p, _)| (p, world_point(cam, p, depth[p])))
+            .collect();
+        if points.is_empty() {
+            return;
+        }
+        let seed = stage_seed(self.seed, &format!("truth-hallucination:{key}"));
+        let content = Content::draw(seed, self.hallucination, cam, &points);
+        let m = self.hallucination.mix();
+        let c = img.channels;
+        for &(p, x) in &points {
+            let h = content.colour_at(x);
+            for (ch, v) in img.data[p * c..(p + 1) * c].iter_mut().enumerate() {
+                *v = (1.0 - m) * *v + m * h[ch.min(2)];
+            }
         }
     }
 
@@ -308,6 +373,77 @@ impl RelativeMap {
     }
 }
 
+/// The world point of pixel `p` of `cam` at camera depth `z` (pixel centre).
+fn world_point(cam: &Camera, p: usize, z: f32) -> glam::DVec3 {
+    let w = cam.width as usize;
+    let (x, y, z) = ((p % w) as f64 + 0.5, (p / w) as f64 + 0.5, z as f64);
+    let pc = glam::DVec3::new((x - cam.cx) / cam.fx * z, (y - cam.cy) / cam.fy * z, z);
+    cam.world_from_camera_rotation * pc + cam.center
+}
+
+/// One call's hallucinated content, a function of the world point (so one call's clip or
+/// image is consistent with itself): stripes of two seeded colours along a seeded
+/// direction (frequency 1–4 cycles per metre, seeded phase), and painted spheres placed
+/// at seeded unseen points of the call's view, of radius 4–12 % of their distance to the
+/// camera and a seeded colour. No transcendental function.
+struct Content {
+    colours: [[f32; 3]; 2],
+    direction: glam::DVec3,
+    frequency: f64,
+    phase: f64,
+    objects: Vec<(glam::DVec3, f64, [f32; 3])>,
+}
+
+impl Content {
+    fn draw(
+        seed: u64,
+        level: Hallucination,
+        cam: &Camera,
+        points: &[(usize, glam::DVec3)],
+    ) -> Content {
+        let mut u = Uniform::new(seed);
+        let colour = |u: &mut Uniform| [u.unit(), u.unit(), u.unit()];
+        let colours = [colour(&mut u), colour(&mut u)];
+        let direction = loop {
+            let v = glam::DVec3::new(
+                2.0 * u.unit_f64() - 1.0,
+                2.0 * u.unit_f64() - 1.0,
+                2.0 * u.unit_f64() - 1.0,
+            );
+            let l2 = v.length_squared();
+            if l2 <= 1.0 && l2 > 1e-4 {
+                break v / l2.sqrt();
+            }
+        };
+        let frequency = 1.0 + 3.0 * u.unit_f64();
+        let phase = u.unit_f64();
+        let objects = (0..level.objects())
+            .map(|_| {
+                let (_, c) = points[u.below(points.len() as u32) as usize];
+                let r = (0.04 + 0.08 * u.unit_f64()) * (c - cam.center).length();
+                (c, r, colour(&mut u))
+            })
+            .collect();
+        Content {
+            colours,
+            direction,
+            frequency,
+            phase,
+            objects,
+        }
+    }
+
+    fn colour_at(&self, x: glam::DVec3) -> [f32; 3] {
+        for &(c, r, col) in &self.objects {
+            if (x - c).length_squared() <= r * r {
+                return col;
+            }
+        }
+        let t = self.frequency * self.direction.dot(x) + self.phase;
+        self.colours[usize::from(t - t.floor() >= 0.5)]
+    }
+}
+
 enum Slot<T: ?Sized> {
     Model(Box<T>),
     Truth,
@@ -393,6 +529,7 @@ impl Generators {
                     "inconsistency": config.inconsistency,
                     "seed": config.seed,
                     "depth": config.truth_depth,
+                    "hallucination": config.hallucination,
                 }),
             );
         }
@@ -427,8 +564,18 @@ impl Generators {
                 .inpaint_seeded(image, mask, stage_seed(self.seed, key))
                 .map_err(named)?,
             Slot::Truth => {
-                let t = self.gt().get(&cam.name)?;
-                let g = self.gt().degrade(&t.image, key);
+                let gt = self.gt();
+                let t = gt.get(&cam.name)?;
+                let mut g = gt.degrade(&t.image, key);
+                if gt.hallucinates() {
+                    let unseen: Vec<bool> = gt
+                        .unseen(cam, &t.depth)
+                        .iter()
+                        .zip(mask)
+                        .map(|(&u, &m)| u && m)
+                        .collect();
+                    gt.hallucinate(cam, &t.depth, &unseen, &mut g, key);
+                }
                 let mut out = image.clone();
                 for (p, &m) in mask.iter().enumerate() {
                     if m {
@@ -476,8 +623,12 @@ impl Generators {
                 // Start: a training view or a trajectory keyframe; its truth is its image
                 // when it is a training view, the stored truth otherwise.
                 let gt = self.gt();
+                // Hallucinating: the clip follows its keyframes' content (a video model
+                // conditioned on them), so an inpainted keyframe's hallucination carries
+                // into the clip; the geometry is still the truth's.
                 let key = |k: &Keyframe| -> Result<(ImageF32, Vec<f32>)> {
                     match gt.get(&k.camera.name) {
+                        Ok(t) if gt.hallucinates() => Ok((k.image.clone(), t.depth.clone())),
                         Ok(t) => Ok((t.image.clone(), t.depth.clone())),
                         Err(e) => match k.depth {
                             Some(d) => Ok((k.image.clone(), d.to_vec())),
@@ -575,8 +726,8 @@ impl Generators {
             })?,
             Slot::Truth => {
                 let gt = self.gt();
-                let img = match gt.get(&cam.name) {
-                    Ok(t) => t.image.clone(),
+                let (img, depth) = match gt.get(&cam.name) {
+                    Ok(t) => (t.image.clone(), t.depth.clone()),
                     Err(e) => {
                         let Some((a, b, k, n)) = between else {
                             return Err(e);
@@ -595,10 +746,23 @@ impl Generators {
                             },
                             n,
                         )?;
-                        v.frames[k].clone()
+                        let d = v.depths.as_ref().map_or_else(Vec::new, |d| d[k].clone());
+                        (v.frames[k].clone(), d)
                     }
                 };
-                gt.degrade(&img, &format!("fix:{}", cam.name))
+                let mut out = gt.degrade(&img, &format!("fix:{}", cam.name));
+                if gt.hallucinates() && depth.len() == (cam.width * cam.height) as usize {
+                    // A fixer cannot know content no training view saw: there it keeps
+                    // the render (no truth leaks into hallucinated regions).
+                    let c = out.channels;
+                    for (p, u) in gt.unseen(cam, &depth).into_iter().enumerate() {
+                        if u {
+                            out.data[p * c..(p + 1) * c]
+                                .copy_from_slice(&render.data[p * c..(p + 1) * c]);
+                        }
+                    }
+                }
+                out
             }
         };
         check_image(&out, render, "fixer output", &cam.name)?;

@@ -27,7 +27,9 @@ pub mod stage1;
 pub mod stage2;
 pub mod views;
 
-pub use config::{Inconsistency, MaskSource, PipelineConfig, ReconConfig, SlotNames, TruthDepth};
+pub use config::{
+    Hallucination, Inconsistency, MaskSource, PipelineConfig, ReconConfig, SlotNames, TruthDepth,
+};
 
 use crate::camera::Camera;
 use crate::camera::inria::read_cameras_json;
@@ -341,6 +343,30 @@ pub fn candidate_truth(inputs: &Inputs) -> Result<Vec<Truth>> {
         .collect()
 }
 
+/// The training views' cameras and depths, from which the hallucinating ground-truth
+/// generator tells seen content from unseen (empty when it does not hallucinate).
+pub fn training_truth(inputs: &Inputs, config: &PipelineConfig) -> Result<Vec<(Camera, Vec<f32>)>> {
+    if config.hallucination == Hallucination::None {
+        return Ok(Vec::new());
+    }
+    inputs
+        .data
+        .train
+        .iter()
+        .map(|&i| {
+            let v = &inputs.data.views[i];
+            let d = v.depth.clone().ok_or_else(|| {
+                Error::invalid(format!(
+                    "the hallucinating ground-truth generator needs the depth of training view '{}' (to tell what the training views saw)",
+                    v.camera.name
+                ))
+                .at(&inputs.data.root)
+            })?;
+            Ok((v.camera.clone(), d))
+        })
+        .collect()
+}
+
 /// What a finished run produced.
 #[derive(Clone, Debug)]
 pub struct Outcome {
@@ -430,7 +456,8 @@ fn run_in(
     let truth = if config.slots.uses_truth() {
         Some(
             GroundTruth::new(candidate_truth(inputs)?, config.inconsistency, config.seed)
-                .with_depth(config.truth_depth),
+                .with_depth(config.truth_depth)
+                .hallucinating(config.hallucination, training_truth(inputs, config)?),
         )
     } else {
         None

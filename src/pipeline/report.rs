@@ -28,12 +28,19 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
         config.slots.fixer,
         if config.slots.uses_truth() {
             format!(
-                " (**ground-truth generator**: an upper bound, inconsistency {}{})",
+                " (**ground-truth generator**: an upper bound, inconsistency {}{}{})",
                 config.inconsistency.name(),
                 match config.truth_depth {
                     super::TruthDepth::Metric => "",
                     super::TruthDepth::Relative =>
                         ", **relative depth**: disparity under a seeded affine map per image and clip",
+                },
+                match config.hallucination {
+                    super::Hallucination::None => "",
+                    super::Hallucination::Low =>
+                        ", **hallucinating** (low): unseen content differs per call",
+                    super::Hallucination::High =>
+                        ", **hallucinating** (high): unseen content differs per call",
                 }
             )
         } else {
@@ -83,6 +90,18 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
         md += &format!(
             "| {0} | ![]({1}/views/{s}/render.png) | ![]({1}/views/{s}/inpaint.mask.png) | ![]({1}/views/{s}/inpaint_0.png) |\n",
             c.name, prefix
+        );
+    }
+    if let Ok(c) = read_json::<serde_json::Value>(&run.join("views").join("conflict.json")) {
+        md += &format!(
+            "\n**Conflicting generations** (the hallucinating ground-truth generator): two \
+             independent generations of {}; on its {} pixels no training view saw they differ \
+             by {:.1} dB PSNR — what independent view detection keeps apart.\n\n\
+             | generation a | generation b |\n|---|---|\n\
+             | ![]({prefix}/views/conflict_a.png) | ![]({prefix}/views/conflict_b.png) |\n",
+            c["view"].as_str().unwrap_or("?"),
+            c["unseen_pixels"],
+            c["psnr_db"].as_f64().unwrap_or(f64::NAN)
         );
     }
     md += "\n## Stage 1 and 2 (§3.3)\n\n| view | kind | image | weights (QA-Mask heat map) |\n|---|---|---|---|\n";

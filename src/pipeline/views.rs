@@ -435,9 +435,74 @@ pub fn run(
         w.put("frustums.obj", |p| write_obj(p, &polys))?;
         let svg = frustums_svg(&polys, &plan, &cams, &inputs.data.train_cameras());
         w.put("frustums.svg", |p| write_text(p, &svg))?;
+        if let Some(gt) = gens.truth.as_ref().filter(|g| g.hallucinates()) {
+            conflict_picture(gens, gt, &plan, inputs, w)?;
+        }
         Ok(())
     })?;
     load(step)
+}
+
+/// The hallucinating generator's conflict, for people (SPEC.md §20.6): two independent
+/// generations of the first independent view (else candidate) of which at least 10 % of
+/// the pixels no training view saw — the whole image generated, keys `conflict:<view>:a`
+/// and `:b` — as `conflict_a` / `conflict_b`, and in `conflict.json` their PSNR over the
+/// unseen pixels.
+fn conflict_picture(
+    gens: &Generators,
+    gt: &super::generators::GroundTruth,
+    plan: &Plan,
+    inputs: &Inputs,
+    w: &mut crate::pipeline::rundir::StepWriter,
+) -> Result<()> {
+    let order = plan
+        .independent
+        .iter()
+        .chain(plan.candidates.iter().map(|c| &c.name));
+    for name in order {
+        let Some(cam) = inputs.candidates.iter().find(|c| &c.name == name) else {
+            continue;
+        };
+        let t = gt.get(name)?;
+        let unseen = gt.unseen(cam, &t.depth);
+        let n = unseen.iter().filter(|&&u| u).count();
+        if n * 10 < unseen.len() {
+            continue;
+        }
+        let all = vec![true; unseen.len()];
+        let a = gens.inpaint(cam, &t.image, &all, &format!("conflict:{name}:a"))?;
+        let b = gens.inpaint(cam, &t.image, &all, &format!("conflict:{name}:b"))?;
+        let sums: Vec<crate::pipeline::evaluate::ClassSums> = unseen
+            .iter()
+            .enumerate()
+            .filter(|(_, u)| **u)
+            .map(|(p, _)| {
+                let se = (0..3)
+                    .map(|c| {
+                        let d = (a.data[p * 3 + c] - b.data[p * 3 + c]) as f64;
+                        d * d
+                    })
+                    .sum();
+                crate::pipeline::evaluate::ClassSums {
+                    pixels: 1,
+                    squared_error: se,
+                    ssim_sum: 0.0,
+                }
+            })
+            .collect();
+        save_image(w, "conflict_a", &a)?;
+        save_image(w, "conflict_b", &b)?;
+        w.json(
+            "conflict.json",
+            &serde_json::json!({
+                "view": name,
+                "unseen_pixels": n,
+                "psnr_db": crate::pipeline::evaluate::ClassSums::psnr(&sums),
+            }),
+        )?;
+        return Ok(());
+    }
+    Ok(())
 }
 
 /// Read a finished `views/` step.

@@ -8,8 +8,8 @@ use std::time::Instant;
 use unseen::error::{Error, Result};
 use unseen::pipeline::compare::compare;
 use unseen::pipeline::{
-    self, Inconsistency, Inputs, MaskSource, PipelineConfig, RunOptions, Scope, SlotNames,
-    TruthDepth, load_inputs,
+    self, Hallucination, Inconsistency, Inputs, MaskSource, PipelineConfig, RunOptions, Scope,
+    SlotNames, TruthDepth, load_inputs,
 };
 use unseen::train::run::{Checkpointing, train_run};
 use unseen::train::trainer::TrainConfig;
@@ -106,6 +106,10 @@ pub struct Knobs {
     /// Depth of the ground-truth generator's depth slots.
     #[arg(long, value_enum)]
     truth_depth: Option<TruthDepthArg>,
+    /// The ground-truth generator's hallucination of content no training view saw
+    /// (labelled mode: differs per call, so independent generations conflict).
+    #[arg(long, value_enum)]
+    hallucination: Option<Level>,
     #[arg(long, value_enum)]
     mask: Option<MaskArg>,
     #[arg(long)]
@@ -144,6 +148,13 @@ impl Knobs {
             c.truth_depth = match d {
                 TruthDepthArg::Metric => TruthDepth::Metric,
                 TruthDepthArg::Relative => TruthDepth::Relative,
+            };
+        }
+        if let Some(l) = self.hallucination {
+            c.hallucination = match l {
+                Level::None => Hallucination::None,
+                Level::Low => Hallucination::Low,
+                Level::High => Hallucination::High,
             };
         }
         if let Some(m) = self.mask {
@@ -352,8 +363,9 @@ pub struct AuditArgs {
     /// even_views, no_depth_supervision, no_propagation, qa_sh3, qa_sh4, no_interpolation.
     #[arg(long, value_delimiter = ',')]
     variants: Vec<String>,
-    /// Generators, comma-separated: classical, truth-none, truth-low, truth-high
-    /// (default: quick classical,truth-low; paper all four).
+    /// Generators, comma-separated: classical, truth-none, truth-low, truth-high,
+    /// truth-low+hallucinating+relative, truth-high+hallucinating+relative (default: quick
+    /// classical,truth-low; paper classical and the three truth levels).
     #[arg(long, value_delimiter = ',')]
     generators: Vec<String>,
     /// The seeds of this batch: `K` (seeds 0 to K−1) or `A..B` (seeds A to B−1; default:

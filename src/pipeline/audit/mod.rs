@@ -17,7 +17,10 @@
 //! SPEC.md §21.2).
 
 use super::evaluate::{ClassSums, Row, Summary, ViewRecord};
-use super::{Event, Inconsistency, MaskSource, PipelineConfig, RunOptions, SlotNames};
+use super::{
+    Event, Hallucination, Inconsistency, MaskSource, PipelineConfig, RunOptions, SlotNames,
+    TruthDepth,
+};
 use crate::error::{Error, Result};
 use crate::train::checkpoint::checkpoint_path;
 use crate::train::run::{Checkpointing, latest_ply, read_config, train_run};
@@ -109,6 +112,11 @@ pub enum GeneratorKind {
     Classical,
     /// The labelled ground-truth generator at a named inconsistency level.
     Truth(&'static str),
+    /// The ground-truth generator at a level (low or high) that also hallucinates unseen
+    /// content at that level and answers depth in the relative mode (SPEC.md §20.6): the
+    /// generator under which the paper's mechanisms (independent views against conflicting
+    /// content, Eq. 5's alignment) have something to do.
+    Mechanisms(&'static str),
 }
 
 impl GeneratorKind {
@@ -116,18 +124,22 @@ impl GeneratorKind {
         match self {
             GeneratorKind::Classical => "classical".into(),
             GeneratorKind::Truth(level) => format!("truth-{level}"),
+            GeneratorKind::Mechanisms(level) => format!("truth-{level}+hallucinating+relative"),
         }
     }
 
-    /// `classical`, `truth-none`, `truth-low`, `truth-high`.
+    /// `classical`, `truth-none`, `truth-low`, `truth-high`,
+    /// `truth-low+hallucinating+relative`, `truth-high+hallucinating+relative`.
     pub fn by_name(name: &str) -> Result<GeneratorKind> {
         match name {
             "classical" => Ok(GeneratorKind::Classical),
             "truth-none" => Ok(GeneratorKind::Truth("none")),
             "truth-low" => Ok(GeneratorKind::Truth("low")),
             "truth-high" => Ok(GeneratorKind::Truth("high")),
+            "truth-low+hallucinating+relative" => Ok(GeneratorKind::Mechanisms("low")),
+            "truth-high+hallucinating+relative" => Ok(GeneratorKind::Mechanisms("high")),
             _ => Err(Error::invalid(format!(
-                "unknown generator '{name}' (classical, truth-none, truth-low, truth-high)"
+                "unknown generator '{name}' (classical, truth-none, truth-low, truth-high, truth-low+hallucinating+relative, truth-high+hallucinating+relative)"
             ))),
         }
     }
@@ -142,6 +154,15 @@ impl GeneratorKind {
                 c.slots = SlotNames::truth();
                 c.inconsistency = Inconsistency::by_name(level)?;
             }
+            GeneratorKind::Mechanisms(level) => {
+                c.slots = SlotNames::truth();
+                c.inconsistency = Inconsistency::by_name(level)?;
+                c.hallucination = match level {
+                    "high" => Hallucination::High,
+                    _ => Hallucination::Low,
+                };
+                c.truth_depth = TruthDepth::Relative;
+            }
         }
         Ok(())
     }
@@ -150,14 +171,14 @@ impl GeneratorKind {
     pub fn family(self) -> &'static str {
         match self {
             GeneratorKind::Classical => "classical",
-            GeneratorKind::Truth(_) => "truth",
+            GeneratorKind::Truth(_) | GeneratorKind::Mechanisms(_) => "truth",
         }
     }
 
     /// Position on the inconsistency axis (classical: none).
     fn level(self) -> Option<usize> {
         match self {
-            GeneratorKind::Classical => None,
+            GeneratorKind::Classical | GeneratorKind::Mechanisms(_) => None,
             GeneratorKind::Truth(l) => ["none", "low", "high"].iter().position(|&x| x == l),
         }
     }
