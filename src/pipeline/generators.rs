@@ -8,7 +8,11 @@
 //! reach it) and of the trajectory cameras interpolated between two candidates (the `morph`
 //! of their truths); any other pose is an error. Its outputs can be degraded by a seeded
 //! [`Inconsistency`] — colour gain and offset, blur, sub-pixel misalignment, hallucinated
-//! patches — the controlled variable of the paper's mechanism claims.
+//! patches — the controlled variable of the paper's mechanism claims. Two labelled modes
+//! make it behave like the models the paper uses (SPEC.md §20.6): relative depth
+//! ([`RelativeMap`]: disparity up to a seeded affine map, so alignment has work) and
+//! hallucination (content no training view saw differs per call, so independent
+//! generations conflict).
 
 use super::config::{Hallucination, Inconsistency, SlotNames, TruthDepth};
 use crate::camera::Camera;
