@@ -24,8 +24,10 @@ pub const CONVENTIONS_VERSION: u32 = 1;
 /// verdict on its certified lower bound (differs only where GJK stalls on nearly parallel
 /// faces); 5 depth supervision on the generated views only (the original views' dataset
 /// depth became the non-paper switch `original_view_depth`), Eq. 4's mean as
-/// `r₀ + Σ(rⱼ − r₀)/n` (exact for equal ranges).
-pub const NUMERICS_REVISION: u32 = 5;
+/// `r₀ + Σ(rⱼ − r₀)/n` (exact for equal ranges); 6 stage 2's dependent-view depth by video
+/// depth alignment (the least-squares fit to the stage-1 render became the non-paper
+/// `stage2_depth: render_fit`).
+pub const NUMERICS_REVISION: u32 = 6;
 
 /// Image losses the oracle can differentiate.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -148,6 +148,22 @@ pub enum TruthDepth {
     Relative,
 }
 
+/// How stage 2 obtains the depth of an inpainted dependent view (SPEC.md §20.4).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Stage2Depth {
+    /// The paper's DIBR-based video depth alignment ("throughout the process", §3.3): a
+    /// clip from the nearest training view to the inpainted dependent view, its video
+    /// depth aligned by one RANSAC over all frames against the training view's depth
+    /// DIBR-warped to every frame (Eq. 5), the last frame's aligned depth (Eq. 6).
+    #[default]
+    Video,
+    /// **Not in the paper** (the method before numerics revision 6, kept for the
+    /// ablation): the depth slot's estimate of the inpainted image, least-squares fitted to
+    /// the stage-1 scene's expected depth where its alpha exceeds 0.5.
+    RenderFit,
+}
+
 impl Default for Inconsistency {
     fn default() -> Self {
         Inconsistency::NONE
@@ -273,6 +289,11 @@ pub struct PipelineConfig {
     /// DIBR propagation of inpainted independent views to the dependent views (ablation).
     pub propagation: bool,
 
+    // ---- stage 2 (§3.3.2)
+    /// Depth of the inpainted dependent views: video depth alignment (paper) or the
+    /// labelled deviation `render_fit` (ablation).
+    pub stage2_depth: Stage2Depth,
+
     // ---- losses (Eq. 7)
     pub mask_source: MaskSource,
     /// λ1, λ2, λ3 of Eq. 7 (the depth weight is used only with `depth_supervision`).
@@ -328,6 +349,7 @@ impl PipelineConfig {
             ransac_iterations: 1000,
             init_stride: 2,
             propagation: true,
+            stage2_depth: Stage2Depth::Video,
             mask_source: MaskSource::Qa,
             loss: LossWeights::PAPER,
             depth_supervision: true,
@@ -462,14 +484,14 @@ impl PipelineConfig {
         Ok(())
     }
 
-    /// The loss of every reconstruction: Eq. 7's weights, the depth term only with depth
-    /// supervision.
     /// Whether the original training views' dataset depth is supervised (the non-paper
     /// switch, and only with depth supervision on).
     pub fn supervises_original_depth(&self) -> bool {
         self.depth_supervision && self.original_view_depth
     }
 
+    /// The loss of every reconstruction: Eq. 7's weights, the depth term only with depth
+    /// supervision.
     pub fn recon_loss(&self) -> LossWeights {
         LossWeights {
             depth: if self.depth_supervision {

@@ -18,8 +18,8 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
     let mut md = String::from("# unseen: scene extrapolation\n\n");
     md += &format!(
         "Preset `{}`, slots: inpaint `{}`, depth `{}`, video `{}`, video depth `{}`, fixer `{}`{}; \
-         mask `{}`, depth supervision {}{}, DIBR propagation {}, independent view detection {}, \
-         interpolation {}. The whole configuration is `{prefix}/config.json`.\n\n",
+         mask `{}`, depth supervision {}{}, DIBR propagation {}, stage-2 depth {}, independent \
+         view detection {}, interpolation {}. The whole configuration is `{prefix}/config.json`.\n\n",
         config.preset,
         config.slots.inpaint,
         config.slots.depth,
@@ -59,6 +59,11 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
             ""
         },
         config.propagation,
+        match config.stage2_depth {
+            super::Stage2Depth::Video => "by video depth alignment",
+            super::Stage2Depth::RenderFit =>
+                "by a fit to the stage-1 render (**not in the paper**)",
+        },
         config.independent_detection,
         config.interpolation,
     );
@@ -140,6 +145,55 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
             );
         }
         md += "\n";
+    }
+    if let Ok(d) = read_json::<serde_json::Value>(&run.join("stage2/dependent/dependent.json")) {
+        let views = d["views"].as_array().cloned().unwrap_or_default();
+        if !views.is_empty() {
+            md += &format!(
+                "### Depth of the dependent views (§3.3.2)\n\n{}\n\n\
+                 | dependent view | method | from | space | scale | offset | inliers / valid |\n|---|---|---|---|---|---|---|\n",
+                match config.stage2_depth {
+                    super::Stage2Depth::Video =>
+                        "DIBR-based video depth alignment: a clip from the nearest training view, \
+                         its video depth fitted by one RANSAC against that view's depth warped to \
+                         every frame; a view whose clip cannot be made or aligned keeps the fit to \
+                         the stage-1 render (`render_fit`, with the reason in `dependent.json`).",
+                    super::Stage2Depth::RenderFit =>
+                        "**Not in the paper** (`stage2_depth: render_fit`): the depth slot's \
+                         estimate fitted by least squares to the stage-1 render's depth.",
+                }
+            );
+            for v in views.iter().take(8) {
+                let method = v["method"].as_str().unwrap_or("?");
+                let a = if method == "video" {
+                    &v["alignment"]
+                } else {
+                    &v["render_fit"]["alignment"]
+                };
+                let space = if method == "video" {
+                    &v["space"]
+                } else {
+                    &v["render_fit"]["space"]
+                };
+                md += &format!(
+                    "| {} | {}{} | {} | {} | {:.4} | {:.4} | {} / {} |\n",
+                    v["view"].as_str().unwrap_or("?"),
+                    method,
+                    if v.get("video_failed").is_some() {
+                        " (video failed)"
+                    } else {
+                        ""
+                    },
+                    v["source"].as_str().unwrap_or("—"),
+                    space.as_str().unwrap_or("?"),
+                    a["scale"].as_f64().unwrap_or(f64::NAN),
+                    a["offset"].as_f64().unwrap_or(f64::NAN),
+                    a["inliers"],
+                    a["valid"],
+                );
+            }
+            md += "\n";
+        }
     }
     if let Some(m) = &out.metrics {
         md += "## Evaluation views (render | truth)\n\n";

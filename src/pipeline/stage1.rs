@@ -29,11 +29,11 @@ use crate::camera::inria::{cameras_json_string, read_cameras_json};
 use crate::error::{Error, Result};
 use crate::io::image::ImageF32;
 use crate::io::write_text;
-use crate::models::{DepthHint, Keyframe};
+use crate::models::{DepthHint, Keyframe, Video};
 use crate::scene::Uniform;
 use crate::train::trainer::init_from_points;
 use crate::train::trainer::stage_seed;
-use crate::warp::align::{Frame, RansacConfig, ransac};
+use crate::warp::align::{Alignment, Frame, RansacConfig, Space, ransac};
 use crate::warp::dibr::{WarpOptions, warp};
 use rayon::prelude::*;
 use std::path::Path;
@@ -276,63 +276,15 @@ fn independent_view(
             let sd: &[f32] = sd;
             let mut aligned = None;
             if Some(k) == chosen {
-                // Eq. 5: the start frame's depth warped to every frame.
-                let targets: Vec<Vec<f32>> = video
-                    .cameras
-                    .iter()
-                    .map(|c| warp_depth(sd, &sv.camera, c))
-                    .collect::<Result<_>>()?;
-                // What the caller knows of each frame, for estimators that extend known
-                // depth: the start frame's warped depth, else the end keyframe's (the
-                // inpainting's depth `D` of detection) warped there. Only the former is
-                // Eq. 5's target.
-                let known: Vec<Vec<f32>> = video
-                    .cameras
-                    .iter()
-                    .zip(&targets)
-                    .map(|(c, t)| {
-                        let end = warp_depth(&d0, cam, c)?;
-                        Ok(t.iter()
-                            .zip(&end)
-                            .map(|(&a, &b)| if a > 0.0 { a } else { b })
-                            .collect())
-                    })
-                    .collect::<Result<_>>()?;
-                let hints: Vec<DepthHint> = known
-                    .iter()
-                    .map(|t| DepthHint {
-                        depth: t,
-                        mask: None,
-                    })
-                    .collect();
-                let est = gens.video_depth(video, &hints)?;
-                let space = config.align_space.unwrap_or(est[0].kind.space());
-                let frames: Vec<Frame> = est
-                    .iter()
-                    .zip(&targets)
-                    .map(|(e, t)| Frame {
-                        estimate: &e.values,
-                        depth: t,
-                    })
-                    .collect();
-                let a = ransac(
-                    &frames,
-                    space,
-                    &RansacConfig {
-                        threshold: config.ransac_threshold,
-                        iterations: config.ransac_iterations,
-                        seed: stage_seed(config.seed, &format!("ransac:{name}")),
-                        ..RansacConfig::default()
-                    },
-                )
-                .map_err(|e| {
-                    Error::invalid(format!(
-                        "view '{name}': video depth alignment failed: {}",
-                        e.message
-                    ))
-                })?;
-                let depths: Vec<Vec<f32>> =
-                    est.iter().map(|e| apply_alignment(e, &a, space)).collect();
+                let (depths, a, space) =
+                    align_clip(config, gens, video, sd, &sv.camera, &d0, cam, name).map_err(
+                        |e| {
+                            Error::invalid(format!(
+                                "view '{name}': video depth alignment failed: {}",
+                                e.message
+                            ))
+                        },
+                    )?;
                 d_i = depths.last().cloned();
                 align_record = Some(serde_json::json!({
                     "source": sv.camera.name,
@@ -372,6 +324,80 @@ fn independent_view(
         )?;
         Ok(())
     })
+}
+
+/// The start of [`align_clip`]'s error when the clip's depth admits no fit (too few valid
+/// pixels, degenerate estimates): a caller with another depth to fall back on matches it.
+pub(crate) const NO_ALIGNMENT: &str = "the clip's video depth admits no alignment";
+
+/// DIBR-based video depth alignment (paper §3.3.1, Eq. 5–6) of one clip from a training
+/// view (`start_depth`: its dense depth at `start_cam`) to a generated view (`end_cam`,
+/// whose current depth `end_depth` is only a hint): video depth of every frame, aligned by
+/// one RANSAC over all frames against the start depth DIBR-warped to every frame. Returns
+/// the aligned metric depth of every frame (the last is the generated view's `D`), the
+/// fit and its space. `view` names the generated view in the RANSAC seed.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn align_clip(
+    config: &PipelineConfig,
+    gens: &Generators,
+    video: &Video,
+    start_depth: &[f32],
+    start_cam: &Camera,
+    end_depth: &[f32],
+    end_cam: &Camera,
+    view: &str,
+) -> Result<(Vec<Vec<f32>>, Alignment, Space)> {
+    // Eq. 5's target: the start frame's depth warped to every frame.
+    let targets: Vec<Vec<f32>> = video
+        .cameras
+        .iter()
+        .map(|c| warp_depth(start_depth, start_cam, c))
+        .collect::<Result<_>>()?;
+    // What the caller knows of each frame, for estimators that extend known depth: the
+    // start frame's warped depth, else the end keyframe's warped there. Only the former
+    // is Eq. 5's target.
+    let known: Vec<Vec<f32>> = video
+        .cameras
+        .iter()
+        .zip(&targets)
+        .map(|(c, t)| {
+            let end = warp_depth(end_depth, end_cam, c)?;
+            Ok(t.iter()
+                .zip(&end)
+                .map(|(&a, &b)| if a > 0.0 { a } else { b })
+                .collect())
+        })
+        .collect::<Result<_>>()?;
+    let hints: Vec<DepthHint> = known
+        .iter()
+        .map(|t| DepthHint {
+            depth: t,
+            mask: None,
+        })
+        .collect();
+    let est = gens.video_depth(video, &hints)?;
+    let space = config.align_space.unwrap_or(est[0].kind.space());
+    let frames: Vec<Frame> = est
+        .iter()
+        .zip(&targets)
+        .map(|(e, t)| Frame {
+            estimate: &e.values,
+            depth: t,
+        })
+        .collect();
+    let a = ransac(
+        &frames,
+        space,
+        &RansacConfig {
+            threshold: config.ransac_threshold,
+            iterations: config.ransac_iterations,
+            seed: stage_seed(config.seed, &format!("ransac:{view}")),
+            ..RansacConfig::default()
+        },
+    )
+    .map_err(|e| Error::invalid(format!("{NO_ALIGNMENT}: {}", e.message)))?;
+    let depths = est.iter().map(|e| apply_alignment(e, &a, space)).collect();
+    Ok((depths, a, space))
 }
 
 /// The supervision a stage-1 view step provides: the inpainted view (with `D_I`) and the

@@ -2,21 +2,27 @@
 //!
 //! Step `stage2/dependent`: render the stage-1 scene at every dependent view; inpaint its
 //! warp mask (what DIBR propagation did not cover; without propagation, the pixels the
-//! stage-1 scene leaves below `coverage_alpha`); its depth from the depth slot, aligned by
-//! least squares to the stage-1 render's expected depth where alpha > 0.5.
+//! stage-1 scene leaves below `coverage_alpha`); its depth by the paper's DIBR-based video
+//! depth alignment (a clip from the nearest training view to the inpainted view, aligned
+//! as stage 1 aligns its chosen clip: [`super::stage1::align_clip`]), with the depth slot's
+//! estimate least-squares fitted to the stage-1 render's expected depth (alpha > 0.5) as
+//! the clip's end-keyframe hint — and as the depth itself where no clip can be made or
+//! aligned, or under the labelled deviation `stage2_depth: render_fit`. Every view's
+//! method and fit: `dependent.json`.
 //! Step `stage2/videos`: a clip between every two neighbours of the closed trajectory.
 //! Step `stage2/recon`: the stage-1 scene fine-tuned on the original views, every
 //! trajectory keyframe and the clips' intermediate frames, weighted by the mask of the
 //! stage-1 scene.
 
+use super::config::Stage2Depth;
 use super::generators::Generators;
 use super::recon::{self, Supervision, reconstruct};
 use super::rundir::{RunDir, StepDone};
-use super::stage1::{Stage1, save_video, video_supervision};
-use super::views::{MIN_ALIGN_PIXELS, Views, apply_alignment, render_rgba};
+use super::stage1::{NO_ALIGNMENT, Stage1, align_clip, save_video, video_supervision};
+use super::views::{MIN_ALIGN_PIXELS, Views, apply_alignment, render_rgba, training_depth};
 use super::{
-    Event, Inputs, PipelineConfig, load_depth, load_image, load_mask, save_depth, save_image,
-    save_mask, stem,
+    Event, Inputs, PipelineConfig, load_depth, load_image, load_mask, nearest_training, save_depth,
+    save_image, save_mask, stem,
 };
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -93,11 +99,16 @@ pub fn run(
             "views": views.step.digest,
             "stage1": s1.recon.digest,
             "propagate": s1.propagate.as_ref().map(|s| &s.digest),
-            "slots": gens.key(config, &["inpaint", "depth"]),
+            "slots": gens.key(config, &["inpaint", "depth", "video", "video_depth"]),
             "coverage_alpha": config.coverage_alpha,
             "align_space": config.align_space,
+            "stage2_depth": config.stage2_depth,
+            "video_frames": config.video_frames,
+            "ransac": [config.ransac_threshold, config.ransac_iterations as f64],
+            "seed": config.seed,
         });
         let step = dir.step("stage2/dependent", key, on_event, |w| {
+            let mut records = Vec::new();
             for dep in &views.plan.dependent {
                 let cam = views.camera(&dep.name)?;
                 let (wd, ht) = (cam.width as usize, cam.height as usize);
@@ -159,13 +170,100 @@ pub fn run(
                         ))
                     })?
                 };
-                let d = apply_alignment(&est, &a, space);
+                let fit = apply_alignment(&est, &a, space);
                 let s = stem(&dep.name);
+                let fit_record = serde_json::json!({"space": space, "alignment": a});
+                // The paper's depth (§3.3: DIBR-based video depth alignment throughout): a
+                // clip from the nearest training view to the inpainted view; the render
+                // fit above is its end keyframe's depth hint, and the depth itself where
+                // no clip can be made or aligned (recorded).
+                let (d, record) = match config.stage2_depth {
+                    Stage2Depth::RenderFit => (
+                        fit,
+                        serde_json::json!({"view": dep.name, "method": "render_fit", "render_fit": fit_record}),
+                    ),
+                    Stage2Depth::Video => {
+                        let src = nearest_training(&inputs.data, cam, 1)[0];
+                        let sv = &inputs.data.views[src];
+                        let sd = training_depth(inputs, src)?;
+                        let clip = gens.video(
+                            Keyframe {
+                                image: &sv.image,
+                                camera: &sv.camera,
+                                depth: Some(&sd),
+                            },
+                            Keyframe {
+                                image: &ip,
+                                camera: cam,
+                                depth: Some(&fit),
+                            },
+                            config.video_frames as usize,
+                        );
+                        let aligned = match clip {
+                            Ok(v) => align_clip(
+                                config,
+                                gens,
+                                &v,
+                                &sd,
+                                &sv.camera,
+                                &fit,
+                                cam,
+                                &format!("stage2:{}", dep.name),
+                            )
+                            .map(|r| (v, r)),
+                            Err(e) if e.message.contains(crate::models::morph::NO_VISIBLE_END) => {
+                                Err(e)
+                            }
+                            Err(e) => return Err(e),
+                        };
+                        match aligned {
+                            Ok((v, (depths, va, vspace))) => {
+                                save_video(
+                                    w,
+                                    &format!("{s}/video"),
+                                    &v.frames,
+                                    &v.cameras,
+                                    Some(&depths),
+                                )?;
+                                let last = depths.last().cloned().expect("a clip has frames");
+                                (
+                                    last,
+                                    serde_json::json!({
+                                        "view": dep.name,
+                                        "method": "video",
+                                        "source": sv.camera.name,
+                                        "space": vspace,
+                                        "alignment": va,
+                                        "render_fit": fit_record,
+                                    }),
+                                )
+                            }
+                            Err(e)
+                                if e.message.contains(NO_ALIGNMENT)
+                                    || e.message.contains(crate::models::morph::NO_VISIBLE_END) =>
+                            {
+                                (
+                                fit,
+                                serde_json::json!({
+                                    "view": dep.name,
+                                    "method": "render_fit",
+                                    "source": sv.camera.name,
+                                    "video_failed": e.message,
+                                    "render_fit": fit_record,
+                                }),
+                            )
+                            }
+                            Err(e) => return Err(e),
+                        }
+                    }
+                };
+                records.push(record);
                 save_image(w, &format!("{s}/render"), &rgb)?;
                 save_mask(w, &format!("{s}/inpaint"), &mask, wd, ht)?;
                 save_image(w, &format!("{s}/inpaint"), &ip)?;
                 save_depth(w, &format!("{s}/inpaint"), &d, wd, ht)?;
             }
+            w.json("dependent.json", &serde_json::json!({ "views": records }))?;
             Ok(())
         })?;
         steps.push(step.clone());

@@ -1184,7 +1184,7 @@ fn cli_audit_bad_input_is_one_clear_error() {
         .unwrap();
     let jobs = String::from_utf8_lossy(&st.stdout);
     assert!(st.status.success());
-    assert_eq!(jobs.lines().count(), 19, "{jobs}");
+    assert_eq!(jobs.lines().count(), 21, "{jobs}");
     assert_eq!(jobs.lines().next(), Some("original/seed-0"));
     assert!(jobs.contains("runs/truth-low/even_views/seed-0"));
     assert!(!t.path().join("listed").exists());
@@ -1487,4 +1487,128 @@ fn hallucinating_relative_truth_runs_end_to_end_and_costs_unseen_fidelity() {
     );
     eprintln!("extrapolated gain: {plain:.2} dB without hallucination, {hallucinated:.2} dB with");
     assert!(hallucinated < plain, "{hallucinated} vs {plain}");
+}
+
+/// Median of `|d − truth| / truth` over the pixels with a positive truth and estimate.
+fn median_relative_error(d: &[f32], truth: &[f32]) -> f64 {
+    let mut e: Vec<f64> = d
+        .iter()
+        .zip(truth)
+        .filter(|&(&a, &b)| a > 0.0 && b > 0.0)
+        .map(|(&a, &b)| ((a - b) / b).abs() as f64)
+        .collect();
+    assert!(!e.is_empty(), "no pixel with both depths");
+    e.sort_by(f64::total_cmp);
+    e[e.len() / 2]
+}
+
+/// Stage 2's dependent-view depth (SPEC.md §20.4) under relative truth depth: by default
+/// the paper's video depth alignment (a clip from the nearest training view, one RANSAC
+/// over its frames) undoes the clip's seeded affine map of disparity — every dependent
+/// candidate's depth is within `VIDEO_DEPTH_MEDIAN_REL` of the dataset's depth (median
+/// relative error; measured 0.13–2.1 % on the 10 lounge bridge views at 40×30, truth-low,
+/// whose map distorts depth by up to 5 % and flickers 1 % per frame: the bound is the
+/// distortion's) — and more accurately than the labelled deviation `render_fit` (measured
+/// 4.3–17 %: a single-image fit to a 60-iteration stage-1 render), which is recorded as
+/// such, writes no clip and gives other depths.
+#[test]
+fn stage2_depth_by_video_alignment_recovers_the_relative_map_and_render_fit_is_the_labelled_deviation()
+ {
+    use unseen::pipeline::{RunOptions, Scope, Stage2Depth};
+    const VIDEO_DEPTH_MEDIAN_REL: f64 = 0.05;
+    let t = TempDir::new("pipeline-stage2-depth");
+    let run = tiny_run(t.path());
+    let inp = inputs(&run);
+    let cfg = PipelineConfig {
+        interpolation: false,
+        inconsistency: unseen::pipeline::Inconsistency::LOW,
+        truth_depth: unseen::pipeline::TruthDepth::Relative,
+        ..tiny_config()
+    };
+    assert_eq!(
+        cfg.stage2_depth,
+        Stage2Depth::Video,
+        "the paper's method is the default"
+    );
+    let until = RunOptions {
+        scope: Scope::Until("stage2/dependent".into()),
+        ..RunOptions::default()
+    };
+    let fit_cfg = PipelineConfig {
+        stage2_depth: Stage2Depth::RenderFit,
+        ..cfg.clone()
+    };
+    let (video_out, fit_out) = (t.path().join("video"), t.path().join("fit"));
+    pipeline::run_with(&cfg, &inp, &video_out, &until, &quiet).unwrap();
+    pipeline::run_with(&fit_cfg, &inp, &fit_out, &until, &quiet).unwrap();
+    let records = |out: &Path| -> Vec<serde_json::Value> {
+        let p = out.join("stage2/dependent/dependent.json");
+        let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&p).unwrap()).unwrap();
+        v["views"].as_array().unwrap().clone()
+    };
+    let (video, fit) = (records(&video_out), records(&fit_out));
+    assert!(!video.is_empty(), "the lounge plan has dependent views");
+    assert_eq!(video.len(), fit.len());
+    let (mut checked, mut differ, mut sum_video, mut sum_fit) = (0, 0, 0.0, 0.0);
+    for (v, f) in video.iter().zip(&fit) {
+        let name = v["view"].as_str().unwrap();
+        assert_eq!(f["method"], "render_fit", "{f}");
+        let stem = pipeline::stem(name);
+        assert!(
+            !fit_out
+                .join("stage2/dependent")
+                .join(&stem)
+                .join("video")
+                .exists()
+        );
+        assert_eq!(v["method"], "video", "{name}: {v}");
+        assert!(
+            video_out
+                .join("stage2/dependent")
+                .join(&stem)
+                .join("video/cameras.json")
+                .is_file()
+        );
+        let scale = v["alignment"]["scale"].as_f64().unwrap();
+        assert!(
+            (scale - 1.0).abs() > 0.2,
+            "{name}: scale {scale} (no map to undo?)"
+        );
+        let Some(truth) = inp
+            .data
+            .views
+            .iter()
+            .find(|x| x.camera.name == name)
+            .and_then(|x| x.depth.clone().map(|d| (x.camera.clone(), d)))
+        else {
+            continue; // a gap camera: no dataset view
+        };
+        let (w, h) = (truth.0.width as usize, truth.0.height as usize);
+        let read = |out: &Path| {
+            unseen::io::image::read_depth(
+                &out.join("stage2/dependent")
+                    .join(&stem)
+                    .join("inpaint.depth.exr"),
+                w,
+                h,
+            )
+            .unwrap()
+        };
+        let (dv, df) = (read(&video_out), read(&fit_out));
+        let (ev, ef) = (
+            median_relative_error(&dv, &truth.1),
+            median_relative_error(&df, &truth.1),
+        );
+        eprintln!("{name}: median relative depth error video {ev:.4}, render fit {ef:.4}");
+        assert!(ev <= VIDEO_DEPTH_MEDIAN_REL, "{name}: {ev}");
+        differ += usize::from(dv != df);
+        checked += 1;
+        (sum_video, sum_fit) = (sum_video + ev, sum_fit + ef);
+    }
+    assert!(checked > 0, "no dependent candidate with dataset depth");
+    assert!(
+        sum_video < sum_fit,
+        "video {sum_video} vs render fit {sum_fit}"
+    );
+    assert_eq!(differ, checked, "the two methods gave the same depth");
 }

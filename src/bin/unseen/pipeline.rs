@@ -9,7 +9,7 @@ use unseen::error::{Error, Result};
 use unseen::pipeline::compare::compare;
 use unseen::pipeline::{
     self, Hallucination, Inconsistency, Inputs, MaskSource, PipelineConfig, RunOptions, Scope,
-    SlotNames, TruthDepth, load_inputs,
+    SlotNames, Stage2Depth, TruthDepth, load_inputs,
 };
 use unseen::train::run::{Checkpointing, train_run};
 use unseen::train::trainer::TrainConfig;
@@ -127,6 +127,10 @@ pub struct Knobs {
     /// views with the dataset's depth (the paper supervises the generated views' priors).
     #[arg(long)]
     original_view_depth: bool,
+    /// Not in the paper: the dependent views' depth by a least-squares fit of the depth
+    /// slot to the stage-1 render instead of video depth alignment.
+    #[arg(long)]
+    stage2_render_fit: bool,
 }
 
 impl Knobs {
@@ -172,6 +176,9 @@ impl Knobs {
         c.independent_detection &= !self.no_independent_detection;
         c.interpolation &= !self.no_interpolation;
         c.original_view_depth |= self.original_view_depth;
+        if self.stage2_render_fit {
+            c.stage2_depth = Stage2Depth::RenderFit;
+        }
         Ok(())
     }
 }
@@ -360,7 +367,7 @@ pub struct AuditArgs {
     #[arg(long, value_enum, default_value = "quick")]
     preset: Preset,
     /// Variants, comma-separated (default: all): full, no_qa_mask, opacity_mask,
-    /// even_views, no_depth_supervision, no_propagation, qa_sh3, qa_sh4, no_interpolation.
+    /// even_views, no_depth_supervision, no_propagation, qa_sh3, qa_sh4, no_interpolation, stage2_render_fit.
     #[arg(long, value_delimiter = ',')]
     variants: Vec<String>,
     /// Generators, comma-separated: classical, truth-none, truth-low, truth-high,
