@@ -48,6 +48,9 @@ impl Inpainter for Telea {
     fn name(&self) -> &str {
         "telea"
     }
+    fn needs_known_pixels(&self) -> bool {
+        true
+    }
     fn inpaint(&self, image: &ImageF32, mask: &[bool]) -> Result<ImageF32> {
         check_mask(image, mask)?;
         let data = inpaint_float(
@@ -82,6 +85,9 @@ impl Default for DepthFill {
 impl DepthEstimator for DepthFill {
     fn name(&self) -> &str {
         "depth-fill"
+    }
+    fn needs_known_depth(&self) -> bool {
+        true
     }
     fn estimate(&self, image: &ImageF32, hint: Option<DepthHint>) -> Result<DepthMap> {
         let hint = hint.ok_or_else(|| {

@@ -81,6 +81,11 @@ pub trait Inpainter: Send + Sync {
     fn stochastic(&self) -> bool {
         false
     }
+    /// Whether the model fills only from known pixels (a classical inpainter cannot fill an
+    /// image of which nothing is known; a generative model can).
+    fn needs_known_pixels(&self) -> bool {
+        false
+    }
 }
 
 /// Image → relative depth or disparity. `hint` is what the caller knows; learned models
@@ -93,6 +98,11 @@ pub trait DepthEstimator: Send + Sync {
         self.name().to_string()
     }
     fn estimate(&self, image: &ImageF32, hint: Option<DepthHint>) -> Result<DepthMap>;
+    /// Whether the model only extends the hint's known depth (it cannot estimate depth
+    /// where the hint knows none; a learned model can).
+    fn needs_known_depth(&self) -> bool {
+        false
+    }
 }
 
 /// Frames → per-frame relative depth (one scale for the clip when the model is

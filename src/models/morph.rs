@@ -15,6 +15,16 @@ use glam::{DMat3, DQuat};
 /// The error of a clip in which some intermediate camera sees neither end frame.
 pub const NO_VISIBLE_END: &str = "neither end frame is visible from an intermediate camera";
 
+/// The error of a clip between end frames of different sizes (a clip has one size).
+pub const END_SIZES_DIFFER: &str = "the end frames differ in size or channels";
+
+/// Whether `e` says that a clip cannot be made between its two keyframes (an intermediate
+/// camera sees neither, or they differ in size) rather than that something failed: the
+/// pipeline records such a clip and leaves it out (SPEC.md §20.3–20.4).
+pub fn cannot_make_clip(e: &Error) -> bool {
+    e.message.contains(NO_VISIBLE_END) || e.message.contains(END_SIZES_DIFFER)
+}
+
 /// Settings of [`Morph`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Morph {
@@ -100,7 +110,7 @@ impl VideoGenerator for Morph {
         };
         let (ia, ib) = (start.image, end.image);
         if (ia.width, ia.height, ia.channels) != (ib.width, ib.height, ib.channels) {
-            return Err(Error::invalid("the end frames differ in size or channels"));
+            return Err(Error::invalid(END_SIZES_DIFFER));
         }
         let (w, h, ch) = (ia.width, ia.height, ia.channels);
         let mut video = Video {

@@ -553,6 +553,22 @@ impl Generators {
         self.truth.as_ref().expect("checked in new")
     }
 
+    /// The inpaint slot's model when it fills only from known pixels (Telea): its name.
+    pub fn inpaint_needs_known(&self) -> Option<&str> {
+        match &self.inpaint {
+            Slot::Model(m) if m.needs_known_pixels() => Some(m.name()),
+            _ => None,
+        }
+    }
+
+    /// The depth slot's model when it only extends known depth (depth-fill): its name.
+    pub fn depth_needs_known(&self) -> Option<&str> {
+        match &self.depth {
+            Slot::Model(m) if m.needs_known_depth() => Some(m.name()),
+            _ => None,
+        }
+    }
+
     /// Inpaint `mask` of `image` seen from `cam`; `key` names this inpainting (its seed).
     pub fn inpaint(
         &self,
@@ -621,6 +637,19 @@ impl Generators {
 
     /// A clip of `n` frames from `start` to `end`.
     pub fn video(&self, start: Keyframe, end: Keyframe, n: usize) -> Result<Video> {
+        let (a, b) = (start.image, end.image);
+        if (a.width, a.height, a.channels) != (b.width, b.height, b.channels) {
+            return Err(Error::invalid(format!(
+                "{}: '{}' is {}x{}, '{}' {}x{}",
+                crate::models::morph::END_SIZES_DIFFER,
+                start.camera.name,
+                a.width,
+                a.height,
+                end.camera.name,
+                b.width,
+                b.height
+            )));
+        }
         let v = match &self.video {
             Slot::Model(m) => m.generate(start, end, n)?,
             Slot::Truth => {

@@ -241,19 +241,6 @@ pub fn load_inputs(
             );
         }
         c.validate().map_err(|e| e.at(candidates))?;
-        if let Some(&t) = data.train.iter().find(|&&t| {
-            let tc = &data.views[t].camera;
-            (tc.center - c.center).length() < 1e-9
-                && tc
-                    .world_from_camera_rotation
-                    .abs_diff_eq(c.world_from_camera_rotation, 1e-9)
-        }) {
-            return Err(Error::invalid(format!(
-                "candidate '{}' has the pose of training view '{}': nothing to extrapolate there",
-                c.name, data.views[t].camera.name
-            ))
-            .at(candidates));
-        }
     }
     let mut eval_idx = Vec::new();
     if let Some(e) = evaluation {
@@ -301,6 +288,14 @@ pub fn load_inputs(
 }
 
 /// The truth of the candidate views, from the dataset (for the ground-truth generator).
+/// Whether two cameras have the same pose (centre within 1e-9, rotation entries within
+/// 1e-9): what "the same view" means for candidates (SPEC.md §20.2).
+pub fn same_pose(a: &Camera, b: &Camera) -> bool {
+    (a.center - b.center).length() < 1e-9
+        && a.world_from_camera_rotation
+            .abs_diff_eq(b.world_from_camera_rotation, 1e-9)
+}
+
 pub fn candidate_truth(inputs: &Inputs) -> Result<Vec<Truth>> {
     inputs
         .candidates
@@ -317,12 +312,7 @@ pub fn candidate_truth(inputs: &Inputs) -> Result<Vec<Truth>> {
                         c.name
                     ))
                 })?;
-            let same_pose = (v.camera.center - c.center).length() < 1e-9
-                && v
-                    .camera
-                    .world_from_camera_rotation
-                    .abs_diff_eq(c.world_from_camera_rotation, 1e-9);
-            if (v.camera.width, v.camera.height) != (c.width, c.height) || !same_pose {
+            if (v.camera.width, v.camera.height) != (c.width, c.height) || !same_pose(&v.camera, c) {
                 return Err(Error::invalid(format!(
                     "candidate '{}' differs in size or pose from the dataset's view of that name: the ground-truth generator cannot use its truth",
                     c.name

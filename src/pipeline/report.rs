@@ -89,6 +89,13 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
         plan.independent.join(", "),
         plan.trajectory.join(" → "),
     );
+    if !plan.set_aside.is_empty() {
+        md += "**Set aside** (left out of detection, as the covered ones; SPEC.md §20.2):\n\n";
+        for a in &plan.set_aside {
+            md += &format!("- {}: {}\n", a.name, a.reason);
+        }
+        md += "\n";
+    }
     md += "| candidate | render | inpainting mask | inpainting |\n|---|---|---|---|\n";
     for c in plan.candidates.iter().filter(|c| c.masked > 0).take(6) {
         let s = stem(&c.name);

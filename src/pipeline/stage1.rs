@@ -260,7 +260,7 @@ fn independent_view(
                 config.video_frames as usize,
             ) {
                 Ok(v) => clips.push((src, sd, v)),
-                Err(e) if e.message.contains(crate::models::morph::NO_VISIBLE_END) => failed.push(serde_json::json!({
+                Err(e) if crate::models::morph::cannot_make_clip(&e) => failed.push(serde_json::json!({
                     "source": sv.camera.name,
                     "error": e.message,
                 })),

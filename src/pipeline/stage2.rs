@@ -211,7 +211,7 @@ pub fn run(
                                 &format!("stage2:{}", dep.name),
                             )
                             .map(|r| (v, r)),
-                            Err(e) if e.message.contains(crate::models::morph::NO_VISIBLE_END) => {
+                            Err(e) if crate::models::morph::cannot_make_clip(&e) => {
                                 Err(e)
                             }
                             Err(e) => return Err(e),
@@ -240,7 +240,7 @@ pub fn run(
                             }
                             Err(e)
                                 if e.message.contains(NO_ALIGNMENT)
-                                    || e.message.contains(crate::models::morph::NO_VISIBLE_END) =>
+                                    || crate::models::morph::cannot_make_clip(&e) =>
                             {
                                 (
                                 fit,
@@ -298,7 +298,7 @@ pub fn run(
                 config.video_frames as usize,
             ) {
                 Ok(v) => v,
-                Err(e) if e.message.contains(crate::models::morph::NO_VISIBLE_END) => {
+                Err(e) if crate::models::morph::cannot_make_clip(&e) => {
                     failed.push(serde_json::json!({
                         "pair": [&ka.camera.name, &kb.camera.name],
                         "error": e.message,

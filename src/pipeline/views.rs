@@ -20,7 +20,7 @@ use super::generators::Generators;
 use super::rundir::{RunDir, StepDone};
 use super::{
     Event, Inputs, PipelineConfig, load_depth, load_image, load_mask, nearest_training, read_json,
-    save_depth, save_image, save_mask, stem,
+    same_pose, save_depth, save_image, save_mask, stem,
 };
 use crate::camera::Camera;
 use crate::camera::inria::{cameras_json_string, read_cameras_json};
@@ -74,6 +74,10 @@ pub struct Plan {
     pub candidates: Vec<Candidate>,
     /// Candidates the scene already covers (nothing to inpaint): left out.
     pub covered: Vec<String>,
+    /// Candidates the slots cannot extrapolate (a rule of SPEC.md §20.2), with the reason:
+    /// left out, as the covered ones.
+    #[serde(default)]
+    pub set_aside: Vec<SetAside>,
     pub collisions: Vec<[String; 2]>,
     pub detection: bool,
     pub independent: Vec<String>,
@@ -84,6 +88,13 @@ pub struct Plan {
     pub trajectory: Vec<String>,
     #[serde(skip)]
     pub gap_cameras: Vec<GapCamera>,
+}
+
+/// A candidate left out of detection, and why (SPEC.md §20.2).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SetAside {
+    pub name: String,
+    pub reason: String,
 }
 
 /// An interpolated camera and the two independent views it lies between.
@@ -265,9 +276,49 @@ pub fn run(
         let mut masks: Vec<Vec<bool>> = Vec::new();
         let mut ranges: Vec<[f64; 2]> = Vec::new();
         let mut covered = Vec::new();
+        let mut set_aside = Vec::new();
         for (ci, cam) in inputs.candidates.iter().enumerate() {
             let s = stem(&cam.name);
             let (wd, ht) = (cam.width as usize, cam.height as usize);
+            // A candidate at a training view's pose has nothing to extrapolate; a second
+            // candidate with the same camera would only collide with the first.
+            let same_training = inputs
+                .data
+                .train
+                .iter()
+                .map(|&t| &inputs.data.views[t].camera)
+                .find(|t| same_pose(t, cam));
+            let same_candidate = inputs.candidates[..ci]
+                .iter()
+                .find(|p| {
+                    same_pose(p, cam)
+                        && (p.width, p.height, p.fx, p.fy, p.cx, p.cy)
+                            == (cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy)
+                });
+            let repeat = match (same_training, same_candidate) {
+                (Some(t), _) => Some(format!(
+                    "has the pose of training view '{}': nothing to extrapolate there",
+                    t.name
+                )),
+                (None, Some(p)) => Some(format!("is the same camera as candidate '{}'", p.name)),
+                (None, None) => None,
+            };
+            if let Some(reason) = repeat {
+                set_aside.push(SetAside {
+                    name: cam.name.clone(),
+                    reason,
+                });
+                records.push(Candidate {
+                    name: cam.name.clone(),
+                    masked: 0,
+                    nearest_training: None,
+                    space: None,
+                    alignments: Vec::new(),
+                    ranges: Vec::new(),
+                    range: None,
+                });
+                continue;
+            }
             let (rgb, alpha, ed) = render_rgba(&inputs.scene, cam, inputs.background)?;
             let mask: Vec<bool> = alpha.iter().map(|&a| a < config.coverage_alpha).collect();
             save_image(w, &format!("{s}/render"), &rgb)?;
@@ -285,6 +336,33 @@ pub fn run(
             if masked == 0 {
                 covered.push(cam.name.clone());
                 records.push(rec);
+                continue;
+            }
+            let aside = |rec: Candidate, reason: String, set_aside: &mut Vec<SetAside>| {
+                set_aside.push(SetAside {
+                    name: rec.name.clone(),
+                    reason,
+                });
+                Candidate {
+                    nearest_training: None,
+                    space: None,
+                    alignments: Vec::new(),
+                    ranges: Vec::new(),
+                    range: None,
+                    ..rec
+                }
+            };
+            if masked == wd * ht
+                && let Some(slot) = gens.inpaint_needs_known()
+            {
+                records.push(aside(
+                    rec,
+                    format!(
+                        "sees nothing of the scene (alpha < {} at every pixel) and the inpaint slot '{slot}' fills only from known pixels",
+                        config.coverage_alpha
+                    ),
+                    &mut set_aside,
+                ));
                 continue;
             }
             // Eq. 2's target: the depth of the closest training view (by pose distance)
@@ -307,11 +385,23 @@ pub fn run(
             }
             // Without any reference (the candidate shares no surface with the training
             // views or the scene), a metric estimate is used as it is (identity alignment)
-            // and anything else is an error.
+            // and a disparity estimate sets the candidate aside.
             let (reference, warped) = match found {
                 Some((pcam, w)) => (Some(pcam.name.clone()), w),
                 None => (None, vec![0f32; wd * ht]),
             };
+            if reference.is_none()
+                && let Some(slot) = gens.depth_needs_known()
+            {
+                records.push(aside(
+                    rec,
+                    format!(
+                        "no training view shares {need} pixels of known depth with it, nor does the scene cover them, and the depth slot '{slot}' only extends known depth"
+                    ),
+                    &mut set_aside,
+                ));
+                continue;
+            }
             rec.nearest_training = reference.clone();
             // Eq. 4 over `n` inpaintings only when they can differ: a deterministic slot
             // would give `n` equal ranges (SPEC.md §20.2).
@@ -320,33 +410,32 @@ pub fn run(
             } else {
                 1
             };
+            let mut why = None;
             for j in 0..n {
                 let ip = gens.inpaint(cam, &rgb, &mask, &format!("views:{}:{j}", cam.name))?;
-                let est = gens
-                    .depth(
-                        cam,
-                        &ip,
-                        DepthHint {
-                            depth: &warped,
-                            mask: None,
-                        },
-                    )
-?;
+                let hint = DepthHint {
+                    depth: &warped,
+                    mask: None,
+                };
+                let est = gens.depth(cam, &ip, hint)?;
                 let space = config.align_space.unwrap_or(est.kind.space());
                 let a = match &reference {
-                    Some(r) => least_squares(
+                    Some(r) => match least_squares(
                         &[Frame {
                             estimate: &est.values,
                             depth: &warped,
                         }],
                         space,
-                    )
-                    .map_err(|e| {
-                        Error::invalid(format!(
-                            "candidate '{}': cannot align its depth to training view '{r}' ({})",
-                            cam.name, e.message
-                        ))
-                    })?,
+                    ) {
+                        Ok(a) => a,
+                        Err(e) => {
+                            why = Some(format!(
+                                "its depth cannot be aligned to training view '{r}' ({})",
+                                e.message
+                            ));
+                            break;
+                        }
+                    },
                     None if space == Space::Depth => Alignment {
                         scale: 1.0,
                         offset: 0.0,
@@ -356,24 +445,32 @@ pub fn run(
                         residual_max: 0.0,
                     },
                     None => {
-                        return Err(Error::invalid(format!(
-                            "candidate '{}': no training view shares {need} pixels of known depth with it, nor does the scene cover them, so its {space:?} estimate cannot be aligned; is the view behind or outside the scene?",
-                            cam.name
-                        )));
+                        why = Some(format!(
+                            "no training view shares {need} pixels of known depth with it, nor does the scene cover them, so its {space:?} estimate cannot be aligned (is the view behind or outside the scene?)"
+                        ));
+                        break;
                     }
                 };
                 let d = apply_alignment(&est, &a, space);
-                let range = depth_range(&d, &mask).map_err(|e| {
-                    Error::invalid(format!(
-                        "candidate '{}', inpainting {j}: {} after alignment",
-                        cam.name, e.message
-                    ))
-                })?;
+                let range = match depth_range(&d, &mask) {
+                    Ok(r) => r,
+                    Err(e) => {
+                        why = Some(format!(
+                            "inpainting {j}: {} after alignment, so it has no frustum",
+                            e.message
+                        ));
+                        break;
+                    }
+                };
                 save_image(w, &format!("{s}/inpaint_{j}"), &ip)?;
                 save_depth(w, &format!("{s}/inpaint_{j}"), &d, wd, ht)?;
                 rec.space = Some(space);
                 rec.alignments.push([a.scale, a.offset]);
                 rec.ranges.push(range);
+            }
+            if let Some(reason) = why {
+                records.push(aside(rec, reason, &mut set_aside));
+                continue;
             }
             let range = mean_range(&rec.ranges)?;
             rec.range = Some(range);
@@ -383,9 +480,15 @@ pub fn run(
             records.push(rec);
         }
         if active.is_empty() {
-            return Err(Error::invalid(
-                "the scene already covers every candidate view: nothing to extrapolate",
-            ));
+            let mut why = format!(
+                "nothing to extrapolate: of {} candidate views the scene covers {}",
+                inputs.candidates.len(),
+                covered.len()
+            );
+            for a in &set_aside {
+                why += &format!("; '{}' is set aside: {}", a.name, a.reason);
+            }
+            return Err(Error::invalid(why));
         }
         let name = |i: usize| inputs.candidates[i].name.clone();
         let cams: Vec<&Camera> = active.iter().map(|&i| &inputs.candidates[i]).collect();
@@ -415,6 +518,7 @@ pub fn run(
         let plan = Plan {
             candidates: records,
             covered,
+            set_aside,
             collisions: sel
                 .edges
                 .iter()
@@ -440,7 +544,14 @@ pub fn run(
         }
         Ok(())
     })?;
-    load(step)
+    let views = load(step)?;
+    for a in &views.plan.set_aside {
+        on_event(Event::Note(format!(
+            "warning: candidate '{}' is set aside: {}",
+            a.name, a.reason
+        )));
+    }
+    Ok(views)
 }
 
 /// The hallucinating generator's conflict, for people (SPEC.md §20.6): two independent
@@ -587,7 +698,19 @@ fn assign_dependents<'c>(
             continue;
         }
         let name = format!("gap_{}_{}", cam(a).name, cam(b).name);
-        let c = interpolate_camera(cam(a), cam(b), 0.5, name.clone())?;
+        // A camera has one size: between views of different sizes the gap camera takes
+        // the first view's size and intrinsics, its pose still half-way.
+        let (ca, cb) = (cam(a), cam(b));
+        let b_as_a = Camera {
+            width: ca.width,
+            height: ca.height,
+            fx: ca.fx,
+            fy: ca.fy,
+            cx: ca.cx,
+            cy: ca.cy,
+            ..cb.clone()
+        };
+        let c = interpolate_camera(ca, &b_as_a, 0.5, name.clone())?;
         dependent.push(Dependent {
             name,
             between: [cam(a).name.clone(), cam(b).name.clone()],

@@ -322,14 +322,25 @@ fn bad_pipeline_input_is_one_clear_error() {
     let empty = t.path().join("empty.json");
     std::fs::write(&empty, "[]").unwrap();
     assert!(err(load_inputs(&run, &empty, None, Some(&lounge()))).contains("empty"));
-    // A candidate at a training pose.
+    // Only a candidate at a training pose: set aside (SPEC.md §20.2), so nothing is left
+    // to extrapolate — one error naming it and the rule, nothing written for the plan.
     let all: Vec<serde_json::Value> =
         serde_json::from_slice(&std::fs::read(lounge().join("cameras.json")).unwrap()).unwrap();
     let train0 = all.iter().find(|c| c["img_name"] == "train_001").unwrap();
     let same = t.path().join("same.json");
     std::fs::write(&same, serde_json::to_string(&[train0]).unwrap()).unwrap();
-    let e = err(load_inputs(&run, &same, None, Some(&lounge())));
-    assert!(e.contains("train_001") && e.contains("same.json"), "{e}");
+    let inp = load_inputs(&run, &same, None, Some(&lounge())).unwrap();
+    let out = t.path().join("same-out");
+    let e = pipeline::run(&tiny_config(), &inp, &out, false, &quiet)
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
+    assert!(
+        e.contains("nothing to extrapolate")
+            && e.contains("'train_001' is set aside: has the pose of training view 'train_001'"),
+        "{e}"
+    );
+    assert!(!out.join("views/plan.json").exists());
     // A run without a PLY.
     let bare = t.path().join("bare");
     std::fs::create_dir_all(&bare).unwrap();
@@ -1611,4 +1622,278 @@ fn stage2_depth_by_video_alignment_recovers_the_relative_map_and_render_fit_is_t
         "video {sum_video} vs render fit {sum_fit}"
     );
     assert_eq!(differ, checked, "the two methods gave the same depth");
+}
+
+/// A candidate set as a user gives it (SPEC.md §20.2, "Candidates as users give them"):
+/// three bridge views, a held-out view of which the original scene covers no pixel, a
+/// training view's pose, and (classical only: the ground-truth generator needs the
+/// dataset's views) the same camera again under another name and a view of another size
+/// and focal length. With the classical slots the blind view is set aside (Telea fills
+/// only from known pixels), with the ground-truth generator it is extrapolated; the
+/// training pose and the repeat are set aside; the run finishes in both families and the
+/// report names every set-aside view with its reason.
+#[test]
+fn candidate_sets_as_users_give_them_are_extrapolated_or_set_aside_never_stop_the_run() {
+    use unseen::camera::inria::cameras_json_string;
+    use unseen::raster::{Outputs, RenderOptions, render};
+    let t = TempDir::new("pipeline-user-candidates");
+    let run = tiny_run(t.path());
+    let base = inputs(&run);
+    let data = &base.data;
+    // Full size: candidates are given at the dataset's resolution and scaled like the run.
+    let full = unseen::camera::inria::read_cameras_json(&lounge().join("cameras.json")).unwrap();
+    let at_full = |n: &str| full.iter().find(|c| c.name == n).unwrap().clone();
+    let blind = data
+        .views
+        .iter()
+        .filter(|v| v.camera.name.starts_with("heldout_"))
+        .find(|v| {
+            let r = render(
+                &base.scene,
+                &v.camera,
+                &RenderOptions {
+                    background: base.background,
+                    outputs: Outputs {
+                        alpha: true,
+                        ..Outputs::default()
+                    },
+                    ..RenderOptions::default()
+                },
+            )
+            .unwrap();
+            r.alpha.unwrap().iter().all(|&a| a < 0.5)
+        })
+        .map(|v| v.camera.name.clone())
+        .expect("a held-out lounge view the tiny scene does not cover");
+    let trained = data.views[data.train[0]].camera.name.clone();
+    let mut common = vec![
+        at_full("bridge_002"),
+        at_full("bridge_008"),
+        at_full(&blind),
+        at_full("bridge_014"),
+        at_full(&trained),
+    ];
+    let write = |name: &str, cams: &[unseen::camera::Camera]| {
+        let p = t.path().join(name);
+        std::fs::write(&p, cameras_json_string(cams)).unwrap();
+        p
+    };
+    let truth_list = write("truth.json", &common);
+    let mut again = at_full("bridge_008");
+    again.name = "bridge_008_again".into();
+    let mut other = at_full("bridge_014");
+    other.name = "bridge_014_narrow".into();
+    (other.width, other.height, other.fx, other.fy) = (120, 96, 1.4 * other.fx, 1.4 * other.fy);
+    (other.cx, other.cy) = (60.0, 48.0);
+    common.push(again);
+    common.push(other);
+    let classical_list = write("classical.json", &common);
+    for (family, list) in [("classical", &classical_list), ("truth", &truth_list)] {
+        let inp = load_inputs(
+            &run,
+            list,
+            Some(&lounge().join("evaluation.json")),
+            Some(&lounge()),
+        )
+        .unwrap();
+        let cfg = PipelineConfig {
+            slots: if family == "truth" {
+                SlotNames::truth()
+            } else {
+                SlotNames::default()
+            },
+            interpolation: false,
+            ..tiny_config()
+        };
+        let out = t.path().join(family);
+        let o = pipeline::run(&cfg, &inp, &out, false, &quiet)
+            .unwrap_or_else(|e| panic!("{family}: {e}"));
+        let plan: unseen::pipeline::views::Plan =
+            serde_json::from_slice(&std::fs::read(out.join("views/plan.json")).unwrap()).unwrap();
+        let reason = |n: &str| {
+            plan.set_aside
+                .iter()
+                .find(|a| a.name == n)
+                .map(|a| a.reason.clone())
+        };
+        eprintln!("{family}: set aside {:?}", plan.set_aside);
+        assert!(
+            reason(&trained).is_some_and(|r| r.contains("pose of training view")),
+            "{family}: {:?}",
+            plan.set_aside
+        );
+        if family == "classical" {
+            assert!(reason(&blind).is_some_and(|r| r.contains("sees nothing")));
+            assert!(reason("bridge_008_again").is_some_and(|r| r.contains("same camera")));
+            assert!(
+                reason("bridge_014_narrow").is_none(),
+                "another size is a view"
+            );
+            assert!(plan.trajectory.iter().any(|n| n == "bridge_014_narrow"));
+        } else {
+            assert!(
+                reason(&blind).is_none(),
+                "the truth generator fills from nothing"
+            );
+            assert!(plan.trajectory.contains(&blind), "{:?}", plan.trajectory);
+        }
+        let report = pipeline::report::markdown(&cfg, &out, &o, 0.0).unwrap();
+        for a in &plan.set_aside {
+            assert!(
+                report.contains(&format!("- {}: {}", a.name, a.reason)),
+                "{family}: the report does not name {}",
+                a.name
+            );
+        }
+        let m = o.metrics.as_ref().expect("metrics");
+        assert!(m.row("stage2").unwrap().psnr_all.is_finite());
+    }
+}
+
+/// The case a new user met (issue #36): candidates taken from the room's unseen half
+/// (every other held-out camera), the classical slots. Several of them see nothing (or
+/// almost nothing) of the original scene; `unseen extrapolate` finishes, prints which views it set aside and why,
+/// and lists them in `plan.json` and the report.
+#[test]
+fn cli_extrapolate_on_the_unseen_half_sets_blind_views_aside_and_finishes() {
+    let t = TempDir::new("pipeline-cli-unseen-half");
+    let run = tiny_run(t.path());
+    let full = unseen::camera::inria::read_cameras_json(&lounge().join("cameras.json")).unwrap();
+    let held: Vec<unseen::camera::Camera> = full
+        .iter()
+        .filter(|c| c.name.starts_with("heldout_"))
+        .step_by(2)
+        .cloned()
+        .collect();
+    let list = t.path().join("unseen_half.json");
+    std::fs::write(&list, unseen::camera::inria::cameras_json_string(&held)).unwrap();
+    let out = t.path().join("out");
+    let st = Command::new(env!("CARGO_BIN_EXE_unseen"))
+        .arg("extrapolate")
+        .arg(&run)
+        .arg("--views")
+        .arg(&list)
+        .arg("--config")
+        .arg(tiny_config_file(t.path()))
+        .args([
+            "--generator",
+            "classical",
+            "--no-interpolation",
+            "--threads",
+            "2",
+        ])
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&st.stderr);
+    assert!(st.status.success(), "{err}");
+    let plan: unseen::pipeline::views::Plan =
+        serde_json::from_slice(&std::fs::read(out.join("views/plan.json")).unwrap()).unwrap();
+    assert!(
+        !plan.set_aside.is_empty(),
+        "no blind view in {}",
+        held.len()
+    );
+    assert!(!plan.independent.is_empty());
+    for a in &plan.set_aside {
+        // The two classical rules: Telea needs a known pixel, depth-fill known depth.
+        assert!(
+            a.reason.contains("sees nothing") || a.reason.contains("only extends known depth"),
+            "{a:?}"
+        );
+        assert!(
+            err.contains(&format!("candidate '{}' is set aside", a.name)),
+            "{err}"
+        );
+    }
+    eprintln!(
+        "{} candidates: {} set aside, {} independent, {} dependent",
+        held.len(),
+        plan.set_aside.len(),
+        plan.independent.len(),
+        plan.dependent.len()
+    );
+}
+
+/// Two candidates of different sizes that do not collide (SPEC.md §20.2): their gap camera
+/// takes the first's size; the clips between them cannot be made and are recorded; the
+/// run finishes.
+#[test]
+fn independent_views_of_different_sizes_get_a_gap_camera_and_finish() {
+    let t = TempDir::new("pipeline-two-sizes");
+    let run = tiny_run(t.path());
+    let full = unseen::camera::inria::read_cameras_json(&lounge().join("candidates.json")).unwrap();
+    let mut two: Vec<unseen::camera::Camera> = full
+        .into_iter()
+        .filter(|c| c.name == "bridge_002" || c.name == "bridge_014")
+        .collect();
+    let o = &mut two[1];
+    (o.width, o.height, o.fx, o.fy, o.cx, o.cy) = (120, 96, 1.4 * o.fx, 1.4 * o.fy, 60.0, 48.0);
+    let list = t.path().join("two.json");
+    std::fs::write(&list, unseen::camera::inria::cameras_json_string(&two)).unwrap();
+    let inp = load_inputs(&run, &list, None, Some(&lounge())).unwrap();
+    let cfg = PipelineConfig {
+        slots: SlotNames::default(),
+        interpolation: false,
+        ..tiny_config()
+    };
+    let out = t.path().join("out");
+    pipeline::run(&cfg, &inp, &out, false, &quiet).unwrap();
+    let plan: unseen::pipeline::views::Plan =
+        serde_json::from_slice(&std::fs::read(out.join("views/plan.json")).unwrap()).unwrap();
+    assert_eq!(plan.independent.len(), 2, "{plan:?}");
+    let gap = plan
+        .dependent
+        .iter()
+        .find(|d| d.interpolated)
+        .expect("a gap camera");
+    let cams = unseen::camera::inria::read_cameras_json(&out.join("views/cameras.json")).unwrap();
+    let g = cams.iter().find(|c| c.name == gap.name).unwrap();
+    let first = cams.iter().find(|c| c.name == gap.between[0]).unwrap();
+    assert_eq!(
+        (g.width, g.height, g.fx),
+        (first.width, first.height, first.fx)
+    );
+}
+
+/// One candidate (SPEC.md §20.2: one view is a trajectory with a gap to itself): both
+/// families finish and extrapolate that view.
+#[test]
+fn a_single_candidate_view_runs_in_both_families() {
+    let t = TempDir::new("pipeline-single-view");
+    let run = tiny_run(t.path());
+    let full = unseen::camera::inria::read_cameras_json(&lounge().join("candidates.json")).unwrap();
+    let one: Vec<unseen::camera::Camera> = full
+        .into_iter()
+        .filter(|c| c.name == "bridge_008")
+        .collect();
+    let list = t.path().join("one.json");
+    std::fs::write(&list, unseen::camera::inria::cameras_json_string(&one)).unwrap();
+    let inp = load_inputs(
+        &run,
+        &list,
+        Some(&lounge().join("evaluation.json")),
+        Some(&lounge()),
+    )
+    .unwrap();
+    for slots in [SlotNames::default(), SlotNames::truth()] {
+        let cfg = PipelineConfig {
+            slots,
+            interpolation: false,
+            ..tiny_config()
+        };
+        let out = t.path().join(&cfg.slots.inpaint);
+        let o = pipeline::run(&cfg, &inp, &out, false, &quiet).unwrap();
+        let plan: unseen::pipeline::views::Plan =
+            serde_json::from_slice(&std::fs::read(out.join("views/plan.json")).unwrap()).unwrap();
+        assert_eq!(plan.independent, vec!["bridge_008".to_string()]);
+        let m = o.metrics.as_ref().unwrap();
+        assert!(
+            m.row("stage2").unwrap().psnr_extrapolated
+                > m.row("original").unwrap().psnr_extrapolated,
+            "{}",
+            cfg.slots.inpaint
+        );
+    }
 }
