@@ -8,6 +8,7 @@ use crate::error::Result;
 use crate::gaussian::Gaussians;
 use crate::io::create_dir_all;
 use crate::io::image::{ImageF32, write_png};
+use crate::io::json_float::show;
 use crate::raster::{Conventions, RenderOptions, render};
 use crate::train::loss::psnr;
 use crate::train::ssim::ssim;
@@ -16,6 +17,8 @@ use std::path::Path;
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ViewMetrics {
     pub name: String,
+    /// +∞ for a render equal to its truth (`"inf"` in JSON: [`crate::io::json_float`]).
+    #[serde(with = "crate::io::json_float")]
     pub psnr: f64,
     pub ssim: f64,
 }
@@ -24,6 +27,7 @@ pub struct ViewMetrics {
 pub struct EvalReport {
     pub split: Split,
     pub views: Vec<ViewMetrics>,
+    #[serde(with = "crate::io::json_float")]
     pub mean_psnr: f64,
     pub mean_ssim: f64,
 }
@@ -33,11 +37,12 @@ impl EvalReport {
     pub fn table(&self) -> String {
         let mut s = String::from("| view | PSNR (dB) | SSIM |\n|---|---|---|\n");
         for v in &self.views {
-            s += &format!("| {} | {:.2} | {:.4} |\n", v.name, v.psnr, v.ssim);
+            s += &format!("| {} | {} | {:.4} |\n", v.name, show(v.psnr, 2), v.ssim);
         }
         s += &format!(
-            "| **mean** | **{:.2}** | **{:.4}** |\n",
-            self.mean_psnr, self.mean_ssim
+            "| **mean** | **{}** | **{:.4}** |\n",
+            show(self.mean_psnr, 2),
+            self.mean_ssim
         );
         s
     }

@@ -4,6 +4,7 @@
 //! the destination folder, synced, then renamed over the destination.
 
 pub mod image;
+pub mod json_float;
 pub mod manifest;
 pub mod npy;
 

@@ -10,6 +10,7 @@ use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gaussian::Gaussians;
 use crate::io::image::write_png;
+use crate::io::json_float::show;
 use crate::raster::{RenderOptions, render};
 use crate::train::ssim::ssim_map;
 use glam::DVec3;
@@ -18,41 +19,27 @@ use glam::DVec3;
 /// its own depth at the point's pixel is within this fraction of the point's depth.
 pub const VISIBILITY_DEPTH_TOLERANCE: f64 = 0.02;
 
-/// NaN (a class with no pixel) as JSON `null`, and back.
-pub(crate) mod nan_null {
-    use serde::{Deserialize, Deserializer, Serializer};
-    pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
-        if v.is_finite() {
-            s.serialize_f64(*v)
-        } else {
-            s.serialize_none()
-        }
-    }
-    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
-        Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
-    }
-}
-
-/// Metrics of one scene (`null` in JSON where a class has no pixel).
+/// Metrics of one scene (`null` in JSON where a class has no pixel, `"inf"` for the PSNR
+/// of identical images: [`crate::io::json_float`]).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Row {
     pub scene: String,
-    #[serde(with = "nan_null")]
+    #[serde(with = "crate::io::json_float")]
     pub psnr_all: f64,
-    #[serde(with = "nan_null")]
+    #[serde(with = "crate::io::json_float")]
     pub psnr_existing: f64,
-    #[serde(with = "nan_null")]
+    #[serde(with = "crate::io::json_float")]
     pub psnr_extrapolated: f64,
-    #[serde(with = "nan_null")]
+    #[serde(with = "crate::io::json_float")]
     pub ssim_all: f64,
-    #[serde(with = "nan_null")]
+    #[serde(with = "crate::io::json_float")]
     pub ssim_existing: f64,
-    #[serde(with = "nan_null")]
+    #[serde(with = "crate::io::json_float")]
     pub ssim_extrapolated: f64,
     /// Mean over the training half's test views.
-    #[serde(with = "nan_null")]
+    #[serde(with = "crate::io::json_float")]
     pub psnr_train_half: f64,
-    #[serde(with = "nan_null")]
+    #[serde(with = "crate::io::json_float")]
     pub ssim_train_half: f64,
     pub gaussians: usize,
     /// Per evaluation view, the sums the pooled metrics are made of (in evaluation order),
@@ -114,14 +101,14 @@ impl Summary {
         );
         for r in &self.rows {
             s += &format!(
-                "| {} | {:.2} | {:.2} | {:.2} | {:.4} | {:.4} | {:.2} | {} |\n",
+                "| {} | {} | {} | {} | {:.4} | {:.4} | {} | {} |\n",
                 r.scene,
-                r.psnr_existing,
-                r.psnr_extrapolated,
-                r.psnr_all,
+                show(r.psnr_existing, 2),
+                show(r.psnr_extrapolated, 2),
+                show(r.psnr_all, 2),
                 r.ssim_existing,
                 r.ssim_extrapolated,
-                r.psnr_train_half,
+                show(r.psnr_train_half, 2),
                 r.gaussians
             );
         }

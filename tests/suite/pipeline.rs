@@ -1897,3 +1897,61 @@ fn a_single_candidate_view_runs_in_both_families() {
         );
     }
 }
+
+/// The PSNR of identical images is +∞ (SPEC.md §20.7): metrics files write it as `"inf"`
+/// (`io::json_float`), read it back as +∞ bit for bit — `null` stays NaN, an empty class —
+/// and the tables print "∞".
+#[test]
+fn psnr_of_identical_images_is_infinity_in_json_and_reports() {
+    use unseen::pipeline::evaluate::{ClassSums, Row, Summary};
+    let x = vec![0.25f32; 30];
+    let inf = unseen::train::loss::psnr(&x, &x);
+    assert_eq!(inf, f64::INFINITY);
+    let exact = ClassSums {
+        pixels: 10,
+        squared_error: 0.0,
+        ssim_sum: 10.0,
+    };
+    assert_eq!(ClassSums::psnr([&exact]), f64::INFINITY);
+    let row = Row {
+        scene: "stage2".into(),
+        psnr_all: inf,
+        psnr_existing: inf,
+        psnr_extrapolated: f64::NAN,
+        ssim_all: 1.0,
+        ssim_existing: 1.0,
+        ssim_extrapolated: f64::NAN,
+        psnr_train_half: 31.5,
+        ssim_train_half: 0.9,
+        gaussians: 7,
+        views: Vec::new(),
+    };
+    let s = Summary {
+        evaluation_views: 1,
+        existing_fraction: 1.0,
+        rows: vec![row],
+    };
+    let text = serde_json::to_string(&s).unwrap();
+    assert!(text.contains("\"psnr_all\":\"inf\""), "{text}");
+    assert!(text.contains("\"psnr_extrapolated\":null"), "{text}");
+    let back: Summary = serde_json::from_str(&text).unwrap();
+    let r = &back.rows[0];
+    assert_eq!(r.psnr_all, f64::INFINITY);
+    assert!(r.psnr_extrapolated.is_nan());
+    assert_eq!(r.psnr_train_half.to_bits(), 31.5f64.to_bits());
+    assert!(back.table().contains("| stage2 | ∞ | NaN | ∞ |"), "{}", back.table());
+    let e = unseen::eval::EvalReport {
+        split: unseen::dataset::Split::Test,
+        views: vec![unseen::eval::ViewMetrics {
+            name: "v".into(),
+            psnr: inf,
+            ssim: 1.0,
+        }],
+        mean_psnr: inf,
+        mean_ssim: 1.0,
+    };
+    let back: unseen::eval::EvalReport =
+        serde_json::from_str(&serde_json::to_string(&e).unwrap()).unwrap();
+    assert_eq!(back, e);
+    assert!(back.table().contains("**∞**"));
+}

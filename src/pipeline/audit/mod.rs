@@ -817,7 +817,7 @@ pub struct Verdict {
     /// Mean and sample standard deviation of `full − variant` over the units (std is NaN,
     /// `null` in JSON, with one).
     pub mean_diff: f64,
-    #[serde(with = "super::evaluate::nan_null")]
+    #[serde(with = "crate::io::json_float")]
     pub std_diff: f64,
     /// The value the test compares Δ with: 0, or `−margin` for a "does not hurt" claim.
     pub null: f64,
@@ -828,11 +828,11 @@ pub struct Verdict {
     /// The BCa interval (from [`stats::Rule::bootstrap_from`] units).
     pub bca: Option<[f64; 2]>,
     /// Holm-adjusted two-sided p-value of the null value.
-    #[serde(with = "super::evaluate::nan_null")]
+    #[serde(with = "crate::io::json_float")]
     pub p_holm: f64,
     /// The smallest true distance from the null value found with the rule's power at the
     /// family's first Holm level, for the measured spread.
-    #[serde(with = "super::evaluate::nan_null")]
+    #[serde(with = "crate::io::json_float")]
     pub min_detectable: f64,
     /// Percentile interval of a bootstrap over units, then over the evaluation views of
     /// each unit (pooled PSNR of the resampled views), over the `hierarchical_units`
@@ -1266,10 +1266,11 @@ fn finish(
 fn stat(results: &[&JobResult], f: impl Fn(&JobResult) -> f64, digits: usize) -> String {
     let v: Vec<f64> = results.iter().map(|r| f(r)).collect();
     let (m, s) = mean_std(&v);
-    if s.is_nan() {
-        format!("{m:.digits$}")
+    let m = crate::io::json_float::show(m, digits);
+    if s.is_finite() {
+        format!("{m} ± {s:.digits$}")
     } else {
-        format!("{m:.digits$} ± {s:.digits$}")
+        m
     }
 }
 
