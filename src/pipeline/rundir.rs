@@ -143,14 +143,27 @@ impl RunDir {
                 skipped: true,
             })
         };
-        if (self.resume || self.scope != Scope::All)
-            && let Some(digest) = verified(&dir, &inputs_sha256)
-        {
-            return reuse(dir, digest, Event::StepSkipped { step: name.into() });
+        if self.resume || self.scope != Scope::All {
+            match check(&dir, &inputs_sha256) {
+                Ok(digest) => return reuse(dir, digest, Event::StepSkipped { step: name.into() }),
+                // Said once, so that a damaged file is never silently replaced.
+                Err(Some(why)) => on_event(Event::Note(format!("{name}: {why}: recomputed"))),
+                Err(None) => {}
+            }
         }
-        if let Some(cached) = self.cache_entry(name, &inputs_sha256)
-            && let Some(digest) = verified(&cached, &inputs_sha256)
-        {
+        let cached =
+            self.cache_entry(name, &inputs_sha256)
+                .and_then(|c| match check(&c, &inputs_sha256) {
+                    Ok(digest) => Some((c, digest)),
+                    Err(Some(why)) => {
+                        on_event(Event::Note(format!(
+                            "{name}: the step cache's entry is not usable ({why})"
+                        )));
+                        None
+                    }
+                    Err(None) => None,
+                });
+        if let Some((cached, digest)) = cached {
             if dir.exists() {
                 std::fs::remove_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
             }
@@ -358,18 +371,38 @@ fn publish(from: &Path, to: &Path, inputs_sha256: &str) -> Result<()> {
 
 /// The manifest digest when `dir` holds a complete step with these inputs.
 fn verified(dir: &Path, inputs_sha256: &str) -> Option<String> {
-    let bytes = std::fs::read(dir.join("manifest.json")).ok()?;
-    let m: Manifest = serde_json::from_slice(&bytes).ok()?;
+    check(dir, inputs_sha256).ok()
+}
+
+/// Whether the step folder `dir` holds a finished step with these inputs: `Ok(digest)`, or
+/// why not — `None` when there is nothing there at all (never started), else the first
+/// fault found (interrupted, manifest damaged, other inputs, a file missing or changed).
+fn check(dir: &Path, inputs_sha256: &str) -> std::result::Result<String, Option<String>> {
+    let bytes = match std::fs::read(dir.join("manifest.json")) {
+        Ok(b) => b,
+        Err(_) if !dir.exists() => return Err(None),
+        Err(_) => {
+            return Err(Some(
+                "no manifest.json (interrupted before it was written)".into(),
+            ));
+        }
+    };
+    let m: Manifest = serde_json::from_slice(&bytes)
+        .map_err(|e| Some(format!("manifest.json is damaged ({e})")))?;
     if m.inputs_sha256 != inputs_sha256 {
-        return None;
+        return Err(Some("it was computed from other inputs".into()));
     }
     for f in &m.files {
-        let b = std::fs::read(dir.join(&f.path)).ok()?;
+        let b = std::fs::read(dir.join(&f.path))
+            .map_err(|e| Some(format!("{} cannot be read ({e})", f.path)))?;
         if sha256_hex(&b) != f.sha256 {
-            return None;
+            return Err(Some(format!(
+                "{} does not match its sha256 in manifest.json",
+                f.path
+            )));
         }
     }
-    Some(sha256_hex(&bytes))
+    Ok(sha256_hex(&bytes))
 }
 
 /// Writes a step's files (atomically) and records their hashes.

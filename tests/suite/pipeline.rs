@@ -1939,7 +1939,11 @@ fn psnr_of_identical_images_is_infinity_in_json_and_reports() {
     assert_eq!(r.psnr_all, f64::INFINITY);
     assert!(r.psnr_extrapolated.is_nan());
     assert_eq!(r.psnr_train_half.to_bits(), 31.5f64.to_bits());
-    assert!(back.table().contains("| stage2 | ∞ | NaN | ∞ |"), "{}", back.table());
+    assert!(
+        back.table().contains("| stage2 | ∞ | NaN | ∞ |"),
+        "{}",
+        back.table()
+    );
     let e = unseen::eval::EvalReport {
         split: unseen::dataset::Split::Test,
         views: vec![unseen::eval::ViewMetrics {
@@ -1954,4 +1958,127 @@ fn psnr_of_identical_images_is_infinity_in_json_and_reports() {
         serde_json::from_str(&serde_json::to_string(&e).unwrap()).unwrap();
     assert_eq!(back, e);
     assert!(back.table().contains("**∞**"));
+}
+
+/// Damage on disk (SPEC.md §20.8): a byte flipped in a finished step's file, a truncated
+/// manifest, a deleted file, an interrupted step (a folder without manifest), and a
+/// damaged step-cache entry. `--resume` (and a run reading the cache) finds each by hash,
+/// names the step and the fault, recomputes it, and ends with the same bits as an
+/// undamaged run.
+#[test]
+fn damaged_steps_and_cache_entries_are_named_recomputed_and_end_in_the_same_bits() {
+    let t = TempDir::new("pipeline-damage");
+    let run = tiny_run(t.path());
+    let inp = inputs(&run);
+    let cfg = PipelineConfig {
+        interpolation: false,
+        ..tiny_config()
+    };
+    let reference = t.path().join("reference");
+    pipeline::run(&cfg, &inp, &reference, false, &quiet).unwrap();
+    let a = t.path().join("a");
+    pipeline::run(&cfg, &inp, &a, false, &quiet).unwrap();
+    let first = |dir: &Path, suffix: &str| {
+        walk(dir)
+            .into_iter()
+            .filter(|p| p.to_string_lossy().ends_with(suffix))
+            .min()
+            .unwrap()
+    };
+    // A flipped byte (written in place), a truncated manifest, a deleted file, and a
+    // step folder left without its manifest.
+    let flipped = first(&a.join("views"), "render.png");
+    let mut b = std::fs::read(&flipped).unwrap();
+    let k = b.len() / 2;
+    b[k] ^= 0x40;
+    std::fs::write(&flipped, &b).unwrap();
+    let manifest = a.join("stage1/recon/manifest.json");
+    let m = std::fs::read(&manifest).unwrap();
+    std::fs::write(&manifest, &m[..m.len() / 3]).unwrap();
+    let deleted = first(&a.join("stage2/dependent"), "inpaint.png");
+    std::fs::remove_file(&deleted).unwrap();
+    std::fs::remove_file(a.join("stage2/videos/manifest.json")).unwrap();
+    let notes = std::sync::Mutex::new(Vec::new());
+    let collect = |e: Event| {
+        if let Event::Note(n) = e {
+            notes.lock().unwrap().push(n)
+        }
+    };
+    pipeline::run(&cfg, &inp, &a, true, &collect).unwrap();
+    let notes = notes.into_inner().unwrap();
+    let said = |step: &str, words: &str| {
+        notes.iter().any(|n| {
+            n.starts_with(&format!("{step}: ")) && n.contains(words) && n.ends_with("recomputed")
+        })
+    };
+    let rel = |p: &Path, step: &str| {
+        p.strip_prefix(a.join(step))
+            .unwrap()
+            .to_string_lossy()
+            .into_owned()
+    };
+    assert!(
+        said(
+            "views",
+            &format!("{} does not match its sha256", rel(&flipped, "views"))
+        ),
+        "{notes:?}"
+    );
+    assert!(
+        said("stage1/recon", "manifest.json is damaged"),
+        "{notes:?}"
+    );
+    assert!(
+        said(
+            "stage2/dependent",
+            &format!("{} cannot be read", rel(&deleted, "stage2/dependent"))
+        ),
+        "{notes:?}"
+    );
+    assert!(said("stage2/videos", "interrupted"), "{notes:?}");
+    let c = compare(&reference, &a, 0.0).unwrap();
+    assert!(c.steps.iter().all(|s| s.identical), "{}", c.table());
+
+    // The step cache: an entry with a flipped byte is not copied — the run says so,
+    // computes the step, and ends with the same bits.
+    let cache = t.path().join("cache");
+    let opts = unseen::pipeline::RunOptions {
+        cache: Some(cache.clone()),
+        ..Default::default()
+    };
+    pipeline::run_with(&cfg, &inp, &t.path().join("c"), &opts, &quiet).unwrap();
+    let entry = std::fs::read_dir(&cache)
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| {
+            std::fs::read_to_string(p.join("manifest.json"))
+                .is_ok_and(|m| m.contains("\"step\": \"views\""))
+        })
+        .expect("the views step in the cache");
+    let damaged = first(&entry, "render.png");
+    let mut b = std::fs::read(&damaged).unwrap();
+    let j = b.len() / 2;
+    b[j] ^= 0x40;
+    // A new inode: the run folder `c` hard-linked to the entry keeps its bytes.
+    std::fs::remove_file(&damaged).unwrap();
+    std::fs::write(&damaged, &b).unwrap();
+    let notes = std::sync::Mutex::new(Vec::new());
+    let collect = |e: Event| {
+        if let Event::Note(n) = e {
+            notes.lock().unwrap().push(n)
+        }
+    };
+    let d = t.path().join("d");
+    pipeline::run_with(&cfg, &inp, &d, &opts, &collect).unwrap();
+    let notes = notes.into_inner().unwrap();
+    assert!(
+        notes.iter().any(
+            |n| n.starts_with("views: the step cache's entry is not usable")
+                && n.contains("does not match its sha256")
+        ),
+        "{notes:?}"
+    );
+    let c = compare(&reference, &d, 0.0).unwrap();
+    assert!(c.steps.iter().all(|s| s.identical), "{}", c.table());
 }
