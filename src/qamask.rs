@@ -249,10 +249,9 @@ pub fn fine_tune(
 /// `DIR/qa_mask.json` (its [`QaMaskConfig`]), `DIR/manifest.json` (sha256 of both).
 pub fn write_mask_dir(dir: &Path, scene: &Gaussians, cfg: &QaMaskConfig) -> Result<()> {
     create_dir_all(dir)?;
-    let ply = ply_bytes(scene)?;
+    let (ply, text) = mask_files(scene, cfg)?;
     let ply_path = dir.join("point_cloud.ply");
     write_atomic(&ply_path, |w| w.write_all(&ply))?;
-    let text = serde_json::to_string_pretty(cfg).expect("config serializes");
     write_text(&dir.join("qa_mask.json"), &text)?;
     Manifest::new(
         "qa-mask",
@@ -267,7 +266,15 @@ pub fn write_mask_dir(dir: &Path, scene: &Gaussians, cfg: &QaMaskConfig) -> Resu
     Ok(())
 }
 
-/// Read a QA-Mask directory written by [`write_mask_dir`].
+/// The two files of a QA-Mask directory: `point_cloud.ply` (bytes) and `qa_mask.json`
+/// (text), for a caller that writes them its own way (a pipeline step).
+pub fn mask_files(scene: &Gaussians, cfg: &QaMaskConfig) -> Result<(Vec<u8>, String)> {
+    let ply = ply_bytes(scene)?;
+    let text = serde_json::to_string_pretty(cfg).expect("config serializes");
+    Ok((ply, text))
+}
+
+/// Read a QA-Mask directory written by [`write_mask_dir`] (or with [`mask_files`]).
 pub fn read_mask_dir(dir: &Path) -> Result<(Gaussians, QaMaskConfig)> {
     let p = dir.join("qa_mask.json");
     let text = std::fs::read(&p).map_err(|e| Error::io(&p, e))?;

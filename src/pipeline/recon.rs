@@ -19,7 +19,7 @@ use crate::gaussian::Gaussians;
 use crate::io::image::ImageF32;
 use crate::qamask::{
     QaMaskConfig, fine_tune, mask_scene, opacity_mask, read_mask_dir, render_qa_mask,
-    write_mask_dir,
+    mask_files,
 };
 use crate::train::trainer::{TrainConfig, Trainer, stage_seed};
 
@@ -94,11 +94,12 @@ pub fn weights(
                         });
                     }
                 })?;
-                let d = w.dir().to_path_buf();
-                write_mask_dir(&d, &g, &qa)?;
-                for f in ["point_cloud.ply", "qa_mask.json"] {
-                    w.put(f, |_| Ok(()))?;
-                }
+                // The mask directory's files, through the step (whose manifest closes it).
+                let (ply, text) = mask_files(&g, &qa)?;
+                w.put("point_cloud.ply", |p| {
+                    crate::io::write_atomic(p, |f| std::io::Write::write_all(f, &ply))
+                })?;
+                w.put("qa_mask.json", |p| crate::io::write_text(p, &text))?;
                 Ok(())
             })?;
             let (g, c) = read_mask_dir(&step.dir)?;

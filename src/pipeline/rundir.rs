@@ -45,6 +45,60 @@ pub struct RunDir {
     finished: std::sync::atomic::AtomicBool,
     /// Shared step cache ([`RunDir::with_cache`]).
     cache: Option<PathBuf>,
+    /// The output folder as opened: checked before every step and every file.
+    guard: RootGuard,
+}
+
+/// The output folder as the run opened it, held open: a folder removed or replaced during
+/// the run (a cleanup script, another job) is an error at the next step or file, never
+/// silently re-created with the earlier steps missing. Holding the folder open keeps its
+/// inode from being reused, so "the same folder" is exact: the path's (device, inode) is the
+/// open folder's and the open folder still has a link.
+#[derive(Clone, Debug)]
+struct RootGuard {
+    root: PathBuf,
+    #[cfg(unix)]
+    open: std::sync::Arc<std::fs::File>,
+}
+
+impl RootGuard {
+    fn new(root: &Path) -> Result<RootGuard> {
+        Ok(RootGuard {
+            root: root.to_path_buf(),
+            #[cfg(unix)]
+            open: std::sync::Arc::new(std::fs::File::open(root).map_err(|e| Error::io(root, e))?),
+        })
+    }
+
+    #[cfg(unix)]
+    fn check(&self) -> Result<()> {
+        use std::os::unix::fs::MetadataExt;
+        let gone = |why: String| {
+            Err(Error::invalid(format!(
+                "the output folder disappeared during the run ({why}); nothing was re-created"
+            ))
+            .at(&self.root))
+        };
+        let held = self.open.metadata().map_err(|e| Error::io(&self.root, e))?;
+        if held.nlink() == 0 {
+            return gone("removed".into());
+        }
+        match std::fs::metadata(&self.root) {
+            Ok(m) if (m.dev(), m.ino()) == (held.dev(), held.ino()) => Ok(()),
+            Ok(_) => Err(Error::invalid(
+                "the output folder was replaced by another during the run",
+            )
+            .at(&self.root)),
+            Err(e) => gone(e.to_string()),
+        }
+    }
+
+    #[cfg(not(unix))]
+    fn check(&self) -> Result<()> {
+        std::fs::metadata(&self.root)
+            .map(|_| ())
+            .map_err(|e| Error::io(&self.root, e))
+    }
 }
 
 /// The message of the error that ends a scoped run after its last step (caught by
@@ -98,6 +152,7 @@ impl RunDir {
             base: base.to_string(),
             finished: std::sync::atomic::AtomicBool::new(false),
             cache: None,
+            guard: RootGuard::new(root)?,
         })
     }
 
@@ -126,6 +181,7 @@ impl RunDir {
         if self.finished.load(Ordering::SeqCst) {
             return Err(Error::invalid(SCOPE_DONE));
         }
+        self.guard.check()?;
         let is_target = matches!(&self.scope, Scope::Only(s) | Scope::Until(s) if s == name);
         let dir = self.root.join(name);
         let inputs = serde_json::json!({ "run": self.base, "step": inputs });
@@ -192,6 +248,7 @@ impl RunDir {
         let mut w = StepWriter {
             dir: dir.clone(),
             files: Vec::new(),
+            guard: self.guard.clone(),
         };
         compute(&mut w).map_err(|e| {
             if e.message.starts_with(&format!("step {name}")) {
@@ -210,6 +267,7 @@ impl RunDir {
         // Outside the manifest (timings differ run to run), written before it: a step is
         // complete only once its manifest exists.
         let text = serde_json::to_string(&cost).expect("serializes") + "\n";
+        self.guard.check()?;
         write_text(&dir.join(TIMING_FILE), &text)?;
         let digest = Manifest::new("extrapolate", name, inputs, files).write(&dir)?;
         if let Some(cached) = self.cache_entry(name, &inputs_sha256) {
@@ -409,6 +467,7 @@ fn check(dir: &Path, inputs_sha256: &str) -> std::result::Result<String, Option<
 pub struct StepWriter {
     dir: PathBuf,
     files: Vec<FileEntry>,
+    guard: RootGuard,
 }
 
 impl StepWriter {
@@ -424,6 +483,8 @@ impl StepWriter {
             )));
         }
         let p = self.dir.join(rel);
+        // Its folders are created as needed: only while the output folder is the run's.
+        self.guard.check()?;
         if let Some(parent) = p.parent() {
             create_dir_all(parent)?;
         }

@@ -6,6 +6,7 @@ mod collide;
 mod common;
 mod conventions;
 mod dibr;
+mod faults;
 mod golden_drjit;
 mod golden_grad;
 mod gradients;

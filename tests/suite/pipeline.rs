@@ -20,12 +20,12 @@ const TINY_EXTRAPOLATED_GAIN_DB: f64 = 5.0;
 /// Largest drop of the training half's PSNR allowed (the 0.5 dB; +1.0 dB measured).
 const TRAIN_HALF_DROP_DB: f64 = 0.5;
 
-fn lounge() -> PathBuf {
+pub(super) fn lounge() -> PathBuf {
     reference("scenes/lounge")
 }
 
 /// A 300-iteration original scene at 40×30.
-fn tiny_run(dir: &Path) -> PathBuf {
+pub(super) fn tiny_run(dir: &Path) -> PathBuf {
     let run = dir.join("run");
     let cfg = TrainConfig {
         iterations: 300,
@@ -38,7 +38,7 @@ fn tiny_run(dir: &Path) -> PathBuf {
 }
 
 /// The quick preset shrunk to seconds.
-fn tiny_config() -> PipelineConfig {
+pub(super) fn tiny_config() -> PipelineConfig {
     let r = |iterations| ReconConfig {
         iterations,
         densify: None,
@@ -55,7 +55,7 @@ fn tiny_config() -> PipelineConfig {
     }
 }
 
-fn tiny_config_file(dir: &Path) -> PathBuf {
+pub(super) fn tiny_config_file(dir: &Path) -> PathBuf {
     let p = dir.join("tiny.json");
     std::fs::write(&p, serde_json::to_string(&tiny_config()).unwrap()).unwrap();
     p
@@ -247,7 +247,7 @@ fn resume_after_kill_9_gives_the_same_bits() {
     assert_eq!(cmp(&t.path().join("nothing-here")).status.code(), Some(2));
 }
 
-fn walk(d: &Path) -> Vec<PathBuf> {
+pub(super) fn walk(d: &Path) -> Vec<PathBuf> {
     let mut out = Vec::new();
     for e in std::fs::read_dir(d).unwrap().flatten() {
         let p = e.path();
