@@ -18,8 +18,7 @@ use crate::error::{Error, Result};
 use crate::gaussian::Gaussians;
 use crate::io::image::ImageF32;
 use crate::qamask::{
-    QaMaskConfig, fine_tune, mask_scene, opacity_mask, read_mask_dir, render_qa_mask,
-    mask_files,
+    QaMaskConfig, fine_tune, mask_files, mask_scene, opacity_mask, read_mask_dir, render_qa_mask,
 };
 use crate::train::trainer::{TrainConfig, Trainer, stage_seed};
 

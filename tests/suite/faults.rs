@@ -443,3 +443,80 @@ fn extrapolate_whose_output_folder_vanishes_fails_cleanly_and_resumes_to_the_sam
     let c = compare(&reference, &out, 0.0).unwrap();
     assert!(c.steps.iter().all(|s| s.identical), "{}", c.table());
 }
+
+/// Kills at random moments (SPEC.md §11): `unseen extrapolate` (the tiny configuration) is
+/// killed with SIGKILL at `UNSEEN_SOAK_KILLS` (default 20) seeded random moments — each
+/// uniform over the undisturbed run's wall time after a `--resume` of the same folder, so
+/// a run is killed again and again until one resume gets to the end; that folder must then
+/// equal the undisturbed run step for step, bit for bit (`compare`, tolerance 0), with no
+/// temporary left, and the next kills start a new folder. The last folder is resumed to
+/// the end and checked the same way. The long version:
+/// `UNSEEN_SOAK_KILLS=500 UNSEEN_SOAK_SEED=<s> cargo test --release --test tests soak`.
+#[test]
+fn soak_extrapolate_killed_at_random_moments_resumes_to_the_same_bits() {
+    let kills: usize = std::env::var("UNSEEN_SOAK_KILLS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(20);
+    let seed: u64 = std::env::var("UNSEEN_SOAK_SEED")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(36);
+    let t = TempDir::new("faults-soak");
+    let run = tiny_run(t.path());
+    let cfg = tiny_config_file(t.path());
+    let reference = t.path().join("reference");
+    let started = std::time::Instant::now();
+    let o = Command::new(env!("CARGO_BIN_EXE_unseen"))
+        .args(extrapolate_args(&run, &cfg, &reference, false))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let wall = started.elapsed().as_secs_f64();
+    let same = |out: &Path| {
+        let c = compare(&reference, out, 0.0).unwrap();
+        assert!(c.steps.iter().all(|s| s.identical), "{}", c.table());
+        let tmp: Vec<PathBuf> = walk(out)
+            .into_iter()
+            .filter(|p| p.to_string_lossy().contains(".tmp"))
+            .collect();
+        assert!(tmp.is_empty(), "temporaries left: {tmp:?}");
+    };
+    let mut rng = unseen::scene::Uniform::new(seed);
+    let (mut killed, mut chain, mut kills_in_chain) = (0, 0, Vec::new());
+    let mut out = t.path().join("out-0");
+    let mut in_chain = 0;
+    while killed < kills {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_unseen"))
+            .args(extrapolate_args(&run, &cfg, &out, true))
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_secs_f64(rng.unit_f64() * wall));
+        if let Some(st) = child.try_wait().unwrap() {
+            assert!(st.success(), "a resumed run failed");
+            same(&out);
+            std::fs::remove_dir_all(&out).unwrap();
+            kills_in_chain.push(in_chain);
+            (chain, in_chain) = (chain + 1, 0);
+            out = t.path().join(format!("out-{chain}"));
+        } else {
+            child.kill().unwrap();
+            child.wait().unwrap();
+            killed += 1;
+            in_chain += 1;
+        }
+    }
+    let o = Command::new(env!("CARGO_BIN_EXE_unseen"))
+        .args(extrapolate_args(&run, &cfg, &out, true))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    same(&out);
+    kills_in_chain.push(in_chain);
+    eprintln!(
+        "{killed} kills over {} folders (kills per folder {kills_in_chain:?}; undisturbed run {wall:.2} s)",
+        kills_in_chain.len()
+    );
+}
