@@ -1,7 +1,7 @@
 //! Any bytes as the candidate and evaluation view lists of `unseen extrapolate` (split at
 //! the first NUL: `candidates.json`, `evaluation.json`), loaded by `pipeline::load_inputs`
-//! against a fixture (a three-view 4×3 dataset and a one-iteration run on it, made once per
-//! process): Ok with a non-empty list of valid, uniquely named candidates and evaluation
+//! against a fixture (a four-view 4×3 dataset — `a`, `b` trained, `c`, `d` held out, with
+//! depth — and a one-iteration run on it, made once per process): Ok with a non-empty list of valid, uniquely named candidates and evaluation
 //! views that have truth and are neither candidates nor trained on, or a clear error;
 //! never a panic.
 #![no_main]
@@ -13,7 +13,7 @@ mod common;
 fn fixture() -> &'static (PathBuf, PathBuf) {
     static ROOT: std::sync::OnceLock<(PathBuf, PathBuf)> = std::sync::OnceLock::new();
     ROOT.get_or_init(|| {
-        let cams: Vec<unseen::camera::Camera> = ["a", "b", "c"]
+        let cams: Vec<unseen::camera::Camera> = ["a", "b", "c", "d"]
             .iter()
             .enumerate()
             .map(|(k, n)| {
@@ -29,13 +29,13 @@ fn fixture() -> &'static (PathBuf, PathBuf) {
         std::fs::rename(&cameras, data.join("cameras.json")).unwrap();
         let img = unseen::io::image::ImageF32::new(4, 3, 3, vec![0.5; 36]).unwrap();
         let depth = unseen::io::image::ImageF32::new(4, 3, 1, vec![3.0; 12]).unwrap();
-        for n in ["a", "b", "c"] {
+        for n in ["a", "b", "c", "d"] {
             unseen::io::image::write_png(&data.join("images").join(format!("{n}.png")), &img)
                 .unwrap();
             unseen::io::image::write_exr(&data.join("depth").join(format!("{n}.exr")), &depth)
                 .unwrap();
         }
-        std::fs::write(data.join("split.json"), r#"{"train": ["a"], "heldout": ["b", "c"]}"#)
+        std::fs::write(data.join("split.json"), r#"{"train": ["a", "b"], "heldout": ["c", "d"]}"#)
             .unwrap();
         let run = data.parent().unwrap().join("run");
         let cfg = unseen::train::trainer::TrainConfig {
