@@ -1627,8 +1627,8 @@ fn stage2_depth_by_video_alignment_recovers_the_relative_map_and_render_fit_is_t
 /// A candidate set as a user gives it (SPEC.md §20.2, "Candidates as users give them"):
 /// three bridge views, a held-out view of which the original scene covers no pixel, a
 /// training view's pose, and (classical only: the ground-truth generator needs the
-/// dataset's views) the same camera again under another name and a view of another size
-/// and focal length. With the classical slots the blind view is set aside (Telea fills
+/// dataset's views) the same camera again under another name, a view of another size
+/// and focal length, a view from outside the room and one from inside a wall. With the classical slots the blind view is set aside (Telea fills
 /// only from known pixels), with the ground-truth generator it is extrapolated; the
 /// training pose and the repeat are set aside; the run finishes in both families and the
 /// report names every set-aside view with its reason.
@@ -1685,8 +1685,22 @@ fn candidate_sets_as_users_give_them_are_extrapolated_or_set_aside_never_stop_th
     other.name = "bridge_014_narrow".into();
     (other.width, other.height, other.fx, other.fy) = (120, 96, 1.4 * other.fx, 1.4 * other.fy);
     (other.cx, other.cy) = (60.0, 48.0);
+    // Outside the room: 50 m behind a bridge view, looking the same way (through the
+    // back of the wall). Inside a wall: at the surface a training view sees at its centre
+    // pixel, looking on (the Gaussians there are behind the near plane or around it).
+    let mut outside = at_full("bridge_002");
+    outside.name = "outside_the_room".into();
+    outside.center -= outside.world_from_camera_rotation.col(2) * 50.0;
+    let mut in_wall = at_full(&trained);
+    in_wall.name = "inside_a_wall".into();
+    let t0 = &data.views[data.train[0]];
+    let (w0, h0) = (t0.camera.width as usize, t0.camera.height as usize);
+    let z = t0.depth.as_ref().unwrap()[(h0 / 2) * w0 + w0 / 2] as f64;
+    in_wall.center += in_wall.world_from_camera_rotation.col(2) * z;
     common.push(again);
     common.push(other);
+    common.push(outside);
+    common.push(in_wall);
     let classical_list = write("classical.json", &common);
     for (family, list) in [("classical", &classical_list), ("truth", &truth_list)] {
         let inp = load_inputs(
@@ -1730,6 +1744,17 @@ fn candidate_sets_as_users_give_them_are_extrapolated_or_set_aside_never_stop_th
                 "another size is a view"
             );
             assert!(plan.trajectory.iter().any(|n| n == "bridge_014_narrow"));
+            // Each is extrapolated, covered or set aside with a reason: never the run's end.
+            for n in ["outside_the_room", "inside_a_wall"] {
+                let handled = reason(n).is_some()
+                    || plan.covered.iter().any(|c| c == n)
+                    || plan.trajectory.iter().any(|c| c == n);
+                assert!(handled, "{n}: {plan:?}");
+                eprintln!(
+                    "{n}: {}",
+                    reason(n).unwrap_or_else(|| "extrapolated or covered".into())
+                );
+            }
         } else {
             assert!(
                 reason(&blind).is_none(),
