@@ -295,6 +295,17 @@ pub fn check_same_size(
 /// Read a depth map (EXR channel `Y`) that must be `width × height` (the size of the image
 /// it belongs to); a size mismatch is an error naming the file.
 pub fn read_depth(path: &Path, width: usize, height: usize) -> Result<Vec<f32>> {
+    // The size is known: a header that declares another is refused before the decoder
+    // allocates what it declares (up to 1 GiB for a few hundred bytes of PIZ or B44
+    // header otherwise; found by the `run_readers` fuzz target).
+    let declared = exr_size(path)?;
+    if declared != (width, height) {
+        return Err(UError::invalid(format!(
+            "depth is {}x{} but the image is {width}x{height}",
+            declared.0, declared.1
+        ))
+        .at(path));
+    }
     let d = read_exr(path, &["Y"])?;
     if (d.width, d.height) != (width, height) {
         return Err(UError::invalid(format!(
@@ -350,6 +361,19 @@ fn check_exr_size(path: &Path) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The size of an EXR's first valid layer at its largest resolution level, from the header
+/// alone (what [`read_exr`] would return).
+fn exr_size(path: &Path) -> Result<(usize, usize)> {
+    let meta = exr::meta::MetaData::read_from_file(path, false)
+        .map_err(|e| UError::parse(path, format!("cannot read EXR: {e}")))?;
+    let h = meta
+        .headers
+        .iter()
+        .find(|h| !h.deep)
+        .ok_or_else(|| UError::parse(path, "cannot read EXR: no flat layer"))?;
+    Ok((h.layer_size.width(), h.layer_size.height()))
 }
 
 /// Read the first layer of an EXR as float channels, in the order of `names`

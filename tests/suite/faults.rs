@@ -382,8 +382,8 @@ fn extrapolate_on_a_disk_turned_read_only_fails_cleanly_and_resumes_to_the_same_
     assert!(c.steps.iter().all(|s| s.identical), "{}", c.table());
 }
 
-/// The output folder is removed in the middle of `unseen extrapolate` (once the views step
-/// is done): one clear error naming it, exit non-zero, and no step finished in a folder
+/// The output folder vanishes in the middle of `unseen extrapolate` (moved away once the
+/// views step is done): one clear error naming it, exit non-zero, and no step finished in a folder
 /// re-created behind the run's back (the run checks its output folder's identity before
 /// every file); `--resume` then computes the run again, bit-identical to an undisturbed one.
 /// Needs no root.
@@ -413,8 +413,12 @@ fn extrapolate_whose_output_folder_vanishes_fails_cleanly_and_resumes_to_the_sam
         );
         std::thread::sleep(std::time::Duration::from_millis(5));
     }
-    std::fs::remove_dir_all(&out).unwrap();
+    // Moved away in one step (a recursive delete would race with the run's writes), then
+    // deleted once the run has stopped.
+    let gone = t.path().join("gone");
+    std::fs::rename(&out, &gone).unwrap();
     let o = child.wait_with_output().unwrap();
+    std::fs::remove_dir_all(&gone).unwrap();
     let err = String::from_utf8_lossy(&o.stderr).into_owned();
     assert!(
         !o.status.success(),

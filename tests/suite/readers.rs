@@ -357,3 +357,36 @@ fn manifests_and_step_lists_stay_inside_their_folder() {
         .to_string();
     assert!(e.contains("steps.json") && e.contains("inside"), "{e}");
 }
+
+/// Found by the `run_readers` fuzz target (fuzz/README.md, Findings): a 752-byte EXR whose
+/// header declares a PIZ-compressed layer large enough that the decoder asked for 772 MB
+/// (within `read_exr`'s 1 GiB bound for compressions without a small ratio). `read_depth`
+/// knows the size it wants and now refuses a header that declares another before
+/// decoding: the error is the size mismatch, from the header alone.
+#[test]
+fn a_depth_header_of_another_size_is_refused_before_decoding() {
+    let t = temp_dir("depth-header-size");
+    for (name, bytes) in [
+        (
+            "piz-header",
+            &include_bytes!("../../fuzz/regressions/run_readers-oom-piz-header")[..],
+        ),
+        (
+            "rss",
+            &include_bytes!("../../fuzz/regressions/run_readers-oom-rss")[..],
+        ),
+    ] {
+        // The target's layout: bytes 0–1 give the size, the rest is the file.
+        let (w, h) = (1 + bytes[0] as usize % 64, 1 + bytes[1] as usize % 64);
+        let p = t.path().join(format!("{name}.depth.exr"));
+        std::fs::write(&p, &bytes[2..]).unwrap();
+        let e = unseen::io::image::read_depth(&p, w, h)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(&format!("but the image is {w}x{h}")) || e.contains("cannot read EXR"),
+            "{name}: {e}"
+        );
+        assert!(e.contains(&*p.to_string_lossy()), "{name}: {e}");
+    }
+}
