@@ -70,9 +70,9 @@ fn unseen(args: &[&std::ffi::OsStr]) -> Output {
         .unwrap()
 }
 
-/// The contract of a failed run: non-zero exit, exactly one `error:` line, which names a
-/// path under `out` and contains `cause`; no temporary left anywhere under `out`.
-fn failed_cleanly(o: &Output, out: &Path, cause: &str) -> String {
+/// Exactly one `error:` line on stderr, which names a path under `out` and contains
+/// `cause`; non-zero exit, no panic. Returns the line.
+fn one_error_line(o: &Output, out: &Path, cause: &str) -> String {
     let err = String::from_utf8_lossy(&o.stderr).into_owned();
     assert!(!o.status.success(), "the run succeeded: {err}");
     let lines: Vec<&str> = err.lines().filter(|l| l.starts_with("error:")).collect();
@@ -84,12 +84,57 @@ fn failed_cleanly(o: &Output, out: &Path, cause: &str) -> String {
         out.display()
     );
     assert!(!err.contains("panicked"), "{err}");
+    lines[0].to_string()
+}
+
+/// No temporary anywhere under `out`.
+fn no_temporaries(out: &Path) {
     let tmp: Vec<PathBuf> = walk(out)
         .into_iter()
         .filter(|p| p.to_string_lossy().contains(".tmp"))
         .collect();
     assert!(tmp.is_empty(), "temporaries left: {tmp:?}");
-    lines[0].to_string()
+}
+
+/// The contract of a failed run: [`one_error_line`] and [`no_temporaries`].
+fn failed_cleanly(o: &Output, out: &Path, cause: &str) -> String {
+    let line = one_error_line(o, out, cause);
+    no_temporaries(out);
+    line
+}
+
+/// `unseen extrapolate` (tiny configuration) into `out`, which must succeed.
+fn extrapolate_ok(run: &Path, cfg: &Path, out: &Path, resume: bool) {
+    let o = Command::new(env!("CARGO_BIN_EXE_unseen"))
+        .args(extrapolate_args(run, cfg, out, resume))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+/// Start `unseen extrapolate` into `out` and return once its views step is done.
+fn extrapolate_past_views(run: &Path, cfg: &Path, out: &Path) -> std::process::Child {
+    let child = Command::new(env!("CARGO_BIN_EXE_unseen"))
+        .args(extrapolate_args(run, cfg, out, false))
+        .stderr(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let start = std::time::Instant::now();
+    while !out.join("views/manifest.json").exists() {
+        assert!(
+            start.elapsed().as_secs() < 120,
+            "the views step never finished"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    child
+}
+
+/// Every step of `out` equals `reference`'s bit for bit.
+fn same_bits(reference: &Path, out: &Path) {
+    let c = compare(reference, out, 0.0).unwrap();
+    assert!(c.steps.iter().all(|s| s.identical), "{}", c.table());
 }
 
 const ENOSPC: &str = "No space left on device";
@@ -154,8 +199,7 @@ fn extrapolate_on_a_full_disk_fails_cleanly_and_resumes_to_the_same_bits() {
             .collect::<Vec<_>>(),
     );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let c = compare(&reference, &out, 0.0).unwrap();
-    assert!(c.steps.iter().all(|s| s.identical), "{}", c.table());
+    same_bits(&reference, &out);
 }
 
 /// Every file under `a` and `b` (relative paths), with the names of those that differ in
@@ -311,30 +355,14 @@ fn extrapolate_on_a_disk_turned_read_only_fails_cleanly_and_resumes_to_the_same_
     let run = tiny_run(t.path());
     let cfg = tiny_config_file(t.path());
     let reference = t.path().join("reference");
-    let o = Command::new(env!("CARGO_BIN_EXE_unseen"))
-        .args(extrapolate_args(&run, &cfg, &reference, false))
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    extrapolate_ok(&run, &cfg, &reference, false);
     let Some(disk) = Tmpfs::mount(&t.path().join("disk"), 64 << 20) else {
         return;
     };
     let out = disk.0.join("out");
-    let child = Command::new(env!("CARGO_BIN_EXE_unseen"))
-        .args(extrapolate_args(&run, &cfg, &out, false))
-        .stderr(std::process::Stdio::piped())
-        .stdout(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
-    let start = std::time::Instant::now();
-    while !out.join("views/manifest.json").exists() {
-        assert!(
-            start.elapsed().as_secs() < 120,
-            "the views step never finished"
-        );
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
+    let child = extrapolate_past_views(&run, &cfg, &out);
     // A tmpfs refuses `ro` while a file is open for writing: retry until between writes.
+    let start = std::time::Instant::now();
     let ro = loop {
         let st = Command::new("mount")
             .args(["-o", "remount,ro"])
@@ -350,36 +378,21 @@ fn extrapolate_on_a_disk_turned_read_only_fails_cleanly_and_resumes_to_the_same_
         std::thread::sleep(std::time::Duration::from_millis(1));
     };
     let o = child.wait_with_output().unwrap();
-    let err = String::from_utf8_lossy(&o.stderr).into_owned();
-    assert!(ro, "could not remount read-only: {err}");
     assert!(
-        !o.status.success(),
-        "the run finished before the remount: {err}"
+        ro,
+        "could not remount read-only: {}",
+        String::from_utf8_lossy(&o.stderr)
     );
-    let lines: Vec<&str> = err.lines().filter(|l| l.starts_with("error:")).collect();
-    assert_eq!(lines.len(), 1, "{err}");
-    assert!(lines[0].contains("Read-only file system"), "{err}");
-    assert!(lines[0].contains(&*out.to_string_lossy()), "{err}");
-    assert!(!err.contains("panicked"), "{err}");
-    eprintln!("{}", lines[0]);
+    eprintln!("{}", one_error_line(&o, &out, "Read-only file system"));
     let st = Command::new("mount")
         .args(["-o", "remount,rw"])
         .arg(&disk.0)
         .status()
         .unwrap();
     assert!(st.success());
-    let o = Command::new(env!("CARGO_BIN_EXE_unseen"))
-        .args(extrapolate_args(&run, &cfg, &out, true))
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let tmp: Vec<PathBuf> = walk(&out)
-        .into_iter()
-        .filter(|p| p.to_string_lossy().contains(".tmp"))
-        .collect();
-    assert!(tmp.is_empty(), "temporaries left: {tmp:?}");
-    let c = compare(&reference, &out, 0.0).unwrap();
-    assert!(c.steps.iter().all(|s| s.identical), "{}", c.table());
+    extrapolate_ok(&run, &cfg, &out, true);
+    no_temporaries(&out);
+    same_bits(&reference, &out);
 }
 
 /// The output folder vanishes in the middle of `unseen extrapolate` (moved away once the
@@ -393,42 +406,16 @@ fn extrapolate_whose_output_folder_vanishes_fails_cleanly_and_resumes_to_the_sam
     let run = tiny_run(t.path());
     let cfg = tiny_config_file(t.path());
     let reference = t.path().join("reference");
-    let o = Command::new(env!("CARGO_BIN_EXE_unseen"))
-        .args(extrapolate_args(&run, &cfg, &reference, false))
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    extrapolate_ok(&run, &cfg, &reference, false);
     let out = t.path().join("out");
-    let child = Command::new(env!("CARGO_BIN_EXE_unseen"))
-        .args(extrapolate_args(&run, &cfg, &out, false))
-        .stderr(std::process::Stdio::piped())
-        .stdout(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
-    let start = std::time::Instant::now();
-    while !out.join("views/manifest.json").exists() {
-        assert!(
-            start.elapsed().as_secs() < 120,
-            "the views step never finished"
-        );
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
+    let child = extrapolate_past_views(&run, &cfg, &out);
     // Moved away in one step (a recursive delete would race with the run's writes), then
     // deleted once the run has stopped.
     let gone = t.path().join("gone");
     std::fs::rename(&out, &gone).unwrap();
     let o = child.wait_with_output().unwrap();
     std::fs::remove_dir_all(&gone).unwrap();
-    let err = String::from_utf8_lossy(&o.stderr).into_owned();
-    assert!(
-        !o.status.success(),
-        "the run finished without its folder: {err}"
-    );
-    let lines: Vec<&str> = err.lines().filter(|l| l.starts_with("error:")).collect();
-    assert_eq!(lines.len(), 1, "{err}");
-    assert!(lines[0].contains(&*out.to_string_lossy()), "{err}");
-    assert!(!err.contains("panicked"), "{err}");
-    eprintln!("{}", lines[0]);
+    eprintln!("{}", one_error_line(&o, &out, ""));
     if out.exists() {
         let done: Vec<PathBuf> = walk(&out)
             .into_iter()
@@ -439,13 +426,8 @@ fn extrapolate_whose_output_folder_vanishes_fails_cleanly_and_resumes_to_the_sam
             "steps finished in a re-created folder: {done:?}"
         );
     }
-    let o = Command::new(env!("CARGO_BIN_EXE_unseen"))
-        .args(extrapolate_args(&run, &cfg, &out, true))
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let c = compare(&reference, &out, 0.0).unwrap();
-    assert!(c.steps.iter().all(|s| s.identical), "{}", c.table());
+    extrapolate_ok(&run, &cfg, &out, true);
+    same_bits(&reference, &out);
 }
 
 /// Kills at random moments (SPEC.md §11): `unseen extrapolate` (the tiny configuration) is
@@ -478,13 +460,8 @@ fn soak_extrapolate_killed_at_random_moments_resumes_to_the_same_bits() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let wall = started.elapsed().as_secs_f64();
     let same = |out: &Path| {
-        let c = compare(&reference, out, 0.0).unwrap();
-        assert!(c.steps.iter().all(|s| s.identical), "{}", c.table());
-        let tmp: Vec<PathBuf> = walk(out)
-            .into_iter()
-            .filter(|p| p.to_string_lossy().contains(".tmp"))
-            .collect();
-        assert!(tmp.is_empty(), "temporaries left: {tmp:?}");
+        same_bits(&reference, out);
+        no_temporaries(out);
     };
     let mut rng = unseen::scene::Uniform::new(seed);
     let (mut killed, mut chain, mut kills_in_chain) = (0, 0, Vec::new());
