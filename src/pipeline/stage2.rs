@@ -147,14 +147,7 @@ pub fn run(
                 // estimate → used as it is; a disparity estimate cannot be.
                 let known_px = known.iter().filter(|&&d| d > 0.0).count();
                 let a = if known_px < MIN_ALIGN_PIXELS && space == Space::Depth {
-                    Alignment {
-                        scale: 1.0,
-                        offset: 0.0,
-                        inliers: 0,
-                        valid: known_px,
-                        residual_mean: 0.0,
-                        residual_max: 0.0,
-                    }
+                    Alignment::identity(known_px)
                 } else {
                     least_squares(
                         &[Frame {

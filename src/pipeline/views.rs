@@ -436,14 +436,7 @@ pub fn run(
                             break;
                         }
                     },
-                    None if space == Space::Depth => Alignment {
-                        scale: 1.0,
-                        offset: 0.0,
-                        inliers: 0,
-                        valid: 0,
-                        residual_mean: 0.0,
-                        residual_max: 0.0,
-                    },
+                    None if space == Space::Depth => Alignment::identity(0),
                     None => {
                         why = Some(format!(
                             "no training view shares {need} pixels of known depth with it, nor does the scene cover them, so its {space:?} estimate cannot be aligned (is the view behind or outside the scene?)"

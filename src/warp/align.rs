@@ -35,6 +35,20 @@ pub struct Alignment {
     pub residual_max: f64,
 }
 
+impl Alignment {
+    /// No fit: the estimate used as it is (`valid` known pixels were too few to fit).
+    pub fn identity(valid: usize) -> Alignment {
+        Alignment {
+            scale: 1.0,
+            offset: 0.0,
+            inliers: 0,
+            valid,
+            residual_mean: 0.0,
+            residual_max: 0.0,
+        }
+    }
+}
+
 /// One frame: estimator values and metric target depths, same length.
 #[derive(Clone, Copy, Debug)]
 pub struct Frame<'a> {
