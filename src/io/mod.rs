@@ -112,13 +112,89 @@ pub fn abandon_temporaries() -> usize {
     n
 }
 
-/// `dir/.name.tmp-<pid>`: same folder (so rename is atomic), hidden, per process.
+/// `dir/.name.tmp-<host>-<pid>-<random>`: same folder (so rename is atomic), hidden, and
+/// unique across processes and hosts sharing the folder ([`unique_suffix`]).
 pub(crate) fn temp_sibling(path: &Path) -> PathBuf {
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    path.with_file_name(format!(".{name}.tmp-{}", std::process::id()))
+    path.with_file_name(format!(".{name}.tmp-{}", unique_suffix()))
+}
+
+/// This machine's host name as it appears in temporaries' names: letters, digits, `.` and
+/// `_` only (anything else becomes `_`), so that `-` separates the name's fields; `host`
+/// when the name cannot be read.
+pub fn host_name() -> String {
+    static NAME: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    NAME.get_or_init(|| {
+        let raw = std::fs::read_to_string("/proc/sys/kernel/hostname")
+            .or_else(|_| std::fs::read_to_string("/etc/hostname"))
+            .ok()
+            .or_else(|| std::env::var("HOSTNAME").ok())
+            .or_else(|| std::env::var("COMPUTERNAME").ok())
+            .unwrap_or_default();
+        let name: String = raw
+            .trim()
+            .chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || c == '.' || c == '_' {
+                    c
+                } else {
+                    '_'
+                }
+            })
+            .collect();
+        if name.is_empty() { "host".into() } else { name }
+    })
+    .clone()
+}
+
+/// `<host>-<pid>-<16 hex digits>`: a name no other writer uses, on this machine or on
+/// another one sharing the folder (SPEC.md §20.8). The last field is random (the standard
+/// library's per-process random hash keys, mixed with the clock and a counter), so two
+/// hosts whose processes have the same id still differ.
+pub fn unique_suffix() -> String {
+    use std::hash::{BuildHasher, Hasher};
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let mut h = std::collections::hash_map::RandomState::new().build_hasher();
+    h.write_u128(
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos()),
+    );
+    h.write_u64(COUNTER.fetch_add(1, Ordering::Relaxed));
+    format!("{}-{}-{:016x}", host_name(), std::process::id(), h.finish())
+}
+
+/// The writer of a temporary named by [`unique_suffix`] (`….tmp-<host>-<pid>-<hex>` or
+/// `….stale-…`): its host and process id, `None` for any other name.
+pub fn temporary_owner(name: &str) -> Option<(String, u32)> {
+    let tail = name
+        .rsplit_once(".tmp-")
+        .or_else(|| name.rsplit_once(".stale-"))?
+        .1;
+    let mut fields = tail.rsplitn(3, '-');
+    let random = fields.next()?;
+    let pid = fields.next()?.parse().ok()?;
+    let host = fields.next()?;
+    (random.len() == 16 && random.bytes().all(|b| b.is_ascii_hexdigit()) && !host.is_empty())
+        .then(|| (host.to_string(), pid))
+}
+
+/// Whether the temporary `name` was left by a process of this host that no longer runs
+/// (Linux: no `/proc/<pid>`): such a temporary is abandoned whatever its age. A temporary
+/// of another host, or where processes cannot be looked up, is never taken for abandoned
+/// here (its age decides).
+pub fn temporary_is_orphan(name: &str) -> bool {
+    let Some((host, pid)) = temporary_owner(name) else {
+        return false;
+    };
+    host == host_name()
+        && pid != std::process::id()
+        && Path::new("/proc/self").exists()
+        && !Path::new(&format!("/proc/{pid}")).exists()
 }
 
 /// Remove the `.<name>.tmp-<pid>` files a killed run left (§10) directly in `dir`.

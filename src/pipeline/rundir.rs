@@ -18,7 +18,10 @@
 use super::Event;
 use crate::error::{Error, Result};
 use crate::io::manifest::{FileEntry, Manifest, inputs_sha256};
-use crate::io::{Temporary, create_dir_all, remove_stale_temporaries, sha256_hex, write_text};
+use crate::io::{
+    Temporary, create_dir_all, remove_stale_temporaries, sha256_hex, temporary_is_orphan,
+    unique_suffix, write_text,
+};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -161,7 +164,7 @@ impl RunDir {
         if cache.is_file() {
             return Err(Error::invalid("the step cache path is a file").at(cache));
         }
-        // Temporaries of killed publishers are left alone: another job may be writing one.
+        // Temporaries of killed publishers go; those another job may be writing stay.
         create_dir_all(cache)?;
         sweep_abandoned(cache, ABANDONED_AFTER);
         self.cache = Some(cache.to_path_buf());
@@ -360,8 +363,10 @@ fn copy_into(from: &Path, to: &Path) -> Result<()> {
 const ABANDONED_AFTER: std::time::Duration = std::time::Duration::from_secs(24 * 3600);
 
 /// Remove the temporaries (`.<key>.tmp-*`, `.<key>.stale-*` folders) that killed
-/// publishers left in `cache`, once they are older than `age` (younger ones may belong to
-/// a job publishing right now, on this machine or another). Best effort.
+/// publishers left in `cache`: at once when their writer was a process of this host that
+/// no longer runs ([`temporary_is_orphan`]), else once they are older than `age` (a younger
+/// one of another host may belong to a job publishing right now; host clocks may differ
+/// by minutes, not by `age`). Best effort.
 fn sweep_abandoned(cache: &Path, age: std::time::Duration) {
     let Ok(entries) = std::fs::read_dir(cache) else {
         return;
@@ -374,25 +379,10 @@ fn sweep_abandoned(cache: &Path, age: std::time::Duration) {
             .metadata()
             .and_then(|m| m.modified())
             .is_ok_and(|t| t.elapsed().is_ok_and(|a| a >= age));
-        if temporary && old {
+        if temporary && (old || temporary_is_orphan(&name)) {
             let _ = std::fs::remove_dir_all(e.path());
         }
     }
-}
-
-/// A name no other job uses (process id, clock, counter): cache temporaries may be made by
-/// jobs on several machines sharing the folder.
-fn unique_suffix() -> String {
-    use std::sync::atomic::{AtomicU64, Ordering};
-    static COUNTER: AtomicU64 = AtomicU64::new(0);
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_nanos());
-    format!(
-        "{}-{nanos}-{}",
-        std::process::id(),
-        COUNTER.fetch_add(1, Ordering::Relaxed)
-    )
 }
 
 /// Publish a finished step into the cache entry `to`: copied into a temporary sibling, then
@@ -408,6 +398,11 @@ fn publish(from: &Path, to: &Path, inputs_sha256: &str) -> Result<()> {
     let tmp = Temporary::create_dir(parent.join(format!(".{key}.tmp-{}", unique_suffix())))
         .map_err(|e| Error::io(to, e))?;
     let r = copy_into(from, tmp.path()).and_then(|()| {
+        // Another job may have published the same step while this one copied: keep its
+        // entry (same bits) rather than replace one a third job may be copying from.
+        if verified(to, inputs_sha256).is_some() {
+            return Ok(());
+        }
         if to.exists() {
             let aside =
                 Temporary::register(parent.join(format!(".{key}.stale-{}", unique_suffix())));
@@ -534,8 +529,35 @@ mod tests {
         let old_stale = make(".key.stale-1-2-3", true);
         let young_tmp = make(".key.tmp-4-5-6", false);
         let old_entry = make("key", true);
+        // Young ones named by `unique_suffix`: a dead process of this host's is an orphan
+        // (gone at once); a live one's (this process), and another host's, stay.
+        let host = crate::io::host_name();
+        let dead_pid = u32::try_from(i32::MAX).unwrap(); // above Linux's pid_max
+        let orphan = make(
+            &format!(".key.tmp-{host}-{dead_pid}-0123456789abcdef"),
+            false,
+        );
+        let live = make(&format!(".key.tmp-{}", crate::io::unique_suffix()), false);
+        let elsewhere = make(
+            &format!(".key.stale-{host}x-{dead_pid}-0123456789abcdef"),
+            false,
+        );
         sweep_abandoned(&root.0, day);
         assert!(!old_tmp.exists() && !old_stale.exists());
         assert!(young_tmp.exists() && old_entry.exists());
+        assert!(!orphan.exists() && live.exists() && elsewhere.exists());
+    }
+
+    /// Temporaries' names carry their writer; the host field never contains `-`.
+    #[test]
+    fn temporary_names_are_unique_and_name_their_writer() {
+        use crate::io::{host_name, temporary_owner, unique_suffix};
+        let (a, b) = (unique_suffix(), unique_suffix());
+        assert_ne!(a, b);
+        assert!(!host_name().contains('-') && !host_name().is_empty());
+        let owner = temporary_owner(&format!(".key.tmp-{a}"));
+        assert_eq!(owner, Some((host_name(), std::process::id())));
+        assert_eq!(temporary_owner(".key.tmp-1-2-3"), None);
+        assert_eq!(temporary_owner("key"), None);
     }
 }

@@ -501,3 +501,181 @@ fn soak_extrapolate_killed_at_random_moments_resumes_to_the_same_bits() {
         kills_in_chain.len()
     );
 }
+
+// ------------------------------------------------------- a step cache shared by workers
+
+/// `extrapolate_args` with the step cache `cache`.
+fn with_cache(run: &Path, cfg: &Path, out: &Path, cache: &Path) -> Vec<std::ffi::OsString> {
+    let mut a = extrapolate_args(run, cfg, out, false);
+    a.extend(["--cache".into(), cache.into()]);
+    a
+}
+
+/// Every entry of the step cache `cache` under a step's name (not hidden) is a whole step:
+/// its manifest lists files that all have their sha256. Returns how many there are.
+fn cache_entries_are_whole(cache: &Path) -> usize {
+    let mut entries = 0;
+    for e in std::fs::read_dir(cache).unwrap().flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if name.starts_with('.') {
+            continue;
+        }
+        let m = unseen::io::manifest::Manifest::read(&e.path()).unwrap();
+        for f in &m.files {
+            let bytes = std::fs::read(e.path().join(&f.path)).unwrap();
+            assert_eq!(
+                unseen::io::sha256_hex(&bytes),
+                f.sha256,
+                "{name}/{}",
+                f.path
+            );
+        }
+        entries += 1;
+    }
+    entries
+}
+
+/// [`cache_entries_are_whole`], and nothing else is there (no temporary).
+fn cache_is_whole(cache: &Path) -> usize {
+    let hidden: Vec<_> = std::fs::read_dir(cache)
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with('.'))
+        .collect();
+    assert!(
+        hidden.is_empty(),
+        "temporaries left in the cache: {hidden:?}"
+    );
+    cache_entries_are_whole(cache)
+}
+
+/// A command run as if on another machine: in a new UTS namespace whose host name is
+/// `host` (root and util-linux's `unshare`), else on this one (said once).
+fn on_host(host: &str, args: &[std::ffi::OsString]) -> Command {
+    let probe = Command::new("unshare")
+        .args(["--uts", "sh", "-c", "hostname probe-host"])
+        .output();
+    if probe.is_ok_and(|o| o.status.success()) {
+        let mut c = Command::new("unshare");
+        c.args([
+            "--uts",
+            "sh",
+            "-c",
+            &format!("hostname {host} && exec \"$0\" \"$@\""),
+        ])
+        .arg(env!("CARGO_BIN_EXE_unseen"))
+        .args(args);
+        c
+    } else {
+        eprintln!("NOTE: cannot change the host name (needs root and unshare): same host");
+        let mut c = Command::new(env!("CARGO_BIN_EXE_unseen"));
+        c.args(args);
+        c
+    }
+}
+
+/// Two workers, on two host names, run the same pipeline with one step cache at the same
+/// moment, so they compute and publish every step at once: both succeed with the same
+/// bits as a run without the cache, and the cache ends with one whole entry per step and
+/// no temporary (SPEC.md §20.8).
+#[test]
+fn two_workers_racing_on_the_same_steps_both_succeed_and_leave_one_verified_entry_each() {
+    let t = TempDir::new("faults-cache-race");
+    let run = tiny_run(t.path());
+    let cfg = tiny_config_file(t.path());
+    let reference = t.path().join("reference");
+    extrapolate_ok(&run, &cfg, &reference, false);
+    let cache = t.path().join("cache");
+    let (a, b) = (t.path().join("a"), t.path().join("b"));
+    let workers: Vec<std::process::Child> = [("host-a", &a), ("host-b", &b)]
+        .into_iter()
+        .map(|(host, out)| {
+            on_host(host, &with_cache(&run, &cfg, out, &cache))
+                .stdout(std::process::Stdio::null())
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .unwrap()
+        })
+        .collect();
+    for w in workers {
+        let o = w.wait_with_output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    same_bits(&reference, &a);
+    same_bits(&reference, &b);
+    let steps: Vec<String> =
+        serde_json::from_slice(&std::fs::read(reference.join("steps.json")).unwrap()).unwrap();
+    assert_eq!(cache_is_whole(&cache), steps.len());
+}
+
+/// A worker killed while it publishes a step into the cache (SIGKILL the moment a cache
+/// temporary appears; the cache on a tmpfs so that the files are copied, not linked, and
+/// the copy lasts long enough to be caught), retried until one dies with its temporary in
+/// place: the cache never shows a partial entry under a step's name, and the next worker
+/// on this host sweeps the dead worker's temporary at once and ends with the same bits as
+/// a run without the cache.
+#[test]
+fn a_worker_killed_while_publishing_to_the_cache_leaves_nothing_the_next_one_takes() {
+    let t = TempDir::new("faults-cache-kill");
+    let run = tiny_run(t.path());
+    let cfg = tiny_config_file(t.path());
+    let reference = t.path().join("reference");
+    extrapolate_ok(&run, &cfg, &reference, false);
+    let Some(disk) = Tmpfs::mount(&t.path().join("disk"), 1 << 30) else {
+        return;
+    };
+    let cache = disk.0.join("cache");
+    let temporaries = |cache: &Path| -> Vec<String> {
+        std::fs::read_dir(cache)
+            .map(|d| {
+                d.flatten()
+                    .map(|e| e.file_name().to_string_lossy().into_owned())
+                    .filter(|n| n.starts_with('.'))
+                    .collect()
+            })
+            .unwrap_or_default()
+    };
+    // Attempts until one is killed with its temporary still there (a kill that lands
+    // after the rename leaves none); each new worker sweeps the previous one's orphans.
+    let mut left = Vec::new();
+    for attempt in 0..40 {
+        let out = t.path().join(format!("killed-{attempt}"));
+        let mut child = Command::new(env!("CARGO_BIN_EXE_unseen"))
+            .args(with_cache(&run, &cfg, &out, &cache))
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        let before = temporaries(&cache);
+        let killed = loop {
+            if child.try_wait().unwrap().is_some() {
+                break false;
+            }
+            if temporaries(&cache).iter().any(|n| !before.contains(n)) {
+                child.kill().unwrap();
+                break true;
+            }
+        };
+        child.wait().unwrap();
+        // Entries under their final names are always whole.
+        cache_entries_are_whole(&cache);
+        left = temporaries(&cache)
+            .into_iter()
+            .filter(|n| !before.contains(n))
+            .collect();
+        if killed && !left.is_empty() {
+            eprintln!("attempt {attempt}: killed while publishing, left {left:?}");
+            break;
+        }
+    }
+    assert!(!left.is_empty(), "no worker was caught publishing");
+    let last = t.path().join("last");
+    let o = Command::new(env!("CARGO_BIN_EXE_unseen"))
+        .args(with_cache(&run, &cfg, &last, &cache))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    same_bits(&reference, &last);
+    cache_is_whole(&cache);
+}
