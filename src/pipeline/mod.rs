@@ -407,7 +407,7 @@ pub fn run_with(
     config.validate()?;
     let target = match &opts.scope {
         Scope::All => None,
-        Scope::Only(s) | Scope::Until(s) => Some(s.clone()),
+        Scope::Only(s) | Scope::Until(s) | Scope::Before(s) => Some(s.clone()),
     };
     if let Some(c) = &opts.cache
         && c.is_file()

@@ -26,13 +26,15 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 /// Which steps a run computes (SPEC.md §20.8): all, or one step alone (its inputs must be
-/// done: a batch engine's worker), or everything up to one step.
+/// done: a batch engine's worker), or everything up to one step, or everything before the
+/// first step whose name starts with a prefix (the audit's shared-steps jobs).
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub enum Scope {
     #[default]
     All,
     Only(String),
     Until(String),
+    Before(String),
 }
 
 /// An open run directory.
@@ -182,6 +184,12 @@ impl RunDir {
     ) -> Result<StepDone> {
         use std::sync::atomic::Ordering;
         if self.finished.load(Ordering::SeqCst) {
+            return Err(Error::invalid(SCOPE_DONE));
+        }
+        if let Scope::Before(prefix) = &self.scope
+            && name.starts_with(prefix.as_str())
+        {
+            self.finished.store(true, Ordering::SeqCst);
             return Err(Error::invalid(SCOPE_DONE));
         }
         self.guard.check()?;

@@ -2,6 +2,7 @@ mod align;
 mod audit_rule;
 mod bad_input;
 mod cli;
+mod cluster;
 mod collide;
 mod common;
 mod conventions;

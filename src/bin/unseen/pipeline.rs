@@ -391,13 +391,57 @@ pub struct AuditArgs {
     /// Training iterations of the original scene (default: quick 1500, paper 30000).
     #[arg(long)]
     train_iterations: Option<u32>,
-    /// Run one job alone (`original/seed-K` or `runs/<generator>/<variant>/seed-K`, as
-    /// `--list` prints them): a batch engine's worker. Finish with a run without it.
+    /// A JSON PipelineConfig over the preset (any subset of fields): every job's
+    /// pipeline before its generator, variant and seed.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Downscale of the dataset's images for the original scene and the pipeline
+    /// (default: quick 2, paper 1).
+    #[arg(long)]
+    train_resolution: Option<u32>,
+    /// Run one job alone (`original/seed-K`, `shared/<generator>/seed-K` or
+    /// `runs/<generator>/<variant>/seed-K`, as `--list` prints them): a batch engine's
+    /// worker. It writes DIR/receipts/<job>.json, also when it fails. Finish with
+    /// `--collect`, or with a run without `--only`.
     #[arg(long)]
     only: Option<String>,
-    /// Print the jobs and exit.
+    /// With --only: the worker's log, named in its receipt.
+    #[arg(long, requires = "only")]
+    log: Option<PathBuf>,
+    /// Print the jobs (wave by wave, with --estimate their expected costs) and exit.
     #[arg(long)]
     list: bool,
+    /// With --list: each job's expected seconds and peak memory on 2 threads (from this
+    /// audit's finished jobs where there are some, else the built-in calibration), and
+    /// per wave the CPU-hours and the largest peak.
+    #[arg(long, requires = "list")]
+    estimate: bool,
+    /// Run no job: merge the jobs' receipts and results into the report; every job
+    /// without a receipt of a success is named (with its log) and the merge fails.
+    #[arg(long, conflicts_with_all = ["only", "list", "report_only"])]
+    collect: bool,
+    /// With --collect: the Slurm submission folder the jobs ran from (names their logs).
+    #[arg(long, requires = "collect")]
+    submission: Option<PathBuf>,
+    /// Write a Slurm submission folder for this audit (job arrays in waves, a merge job,
+    /// submit.sh) and run no job.
+    #[arg(long, conflicts_with_all = ["only", "list", "report_only", "collect"])]
+    emit_slurm: Option<PathBuf>,
+    /// Slurm partition of every job (--emit-slurm).
+    #[arg(long, requires = "emit_slurm")]
+    slurm_partition: Option<String>,
+    /// Slurm account of every job (--emit-slurm).
+    #[arg(long, requires = "emit_slurm")]
+    slurm_account: Option<String>,
+    /// Another `#SBATCH` option for every job, e.g. `--slurm-extra=--qos=long`; repeatable.
+    #[arg(long, requires = "emit_slurm", allow_hyphen_values = true)]
+    slurm_extra: Vec<String>,
+    /// At most this many tasks of one wave at once (`--array=…%N`).
+    #[arg(long, requires = "emit_slurm")]
+    slurm_throttle: Option<u32>,
+    /// CPUs per task, the workers' thread count (default 2).
+    #[arg(long, requires = "emit_slurm")]
+    slurm_cpus: Option<u32>,
     /// Worker threads (default: all cores); results are the same bits for any count.
     #[arg(long)]
     threads: Option<usize>,
@@ -422,11 +466,19 @@ fn parse_seeds(s: &str) -> std::result::Result<std::ops::Range<u32>, String> {
 
 /// `unseen audit`: every job (or one), then the report.
 pub fn run_audit(a: &AuditArgs) -> Result<()> {
-    use unseen::pipeline::audit::{self, AuditConfig, GeneratorKind, Variant};
-    let mut cfg = AuditConfig::preset(match a.preset {
+    use unseen::pipeline::audit::{self, AuditConfig, GeneratorKind, Variant, cluster};
+    let preset = match a.preset {
         Preset::Quick => "quick",
         Preset::Paper => "paper",
-    })?;
+    };
+    let mut cfg = AuditConfig::preset(preset)?;
+    if let Some(p) = &a.config {
+        let text = std::fs::read(p).map_err(|e| Error::io(p, e))?;
+        let over: serde_json::Value = serde_json::from_slice(&text)
+            .map_err(|e| Error::parse(p, format!("invalid JSON: {e}")))?;
+        cfg.base = PipelineConfig::with_overrides(preset, over, p)?;
+        cfg.base.validate()?;
+    }
     if !a.variants.is_empty() {
         cfg.variants = a
             .variants
@@ -447,27 +499,59 @@ pub fn run_audit(a: &AuditArgs) -> Result<()> {
     if let Some(n) = a.train_iterations {
         cfg.train_iterations = n;
     }
-    cfg.validate()?;
-    let jobs = audit::jobs(&cfg);
-    if a.list {
-        for j in &jobs {
-            println!("{}", j.name());
+    if let Some(r) = a.train_resolution {
+        if r == 0 {
+            return Err(Error::invalid("--train-resolution must be at least 1"));
         }
-        return Ok(());
+        cfg.train_resolution = r;
+    }
+    cfg.validate()?;
+    if a.list {
+        return list_audit(&cfg, a);
+    }
+    if let Some(sub) = &a.emit_slurm {
+        return emit_audit(&cfg, a, preset, sub);
     }
     let draw = super::progress::drawer();
     if let Some(only) = &a.only {
-        let job = jobs
+        let waves = cluster::waves(&cfg);
+        let job = waves
             .iter()
+            .flat_map(|w| &w.jobs)
             .find(|j| &j.name() == only)
             .ok_or_else(|| Error::invalid(format!("no job '{only}' in this audit (see --list)")))?;
         unseen::sys::with_threads(a.threads, || {
-            audit::run_job(&cfg, &a.dataset, &a.out, job, &draw)
+            cluster::run_job_with_receipt(&cfg, &a.dataset, &a.out, job, a.log.as_deref(), &draw)
         })??;
         println!("done: {only}");
         return Ok(());
     }
-    let report = if a.report_only {
+    let report = if a.collect {
+        let log_of = |j: &audit::Job| {
+            a.submission
+                .as_ref()
+                .and_then(|s| cluster::log_in_submission(&cfg, s, j))
+        };
+        match cluster::collect(&cfg, &a.dataset, &a.out, &a.merge, &log_of)? {
+            Ok(r) => r,
+            Err(missing) => {
+                for m in &missing {
+                    let log = m
+                        .log
+                        .as_deref()
+                        .map_or(String::new(), |l| format!(" (log: {l})"));
+                    eprintln!("not done: {}: {}{log}", m.job, m.why);
+                }
+                let total: usize = cluster::waves(&cfg).iter().map(|w| w.jobs.len()).sum();
+                return Err(Error::invalid(format!(
+                    "{} of {total} jobs have no receipt of a success (listed above; the first: {}): nothing merged",
+                    missing.len(),
+                    missing[0].job
+                ))
+                .at(&a.out));
+            }
+        }
+    } else if a.report_only {
         audit::report(&cfg, &a.dataset, &a.out, &a.merge)?
     } else {
         unseen::sys::with_threads(a.threads, || {
@@ -481,5 +565,115 @@ pub fn run_audit(a: &AuditArgs) -> Result<()> {
         );
     }
     println!("audit: report in {}", a.out.join("audit.md").display());
+    Ok(())
+}
+
+/// `--list [--estimate]`: the jobs wave by wave.
+fn list_audit(cfg: &unseen::pipeline::audit::AuditConfig, a: &AuditArgs) -> Result<()> {
+    use unseen::pipeline::audit::cluster;
+    if !a.estimate {
+        for j in unseen::pipeline::audit::jobs(cfg) {
+            println!("{}", j.name());
+        }
+        return Ok(());
+    }
+    let gb = |b: f64| b / 1e9;
+    let (mut cpu_hours, mut jobs) = (0.0, 0);
+    for (wave, costs) in cluster::estimate(cfg, &a.dataset, &a.out)? {
+        let hours: f64 = costs.iter().map(|c| c.seconds).sum::<f64>() * 2.0 / 3600.0;
+        let peak = costs.iter().map(|c| c.peak_rss_bytes).fold(0.0, f64::max);
+        let longest = costs.iter().map(|c| c.seconds).fold(0.0, f64::max);
+        let measured = costs.iter().filter(|c| c.measured).count();
+        println!(
+            "wave {}: {} jobs, {hours:.1} CPU-hours (2 threads each), longest {:.1} h, peak {:.2} GB ({measured} of {} from this audit's finished jobs)",
+            wave.name,
+            wave.jobs.len(),
+            longest / 3600.0,
+            gb(peak),
+            costs.len()
+        );
+        for (j, c) in wave.jobs.iter().zip(&costs) {
+            println!(
+                "  {:<56} {:>9.0} s {:>7.2} GB",
+                j.name(),
+                c.seconds,
+                gb(c.peak_rss_bytes)
+            );
+        }
+        cpu_hours += hours;
+        jobs += wave.jobs.len();
+    }
+    println!("total: {jobs} jobs, {cpu_hours:.1} CPU-hours");
+    Ok(())
+}
+
+/// `--emit-slurm SUB`: the submission folder; the workers' command line names the grid
+/// in absolute paths and the resolved pipeline configuration (a copy in SUB).
+fn emit_audit(
+    cfg: &unseen::pipeline::audit::AuditConfig,
+    a: &AuditArgs,
+    preset: &str,
+    sub: &Path,
+) -> Result<()> {
+    use unseen::pipeline::audit::cluster;
+    let abs = |p: &Path| std::path::absolute(p).map_err(|e| Error::io(p, e));
+    let sub = abs(sub)?;
+    unseen::io::create_dir_all(&sub)?;
+    let config = sub.join("pipeline-config.json");
+    let text = serde_json::to_string_pretty(&cfg.base).expect("serializes") + "\n";
+    unseen::io::write_text(&config, &text)?;
+    let exe = std::env::current_exe().map_err(|e| Error::io(Path::new("unseen"), e))?;
+    let show = |p: PathBuf| p.display().to_string();
+    let mut command = vec![
+        show(exe),
+        "audit".into(),
+        show(abs(&a.dataset)?),
+        "--out".into(),
+        show(abs(&a.out)?),
+        "--preset".into(),
+        preset.into(),
+        "--config".into(),
+        show(config),
+        "--variants".into(),
+        cfg.variants
+            .iter()
+            .map(|v| v.name())
+            .collect::<Vec<_>>()
+            .join(","),
+        "--generators".into(),
+        cfg.generators
+            .iter()
+            .map(|g| g.name())
+            .collect::<Vec<_>>()
+            .join(","),
+        "--seeds".into(),
+        format!("{}..{}", cfg.seeds.start, cfg.seeds.end),
+        "--train-iterations".into(),
+        cfg.train_iterations.to_string(),
+        "--train-resolution".into(),
+        cfg.train_resolution.to_string(),
+    ];
+    for m in &a.merge {
+        command.extend(["--merge".into(), show(abs(m)?)]);
+    }
+    let opts = cluster::SlurmOptions {
+        partition: a.slurm_partition.clone(),
+        account: a.slurm_account.clone(),
+        extra: a.slurm_extra.clone(),
+        throttle: a.slurm_throttle,
+        cpus: a.slurm_cpus,
+    };
+    let waves = cluster::emit_slurm(cfg, &a.dataset, &a.out, &command, &sub, &opts)?;
+    for (w, r) in &waves {
+        println!(
+            "{}: {} jobs, --cpus-per-task={} --mem={}M --time={} min",
+            w.name,
+            w.jobs.len(),
+            r.cpus,
+            r.memory_mb,
+            r.time_minutes
+        );
+    }
+    println!("submit with: {}", sub.join("submit.sh").display());
     Ok(())
 }

@@ -18,7 +18,7 @@
 
 use super::evaluate::{ClassSums, Row, Summary, ViewRecord};
 use super::{
-    Event, Hallucination, Inconsistency, MaskSource, PipelineConfig, RunOptions, SlotNames,
+    Event, Hallucination, Inconsistency, MaskSource, PipelineConfig, RunOptions, Scope, SlotNames,
     Stage2Depth, TruthDepth,
 };
 use crate::error::{Error, Result};
@@ -27,6 +27,7 @@ use crate::train::run::{Checkpointing, latest_ply, read_config, train_run};
 use crate::train::trainer::TrainConfig;
 use std::path::{Path, PathBuf};
 
+pub mod cluster;
 pub mod samples;
 pub mod stats;
 pub use samples::Samples;
@@ -312,7 +313,8 @@ pub fn config_digest(c: &PipelineConfig) -> String {
     crate::io::sha256_hex(&serde_json::to_vec(&c).expect("serializes"))
 }
 
-/// One job of an audit: the original scene of a seed, or a pipeline run.
+/// One job of an audit: the original scene of a seed, a pipeline run, or (for a batch
+/// engine, [`cluster::waves`]) the steps a seed's variants share under one generator.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Job {
     Original {
@@ -323,11 +325,24 @@ pub enum Job {
         variant: Variant,
         seed: u32,
     },
+    /// The `full` variant's run up to its first stage-1 reconstruction ([`SHARED_BEFORE`]):
+    /// the views, the original scene's QA-Mask and the stage-1 generations, which most
+    /// variants share through the step cache. Computed once before the variants start, so
+    /// that parallel workers do not all compute them at once; its folder is the `full`
+    /// run's, which continues from it.
+    Shared {
+        generator: GeneratorKind,
+        seed: u32,
+    },
 }
 
+/// Where a [`Job::Shared`] stops: before the first step whose name starts with this.
+pub const SHARED_BEFORE: &str = "stage1/recon";
+
 impl Job {
-    /// The job's folder under the audit directory, also its name on the command line:
-    /// `original/seed-K` or `runs/<generator>/<variant>/seed-K`.
+    /// The job's name on the command line: `original/seed-K`,
+    /// `runs/<generator>/<variant>/seed-K` (also its folder under the audit directory) or
+    /// `shared/<generator>/seed-K`.
     pub fn name(&self) -> String {
         match self {
             Job::Original { seed } => format!("original/seed-{seed}"),
@@ -336,6 +351,20 @@ impl Job {
                 variant,
                 seed,
             } => format!("runs/{}/{}/seed-{seed}", generator.name(), variant.name()),
+            Job::Shared { generator, seed } => format!("shared/{}/seed-{seed}", generator.name()),
+        }
+    }
+
+    /// The job's folder under the audit directory.
+    pub fn folder(&self) -> String {
+        match *self {
+            Job::Shared { generator, seed } => Job::Run {
+                generator,
+                variant: Variant::Full,
+                seed,
+            }
+            .name(),
+            _ => self.name(),
         }
     }
 }
@@ -480,35 +509,38 @@ pub fn run_job(
             original(cfg, dataset, dir, seed, on_event)?;
             Ok(None)
         }
+        Job::Shared { generator, seed } => {
+            let scope = Scope::Before(SHARED_BEFORE.into());
+            pipeline_job(
+                cfg,
+                dataset,
+                dir,
+                job,
+                generator,
+                Variant::Full,
+                seed,
+                scope,
+                on_event,
+            )?;
+            Ok(None)
+        }
         Job::Run {
             generator,
             variant,
             seed,
         } => {
-            let run = dir.join(Job::Original { seed }.name());
-            if !original_done(cfg, dataset, &run, seed) {
-                return Err(Error::invalid(format!(
-                    "job {} needs the original scene of seed {seed}: run the job {} first",
-                    job.name(),
-                    Job::Original { seed }.name()
-                ))
-                .at(dir));
-            }
-            on_event(Event::Stage { name: job.name() });
-            let inputs = super::load_inputs(
-                &run,
-                &dataset.join("candidates.json"),
-                Some(&dataset.join("evaluation.json")),
-                Some(dataset),
+            let (pc, outcome) = pipeline_job(
+                cfg,
+                dataset,
+                dir,
+                job,
+                generator,
+                variant,
+                seed,
+                Scope::All,
+                on_event,
             )?;
-            let pc = cfg.pipeline_config(generator, variant, seed)?;
-            let out = dir.join(job.name());
-            let opts = RunOptions {
-                resume: out.is_dir(),
-                cache: Some(dir.join("cache")),
-                ..RunOptions::default()
-            };
-            let outcome = super::run_with(&pc, &inputs, &out, &opts, on_event)?;
+            let out = dir.join(job.folder());
             let summary: Summary = outcome.metrics.ok_or_else(|| {
                 Error::invalid("the dataset has no evaluation poses (evaluation.json)").at(dataset)
             })?;
@@ -547,6 +579,48 @@ pub fn run_job(
             Ok(Some(result))
         }
     }
+}
+
+/// Run the pipeline of (`generator`, `variant`, `seed`) in `job`'s folder within `scope`,
+/// continuing what is there and sharing `DIR/cache`; the seed's original scene must be
+/// done. Returns the job's configuration and the run's outcome.
+#[allow(clippy::too_many_arguments)]
+fn pipeline_job(
+    cfg: &AuditConfig,
+    dataset: &Path,
+    dir: &Path,
+    job: &Job,
+    generator: GeneratorKind,
+    variant: Variant,
+    seed: u32,
+    scope: Scope,
+    on_event: &(dyn Fn(Event) + Sync),
+) -> Result<(PipelineConfig, super::Outcome)> {
+    let run = dir.join(Job::Original { seed }.name());
+    if !original_done(cfg, dataset, &run, seed) {
+        return Err(Error::invalid(format!(
+            "job {} needs the original scene of seed {seed}: run the job {} first",
+            job.name(),
+            Job::Original { seed }.name()
+        ))
+        .at(dir));
+    }
+    on_event(Event::Stage { name: job.name() });
+    let inputs = super::load_inputs(
+        &run,
+        &dataset.join("candidates.json"),
+        Some(&dataset.join("evaluation.json")),
+        Some(dataset),
+    )?;
+    let pc = cfg.pipeline_config(generator, variant, seed)?;
+    let out = dir.join(job.folder());
+    let opts = RunOptions {
+        resume: out.is_dir(),
+        cache: Some(dir.join("cache")),
+        scope,
+    };
+    let outcome = super::run_with(&pc, &inputs, &out, &opts, on_event)?;
+    Ok((pc, outcome))
 }
 
 /// The original scene of `seed` is trained in `run`: its manifest names this dataset and

@@ -1,0 +1,740 @@
+//! An audit on a batch engine (SPEC.md §21.5): its jobs in dependency waves, a receipt per
+//! job, the merge that names every job without a successful receipt, a Slurm submission
+//! folder, and the cost estimate its resource requests come from.
+//!
+//! Nothing here schedules: Slurm does. A worker is `unseen audit … --only JOB`; it writes
+//! `DIR/receipts/<job>.json` whether it succeeds or fails; the merge
+//! (`unseen audit … --collect`) reads the receipts and the run jobs' `audit_job.json`,
+//! computes nothing, and writes the same report a sequential `unseen audit` writes.
+
+use super::{AuditConfig, Job, JobResult, MaskSource, Report, finish, gather, jobs};
+use crate::error::{Error, Result};
+use crate::io::{sha256_hex, write_text};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// One wave of jobs: every job of a wave may run at once; a wave starts when the one
+/// before it has succeeded.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Wave {
+    pub name: &'static str,
+    pub jobs: Vec<Job>,
+}
+
+/// The audit's jobs in waves: the original scenes (one per seed), the steps a seed's
+/// variants share under each generator ([`Job::Shared`]), then every variant's run.
+/// Together they are [`jobs`] and the shared-steps jobs.
+pub fn waves(cfg: &AuditConfig) -> Vec<Wave> {
+    let all = jobs(cfg);
+    let originals = all
+        .iter()
+        .filter(|j| matches!(j, Job::Original { .. }))
+        .cloned()
+        .collect();
+    let runs = all
+        .iter()
+        .filter(|j| matches!(j, Job::Run { .. }))
+        .cloned()
+        .collect();
+    let shared = cfg
+        .seeds
+        .clone()
+        .flat_map(|seed| {
+            cfg.generators
+                .iter()
+                .map(move |&generator| Job::Shared { generator, seed })
+        })
+        .collect();
+    vec![
+        Wave {
+            name: "originals",
+            jobs: originals,
+        },
+        Wave {
+            name: "shared",
+            jobs: shared,
+        },
+        Wave {
+            name: "runs",
+            jobs: runs,
+        },
+    ]
+}
+
+// ------------------------------------------------------------------------- receipts
+
+/// The `format` of a receipt.
+pub const RECEIPT_FORMAT: &str = "unseen-audit-receipt/1";
+
+/// What a worker leaves for the merge: one per job, written when the job ends (succeeded
+/// or failed; a job killed before its end leaves none).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Receipt {
+    pub format: String,
+    pub job: String,
+    /// The worker's host ([`crate::io::host_name`]) and process id.
+    pub host: String,
+    pub pid: u32,
+    /// The batch engine's id of the job (`SLURM_ARRAY_JOB_ID_SLURM_ARRAY_TASK_ID`, or
+    /// `SLURM_JOB_ID`), when it ran under one.
+    pub batch_job: Option<String>,
+    /// The worker's log, as its caller named it (`--log`).
+    pub log: Option<String>,
+    /// UTC, RFC 3339, to the second.
+    pub started: String,
+    pub finished: String,
+    pub seconds: f64,
+    /// 0: the job is done; 1: it failed with `error`.
+    pub exit: i32,
+    pub error: Option<String>,
+    pub crate_version: String,
+    pub numerics_revision: u32,
+    /// sha256 of what the job leaves, by path under the audit directory: a run's
+    /// `audit_job.json`, an original's `manifest.json`, a shared job's step manifests.
+    pub digests: BTreeMap<String, String>,
+}
+
+/// `DIR/receipts/<job name, '/' as '__'>.json`.
+pub fn receipt_path(dir: &Path, job: &Job) -> PathBuf {
+    dir.join("receipts")
+        .join(format!("{}.json", job.name().replace('/', "__")))
+}
+
+/// [`super::run_job`] with its receipt: the old receipt is removed first (a job killed
+/// this time must not pass for done), the new one written at the end, with the error
+/// when the job failed (the job's error is returned either way).
+pub fn run_job_with_receipt(
+    cfg: &AuditConfig,
+    dataset: &Path,
+    dir: &Path,
+    job: &Job,
+    log: Option<&Path>,
+    on_event: &(dyn Fn(super::Event) + Sync),
+) -> Result<Option<JobResult>> {
+    let path = receipt_path(dir, job);
+    if path.exists() {
+        std::fs::remove_file(&path).map_err(|e| Error::io(&path, e))?;
+    }
+    let started = std::time::SystemTime::now();
+    let t0 = std::time::Instant::now();
+    let outcome = super::run_job(cfg, dataset, dir, job, on_event);
+    let digests = match &outcome {
+        Ok(_) => job_digests(dir, job)?,
+        Err(_) => BTreeMap::new(),
+    };
+    let env = |k: &str| std::env::var(k).ok().filter(|v| !v.is_empty());
+    let batch_job = match (env("SLURM_ARRAY_JOB_ID"), env("SLURM_ARRAY_TASK_ID")) {
+        (Some(a), Some(t)) => Some(format!("{a}_{t}")),
+        _ => env("SLURM_JOB_ID"),
+    };
+    let receipt = Receipt {
+        format: RECEIPT_FORMAT.into(),
+        job: job.name(),
+        host: crate::io::host_name(),
+        pid: std::process::id(),
+        batch_job,
+        log: log.map(|p| p.display().to_string()),
+        started: utc(started),
+        finished: utc(std::time::SystemTime::now()),
+        seconds: t0.elapsed().as_secs_f64(),
+        exit: i32::from(outcome.is_err()),
+        error: outcome.as_ref().err().map(|e| e.to_string()),
+        crate_version: env!("CARGO_PKG_VERSION").into(),
+        numerics_revision: crate::oracle::NUMERICS_REVISION,
+        digests,
+    };
+    let text = serde_json::to_string_pretty(&receipt).expect("serializes") + "\n";
+    let written =
+        crate::io::create_dir_all(&dir.join("receipts")).and_then(|()| write_text(&path, &text));
+    let result = outcome?;
+    written?;
+    Ok(result)
+}
+
+/// What a finished job leaves, with its sha256 ([`Receipt::digests`]).
+fn job_digests(dir: &Path, job: &Job) -> Result<BTreeMap<String, String>> {
+    let files: Vec<String> = match job {
+        Job::Original { .. } => vec![format!("{}/manifest.json", job.folder())],
+        Job::Run { .. } => vec![format!("{}/audit_job.json", job.folder())],
+        Job::Shared { .. } => {
+            let mut v = Vec::new();
+            manifests(&dir.join(job.folder()), &job.folder(), &mut v);
+            v.sort();
+            v
+        }
+    };
+    files
+        .into_iter()
+        .map(|rel| {
+            let p = dir.join(&rel);
+            let bytes = std::fs::read(&p).map_err(|e| Error::io(&p, e))?;
+            Ok((rel, sha256_hex(&bytes)))
+        })
+        .collect()
+}
+
+/// Every `manifest.json` below `folder` (named `rel/...`).
+fn manifests(folder: &Path, rel: &str, out: &mut Vec<String>) {
+    let Ok(entries) = std::fs::read_dir(folder) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if name.starts_with('.') {
+            continue;
+        }
+        let sub = format!("{rel}/{name}");
+        if e.path().is_dir() {
+            manifests(&e.path(), &sub, out);
+        } else if name == "manifest.json" {
+            out.push(sub);
+        }
+    }
+}
+
+/// `YYYY-MM-DDTHH:MM:SSZ` of a time (days to civil date: Howard Hinnant's algorithm).
+pub fn utc(t: std::time::SystemTime) -> String {
+    let secs = t
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let (days, rem) = ((secs / 86_400) as i64, secs % 86_400);
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!(
+        "{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}Z",
+        rem / 3600,
+        rem % 3600 / 60,
+        rem % 60
+    )
+}
+
+// ---------------------------------------------------------------------------- merge
+
+/// A job the merge cannot take: its name, why, and where its log is (when known).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Missing {
+    pub job: String,
+    pub why: String,
+    pub log: Option<String>,
+}
+
+/// The merge: every job of every wave must have a receipt of a success whose digests
+/// still verify; the run jobs' results are read from their `audit_job.json` (nothing is
+/// computed) and reported as [`super::run`] reports them. `log_of` names a job's log for
+/// jobs without a receipt (a receipt names its own). `Ok(Err(missing))`: what is missing
+/// or failed, in wave order; nothing is written then.
+pub fn collect(
+    cfg: &AuditConfig,
+    dataset: &Path,
+    dir: &Path,
+    merge: &[PathBuf],
+    log_of: &dyn Fn(&Job) -> Option<String>,
+) -> Result<std::result::Result<Report, Vec<Missing>>> {
+    cfg.validate()?;
+    super::check_inputs(dataset, dir)?;
+    let pool = gather(cfg, dataset, dir, merge)?;
+    let mut missing = Vec::new();
+    let mut results = Vec::new();
+    for job in waves(cfg).into_iter().flat_map(|w| w.jobs) {
+        match take(cfg, dir, &job) {
+            Ok(Some(r)) => results.push(r),
+            Ok(None) => {}
+            Err((why, log)) => missing.push(Missing {
+                job: job.name(),
+                why,
+                log: log.or_else(|| log_of(&job)),
+            }),
+        }
+    }
+    if !missing.is_empty() {
+        return Ok(Err(missing));
+    }
+    Ok(Ok(finish(cfg, dir, pool, results)?))
+}
+
+/// A finished job's result (`None` for jobs without one), or why it is not finished and
+/// the log its receipt names.
+fn take(
+    cfg: &AuditConfig,
+    dir: &Path,
+    job: &Job,
+) -> std::result::Result<Option<JobResult>, (String, Option<String>)> {
+    let path = receipt_path(dir, job);
+    let bytes = std::fs::read(&path).map_err(|_| {
+        (
+            "no receipt: the job did not end (killed, out of time or memory, cancelled after \
+             a failed wave, or never submitted)"
+                .to_string(),
+            None,
+        )
+    })?;
+    let r: Receipt = serde_json::from_slice(&bytes)
+        .ok()
+        .filter(|r: &Receipt| r.format == RECEIPT_FORMAT && r.job == job.name())
+        .ok_or_else(|| (format!("{} is not its receipt", path.display()), None))?;
+    let fail = |why: String| (why, r.log.clone());
+    if r.exit != 0 {
+        return Err(fail(format!(
+            "failed on {} after {:.0} s: {}",
+            r.host,
+            r.seconds,
+            r.error.as_deref().unwrap_or("no message")
+        )));
+    }
+    if r.numerics_revision != crate::oracle::NUMERICS_REVISION {
+        return Err(fail(format!(
+            "computed by numerics revision {} (this binary: {}): run it again",
+            r.numerics_revision,
+            crate::oracle::NUMERICS_REVISION
+        )));
+    }
+    for (rel, sha) in &r.digests {
+        let ok = std::fs::read(dir.join(rel)).is_ok_and(|b| sha256_hex(&b) == *sha);
+        if !ok {
+            return Err(fail(format!(
+                "{rel} is missing or changed since the job's receipt"
+            )));
+        }
+    }
+    match job {
+        Job::Run {
+            generator,
+            variant,
+            seed,
+        } => {
+            let p = dir.join(job.folder()).join("audit_job.json");
+            let result: JobResult = std::fs::read(&p)
+                .ok()
+                .and_then(|b| serde_json::from_slice(&b).ok())
+                .ok_or_else(|| fail(format!("{} cannot be read", p.display())))?;
+            let config = cfg
+                .config_digest(*generator, *variant)
+                .map_err(|e| fail(e.to_string()))?;
+            let same = result.generator == generator.name()
+                && result.variant == variant.name()
+                && result.seed == *seed
+                && result.config == config;
+            if !same {
+                return Err(fail(format!(
+                    "{} is of another job or configuration",
+                    p.display()
+                )));
+            }
+            Ok(Some(result))
+        }
+        _ => Ok(None),
+    }
+}
+
+// ------------------------------------------------------------------------ estimates
+
+/// Seconds per training iteration per pixel on 2 threads, measured on the demo (lounge,
+/// quick preset, 80×60, 2-vCPU Xeon, Sapphire Rapids class): the original scene's 1 500
+/// iterations took 17.0 s (46 k Gaussians) — 2.4 µs; the pipeline's reconstructions and
+/// QA-Mask fine-tunes (1 600 + 900 iterations) 71.6 s — 6.0 µs (more Gaussians per pixel).
+pub const ORIGINAL_SECONDS_PER_ITERATION_PIXEL: f64 = 2.4e-6;
+pub const PIPELINE_SECONDS_PER_ITERATION_PIXEL: f64 = 6.0e-6;
+/// Peak resident memory per training pixel, same runs: 134 MB (original) and 324 MB
+/// (pipeline) at 4 800 pixels, over a fixed 50 MB.
+pub const ORIGINAL_BYTES_PER_PIXEL: f64 = 28_000.0;
+pub const PIPELINE_BYTES_PER_PIXEL: f64 = 68_000.0;
+pub const BASE_BYTES: f64 = 50e6;
+
+/// What a job is expected to cost on 2 threads.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Cost {
+    pub seconds: f64,
+    pub peak_rss_bytes: f64,
+    /// From this audit's own finished jobs of the same kind, not the calibration above.
+    pub measured: bool,
+}
+
+/// The work of a job in training iteration-pixels: the model behind [`estimate`].
+fn work(cfg: &AuditConfig, job: &Job, pixels: f64) -> f64 {
+    let pc = match *job {
+        Job::Run {
+            generator,
+            variant,
+            seed,
+        } => cfg
+            .pipeline_config(generator, variant, seed)
+            .unwrap_or_else(|_| cfg.base.clone()),
+        _ => cfg.base.clone(),
+    };
+    let qa = f64::from(pc.qa_iterations);
+    match job {
+        Job::Original { .. } => f64::from(cfg.train_iterations) * pixels,
+        // The original scene's QA-Mask (the stage-1 generations are small beside it).
+        Job::Shared { .. } => qa * pixels,
+        Job::Run { .. } => {
+            let recon = pc.stage1.iterations
+                + pc.stage2.iterations
+                + if pc.interpolation {
+                    pc.interpolate.iterations
+                } else {
+                    0
+                };
+            let qa_masks = match (pc.mask_source, pc.interpolation) {
+                (MaskSource::Qa, true) => 3.0,
+                (MaskSource::Qa, false) => 2.0,
+                _ => 0.0,
+            };
+            (f64::from(recon) + qa_masks * qa) * pixels
+        }
+    }
+}
+
+/// The training pixels of the dataset at the audit's training resolution (from its first
+/// candidate camera's size).
+fn training_pixels(cfg: &AuditConfig, dataset: &Path) -> Result<f64> {
+    let cams = crate::camera::inria::read_cameras_json(&dataset.join("candidates.json"))?;
+    let c = cams
+        .first()
+        .ok_or_else(|| Error::invalid("candidates.json lists no camera").at(dataset))?;
+    let r = f64::from(cfg.train_resolution.max(1));
+    Ok((f64::from(c.width) / r).round() * (f64::from(c.height) / r).round())
+}
+
+/// Every job's expected [`Cost`], wave by wave. Where `dir` holds finished jobs of this
+/// audit (receipts of successes), their measured seconds and peak memory (the steps'
+/// `cost.json`, the original's `train_stats.json`) replace the calibration for their kind:
+/// seconds per iteration-pixel averaged over them, memory their maximum.
+pub fn estimate(cfg: &AuditConfig, dataset: &Path, dir: &Path) -> Result<Vec<(Wave, Vec<Cost>)>> {
+    let pixels = training_pixels(cfg, dataset)?;
+    let kind = |j: &Job| match j {
+        Job::Original { .. } => 0,
+        Job::Shared { .. } => 1,
+        Job::Run { .. } => 2,
+    };
+    // Measured: (seconds / work summed, work summed, peak memory) per kind.
+    let mut measured = [(0.0f64, 0.0f64, 0.0f64); 3];
+    for job in waves(cfg).iter().flat_map(|w| &w.jobs) {
+        let Some((seconds, peak)) = measured_cost(dir, job) else {
+            continue;
+        };
+        let m = &mut measured[kind(job)];
+        m.0 += seconds;
+        m.1 += work(cfg, job, pixels);
+        m.2 = m.2.max(peak);
+    }
+    Ok(waves(cfg)
+        .into_iter()
+        .map(|w| {
+            let costs = w
+                .jobs
+                .iter()
+                .map(|j| {
+                    let k = kind(j);
+                    let units = work(cfg, j, pixels);
+                    let (rate, bytes_per_pixel) = match j {
+                        Job::Original { .. } => (
+                            ORIGINAL_SECONDS_PER_ITERATION_PIXEL,
+                            ORIGINAL_BYTES_PER_PIXEL,
+                        ),
+                        _ => (
+                            PIPELINE_SECONDS_PER_ITERATION_PIXEL,
+                            PIPELINE_BYTES_PER_PIXEL,
+                        ),
+                    };
+                    let (s, u, peak) = measured[k];
+                    if u > 0.0 && peak > 0.0 {
+                        Cost {
+                            seconds: s / u * units,
+                            peak_rss_bytes: peak,
+                            measured: true,
+                        }
+                    } else {
+                        Cost {
+                            seconds: rate * units,
+                            peak_rss_bytes: BASE_BYTES + bytes_per_pixel * pixels,
+                            measured: false,
+                        }
+                    }
+                })
+                .collect();
+            (w, costs)
+        })
+        .collect())
+}
+
+/// A finished job's seconds (its receipt) and peak memory (its steps' or training's
+/// records), if it succeeded in `dir`.
+fn measured_cost(dir: &Path, job: &Job) -> Option<(f64, f64)> {
+    let r: Receipt = serde_json::from_slice(&std::fs::read(receipt_path(dir, job)).ok()?).ok()?;
+    if r.exit != 0 || r.seconds <= 0.0 {
+        return None;
+    }
+    let folder = dir.join(job.folder());
+    let peak = match job {
+        Job::Original { .. } => {
+            let s: serde_json::Value =
+                serde_json::from_slice(&std::fs::read(folder.join("train_stats.json")).ok()?)
+                    .ok()?;
+            s["peak_memory_bytes"].as_f64()?
+        }
+        _ => {
+            let t: BTreeMap<String, crate::io::Cost> =
+                serde_json::from_slice(&std::fs::read(folder.join("timings.json")).ok()?).ok()?;
+            t.values()
+                .filter_map(|c| c.peak_rss_bytes)
+                .max()
+                .map(|b| b as f64)?
+        }
+    };
+    Some((r.seconds, peak))
+}
+
+// ------------------------------------------------------------------------- Slurm
+
+/// Resource requests over an estimate: a job's `--time` is [`TIME_FACTOR`] times its
+/// expected seconds (other CPUs, a loaded node, a slower file system; a job over its time
+/// is killed and must run again), at least [`MIN_TIME_SECONDS`]; its `--mem` is
+/// [`MEMORY_FACTOR`] times its expected peak, at least [`MIN_MEMORY_BYTES`].
+pub const TIME_FACTOR: f64 = 3.0;
+pub const MIN_TIME_SECONDS: f64 = 600.0;
+pub const MEMORY_FACTOR: f64 = 2.0;
+pub const MIN_MEMORY_BYTES: f64 = 1e9;
+
+/// Options of a Slurm submission folder.
+#[derive(Clone, Debug, Default)]
+pub struct SlurmOptions {
+    pub partition: Option<String>,
+    pub account: Option<String>,
+    /// More `#SBATCH` options, one per entry (e.g. `--qos=long`).
+    pub extra: Vec<String>,
+    /// At most this many tasks of one array at once (`--array=…%N`).
+    pub throttle: Option<u32>,
+    /// CPUs per task (the worker's thread count); 2 when unset.
+    pub cpus: Option<u32>,
+}
+
+/// The resource request of a wave: the largest of its jobs'.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Request {
+    pub cpus: u32,
+    pub memory_mb: u64,
+    pub time_minutes: u64,
+}
+
+/// [`Request`] of a wave's costs.
+pub fn request(costs: &[Cost], cpus: u32) -> Request {
+    let seconds = costs.iter().map(|c| c.seconds).fold(0.0, f64::max);
+    let bytes = costs.iter().map(|c| c.peak_rss_bytes).fold(0.0, f64::max);
+    let time = (seconds * TIME_FACTOR).max(MIN_TIME_SECONDS);
+    let mem = (bytes * MEMORY_FACTOR).max(MIN_MEMORY_BYTES);
+    Request {
+        cpus,
+        memory_mb: (mem / 1e6).ceil() as u64,
+        time_minutes: (time / 60.0).ceil() as u64,
+    }
+}
+
+/// A word for `sh`: single-quoted unless it is plain.
+pub fn shell_quote(s: &str) -> String {
+    let plain = !s.is_empty()
+        && s.bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b"-_./=:,+@%".contains(&b));
+    if plain {
+        s.into()
+    } else {
+        format!("'{}'", s.replace('\'', r"'\''"))
+    }
+}
+
+/// Write a Slurm submission folder `out` for the audit: `jobs.txt` (every job, wave by
+/// wave), per wave `wave-N-<name>.txt` (its jobs; array task i runs line i+1) and
+/// `wave-N-<name>.sbatch` (a job array whose task runs `unseen … --only JOB`), `merge.sbatch`
+/// (`unseen … --collect`), `submit.sh` (submits the waves in order, each after the one
+/// before succeeded, the merge after all of them ended, and prints the job ids) and
+/// `logs/`. `command` is the worker's command line without `--only` (binary first, the
+/// audit's grid in absolute paths). Returns the waves with their requests.
+pub fn emit_slurm(
+    cfg: &AuditConfig,
+    dataset: &Path,
+    dir: &Path,
+    command: &[String],
+    out: &Path,
+    opts: &SlurmOptions,
+) -> Result<Vec<(Wave, Request)>> {
+    if out.is_file() {
+        return Err(Error::invalid("the submission path is a file").at(out));
+    }
+    let estimates = estimate(cfg, dataset, dir)?;
+    let cpus = opts.cpus.unwrap_or(2).max(1);
+    let logs = out.join("logs");
+    crate::io::create_dir_all(&logs)?;
+    let cmd: Vec<String> = command.iter().map(|a| shell_quote(a)).collect();
+    let cmd = cmd.join(" ");
+    let head = |name: &str, req: &Request, log: &Path| {
+        let mut s = format!(
+            "#!/bin/bash\n#SBATCH --job-name=unseen-{name}\n#SBATCH --cpus-per-task={}\n\
+             #SBATCH --mem={}M\n#SBATCH --time={}\n#SBATCH --output={}\n\
+             #SBATCH --open-mode=append\n#SBATCH --kill-on-invalid-dep=yes\n",
+            req.cpus,
+            req.memory_mb,
+            slurm_time(req.time_minutes),
+            log.display()
+        );
+        if let Some(p) = &opts.partition {
+            s += &format!("#SBATCH --partition={p}\n");
+        }
+        if let Some(a) = &opts.account {
+            s += &format!("#SBATCH --account={a}\n");
+        }
+        for e in &opts.extra {
+            s += &format!("#SBATCH {e}\n");
+        }
+        s
+    };
+    let mut all = String::new();
+    let mut emitted = Vec::new();
+    let mut submit = String::from(
+        "#!/bin/sh\n# Submit the audit's waves to Slurm; prints the job ids.\nset -eu\n\
+         cd \"$(dirname \"$0\")\"\nid() { sbatch --parsable \"$@\" | cut -d';' -f1; }\n",
+    );
+    let mut ids = Vec::new();
+    let mut n = 0;
+    for (wave, costs) in estimates {
+        if wave.jobs.is_empty() {
+            continue;
+        }
+        n += 1;
+        let stem = format!("wave-{n}-{}", wave.name);
+        let list: String = wave.jobs.iter().map(|j| j.name() + "\n").collect();
+        all += &list;
+        let list_path = out.join(format!("{stem}.txt"));
+        write_text(&list_path, &list)?;
+        let req = request(&costs, cpus);
+        let mut s = head(wave.name, &req, &logs.join(format!("{}-%a.out", wave.name)));
+        let throttle = opts.throttle.map_or(String::new(), |t| format!("%{t}"));
+        s += &format!(
+            "#SBATCH --array=0-{}{throttle}\nset -eu\n\
+             job=$(sed -n \"$((SLURM_ARRAY_TASK_ID + 1))p\" {})\n\
+             exec {cmd} --only \"$job\" --threads \"${{SLURM_CPUS_PER_TASK:-{cpus}}}\" \
+             --log {}\n",
+            wave.jobs.len() - 1,
+            shell_quote(&list_path.display().to_string()),
+            shell_quote(&format!("{}/{}-", logs.display(), wave.name))
+                + "\"$SLURM_ARRAY_TASK_ID\".out"
+        );
+        write_text(&out.join(format!("{stem}.sbatch")), &s)?;
+        let var = format!("w{n}");
+        let dep = ids.last().map_or(String::new(), |p: &String| {
+            format!(" --dependency=afterok:${p}")
+        });
+        submit += &format!(
+            "{var}=$(id{dep} {stem}.sbatch)\necho \"{}: ${var} ({} jobs)\"\n",
+            wave.name,
+            wave.jobs.len()
+        );
+        ids.push(var);
+        emitted.push((wave, req));
+    }
+    write_text(&out.join("jobs.txt"), &all)?;
+    let merge_req = Request {
+        cpus: 1,
+        memory_mb: (MIN_MEMORY_BYTES / 1e6) as u64,
+        time_minutes: (MIN_TIME_SECONDS / 60.0) as u64,
+    };
+    let mut m = head("merge", &merge_req, &logs.join("merge.out"));
+    m += &format!(
+        "set -eu\nexec {cmd} --collect --submission {}\n",
+        shell_quote(&out.display().to_string())
+    );
+    write_text(&out.join("merge.sbatch"), &m)?;
+    let after: Vec<String> = ids.iter().map(|v| format!("${v}")).collect();
+    submit += &format!(
+        "merge=$(id --dependency=afterany:{} merge.sbatch)\necho \"merge: $merge\"\n\
+         echo {} $merge > job-ids.txt\n",
+        after.join(":"),
+        after.join(" ")
+    );
+    let script = out.join("submit.sh");
+    write_text(&script, &submit)?;
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let _ = std::fs::set_permissions(&script, std::fs::Permissions::from_mode(0o755));
+    }
+    Ok(emitted)
+}
+
+/// `--time` as Slurm reads it: `D-HH:MM:00`.
+fn slurm_time(minutes: u64) -> String {
+    format!(
+        "{}-{:02}:{:02}:00",
+        minutes / 1440,
+        minutes % 1440 / 60,
+        minutes % 60
+    )
+}
+
+/// The log the submission folder `submission` gives `job` ([`emit_slurm`]'s names).
+pub fn log_in_submission(cfg: &AuditConfig, submission: &Path, job: &Job) -> Option<String> {
+    waves(cfg).into_iter().find_map(|w| {
+        let i = w.jobs.iter().position(|j| j == job)?;
+        Some(
+            submission
+                .join("logs")
+                .join(format!("{}-{i}.out", w.name))
+                .display()
+                .to_string(),
+        )
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::Variant;
+    use super::*;
+
+    #[test]
+    fn utc_formats_known_instants() {
+        let at = |s: u64| utc(std::time::UNIX_EPOCH + std::time::Duration::from_secs(s));
+        assert_eq!(at(0), "1970-01-01T00:00:00Z");
+        assert_eq!(at(951_782_400), "2000-02-29T00:00:00Z");
+        assert_eq!(at(1_795_675_953), "2026-11-26T06:52:33Z");
+    }
+
+    #[test]
+    fn waves_hold_every_job_once_originals_first() {
+        let cfg = AuditConfig {
+            variants: vec![Variant::Full, Variant::EvenViews],
+            seeds: 3..5,
+            ..AuditConfig::quick()
+        };
+        let w = waves(&cfg);
+        assert_eq!(
+            w.iter().map(|w| w.jobs.len()).collect::<Vec<_>>(),
+            [2, 4, 8]
+        );
+        let flat: Vec<Job> = w.iter().flat_map(|w| w.jobs.clone()).collect();
+        let listed = jobs(&cfg);
+        assert!(listed.iter().all(|j| flat.contains(j)));
+        assert_eq!(w[1].jobs[0].folder(), "runs/classical/full/seed-3");
+    }
+
+    #[test]
+    fn requests_have_their_safety_factors_and_floors() {
+        let c = |s: f64, b: f64| Cost {
+            seconds: s,
+            peak_rss_bytes: b,
+            measured: false,
+        };
+        let r = request(&[c(3600.0, 3e9), c(10.0, 1e6)], 4);
+        assert_eq!((r.cpus, r.memory_mb, r.time_minutes), (4, 6000, 180));
+        let r = request(&[c(1.0, 1e6)], 2);
+        assert_eq!((r.memory_mb, r.time_minutes), (1000, 10));
+        assert_eq!(slurm_time(180), "0-03:00:00");
+        assert_eq!(slurm_time(1441), "1-00:01:00");
+        assert_eq!(shell_quote("a b'c"), r"'a b'\''c'");
+        assert_eq!(shell_quote("/x/y-z.json"), "/x/y-z.json");
+    }
+}
