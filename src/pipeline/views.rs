@@ -90,6 +90,25 @@ pub struct Plan {
     pub gap_cameras: Vec<GapCamera>,
 }
 
+/// The per-view stage-1 steps of the run `out` (`stage1/<view>` for each independent view
+/// of its finished views step, in plan order): what a batch engine fans out after
+/// `--until views` (SPEC.md §20.8).
+pub fn stage1_steps(out: &std::path::Path) -> Result<Vec<String>> {
+    let path = out.join("views").join("plan.json");
+    if !path.is_file() {
+        return Err(Error::invalid(
+            "the views step is not done here (run with --until views first)",
+        )
+        .at(out));
+    }
+    let plan: Plan = read_json(&path)?;
+    Ok(plan
+        .independent
+        .iter()
+        .map(|n| format!("stage1/{}", super::stem(n)))
+        .collect())
+}
+
 /// A candidate left out of detection, and why (SPEC.md §20.2).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SetAside {

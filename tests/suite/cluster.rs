@@ -223,3 +223,60 @@ fn the_estimate_lists_every_wave_and_uses_what_the_audit_measured() {
         "{est}"
     );
 }
+
+/// `extrapolate --emit-slurm`: three waves (the views, a stage-1 array over the
+/// candidates, the rest), valid shell; `--stage1-steps` lists the per-view steps once the
+/// views step is done, and before it is a clear error.
+#[test]
+fn extrapolate_emits_its_per_view_fan_out_and_lists_its_stage1_steps() {
+    let t = TempDir::new("cluster-extrapolate");
+    let run = super::pipeline::tiny_run(t.path());
+    let cfg = super::pipeline::tiny_config_file(t.path());
+    let (out, sub) = (t.path().join("out"), t.path().join("submit"));
+    let ex = |more: &[&std::ffi::OsStr]| {
+        Command::new(env!("CARGO_BIN_EXE_unseen"))
+            .arg("extrapolate")
+            .arg(&run)
+            .arg("--views")
+            .arg(lounge().join("candidates.json"))
+            .arg("--config")
+            .arg(&cfg)
+            .arg("--out")
+            .arg(&out)
+            .args(more)
+            .output()
+            .unwrap()
+    };
+    let printed = ok(&ex(&["--emit-slurm".as_ref(), sub.as_os_str()]));
+    assert!(printed.contains("stage1: 12 tasks"), "{printed}");
+    assert!(!out.exists(), "--emit-slurm ran something");
+    for (stem, n) in [
+        ("wave-1-views", 1),
+        ("wave-2-stage1", 12),
+        ("wave-3-finish", 1),
+    ] {
+        let s = std::fs::read_to_string(sub.join(format!("{stem}.sbatch"))).unwrap();
+        assert!(s.contains(&format!("#SBATCH --array=0-{}\n", n - 1)), "{s}");
+        assert!(s.contains("pipeline-config.json"), "{s}");
+        if let Ok(st) = Command::new("bash")
+            .arg("-n")
+            .arg(sub.join(format!("{stem}.sbatch")))
+            .status()
+        {
+            assert!(st.success(), "{stem} is not valid shell");
+        }
+    }
+    let o = ex(&["--stage1-steps".as_ref()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("the views step is not done here"),
+        "{err}"
+    );
+    ok(&ex(&["--until".as_ref(), "views".as_ref()]));
+    let steps = ok(&ex(&["--stage1-steps".as_ref()]));
+    let plan: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("views/plan.json")).unwrap()).unwrap();
+    let n = plan["independent"].as_array().unwrap().len();
+    assert!(n > 0 && steps.lines().count() == n, "{steps}");
+    assert!(steps.lines().all(|l| l.starts_with("stage1/")), "{steps}");
+}

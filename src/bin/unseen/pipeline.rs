@@ -91,6 +91,15 @@ pub struct ExtrapolateArgs {
     /// computed is copied from it instead (same bits).
     #[arg(long)]
     cache: Option<PathBuf>,
+    /// Print the per-view stage-1 steps of OUT (its views step must be done) and exit.
+    #[arg(long, conflicts_with_all = ["only", "until", "emit_slurm"])]
+    stage1_steps: bool,
+    /// Write a Slurm submission folder for this run (the views, the stage-1 views as a job
+    /// array, then the rest; submit.sh) and run nothing.
+    #[arg(long, conflicts_with_all = ["only", "until"])]
+    emit_slurm: Option<PathBuf>,
+    #[command(flatten)]
+    slurm: SlurmArgs,
     #[command(flatten)]
     knobs: Knobs,
 }
@@ -207,8 +216,17 @@ fn config_from(preset: Preset, file: Option<&Path>, knobs: &Knobs) -> Result<Pip
 }
 
 pub fn run_extrapolate(a: &ExtrapolateArgs) -> Result<()> {
+    if a.stage1_steps {
+        for s in pipeline::views::stage1_steps(&a.out)? {
+            println!("{s}");
+        }
+        return Ok(());
+    }
     let cfg = config_from(a.preset, a.config.as_deref(), &a.knobs)?;
     let inputs = load_inputs(&a.run, &a.views, a.eval.as_deref(), a.dataset.as_deref())?;
+    if let Some(sub) = &a.emit_slurm {
+        return emit_extrapolate(a, &cfg, &inputs, sub);
+    }
     let draw = super::progress::drawer();
     let scope = match (&a.only, &a.until) {
         (Some(s), _) => Scope::Only(s.clone()),
@@ -230,6 +248,99 @@ pub fn run_extrapolate(a: &ExtrapolateArgs) -> Result<()> {
         Some(s) => println!("extrapolated scene: {}", s.display()),
         None => println!("done: the requested steps are in {}", a.out.display()),
     }
+    Ok(())
+}
+
+/// `extrapolate --emit-slurm SUB`: wave 1 computes the views step and lists the stage-1
+/// steps into SUB/stage1-steps.txt; wave 2 is an array over the candidates (an upper bound
+/// of the independent views; a task past the list has nothing to do); wave 3 finishes the
+/// run with `--resume`. Every job runs the resolved configuration (SUB/pipeline-config.json).
+fn emit_extrapolate(
+    a: &ExtrapolateArgs,
+    cfg: &PipelineConfig,
+    inputs: &Inputs,
+    sub: &Path,
+) -> Result<()> {
+    use unseen::pipeline::audit::cluster::{self, ArrayWave, shell_quote};
+    let abs = |p: &Path| std::path::absolute(p).map_err(|e| Error::io(p, e));
+    let sub = abs(sub)?;
+    if sub.is_file() {
+        return Err(Error::invalid("the submission path is a file").at(&sub));
+    }
+    unseen::io::create_dir_all(&sub)?;
+    let config = sub.join("pipeline-config.json");
+    let text = serde_json::to_string_pretty(cfg).expect("serializes") + "\n";
+    unseen::io::write_text(&config, &text)?;
+    let exe = std::env::current_exe().map_err(|e| Error::io(Path::new("unseen"), e))?;
+    let show = |p: PathBuf| shell_quote(&p.display().to_string());
+    let mut cmd = vec![
+        show(exe),
+        "extrapolate".into(),
+        show(abs(&a.run)?),
+        "--views".into(),
+        show(abs(&a.views)?),
+        "--out".into(),
+        show(abs(&a.out)?),
+        "--preset".into(),
+        cfg.preset.clone(),
+        "--config".into(),
+        show(config),
+    ];
+    for (flag, p) in [
+        ("--eval", &a.eval),
+        ("--dataset", &a.dataset),
+        ("--cache", &a.cache),
+    ] {
+        if let Some(p) = p {
+            cmd.extend([flag.to_string(), show(abs(p)?)]);
+        }
+    }
+    let cmd = cmd.join(" ");
+    let opts = a.slurm.options();
+    let cpus = opts.cpus.unwrap_or(2).max(1);
+    let threads = format!("--threads \"${{SLURM_CPUS_PER_TASK:-{cpus}}}\"");
+    let steps = shell_quote(&sub.join("stage1-steps.txt").display().to_string());
+    // The candidates are at the run's resolution: the pipeline's image size.
+    let pixels = inputs
+        .candidates
+        .first()
+        .map_or(0.0, |c| f64::from(c.width) * f64::from(c.height));
+    let whole = cluster::request(&[cluster::pipeline_cost(cfg, pixels)], cpus);
+    let small = cluster::least_request(cpus);
+    let waves = [
+        ArrayWave {
+            name: "views".into(),
+            tasks: 1,
+            request: small.clone(),
+            body: format!(
+                "{cmd} --resume --until views {threads}\n{cmd} --stage1-steps > {steps}\n"
+            ),
+        },
+        ArrayWave {
+            name: "stage1".into(),
+            tasks: inputs.candidates.len(),
+            request: small,
+            body: format!(
+                "step=$(sed -n \"$((SLURM_ARRAY_TASK_ID + 1))p\" {steps})\n\
+                 if [ -z \"$step\" ]; then echo \"no stage-1 view $SLURM_ARRAY_TASK_ID\"; exit 0; fi\n\
+                 exec {cmd} --only \"$step\" {threads}\n"
+            ),
+        },
+        ArrayWave {
+            name: "finish".into(),
+            tasks: 1,
+            request: whole,
+            body: format!("exec {cmd} --resume {threads}\n"),
+        },
+    ];
+    cluster::write_submission(&sub, &waves, None, &opts)?;
+    for w in &waves {
+        println!(
+            "{}: {} tasks, --cpus-per-task={} --mem={}M --time={} min",
+            w.name, w.tasks, w.request.cpus, w.request.memory_mb, w.request.time_minutes
+        );
+    }
+    println!("submit with: {}", sub.join("submit.sh").display());
     Ok(())
 }
 
@@ -357,6 +468,38 @@ pub fn run_demo(a: &DemoArgs) -> Result<()> {
     Ok(())
 }
 
+/// The resource options of `--emit-slurm`.
+#[derive(Args)]
+pub struct SlurmArgs {
+    /// Slurm partition of every job (--emit-slurm).
+    #[arg(long, requires = "emit_slurm")]
+    slurm_partition: Option<String>,
+    /// Slurm account of every job (--emit-slurm).
+    #[arg(long, requires = "emit_slurm")]
+    slurm_account: Option<String>,
+    /// Another `#SBATCH` option for every job, e.g. `--slurm-extra=--qos=long`; repeatable.
+    #[arg(long, requires = "emit_slurm", allow_hyphen_values = true)]
+    slurm_extra: Vec<String>,
+    /// At most this many tasks of one wave at once (`--array=…%N`).
+    #[arg(long, requires = "emit_slurm")]
+    slurm_throttle: Option<u32>,
+    /// CPUs per task, the workers' thread count (default 2).
+    #[arg(long, requires = "emit_slurm")]
+    slurm_cpus: Option<u32>,
+}
+
+impl SlurmArgs {
+    fn options(&self) -> unseen::pipeline::audit::cluster::SlurmOptions {
+        unseen::pipeline::audit::cluster::SlurmOptions {
+            partition: self.slurm_partition.clone(),
+            account: self.slurm_account.clone(),
+            extra: self.slurm_extra.clone(),
+            throttle: self.slurm_throttle,
+            cpus: self.slurm_cpus,
+        }
+    }
+}
+
 #[derive(Args)]
 pub struct AuditArgs {
     /// Dataset with ground truth, candidates.json and evaluation.json (a bundled room).
@@ -427,21 +570,8 @@ pub struct AuditArgs {
     /// submit.sh) and run no job.
     #[arg(long, conflicts_with_all = ["only", "list", "report_only", "collect"])]
     emit_slurm: Option<PathBuf>,
-    /// Slurm partition of every job (--emit-slurm).
-    #[arg(long, requires = "emit_slurm")]
-    slurm_partition: Option<String>,
-    /// Slurm account of every job (--emit-slurm).
-    #[arg(long, requires = "emit_slurm")]
-    slurm_account: Option<String>,
-    /// Another `#SBATCH` option for every job, e.g. `--slurm-extra=--qos=long`; repeatable.
-    #[arg(long, requires = "emit_slurm", allow_hyphen_values = true)]
-    slurm_extra: Vec<String>,
-    /// At most this many tasks of one wave at once (`--array=…%N`).
-    #[arg(long, requires = "emit_slurm")]
-    slurm_throttle: Option<u32>,
-    /// CPUs per task, the workers' thread count (default 2).
-    #[arg(long, requires = "emit_slurm")]
-    slurm_cpus: Option<u32>,
+    #[command(flatten)]
+    slurm: SlurmArgs,
     /// Worker threads (default: all cores); results are the same bits for any count.
     #[arg(long)]
     threads: Option<usize>,
@@ -656,13 +786,7 @@ fn emit_audit(
     for m in &a.merge {
         command.extend(["--merge".into(), show(abs(m)?)]);
     }
-    let opts = cluster::SlurmOptions {
-        partition: a.slurm_partition.clone(),
-        account: a.slurm_account.clone(),
-        extra: a.slurm_extra.clone(),
-        throttle: a.slurm_throttle,
-        cpus: a.slurm_cpus,
-    };
+    let opts = a.slurm.options();
     let waves = cluster::emit_slurm(cfg, &a.dataset, &a.out, &command, &sub, &opts)?;
     for (w, r) in &waves {
         println!(

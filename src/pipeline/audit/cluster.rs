@@ -7,7 +7,9 @@
 //! (`unseen audit … --collect`) reads the receipts and the run jobs' `audit_job.json`,
 //! computes nothing, and writes the same report a sequential `unseen audit` writes.
 
-use super::{AuditConfig, Job, JobResult, MaskSource, Report, finish, gather, jobs};
+use super::{
+    AuditConfig, Job, JobResult, MaskSource, PipelineConfig, Report, finish, gather, jobs,
+};
 use crate::error::{Error, Result};
 use crate::io::{sha256_hex, write_text};
 use std::collections::BTreeMap;
@@ -368,26 +370,38 @@ fn work(cfg: &AuditConfig, job: &Job, pixels: f64) -> f64 {
             .unwrap_or_else(|_| cfg.base.clone()),
         _ => cfg.base.clone(),
     };
-    let qa = f64::from(pc.qa_iterations);
     match job {
         Job::Original { .. } => f64::from(cfg.train_iterations) * pixels,
         // The original scene's QA-Mask (the stage-1 generations are small beside it).
-        Job::Shared { .. } => qa * pixels,
-        Job::Run { .. } => {
-            let recon = pc.stage1.iterations
-                + pc.stage2.iterations
-                + if pc.interpolation {
-                    pc.interpolate.iterations
-                } else {
-                    0
-                };
-            let qa_masks = match (pc.mask_source, pc.interpolation) {
-                (MaskSource::Qa, true) => 3.0,
-                (MaskSource::Qa, false) => 2.0,
-                _ => 0.0,
-            };
-            (f64::from(recon) + qa_masks * qa) * pixels
-        }
+        Job::Shared { .. } => f64::from(pc.qa_iterations) * pixels,
+        Job::Run { .. } => pipeline_work(&pc, pixels),
+    }
+}
+
+/// The training iteration-pixels of a whole pipeline run: its reconstructions and its
+/// QA-Mask fine-tunes (3, 2 without interpolation, none without the QA-Mask).
+pub fn pipeline_work(pc: &PipelineConfig, pixels: f64) -> f64 {
+    let recon = pc.stage1.iterations
+        + pc.stage2.iterations
+        + if pc.interpolation {
+            pc.interpolate.iterations
+        } else {
+            0
+        };
+    let qa_masks = match (pc.mask_source, pc.interpolation) {
+        (MaskSource::Qa, true) => 3.0,
+        (MaskSource::Qa, false) => 2.0,
+        _ => 0.0,
+    };
+    (f64::from(recon) + qa_masks * f64::from(pc.qa_iterations)) * pixels
+}
+
+/// A whole pipeline run's expected [`Cost`] by the calibration.
+pub fn pipeline_cost(pc: &PipelineConfig, pixels: f64) -> Cost {
+    Cost {
+        seconds: PIPELINE_SECONDS_PER_ITERATION_PIXEL * pipeline_work(pc, pixels),
+        peak_rss_bytes: BASE_BYTES + PIPELINE_BYTES_PER_PIXEL * pixels,
+        measured: false,
     }
 }
 
@@ -548,13 +562,109 @@ pub fn shell_quote(s: &str) -> String {
     }
 }
 
-/// Write a Slurm submission folder `out` for the audit: `jobs.txt` (every job, wave by
-/// wave), per wave `wave-N-<name>.txt` (its jobs; array task i runs line i+1) and
-/// `wave-N-<name>.sbatch` (a job array whose task runs `unseen … --only JOB`), `merge.sbatch`
-/// (`unseen … --collect`), `submit.sh` (submits the waves in order, each after the one
-/// before succeeded, the merge after all of them ended, and prints the job ids) and
-/// `logs/`. `command` is the worker's command line without `--only` (binary first, the
-/// audit's grid in absolute paths). Returns the waves with their requests.
+/// One job array of a submission folder: `tasks` tasks, each running `body` (a shell
+/// script's lines after the `#SBATCH` header; `$SLURM_ARRAY_TASK_ID` is the task).
+#[derive(Clone, Debug)]
+pub struct ArrayWave {
+    pub name: String,
+    pub tasks: usize,
+    pub request: Request,
+    pub body: String,
+}
+
+/// Write the Slurm submission folder `out`: per wave `wave-N-<name>.sbatch` (a job array,
+/// `--output=out/logs/<name>-%a.out`), the optional `merge.sbatch`, and `submit.sh`, which
+/// submits each wave after the one before succeeded (`afterok`), the merge after every wave
+/// ended (`afterany`: it names what failed), prints the ids and writes `job-ids.txt`.
+pub fn write_submission(
+    out: &Path,
+    waves: &[ArrayWave],
+    merge: Option<&ArrayWave>,
+    opts: &SlurmOptions,
+) -> Result<()> {
+    let logs = out.join("logs");
+    crate::io::create_dir_all(&logs)?;
+    let script = |w: &ArrayWave, array: bool| {
+        let r = &w.request;
+        let mut s = format!(
+            "#!/bin/bash\n#SBATCH --job-name=unseen-{}\n#SBATCH --cpus-per-task={}\n\
+             #SBATCH --mem={}M\n#SBATCH --time={}\n#SBATCH --output={}\n\
+             #SBATCH --open-mode=append\n#SBATCH --kill-on-invalid-dep=yes\n",
+            w.name,
+            r.cpus,
+            r.memory_mb,
+            slurm_time(r.time_minutes),
+            logs.join(if array {
+                format!("{}-%a.out", w.name)
+            } else {
+                format!("{}.out", w.name)
+            })
+            .display()
+        );
+        if array {
+            let throttle = opts.throttle.map_or(String::new(), |t| format!("%{t}"));
+            s += &format!("#SBATCH --array=0-{}{throttle}\n", w.tasks.max(1) - 1);
+        }
+        if let Some(p) = &opts.partition {
+            s += &format!("#SBATCH --partition={p}\n");
+        }
+        if let Some(a) = &opts.account {
+            s += &format!("#SBATCH --account={a}\n");
+        }
+        for e in &opts.extra {
+            s += &format!("#SBATCH {e}\n");
+        }
+        s + "set -eu\n" + &w.body
+    };
+    let mut submit = String::from(
+        "#!/bin/sh\n# Submit the waves to Slurm; prints the job ids.\nset -eu\n\
+         cd \"$(dirname \"$0\")\"\nid() { sbatch --parsable \"$@\" | cut -d';' -f1; }\n",
+    );
+    let mut ids: Vec<String> = Vec::new();
+    for (i, w) in waves.iter().enumerate() {
+        let stem = format!("wave-{}-{}", i + 1, w.name);
+        write_text(&out.join(format!("{stem}.sbatch")), &script(w, true))?;
+        let var = format!("w{}", i + 1);
+        let dep = ids
+            .last()
+            .map_or(String::new(), |p| format!(" --dependency=afterok:${p}"));
+        submit += &format!(
+            "{var}=$(id{dep} {stem}.sbatch)\necho \"{}: ${var} ({} tasks)\"\n",
+            w.name, w.tasks
+        );
+        ids.push(var);
+    }
+    let mut all: Vec<String> = ids.iter().map(|v| format!("${v}")).collect();
+    if let Some(m) = merge {
+        write_text(&out.join("merge.sbatch"), &script(m, false))?;
+        submit += &format!(
+            "merge=$(id --dependency=afterany:{} merge.sbatch)\necho \"merge: $merge\"\n",
+            all.join(":")
+        );
+        all.push("$merge".into());
+    }
+    submit += &format!("echo {} > job-ids.txt\n", all.join(" "));
+    let path = out.join("submit.sh");
+    write_text(&path, &submit)?;
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755))
+            .map_err(|e| Error::io(&path, e))?;
+    }
+    Ok(())
+}
+
+/// The smallest request ([`MIN_TIME_SECONDS`], [`MIN_MEMORY_BYTES`]) on `cpus` CPUs.
+pub fn least_request(cpus: u32) -> Request {
+    request(&[], cpus)
+}
+
+/// Write a Slurm submission folder `out` for the audit ([`write_submission`]): also
+/// `jobs.txt` (every job, wave by wave) and per wave `wave-N-<name>.txt` (its jobs; array
+/// task i runs line i+1 as `unseen … --only JOB`); the merge runs `unseen … --collect`.
+/// `command` is the worker's command line without `--only` (binary first, the audit's grid
+/// in absolute paths). Returns the waves with their requests.
 pub fn emit_slurm(
     cfg: &AuditConfig,
     dataset: &Path,
@@ -568,101 +678,48 @@ pub fn emit_slurm(
     }
     let estimates = estimate(cfg, dataset, dir)?;
     let cpus = opts.cpus.unwrap_or(2).max(1);
+    crate::io::create_dir_all(out)?;
     let logs = out.join("logs");
-    crate::io::create_dir_all(&logs)?;
     let cmd: Vec<String> = command.iter().map(|a| shell_quote(a)).collect();
     let cmd = cmd.join(" ");
-    let head = |name: &str, req: &Request, log: &Path| {
-        let mut s = format!(
-            "#!/bin/bash\n#SBATCH --job-name=unseen-{name}\n#SBATCH --cpus-per-task={}\n\
-             #SBATCH --mem={}M\n#SBATCH --time={}\n#SBATCH --output={}\n\
-             #SBATCH --open-mode=append\n#SBATCH --kill-on-invalid-dep=yes\n",
-            req.cpus,
-            req.memory_mb,
-            slurm_time(req.time_minutes),
-            log.display()
-        );
-        if let Some(p) = &opts.partition {
-            s += &format!("#SBATCH --partition={p}\n");
-        }
-        if let Some(a) = &opts.account {
-            s += &format!("#SBATCH --account={a}\n");
-        }
-        for e in &opts.extra {
-            s += &format!("#SBATCH {e}\n");
-        }
-        s
-    };
     let mut all = String::new();
+    let mut arrays = Vec::new();
     let mut emitted = Vec::new();
-    let mut submit = String::from(
-        "#!/bin/sh\n# Submit the audit's waves to Slurm; prints the job ids.\nset -eu\n\
-         cd \"$(dirname \"$0\")\"\nid() { sbatch --parsable \"$@\" | cut -d';' -f1; }\n",
-    );
-    let mut ids = Vec::new();
-    let mut n = 0;
     for (wave, costs) in estimates {
         if wave.jobs.is_empty() {
             continue;
         }
-        n += 1;
-        let stem = format!("wave-{n}-{}", wave.name);
         let list: String = wave.jobs.iter().map(|j| j.name() + "\n").collect();
         all += &list;
-        let list_path = out.join(format!("{stem}.txt"));
+        let list_path = out.join(format!("wave-{}-{}.txt", arrays.len() + 1, wave.name));
         write_text(&list_path, &list)?;
-        let req = request(&costs, cpus);
-        let mut s = head(wave.name, &req, &logs.join(format!("{}-%a.out", wave.name)));
-        let throttle = opts.throttle.map_or(String::new(), |t| format!("%{t}"));
-        s += &format!(
-            "#SBATCH --array=0-{}{throttle}\nset -eu\n\
-             job=$(sed -n \"$((SLURM_ARRAY_TASK_ID + 1))p\" {})\n\
+        let log = shell_quote(&format!("{}/{}-", logs.display(), wave.name));
+        let body = format!(
+            "job=$(sed -n \"$((SLURM_ARRAY_TASK_ID + 1))p\" {})\n\
              exec {cmd} --only \"$job\" --threads \"${{SLURM_CPUS_PER_TASK:-{cpus}}}\" \
-             --log {}\n",
-            wave.jobs.len() - 1,
+             --log {log}\"$SLURM_ARRAY_TASK_ID\".out\n",
             shell_quote(&list_path.display().to_string()),
-            shell_quote(&format!("{}/{}-", logs.display(), wave.name))
-                + "\"$SLURM_ARRAY_TASK_ID\".out"
         );
-        write_text(&out.join(format!("{stem}.sbatch")), &s)?;
-        let var = format!("w{n}");
-        let dep = ids.last().map_or(String::new(), |p: &String| {
-            format!(" --dependency=afterok:${p}")
+        let req = request(&costs, cpus);
+        arrays.push(ArrayWave {
+            name: wave.name.into(),
+            tasks: wave.jobs.len(),
+            request: req.clone(),
+            body,
         });
-        submit += &format!(
-            "{var}=$(id{dep} {stem}.sbatch)\necho \"{}: ${var} ({} jobs)\"\n",
-            wave.name,
-            wave.jobs.len()
-        );
-        ids.push(var);
         emitted.push((wave, req));
     }
     write_text(&out.join("jobs.txt"), &all)?;
-    let merge_req = Request {
-        cpus: 1,
-        memory_mb: (MIN_MEMORY_BYTES / 1e6) as u64,
-        time_minutes: (MIN_TIME_SECONDS / 60.0) as u64,
+    let merge = ArrayWave {
+        name: "merge".into(),
+        tasks: 1,
+        request: least_request(1),
+        body: format!(
+            "exec {cmd} --collect --submission {}\n",
+            shell_quote(&out.display().to_string())
+        ),
     };
-    let mut m = head("merge", &merge_req, &logs.join("merge.out"));
-    m += &format!(
-        "set -eu\nexec {cmd} --collect --submission {}\n",
-        shell_quote(&out.display().to_string())
-    );
-    write_text(&out.join("merge.sbatch"), &m)?;
-    let after: Vec<String> = ids.iter().map(|v| format!("${v}")).collect();
-    submit += &format!(
-        "merge=$(id --dependency=afterany:{} merge.sbatch)\necho \"merge: $merge\"\n\
-         echo {} $merge > job-ids.txt\n",
-        after.join(":"),
-        after.join(" ")
-    );
-    let script = out.join("submit.sh");
-    write_text(&script, &submit)?;
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        let _ = std::fs::set_permissions(&script, std::fs::Permissions::from_mode(0o755));
-    }
+    write_submission(out, &arrays, Some(&merge), opts)?;
     Ok(emitted)
 }
 
