@@ -150,10 +150,26 @@ pub fn host_name() -> String {
     .clone()
 }
 
-/// `<host>-<pid>-<16 hex digits>`: a name no other writer uses, on this machine or on
-/// another one sharing the folder (SPEC.md §20.8). The last field is random (the standard
-/// library's per-process random hash keys, mixed with the clock and a counter), so two
-/// hosts whose processes have the same id still differ.
+/// This process's PID namespace (Linux: the inode of `/proc/self/ns/pid`; 0 where it
+/// cannot be read): two containers on one host have the same host name but not the same
+/// namespace, and their process ids mean different processes.
+pub fn pid_namespace() -> u64 {
+    static NS: std::sync::OnceLock<u64> = std::sync::OnceLock::new();
+    *NS.get_or_init(|| {
+        std::fs::read_link("/proc/self/ns/pid")
+            .ok()
+            .and_then(|l| {
+                let l = l.to_string_lossy().into_owned();
+                l.strip_prefix("pid:[")?.strip_suffix(']')?.parse().ok()
+            })
+            .unwrap_or(0)
+    })
+}
+
+/// `<host>-<pid namespace>-<pid>-<16 hex digits>`: a name no other writer uses, on this
+/// machine or on another one sharing the folder (SPEC.md §10). The last field is random
+/// (the standard library's per-process random hash keys, mixed with the clock and a
+/// counter), so two hosts whose processes have the same id still differ.
 pub fn unique_suffix() -> String {
     use std::hash::{BuildHasher, Hasher};
     use std::sync::atomic::{AtomicU64, Ordering};
@@ -165,54 +181,83 @@ pub fn unique_suffix() -> String {
             .map_or(0, |d| d.as_nanos()),
     );
     h.write_u64(COUNTER.fetch_add(1, Ordering::Relaxed));
-    format!("{}-{}-{:016x}", host_name(), std::process::id(), h.finish())
+    format!(
+        "{}-{}-{}-{:016x}",
+        host_name(),
+        pid_namespace(),
+        std::process::id(),
+        h.finish()
+    )
 }
 
-/// The writer of a temporary named by [`unique_suffix`] (`….tmp-<host>-<pid>-<hex>` or
-/// `….stale-…`): its host and process id, `None` for any other name.
-pub fn temporary_owner(name: &str) -> Option<(String, u32)> {
+/// The writer of a temporary named by [`unique_suffix`] (`….tmp-<host>-<ns>-<pid>-<hex>`
+/// or `….stale-…`): its host, PID namespace and process id; `None` for any other name.
+pub fn temporary_owner(name: &str) -> Option<(String, u64, u32)> {
     let tail = name
         .rsplit_once(".tmp-")
         .or_else(|| name.rsplit_once(".stale-"))?
         .1;
-    let mut fields = tail.rsplitn(3, '-');
+    let mut fields = tail.rsplitn(4, '-');
     let random = fields.next()?;
     let pid = fields.next()?.parse().ok()?;
+    let ns = fields.next()?.parse().ok()?;
     let host = fields.next()?;
     (random.len() == 16 && random.bytes().all(|b| b.is_ascii_hexdigit()) && !host.is_empty())
-        .then(|| (host.to_string(), pid))
+        .then(|| (host.to_string(), ns, pid))
 }
 
-/// Whether the temporary `name` was left by a process of this host that no longer runs
-/// (Linux: no `/proc/<pid>`): such a temporary is abandoned whatever its age. A temporary
-/// of another host, or where processes cannot be looked up, is never taken for abandoned
-/// here (its age decides).
+/// Whether the temporary `name` was left by a process of this host and PID namespace that
+/// no longer runs (Linux: no `/proc/<pid>`): such a temporary is abandoned whatever its
+/// age. Another host's or namespace's, or one where processes cannot be looked up, is
+/// never taken for abandoned here (its age decides). The look-up needs a `/proc` that
+/// shows the writer: the same user's processes, or no `hidepid` mount option.
 pub fn temporary_is_orphan(name: &str) -> bool {
-    let Some((host, pid)) = temporary_owner(name) else {
+    let Some((host, ns, pid)) = temporary_owner(name) else {
         return false;
     };
     host == host_name()
+        && ns == pid_namespace()
+        && ns != 0
         && pid != std::process::id()
         && Path::new("/proc/self").exists()
         && !Path::new(&format!("/proc/{pid}")).exists()
 }
 
-/// Remove the `.<name>.tmp-<pid>` files a killed run left (§10) directly in `dir`.
+/// Remove the `.<name>.tmp-…` files a killed writer left (§10) directly in `dir`: those of
+/// a process of this host that no longer runs ([`temporary_is_orphan`]) and those older
+/// than [`ABANDONED_AFTER`]. A live writer's — another `--only` worker of the same run, on
+/// this host or another — is left alone, and a file that vanishes meanwhile is fine.
 pub fn remove_stale_temporaries(dir: &Path) -> Result<()> {
     let Ok(entries) = std::fs::read_dir(dir) else {
         return Ok(());
     };
     for e in entries.flatten() {
         let p = e.path();
-        if p.is_file()
-            && e.file_name()
-                .to_str()
-                .is_some_and(|n| n.starts_with('.') && n.contains(".tmp-"))
-        {
-            std::fs::remove_file(&p).map_err(|err| Error::io(&p, err))?;
+        let name = e.file_name().to_string_lossy().into_owned();
+        if p.is_file() && name.starts_with('.') && name.contains(".tmp-") && abandoned(&e, &name) {
+            match std::fs::remove_file(&p) {
+                Err(err) if err.kind() != std::io::ErrorKind::NotFound => {
+                    return Err(Error::io(&p, err));
+                }
+                _ => {}
+            }
         }
     }
     Ok(())
+}
+
+/// How old a temporary must be to count as abandoned whoever wrote it: a writer renames a
+/// file or publishes a cache entry within seconds, so a day-old one belongs to a process
+/// that was killed (host clocks may differ by minutes, not by a day).
+pub const ABANDONED_AFTER: std::time::Duration = std::time::Duration::from_secs(24 * 3600);
+
+/// Whether the temporary `e` (named `name`) is abandoned: an orphan of this host, or older
+/// than [`ABANDONED_AFTER`].
+pub fn abandoned(e: &std::fs::DirEntry, name: &str) -> bool {
+    temporary_is_orphan(name)
+        || e.metadata()
+            .and_then(|m| m.modified())
+            .is_ok_and(|t| t.elapsed().is_ok_and(|a| a >= ABANDONED_AFTER))
 }
 
 /// Create a directory and its parents, naming it in the error.

@@ -19,8 +19,7 @@ use super::Event;
 use crate::error::{Error, Result};
 use crate::io::manifest::{FileEntry, Manifest, inputs_sha256};
 use crate::io::{
-    Temporary, create_dir_all, remove_stale_temporaries, sha256_hex, temporary_is_orphan,
-    unique_suffix, write_text,
+    Temporary, create_dir_all, remove_stale_temporaries, sha256_hex, unique_suffix, write_text,
 };
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -168,7 +167,7 @@ impl RunDir {
         }
         // Temporaries of killed publishers go; those another job may be writing stay.
         create_dir_all(cache)?;
-        sweep_abandoned(cache, ABANDONED_AFTER);
+        sweep_abandoned(cache);
         self.cache = Some(cache.to_path_buf());
         Ok(self)
     }
@@ -210,12 +209,13 @@ impl RunDir {
                 skipped: true,
             })
         };
+        // Why a step folder here is not taken: said once, before the step is recomputed,
+        // so that a damaged file is never silently replaced.
+        let mut not_taken = None;
         if self.resume || self.scope != Scope::All {
             match check(&dir, &inputs_sha256) {
                 Ok(digest) => return reuse(dir, digest, Event::StepSkipped { step: name.into() }),
-                // Said once, so that a damaged file is never silently replaced.
-                Err(Some(why)) => on_event(Event::Note(format!("{name}: {why}: recomputed"))),
-                Err(None) => {}
+                Err(why) => not_taken = why,
             }
         }
         let cached =
@@ -245,10 +245,14 @@ impl RunDir {
         if let Scope::Only(only) = &self.scope
             && only != name
         {
+            // Not this worker's step (another worker may be writing it): left alone.
             return Err(Error::invalid(format!(
                     "step {name} is not done in this run directory and comes before --only {only} (run up to it first with --until {name}; or is there no step called {only}?)"
                 ))
                 .at(&self.root));
+        }
+        if let Some(why) = not_taken {
+            on_event(Event::Note(format!("{name}: {why}: recomputed")));
         }
         if dir.exists() {
             std::fs::remove_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
@@ -366,16 +370,11 @@ fn copy_into(from: &Path, to: &Path) -> Result<()> {
     walk(from, to, true)
 }
 
-/// How old a cache temporary must be to count as abandoned: a publisher copies one step,
-/// which takes seconds, so a day-old one belongs to a job that was killed.
-const ABANDONED_AFTER: std::time::Duration = std::time::Duration::from_secs(24 * 3600);
-
 /// Remove the temporaries (`.<key>.tmp-*`, `.<key>.stale-*` folders) that killed
-/// publishers left in `cache`: at once when their writer was a process of this host that
-/// no longer runs ([`temporary_is_orphan`]), else once they are older than `age` (a younger
-/// one of another host may belong to a job publishing right now; host clocks may differ
-/// by minutes, not by `age`). Best effort.
-fn sweep_abandoned(cache: &Path, age: std::time::Duration) {
+/// publishers left in `cache` ([`crate::io::abandoned`]: at once when their writer was a
+/// process of this host that no longer runs, else once they are a day old — a younger one
+/// of another host may belong to a job publishing right now). Best effort.
+fn sweep_abandoned(cache: &Path) {
     let Ok(entries) = std::fs::read_dir(cache) else {
         return;
     };
@@ -383,20 +382,18 @@ fn sweep_abandoned(cache: &Path, age: std::time::Duration) {
         let name = e.file_name().to_string_lossy().into_owned();
         let temporary =
             name.starts_with('.') && (name.contains(".tmp-") || name.contains(".stale-"));
-        let old = e
-            .metadata()
-            .and_then(|m| m.modified())
-            .is_ok_and(|t| t.elapsed().is_ok_and(|a| a >= age));
-        if temporary && (old || temporary_is_orphan(&name)) {
+        if temporary && crate::io::abandoned(&e, &name) {
             let _ = std::fs::remove_dir_all(e.path());
         }
     }
 }
 
 /// Publish a finished step into the cache entry `to`: copied into a temporary sibling, then
-/// renamed into place, so an entry appears whole. A verified entry is kept (another job
-/// published the same step); one that does not verify is first renamed aside, then
-/// removed, so no job ever deletes in place an entry another job may be reading.
+/// renamed into place, so an entry appears whole. The rename fails when `to` exists (a
+/// folder is never renamed onto a non-empty one): a verified entry there is kept (another
+/// job published the same step: same bits); one that does not verify is first renamed
+/// aside, then removed, and the rename tried again — so no job ever deletes in place an
+/// entry another job may be reading, nor replaces a verified one.
 fn publish(from: &Path, to: &Path, inputs_sha256: &str) -> Result<()> {
     if verified(to, inputs_sha256).is_some() {
         return Ok(());
@@ -406,17 +403,13 @@ fn publish(from: &Path, to: &Path, inputs_sha256: &str) -> Result<()> {
     let tmp = Temporary::create_dir(parent.join(format!(".{key}.tmp-{}", unique_suffix())))
         .map_err(|e| Error::io(to, e))?;
     let r = copy_into(from, tmp.path()).and_then(|()| {
-        // Another job may have published the same step while this one copied: keep its
-        // entry (same bits) rather than replace one a third job may be copying from.
-        if verified(to, inputs_sha256).is_some() {
+        if tmp.rename_to(to).is_ok() || verified(to, inputs_sha256).is_some() {
             return Ok(());
         }
-        if to.exists() {
-            let aside =
-                Temporary::register(parent.join(format!(".{key}.stale-{}", unique_suffix())));
-            if std::fs::rename(to, aside.path()).is_ok() {
-                let _ = std::fs::remove_dir_all(aside.path());
-            }
+        // An unverified entry (damaged, or left by an older layout): aside, then replaced.
+        let aside = Temporary::register(parent.join(format!(".{key}.stale-{}", unique_suffix())));
+        if std::fs::rename(to, aside.path()).is_ok() {
+            let _ = std::fs::remove_dir_all(aside.path());
         }
         match tmp.rename_to(to) {
             // Another job renamed its copy into place first: keep that one.
@@ -515,9 +508,11 @@ mod tests {
         }
     }
 
-    /// Old cache temporaries go, young ones (a publisher at work) and entries stay.
+    /// Old cache temporaries go, young ones (a publisher at work) and entries stay; a young
+    /// one of a dead process of this host and namespace goes, a live process's (a child
+    /// that is still running) and another host's or namespace's stay.
     #[test]
-    fn sweep_removes_only_old_temporaries() {
+    fn sweep_removes_only_abandoned_temporaries() {
         let root =
             Scratch(std::env::temp_dir().join(format!("unseen-sweep-{}", std::process::id())));
         let day = std::time::Duration::from_secs(24 * 3600);
@@ -537,23 +532,31 @@ mod tests {
         let old_stale = make(".key.stale-1-2-3", true);
         let young_tmp = make(".key.tmp-4-5-6", false);
         let old_entry = make("key", true);
-        // Young ones named by `unique_suffix`: a dead process of this host's is an orphan
-        // (gone at once); a live one's (this process), and another host's, stay.
-        let host = crate::io::host_name();
+        let (host, ns) = (crate::io::host_name(), crate::io::pid_namespace());
         let dead_pid = u32::try_from(i32::MAX).unwrap(); // above Linux's pid_max
-        let orphan = make(
-            &format!(".key.tmp-{host}-{dead_pid}-0123456789abcdef"),
-            false,
-        );
-        let live = make(&format!(".key.tmp-{}", crate::io::unique_suffix()), false);
-        let elsewhere = make(
-            &format!(".key.stale-{host}x-{dead_pid}-0123456789abcdef"),
-            false,
-        );
-        sweep_abandoned(&root.0, day);
+        let mut child = std::process::Command::new("sleep")
+            .arg("30")
+            .spawn()
+            .unwrap();
+        let named = |kind: &str, host: &str, ns: u64, pid: u32| {
+            make(
+                &format!(".key.{kind}-{host}-{ns}-{pid}-0123456789abcdef"),
+                false,
+            )
+        };
+        let orphan = named("tmp", &host, ns, dead_pid);
+        let live = named("tmp", &host, ns, child.id());
+        let elsewhere = named("stale", &format!("{host}x"), ns, dead_pid);
+        let other_ns = named("tmp", &host, ns + 1, dead_pid);
+        sweep_abandoned(&root.0);
+        child.kill().unwrap();
+        child.wait().unwrap();
         assert!(!old_tmp.exists() && !old_stale.exists());
         assert!(young_tmp.exists() && old_entry.exists());
-        assert!(!orphan.exists() && live.exists() && elsewhere.exists());
+        if ns != 0 {
+            assert!(!orphan.exists(), "a dead local writer's temporary stays");
+        }
+        assert!(live.exists() && elsewhere.exists() && other_ns.exists());
     }
 
     /// Temporaries' names carry their writer; the host field never contains `-`.
@@ -564,7 +567,8 @@ mod tests {
         assert_ne!(a, b);
         assert!(!host_name().contains('-') && !host_name().is_empty());
         let owner = temporary_owner(&format!(".key.tmp-{a}"));
-        assert_eq!(owner, Some((host_name(), std::process::id())));
+        let ns = crate::io::pid_namespace();
+        assert_eq!(owner, Some((host_name(), ns, std::process::id())));
         assert_eq!(temporary_owner(".key.tmp-1-2-3"), None);
         assert_eq!(temporary_owner("key"), None);
     }

@@ -1,4 +1,4 @@
-//! The audit on a batch engine without one (SPEC.md §21.5): workers run as `--only JOB`
+//! The audit on a batch engine without one (SPEC.md §21.4): workers run as `--only JOB`
 //! processes in the emitted waves' order, each leaves a receipt; the merge (`--collect`)
 //! names every job without a receipt of a success and writes nothing, then, once all are
 //! done, writes the report a sequential audit writes, byte for byte. `.ci/slurm` runs the

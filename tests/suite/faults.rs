@@ -334,13 +334,15 @@ fn an_audit_job_on_a_full_disk_fails_cleanly_and_reruns_to_the_same_bits() {
     let (a, b) = (plys(&reference), plys(&out));
     assert!(!a.is_empty());
     assert!(a == b, "the scenes differ");
-    // As for `train`: only the files naming the folder or holding clock times differ.
+    // As for `train`: only the files naming the folder or holding clock times differ, and
+    // the job's receipt (its host, process and times).
     assert_eq!(
         differing_files(&reference, &out),
         [
             "original/seed-0/cfg_args",
             "original/seed-0/manifest.json",
-            "original/seed-0/train_stats.json"
+            "original/seed-0/train_stats.json",
+            "receipts/original__seed-0.json"
         ]
     );
 }

@@ -1,4 +1,4 @@
-//! An audit on a batch engine (SPEC.md §21.5): its jobs in dependency waves, a receipt per
+//! An audit on a batch engine (SPEC.md §21.4): its jobs in dependency waves, a receipt per
 //! job, the merge that names every job without a successful receipt, a Slurm submission
 //! folder, and the cost estimate its resource requests come from.
 //!
@@ -104,7 +104,12 @@ pub fn receipt_path(dir: &Path, job: &Job) -> PathBuf {
 
 /// [`super::run_job`] with its receipt: the old receipt is removed first (a job killed
 /// this time must not pass for done), the new one written at the end, with the error
-/// when the job failed (the job's error is returned either way).
+/// when the job failed (the job's error is returned either way). Bad input — an invalid
+/// audit, a dataset without its poses, an output path that is a file, a pipeline job
+/// before its original — is refused before anything is written, receipt included
+/// (SPEC.md §21.1); so is a job that fails before it wrote anything into a `dir` that did
+/// not exist (bad input found by the job itself: nothing written, SPEC.md §11), which the
+/// merge then names as without receipt.
 pub fn run_job_with_receipt(
     cfg: &AuditConfig,
     dataset: &Path,
@@ -117,9 +122,18 @@ pub fn run_job_with_receipt(
     if path.exists() {
         std::fs::remove_file(&path).map_err(|e| Error::io(&path, e))?;
     }
+    cfg.validate()?;
+    super::check_inputs(dataset, dir)?;
+    if let Job::Run { seed, .. } | Job::Shared { seed, .. } = *job {
+        super::require_original(cfg, dataset, dir, job, seed)?;
+    }
+    let existed = dir.exists();
     let started = std::time::SystemTime::now();
     let t0 = std::time::Instant::now();
     let outcome = super::run_job(cfg, dataset, dir, job, on_event);
+    if outcome.is_err() && !existed && !dir.exists() {
+        return outcome;
+    }
     let digests = match &outcome {
         Ok(_) => job_digests(dir, job)?,
         Err(_) => BTreeMap::new(),
@@ -153,17 +167,18 @@ pub fn run_job_with_receipt(
     Ok(result)
 }
 
-/// What a finished job leaves, with its sha256 ([`Receipt::digests`]).
+/// What a finished job leaves, with its sha256 ([`Receipt::digests`]): an original's
+/// manifest; a run's `audit_job.json` and the manifest of the original it ran on (a run on
+/// a scene trained again since is not merged). A shared job's steps are the `full` run's,
+/// whose receipt covers them: none.
 fn job_digests(dir: &Path, job: &Job) -> Result<BTreeMap<String, String>> {
-    let files: Vec<String> = match job {
+    let files: Vec<String> = match *job {
         Job::Original { .. } => vec![format!("{}/manifest.json", job.folder())],
-        Job::Run { .. } => vec![format!("{}/audit_job.json", job.folder())],
-        Job::Shared { .. } => {
-            let mut v = Vec::new();
-            manifests(&dir.join(job.folder()), &job.folder(), &mut v);
-            v.sort();
-            v
-        }
+        Job::Run { seed, .. } => vec![
+            format!("{}/audit_job.json", job.folder()),
+            format!("{}/manifest.json", Job::Original { seed }.folder()),
+        ],
+        Job::Shared { .. } => Vec::new(),
     };
     files
         .into_iter()
@@ -173,25 +188,6 @@ fn job_digests(dir: &Path, job: &Job) -> Result<BTreeMap<String, String>> {
             Ok((rel, sha256_hex(&bytes)))
         })
         .collect()
-}
-
-/// Every `manifest.json` below `folder` (named `rel/...`).
-fn manifests(folder: &Path, rel: &str, out: &mut Vec<String>) {
-    let Ok(entries) = std::fs::read_dir(folder) else {
-        return;
-    };
-    for e in entries.flatten() {
-        let name = e.file_name().to_string_lossy().into_owned();
-        if name.starts_with('.') {
-            continue;
-        }
-        let sub = format!("{rel}/{name}");
-        if e.path().is_dir() {
-            manifests(&e.path(), &sub, out);
-        } else if name == "manifest.json" {
-            out.push(sub);
-        }
-    }
 }
 
 /// `YYYY-MM-DDTHH:MM:SSZ` of a time (days to civil date: Howard Hinnant's algorithm).
@@ -245,7 +241,7 @@ pub fn collect(
     let mut missing = Vec::new();
     let mut results = Vec::new();
     for job in waves(cfg).into_iter().flat_map(|w| w.jobs) {
-        match take(cfg, dir, &job) {
+        match take(cfg, dataset, dir, &job) {
             Ok(Some(r)) => results.push(r),
             Ok(None) => {}
             Err((why, log)) => missing.push(Missing {
@@ -265,6 +261,7 @@ pub fn collect(
 /// the log its receipt names.
 fn take(
     cfg: &AuditConfig,
+    dataset: &Path,
     dir: &Path,
     job: &Job,
 ) -> std::result::Result<Option<JobResult>, (String, Option<String>)> {
@@ -331,7 +328,19 @@ fn take(
             }
             Ok(Some(result))
         }
-        _ => Ok(None),
+        Job::Original { seed } => {
+            let run = dir.join(job.folder());
+            if super::original_done(cfg, dataset, &run, *seed) {
+                Ok(None)
+            } else {
+                Err(fail(
+                    "trained on another dataset or with another training configuration than \
+                     this audit's (or damaged)"
+                        .into(),
+                ))
+            }
+        }
+        Job::Shared { .. } => Ok(None),
     }
 }
 
@@ -573,7 +582,7 @@ pub struct ArrayWave {
 }
 
 /// Write the Slurm submission folder `out`: per wave `wave-N-<name>.sbatch` (a job array,
-/// `--output=out/logs/<name>-%a.out`), the optional `merge.sbatch`, and `submit.sh`, which
+/// `--output=logs/<name>-%a.out`, relative to `out`, from where `submit.sh` submits), the optional `merge.sbatch`, and `submit.sh`, which
 /// submits each wave after the one before succeeded (`afterok`), the merge after every wave
 /// ended (`afterany`: it names what failed), prints the ids and writes `job-ids.txt`.
 pub fn write_submission(
@@ -594,12 +603,13 @@ pub fn write_submission(
             r.cpus,
             r.memory_mb,
             slurm_time(r.time_minutes),
-            logs.join(if array {
-                format!("{}-%a.out", w.name)
+            // Relative to the submission folder (submit.sh submits from there): a path with
+            // a space or a quote cannot be an `#SBATCH` value.
+            if array {
+                format!("logs/{}-%a.out", w.name)
             } else {
-                format!("{}.out", w.name)
-            })
-            .display()
+                format!("logs/{}.out", w.name)
+            }
         );
         if array {
             let throttle = opts.throttle.map_or(String::new(), |t| format!("%{t}"));
@@ -618,7 +628,9 @@ pub fn write_submission(
     };
     let mut submit = String::from(
         "#!/bin/sh\n# Submit the waves to Slurm; prints the job ids.\nset -eu\n\
-         cd \"$(dirname \"$0\")\"\nid() { sbatch --parsable \"$@\" | cut -d';' -f1; }\n",
+         cd \"$(dirname \"$0\")\"\n\
+         # sbatch --parsable prints <id> or <id>;<cluster>; a refused job stops the script.\n\
+         id() { r=$(sbatch --parsable \"$@\") || exit 1; [ -n \"$r\" ] || exit 1; echo \"${r%%;*}\"; }\n",
     );
     let mut ids: Vec<String> = Vec::new();
     for (i, w) in waves.iter().enumerate() {

@@ -596,15 +596,7 @@ fn pipeline_job(
     scope: Scope,
     on_event: &(dyn Fn(Event) + Sync),
 ) -> Result<(PipelineConfig, super::Outcome)> {
-    let run = dir.join(Job::Original { seed }.name());
-    if !original_done(cfg, dataset, &run, seed) {
-        return Err(Error::invalid(format!(
-            "job {} needs the original scene of seed {seed}: run the job {} first",
-            job.name(),
-            Job::Original { seed }.name()
-        ))
-        .at(dir));
-    }
+    let run = require_original(cfg, dataset, dir, job, seed)?;
     on_event(Event::Stage { name: job.name() });
     let inputs = super::load_inputs(
         &run,
@@ -621,6 +613,27 @@ fn pipeline_job(
     };
     let outcome = super::run_with(&pc, &inputs, &out, &opts, on_event)?;
     Ok((pc, outcome))
+}
+
+/// The folder of `seed`'s original scene, which `job` needs: an error naming the job to
+/// run first unless it is trained ([`original_done`]).
+fn require_original(
+    cfg: &AuditConfig,
+    dataset: &Path,
+    dir: &Path,
+    job: &Job,
+    seed: u32,
+) -> Result<PathBuf> {
+    let run = dir.join(Job::Original { seed }.name());
+    if !original_done(cfg, dataset, &run, seed) {
+        return Err(Error::invalid(format!(
+            "job {} needs the original scene of seed {seed}: run the job {} first",
+            job.name(),
+            Job::Original { seed }.name()
+        ))
+        .at(dir));
+    }
+    Ok(run)
 }
 
 /// The original scene of `seed` is trained in `run`: its manifest names this dataset and
