@@ -611,12 +611,12 @@ fn two_workers_racing_on_the_same_steps_both_succeed_and_leave_one_verified_entr
     assert_eq!(cache_is_whole(&cache), steps.len());
 }
 
-/// A worker killed while it publishes a step into the cache (SIGKILL the moment a cache
-/// temporary appears; the cache on a tmpfs so that the files are copied, not linked, and
-/// the copy lasts long enough to be caught), retried until one dies with its temporary in
-/// place: the cache never shows a partial entry under a step's name, and the next worker
-/// on this host sweeps the dead worker's temporary at once and ends with the same bits as
-/// a run without the cache.
+/// A worker killed while it publishes a step into the cache: from an empty cache on a tmpfs
+/// (so that the files are copied, not linked, and the copy lasts long enough to be caught),
+/// the worker is stopped the moment a cache temporary appears and killed if it is still
+/// there, retried until one dies with its temporary in place: the cache never shows a
+/// partial entry under a step's name, and the next worker on this host sweeps the dead
+/// worker's temporary at once and ends with the same bits as a run without the cache.
 #[test]
 fn a_worker_killed_while_publishing_to_the_cache_leaves_nothing_the_next_one_takes() {
     let t = TempDir::new("faults-cache-kill");
@@ -638,10 +638,15 @@ fn a_worker_killed_while_publishing_to_the_cache_leaves_nothing_the_next_one_tak
             })
             .unwrap_or_default()
     };
-    // Attempts until one is killed with its temporary still there (a kill that lands
-    // after the rename leaves none); each new worker sweeps the previous one's orphans.
+    // Each attempt starts from an empty cache, so that every step is published once. The
+    // moment a new temporary appears the worker is stopped (SIGSTOP); if the temporary is
+    // still there it is killed (SIGKILL) mid-copy, else it continues to the next publish.
+    let signal = |child: &std::process::Child, sig: i32| {
+        assert_eq!(unsafe { libc::kill(child.id() as i32, sig) }, 0);
+    };
     let mut left = Vec::new();
-    for attempt in 0..40 {
+    for attempt in 0..20 {
+        let _ = std::fs::remove_dir_all(&cache);
         let out = t.path().join(format!("killed-{attempt}"));
         let mut child = Command::new(env!("CARGO_BIN_EXE_unseen"))
             .args(with_cache(&run, &cfg, &out, &cache))
@@ -649,24 +654,30 @@ fn a_worker_killed_while_publishing_to_the_cache_leaves_nothing_the_next_one_tak
             .stderr(std::process::Stdio::null())
             .spawn()
             .unwrap();
-        let before = temporaries(&cache);
-        let killed = loop {
-            if child.try_wait().unwrap().is_some() {
-                break false;
+        let mut seen: Vec<String> = Vec::new();
+        while child.try_wait().unwrap().is_none() {
+            let fresh: Vec<String> = temporaries(&cache)
+                .into_iter()
+                .filter(|n| !seen.contains(n))
+                .collect();
+            if fresh.is_empty() {
+                continue;
             }
-            if temporaries(&cache).iter().any(|n| !before.contains(n)) {
-                child.kill().unwrap();
-                break true;
+            signal(&child, libc::SIGSTOP);
+            let now = temporaries(&cache);
+            if fresh.iter().any(|n| now.contains(n)) {
+                signal(&child, libc::SIGKILL);
+                left = fresh.into_iter().filter(|n| now.contains(n)).collect();
+                break;
             }
-        };
+            seen.extend(fresh);
+            signal(&child, libc::SIGCONT);
+        }
+        let _ = child.kill();
         child.wait().unwrap();
         // Entries under their final names are always whole.
         cache_entries_are_whole(&cache);
-        left = temporaries(&cache)
-            .into_iter()
-            .filter(|n| !before.contains(n))
-            .collect();
-        if killed && !left.is_empty() {
+        if !left.is_empty() {
             eprintln!("attempt {attempt}: killed while publishing, left {left:?}");
             break;
         }
