@@ -10,6 +10,9 @@
 # The binary must be of numerics revision 6 (a release build of this tree); a batch of two
 # seeds of one room takes 20–30 min on 2 cores at nice 19. The run folders (≈1 GB a seed)
 # are removed after a batch that succeeded: samples.json is what the audit keeps.
+# Low priority: `nice 19` yields only within this session's scheduler autogroup; a batch
+# started with `setsid` is its own group and gets an equal share of the cores unless its
+# group is niced too: `echo 19 > /proc/<pid>/autogroup` (benches/README.md).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 room="$1"; seeds="$2"; bin="${3:-target/release/unseen}"
