@@ -218,18 +218,22 @@ impl RunDir {
                 Err(why) => not_taken = why,
             }
         }
-        let cached =
-            self.cache_entry(name, &inputs_sha256)
-                .and_then(|c| match check(&c, &inputs_sha256) {
-                    Ok(digest) => Some((c, digest)),
-                    Err(Some(why)) => {
-                        on_event(Event::Note(format!(
-                            "{name}: the step cache's entry is not usable ({why})"
-                        )));
-                        None
-                    }
-                    Err(None) => None,
-                });
+        // In an `--only` run, a step that is not the target and has a folder here is another
+        // worker's (in flight, or left damaged): never replaced from the cache.
+        let others = matches!(&self.scope, Scope::Only(only) if only != name) && dir.exists();
+        let cached = self
+            .cache_entry(name, &inputs_sha256)
+            .filter(|_| !others)
+            .and_then(|c| match check(&c, &inputs_sha256) {
+                Ok(digest) => Some((c, digest)),
+                Err(Some(why)) => {
+                    on_event(Event::Note(format!(
+                        "{name}: the step cache's entry is not usable ({why})"
+                    )));
+                    None
+                }
+                Err(None) => None,
+            });
         if let Some((cached, digest)) = cached {
             if dir.exists() {
                 std::fs::remove_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;

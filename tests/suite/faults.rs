@@ -692,3 +692,51 @@ fn a_worker_killed_while_publishing_to_the_cache_leaves_nothing_the_next_one_tak
     same_bits(&reference, &last);
     cache_is_whole(&cache);
 }
+
+/// Parallel `--only` workers of one run with a step cache: a sibling step whose folder
+/// another worker is writing (here: a folder without its manifest yet) is left alone even
+/// though the cache holds it — never replaced from the cache under that worker.
+#[test]
+fn an_only_worker_never_replaces_a_sibling_folder_from_the_cache() {
+    let t = TempDir::new("faults-cache-sibling");
+    let run = tiny_run(t.path());
+    let cfg = tiny_config_file(t.path());
+    let cache = t.path().join("cache");
+    let first = t.path().join("first");
+    let o = Command::new(env!("CARGO_BIN_EXE_unseen"))
+        .args(with_cache(&run, &cfg, &first, &cache))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = t.path().join("second");
+    let scoped = |scope: &[&str]| {
+        let o = Command::new(env!("CARGO_BIN_EXE_unseen"))
+            .args(with_cache(&run, &cfg, &out, &cache))
+            .args(scope)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    scoped(&["--until", "views"]);
+    let steps = Command::new(env!("CARGO_BIN_EXE_unseen"))
+        .args(with_cache(&run, &cfg, &out, &cache))
+        .arg("--stage1-steps")
+        .output()
+        .unwrap();
+    let steps: Vec<String> = String::from_utf8_lossy(&steps.stdout)
+        .lines()
+        .map(String::from)
+        .collect();
+    assert!(steps.len() >= 2, "{steps:?}");
+    // Another worker is writing the first view's step.
+    let in_flight = out.join(&steps[0]);
+    std::fs::create_dir_all(&in_flight).unwrap();
+    std::fs::write(in_flight.join("being-written"), "x").unwrap();
+    scoped(&["--only", &steps[1]]);
+    assert!(
+        in_flight.join("being-written").exists(),
+        "the sibling was replaced"
+    );
+    assert!(!in_flight.join("manifest.json").exists());
+    assert!(out.join(&steps[1]).join("manifest.json").exists());
+}
