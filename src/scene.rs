@@ -9,6 +9,7 @@ use rand_core::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
 /// A seeded uniform source (rand_pcg), the crate's one RNG family.
+#[derive(Clone)]
 pub struct Uniform(Pcg64Mcg);
 
 impl Uniform {

@@ -234,7 +234,9 @@ pub struct IterationTimes {
     pub adam: f64,
 }
 
-/// Training state: parameters, optimizer, statistics, generator.
+/// Training state: parameters, optimizer, statistics, generator. A clone continues with
+/// the same bits as the original would.
+#[derive(Clone)]
 pub struct Trainer<'a> {
     pub config: TrainConfig,
     /// The views (borrowed; copied on the first [`Trainer::replace_image`]).
