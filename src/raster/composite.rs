@@ -25,6 +25,7 @@
 use super::RenderReport;
 use super::plan::RenderPlan;
 use super::project::{ALPHA_THRESHOLD, Projected, Splat};
+use super::schedule::longest_first;
 use super::tile::{Shared, TILE_SIZE, TileBins};
 use crate::math::fastexp::exp;
 use rayon::prelude::*;
@@ -977,9 +978,9 @@ pub fn composite(
             (true, true) => tiles::<true, true>(r, w, h, p, bins, plan, bg, want, kernel, o),
         }
     };
-    // An integer sum: the same for any grouping.
-    let tasks = n_tiles.div_ceil(per);
-    report.pairs_evaluated += (0..tasks).into_par_iter().map(run).sum::<u64>();
+    // Costliest runs first; an integer sum: the same for any grouping.
+    let costs = bins.run_costs(per, height);
+    report.pairs_evaluated += longest_first(&costs, run).into_iter().sum::<u64>();
     out
 }
 

@@ -10,6 +10,7 @@ pub mod composite;
 pub mod decisions;
 pub mod plan;
 pub mod project;
+pub(crate) mod schedule;
 pub mod tile;
 
 pub use composite::Kernel;

@@ -60,6 +60,7 @@ use crate::raster::composite::{
 };
 use crate::raster::composite::{Kernel, MAX_TASKS};
 use crate::raster::project::{ALPHA_THRESHOLD, Projected, Splat};
+use crate::raster::schedule::longest_first;
 use crate::raster::tile::{TILE_SIZE, TileBins};
 use rayon::prelude::*;
 
@@ -798,16 +799,70 @@ fn tiles<const ISA: u8, const GEOMETRY: bool>(
     background: [f32; 3],
     g: &PixelGrads,
 ) -> TileGrads {
+    // At most one entry per intersection of the run: the outputs never grow by copying.
+    let most = bins.offsets[tiles.end] - bins.offsets[tiles.start];
     let mut out = TileGrads {
-        gids: Vec::new(),
-        grads: Vec::new(),
+        gids: Vec::with_capacity(most),
+        grads: Vec::with_capacity(most),
         pairs: 0,
     };
-    // Reused for every tile of the run: no allocation in the loop once warm.
-    let mut list: Vec<Entry> = Vec::new();
-    let mut rows_idx: [Vec<u32>; TILE_SIZE] = std::array::from_fn(|_| Vec::new());
-    let mut acc: Vec<Acc> = Vec::new();
-    let mut gids: Vec<u32> = Vec::new();
+    // The thread's work area, reused by every tile and run it blends: no allocation (nor
+    // the page faults of fresh memory) once it has grown to the largest tile. Taken out
+    // and put back rather than used inside `with`: a closure would compile the list
+    // building without the caller's target features.
+    let mut scratch = SCRATCH.with_borrow_mut(std::mem::take);
+    tiles_with::<ISA, GEOMETRY>(
+        tiles,
+        width,
+        height,
+        p,
+        bins,
+        cull_rows,
+        max_alpha,
+        background,
+        g,
+        &mut scratch,
+        &mut out,
+    );
+    SCRATCH.with_borrow_mut(|s| *s = scratch);
+    out
+}
+
+/// Per-thread work area of [`tiles`].
+#[derive(Default)]
+struct Scratch {
+    list: Vec<Entry>,
+    rows_idx: [Vec<u32>; TILE_SIZE],
+    acc: Vec<Acc>,
+    gids: Vec<u32>,
+}
+
+thread_local! {
+    static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::default();
+}
+
+/// [`tiles`] in a given work area.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn tiles_with<const ISA: u8, const GEOMETRY: bool>(
+    tiles: std::ops::Range<usize>,
+    width: usize,
+    height: usize,
+    p: &Projected,
+    bins: &TileBins,
+    cull_rows: bool,
+    max_alpha: f32,
+    background: [f32; 3],
+    g: &PixelGrads,
+    scratch: &mut Scratch,
+    out: &mut TileGrads,
+) {
+    let Scratch {
+        list,
+        rows_idx,
+        acc,
+        gids,
+    } = scratch;
     let mut states = [RowState::default(); TILE_SIZE];
     // `range_n[a][b][row]`: the largest n of columns [a, b) of the row (rows contiguous, so
     // that a splat's 16 rows are one load).
@@ -942,29 +997,28 @@ fn tiles<const ISA: u8, const GEOMETRY: bool>(
             #[cfg(target_arch = "x86_64")]
             if ISA == ISA_AVX512 {
                 // SAFETY: ISA_AVX512 only when the CPU has AVX-512F (checked by the caller).
-                unsafe { avx512::row::<GEOMETRY>(max_alpha, &list, idx, &px, py, st, &mut acc) }
+                unsafe { avx512::row::<GEOMETRY>(max_alpha, list, idx, &px, py, st, acc) }
             } else if ISA == ISA_AVX2 {
                 // SAFETY: ISA_AVX2 only when the CPU has AVX2 (checked by the caller).
-                unsafe { avx2::row::<GEOMETRY>(max_alpha, &list, idx, &px, py, st, &mut acc) }
+                unsafe { avx2::row::<GEOMETRY>(max_alpha, list, idx, &px, py, st, acc) }
             } else {
-                row_lanes::<GEOMETRY>(max_alpha, &list, idx, &px, py, st, &mut acc)
+                row_lanes::<GEOMETRY>(max_alpha, list, idx, &px, py, st, acc)
             }
             #[cfg(not(target_arch = "x86_64"))]
-            row_lanes::<GEOMETRY>(max_alpha, &list, idx, &px, py, st, &mut acc);
+            row_lanes::<GEOMETRY>(max_alpha, list, idx, &px, py, st, acc);
         }
-        out.gids.extend_from_slice(&gids);
+        out.gids.extend_from_slice(gids);
         #[cfg(target_arch = "x86_64")]
         if ISA != ISA_SCALAR {
             // A loop in this function (compiled for the ISA), not an iterator adaptor: a
             // generic `fold` may be compiled out of line without AVX2.
-            for a in &acc {
+            for a in acc.iter() {
                 out.grads.push(reduce_lanes::<GEOMETRY>(a));
             }
             continue;
         }
         out.grads.extend(acc.iter().map(reduce::<GEOMETRY>));
     }
-    out
 }
 
 /// [`tiles`] compiled for AVX-512F (its list building too, not only the row kernel).
@@ -1118,10 +1172,9 @@ pub fn composite_backward(
     };
     let n_tiles = bins.tiles_x * bins.tiles_y;
     let per = n_tiles.div_ceil(MAX_TASKS).max(1);
-    let parts: Vec<TileGrads> = (0..n_tiles.div_ceil(per))
-        .into_par_iter()
-        .map(|k| run(k * per..((k + 1) * per).min(n_tiles)))
-        .collect();
+    let parts: Vec<TileGrads> = longest_first(&bins.run_costs(per, height), |k| {
+        run(k * per..((k + 1) * per).min(n_tiles))
+    });
     let mut splats = vec![SplatGrad::default(); p.splats.len()];
     // Sum per Gaussian in tile order. Only walked intersections are listed: the others
     // would add +0.0 to accumulators that are never −0.0. Ranges of Gaussians in parallel,
