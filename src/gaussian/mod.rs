@@ -272,17 +272,35 @@ impl Gaussians {
 
     /// The Gaussians at `indices`, in that order (indices may repeat).
     pub fn select(&self, indices: &[usize]) -> Gaussians {
+        use rayon::prelude::*;
+        // Plain copies, in parallel over fixed runs of indices (densification copies the
+        // whole scene and both Adam moments this way).
+        const RUN: usize = 4096;
         let r = self.rest_per_channel() * 3;
-        let mut sh_rest = Vec::with_capacity(indices.len() * r);
-        for &i in indices {
-            sh_rest.extend_from_slice(&self.sh_rest[i * r..(i + 1) * r]);
+        let mut sh_rest = vec![0f32; indices.len() * r];
+        if r > 0 {
+            sh_rest
+                .par_chunks_mut(r * RUN)
+                .zip(indices.par_chunks(RUN))
+                .for_each(|(dst, run)| {
+                    for (d, &i) in dst.chunks_exact_mut(r).zip(run) {
+                        d.copy_from_slice(&self.sh_rest[i * r..(i + 1) * r]);
+                    }
+                });
+        }
+        fn pick<T: Copy + Send + Sync>(v: &[T], indices: &[usize]) -> Vec<T> {
+            indices
+                .par_iter()
+                .with_min_len(RUN)
+                .map(|&i| v[i])
+                .collect()
         }
         Gaussians {
-            means: indices.iter().map(|&i| self.means[i]).collect(),
-            log_scales: indices.iter().map(|&i| self.log_scales[i]).collect(),
-            quats: indices.iter().map(|&i| self.quats[i]).collect(),
-            opacity_logits: indices.iter().map(|&i| self.opacity_logits[i]).collect(),
-            sh_dc: indices.iter().map(|&i| self.sh_dc[i]).collect(),
+            means: pick(&self.means, indices),
+            log_scales: pick(&self.log_scales, indices),
+            quats: pick(&self.quats, indices),
+            opacity_logits: pick(&self.opacity_logits, indices),
+            sh_dc: pick(&self.sh_dc, indices),
             sh_rest,
             sh_degree: self.sh_degree,
         }

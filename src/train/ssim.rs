@@ -249,21 +249,35 @@ fn ssim_with(
     if x.is_empty() {
         return (0.0 / n, grad.then(Vec::new));
     }
-    let zeros = vec![0.0; w];
+    // The calling thread's buffers of the last call, resized: every value of each is
+    // written below before it is read, so none is cleared (a training loop called this
+    // with megabytes of fresh zeroed memory every iteration, serially).
+    let mut work = WORK.with_borrow_mut(std::mem::take);
+    let Work {
+        zeros,
+        xp,
+        yp,
+        hz,
+        values,
+        deriv,
+    } = &mut work;
+    zeros.clear();
+    zeros.resize(w, 0.0);
     // The channels apart, in f64: `[ch][p]`.
-    let planes = |img: &[f32]| -> Vec<f64> {
-        let mut out = vec![0.0; img.len()];
+    let planes = |img: &[f32], out: &mut Vec<f64>| {
+        out.resize(img.len(), 0.0);
         for (p, px) in img.chunks_exact(c).enumerate() {
             for (ch, &v) in px.iter().enumerate() {
                 out[ch * np + p] = v as f64;
             }
         }
-        out
     };
-    let (xp, yp) = (planes(x), planes(y));
+    planes(x, xp);
+    planes(y, yp);
+    let (xp, yp, zeros) = (&xp[..], &yp[..], &zeros[..]);
     // (1) Moments: quantity `5·ch + j`, j = x, y, x², y², x·y.
     let q = 5 * c;
-    let mut hz = vec![0.0; h * q * w];
+    hz.resize(h * q * w, 0.0);
     let fill = |row: usize, qi: usize, dst: &mut [f64]| {
         let (ch, j) = (qi / 5, qi % 5);
         let at = (ch * h + row) * w;
@@ -279,17 +293,19 @@ fn ssim_with(
                 .for_each(|(o, (a, b))| *o = a * b),
         }
     };
-    horizontal(isa, (w, q), &k, fill, &mut hz);
+    horizontal(isa, (w, q), &k, fill, hz);
+    let moments_hz = &hz[..];
     // (2) Per row: the SSIM map `[y][ch][x]` and the derivative planes `[y][3·ch + j][x]`.
-    let mut values = vec![0.0; h * c * w];
-    let mut deriv = vec![0.0; if grad { h * 3 * c * w } else { 0 }];
+    values.resize(h * c * w, 0.0);
+    deriv.resize(if grad { h * 3 * c * w } else { 0 }, 0.0);
+    let (values, deriv) = (&mut values[..h * c * w], &mut deriv[..]);
     let task = |t: usize, vals: &mut [f64], ders: &mut [f64]| {
         let mut moments = vec![0.0; 5 * w];
         for (j, vrow) in vals.chunks_exact_mut(c * w).enumerate() {
             let row = t * TASK_ROWS + j;
             for (ch, v) in vrow.chunks_exact_mut(w).enumerate() {
                 for (i, m) in moments.chunks_exact_mut(w).enumerate() {
-                    vertical(isa, &hz, (w, h, q), row, 5 * ch + i, &k, &zeros, m);
+                    vertical(isa, moments_hz, (w, h, q), row, 5 * ch + i, &k, zeros, m);
                 }
                 let m: [&[f64]; 5] = std::array::from_fn(|i| &moments[i * w..(i + 1) * w]);
                 if grad {
@@ -333,12 +349,12 @@ fn ssim_with(
         // (4) The derivative planes blurred along x, (5) along y and combined.
         let qd = 3 * c;
         // Into the moments' storage (no longer needed, and larger).
-        let mut hd = hz;
-        hd.truncate(h * qd * w);
+        let hd = &mut hz[..h * qd * w];
         let fill = |row: usize, qi: usize, dst: &mut [f64]| {
             dst.copy_from_slice(&deriv[(row * qd + qi) * w..(row * qd + qi + 1) * w]);
         };
-        horizontal(isa, (w, qd), &k, fill, &mut hd);
+        horizontal(isa, (w, qd), &k, fill, hd);
+        let hd = &hd[..];
         let mut g = vec![0f32; x.len()];
         g.par_chunks_mut(TASK_ROWS * w * c)
             .enumerate()
@@ -348,7 +364,7 @@ fn ssim_with(
                     let row = t * TASK_ROWS + j;
                     for ch in 0..c {
                         for (i, bi) in b.chunks_exact_mut(w).enumerate() {
-                            vertical(isa, &hd, (w, h, qd), row, 3 * ch + i, &k, &zeros, bi);
+                            vertical(isa, hd, (w, h, qd), row, 3 * ch + i, &k, zeros, bi);
                         }
                         let (b0, rest) = b.split_at(w);
                         let (b1, b2) = rest.split_at(w);
@@ -364,7 +380,23 @@ fn ssim_with(
             });
         g
     });
+    WORK.with_borrow_mut(|w| *w = work);
     (total / n, g)
+}
+
+/// The buffers of [`ssim_with`], kept per thread between calls.
+#[derive(Default)]
+struct Work {
+    zeros: Vec<f64>,
+    xp: Vec<f64>,
+    yp: Vec<f64>,
+    hz: Vec<f64>,
+    values: Vec<f64>,
+    deriv: Vec<f64>,
+}
+
+thread_local! {
+    static WORK: std::cell::RefCell<Work> = std::cell::RefCell::default();
 }
 
 #[cfg(test)]
