@@ -178,8 +178,10 @@ pub fn fine_tune(
         ..RenderOptions::default()
     };
     let geometry = Arc::new(geometry_of(scene));
+    // The views in parallel (a record is parallel only over its bands of tile rows: four
+    // at 80×60); each record is independent of which thread made it.
     let records: Vec<FrozenBlend> = views
-        .iter()
+        .par_iter()
         .map(|cam| FrozenBlend::record_shared(scene, cam, &opts, geometry.clone()))
         .collect::<Result<_>>()?;
     let targets: Vec<Vec<f32>> = views
