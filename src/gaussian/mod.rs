@@ -272,10 +272,41 @@ impl Gaussians {
 
     /// The Gaussians at `indices`, in that order (indices may repeat).
     pub fn select(&self, indices: &[usize]) -> Gaussians {
+        self.select_joined(&self.head(0), indices)
+    }
+
+    /// The first `n` Gaussians (at most all).
+    fn head(&self, n: usize) -> Gaussians {
+        let n = n.min(self.len());
+        let r = self.rest_per_channel() * 3;
+        Gaussians {
+            means: self.means[..n].to_vec(),
+            log_scales: self.log_scales[..n].to_vec(),
+            quats: self.quats[..n].to_vec(),
+            opacity_logits: self.opacity_logits[..n].to_vec(),
+            sh_dc: self.sh_dc[..n].to_vec(),
+            sh_rest: self.sh_rest[..n * r].to_vec(),
+            sh_degree: self.sh_degree,
+        }
+    }
+
+    /// The Gaussians at `indices` of `self` followed by `extra` (index `len() + j` is
+    /// `extra`'s `j`), in that order: each array allocated once at its final size and
+    /// filled in parallel over fixed runs of indices (densification builds its result
+    /// this way instead of appending to the whole scene and its moments, which copied them
+    /// into fresh, page-faulting memory twice more). Plain copies: the same values as
+    /// appending and selecting.
+    ///
+    /// # Panics
+    /// If the SH degrees differ or an index is out of range.
+    pub fn select_joined(&self, extra: &Gaussians, indices: &[usize]) -> Gaussians {
         use rayon::prelude::*;
-        // Plain copies, in parallel over fixed runs of indices (densification copies the
-        // whole scene and both Adam moments this way).
+        assert_eq!(
+            self.sh_degree, extra.sh_degree,
+            "SH degree of the joined set"
+        );
         const RUN: usize = 4096;
+        let n = self.len();
         let r = self.rest_per_channel() * 3;
         let mut sh_rest = vec![0f32; indices.len() * r];
         if r > 0 {
@@ -284,23 +315,29 @@ impl Gaussians {
                 .zip(indices.par_chunks(RUN))
                 .for_each(|(dst, run)| {
                     for (d, &i) in dst.chunks_exact_mut(r).zip(run) {
-                        d.copy_from_slice(&self.sh_rest[i * r..(i + 1) * r]);
+                        let (src, k) = if i < n {
+                            (&self.sh_rest, i)
+                        } else {
+                            (&extra.sh_rest, i - n)
+                        };
+                        d.copy_from_slice(&src[k * r..(k + 1) * r]);
                     }
                 });
         }
-        fn pick<T: Copy + Send + Sync>(v: &[T], indices: &[usize]) -> Vec<T> {
+        fn pick<T: Copy + Send + Sync>(a: &[T], b: &[T], indices: &[usize]) -> Vec<T> {
+            let n = a.len();
             indices
                 .par_iter()
                 .with_min_len(RUN)
-                .map(|&i| v[i])
+                .map(|&i| if i < n { a[i] } else { b[i - n] })
                 .collect()
         }
         Gaussians {
-            means: pick(&self.means, indices),
-            log_scales: pick(&self.log_scales, indices),
-            quats: pick(&self.quats, indices),
-            opacity_logits: pick(&self.opacity_logits, indices),
-            sh_dc: pick(&self.sh_dc, indices),
+            means: pick(&self.means, &extra.means, indices),
+            log_scales: pick(&self.log_scales, &extra.log_scales, indices),
+            quats: pick(&self.quats, &extra.quats, indices),
+            opacity_logits: pick(&self.opacity_logits, &extra.opacity_logits, indices),
+            sh_dc: pick(&self.sh_dc, &extra.sh_dc, indices),
             sh_rest,
             sh_degree: self.sh_degree,
         }
@@ -315,5 +352,31 @@ impl Gaussians {
         self.opacity_logits.extend_from_slice(&other.opacity_logits);
         self.sh_dc.extend_from_slice(&other.sh_dc);
         self.sh_rest.extend_from_slice(&other.sh_rest);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// Selecting from a scene followed by another is appending then selecting, bit for
+    /// bit (densification relies on it), for any thread count and for runs longer than
+    /// one parallel task.
+    #[test]
+    fn select_joined_is_append_then_select() {
+        let a = crate::scene::random_scene(9000, 3, 1, 0.01, 0.1);
+        let b = crate::scene::random_scene(700, 3, 2, 0.01, 0.1);
+        let n = a.len() + b.len();
+        let idx: Vec<usize> = (0..12_000).map(|k| (k * 7919 + k / 3) % n).collect();
+        let mut joined = a.clone();
+        joined.append(&b);
+        let want = joined.select(&idx);
+        for threads in [1, 3] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let got = pool.install(|| a.select_joined(&b, &idx));
+            assert_eq!(got, want);
+        }
+        assert_eq!(a.select(&[]).len(), 0);
     }
 }

@@ -456,11 +456,13 @@ impl Adam {
         self.v = self.v.select(indices);
     }
 
-    /// Append zero moments for `n` new Gaussians.
-    pub fn extend_zeros(&mut self, n: usize) -> Result<()> {
+    /// Keep the moments at `indices` of the current Gaussians followed by `n` new ones
+    /// with zero moments ([`Gaussians::select_joined`]): appending zero moments and then
+    /// selecting, without the intermediate copies.
+    pub fn select_joined(&mut self, n: usize, indices: &[usize]) -> Result<()> {
         let z = Gaussians::zeros(n, self.m.sh_degree)?;
-        self.m.append(&z);
-        self.v.append(&z);
+        self.m = self.m.select_joined(&z, indices);
+        self.v = self.v.select_joined(&z, indices);
         Ok(())
     }
 }

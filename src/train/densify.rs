@@ -150,13 +150,10 @@ pub fn densify_and_prune(
     // Radii carried along for the optional screen-space test: copies inherit theirs.
     let mut radius = stats.max_radius.clone();
 
-    // Clone: plain copies.
-    let clones = g.select(&clone);
-    g.append(&clones);
-    adam.extend_zeros(clones.len())?;
+    // Clone: plain copies. Split: 2 samples per selected Gaussian, block-major. Both go
+    // after the scene (`extra`); the result is selected from the two at once.
+    let mut extra = g.select(&clone);
     radius.extend(clone.iter().map(|&i| stats.max_radius[i]));
-
-    // Split: 2 samples per selected Gaussian, block-major.
     let mut parts = g.select(&split);
     parts.append(&g.select(&split));
     let k = split.len();
@@ -176,29 +173,43 @@ pub fn densify_and_prune(
         }
         parts.log_scales[c] = g.log_scales[src].map(|v| v - shrink);
     }
-    g.append(&parts);
-    adam.extend_zeros(parts.len())?;
+    extra.append(&parts);
     radius.extend((0..2 * k).map(|c| stats.max_radius[split[c % k]]));
 
-    // Prune: split originals, transparent, and (optionally) too large ones.
-    let mut remove = vec![false; g.len()];
+    // Prune: split originals, transparent, and (optionally) too large ones (over the
+    // scene followed by `extra`).
+    let total = n0 + extra.len();
+    let opacity = |i: usize| {
+        if i < n0 {
+            g.opacity_logits[i]
+        } else {
+            extra.opacity_logits[i - n0]
+        }
+    };
+    let log_scales = |i: usize| {
+        if i < n0 {
+            g.log_scales[i]
+        } else {
+            extra.log_scales[i - n0]
+        }
+    };
+    let mut remove = vec![false; total];
     for &i in &split {
         remove[i] = true;
     }
     let screen = cfg.max_screen_size_px.filter(|_| world_prune);
     for (i, r) in remove.iter_mut().enumerate() {
-        let transparent = sigmoid(g.opacity_logits[i]) < cfg.min_opacity;
-        let big_world =
-            world_prune && max_scale(g.log_scales[i]) > cfg.world_prune_fraction * extent;
+        let transparent = sigmoid(opacity(i)) < cfg.min_opacity;
+        let big_world = world_prune && max_scale(log_scales(i)) > cfg.world_prune_fraction * extent;
         let big_screen = screen.is_some_and(|px| radius[i] > px);
         if transparent || big_world || big_screen {
             *r = true;
         }
     }
-    let keep: Vec<usize> = (0..g.len()).filter(|&i| !remove[i]).collect();
-    report.pruned = g.len() - keep.len() - split.len();
-    *g = g.select(&keep);
-    adam.select(&keep);
+    let keep: Vec<usize> = (0..total).filter(|&i| !remove[i]).collect();
+    report.pruned = total - keep.len() - split.len();
+    *g = g.select_joined(&extra, &keep);
+    adam.select_joined(extra.len(), &keep)?;
     *stats = DensifyStats::new(g.len());
     report.after = g.len();
     Ok(report)
