@@ -127,6 +127,9 @@ pub struct BinScratch {
     /// and the radix sort's second buffer.
     recs: Vec<[u64; 2]>,
     recs_tmp: Vec<[u64; 2]>,
+    /// Per chunk of Gaussians: the smallest and largest depth bits of its visible splats and
+    /// their count.
+    chunks: Vec<(u32, u32, usize)>,
     /// Per-chunk counters (visible splats, radix histograms, per-tile counts), turned into
     /// write cursors in place.
     counts: Vec<usize>,
@@ -143,8 +146,7 @@ impl Packing {
     fn new(tiles_x: usize, tiles_y: usize) -> Self {
         let bx = usize::BITS - tiles_x.leading_zeros();
         let by = usize::BITS - tiles_y.leading_zeros();
-        // Fails only for grids of more than ~2^30 tiles (2^38 pixels); bit 63 is
-        // `TRASH`.
+        // Fails only for grids of more than ~2^30 tiles (2^38 pixels).
         assert!(
             2 * (bx + by) <= 63,
             "tile grid {tiles_x}×{tiles_y} too large"
@@ -171,17 +173,17 @@ impl Packing {
 /// [`bin`] into `out`, reusing `out`'s and `scratch`'s buffers (no allocation once they
 /// are large enough).
 ///
-/// 1. Per fixed chunk of Gaussians (parallel): one record per Gaussian, in index order
-///    (`depth_bits << 32 | index`, its packed tile rectangle, flagged [`TRASH`] if the
-///    splat is culled; sixteen per AVX-512F instruction where the CPU has it, the same
-///    records), and the minimum and maximum depth bits and the count of the visible ones.
-/// 2. Stable LSD radix sort of the records on `depth_bits − min` (only the bits the range
-///    needs: `⌈bits/11⌉` passes of equal width ≤ 11 bits), which also drops the culled
-///    records: the first pass puts them in a last bucket and cuts it off (a pass is made
-///    for that alone when there are no bits to sort). Each pass: per-chunk histograms
-///    (parallel), an exclusive prefix sum in (digit, chunk) order giving each chunk its
-///    write cursor per digit, a parallel scatter. Stability over index-ordered input makes
-///    the order (depth bits, Gaussian index).
+/// 1. Per fixed chunk of Gaussians (parallel): a record per visible splat, in index order
+///    at the chunk's head (`depth_bits << 32 | index`, its packed tile rectangle; sixteen
+///    splats per AVX-512F instruction where the CPU has it, compressed to the head: the same
+///    records), the minimum and maximum depth bits and the count of the visible ones; then
+///    the chunks' records gathered in order (parallel copies at running-sum offsets).
+///    Culled splats never reach the sort (at 80×60 about 60 % of a trained scene is culled).
+/// 2. Stable LSD radix sort of the visible records on `depth_bits − min` (only the bits
+///    the range needs: `⌈bits/11⌉` passes of equal width ≤ 11 bits). Each pass: per-chunk
+///    histograms (parallel), an exclusive prefix sum in (digit, chunk) order giving each
+///    chunk its write cursor per digit, a parallel scatter. Stability over index-ordered
+///    input makes the order (depth bits, Gaussian index).
 /// 3. Per fixed chunk of the sorted records (parallel): count per tile (branch-free, on a
 ///    grid of 2D differences); an exclusive prefix sum in (tile, chunk) order gives the
 ///    tile offsets and each chunk's write cursor per tile; a parallel scatter writes each
@@ -208,6 +210,7 @@ pub fn bin_into(
     let BinScratch {
         recs,
         recs_tmp,
+        chunks,
         counts,
     } = scratch;
     assert!(
@@ -216,7 +219,8 @@ pub fn bin_into(
     );
     let packing = Packing::new(tiles_x, tiles_y);
 
-    // 1. One record per Gaussian, in index order; culled ones marked for the trash.
+    // 1. Per chunk of Gaussians, a record per visible one in index order at the chunk's
+    // head; then the chunks' records gathered, in order.
     assert_eq!(
         p.splats.len(),
         p.radii.len(),
@@ -228,8 +232,7 @@ pub fn bin_into(
     let avx512 = kernel.avx512();
     #[cfg(not(target_arch = "x86_64"))]
     let _ = kernel;
-    let (min, max, n) = recs
-        .par_chunks_mut(CHUNK)
+    recs.par_chunks_mut(CHUNK)
         .zip(p.radii.par_chunks(CHUNK).zip(p.splats.par_chunks(CHUNK)))
         .enumerate()
         .map(|(c, (out, (radii, splats)))| {
@@ -241,10 +244,30 @@ pub fn bin_into(
             }
             records(splats, radii, c * CHUNK, grid, out)
         })
-        .reduce(
-            || (u32::MAX, 0, 0),
-            |a, b| (a.0.min(b.0), a.1.max(b.1), a.2 + b.2),
-        );
+        .collect_into_vec(chunks);
+    let (mut min, mut max, mut n) = (u32::MAX, 0, 0);
+    for &(lo, hi, count) in chunks.iter() {
+        (min, max, n) = (min.min(lo), max.max(hi), n + count);
+    }
+    // The gather, into the sort's second buffer (the buffers keep their lengths: refilling
+    // a tail cut off would cost a memset of the culled records' share every frame).
+    resize(recs_tmp, n_all);
+    counts.clear();
+    counts.extend(chunks.iter().scan(0, |at, c| {
+        let start = *at;
+        *at += c.2;
+        Some(start)
+    }));
+    let dst = Shared::new(recs_tmp);
+    recs.par_chunks(CHUNK)
+        .zip(chunks.par_iter())
+        .zip(counts.par_iter())
+        .for_each(|((src, c), &start)| {
+            // SAFETY: chunk `c` writes `start..start + count`, ranges disjoint across
+            // chunks by the running sum, all `≤ n ≤ n_all`, the buffer's length.
+            unsafe { dst.write_slice(start, &src[..c.2]) };
+        });
+    std::mem::swap(recs, recs_tmp);
 
     // 2. Sort by (depth bits, Gaussian index).
     let bits = if n > 1 {
@@ -253,8 +276,6 @@ pub fn bin_into(
         0
     };
     radix_sort(recs, recs_tmp, counts, min, bits, n);
-    // The sorted visible records (the buffer keeps its length: refilling a tail cut off
-    // here would cost a memset of the culled records' share every frame).
     let recs = &recs[..n];
 
     // 3. Per-tile counts per chunk of the sorted records, then the scatter. The counts
@@ -330,21 +351,22 @@ fn visible(r: &[i32; 2]) -> bool {
     r[0] > 0 || r[1] > 0
 }
 
-/// The record of splat `gid`: `[depth_bits << 32 | gid, packed tile rectangle]`, the
-/// rectangle flagged [`TRASH`] when the splat is culled.
+/// The record of splat `gid`: `[depth_bits << 32 | gid, packed tile rectangle]`.
 #[inline(always)]
 fn record(s: &Splat, r: [i32; 2], gid: usize, (packing, tiles_x, tiles_y): Grid) -> [u64; 2] {
     let [x0, x1, y0, y1] = tile_rect(s.mean, r, tiles_x, tiles_y);
     // Negative radii could invert the rectangle: it is then empty.
-    let rect = packing.pack([x0, x1.max(x0), y0, y1.max(y0)]) | u64::from(!visible(&r)) << 63;
+    let rect = packing.pack([x0, x1.max(x0), y0, y1.max(y0)]);
     [u64::from(s.depth.to_bits()) << 32 | gid as u64, rect]
 }
 
 /// The tile grid: its packing and size.
 type Grid = (Packing, usize, usize);
 
-/// [`record`] of every splat of a chunk starting at Gaussian `first`, into `out`; returns
-/// the smallest and largest depth bits of the visible ones and their count.
+/// [`record`] of every visible splat of a chunk starting at Gaussian `first`, in index
+/// order at the head of `out` (as long as the chunk; the entries past the returned count
+/// are unspecified); returns the smallest and largest depth bits of the visible splats and
+/// their count.
 fn records(
     splats: &[Splat],
     radii: &[[i32; 2]],
@@ -352,9 +374,12 @@ fn records(
     grid: Grid,
     out: &mut [[u64; 2]],
 ) -> (u32, u32, usize) {
+    let n = splats.len().min(radii.len()).min(out.len());
     let (mut lo, mut hi, mut count) = (u32::MAX, 0u32, 0usize);
-    for (i, (o, (s, &r))) in out.iter_mut().zip(splats.iter().zip(radii)).enumerate() {
-        *o = record(s, r, first + i, grid);
+    for (i, (s, &r)) in splats[..n].iter().zip(&radii[..n]).enumerate() {
+        // Branch-free: every record is written at the cursor (`count ≤ i < n`), which
+        // moves on past the visible ones only.
+        out[count] = record(s, r, first + i, grid);
         let (vis, d) = (visible(&r), s.depth.to_bits());
         lo = if vis { lo.min(d) } else { lo };
         hi = if vis { hi.max(d) } else { hi };
@@ -408,7 +433,6 @@ unsafe fn records_avx512(
             shift(2 * packing.bx),
             shift(2 * packing.bx + packing.by),
         );
-        let trash = _mm512_set1_epi64(TRASH as i64);
         let first_pair = _mm512_setr_epi64(0, 1, 8, 9, 2, 3, 10, 11);
         let second_pair = _mm512_setr_epi64(4, 5, 12, 13, 6, 7, 14, 15);
         let mut vlo = _mm512_set1_epi32(-1);
@@ -443,7 +467,6 @@ unsafe fn records_avx512(
             let y1 = _mm512_max_epi32(up(_mm512_div_ps(_mm512_add_ps(my, ryf), tile), hy), y0);
             vlo = _mm512_mask_min_epu32(vlo, vis, vlo, depth);
             vhi = _mm512_mask_max_epu32(vhi, vis, vhi, depth);
-            count += vis.count_ones() as usize;
             for half in 0..2 {
                 let wide = |v: __m512i| {
                     _mm512_cvtepu32_epi64(if half == 0 {
@@ -459,8 +482,6 @@ unsafe fn records_avx512(
                         _mm512_sll_epi64(wide(y1), s_y1),
                     ),
                 );
-                let culled = !(vis >> (8 * half)) as u8;
-                let rect = _mm512_mask_or_epi64(rect, culled, rect, trash);
                 let gid = _mm512_add_epi64(
                     _mm512_set1_epi64((first + k + 8 * half) as i64),
                     _mm512_setr_epi64(0, 1, 2, 3, 4, 5, 6, 7),
@@ -470,14 +491,19 @@ unsafe fn records_avx512(
                     _mm512_unpacklo_epi64(key, rect),
                     _mm512_unpackhi_epi64(key, rect),
                 );
-                let dst = out[k + 8 * half..k + 8 * half + 8]
-                    .as_flattened_mut()
-                    .as_mut_ptr();
-                _mm512_storeu_si512(dst.cast(), _mm512_permutex2var_epi64(a, first_pair, b));
-                _mm512_storeu_si512(
-                    dst.add(8).cast(),
-                    _mm512_permutex2var_epi64(a, second_pair, b),
-                );
+                // Four records per register; the visible ones compressed to the cursor
+                // (`count ≤ k + 8·half + 4·quarter`: the full store stays within the
+                // chunk's records written or about to be).
+                let quarters = [first_pair, second_pair];
+                for (q, order) in quarters.into_iter().enumerate() {
+                    let bits = (vis >> (8 * half + 4 * q)) & 0xf;
+                    let keep = DOUBLED[bits as usize];
+                    let recs =
+                        _mm512_maskz_compress_epi64(keep, _mm512_permutex2var_epi64(a, order, b));
+                    let dst = out[count..count + 4].as_flattened_mut().as_mut_ptr();
+                    _mm512_storeu_si512(dst.cast(), recs);
+                    count += bits.count_ones() as usize;
+                }
             }
         }
         let (mut l16, mut h16) = ([0u32; 16], [0u32; 16]);
@@ -488,47 +514,60 @@ unsafe fn records_avx512(
             hi = hi.max(h16[l]);
         }
     }
+    // The tail from the cursor (`count ≤ full`: its writes stay below `n`).
     let (tlo, thi, tcount) = records(
         &splats[full..n],
         &radii[full..n],
         first + full,
         grid,
-        &mut out[full..n],
+        &mut out[count..n],
     );
     (lo.min(tlo), hi.max(thi), count + tcount)
 }
 
-/// The trash flag of a record's rectangle word: the Gaussian is culled.
-const TRASH: u64 = 1 << 63;
+/// Bits `i` of a 4-bit mask doubled into bits `2i, 2i + 1` (a record is two 64-bit lanes).
+#[cfg(target_arch = "x86_64")]
+const DOUBLED: [u8; 16] = {
+    let mut t = [0u8; 16];
+    let mut m = 0;
+    while m < 16 {
+        let mut i = 0;
+        while i < 4 {
+            if m >> i & 1 == 1 {
+                t[m] |= 0b11 << (2 * i);
+            }
+            i += 1;
+        }
+        m += 1;
+    }
+    t
+};
 
-/// Stable LSD radix sort of `recs` on the key `(rec[0] >> 32) − min`, of which only the
-/// low `bits` bits may be set, that also drops the records flagged [`TRASH`] (`visible`
-/// records are not): the first pass puts them in a last bucket, cut off after it. The sorted
-/// records are `recs[..visible]`; the buffers keep their lengths.
+/// Stable LSD radix sort of `recs[..n]` on the key `(rec[0] >> 32) − min`, of which only
+/// the low `bits` bits may be set: `⌈bits/11⌉` passes of equal width, each from one buffer
+/// into the other (swapped after it), so the sorted records end in `recs[..n]`. `tmp` is as
+/// long as `recs`.
 fn radix_sort(
     recs: &mut Vec<[u64; 2]>,
     tmp: &mut Vec<[u64; 2]>,
     counts: &mut Vec<usize>,
     min: u32,
     bits: u32,
-    visible: usize,
+    n: usize,
 ) {
-    let mut n = recs.len();
-    let passes = bits.div_ceil(MAX_DIGIT_BITS).max(u32::from(visible < n));
+    let passes = bits.div_ceil(MAX_DIGIT_BITS);
     if passes == 0 {
         return;
     }
     let width = bits.div_ceil(passes);
-    let buckets = (1usize << width) + 1;
+    let buckets = 1usize << width;
     let mask = (1u32 << width) - 1;
-    resize(tmp, n);
+    let len = chunk_len(n);
+    let n_chunks = n.div_ceil(len);
     for pass in 0..passes {
-        let len = chunk_len(n);
-        let n_chunks = n.div_ceil(len);
         let shift = pass * width;
         let digit = move |r: &[u64; 2]| {
-            let d = ((((r[0] >> 32) as u32).wrapping_sub(min) >> shift) & mask) as usize;
-            if r[1] & TRASH != 0 { buckets - 1 } else { d }
+            ((((r[0] >> 32) as u32).wrapping_sub(min) >> shift) & mask) as usize
         };
         reset(counts, n_chunks * buckets);
         recs[..n]
@@ -554,7 +593,7 @@ fn radix_sort(
             trivial |= acc - start == n;
         }
         if !trivial {
-            let dst = Shared::new(tmp);
+            let dst = Shared::new(&mut tmp[..n]);
             recs[..n]
                 .par_chunks(len)
                 .zip(counts.par_chunks_mut(buckets))
@@ -563,14 +602,13 @@ fn radix_sort(
                         let d = digit(r);
                         // SAFETY: chunk `c` writes digit `d` at `cursor[c][d]..cursor[c][d] +
                         // hist[c][d]`, ranges disjoint across (chunk, digit) pairs by the prefix
-                        // sum, all `< n` ≤ the length of `tmp`.
+                        // sum, all `< n`, the length of `dst`.
                         unsafe { dst.write(cur[d], *r) };
                         cur[d] += 1;
                     }
                 });
             std::mem::swap(recs, tmp);
         }
-        n = visible;
     }
 }
 
@@ -618,6 +656,17 @@ impl<T: Copy> Shared<T> {
         assert!(i < self.len);
         // SAFETY: in bounds and unaliased (the caller's contract).
         unsafe { self.ptr.add(i).write(v) }
+    }
+    /// `src` copied to indices `at..at + src.len()`.
+    ///
+    /// # Safety
+    /// No other thread reads or writes those indices while the slice is shared (bounds are
+    /// checked).
+    pub(crate) unsafe fn write_slice(self, at: usize, src: &[T]) {
+        assert!(at <= self.len && src.len() <= self.len - at);
+        // SAFETY: in bounds (checked) and unaliased (the caller's contract); `src` is a
+        // shared borrow, so it does not overlap the exclusively borrowed destination.
+        unsafe { std::ptr::copy_nonoverlapping(src.as_ptr(), self.ptr.add(at), src.len()) }
     }
 }
 
@@ -692,7 +741,22 @@ mod tests {
                     // SAFETY: AVX-512F is available (checked above).
                     let b = unsafe { records_avx512(&splats, &radii, 5, grid, &mut got) };
                     assert_eq!(a, b, "{n} splats, {tiles_x}×{tiles_y} tiles");
-                    assert_eq!(want, got, "{n} splats, {tiles_x}×{tiles_y} tiles");
+                    // The visible splats' records, in index order, at the head.
+                    let visible: Vec<[u64; 2]> = (0..n)
+                        .filter(|&i| visible(&radii[i]))
+                        .map(|i| record(&splats[i], radii[i], 5 + i, grid))
+                        .collect();
+                    assert_eq!(a.2, visible.len());
+                    assert_eq!(
+                        want[..a.2],
+                        visible[..],
+                        "{n} splats, {tiles_x}×{tiles_y} tiles"
+                    );
+                    assert_eq!(
+                        got[..b.2],
+                        visible[..],
+                        "{n} splats, {tiles_x}×{tiles_y} tiles"
+                    );
                 }
             }
         }

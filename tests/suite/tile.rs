@@ -130,8 +130,11 @@ fn assert_same(got: &TileBins, want: &TileBins, what: &str) {
 
 #[test]
 fn bin_matches_reference_sort_and_scatter() {
-    // Sizes around the chunk boundaries (8192; 32 chunks from 262 144 on).
-    let sizes = [0usize, 1, 2, 3, 17, 1000, 8191, 8192, 8193, 16_385, 270_001];
+    // Sizes around the chunk boundaries (2048, and the record pass's 16-splat blocks;
+    // 32 chunks from 65 536 on).
+    let sizes = [
+        0usize, 1, 2, 3, 17, 1000, 2047, 2048, 2049, 8191, 8193, 16_385, 270_001,
+    ];
     let images = [
         (256, 256),
         (37, 21),
