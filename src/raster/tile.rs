@@ -133,6 +133,8 @@ pub struct BinScratch {
     /// Per-chunk counters (visible splats, radix histograms, per-tile counts), turned into
     /// write cursors in place.
     counts: Vec<usize>,
+    /// One counter per digit or grid cell: the running sums of [`cursors`].
+    running: Vec<usize>,
 }
 
 /// A tile rectangle packed into a u64: `x0 | x1 << bx | y0 << 2bx | y1 << (2bx + by)`.
@@ -212,6 +214,7 @@ pub fn bin_into(
         recs_tmp,
         chunks,
         counts,
+        running,
     } = scratch;
     assert!(
         p.radii.len() <= u32::MAX as usize,
@@ -275,7 +278,7 @@ pub fn bin_into(
     } else {
         0
     };
-    radix_sort(recs, recs_tmp, counts, min, bits, n);
+    radix_sort(recs, recs_tmp, (counts, running), min, bits, n);
     let recs = &recs[..n];
 
     // 3. Per-tile counts per chunk of the sorted records, then the scatter. The counts
@@ -309,19 +312,12 @@ pub fn bin_into(
                 }
             }
         });
-    // Exclusive prefix sum in (tile, chunk) order: tile offsets and chunk cursors.
-    let mut acc = 0usize;
-    for ty in 0..tiles_y {
-        for tx in 0..tiles_x {
-            out.offsets[ty * tiles_x + tx] = acc;
-            for c in 0..n_chunks {
-                let k = c * grid + ty * gx + tx;
-                let v = counts[k];
-                counts[k] = acc;
-                acc += v;
-            }
-        }
-    }
+    // Exclusive prefix sum in (tile, chunk) order: tile offsets and chunk cursors (cells
+    // off the tile grid, the last column and row, get cursors no record uses).
+    let tile_offsets = (0..tiles_y).flat_map(|ty| (0..tiles_x).map(move |tx| ty * gx + tx));
+    let acc = cursors(counts, grid, running, tile_offsets, |t, at| {
+        out.offsets[t] = at
+    });
     out.offsets[n_tiles] = acc;
     resize(&mut out.ids, acc);
     let ids_w = Shared::new(&mut out.ids);
@@ -550,7 +546,7 @@ const DOUBLED: [u8; 16] = {
 fn radix_sort(
     recs: &mut Vec<[u64; 2]>,
     tmp: &mut Vec<[u64; 2]>,
-    counts: &mut Vec<usize>,
+    (counts, running): (&mut Vec<usize>, &mut Vec<usize>),
     min: u32,
     bits: u32,
     n: usize,
@@ -580,17 +576,10 @@ fn radix_sort(
             });
         // Exclusive prefix sum in (digit, chunk) order; a pass where one digit holds every
         // record would leave the order unchanged and is skipped.
-        let mut acc = 0usize;
         let mut trivial = false;
-        for d in 0..buckets {
-            let start = acc;
-            for c in 0..n_chunks {
-                let k = c * buckets + d;
-                let v = counts[k];
-                counts[k] = acc;
-                acc += v;
-            }
-            trivial |= acc - start == n;
+        cursors(counts, buckets, running, 0..buckets, |_, _| ());
+        for (d, &at) in running.iter().enumerate() {
+            trivial |= at - counts[d] == n;
         }
         if !trivial {
             let dst = Shared::new(&mut tmp[..n]);
@@ -610,6 +599,42 @@ fn radix_sort(
             std::mem::swap(recs, tmp);
         }
     }
+}
+
+/// Per-chunk counts `counts` (chunks of `cells` counters, in chunk order) turned in place
+/// into write cursors: the exclusive prefix sum in (cell, chunk) order over the cells
+/// `order` yields (each told its start by `start(i, at)`, `i` its rank), of which the sum
+/// is returned; `running` ends holding each cell's end. Walked chunk by chunk (a walk in
+/// (cell, chunk) order strides by a chunk's length, a cache miss per counter: at 50k
+/// splats that serial walk cost as much as the sort's parallel passes). Wrapping sums:
+/// cells outside `order` may hold any value.
+fn cursors(
+    counts: &mut [usize],
+    cells: usize,
+    running: &mut Vec<usize>,
+    order: impl Iterator<Item = usize>,
+    mut start: impl FnMut(usize, usize),
+) -> usize {
+    running.clear();
+    running.resize(cells, 0);
+    for chunk in counts.chunks_exact(cells) {
+        for (r, &v) in running.iter_mut().zip(chunk) {
+            *r = r.wrapping_add(v);
+        }
+    }
+    let mut acc = 0usize;
+    for (i, cell) in order.enumerate() {
+        start(i, acc);
+        let total = running[cell];
+        running[cell] = acc;
+        acc = acc.wrapping_add(total);
+    }
+    for chunk in counts.chunks_exact_mut(cells) {
+        for (r, v) in running.iter_mut().zip(chunk) {
+            (*v, *r) = (*r, r.wrapping_add(*v));
+        }
+    }
+    acc
 }
 
 /// `v` of length `len`, all zeros.
