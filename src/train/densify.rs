@@ -24,6 +24,7 @@ use crate::math::fastexp::{exp, ln, sigmoid};
 use crate::raster::project::quat_to_rotmat;
 use crate::scene::Uniform;
 use crate::train::adam::Adam;
+use rayon::prelude::*;
 
 /// Densification constants (INRIA `OptimizationParams` defaults).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -87,15 +88,24 @@ impl DensifyStats {
     pub fn add_view(&mut self, means2d_ndc: &[[f32; 2]], radii: &[[i32; 2]]) {
         assert_eq!(means2d_ndc.len(), self.count.len());
         assert_eq!(radii.len(), self.count.len());
-        for i in 0..radii.len() {
-            let r = radii[i][0].max(radii[i][1]);
-            if r > 0 {
-                let [gx, gy] = means2d_ndc[i];
-                self.grad_accum[i] += (gx * gx + gy * gy).sqrt();
-                self.count[i] += 1;
-                self.max_radius[i] = self.max_radius[i].max(r as f32);
-            }
-        }
+        // Element-wise: fixed chunks in parallel (every iteration, over every Gaussian).
+        const CHUNK: usize = 8192;
+        self.grad_accum
+            .par_chunks_mut(CHUNK)
+            .zip(self.count.par_chunks_mut(CHUNK))
+            .zip(self.max_radius.par_chunks_mut(CHUNK))
+            .zip(means2d_ndc.par_chunks(CHUNK).zip(radii.par_chunks(CHUNK)))
+            .for_each(|(((acc, count), max_r), (m2d, radii))| {
+                for i in 0..acc.len() {
+                    let r = radii[i][0].max(radii[i][1]);
+                    if r > 0 {
+                        let [gx, gy] = m2d[i];
+                        acc[i] += (gx * gx + gy * gy).sqrt();
+                        count[i] += 1;
+                        max_r[i] = max_r[i].max(r as f32);
+                    }
+                }
+            });
     }
 }
 
@@ -128,7 +138,9 @@ pub fn densify_and_prune(
         before: n0,
         ..Default::default()
     };
+    // The per-Gaussian passes run in parallel; every collect keeps index order.
     let grads: Vec<f32> = (0..n0)
+        .into_par_iter()
         .map(|i| {
             if stats.count[i] == 0 {
                 0.0
@@ -140,9 +152,11 @@ pub fn densify_and_prune(
     let dense = cfg.percent_dense * extent;
     let hot = |i: usize| grads[i] >= cfg.grad_threshold;
     let clone: Vec<usize> = (0..n0)
+        .into_par_iter()
         .filter(|&i| hot(i) && max_scale(g.log_scales[i]) <= dense)
         .collect();
     let split: Vec<usize> = (0..n0)
+        .into_par_iter()
         .filter(|&i| hot(i) && max_scale(g.log_scales[i]) > dense)
         .collect();
     report.cloned = clone.len();
@@ -198,15 +212,15 @@ pub fn densify_and_prune(
         remove[i] = true;
     }
     let screen = cfg.max_screen_size_px.filter(|_| world_prune);
-    for (i, r) in remove.iter_mut().enumerate() {
+    remove.par_iter_mut().enumerate().for_each(|(i, r)| {
         let transparent = sigmoid(opacity(i)) < cfg.min_opacity;
         let big_world = world_prune && max_scale(log_scales(i)) > cfg.world_prune_fraction * extent;
         let big_screen = screen.is_some_and(|px| radius[i] > px);
         if transparent || big_world || big_screen {
             *r = true;
         }
-    }
-    let keep: Vec<usize> = (0..total).filter(|&i| !remove[i]).collect();
+    });
+    let keep: Vec<usize> = (0..total).into_par_iter().filter(|&i| !remove[i]).collect();
     report.pruned = total - keep.len() - split.len();
     *g = g.select_joined(&extra, &keep);
     adam.select_joined(extra.len(), &keep)?;
