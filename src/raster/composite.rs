@@ -540,13 +540,38 @@ mod avx2 {
     }
 }
 
+#[cfg(target_arch = "x86_64")]
+pub(crate) use avx512::splat_alpha16;
+
 /// [`blend_group_lanes`] with AVX-512F intrinsics: one tile row is one 16-lane register,
 /// the operations those of [`avx2::blend_group`] one for one, masks in mask registers.
 #[cfg(target_arch = "x86_64")]
 mod avx512 {
-    use super::{Cut, GROUP, Group, Members, SIGMA_CLAMP, TileSplat};
+    use super::{Cut, GROUP, Group, Members, SIGMA_CLAMP, Splat, TileSplat};
     use crate::math::fastexp::exp_avx512;
     use std::arch::x86_64::*;
+
+    /// σ and α of splat `s` at the 16 pixel centres `px` of the row at `py` under the α
+    /// clamp `clamp`: [`super::splat_alpha`]'s operations lane for lane (the same bits).
+    /// Shared by the blend and the frozen-blend record.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    pub(crate) fn splat_alpha16(s: &Splat, px: __m512, py: f32, clamp: __m512) -> (__m512, __m512) {
+        let c = |x: f32| _mm512_set1_ps(x);
+        let dy = s.mean[1] - py;
+        let (cdd, dyv) = (c(s.conic[2] * dy * dy), c(dy));
+        let dx = _mm512_sub_ps(c(s.mean[0]), px);
+        let sum = _mm512_add_ps(_mm512_mul_ps(_mm512_mul_ps(c(s.conic[0]), dx), dx), cdd);
+        let sigma = _mm512_add_ps(
+            _mm512_mul_ps(c(0.5), sum),
+            _mm512_mul_ps(_mm512_mul_ps(c(s.conic[1]), dx), dyv),
+        );
+        let clamped = _mm512_min_ps(sigma, c(SIGMA_CLAMP));
+        let neg = _mm512_xor_si512(_mm512_castps_si512(clamped), _mm512_set1_epi32(i32::MIN));
+        // SAFETY: this function runs only on CPUs with AVX-512F.
+        let e = unsafe { exp_avx512(_mm512_castsi512_ps(neg)) };
+        (sigma, _mm512_min_ps(_mm512_mul_ps(c(s.opacity), e), clamp))
+    }
 
     /// # Safety
     /// The CPU must support AVX-512F.
@@ -584,19 +609,7 @@ mod avx512 {
             }
             pairs += GROUP as u64;
             let s = &ts.s;
-            let dy = s.mean[1] - py;
-            let (cdd, dyv) = (c(s.conic[2] * dy * dy), c(dy));
-            let dx = _mm512_sub_ps(c(s.mean[0]), pxv);
-            let sum = _mm512_add_ps(_mm512_mul_ps(_mm512_mul_ps(c(s.conic[0]), dx), dx), cdd);
-            let sigma = _mm512_add_ps(
-                _mm512_mul_ps(c(0.5), sum),
-                _mm512_mul_ps(_mm512_mul_ps(c(s.conic[1]), dx), dyv),
-            );
-            let clamped = _mm512_min_ps(sigma, c(SIGMA_CLAMP));
-            let neg = _mm512_xor_si512(_mm512_castps_si512(clamped), _mm512_set1_epi32(i32::MIN));
-            // SAFETY: this function runs only on CPUs with AVX-512F.
-            let e = unsafe { exp_avx512(_mm512_castsi512_ps(neg)) };
-            let alpha = _mm512_min_ps(_mm512_mul_ps(c(s.opacity), e), clamp);
+            let (sigma, alpha) = splat_alpha16(s, pxv, py, clamp);
             let valid = _mm512_mask_cmp_ps_mask::<_CMP_GE_OQ>(act, sigma, zero)
                 & _mm512_cmp_ps_mask::<_CMP_GE_OQ>(alpha, threshold);
             let nt = _mm512_mul_ps(t, _mm512_sub_ps(c(1.0), alpha));

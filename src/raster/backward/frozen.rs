@@ -23,6 +23,8 @@ use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gaussian::Gaussians;
 use crate::math::sh::num_coeffs;
+#[cfg(target_arch = "x86_64")]
+use crate::raster::composite::splat_alpha16;
 use crate::raster::composite::{Kernel, splat_alpha, splat_rows};
 use crate::raster::plan::RenderPlan;
 use crate::raster::project::{
@@ -115,6 +117,61 @@ struct BandRecord {
     alpha: Vec<f32>,
 }
 
+/// A tile row's lanes for [`blended_alpha`]: pixel centres x, the row's y, the splat's list
+/// position, each lane's `n_contrib`, the lanes inside the image, the α clamp.
+type RowLanes<'a> = (&'a [f32; LANES], f32, u32, &'a [u32; LANES], usize, f32);
+
+/// The α of splat `s` in each lane of a tile row where the forward blended it (before the
+/// lane's `n_contrib`, σ ≥ 0, α ≥ the threshold; lanes past `cols` never), else 0.
+fn blended_alpha(s: &Splat, (px, py, pos, n, cols, max_alpha): RowLanes) -> [f32; LANES] {
+    let mut a = [0f32; LANES];
+    for l in 0..cols {
+        let sa = splat_alpha(s, s.mean[0] - px[l], s.mean[1] - py, max_alpha);
+        let valid = (pos < n[l]) & (sa.sigma >= 0.0) & (sa.alpha >= ALPHA_THRESHOLD);
+        if valid {
+            a[l] = sa.alpha;
+        }
+    }
+    a
+}
+
+/// [`blended_alpha`] sixteen lanes per instruction (the forward kernel's arithmetic,
+/// [`splat_alpha16`]): the same values.
+///
+/// # Safety
+/// The CPU must support AVX-512F.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn blended_alpha_avx512(
+    s: &Splat,
+    (px, py, pos, n, cols, max_alpha): RowLanes,
+) -> [f32; LANES] {
+    use std::arch::x86_64::*;
+    let mut a = [0f32; LANES];
+    // SAFETY: AVX-512F is available (the caller's contract); the loads and the store are
+    // of 16-lane arrays.
+    unsafe {
+        let (sigma, alpha) = splat_alpha16(
+            s,
+            _mm512_loadu_ps(px.as_ptr()),
+            py,
+            _mm512_set1_ps(max_alpha),
+        );
+        let nv = _mm512_loadu_si512(n.as_ptr().cast());
+        let inside = if cols >= LANES {
+            u16::MAX
+        } else {
+            (1u16 << cols) - 1
+        };
+        let valid = inside
+            & _mm512_cmpgt_epu32_mask(nv, _mm512_set1_epi32(pos as i32))
+            & _mm512_cmp_ps_mask::<_CMP_GE_OQ>(sigma, _mm512_setzero_ps())
+            & _mm512_cmp_ps_mask::<_CMP_GE_OQ>(alpha, _mm512_set1_ps(ALPHA_THRESHOLD));
+        _mm512_storeu_ps(a.as_mut_ptr(), _mm512_maskz_mov_ps(valid, alpha));
+    }
+    a
+}
+
 impl FrozenBlend {
     /// Render once and record the blend. The geometry (everything but SH) must not change
     /// while the record is used.
@@ -157,6 +214,8 @@ impl FrozenBlend {
         }
         // Each tile row walks back to front exactly as the backward does; a lane blends
         // where the forward blended it (before `n_contrib`, σ ≥ 0, α ≥ the threshold).
+        #[cfg(target_arch = "x86_64")]
+        let avx512 = opts.kernel.avx512();
         let bands: Vec<BandRecord> = (0..bins.tiles_y)
             .into_par_iter()
             .map(|ty| {
@@ -179,6 +238,7 @@ impl FrozenBlend {
                         }
                         let max_n = n.iter().copied().max().unwrap_or(0) as usize;
                         let py = (y0 + row) as f32 + 0.5;
+                        let px: [f32; LANES] = std::array::from_fn(|l| (x0 + l) as f32 + 0.5);
                         for pos in (0..max_n).rev() {
                             let gid = ids[pos] as usize;
                             let (lo, hi) = splat_rows(p, gid, y0, rows, cull);
@@ -186,17 +246,16 @@ impl FrozenBlend {
                                 continue;
                             }
                             let s = &p.splats[gid];
-                            let mut a = [0f32; LANES];
-                            for l in 0..cols {
-                                let px = (x0 + l) as f32 + 0.5;
-                                let sa = splat_alpha(s, s.mean[0] - px, s.mean[1] - py, max_alpha);
-                                let valid = ((pos as u32) < n[l])
-                                    & (sa.sigma >= 0.0)
-                                    & (sa.alpha >= ALPHA_THRESHOLD);
-                                if valid {
-                                    a[l] = sa.alpha;
-                                }
-                            }
+                            let lane = (&px, py, pos as u32, &n, cols, max_alpha);
+                            #[cfg(target_arch = "x86_64")]
+                            let a = if avx512 {
+                                // SAFETY: AVX-512F was detected (`Kernel::avx512`).
+                                unsafe { blended_alpha_avx512(s, lane) }
+                            } else {
+                                blended_alpha(s, lane)
+                            };
+                            #[cfg(not(target_arch = "x86_64"))]
+                            let a = blended_alpha(s, lane);
                             let Some(first) = a.iter().position(|&v| v > 0.0) else {
                                 continue;
                             };
