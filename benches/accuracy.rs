@@ -59,7 +59,8 @@ use unseen::gaussian::Gaussians;
 use unseen::math::fastexp;
 use unseen::pipeline::compare::ulp_distance;
 use unseen::raster::{Kernel, Outputs, RenderOptions, render};
-use unseen::scene::{Uniform, default_camera, random_scene};
+use unseen::rng::Uniform;
+use unseen::scene::{default_camera, random_scene};
 use unseen::warp::align::{Frame, RansacConfig, Space, least_squares, ransac};
 
 struct Point {

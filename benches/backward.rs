@@ -17,14 +17,16 @@ mod common;
 
 use common::median;
 use std::time::Instant;
+use unseen::raster::Kernel;
 use unseen::raster::backward::composite::{PixelGrads, composite_backward};
 use unseen::raster::backward::frozen::{FrozenBlend, FrozenWork};
 use unseen::raster::backward::project::project_backward;
 use unseen::raster::backward::{GradGroups, ImageGrads, render_for_backward};
-use unseen::raster::composite::{Kernel, Want, composite};
+use unseen::raster::composite::{Want, composite};
 use unseen::raster::project::CameraF32;
 use unseen::raster::{RenderOptions, RenderReport};
-use unseen::scene::{Uniform, default_camera, random_scene};
+use unseen::rng::Uniform;
+use unseen::scene::{default_camera, random_scene};
 
 fn main() {
     unseen::sys::keep_freed_memory(); // as the CLI does (SPEC.md §6)

@@ -6,7 +6,7 @@
 use glam::{DMat3, DQuat, DVec3};
 use std::time::Instant;
 use unseen::collide::gjk::{ConvexHull, proximity};
-use unseen::scene::Uniform;
+use unseen::rng::Uniform;
 
 fn frustum(u: &mut Uniform, center: DVec3) -> ConvexHull {
     let lu =

@@ -22,7 +22,8 @@ mod common;
 
 use common::median;
 use std::time::Instant;
-use unseen::raster::composite::{Kernel, Want, bare_blend, composite};
+use unseen::raster::Kernel;
+use unseen::raster::composite::{Want, bare_blend, composite};
 use unseen::raster::project::{Splat, project};
 use unseen::raster::tile::{bin, tile_rect};
 use unseen::raster::{RenderOptions, RenderPlan, RenderReport};
@@ -31,7 +32,7 @@ use unseen::scene::{default_camera, random_scene};
 /// 128 splats inside one 16×16 tile (σ of 1–4 px, opacities 0.02–0.06, so transmittance
 /// stays above the stop over the whole list and every splat is evaluated on every row).
 fn tile_splats() -> Vec<Splat> {
-    let mut u = unseen::scene::Uniform::new(3);
+    let mut u = unseen::rng::Uniform::new(3);
     (0..128)
         .map(|_| {
             let sd = u.range(1.0, 4.0);

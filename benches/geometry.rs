@@ -12,7 +12,7 @@ use common::{best, pools};
 use glam::{DMat3, DVec3};
 use unseen::camera::Camera;
 use unseen::io::image::ImageF32;
-use unseen::scene::Uniform;
+use unseen::rng::Uniform;
 use unseen::warp::align::{Frame, RansacConfig, Space, ransac};
 use unseen::warp::dibr::{Footprint, WarpOptions, warp};
 

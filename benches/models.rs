@@ -17,7 +17,7 @@ use unseen::io::image::{ImageF32, write_png};
 use unseen::models::morph::Morph;
 use unseen::models::telea::inpaint;
 use unseen::models::{Keyframe, VideoGenerator};
-use unseen::scene::Uniform;
+use unseen::rng::Uniform;
 
 fn blob_mask(w: usize, h: usize, target: f64, u: &mut Uniform) -> Vec<bool> {
     let mut m = vec![false; w * h];

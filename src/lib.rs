@@ -29,9 +29,11 @@ pub mod oracle;
 pub mod pipeline;
 pub mod qamask;
 pub mod raster;
+pub mod rng;
 pub mod scene;
 pub mod sys;
 pub mod train;
+pub mod version;
 pub mod warp;
 
 pub use error::{Error, ErrorKind, Result};

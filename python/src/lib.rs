@@ -702,8 +702,8 @@ fn extrapolate(
 fn versions() -> (String, u32, u32) {
     (
         unseen::VERSION.to_string(),
-        unseen::oracle::CONVENTIONS_VERSION,
-        unseen::oracle::NUMERICS_REVISION,
+        unseen::version::CONVENTIONS_VERSION,
+        unseen::version::NUMERICS_REVISION,
     )
 }
 

@@ -354,29 +354,3 @@ impl Gaussians {
         self.sh_rest.extend_from_slice(&other.sh_rest);
     }
 }
-
-#[cfg(test)]
-mod tests {
-    /// Selecting from a scene followed by another is appending then selecting, bit for
-    /// bit (densification relies on it), for any thread count and for runs longer than
-    /// one parallel task.
-    #[test]
-    fn select_joined_is_append_then_select() {
-        let a = crate::scene::random_scene(9000, 3, 1, 0.01, 0.1);
-        let b = crate::scene::random_scene(700, 3, 2, 0.01, 0.1);
-        let n = a.len() + b.len();
-        let idx: Vec<usize> = (0..12_000).map(|k| (k * 7919 + k / 3) % n).collect();
-        let mut joined = a.clone();
-        joined.append(&b);
-        let want = joined.select(&idx);
-        for threads in [1, 3] {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap();
-            let got = pool.install(|| a.select_joined(&b, &idx));
-            assert_eq!(got, want);
-        }
-        assert_eq!(a.select(&[]).len(), 0);
-    }
-}

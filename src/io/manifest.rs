@@ -50,7 +50,7 @@ pub struct Manifest {
     /// bytes).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub conventions: Option<String>,
-    /// [`crate::oracle::NUMERICS_REVISION`] of the binary that wrote it (0: written before
+    /// [`crate::version::NUMERICS_REVISION`] of the binary that wrote it (0: written before
     /// the field existed): outputs are bit-reproducible by a binary of the same revision.
     #[serde(default)]
     pub numerics_revision: u32,
@@ -76,9 +76,9 @@ impl Manifest {
     ) -> Manifest {
         Manifest {
             crate_version: env!("CARGO_PKG_VERSION").into(),
-            conventions_version: crate::oracle::CONVENTIONS_VERSION,
+            conventions_version: crate::version::CONVENTIONS_VERSION,
             conventions: None,
-            numerics_revision: crate::oracle::NUMERICS_REVISION,
+            numerics_revision: crate::version::NUMERICS_REVISION,
             command: command.into(),
             step: step.into(),
             inputs_sha256: inputs_sha256(&inputs),

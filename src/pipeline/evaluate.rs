@@ -4,8 +4,9 @@
 //! rest), and PSNR / SSIM on the in-distribution test views of the training half (did the
 //! original scene degrade?).
 
+use super::artifacts::{load_mask, read_json, save_mask, scene_of, stem};
 use super::rundir::{RunDir, StepDone};
-use super::{Event, Inputs, load_mask, read_json, save_mask, stem};
+use super::{Event, Inputs};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gaussian::Gaussians;
@@ -226,7 +227,7 @@ pub fn run(
     for (name, step) in scenes {
         let (scene, digest): (Gaussians, String) = match step {
             None => (inputs.scene.clone(), inputs.scene_sha256.clone()),
-            Some(s) => (super::recon::scene_of(s)?, s.digest.clone()),
+            Some(s) => (scene_of(s)?, s.digest.clone()),
         };
         // `records`: the metrics carry per-view sums (a step cached before they were
         // recorded is not reused).

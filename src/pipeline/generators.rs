@@ -24,8 +24,8 @@ use crate::models::{
     self, ArtifactFixer, DepthEstimator, DepthHint, DepthKind, DepthMap, Inpainter, Keyframe,
     Video, VideoDepthEstimator, VideoGenerator,
 };
-use crate::scene::Uniform;
-use crate::train::trainer::stage_seed;
+use crate::rng::Uniform;
+use crate::rng::stage_seed;
 use std::collections::BTreeMap;
 
 /// Truth at one pose: image and camera-z depth.

@@ -9,6 +9,7 @@
 //! Deviation: the paper adds the fixer outputs "on the fly" during the final training; we
 //! fix the renders of the stage-2 scene once, before it (SPEC.md §20.5 says why).
 
+use super::artifacts::{load_image, save_image, scene_of, stem};
 use super::generators::Generators;
 use super::recon::{self, Refresh, Supervision, reconstruct_refreshing};
 use super::rundir::{RunDir, StepDone};
@@ -16,7 +17,7 @@ use super::stage1::{Stage1, independent_supervision, load_video, video_supervisi
 use super::stage2::made_clips;
 use super::stage2::{Stage2, keyframes, neighbour_pairs};
 use super::views::{Views, render_rgb};
-use super::{Event, Inputs, PipelineConfig, load_image, save_image, stem};
+use super::{Event, Inputs, PipelineConfig};
 use crate::error::Result;
 use std::collections::BTreeMap;
 
@@ -38,7 +39,7 @@ pub fn run(
     on_event: &(dyn Fn(Event) + Sync),
 ) -> Result<Interpolation> {
     let mut steps = Vec::new();
-    let s2_scene = recon::scene_of(&s2.recon)?;
+    let s2_scene = scene_of(&s2.recon)?;
     let keys = keyframes(views, s1, s2.dependent.as_ref())?;
     let pairs = neighbour_pairs(keys.len());
     let fkey = serde_json::json!({

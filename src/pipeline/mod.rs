@@ -14,6 +14,7 @@
 //! directory). Nothing below this module imports it. Progress arrives as [`Event`]s, so
 //! a command line only draws them.
 
+pub mod artifacts;
 pub mod audit;
 pub mod compare;
 pub mod config;
@@ -37,14 +38,13 @@ use crate::camera::inria::read_cameras_json;
 use crate::dataset::{Dataset, downscale_camera};
 use crate::error::{Error, Result};
 use crate::gaussian::Gaussians;
-use crate::gaussian::ply::{ply_bytes, read_ply};
-use crate::io::image::{ImageF32, read_exr, read_png, write_exr, write_png};
-use crate::io::{sha256_hex, write_atomic};
+use crate::gaussian::ply::read_ply;
+use crate::io::sha256_hex;
 use crate::train::run::{latest_ply, load_dataset, read_config, read_train_views};
+pub use artifacts::stem;
 use generators::{Generators, GroundTruth, Truth};
 pub use rundir::Scope;
-use rundir::{RunDir, StepDone, StepWriter};
-use std::io::Write;
+use rundir::{RunDir, StepDone};
 use std::path::{Path, PathBuf};
 
 /// Progress of a run, for a progress display or a log.
@@ -124,8 +124,8 @@ fn inputs_digest(
         }
     };
     text(&mut h, env!("CARGO_PKG_VERSION"));
-    h.update(crate::oracle::CONVENTIONS_VERSION.to_le_bytes());
-    h.update(crate::oracle::NUMERICS_REVISION.to_le_bytes());
+    h.update(crate::version::CONVENTIONS_VERSION.to_le_bytes());
+    h.update(crate::version::NUMERICS_REVISION.to_le_bytes());
     text(&mut h, scene_sha256);
     text(
         &mut h,
@@ -522,90 +522,6 @@ fn run_in(
         scene: Some(last.dir.join("scene.ply")),
         metrics,
     })
-}
-
-// ---------------------------------------------------------------- artifact files
-
-/// `stem.exr` (exact floats, read downstream) and `stem.png` (for people).
-pub(crate) fn save_image(w: &mut StepWriter, stem: &str, img: &ImageF32) -> Result<()> {
-    w.put(&format!("{stem}.exr"), |p| write_exr(p, img))?;
-    w.put(&format!("{stem}.png"), |p| write_png(p, img))?;
-    Ok(())
-}
-
-pub(crate) fn load_image(dir: &Path, stem: &str) -> Result<ImageF32> {
-    read_exr(&dir.join(format!("{stem}.exr")), &["R", "G", "B"])
-}
-
-/// `stem.depth.exr` (camera z, channel Y).
-pub(crate) fn save_depth(
-    w: &mut StepWriter,
-    stem: &str,
-    depth: &[f32],
-    width: usize,
-    height: usize,
-) -> Result<()> {
-    let img = ImageF32::new(width, height, 1, depth.to_vec())?;
-    w.put(&format!("{stem}.depth.exr"), |p| write_exr(p, &img))?;
-    Ok(())
-}
-
-pub(crate) fn load_depth(dir: &Path, stem: &str, width: usize, height: usize) -> Result<Vec<f32>> {
-    crate::io::image::read_depth(&dir.join(format!("{stem}.depth.exr")), width, height)
-}
-
-/// `stem.mask.png` (white = true; 8-bit, exact for booleans).
-pub(crate) fn save_mask(
-    w: &mut StepWriter,
-    stem: &str,
-    mask: &[bool],
-    width: usize,
-    height: usize,
-) -> Result<()> {
-    let img = ImageF32::new(
-        width,
-        height,
-        1,
-        mask.iter().map(|&m| if m { 1.0 } else { 0.0 }).collect(),
-    )?;
-    w.put(&format!("{stem}.mask.png"), |p| write_png(p, &img))?;
-    Ok(())
-}
-
-pub(crate) fn load_mask(dir: &Path, stem: &str) -> Result<Vec<bool>> {
-    let img = read_png(&dir.join(format!("{stem}.mask.png")))?;
-    Ok(img.data.chunks(img.channels).map(|c| c[0] > 0.5).collect())
-}
-
-/// `rel` as an INRIA PLY.
-pub(crate) fn save_scene(w: &mut StepWriter, rel: &str, g: &Gaussians) -> Result<()> {
-    let bytes = ply_bytes(g)?;
-    w.put(rel, |p| write_atomic(p, |f| f.write_all(&bytes)))?;
-    Ok(())
-}
-
-pub(crate) fn load_scene(dir: &Path, rel: &str) -> Result<Gaussians> {
-    Ok(read_ply(&dir.join(rel))?.0)
-}
-
-pub(crate) fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
-    let b = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    serde_json::from_slice(&b).map_err(|e| Error::parse(path, format!("invalid JSON: {e}")))
-}
-
-/// The folder or file stem of a camera name in a run directory: ASCII letters, digits,
-/// `_` and `-` as they are, every other byte as `%XX` — injective, so two views never share
-/// a file, and never `.`, `..` or a path separator.
-pub fn stem(name: &str) -> String {
-    let mut s = String::with_capacity(name.len());
-    for b in name.bytes() {
-        if b.is_ascii_alphanumeric() || b == b'_' || b == b'-' {
-            s.push(b as char);
-        } else {
-            s.push_str(&format!("%{b:02X}"));
-        }
-    }
-    s
 }
 
 /// Names a candidate may not have: its stage-1 folder would be another step's.

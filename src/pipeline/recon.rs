@@ -9,9 +9,10 @@
 //! scene is ≈ 0 on the original views, so weighting them would silence the data the scene
 //! came from (the issue's §6).
 
+use super::artifacts::{save_scene, stem};
 use super::config::{MaskSource, PipelineConfig, ReconConfig};
 use super::rundir::{RunDir, StepDone, StepWriter};
-use super::{Event, Inputs, load_scene, save_scene, stem};
+use super::{Event, Inputs};
 use crate::camera::Camera;
 use crate::dataset::{Dataset, View};
 use crate::error::{Error, Result};
@@ -20,7 +21,8 @@ use crate::io::image::ImageF32;
 use crate::qamask::{
     QaMaskConfig, fine_tune, mask_files, mask_scene, opacity_mask, read_mask_dir, render_qa_mask,
 };
-use crate::train::trainer::{TrainConfig, Trainer, stage_seed};
+use crate::rng::stage_seed;
+use crate::train::trainer::{TrainConfig, Trainer};
 
 /// One generated view for a reconstruction.
 #[derive(Clone, Debug)]
@@ -314,9 +316,4 @@ pub fn reconstruct_refreshing(
         }),
     )?;
     Ok(g)
-}
-
-/// The scene of a finished reconstruction step.
-pub fn scene_of(step: &StepDone) -> Result<Gaussians> {
-    load_scene(&step.dir, "scene.ply")
 }

@@ -1,9 +1,10 @@
 //! `report.md` of a run (the demo's page): the plan, per-stage pictures, the metric table
 //! and the time of every step.
 
+use super::Outcome;
+use super::artifacts::{read_json, stem};
 use super::config::PipelineConfig;
 use super::views::Plan;
-use super::{Outcome, read_json, stem};
 use crate::error::Result;
 use std::path::Path;
 

@@ -16,23 +16,24 @@
 //! views, the inpainted views, the clips' intermediate frames and the propagated views
 //! ([`super::recon`]).
 
+use super::artifacts::{
+    load_depth, load_image, load_mask, load_scene, save_depth, save_image, save_mask, save_scene,
+    stem,
+};
 use super::generators::Generators;
 use super::recon::{self, Supervision, reconstruct};
 use super::rundir::{RunDir, StepDone};
 use super::views::{Views, apply_alignment, training_depth, warp_depth};
-use super::{
-    Event, Inputs, PipelineConfig, load_depth, load_image, load_mask, load_scene, nearest_training,
-    save_depth, save_image, save_mask, save_scene, stem,
-};
+use super::{Event, Inputs, PipelineConfig, nearest_training};
 use crate::camera::Camera;
 use crate::camera::inria::{cameras_json_string, read_cameras_json};
 use crate::error::{Error, Result};
 use crate::io::image::ImageF32;
 use crate::io::write_text;
 use crate::models::{DepthHint, Keyframe, Video};
-use crate::scene::Uniform;
+use crate::rng::Uniform;
+use crate::rng::stage_seed;
 use crate::train::trainer::init_from_points;
-use crate::train::trainer::stage_seed;
 use crate::warp::align::{Alignment, Frame, RansacConfig, Space, ransac};
 use crate::warp::dibr::{WarpOptions, warp};
 use rayon::prelude::*;

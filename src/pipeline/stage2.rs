@@ -14,16 +14,16 @@
 //! trajectory keyframe and the clips' intermediate frames, weighted by the mask of the
 //! stage-1 scene.
 
+use super::artifacts::{
+    load_depth, load_image, load_mask, read_json, save_depth, save_image, save_mask, scene_of, stem,
+};
 use super::config::Stage2Depth;
 use super::generators::Generators;
 use super::recon::{self, Supervision, reconstruct};
 use super::rundir::{RunDir, StepDone};
 use super::stage1::{NO_ALIGNMENT, Stage1, align_clip, save_video, video_supervision};
 use super::views::{MIN_ALIGN_PIXELS, Views, apply_alignment, render_rgba, training_depth};
-use super::{
-    Event, Inputs, PipelineConfig, load_depth, load_image, load_mask, nearest_training, save_depth,
-    save_image, save_mask, stem,
-};
+use super::{Event, Inputs, PipelineConfig, nearest_training};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::io::image::ImageF32;
@@ -91,7 +91,7 @@ pub fn run(
     on_event: &(dyn Fn(Event) + Sync),
 ) -> Result<Stage2> {
     let mut steps = Vec::new();
-    let s1_scene = recon::scene_of(&s1.recon)?;
+    let s1_scene = scene_of(&s1.recon)?;
     let dependent = if views.plan.dependent.is_empty() {
         None
     } else {
@@ -380,7 +380,7 @@ pub fn run(
 /// made).
 pub fn made_clips(videos: &StepDone, pairs: usize) -> Result<Vec<usize>> {
     let path = videos.dir.join("videos.json");
-    let list: serde_json::Value = super::read_json(&path)?;
+    let list: serde_json::Value = read_json(&path)?;
     let Some(made) = list.get("made") else {
         return Ok((0..pairs).collect());
     };

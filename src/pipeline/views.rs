@@ -16,12 +16,12 @@
 //! to its centre, ordered along the gap by the segment parameter. A gap with no dependent
 //! view gets a camera interpolated half-way ([`crate::models::morph::interpolate_camera`]).
 
+use super::artifacts::{
+    load_depth, load_image, load_mask, read_json, save_depth, save_image, save_mask, stem,
+};
 use super::generators::Generators;
 use super::rundir::{RunDir, StepDone};
-use super::{
-    Event, Inputs, PipelineConfig, load_depth, load_image, load_mask, nearest_training, read_json,
-    same_pose, save_depth, save_image, save_mask, stem,
-};
+use super::{Event, Inputs, PipelineConfig, nearest_training, same_pose};
 use crate::camera::Camera;
 use crate::camera::inria::{cameras_json_string, read_cameras_json};
 use crate::collide::frustum::{Outline, Polyhedron, depth_range, mean_range, write_obj};

@@ -23,6 +23,7 @@
 //! (tests `simd_and_scalar_kernels_are_bit_identical`, `exp_and_ln_simd_match_scalar_bitwise`).
 
 use super::RenderReport;
+use super::kernel::{ISA_AVX2, ISA_AVX512, ISA_SCALAR, Kernel};
 use super::plan::RenderPlan;
 use super::project::{ALPHA_THRESHOLD, Projected, Splat};
 use super::schedule::longest_first;
@@ -41,42 +42,6 @@ pub const TRANSMITTANCE_STOP: f32 = 1e-4;
 pub const SIGMA_CLAMP: f32 = 30.0;
 /// Floor of alpha in `ED = D / max(alpha, ·)` (gsplat).
 pub const EXPECTED_DEPTH_EPS: f32 = 1e-10;
-
-/// Which compiled form of the per-Gaussian (projection) and per-pixel (blend) kernels runs.
-/// All give identical bits.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum Kernel {
-    /// The fastest form this CPU supports, detected at run time: AVX-512F for the forward
-    /// and backward blends and both projections (forward and backward), AVX2 elsewhere.
-    #[default]
-    Auto,
-    /// AVX2 where detected, never AVX-512 (tests and benches compare the forms).
-    Avx2,
-    /// One pixel (one Gaussian) at a time, no vectorization: the reference form.
-    Scalar,
-}
-
-impl Kernel {
-    /// Whether the AVX2 forms run.
-    pub(crate) fn avx2(self) -> bool {
-        #[cfg(target_arch = "x86_64")]
-        return self != Kernel::Scalar && std::is_x86_feature_detected!("avx2");
-        #[cfg(not(target_arch = "x86_64"))]
-        false
-    }
-    /// Whether the AVX-512F forms run, where one exists.
-    pub(crate) fn avx512(self) -> bool {
-        #[cfg(target_arch = "x86_64")]
-        return self == Kernel::Auto && std::is_x86_feature_detected!("avx512f");
-        #[cfg(not(target_arch = "x86_64"))]
-        false
-    }
-}
-
-/// Instruction sets of the blend kernel (const parameter of the band loop).
-const ISA_SCALAR: u8 = 0;
-const ISA_AVX2: u8 = 1;
-const ISA_AVX512: u8 = 2;
 
 /// Pixels walked together: one tile row (two AVX2 registers of f32).
 const GROUP: usize = TILE_SIZE;
@@ -1006,7 +971,7 @@ mod tests {
     /// batch fill (words past `words` untouched).
     #[test]
     fn row_sets_forms_agree() {
-        let mut u = crate::scene::Uniform::new(11);
+        let mut u = crate::rng::Uniform::new(11);
         for len in [0usize, 1, 15, 16, 63, 64, 65, 130, 255, 256] {
             let mut masks = [0u32; BATCH];
             for m in masks.iter_mut().take(len) {

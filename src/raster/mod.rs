@@ -8,12 +8,13 @@
 pub mod backward;
 pub mod composite;
 pub mod decisions;
+pub mod kernel;
 pub mod plan;
 pub mod project;
 pub(crate) mod schedule;
 pub mod tile;
 
-pub use composite::Kernel;
+pub use kernel::Kernel;
 pub use plan::{Outputs, RenderPlan};
 
 use crate::camera::Camera;

@@ -24,7 +24,7 @@
 //! Gaussian is read; a colour sum that is not finite (a non-finite coefficient among those
 //! the plan uses, or an overflow) skips the Gaussian then, as `non_finite` (the last check).
 
-use super::composite::Kernel;
+use super::kernel::Kernel;
 use super::plan::RenderPlan;
 use super::{RenderOptions, RenderReport};
 use crate::camera::Camera;

@@ -14,7 +14,7 @@
 //! disjoint ([`Shared`], bounds-checked); that and the AVX-512F record pass are the
 //! `unsafe` here.
 
-use super::composite::Kernel;
+use super::kernel::Kernel;
 use super::project::{Projected, SPLAT_FLOATS, Splat};
 use rayon::prelude::*;
 
@@ -699,7 +699,7 @@ impl<T: Copy> Shared<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::Uniform;
+    use crate::rng::Uniform;
 
     /// The AVX-512F record pass against the scalar one, bit for bit: centres off the grid,
     /// on tile boundaries, NaN, ±∞ and beyond i32; radii culled, one-sided, negative,

@@ -18,8 +18,8 @@
 
 use crate::error::{Error, Result};
 use crate::gaussian::{Gaussians, GaussiansChunk, Param};
-use crate::math::Isa;
 use crate::raster::backward::project::{CHUNK, ChunkGrads, GradSink, ParamView};
+use crate::raster::kernel::Isa;
 use rayon::prelude::*;
 
 /// Adam's constants (INRIA: PyTorch defaults with `eps = 1e-15`).
@@ -569,7 +569,7 @@ mod tests {
     /// (0, negative, huge) and ε, at every vector width.
     #[test]
     fn decaying_moments_give_the_plain_bits() {
-        use crate::scene::Uniform;
+        use crate::rng::Uniform;
         let mut u = Uniform::new(41);
         let sub = |u: &mut Uniform| {
             let sign = if u.unit() < 0.5 { 0x8000_0000 } else { 0 };

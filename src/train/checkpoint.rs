@@ -29,7 +29,7 @@
 use crate::error::{Error, Result};
 use crate::gaussian::{Gaussians, Param};
 use crate::math::sh::num_coeffs;
-use crate::scene::Uniform;
+use crate::rng::Uniform;
 use crate::train::adam::GroupStep;
 use crate::train::densify::DensifyStats;
 use crate::train::trainer::{TrainConfig, Trainer};
@@ -54,7 +54,7 @@ pub fn checkpoint_path(run: &Path) -> PathBuf {
 /// resumed run continues from exactly the same numbers.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CheckpointHeader {
-    /// `oracle::NUMERICS_REVISION` of the writer: a checkpoint from another revision would
+    /// `version::NUMERICS_REVISION` of the writer: a checkpoint from another revision would
     /// not continue to the bits this build computes, so it is refused.
     pub numerics_revision: u32,
     pub config: TrainConfig,
@@ -99,7 +99,7 @@ impl Checkpoint {
     ) -> Result<()> {
         let d = &t.dataset;
         let header = CheckpointHeader {
-            numerics_revision: crate::oracle::NUMERICS_REVISION,
+            numerics_revision: crate::version::NUMERICS_REVISION,
             config: t.config.clone(),
             train_views: d
                 .train
@@ -224,12 +224,12 @@ impl Checkpoint {
         let hend = PREFIX + hlen as usize;
         let header: CheckpointHeader = serde_json::from_slice(&body[PREFIX..hend])
             .map_err(|e| bad(format!("invalid header: {e}")))?;
-        if header.numerics_revision != crate::oracle::NUMERICS_REVISION {
+        if header.numerics_revision != crate::version::NUMERICS_REVISION {
             return Err(bad(format!(
                 "written at numerics revision {}, this build is revision {}: it would not \
                  resume to the same bits",
                 header.numerics_revision,
-                crate::oracle::NUMERICS_REVISION
+                crate::version::NUMERICS_REVISION
             )));
         }
         if header.sh_degree > crate::math::sh::MAX_SH_DEGREE {

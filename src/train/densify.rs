@@ -22,7 +22,7 @@ use crate::error::Result;
 use crate::gaussian::Gaussians;
 use crate::math::fastexp::{exp, ln, sigmoid};
 use crate::raster::project::quat_to_rotmat;
-use crate::scene::Uniform;
+use crate::rng::Uniform;
 use crate::train::adam::Adam;
 use rayon::prelude::*;
 

@@ -103,7 +103,7 @@ pub fn mean_sq_dist_3nn(pts: &[[f32; 3]]) -> Vec<f32> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::Uniform;
+    use crate::rng::Uniform;
 
     #[test]
     fn matches_brute_force() {

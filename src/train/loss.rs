@@ -221,7 +221,7 @@ pub fn psnr(x: &[f32], y: &[f32]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::Uniform;
+    use crate::rng::Uniform;
 
     type Images = (Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>);
 

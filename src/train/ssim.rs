@@ -8,7 +8,7 @@
 //! per pixel, `dS̄/dx = (G⊛∂S/∂μx + 2x·G⊛∂S/∂E_xx + y·G⊛∂S/∂E_xy) / N`, the window being
 //! symmetric so that its adjoint (with zero padding) is itself.
 
-use crate::math::Isa;
+use crate::raster::kernel::Isa;
 use rayon::prelude::*;
 
 /// Window size and standard deviation (INRIA `ssim(window_size=11)`, `gaussian(11, 1.5)`).
@@ -402,7 +402,7 @@ thread_local! {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::Uniform;
+    use crate::rng::Uniform;
 
     /// One plane blurred by the passes [`ssim_with`] uses: horizontal, then vertical.
     fn blur(isa: Isa, img: &[f64], w: usize, h: usize) -> Vec<f64> {

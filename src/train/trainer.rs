@@ -18,7 +18,7 @@ use crate::raster::backward::{
     GradGroups, Gradients, ImageGrads, backward_apply, backward_into, render_for_backward,
 };
 use crate::raster::{Conventions, Outputs, RenderOptions};
-use crate::scene::Uniform;
+use crate::rng::{Uniform, stage_seed};
 use crate::train::adam::{Adam, AdamConfig, ExpSchedule};
 use crate::train::densify::{
     DensifyConfig, DensifyReport, DensifyStats, densify_and_prune, reset_opacity,
@@ -271,17 +271,6 @@ struct Schedule {
     stats: bool,
     densify: bool,
     reset: bool,
-}
-
-/// Seed of a stage's generator: the run seed mixed with the stage name (FNV-1a), so
-/// stages draw independent streams (SPEC.md §6).
-pub fn stage_seed(seed: u64, stage: &str) -> u64 {
-    let mut h = 0xcbf2_9ce4_8422_2325u64 ^ seed;
-    for b in stage.bytes() {
-        h ^= b as u64;
-        h = h.wrapping_mul(0x0100_0000_01b3);
-    }
-    h
 }
 
 impl<'a> Trainer<'a> {

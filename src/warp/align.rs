@@ -9,7 +9,7 @@
 //! thread count.
 
 use crate::error::{Error, Result};
-use crate::scene::Uniform;
+use crate::rng::Uniform;
 use rayon::prelude::*;
 
 /// Where the linear model holds.
@@ -162,7 +162,7 @@ pub fn ransac(frames: &[Frame], space: Space, cfg: &RansacConfig) -> Result<Alig
     let n = p.len();
     let inlier =
         |s: f64, t: f64, q: &(f64, f64)| (s * q.0 + t - q.1).abs() <= cfg.threshold * q.1.abs();
-    let mut rng = Uniform::new(crate::train::trainer::stage_seed(cfg.seed, "ransac"));
+    let mut rng = Uniform::new(crate::rng::stage_seed(cfg.seed, "ransac"));
     let mut best: Option<(usize, f64, f64)> = None;
     let mut needed = cfg.iterations as u64;
     let mut it = 0u64;

@@ -1,6 +1,6 @@
 //! Depth alignment: exact recovery, noise, outliers under RANSAC, reproducibility, errors.
 
-use unseen::scene::Uniform;
+use unseen::rng::Uniform;
 use unseen::warp::align::{Frame, RansacConfig, Space, least_squares, ransac};
 
 /// Relative estimates `r` and metric depths `d = s·r + t` (depth space) for `n` pixels.

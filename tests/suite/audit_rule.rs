@@ -6,7 +6,7 @@
 
 use crate::suite::common::{TempDir, reference};
 use unseen::pipeline::audit::stats::{ClaimData, Outcome, Rule, min_detectable_effect, t_power};
-use unseen::scene::Uniform;
+use unseen::rng::Uniform;
 
 /// Simulated audits per scenario: the standard error of a 2.5 % rate is 0.25 %.
 const AUDITS: usize = 4000;

@@ -5,7 +5,7 @@
 use super::polytope::{Frustum, exact_distance, random_frustum, sat_gap};
 use glam::{DMat3, DVec3};
 use unseen::collide::gjk::{ConvexHull, Proximity, TOUCH_REL, proximity};
-use unseen::scene::Uniform;
+use unseen::rng::Uniform;
 
 fn query(a: &Frustum, b: &Frustum) -> Proximity {
     proximity(&a.hull(), &b.hull()).expect("GJK converges")
@@ -447,7 +447,7 @@ mod frustums {
 #[test]
 fn mean_of_equal_ranges_is_exact_so_one_deterministic_inpainting_stands_for_n() {
     use unseen::collide::frustum::mean_range;
-    let mut u = unseen::scene::Uniform::new(35);
+    let mut u = unseen::rng::Uniform::new(35);
     let (mut naive_misses, draws) = (0usize, 20_000usize);
     for _ in 0..draws {
         // Depths over six decades, as scenes in metres and millimetres give.

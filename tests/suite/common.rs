@@ -1,11 +1,20 @@
 //! Helpers shared by the suites.
 use std::path::PathBuf;
 
+/// The repository's root: the folder holding `reference_data/`, at or above the manifest
+/// of the package these tests belong to.
+pub fn repo_root() -> PathBuf {
+    let manifest = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    manifest
+        .ancestors()
+        .find(|d| d.join("reference_data").is_dir())
+        .unwrap_or_else(|| panic!("no reference_data/ at or above {}", manifest.display()))
+        .to_path_buf()
+}
+
 /// `reference_data/<rel>` in the source tree.
 pub fn reference(rel: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("reference_data")
-        .join(rel)
+    repo_root().join("reference_data").join(rel)
 }
 
 /// Run `f` inside a rayon pool of `threads` threads.

@@ -10,7 +10,8 @@ use unseen::raster::decisions::{
     PIXEL_FORWARD_FLAGS, PIXEL_TRANSMITTANCE_STOP, decisions,
 };
 use unseen::raster::{Conventions, Cutoffs, Kernel, Outputs, RenderOptions, render};
-use unseen::scene::{Uniform, default_camera, random_scene};
+use unseen::rng::Uniform;
+use unseen::scene::{default_camera, random_scene};
 
 const LOGIT_ONE: f32 = 100.0; // sigmoid(100) == 1.0 exactly in f32
 

@@ -465,7 +465,7 @@ fn soak_extrapolate_killed_at_random_moments_resumes_to_the_same_bits() {
         same_bits(&reference, out);
         no_temporaries(out);
     };
-    let mut rng = unseen::scene::Uniform::new(seed);
+    let mut rng = unseen::rng::Uniform::new(seed);
     let (mut killed, mut chain, mut kills_in_chain) = (0, 0, Vec::new());
     let mut out = t.path().join("out-0");
     let mut in_chain = 0;

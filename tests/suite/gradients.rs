@@ -6,7 +6,8 @@ use unseen::camera::Camera;
 use unseen::gaussian::Gaussians;
 use unseen::raster::backward::{GradGroups, Gradients, ImageGrads, backward, render_for_backward};
 use unseen::raster::{Outputs, RenderOptions};
-use unseen::scene::{Uniform, default_camera, random_scene};
+use unseen::rng::Uniform;
+use unseen::scene::{default_camera, random_scene};
 
 fn grads_flat(gr: &Gradients, g: &Gaussians) -> Vec<f32> {
     let mut p = Vec::new();

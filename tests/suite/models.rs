@@ -146,7 +146,7 @@ fn classical_slots_and_registry() {
             .contains("hint")
     );
     // Inpainting by name: telea fills only the mask.
-    let mut u = unseen::scene::Uniform::new(3);
+    let mut u = unseen::rng::Uniform::new(3);
     let rgb = ImageF32::new(w, h, 3, (0..w * h * 3).map(|_| u.unit()).collect()).unwrap();
     let t = inpainter("telea").unwrap().inpaint(&rgb, &mask).unwrap();
     for (p, &m) in mask.iter().enumerate() {

@@ -5,7 +5,7 @@
 
 use glam::{DMat3, DVec3};
 use unseen::collide::gjk::ConvexHull;
-use unseen::scene::Uniform;
+use unseen::rng::Uniform;
 
 /// A frustum: 8 corners (near 0–3, far 4–7, same order) and its centre.
 pub struct Frustum {

@@ -137,10 +137,10 @@ fn dense_fine_tune(scene: &mut Gaussians, views: &[Camera], cfg: &QaMaskConfig) 
     use unseen::raster::Outputs;
     use unseen::raster::backward::GradGroups;
     use unseen::raster::backward::frozen::FrozenBlend;
-    use unseen::scene::Uniform;
+    use unseen::rng::Uniform;
+    use unseen::rng::stage_seed;
     use unseen::train::adam::Adam;
     use unseen::train::loss::{LossInput, image_loss};
-    use unseen::train::trainer::stage_seed;
     let opts = RenderOptions {
         background: cfg.target_color,
         sh_degree: Some(cfg.sh_degree),

@@ -401,7 +401,7 @@ fn render_is_deterministic_across_thread_counts() {
 fn projection_simd_matches_scalar_bitwise() {
     use unseen::raster::project::{Projected, project};
     use unseen::raster::{RenderPlan, RenderReport};
-    use unseen::scene::Uniform;
+    use unseen::rng::Uniform;
     let specials = [
         f32::NAN,
         f32::INFINITY,

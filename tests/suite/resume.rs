@@ -6,7 +6,7 @@ use super::common::{TempDir, reference, short_train_config};
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use unseen::scene::Uniform;
+use unseen::rng::Uniform;
 use unseen::train::checkpoint::{Checkpoint, checkpoint_path};
 
 const ITERATIONS: u32 = 400;

@@ -90,7 +90,7 @@ fn telea_matches_opencv() {
 #[test]
 fn telea_any_channel_count_and_edge_cases() {
     let (w, h) = (23usize, 17usize);
-    let mut u = unseen::scene::Uniform::new(5);
+    let mut u = unseen::rng::Uniform::new(5);
     let rgba: Vec<u8> = (0..w * h * 4).map(|_| (u.unit() * 255.0) as u8).collect();
     let rgb: Vec<u8> = rgba.chunks(4).flat_map(|p| [p[0], p[1], p[2]]).collect();
     let mask: Vec<bool> = (0..w * h)

@@ -4,7 +4,7 @@ use super::common::with_threads;
 use unseen::raster::Kernel;
 use unseen::raster::project::{Projected, Splat};
 use unseen::raster::tile::{BinScratch, TILE_SIZE, TileBins, bin, bin_into, tile_rect};
-use unseen::scene::Uniform;
+use unseen::rng::Uniform;
 
 /// The tile rectangle as first written: `f32::floor` / `ceil`, then `as i64` clamped.
 fn reference_rect(mean: [f32; 2], radii: [i32; 2], tiles_x: usize, tiles_y: usize) -> [usize; 4] {

@@ -5,7 +5,8 @@ use super::common::{case_dirs, reference, short_train_config, with_threads};
 use unseen::dataset::{self, LoadOptions, Split};
 use unseen::gaussian::{Gaussians, Param};
 use unseen::io::npy::read_npy_f32;
-use unseen::scene::Uniform;
+use unseen::rng::Uniform;
+use unseen::scene::random_scene;
 use unseen::train::adam::{Adam, AdamConfig, ExpSchedule};
 use unseen::train::densify::{DensifyConfig, DensifyStats, densify_and_prune, reset_opacity};
 use unseen::train::ssim::ssim;
@@ -580,4 +581,27 @@ fn last_iteration_neither_densifies_nor_resets() {
         t.gaussians.opacity_logits.iter().any(|&o| o > cap + 1.0),
         "opacities were reset"
     );
+}
+
+/// Selecting from a scene followed by another is appending then selecting, bit for
+/// bit (densification relies on it), for any thread count and for runs longer than
+/// one parallel task.
+#[test]
+fn select_joined_is_append_then_select() {
+    let a = random_scene(9000, 3, 1, 0.01, 0.1);
+    let b = random_scene(700, 3, 2, 0.01, 0.1);
+    let n = a.len() + b.len();
+    let idx: Vec<usize> = (0..12_000).map(|k| (k * 7919 + k / 3) % n).collect();
+    let mut joined = a.clone();
+    joined.append(&b);
+    let want = joined.select(&idx);
+    for threads in [1, 3] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        let got = pool.install(|| a.select_joined(&b, &idx));
+        assert_eq!(got, want);
+    }
+    assert_eq!(a.select(&[]).len(), 0);
 }

@@ -4,7 +4,7 @@
 use unseen::camera::Camera;
 use unseen::gaussian::Gaussians;
 use unseen::math::sh::{num_coeffs, sh_basis};
-use unseen::scene::Uniform;
+use unseen::rng::Uniform;
 
 /// The forward in f64, per pixel over all Gaussians (no tiles), the same rules as the
 /// f32 rasterizer (SPEC.md §5). Returns rgb (interleaved), alpha, D, ED.

@@ -156,7 +156,7 @@ pub fn run_job_with_receipt(
         exit: i32::from(outcome.is_err()),
         error: outcome.as_ref().err().map(|e| e.to_string()),
         crate_version: env!("CARGO_PKG_VERSION").into(),
-        numerics_revision: crate::oracle::NUMERICS_REVISION,
+        numerics_revision: crate::version::NUMERICS_REVISION,
         digests,
     };
     let text = serde_json::to_string_pretty(&receipt).expect("serializes") + "\n";
@@ -287,11 +287,11 @@ fn take(
             r.error.as_deref().unwrap_or("no message")
         )));
     }
-    if r.numerics_revision != crate::oracle::NUMERICS_REVISION {
+    if r.numerics_revision != crate::version::NUMERICS_REVISION {
         return Err(fail(format!(
             "computed by numerics revision {} (this binary: {}): run it again",
             r.numerics_revision,
-            crate::oracle::NUMERICS_REVISION
+            crate::version::NUMERICS_REVISION
         )));
     }
     for (rel, sha) in &r.digests {

@@ -396,7 +396,7 @@ pub struct JobResult {
     pub generator: String,
     pub variant: String,
     pub seed: u32,
-    /// The binary that computed it ([`crate::oracle::NUMERICS_REVISION`], crate version):
+    /// The binary that computed it ([`crate::version::NUMERICS_REVISION`], crate version):
     /// a sample of another revision is another draw of the chaotic training, averaged into
     /// its seed unless it has the same bits ([`pairs`], [`seed_means`]). 0 / empty in job files
     /// written before it was recorded (the audit's own revision applies).
@@ -566,7 +566,7 @@ pub fn run_job(
                 generator: generator.name(),
                 variant: variant.name().into(),
                 seed,
-                numerics_revision: crate::oracle::NUMERICS_REVISION,
+                numerics_revision: crate::version::NUMERICS_REVISION,
                 crate_version: env!("CARGO_PKG_VERSION").into(),
                 config: config_digest(&pc),
                 original: first,
@@ -974,7 +974,7 @@ fn hierarchical(
     if n < 2 {
         return (None, n);
     }
-    let mut u = crate::scene::Uniform::new(seed);
+    let mut u = crate::rng::Uniform::new(seed);
     let mut reps = Vec::with_capacity(HIERARCHICAL_REPLICATES);
     let mut picks: Vec<usize> = Vec::new();
     for _ in 0..HIERARCHICAL_REPLICATES {
@@ -1329,7 +1329,7 @@ fn finish(
     let usable: Vec<JobResult> = pool.samples.into_iter().filter(|r| !other(r)).collect();
     let report = Report {
         crate_version: env!("CARGO_PKG_VERSION").into(),
-        numerics_revision: crate::oracle::NUMERICS_REVISION,
+        numerics_revision: crate::version::NUMERICS_REVISION,
         provenance: pool.provenance.clone(),
         seeds,
         revisions,

@@ -11,7 +11,7 @@
 //! but the bootstrap's replicate array; single-threaded, so the same bits for any thread
 //! count.
 
-use crate::scene::Uniform;
+use crate::rng::Uniform;
 use std::f64::consts::{FRAC_2_SQRT_PI, PI};
 
 /// `P(T ≤ t)` for Student's t with `df ≥ 1` degrees of freedom.

@@ -55,10 +55,11 @@
 //! real tile lists, SPEC.md §5.8).
 
 use crate::math::round::{ceil, floor};
+use crate::raster::composite::MAX_TASKS;
 use crate::raster::composite::{
     EXPECTED_DEPTH_EPS, SIGMA_CLAMP, SplatAlpha, splat_alpha, splat_rows,
 };
-use crate::raster::composite::{Kernel, MAX_TASKS};
+use crate::raster::kernel::{ISA_AVX2, ISA_AVX512, ISA_SCALAR, Kernel};
 use crate::raster::project::{ALPHA_THRESHOLD, Projected, Splat};
 use crate::raster::schedule::longest_first;
 use crate::raster::tile::{TILE_SIZE, TileBins};
@@ -292,11 +293,6 @@ impl RowBound {
         out
     }
 }
-
-/// Instruction sets of the row kernel (const parameter of the band loop).
-const ISA_SCALAR: u8 = 0;
-const ISA_AVX2: u8 = 1;
-const ISA_AVX512: u8 = 2;
 
 /// A row's visit: the entry index, with the halves to evaluate in the top two bits.
 const VISIT_INDEX: u32 = (1 << 30) - 1;

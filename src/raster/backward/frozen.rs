@@ -25,7 +25,8 @@ use crate::gaussian::Gaussians;
 use crate::math::sh::num_coeffs;
 #[cfg(target_arch = "x86_64")]
 use crate::raster::composite::splat_alpha16;
-use crate::raster::composite::{Kernel, splat_alpha, splat_rows};
+use crate::raster::composite::{splat_alpha, splat_rows};
+use crate::raster::kernel::Kernel;
 use crate::raster::plan::RenderPlan;
 use crate::raster::project::{
     ALPHA_THRESHOLD, CameraF32, Projected, Splat, sh_colors, sh_view_basis,

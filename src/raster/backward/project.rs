@@ -22,7 +22,7 @@ use crate::math::lanes::Lanes;
 #[cfg(target_arch = "x86_64")]
 use crate::math::lanes::{F32x8, F32x16};
 use crate::math::sh::{Dual3, MAX_SH_COEFFS, ShScalar, num_coeffs, sh_basis};
-use crate::raster::composite::Kernel;
+use crate::raster::kernel::Kernel;
 use crate::raster::plan::RenderPlan;
 use crate::raster::project::{
     COPY, CameraF32, Culls, EPS2D, Geometry, MAX_REST, Projected, SPLAT_FLOATS, Splat, copy_padded,
