@@ -1,4 +1,5 @@
 mod align;
+mod architecture;
 mod audit_rule;
 mod bad_input;
 mod cli;

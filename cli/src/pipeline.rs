@@ -406,7 +406,12 @@ pub struct DemoArgs {
 /// The demo: train the original scene on the train half of a bundled room, extrapolate it
 /// with the quick preset into the held-out half, report.
 pub fn run_demo(a: &DemoArgs) -> Result<()> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("reference_data/scenes");
+    // The repository's reference_data/, one level above this package (cli/).
+    let manifest = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let root = manifest
+        .parent()
+        .unwrap_or(manifest)
+        .join("reference_data/scenes");
     let scene = root.join(&a.scene);
     if !scene.is_dir() {
         return Err(Error::invalid(format!("no bundled scene '{}'", a.scene)).at(&root));

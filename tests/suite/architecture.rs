@@ -1,0 +1,338 @@
+//! The floor plan of docs/architecture.md against the library's actual `use` graph: every
+//! top-level module is on a floor, every reference to another top-level module goes to a
+//! lower floor, and no two modules (at any depth) reach each other in a cycle.
+//!
+//! The graph is read from the source text: a reference is a path `crate::a::b…` or
+//! `super::…` outside comments (doc links are not imports), resolved to the longest module
+//! it names. A module's references to its own ancestors and descendants are not edges: a
+//! `mod.rs` declares and re-exports its children and holds the vocabulary they share.
+
+use super::common::repo_root;
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
+
+/// Module path (`raster::composite`) → its source text without comments.
+fn modules(src: &Path) -> BTreeMap<String, String> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![src.to_path_buf()];
+    while let Some(dir) = stack.pop() {
+        for e in std::fs::read_dir(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display())) {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+                continue;
+            }
+            if p.extension().is_none_or(|x| x != "rs") {
+                continue;
+            }
+            let rel = p.strip_prefix(src).unwrap().with_extension("");
+            let mut parts: Vec<String> = rel
+                .iter()
+                .map(|c| c.to_string_lossy().into_owned())
+                .collect();
+            if parts.last().is_some_and(|l| l == "mod") {
+                parts.pop();
+            }
+            if parts == ["lib"] {
+                continue;
+            }
+            let text = std::fs::read_to_string(&p).unwrap();
+            out.insert(parts.join("::"), strip_comments(&text));
+        }
+    }
+    out
+}
+
+/// The text with `//…` line comments and `/*…*/` block comments removed and the contents
+/// of string literals blanked (a path in a message is not an import; a `//` in a string is
+/// not a comment).
+fn strip_comments(s: &str) -> String {
+    let b = s.as_bytes();
+    let mut out = String::with_capacity(s.len());
+    let (mut i, mut in_str) = (0, false);
+    while i < b.len() {
+        if in_str {
+            if b[i] == b'\\' {
+                out.push_str("  ");
+                i += 2;
+                continue;
+            }
+            if b[i] == b'"' {
+                in_str = false;
+                out.push('"');
+            } else {
+                out.push(' ');
+            }
+            i += 1;
+        } else if b[i..].starts_with(b"//") {
+            while i < b.len() && b[i] != b'\n' {
+                i += 1;
+            }
+        } else if b[i..].starts_with(b"/*") {
+            let end = s[i + 2..].find("*/").map_or(b.len(), |k| i + 2 + k + 2);
+            i = end;
+        } else {
+            if b[i] == b'"' && !(i > 0 && matches!(b[i - 1], b'\'' | b'\\')) {
+                in_str = true;
+            }
+            // Non-ASCII bytes only occur in strings and comments; keep them as spaces.
+            out.push(if b[i].is_ascii() { b[i] as char } else { ' ' });
+            i += 1;
+        }
+    }
+    out
+}
+
+/// Every path a text names from `crate::` or `super::` (brace groups expanded), as the
+/// list of its segments after `crate` (`super` resolved against `module`).
+fn referenced_paths(module: &[&str], text: &str) -> Vec<Vec<String>> {
+    let mut out = Vec::new();
+    let bytes = text.as_bytes();
+    let ident = |c: u8| c.is_ascii_alphanumeric() || c == b'_';
+    for start in 0..bytes.len() {
+        if start > 0 && (ident(bytes[start - 1]) || bytes[start - 1] == b':') {
+            continue;
+        }
+        let rest = &text[start..];
+        let (mut base, mut tail): (Vec<String>, &str) =
+            if let Some(t) = rest.strip_prefix("crate::") {
+                (Vec::new(), t)
+            } else if rest.starts_with("super::") {
+                // `super` of `a::b` is `a`, whether `b` is a file or a folder's `mod.rs`.
+                let mut base: Vec<String> = module.iter().map(|s| s.to_string()).collect();
+                let mut t = rest;
+                while let Some(r) = t.strip_prefix("super::") {
+                    base.pop();
+                    t = r;
+                }
+                (base, t)
+            } else {
+                continue;
+            };
+        expand(&mut base, &mut tail, &mut out);
+    }
+    out
+}
+
+/// Read the path segments at the start of `tail` onto `base`, expanding a `{…}` group
+/// into one path per member, and push the results.
+fn expand(base: &mut [String], tail: &mut &str, out: &mut Vec<Vec<String>>) {
+    let mut path = base.to_vec();
+    loop {
+        let t = tail.trim_start();
+        if let Some(group) = t.strip_prefix('{') {
+            // Split the group at its top-level commas.
+            let (mut depth, mut end) = (1, group.len());
+            for (k, c) in group.char_indices() {
+                match c {
+                    '{' => depth += 1,
+                    '}' => {
+                        depth -= 1;
+                        if depth == 0 {
+                            end = k;
+                            break;
+                        }
+                    }
+                    _ => {}
+                }
+            }
+            let inner = &group[..end];
+            let (mut depth, mut from) = (0, 0);
+            let mut members = Vec::new();
+            for (k, c) in inner.char_indices() {
+                match c {
+                    '{' => depth += 1,
+                    '}' => depth -= 1,
+                    ',' if depth == 0 => {
+                        members.push(&inner[from..k]);
+                        from = k + 1;
+                    }
+                    _ => {}
+                }
+            }
+            members.push(&inner[from..]);
+            for m in members {
+                let mut m = m.trim();
+                if m.is_empty() {
+                    continue;
+                }
+                expand(&mut path, &mut m, out);
+            }
+            return;
+        }
+        let n = t
+            .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+            .unwrap_or(t.len());
+        if n == 0 {
+            break;
+        }
+        path.push(t[..n].to_string());
+        *tail = &t[n..];
+        match tail.strip_prefix("::") {
+            Some(r) => *tail = r,
+            None => break,
+        }
+    }
+    out.push(path);
+}
+
+/// The floor of each top-level module, from the table in docs/architecture.md: rows
+/// `| N | `a`, `b` | … |`.
+fn floors(doc: &str) -> BTreeMap<String, u32> {
+    let mut out = BTreeMap::new();
+    for line in doc.lines() {
+        let cells: Vec<&str> = line.split('|').map(str::trim).collect();
+        if cells.len() < 4 {
+            continue;
+        }
+        let Ok(floor) = cells[1].parse::<u32>() else {
+            continue;
+        };
+        for room in cells[2].split(',') {
+            let room = room.trim().trim_matches('`');
+            assert!(
+                out.insert(room.to_string(), floor).is_none(),
+                "docs/architecture.md lists `{room}` twice"
+            );
+        }
+    }
+    out
+}
+
+/// The module graph: module → modules it references (excluding its ancestors and
+/// descendants).
+fn graph(mods: &BTreeMap<String, String>) -> BTreeMap<String, BTreeSet<String>> {
+    let mut edges: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    for (m, text) in mods {
+        let parts: Vec<&str> = m.split("::").collect();
+        let set = edges.entry(m.clone()).or_default();
+        for path in referenced_paths(&parts, text) {
+            let target = (1..=path.len())
+                .rev()
+                .map(|k| path[..k].join("::"))
+                .find(|p| mods.contains_key(p));
+            let Some(t) = target else { continue };
+            let related =
+                t == *m || m.starts_with(&format!("{t}::")) || t.starts_with(&format!("{m}::"));
+            if !related {
+                set.insert(t);
+            }
+        }
+    }
+    edges
+}
+
+/// The strongly connected components with more than one module (Tarjan).
+fn cycles(edges: &BTreeMap<String, BTreeSet<String>>) -> Vec<Vec<String>> {
+    struct T<'a> {
+        e: &'a BTreeMap<String, BTreeSet<String>>,
+        index: BTreeMap<&'a str, usize>,
+        low: BTreeMap<&'a str, usize>,
+        stack: Vec<&'a str>,
+        on: BTreeSet<&'a str>,
+        out: Vec<Vec<String>>,
+    }
+    fn visit<'a>(t: &mut T<'a>, v: &'a str) {
+        let i = t.index.len();
+        t.index.insert(v, i);
+        t.low.insert(v, i);
+        t.stack.push(v);
+        t.on.insert(v);
+        for w in t.e.get(v).into_iter().flatten() {
+            let w = w.as_str();
+            if !t.index.contains_key(w) {
+                visit(t, w);
+                let lw = t.low[w];
+                let lv = t.low.get_mut(v).unwrap();
+                *lv = (*lv).min(lw);
+            } else if t.on.contains(w) {
+                let iw = t.index[w];
+                let lv = t.low.get_mut(v).unwrap();
+                *lv = (*lv).min(iw);
+            }
+        }
+        if t.low[v] == t.index[v] {
+            let mut comp = Vec::new();
+            loop {
+                let w = t.stack.pop().unwrap();
+                t.on.remove(w);
+                comp.push(w.to_string());
+                if w == v {
+                    break;
+                }
+            }
+            if comp.len() > 1 {
+                comp.sort();
+                t.out.push(comp);
+            }
+        }
+    }
+    let mut t = T {
+        e: edges,
+        index: BTreeMap::new(),
+        low: BTreeMap::new(),
+        stack: Vec::new(),
+        on: BTreeSet::new(),
+        out: Vec::new(),
+    };
+    for v in edges.keys() {
+        if !t.index.contains_key(v.as_str()) {
+            visit(&mut t, v);
+        }
+    }
+    t.out
+}
+
+/// The floor plan holds: each top-level module on one floor of docs/architecture.md,
+/// references only downward, and no cycle between modules at any depth.
+#[test]
+fn modules_import_only_downward_and_without_cycles() {
+    let root = repo_root();
+    let doc = std::fs::read_to_string(root.join("docs/architecture.md")).unwrap();
+    let floor = floors(&doc);
+    let mods = modules(&root.join("src"));
+    let edges = graph(&mods);
+
+    let top = |m: &str| m.split("::").next().unwrap().to_string();
+    let tops: BTreeSet<String> = mods.keys().map(|m| top(m)).collect();
+    let listed: BTreeSet<String> = floor.keys().cloned().collect();
+    assert_eq!(
+        tops, listed,
+        "docs/architecture.md's floors must list exactly the library's top-level modules"
+    );
+    let mut upward = Vec::new();
+    for (a, bs) in &edges {
+        for b in bs {
+            let (ta, tb) = (top(a), top(b));
+            if ta != tb && floor[&ta] <= floor[&tb] {
+                upward.push(format!(
+                    "{a} (floor {}) -> {b} (floor {})",
+                    floor[&ta], floor[&tb]
+                ));
+            }
+        }
+    }
+    assert!(
+        upward.is_empty(),
+        "imports that do not go to a lower floor:\n{}",
+        upward.join("\n")
+    );
+    let cyc = cycles(&edges);
+    assert!(cyc.is_empty(), "module cycles: {cyc:?}");
+}
+
+/// The checker sees what it must: a `super` chain, a brace group, a path inside a
+/// function body, and not a path in a comment or a string.
+#[test]
+fn architecture_checker_reads_references() {
+    let text = strip_comments(
+        "use super::super::a::{b::C, d};\n// crate::hidden\nfn f() { crate::e::g(); let s = \"crate::nope\"; }\n",
+    );
+    let got = referenced_paths(&["x", "y", "z"], &text);
+    let got: Vec<String> = got.iter().map(|p| p.join("::")).collect();
+    assert_eq!(got, ["x::a::b::C", "x::a::d", "e::g"]);
+    let mut e = BTreeMap::new();
+    e.insert("a".to_string(), BTreeSet::from(["b".to_string()]));
+    e.insert("b".to_string(), BTreeSet::from(["a".to_string()]));
+    assert_eq!(cycles(&e), vec![vec!["a".to_string(), "b".to_string()]]);
+}
