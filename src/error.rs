@@ -18,6 +18,12 @@ pub enum ErrorKind {
     Unsupported,
     /// Arguments or data are inconsistent (wrong sizes, NaN where a number is required).
     Invalid,
+    /// The inputs are valid but admit no result: a clip in which an intermediate camera
+    /// sees neither end frame, or between end frames of different sizes; a clip's video
+    /// depth that no alignment fits. A caller that can do without the result records it
+    /// and goes on (SPEC.md §20.3–20.4); to every other caller it is an error like
+    /// [`ErrorKind::Invalid`].
+    Degenerate,
 }
 
 /// An error with a human-readable message and, when relevant, the file it concerns.
@@ -54,6 +60,9 @@ impl Error {
     }
     pub fn invalid(message: impl Into<String>) -> Self {
         Error::new(ErrorKind::Invalid, message)
+    }
+    pub fn degenerate(message: impl Into<String>) -> Self {
+        Error::new(ErrorKind::Degenerate, message)
     }
     pub fn io(path: &Path, err: std::io::Error) -> Self {
         Error {

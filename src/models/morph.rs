@@ -7,7 +7,7 @@ use super::classical::{COLOR_SPAN, DEPTH_SPAN};
 use super::telea::inpaint_float;
 use super::{Keyframe, Video, VideoGenerator};
 use crate::camera::Camera;
-use crate::error::{Error, Result};
+use crate::error::{Error, ErrorKind, Result};
 use crate::io::image::ImageF32;
 use crate::warp::dibr::{WarpOptions, Warped, warp};
 use glam::{DMat3, DQuat};
@@ -20,9 +20,10 @@ pub const END_SIZES_DIFFER: &str = "the end frames differ in size or channels";
 
 /// Whether `e` says that a clip cannot be made between its two keyframes (an intermediate
 /// camera sees neither, or they differ in size) rather than that something failed: the
-/// pipeline records such a clip and leaves it out (SPEC.md §20.3–20.4).
+/// pipeline records such a clip and leaves it out (SPEC.md §20.3–20.4). Decided by the
+/// error's kind ([`ErrorKind::Degenerate`]), never by its text.
 pub fn cannot_make_clip(e: &Error) -> bool {
-    e.message.contains(NO_VISIBLE_END) || e.message.contains(END_SIZES_DIFFER)
+    e.kind == ErrorKind::Degenerate
 }
 
 /// Settings of [`Morph`].
@@ -110,7 +111,7 @@ impl VideoGenerator for Morph {
         };
         let (ia, ib) = (start.image, end.image);
         if (ia.width, ia.height, ia.channels) != (ib.width, ib.height, ib.channels) {
-            return Err(Error::invalid(END_SIZES_DIFFER));
+            return Err(Error::degenerate(END_SIZES_DIFFER));
         }
         let (w, h, ch) = (ia.width, ia.height, ia.channels);
         let mut video = Video {
@@ -190,7 +191,7 @@ impl Morph {
             }
         }
         if invented.iter().all(|&v| v) {
-            return Err(Error::invalid(NO_VISIBLE_END));
+            return Err(Error::degenerate(NO_VISIBLE_END));
         }
         let img = inpaint_float(&img, w, h, ch, &invented, self.fill_radius, COLOR_SPAN)?;
         let z = inpaint_float(&z, w, h, 1, &invented, self.fill_radius, DEPTH_SPAN)?;

@@ -5,8 +5,8 @@
 //! original scene degrade?).
 
 use super::artifacts::{load_mask, read_json, save_mask, scene_of, stem};
-use super::rundir::{RunDir, StepDone};
-use super::{Event, Inputs};
+use super::rundir::StepDone;
+use super::{Inputs, StageCtx};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gaussian::Gaussians;
@@ -159,7 +159,13 @@ pub fn existing_pixels(cam: &Camera, depth: &[f32], train: &[(&Camera, &[f32])])
 }
 
 /// The existing-pixel masks of the evaluation poses (step `eval/masks`).
-pub fn masks(inputs: &Inputs, dir: &RunDir, on_event: &(dyn Fn(Event) + Sync)) -> Result<StepDone> {
+pub fn masks(ctx: &StageCtx) -> Result<StepDone> {
+    let StageCtx {
+        inputs,
+        dir,
+        on_event,
+        ..
+    } = *ctx;
     let data = &inputs.data;
     let names: Vec<&str> = inputs
         .evaluation
@@ -199,12 +205,16 @@ pub fn masks(inputs: &Inputs, dir: &RunDir, on_event: &(dyn Fn(Event) + Sync)) -
 /// Evaluate `scenes` (`None` = the original scene; else a reconstruction step) with the
 /// masks of [`masks`].
 pub fn run(
-    inputs: &Inputs,
+    ctx: &StageCtx,
     scenes: &[(String, Option<StepDone>)],
     masks: StepDone,
-    dir: &RunDir,
-    on_event: &(dyn Fn(Event) + Sync),
 ) -> Result<(Summary, Vec<StepDone>)> {
+    let StageCtx {
+        inputs,
+        dir,
+        on_event,
+        ..
+    } = *ctx;
     let data = &inputs.data;
     let existing: Vec<Vec<bool>> = inputs
         .evaluation

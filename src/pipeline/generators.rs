@@ -162,20 +162,7 @@ impl GroundTruth {
     /// Add the truth of `cam` (between candidates `a` and `b`, at the middle of the
     /// trajectory gap): the middle frame of the `morph` of their truths.
     pub fn add_between(&mut self, cam: &Camera, a: &str, b: &str) -> Result<()> {
-        let (ta, tb) = (self.get(a)?, self.get(b)?);
-        let v = Morph::default().generate(
-            Keyframe {
-                image: &ta.image,
-                camera: &ta.camera,
-                depth: Some(&ta.depth),
-            },
-            Keyframe {
-                image: &tb.image,
-                camera: &tb.camera,
-                depth: Some(&tb.depth),
-            },
-            3,
-        )?;
+        let v = self.morph(a, b, 3)?;
         let depth = v.depths.expect("morph gives depths").swap_remove(1);
         let t = Truth {
             camera: cam.clone(),
@@ -184,6 +171,19 @@ impl GroundTruth {
         };
         self.poses.insert(cam.name.clone(), t);
         Ok(())
+    }
+
+    /// The `n` frames of the `morph` from the truth at `a` to the truth at `b` (both ends
+    /// included), with their depths.
+    fn morph(&self, a: &str, b: &str, n: usize) -> Result<Video> {
+        fn key(t: &Truth) -> Keyframe<'_> {
+            Keyframe {
+                image: &t.image,
+                camera: &t.camera,
+                depth: Some(&t.depth),
+            }
+        }
+        Morph::default().generate(key(self.get(a)?), key(self.get(b)?), n)
     }
 
     pub fn get(&self, name: &str) -> Result<&Truth> {
@@ -639,7 +639,7 @@ impl Generators {
     pub fn video(&self, start: Keyframe, end: Keyframe, n: usize) -> Result<Video> {
         let (a, b) = (start.image, end.image);
         if (a.width, a.height, a.channels) != (b.width, b.height, b.channels) {
-            return Err(Error::invalid(format!(
+            return Err(Error::degenerate(format!(
                 "{}: '{}' is {}x{}, '{}' {}x{}",
                 crate::models::morph::END_SIZES_DIFFER,
                 start.camera.name,
@@ -765,20 +765,7 @@ impl Generators {
                         let Some((a, b, k, n)) = between else {
                             return Err(e);
                         };
-                        let (ta, tb) = (gt.get(&a.name)?, gt.get(&b.name)?);
-                        let v = Morph::default().generate(
-                            Keyframe {
-                                image: &ta.image,
-                                camera: &ta.camera,
-                                depth: Some(&ta.depth),
-                            },
-                            Keyframe {
-                                image: &tb.image,
-                                camera: &tb.camera,
-                                depth: Some(&tb.depth),
-                            },
-                            n,
-                        )?;
+                        let v = gt.morph(&a.name, &b.name, n)?;
                         let d = v.depths.as_ref().map_or_else(Vec::new, |d| d[k].clone());
                         (v.frames[k].clone(), d)
                     }

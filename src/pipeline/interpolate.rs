@@ -9,15 +9,15 @@
 //! Deviation: the paper adds the fixer outputs "on the fly" during the final training; we
 //! fix the renders of the stage-2 scene once, before it (SPEC.md §20.5 says why).
 
+use super::StageCtx;
 use super::artifacts::{load_image, save_image, scene_of, stem};
 use super::generators::Generators;
-use super::recon::{self, Refresh, Supervision, reconstruct_refreshing};
-use super::rundir::{RunDir, StepDone};
+use super::recon::{self, Refresh, Supervision, reconstruct};
+use super::rundir::StepDone;
 use super::stage1::{Stage1, independent_supervision, load_video, video_supervision};
 use super::stage2::made_clips;
 use super::stage2::{Stage2, keyframes, neighbour_pairs};
 use super::views::{Views, render_rgb};
-use super::{Event, Inputs, PipelineConfig};
 use crate::error::Result;
 use std::collections::BTreeMap;
 
@@ -29,15 +29,18 @@ pub struct Interpolation {
 
 #[allow(clippy::too_many_arguments)]
 pub fn run(
-    config: &PipelineConfig,
-    inputs: &Inputs,
+    ctx: &StageCtx,
     gens: &Generators,
     views: &Views,
     s1: &Stage1,
     s2: &Stage2,
-    dir: &RunDir,
-    on_event: &(dyn Fn(Event) + Sync),
 ) -> Result<Interpolation> {
+    let StageCtx {
+        config,
+        inputs,
+        dir,
+        on_event,
+    } = *ctx;
     let mut steps = Vec::new();
     let s2_scene = scene_of(&s2.recon)?;
     let keys = keyframes(views, s1, s2.dependent.as_ref())?;
@@ -75,20 +78,12 @@ pub fn run(
         Ok(())
     })?;
     steps.push(fixer.clone());
-    let (weights, qa) = recon::weights(
-        config,
-        inputs,
-        &s2_scene,
-        &s2.recon.digest,
-        "stage2",
-        dir,
-        on_event,
-    )?;
-    steps.extend(qa.clone());
-    let rkey = recon::recon_key(
-        config,
+    let (weights, rkey) = recon::weights_and_key(
+        ctx,
         &config.interpolate,
-        qa.as_ref(),
+        (&s2_scene, &s2.recon),
+        "stage2",
+        &mut steps,
         serde_json::json!({
             "stage2": s2.recon.digest,
             "fixer": fixer.digest,
@@ -97,7 +92,7 @@ pub fn run(
             "fixer_every": config.fixer_every,
             "slots": gens.key(config, &["fixer"]),
         }),
-    );
+    )?;
     let recon_step = dir.step("interpolate/recon", rkey, on_event, |w| {
         let mut generated: Vec<Supervision> = Vec::new();
         for (name, s) in views.plan.independent.iter().zip(&s1.views) {
@@ -150,17 +145,15 @@ pub fn run(
             every: config.fixer_every,
             fix: &fix,
         };
-        reconstruct_refreshing(
-            config,
+        reconstruct(
+            ctx,
             &config.interpolate,
-            inputs,
             s2_scene.clone(),
             &generated,
             &weights,
             Some(&refresh),
             "interpolate",
             w,
-            on_event,
         )?;
         Ok(())
     })?;

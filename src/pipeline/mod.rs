@@ -80,6 +80,16 @@ pub enum Event {
     Note(String),
 }
 
+/// What every stage of a run reads, carried by reference: the configuration, the inputs,
+/// the run directory (with its step cache) and where progress events go.
+#[derive(Clone, Copy)]
+pub struct StageCtx<'a> {
+    pub config: &'a PipelineConfig,
+    pub inputs: &'a Inputs,
+    pub dir: &'a RunDir,
+    pub on_event: &'a (dyn Fn(Event) + Sync),
+}
+
 /// What the pipeline starts from.
 pub struct Inputs {
     /// The `unseen train` run (the original scene).
@@ -418,7 +428,13 @@ pub fn run_with(
     if let Some(c) = &opts.cache {
         dir = dir.with_cache(c)?;
     }
-    match run_in(config, inputs, &dir, on_event) {
+    let ctx = StageCtx {
+        config,
+        inputs,
+        dir: &dir,
+        on_event,
+    };
+    match run_in(&ctx) {
         // Anything after a scoped run's last step (a later step, or a sibling of an
         // `--only` step that is not needed) ends the run there.
         Err(_) if dir.scope_finished() => Ok(Outcome {
@@ -435,12 +451,13 @@ pub fn run_with(
     }
 }
 
-fn run_in(
-    config: &PipelineConfig,
-    inputs: &Inputs,
-    dir: &RunDir,
-    on_event: &(dyn Fn(Event) + Sync),
-) -> Result<Outcome> {
+fn run_in(ctx: &StageCtx) -> Result<Outcome> {
+    let StageCtx {
+        config,
+        inputs,
+        dir,
+        on_event,
+    } = *ctx;
     let out = dir.root.as_path();
     let config_text = serde_json::to_string_pretty(config).expect("config serializes") + "\n";
     crate::io::write_text(&out.join("config.json"), &config_text)?;
@@ -457,13 +474,12 @@ fn run_in(
     let mut steps = Vec::new();
     // Read only the dataset: attempted first, its error (if any) kept until it is needed,
     // so `--only` of a later step does not need it.
-    let eval_masks =
-        (!inputs.evaluation.is_empty()).then(|| evaluate::masks(inputs, dir, on_event));
+    let eval_masks = (!inputs.evaluation.is_empty()).then(|| evaluate::masks(ctx));
 
     on_event(Event::Stage {
         name: "views".into(),
     });
-    let views = views::run(config, inputs, &gens, dir, on_event)?;
+    let views = views::run(ctx, &gens)?;
     steps.push(views.step.clone());
     if let Some(gt) = gens.truth.as_mut() {
         for g in &views.plan.gap_cameras {
@@ -474,13 +490,13 @@ fn run_in(
     on_event(Event::Stage {
         name: "stage1".into(),
     });
-    let s1 = stage1::run(config, inputs, &gens, &views, dir, on_event)?;
+    let s1 = stage1::run(ctx, &gens, &views)?;
     steps.extend(s1.steps.iter().cloned());
 
     on_event(Event::Stage {
         name: "stage2".into(),
     });
-    let s2 = stage2::run(config, inputs, &gens, &views, &s1, dir, on_event)?;
+    let s2 = stage2::run(ctx, &gens, &views, &s1)?;
     steps.extend(s2.steps.iter().cloned());
 
     let mut last = s2.recon.clone();
@@ -493,7 +509,7 @@ fn run_in(
         on_event(Event::Stage {
             name: "interpolate".into(),
         });
-        let ip = interpolate::run(config, inputs, &gens, &views, &s1, &s2, dir, on_event)?;
+        let ip = interpolate::run(ctx, &gens, &views, &s1, &s2)?;
         steps.extend(ip.steps.iter().cloned());
         last = ip.recon.clone();
         scenes.push(("interpolate".to_string(), Some(ip.recon)));
@@ -505,7 +521,7 @@ fn run_in(
             on_event(Event::Stage {
                 name: "eval".into(),
             });
-            let (summary, st) = evaluate::run(inputs, &scenes, masks?, dir, on_event)?;
+            let (summary, st) = evaluate::run(ctx, &scenes, masks?)?;
             steps.extend(st);
             Some(summary)
         }

@@ -11,8 +11,8 @@
 
 use super::artifacts::{save_scene, stem};
 use super::config::{MaskSource, PipelineConfig, ReconConfig};
-use super::rundir::{RunDir, StepDone, StepWriter};
-use super::{Event, Inputs};
+use super::rundir::{StepDone, StepWriter};
+use super::{Event, Inputs, StageCtx};
 use crate::camera::Camera;
 use crate::dataset::{Dataset, View};
 use crate::error::{Error, Result};
@@ -67,14 +67,17 @@ pub fn qa_config(config: &PipelineConfig) -> QaMaskConfig {
 /// is fine-tuned in its own step `qa/<name>` (shared by every variant with the same scene
 /// and QA settings).
 pub fn weights(
-    config: &PipelineConfig,
-    inputs: &Inputs,
+    ctx: &StageCtx,
     scene: &Gaussians,
     scene_digest: &str,
     name: &str,
-    dir: &RunDir,
-    on_event: &(dyn Fn(Event) + Sync),
 ) -> Result<(Weights, Option<StepDone>)> {
+    let StageCtx {
+        config,
+        inputs,
+        dir,
+        on_event,
+    } = *ctx;
     match config.mask_source {
         MaskSource::None => Ok((Weights::None, None)),
         MaskSource::Opacity => Ok((Weights::Opacity(scene.clone()), None)),
@@ -107,6 +110,23 @@ pub fn weights(
             Ok((Weights::Qa(Box::new((g, c))), Some(step)))
         }
     }
+}
+
+/// The start of a reconstruction of the scene of step `start` (stage 2's, interpolation's):
+/// its mask weights, under the name `masked` (the QA-Mask step, if one runs, joins
+/// `steps`), and the reconstruction step's key, `upstream` with [`recon_key`]'s settings.
+pub fn weights_and_key(
+    ctx: &StageCtx,
+    recon: &ReconConfig,
+    (scene, start): (&Gaussians, &StepDone),
+    masked: &str,
+    steps: &mut Vec<StepDone>,
+    upstream: serde_json::Value,
+) -> Result<(Weights, serde_json::Value)> {
+    let (weights, qa) = weights(ctx, scene, &start.digest, masked)?;
+    steps.extend(qa.clone());
+    let key = recon_key(ctx.config, recon, qa.as_ref(), upstream);
+    Ok((weights, key))
 }
 
 /// The key of a reconstruction step: `upstream` (the digests of the steps it reads) with
@@ -162,39 +182,26 @@ pub fn original_views(config: &PipelineConfig, inputs: &Inputs) -> Vec<View> {
         .collect()
 }
 
-/// Fine-tune `init` on the original training views and `generated`, write `scene.ply`
-/// and the weight maps' heat images into `w`; returns the scene.
+/// Fine-tune `init` on the original training views and `generated` (with `refresh`, some
+/// of whose targets are remade on the fly), write `scene.ply` and the weight maps' heat
+/// images into `w`; returns the scene.
 #[allow(clippy::too_many_arguments)]
 pub fn reconstruct(
-    config: &PipelineConfig,
+    ctx: &StageCtx,
     recon: &ReconConfig,
-    inputs: &Inputs,
-    init: Gaussians,
-    generated: &[Supervision],
-    weights: &Weights,
-    stage: &str,
-    w: &mut StepWriter,
-    on_event: &(dyn Fn(Event) + Sync),
-) -> Result<Gaussians> {
-    reconstruct_refreshing(
-        config, recon, inputs, init, generated, weights, None, stage, w, on_event,
-    )
-}
-
-/// [`reconstruct`] with targets remade on the fly.
-#[allow(clippy::too_many_arguments)]
-pub fn reconstruct_refreshing(
-    config: &PipelineConfig,
-    recon: &ReconConfig,
-    inputs: &Inputs,
     init: Gaussians,
     generated: &[Supervision],
     weights: &Weights,
     refresh: Option<&Refresh>,
     stage: &str,
     w: &mut StepWriter,
-    on_event: &(dyn Fn(Event) + Sync),
 ) -> Result<Gaussians> {
+    let StageCtx {
+        config,
+        inputs,
+        on_event,
+        ..
+    } = *ctx;
     let mut views = original_views(config, inputs);
     let n_orig = views.len();
     let mut masks: Vec<Option<Vec<f32>>> = vec![None; n_orig];

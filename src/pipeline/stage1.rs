@@ -22,9 +22,9 @@ use super::artifacts::{
 };
 use super::generators::Generators;
 use super::recon::{self, Supervision, reconstruct};
-use super::rundir::{RunDir, StepDone};
+use super::rundir::StepDone;
 use super::views::{Views, apply_alignment, training_depth, warp_depth};
-use super::{Event, Inputs, PipelineConfig, nearest_training};
+use super::{PipelineConfig, StageCtx, nearest_training};
 use crate::camera::Camera;
 use crate::camera::inria::{cameras_json_string, read_cameras_json};
 use crate::error::{Error, Result};
@@ -126,32 +126,23 @@ pub fn unproject(
 }
 
 /// Run stage 1 (or verify it on disk).
-pub fn run(
-    config: &PipelineConfig,
-    inputs: &Inputs,
-    gens: &Generators,
-    views: &Views,
-    dir: &RunDir,
-    on_event: &(dyn Fn(Event) + Sync),
-) -> Result<Stage1> {
+pub fn run(ctx: &StageCtx, gens: &Generators, views: &Views) -> Result<Stage1> {
+    let StageCtx {
+        config,
+        inputs,
+        dir,
+        on_event,
+    } = *ctx;
     // The QA-Mask of the original scene and the per-view steps read nothing of each other:
     // each is attempted before any error stops the stage, so `--only` any one of them
     // needs only detection (an out-of-scope sibling's "not done" ends the run once the
     // target is done).
-    let qa_result = recon::weights(
-        config,
-        inputs,
-        &inputs.scene,
-        &inputs.scene_sha256,
-        "original",
-        dir,
-        on_event,
-    );
+    let qa_result = recon::weights(ctx, &inputs.scene, &inputs.scene_sha256, "original");
     let per_view: Vec<Result<StepDone>> = views
         .plan
         .independent
         .par_iter()
-        .map(|name| independent_view(config, inputs, gens, views, name, dir, on_event))
+        .map(|name| independent_view(ctx, gens, views, name))
         // No short circuit: every view runs to its end; the first error in view order is
         // reported.
         .collect();
@@ -160,7 +151,7 @@ pub fn run(
     let mut steps: Vec<StepDone> = qa.iter().cloned().collect();
     steps.extend(per_view.iter().cloned());
     let propagate = if config.propagation && !views.plan.dependent.is_empty() {
-        let s = propagate(views, &per_view, dir, on_event)?;
+        let s = propagate(ctx, views, &per_view)?;
         steps.push(s.clone());
         Some(s)
     } else {
@@ -191,15 +182,14 @@ pub fn run(
             generated.extend(propagated_supervision(views, &p.dir)?);
         }
         reconstruct(
-            config,
+            ctx,
             &config.stage1,
-            inputs,
             init,
             &generated,
             &weights,
+            None,
             "stage1",
             w,
-            on_event,
         )?;
         Ok(())
     })?;
@@ -214,14 +204,17 @@ pub fn run(
 
 /// The per-view step of an independent view.
 fn independent_view(
-    config: &PipelineConfig,
-    inputs: &Inputs,
+    ctx: &StageCtx,
     gens: &Generators,
     views: &Views,
     name: &str,
-    dir: &RunDir,
-    on_event: &(dyn Fn(Event) + Sync),
 ) -> Result<StepDone> {
+    let StageCtx {
+        config,
+        inputs,
+        dir,
+        on_event,
+    } = *ctx;
     let key = serde_json::json!({
         "views": views.step.digest,
         "view": name,
@@ -329,7 +322,7 @@ fn independent_view(
 
 /// The start of [`align_clip`]'s error when the clip's depth admits no fit (too few valid
 /// pixels, degenerate estimates): a caller with another depth to fall back on matches it.
-pub(crate) const NO_ALIGNMENT: &str = "the clip's video depth admits no alignment";
+const NO_ALIGNMENT: &str = "the clip's video depth admits no alignment";
 
 /// DIBR-based video depth alignment (paper §3.3.1, Eq. 5–6) of one clip from a training
 /// view (`start_depth`: its dense depth at `start_cam`) to a generated view (`end_cam`,
@@ -396,7 +389,7 @@ pub(crate) fn align_clip(
             ..RansacConfig::default()
         },
     )
-    .map_err(|e| Error::invalid(format!("{NO_ALIGNMENT}: {}", e.message)))?;
+    .map_err(|e| Error::degenerate(format!("{NO_ALIGNMENT}: {}", e.message)))?;
     let depths = est.iter().map(|e| apply_alignment(e, &a, space)).collect();
     Ok((depths, a, space))
 }
@@ -434,12 +427,8 @@ pub fn video_supervision(dir: &Path) -> Result<Vec<Supervision>> {
 }
 
 /// DIBR propagation of the independent views to the dependent ones.
-fn propagate(
-    views: &Views,
-    per_view: &[StepDone],
-    dir: &RunDir,
-    on_event: &(dyn Fn(Event) + Sync),
-) -> Result<StepDone> {
+fn propagate(ctx: &StageCtx, views: &Views, per_view: &[StepDone]) -> Result<StepDone> {
+    let StageCtx { dir, on_event, .. } = *ctx;
     let key = serde_json::json!({
         "views": views.step.digest,
         "independent": per_view.iter().map(|s| &s.digest).collect::<Vec<_>>(),

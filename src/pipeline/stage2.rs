@@ -20,12 +20,12 @@ use super::artifacts::{
 use super::config::Stage2Depth;
 use super::generators::Generators;
 use super::recon::{self, Supervision, reconstruct};
-use super::rundir::{RunDir, StepDone};
-use super::stage1::{NO_ALIGNMENT, Stage1, align_clip, save_video, video_supervision};
+use super::rundir::StepDone;
+use super::stage1::{Stage1, align_clip, save_video, video_supervision};
 use super::views::{MIN_ALIGN_PIXELS, Views, apply_alignment, render_rgba, training_depth};
-use super::{Event, Inputs, PipelineConfig, nearest_training};
+use super::{StageCtx, nearest_training};
 use crate::camera::Camera;
-use crate::error::{Error, Result};
+use crate::error::{Error, ErrorKind, Result};
 use crate::io::image::ImageF32;
 use crate::models::{DepthHint, Keyframe};
 use crate::warp::align::{Alignment, Frame, Space, least_squares};
@@ -81,15 +81,13 @@ pub fn neighbour_pairs(n: usize) -> Vec<(usize, usize)> {
 }
 
 #[allow(clippy::too_many_arguments)]
-pub fn run(
-    config: &PipelineConfig,
-    inputs: &Inputs,
-    gens: &Generators,
-    views: &Views,
-    s1: &Stage1,
-    dir: &RunDir,
-    on_event: &(dyn Fn(Event) + Sync),
-) -> Result<Stage2> {
+pub fn run(ctx: &StageCtx, gens: &Generators, views: &Views, s1: &Stage1) -> Result<Stage2> {
+    let StageCtx {
+        config,
+        inputs,
+        dir,
+        on_event,
+    } = *ctx;
     let mut steps = Vec::new();
     let s1_scene = scene_of(&s1.recon)?;
     let dependent = if views.plan.dependent.is_empty() {
@@ -231,10 +229,8 @@ pub fn run(
                                     }),
                                 )
                             }
-                            Err(e)
-                                if e.message.contains(NO_ALIGNMENT)
-                                    || crate::models::morph::cannot_make_clip(&e) =>
-                            {
+                            // No clip, or no alignment of its depth: the render fit.
+                            Err(e) if e.kind == ErrorKind::Degenerate => {
                                 (
                                 fit,
                                 serde_json::json!({
@@ -320,26 +316,18 @@ pub fn run(
         Ok(())
     })?;
     steps.push(videos.clone());
-    let (weights, qa) = recon::weights(
-        config,
-        inputs,
-        &s1_scene,
-        &s1.recon.digest,
-        "stage1",
-        dir,
-        on_event,
-    )?;
-    steps.extend(qa.clone());
-    let rkey = recon::recon_key(
-        config,
+    let (weights, rkey) = recon::weights_and_key(
+        ctx,
         &config.stage2,
-        qa.as_ref(),
+        (&s1_scene, &s1.recon),
+        "stage1",
+        &mut steps,
         serde_json::json!({
             "stage1": s1.recon.digest,
             "videos": videos.digest,
             "dependent": dependent.as_ref().map(|s| &s.digest),
         }),
-    );
+    )?;
     let recon_step = dir.step("stage2/recon", rkey, on_event, |w| {
         let mut generated: Vec<Supervision> = keys
             .iter()
@@ -354,15 +342,14 @@ pub fn run(
             generated.extend(video_supervision(&videos.dir.join(format!("video_{k}")))?);
         }
         reconstruct(
-            config,
+            ctx,
             &config.stage2,
-            inputs,
             s1_scene.clone(),
             &generated,
             &weights,
+            None,
             "stage2",
             w,
-            on_event,
         )?;
         Ok(())
     })?;

@@ -20,8 +20,8 @@ use super::artifacts::{
     load_depth, load_image, load_mask, read_json, save_depth, save_image, save_mask, stem,
 };
 use super::generators::Generators;
-use super::rundir::{RunDir, StepDone};
-use super::{Event, Inputs, PipelineConfig, nearest_training, same_pose};
+use super::rundir::StepDone;
+use super::{Event, Inputs, StageCtx, nearest_training, same_pose};
 use crate::camera::Camera;
 use crate::camera::inria::{cameras_json_string, read_cameras_json};
 use crate::collide::frustum::{Outline, Polyhedron, depth_range, mean_range, write_obj};
@@ -272,13 +272,13 @@ pub fn render_rgba(
 }
 
 /// Run detection (or verify it on disk).
-pub fn run(
-    config: &PipelineConfig,
-    inputs: &Inputs,
-    gens: &Generators,
-    dir: &RunDir,
-    on_event: &(dyn Fn(Event) + Sync),
-) -> Result<Views> {
+pub fn run(ctx: &StageCtx, gens: &Generators) -> Result<Views> {
+    let StageCtx {
+        config,
+        inputs,
+        dir,
+        on_event,
+    } = *ctx;
     let key = serde_json::json!({
         "scene": inputs.scene_sha256,
         "candidates": inputs.candidates_sha256,

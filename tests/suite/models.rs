@@ -209,3 +209,43 @@ fn classical_slots_and_registry() {
             .is_err()
     );
 }
+
+/// A clip that cannot be made (end frames of different sizes) is an error of kind
+/// `Degenerate`, which the pipeline records and goes on from (`cannot_make_clip`, decided by
+/// the kind, never the text); a malformed request (fewer than two frames) is `Invalid`
+/// and stops the run.
+#[test]
+fn morph_says_by_kind_which_clips_cannot_be_made() {
+    use unseen::error::ErrorKind;
+    use unseen::models::morph::cannot_make_clip;
+    let root = reference("scenes/lounge");
+    let cams = read_cameras_json(&root.join("cameras.json")).unwrap();
+    let (ca, cb) = (&cams[0], &cams[1]);
+    let ia = read_png(&root.join(format!("images/{}.png", ca.name))).unwrap();
+    let ib = ImageF32::new(
+        ia.width - 1,
+        ia.height,
+        3,
+        vec![0.5; (ia.width - 1) * ia.height * 3],
+    )
+    .unwrap();
+    let (da, db) = (
+        vec![2.0; ia.width * ia.height],
+        vec![2.0; ib.width * ib.height],
+    );
+    let key = |image, camera, depth| Keyframe {
+        image,
+        camera,
+        depth: Some(depth),
+    };
+    let e = Morph::default()
+        .generate(key(&ia, ca, &da), key(&ib, cb, &db), 3)
+        .unwrap_err();
+    assert_eq!(e.kind, ErrorKind::Degenerate, "{e}");
+    assert!(cannot_make_clip(&e));
+    let e = Morph::default()
+        .generate(key(&ia, ca, &da), key(&ia, cb, &da), 1)
+        .unwrap_err();
+    assert_eq!(e.kind, ErrorKind::Invalid, "{e}");
+    assert!(!cannot_make_clip(&e));
+}
