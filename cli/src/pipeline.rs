@@ -36,6 +36,16 @@ pub enum Level {
     High,
 }
 
+impl From<Level> for unseen::pipeline::Level {
+    fn from(l: Level) -> Self {
+        match l {
+            Level::None => Self::None,
+            Level::Low => Self::Low,
+            Level::High => Self::High,
+        }
+    }
+}
+
 /// The ground-truth generator's depth (labelled modes, SPEC.md §20.6).
 #[derive(Clone, Copy, ValueEnum)]
 pub enum TruthDepthArg {
@@ -151,11 +161,7 @@ impl Knobs {
             };
         }
         if let Some(l) = self.inconsistency {
-            c.inconsistency = Inconsistency::by_name(match l {
-                Level::None => "none",
-                Level::Low => "low",
-                Level::High => "high",
-            })?;
+            c.inconsistency = Inconsistency::at(l.into());
         }
         if let Some(d) = self.truth_depth {
             c.truth_depth = match d {
@@ -164,11 +170,7 @@ impl Knobs {
             };
         }
         if let Some(l) = self.hallucination {
-            c.hallucination = match l {
-                Level::None => Hallucination::None,
-                Level::Low => Hallucination::Low,
-                Level::High => Hallucination::High,
-            };
+            c.hallucination = Hallucination::at(l.into());
         }
         if let Some(m) = self.mask {
             c.mask_source = match m {

@@ -12,6 +12,7 @@
 use super::gjk::ConvexHull;
 use crate::camera::Camera;
 use crate::error::{Error, Result};
+use crate::math::hull::monotone_chain;
 use glam::DVec3;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -112,28 +113,10 @@ pub fn mask_outline(mask: &[bool], width: usize, outline: Outline) -> Option<Vec
     }
 }
 
-/// Andrew's monotone chain on sorted, distinct integer points: the hull without collinear
-/// points, counter-clockwise in a y-down frame (clockwise in y-up).
+/// The hull of sorted, distinct integer points without collinear points, counter-clockwise
+/// in a y-down frame (clockwise in y-up).
 fn convex_hull_2d(pts: &[[i64; 2]]) -> Vec<[i64; 2]> {
-    let cross = |o: [i64; 2], a: [i64; 2], b: [i64; 2]| {
-        (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
-    };
-    let mut h: Vec<[i64; 2]> = Vec::with_capacity(2 * pts.len());
-    for pass in 0..2 {
-        let start = h.len();
-        let it: Box<dyn Iterator<Item = &[i64; 2]>> = if pass == 0 {
-            Box::new(pts.iter())
-        } else {
-            Box::new(pts.iter().rev())
-        };
-        for &p in it {
-            while h.len() >= start + 2 && cross(h[h.len() - 2], h[h.len() - 1], p) <= 0 {
-                h.pop();
-            }
-            h.push(p);
-        }
-        h.pop();
-    }
+    let mut h = monotone_chain(pts);
     // y-up counter-clockwise is y-down clockwise: reverse for the y-down convention.
     h.reverse();
     h

@@ -2,6 +2,7 @@
 //! spherical harmonics, and the lane type per-Gaussian code is written in.
 
 pub mod fastexp;
+pub mod hull;
 pub mod lanes;
 pub mod round;
 pub mod sh;

@@ -174,68 +174,88 @@ fn without_onnx(card: &Path) -> Error {
     .at(card)
 }
 
-fn unknown(slot: &str, name: &str, known: &str) -> Error {
-    Error::invalid(format!(
-        "unknown {slot} '{name}' (known: {known}, or onnx:CARD.json)"
-    ))
+/// A classical default of a slot: its name and how to make it.
+type Classical<'a, T> = (&'a str, fn() -> Box<T>);
+
+/// The model called `name` for `slot`: an `onnx:CARD.json` card, loaded by `onnx`, or one
+/// of the `classical` defaults by name; any other name is an error listing the known ones.
+fn pick<T: ?Sized>(
+    slot: &str,
+    name: &str,
+    classical: &[Classical<T>],
+    onnx: impl FnOnce(&Path) -> Result<Box<T>>,
+) -> Result<Box<T>> {
+    if let Some(card) = onnx_card(name) {
+        return onnx(card);
+    }
+    match classical.iter().find(|(n, _)| *n == name) {
+        Some((_, make)) => Ok(make()),
+        None => {
+            let known: Vec<&str> = classical.iter().map(|(n, _)| *n).collect();
+            Err(Error::invalid(format!(
+                "unknown {slot} '{name}' (known: {}, or onnx:CARD.json)",
+                known.join(", ")
+            )))
+        }
+    }
+}
+
+/// The loader of an ONNX model type `$ty` (a `$slot`) for [`pick`]: a clear error in a build without
+/// the `onnx` feature (where `$ty` does not exist: the cfg removes it before it is named).
+macro_rules! onnx_model {
+    ($slot:ty, $ty:path) => {{
+        #[cfg(feature = "onnx")]
+        let load = |card: &Path| -> Result<Box<$slot>> { Ok(Box::new(<$ty>::load(card)?)) };
+        #[cfg(not(feature = "onnx"))]
+        let load = |card: &Path| -> Result<Box<$slot>> { Err(without_onnx(card)) };
+        load
+    }};
 }
 
 /// The inpainter called `name`: `telea` (radius 3) or `onnx:CARD.json`.
 pub fn inpainter(name: &str) -> Result<Box<dyn Inpainter>> {
-    if let Some(card) = onnx_card(name) {
-        #[cfg(feature = "onnx")]
-        return Ok(Box::new(onnx::OnnxInpainter::load(card)?));
-        #[cfg(not(feature = "onnx"))]
-        return Err(without_onnx(card));
-    }
-    match name {
-        "telea" => Ok(Box::new(classical::Telea::default())),
-        _ => Err(unknown("inpainter", name, "telea")),
-    }
+    let telea: fn() -> Box<dyn Inpainter> = || Box::new(classical::Telea::default());
+    pick(
+        "inpainter",
+        name,
+        &[("telea", telea)],
+        onnx_model!(dyn Inpainter, onnx::OnnxInpainter),
+    )
 }
 
 /// The depth estimator called `name`: `depth-fill` or `onnx:CARD.json`.
 pub fn depth_estimator(name: &str) -> Result<Box<dyn DepthEstimator>> {
-    if let Some(card) = onnx_card(name) {
-        #[cfg(feature = "onnx")]
-        return Ok(Box::new(onnx::OnnxDepth::load(card)?));
-        #[cfg(not(feature = "onnx"))]
-        return Err(without_onnx(card));
-    }
-    match name {
-        "depth-fill" => Ok(Box::new(classical::DepthFill::default())),
-        _ => Err(unknown("depth estimator", name, "depth-fill")),
-    }
+    let fill: fn() -> Box<dyn DepthEstimator> = || Box::new(classical::DepthFill::default());
+    pick(
+        "depth estimator",
+        name,
+        &[("depth-fill", fill)],
+        onnx_model!(dyn DepthEstimator, onnx::OnnxDepth),
+    )
 }
 
 /// The video depth estimator called `name`: `depth-fill` (per frame, needs hints) or
 /// `onnx:CARD.json` (an image model run per frame).
 pub fn video_depth_estimator(name: &str) -> Result<Box<dyn VideoDepthEstimator>> {
-    if let Some(card) = onnx_card(name) {
-        #[cfg(feature = "onnx")]
-        return Ok(Box::new(onnx::OnnxDepth::load(card)?));
-        #[cfg(not(feature = "onnx"))]
-        return Err(without_onnx(card));
-    }
-    match name {
-        "depth-fill" => Ok(Box::new(classical::DepthFill::default())),
-        _ => Err(unknown("video depth estimator", name, "depth-fill")),
-    }
+    let fill: fn() -> Box<dyn VideoDepthEstimator> = || Box::new(classical::DepthFill::default());
+    pick(
+        "video depth estimator",
+        name,
+        &[("depth-fill", fill)],
+        onnx_model!(dyn VideoDepthEstimator, onnx::OnnxDepth),
+    )
 }
 
 /// The artifact fixer called `name`: `identity`, `bilateral` or `onnx:CARD.json`.
 pub fn artifact_fixer(name: &str) -> Result<Box<dyn ArtifactFixer>> {
-    if let Some(card) = onnx_card(name) {
-        #[cfg(feature = "onnx")]
-        return Ok(Box::new(onnx::OnnxFixer::load(card)?));
-        #[cfg(not(feature = "onnx"))]
-        return Err(without_onnx(card));
-    }
-    match name {
-        "identity" => Ok(Box::new(classical::Identity)),
-        "bilateral" => Ok(Box::new(classical::Bilateral::default())),
-        _ => Err(unknown("artifact fixer", name, "identity, bilateral")),
-    }
+    let identity: fn() -> Box<dyn ArtifactFixer> = || Box::new(classical::Identity);
+    let bilateral: fn() -> Box<dyn ArtifactFixer> = || Box::new(classical::Bilateral::default());
+    pick(
+        "artifact fixer",
+        name,
+        &[("identity", identity), ("bilateral", bilateral)],
+        onnx_model!(dyn ArtifactFixer, onnx::OnnxFixer),
+    )
 }
 
 /// The video generator called `name`: `morph`.

@@ -164,6 +164,52 @@ pub enum Stage2Depth {
     RenderFit,
 }
 
+/// A level of the ground-truth generator's labelled deviations from the truth: its
+/// inconsistency ([`Inconsistency::at`]) and its hallucination ([`Hallucination::at`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Level {
+    None,
+    Low,
+    High,
+}
+
+impl Level {
+    /// Every level, in order.
+    pub const ALL: [Level; 3] = [Level::None, Level::Low, Level::High];
+
+    /// `none`, `low` or `high`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Level::None => "none",
+            Level::Low => "low",
+            Level::High => "high",
+        }
+    }
+
+    /// The level called `name` (`none` or `0`, `low`, `high`).
+    pub fn by_name(name: &str) -> Result<Level> {
+        match name {
+            "none" | "0" => Ok(Level::None),
+            "low" => Ok(Level::Low),
+            "high" => Ok(Level::High),
+            _ => Err(Error::invalid(format!(
+                "unknown inconsistency level '{name}' (none, low or high)"
+            ))),
+        }
+    }
+}
+
+impl Hallucination {
+    /// The hallucination of a level.
+    pub fn at(level: Level) -> Hallucination {
+        match level {
+            Level::None => Hallucination::None,
+            Level::Low => Hallucination::Low,
+            Level::High => Hallucination::High,
+        }
+    }
+}
+
 impl Default for Inconsistency {
     fn default() -> Self {
         Inconsistency::NONE
@@ -202,15 +248,12 @@ impl Inconsistency {
         depth_distortion: 0.15,
     };
 
-    /// `none`, `low` or `high`.
-    pub fn by_name(name: &str) -> Result<Inconsistency> {
-        match name {
-            "none" | "0" => Ok(Self::NONE),
-            "low" => Ok(Self::LOW),
-            "high" => Ok(Self::HIGH),
-            _ => Err(Error::invalid(format!(
-                "unknown inconsistency level '{name}' (none, low or high)"
-            ))),
+    /// The deviations of a level.
+    pub fn at(level: Level) -> Inconsistency {
+        match level {
+            Level::None => Self::NONE,
+            Level::Low => Self::LOW,
+            Level::High => Self::HIGH,
         }
     }
 

@@ -29,8 +29,8 @@ pub mod stage2;
 pub mod views;
 
 pub use config::{
-    Hallucination, Inconsistency, MaskSource, PipelineConfig, ReconConfig, SlotNames, Stage2Depth,
-    TruthDepth,
+    Hallucination, Inconsistency, Level, MaskSource, PipelineConfig, ReconConfig, SlotNames,
+    Stage2Depth, TruthDepth,
 };
 
 use crate::camera::Camera;

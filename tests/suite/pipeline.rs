@@ -769,7 +769,7 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
             ..tiny_config()
         },
         variants: vec![Variant::Full, Variant::OpacityMask],
-        generators: vec![GeneratorKind::Truth("low")],
+        generators: vec![GeneratorKind::Truth(unseen::pipeline::Level::Low)],
         seeds: 0..2,
         train_iterations: 300,
         train_resolution: 4,
@@ -777,7 +777,7 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
     let dir = t.path().join("audit");
     // A pipeline job before its original scene: a clear error naming the job to run.
     let job = Job::Run {
-        generator: GeneratorKind::Truth("low"),
+        generator: GeneratorKind::Truth(unseen::pipeline::Level::Low),
         variant: Variant::Full,
         seed: 0,
     };
@@ -942,7 +942,7 @@ fn audit_verdicts_pool_seeds_and_revisions_and_test_non_inferiority() {
     use unseen::pipeline::audit::{AuditConfig, GeneratorKind, Variant, stats::Rule, verdicts};
     let cfg = AuditConfig {
         variants: vec![Variant::Full, Variant::NoQaMask],
-        generators: vec![GeneratorKind::Truth("low")],
+        generators: vec![GeneratorKind::Truth(unseen::pipeline::Level::Low)],
         ..AuditConfig::quick()
     };
     let rule = Rule::default();
@@ -1258,7 +1258,9 @@ fn audit_samples_round_trip_and_damaged_files_are_clear_errors() {
     s2.write(&path).unwrap();
     let back = Samples::read(&path).unwrap();
     let cfg = AuditConfig {
-        generators: vec![unseen::pipeline::audit::GeneratorKind::Truth("low")],
+        generators: vec![unseen::pipeline::audit::GeneratorKind::Truth(
+            unseen::pipeline::Level::Low,
+        )],
         ..AuditConfig::quick()
     };
     let v = verdicts(&cfg, &back.samples, &Rule::default());

@@ -7,11 +7,12 @@
 //! (`unseen audit … --collect`) reads the receipts and the run jobs' `audit_job.json`,
 //! computes nothing, and writes the same report a sequential `unseen audit` writes.
 
-use super::{
-    AuditConfig, Job, JobResult, MaskSource, PipelineConfig, Report, finish, gather, jobs,
-};
+use super::AuditConfig;
+use super::jobs::{Job, JobResult, check_inputs, jobs, original_done, require_original, run_job};
+use super::report::{Report, finish, gather};
 use crate::error::{Error, Result};
 use crate::io::{sha256_hex, write_text};
+use crate::pipeline::{Event, MaskSource, PipelineConfig};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -116,21 +117,21 @@ pub fn run_job_with_receipt(
     dir: &Path,
     job: &Job,
     log: Option<&Path>,
-    on_event: &(dyn Fn(super::Event) + Sync),
+    on_event: &(dyn Fn(Event) + Sync),
 ) -> Result<Option<JobResult>> {
     let path = receipt_path(dir, job);
     if path.exists() {
         std::fs::remove_file(&path).map_err(|e| Error::io(&path, e))?;
     }
     cfg.validate()?;
-    super::check_inputs(dataset, dir)?;
+    check_inputs(dataset, dir)?;
     if let Job::Run { seed, .. } | Job::Shared { seed, .. } = *job {
-        super::require_original(cfg, dataset, dir, job, seed)?;
+        require_original(cfg, dataset, dir, job, seed)?;
     }
     let existed = dir.exists();
     let started = std::time::SystemTime::now();
     let t0 = std::time::Instant::now();
-    let outcome = super::run_job(cfg, dataset, dir, job, on_event);
+    let outcome = run_job(cfg, dataset, dir, job, on_event);
     if outcome.is_err() && !existed && !dir.exists() {
         return outcome;
     }
@@ -236,7 +237,7 @@ pub fn collect(
     log_of: &dyn Fn(&Job) -> Option<String>,
 ) -> Result<std::result::Result<Report, Vec<Missing>>> {
     cfg.validate()?;
-    super::check_inputs(dataset, dir)?;
+    check_inputs(dataset, dir)?;
     let pool = gather(cfg, dataset, dir, merge)?;
     let mut missing = Vec::new();
     let mut results = Vec::new();
@@ -330,7 +331,7 @@ fn take(
         }
         Job::Original { seed } => {
             let run = dir.join(job.folder());
-            if super::original_done(cfg, dataset, &run, *seed) {
+            if original_done(cfg, dataset, &run, *seed) {
                 Ok(None)
             } else {
                 Err(fail(

@@ -1,0 +1,504 @@
+//! The audit's report: gathering the samples, `audit.json`, `audit.md` and its plot.
+
+use super::jobs::{JobResult, check_inputs, jobs, run_job, sharing};
+use super::samples::{self, Samples};
+use super::stats;
+use super::verdicts::{Metric, Verdict, mean_std, metrics_only, verdicts};
+use super::{AuditConfig, GeneratorKind, Variant};
+use crate::error::{Error, Result};
+use crate::pipeline::Event;
+use crate::pipeline::Level;
+use crate::pipeline::evaluate::Row;
+use std::path::{Path, PathBuf};
+
+/// What `audit.json` holds.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Report {
+    /// The binary that made the report: samples of other revisions are pooled (each
+    /// sample names its own, in `samples.json`).
+    pub crate_version: String,
+    pub numerics_revision: u32,
+    #[serde(flatten)]
+    pub provenance: samples::Provenance,
+    /// Distinct seeds and numerics revisions of the pooled samples.
+    pub seeds: Vec<u32>,
+    pub revisions: Vec<u32>,
+    pub samples: usize,
+    /// Samples of another pipeline configuration of their (generator, variant) than this
+    /// binary's: kept in `samples.json`, left out of every verdict.
+    pub other_config: usize,
+    pub generators: Vec<String>,
+    pub variants: Vec<String>,
+    /// The verdict rule's parameters.
+    pub rule: stats::Rule,
+    pub verdicts: Vec<Verdict>,
+    /// This batch's job results (with their steps): what the step cache saved.
+    #[serde(skip)]
+    pub results: Vec<JobResult>,
+    /// Every pooled sample.
+    #[serde(skip)]
+    pub pool: Vec<JobResult>,
+}
+
+/// The samples an audit of `cfg` in `dir` pools with its own batch: `dir`'s
+/// [`samples::SAMPLES_FILE`] and every `merge` file (another audit's samples, or an
+/// `audit.json` of an earlier version). Read before any job runs, so that a file that
+/// cannot be pooled fails the audit at once.
+pub(super) fn gather(
+    cfg: &AuditConfig,
+    dataset: &Path,
+    dir: &Path,
+    merge: &[PathBuf],
+) -> Result<Samples> {
+    let mut pool = Samples::new(samples::Provenance {
+        dataset: samples::dataset_name(dataset),
+        dataset_digest: samples::dataset_digest(dataset)?,
+        preset: cfg.base.preset.clone(),
+        train_iterations: cfg.train_iterations,
+        train_resolution: cfg.train_resolution,
+    });
+    let own = dir.join(samples::SAMPLES_FILE);
+    let mut files: Vec<PathBuf> = merge.to_vec();
+    if own.is_file() {
+        files.insert(0, own);
+    }
+    for f in files {
+        let s = Samples::read(&f)?;
+        pool.pool(s, &f)?;
+    }
+    Ok(pool)
+}
+
+/// Run every job of `cfg` that is not done (each resumes its own folder), pool the
+/// results with the samples already in `dir` and in `merge` files, then write
+/// `DIR/samples.json`, `DIR/audit.json`, `DIR/audit.md` and `DIR/inconsistency.svg`.
+pub fn run(
+    cfg: &AuditConfig,
+    dataset: &Path,
+    dir: &Path,
+    merge: &[PathBuf],
+    on_event: &(dyn Fn(Event) + Sync),
+) -> Result<Report> {
+    cfg.validate()?;
+    check_inputs(dataset, dir)?;
+    let pool = gather(cfg, dataset, dir, merge)?;
+    crate::io::create_dir_all(dir)?;
+    let mut results = Vec::new();
+    for job in jobs(cfg) {
+        if let Some(r) = run_job(cfg, dataset, dir, &job, on_event)? {
+            results.push(r);
+        }
+    }
+    finish(cfg, dir, pool, results)
+}
+
+/// The report of the samples in `dir` and `merge` files alone (no job runs).
+pub fn report(cfg: &AuditConfig, dataset: &Path, dir: &Path, merge: &[PathBuf]) -> Result<Report> {
+    cfg.validate()?;
+    check_inputs(dataset, dir)?;
+    let pool = gather(cfg, dataset, dir, merge)?;
+    if pool.samples.is_empty() {
+        return Err(Error::invalid(format!(
+            "no samples to report (no {} here and no --merge file)",
+            samples::SAMPLES_FILE
+        ))
+        .at(dir));
+    }
+    crate::io::create_dir_all(dir)?;
+    finish(cfg, dir, pool, Vec::new())
+}
+
+pub(super) fn finish(
+    cfg: &AuditConfig,
+    dir: &Path,
+    mut pool: Samples,
+    results: Vec<JobResult>,
+) -> Result<Report> {
+    for r in &results {
+        pool.insert(r.clone());
+    }
+    pool.write(&dir.join(samples::SAMPLES_FILE))?;
+    let rule = stats::Rule::default();
+    let (seeds, revisions) = pool.seeds_and_revisions();
+    let names = |mut v: Vec<String>| {
+        v.dedup();
+        v
+    };
+    // Samples of another configuration of their cell than this binary's are kept in the
+    // file and left out of everything reported.
+    let other = |r: &JobResult| {
+        let (Ok(g), Ok(v)) = (
+            GeneratorKind::by_name(&r.generator),
+            Variant::by_name(&r.variant),
+        ) else {
+            return false;
+        };
+        cfg.config_digest(g, v).is_ok_and(|d| d != r.config)
+    };
+    let total = pool.samples.len();
+    let usable: Vec<JobResult> = pool.samples.into_iter().filter(|r| !other(r)).collect();
+    let report = Report {
+        crate_version: env!("CARGO_PKG_VERSION").into(),
+        numerics_revision: crate::version::NUMERICS_REVISION,
+        provenance: pool.provenance.clone(),
+        seeds,
+        revisions,
+        samples: usable.len(),
+        other_config: total - usable.len(),
+        generators: names(cfg.generators.iter().map(|g| g.name()).collect()),
+        variants: names(cfg.variants.iter().map(|v| v.name().to_string()).collect()),
+        verdicts: verdicts(cfg, &usable, &rule),
+        rule,
+        results,
+        pool: usable,
+    };
+    let json = serde_json::to_string_pretty(&report).expect("serializes") + "\n";
+    crate::io::write_text(&dir.join("audit.json"), &json)?;
+    crate::io::write_text(&dir.join("inconsistency.svg"), &plot(cfg, &report.pool))?;
+    crate::io::write_text(&dir.join("audit.md"), &markdown(cfg, &report))?;
+    Ok(report)
+}
+
+/// `mean ± std` over the seeds of one (generator, variant), or `mean` with one seed.
+fn stat(results: &[&JobResult], f: impl Fn(&JobResult) -> f64, digits: usize) -> String {
+    let v: Vec<f64> = results.iter().map(|r| f(r)).collect();
+    let (m, s) = mean_std(&v);
+    let m = crate::io::json_float::show(m, digits);
+    if s.is_finite() {
+        format!("{m} ± {s:.digits$}")
+    } else {
+        m
+    }
+}
+
+/// The distinct samples of one (generator, variant) in pool order (a sample another
+/// revision reproduced bit for bit counts once).
+fn group<'a>(results: &'a [JobResult], generator: &str, variant: Variant) -> Vec<&'a JobResult> {
+    let bits = |r: &JobResult| serde_json::to_string(&metrics_only(&r.last)).expect("serializes");
+    let mut out: Vec<&JobResult> = Vec::new();
+    for r in results
+        .iter()
+        .filter(|r| r.generator == generator && r.variant == variant.name())
+    {
+        if !out.iter().any(|o| o.seed == r.seed && bits(o) == bits(r)) {
+            out.push(r);
+        }
+    }
+    out
+}
+
+/// `0–11, 14` for seeds 0..=11 and 14.
+fn seed_ranges(seeds: &[u32]) -> String {
+    let mut parts = Vec::new();
+    let mut i = 0;
+    while i < seeds.len() {
+        let mut j = i;
+        while j + 1 < seeds.len() && seeds[j].checked_add(1) == Some(seeds[j + 1]) {
+            j += 1;
+        }
+        parts.push(if j > i {
+            format!("{}–{}", seeds[i], seeds[j])
+        } else {
+            seeds[i].to_string()
+        });
+        i = j + 1;
+    }
+    parts.join(", ")
+}
+
+/// The six metric cells of a table row (PSNR existing, extrapolated, all; SSIM existing,
+/// extrapolated; train-half PSNR) of the scene `pick` selects, over the seeds.
+fn metric_cells(rows: &[&JobResult], pick: impl Fn(&JobResult) -> &Row) -> String {
+    [
+        stat(rows, |r| pick(r).psnr_existing, 2),
+        stat(rows, |r| pick(r).psnr_extrapolated, 2),
+        stat(rows, |r| pick(r).psnr_all, 2),
+        stat(rows, |r| pick(r).ssim_existing, 4),
+        stat(rows, |r| pick(r).ssim_extrapolated, 4),
+        stat(rows, |r| pick(r).psnr_train_half, 2),
+    ]
+    .join(" | ")
+}
+
+/// `audit.md`.
+pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
+    let revisions: Vec<String> = report.revisions.iter().map(|r| r.to_string()).collect();
+    let mut s = format!(
+        "# Audit of the paper's claims\n\nDataset `{}`; preset `{}`; {} seeds ({}) in {} samples at numerics revision{} {}; original scene: {} iterations at resolution 1/{} on the training half. Metrics on the evaluation poses, pixels split into *existing* (seen by the training half) and *extrapolated*. Made by `unseen audit` (SPEC.md §21), crate {} at numerics revision {}; the samples are in `samples.json` (a later batch of seeds adds to them).\n\n",
+        report.provenance.dataset,
+        report.provenance.preset,
+        report.seeds.len(),
+        seed_ranges(&report.seeds),
+        report.samples,
+        if revisions.len() > 1 { "s" } else { "" },
+        revisions.join(", "),
+        report.provenance.train_iterations,
+        report.provenance.train_resolution,
+        report.crate_version,
+        report.numerics_revision
+    );
+    if report.other_config > 0 {
+        s += &format!(
+            "**{} samples ran another pipeline configuration** than this binary's for their generator and variant (another version of the preset): kept in `samples.json`, left out of every verdict and table.\n\n",
+            report.other_config
+        );
+    }
+    let r = &report.rule;
+    s += &format!(
+        "## Claims\n\n**How to read this.** Δ = full − variant (dB), one value per seed: both runs of a seed start from the same original scene with the same random numbers, so Δ is paired; the same seed at another numerics revision is another draw when both of its runs changed (a pair sharing a run's bits with one already counted counts once), and a seed's Δ is the mean of its draws (draws of one seed are correlated: the seed is the unit). *95 % CI*: Student's t with n − 1 degrees of freedom; from {} seeds a verdict also needs the BCa bootstrap over seeds ({} replicates, seeded; its interval in *BCa*) to agree, since the bootstrap alone is too liberal at these sizes (SPEC.md §21.2). A claim that the full method is better **holds** when Δ is significantly above 0 and is **contradicted** when it is significantly below; a claim that the full method *does not hurt* (non-inferiority) holds when Δ is significantly above −{} dB (the margin) and is contradicted when significantly below it. *Significantly*: the two-sided p-value of that null value, after Holm's correction over the claims of the same generator family (classical; truth at every level) on this dataset, is below α = {}. Otherwise **inconclusive**: the *MDE* column is the smallest true distance from the null value that this many seeds find with {:.0} % power at the family's strictest Holm level, for the measured spread — an effect smaller than that could be there. *Hierarchical*: a 95 % percentile interval from resampling seeds, then each seed's evaluation views (pooled PSNR), over the seeds with per-view records: wider than the seed CI where views disagree. The paper's numbers are from ScanNet++ / Mip-NeRF 360 with diffusion generators: compare directions, not values.\n\n| claim | metric | paper | generator | n | Δ (dB) | 95 % CI | BCa | hierarchical | p (Holm) | MDE (dB) | verdict |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        r.bootstrap_from,
+        r.replicates,
+        r.margin,
+        r.alpha,
+        100.0 * r.power
+    );
+    let interval = |ci: Option<[f64; 2]>| {
+        ci.map_or_else(
+            || "–".to_string(),
+            |[lo, hi]| format!("[{lo:+.2}, {hi:+.2}]"),
+        )
+    };
+    let num = |x: f64, digits: usize| {
+        if x.is_finite() {
+            format!("{x:.digits$}")
+        } else {
+            "–".into()
+        }
+    };
+    for v in &report.verdicts {
+        let null = if v.null != 0.0 {
+            format!(" (vs {:+.1})", v.null)
+        } else {
+            String::new()
+        };
+        s += &format!(
+            "| {} | {} | {} | {} | {} | {:+.2}{null} | {} | {} | {} | {} | {} | **{}** |\n",
+            v.claim.id,
+            v.claim.metric.label(),
+            v.claim.paper,
+            v.generator,
+            v.seeds,
+            v.mean_diff,
+            interval(v.ci),
+            interval(v.bca),
+            interval(v.hierarchical),
+            if v.p_holm.is_finite() {
+                format!("{:.3}", v.p_holm)
+            } else {
+                "–".into()
+            },
+            num(v.min_detectable, 2),
+            v.verdict
+        );
+    }
+    s += "\n## Every variant\n\n| generator | variant | PSNR existing | PSNR extrapolated | PSNR all | SSIM existing | SSIM extrapolated | train-half PSNR | compute (s) |\n|---|---|---|---|---|---|---|---|---|\n";
+    for g in &cfg.generators {
+        let g = g.name();
+        let rows = group(&report.pool, &g, Variant::Full);
+        if !rows.is_empty() {
+            s += &format!(
+                "| {g} | *original scene* | {} | |\n",
+                metric_cells(&rows, |r| &r.original)
+            );
+        }
+        for v in &cfg.variants {
+            let rows = group(&report.pool, &g, *v);
+            if rows.is_empty() {
+                continue;
+            }
+            s += &format!(
+                "| {g} | {} | {} | {} |\n",
+                v.name(),
+                metric_cells(&rows, |r| &r.last),
+                stat(&rows, |r| r.stage_seconds.values().sum(), 0),
+            );
+        }
+    }
+    s += "\n*compute*: the seconds each step took where it was computed; steps shared through the cache are counted in every variant that uses them.\n\n## Compute per stage (s, mean over seeds)\n\n";
+    let stages = [
+        "views",
+        "qa-mask",
+        "stage1",
+        "stage2",
+        "interpolate",
+        "eval",
+    ];
+    s += &format!(
+        "| generator | variant | {} |\n|---|---|{}\n",
+        stages.join(" | "),
+        "---|".repeat(stages.len())
+    );
+    for g in &cfg.generators {
+        let g = g.name();
+        for v in &cfg.variants {
+            let rows = group(&report.pool, &g, *v);
+            if rows.is_empty() {
+                continue;
+            }
+            let cells: Vec<String> = stages
+                .iter()
+                .map(|st| {
+                    let t: f64 = rows
+                        .iter()
+                        .map(|r| r.stage_seconds.get(*st).copied().unwrap_or(0.0))
+                        .sum::<f64>()
+                        / rows.len() as f64;
+                    format!("{t:.1}")
+                })
+                .collect();
+            s += &format!("| {g} | {} | {} |\n", v.name(), cells.join(" | "));
+        }
+    }
+    let shared = sharing(&report.results);
+    if !shared.is_empty() {
+        s += "\n## What the step cache saves\n\nSteps whose inputs are equal (same manifest digest) are computed once and reused by every job that needs them (SPEC.md §20.8). *executions*: steps over all jobs; *distinct*: different steps; compute in seconds if every job computed its own steps, and with each distinct step computed once (what a fresh audit computes; a resumed audit, parallel `--only` workers or a cache from an earlier audit may have computed some twice or none here). The original scenes (one training per seed) are not counted.\n\n| stage | executions | distinct | every job its own (s) | each distinct step once (s) | saved |\n|---|---|---|---|---|---|\n";
+        for r in &shared {
+            let saved = if r.unshared_seconds > 0.0 {
+                format!(
+                    "{:.0} %",
+                    100.0 * (1.0 - r.shared_seconds / r.unshared_seconds)
+                )
+            } else {
+                "–".into()
+            };
+            s += &format!(
+                "| {} | {} | {} | {:.1} | {:.1} | {saved} |\n",
+                r.stage, r.executions, r.distinct, r.unshared_seconds, r.shared_seconds
+            );
+        }
+    }
+    s += "\n![PSNR against the generator's inconsistency](inconsistency.svg)\n";
+    s
+}
+
+/// Existing and extrapolated PSNR of full / w/o QA-Mask / opacity mask against the
+/// ground-truth generator's inconsistency level (mean over seeds), as an SVG.
+pub fn plot(cfg: &AuditConfig, results: &[JobResult]) -> String {
+    let series = [
+        (Variant::Full, "#1f77b4"),
+        (Variant::NoQaMask, "#d62728"),
+        (Variant::OpacityMask, "#2ca02c"),
+    ];
+    let truth: Vec<GeneratorKind> = cfg
+        .generators
+        .iter()
+        .copied()
+        .filter(|g| g.level().is_some())
+        .collect();
+    // Mean and std over seeds of one (generator, variant, metric).
+    let point = |g: GeneratorKind, v: Variant, m: Metric| {
+        let vals: Vec<f64> = group(results, &g.name(), v)
+            .iter()
+            .map(|r| m.of(&r.last))
+            .filter(|x| x.is_finite())
+            .collect();
+        (!vals.is_empty()).then(|| mean_std(&vals))
+    };
+    let panels = [Metric::PsnrExisting, Metric::PsnrExtrapolated];
+    let mut all = Vec::new();
+    for m in panels {
+        for (v, _) in series {
+            for &g in &truth {
+                if let Some((y, sd)) = point(g, v, m) {
+                    let sd = if sd.is_nan() { 0.0 } else { sd };
+                    all.extend([y - sd, y + sd]);
+                }
+            }
+        }
+    }
+    let (lo, hi) = if all.is_empty() {
+        (0.0, 1.0)
+    } else {
+        let lo = all.iter().cloned().fold(f64::INFINITY, f64::min);
+        let hi = all.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+        ((lo - 1.0).floor(), (hi + 1.0).ceil())
+    };
+    let (pw, ph, left, top) = (300.0, 220.0, 60.0, 40.0);
+    let x_of = |i: usize| left + 30.0 + i as f64 * (pw - 60.0) / 2.0;
+    let y_of = |v: f64| top + ph - (v - lo) / (hi - lo) * ph;
+    let mut svg = format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{}\" height=\"{}\" font-family=\"sans-serif\" font-size=\"12\">\n",
+        2.0 * (pw + left) + 40.0,
+        ph + top + 90.0
+    );
+    for (k, m) in panels.iter().enumerate() {
+        let dx = k as f64 * (pw + left + 20.0);
+        svg += &format!("<g transform=\"translate({dx},0)\">\n");
+        svg += &format!(
+            "<text x=\"{}\" y=\"20\" text-anchor=\"middle\">{} (dB)</text>\n",
+            left + pw / 2.0,
+            m.label()
+        );
+        svg += &format!(
+            "<rect x=\"{left}\" y=\"{top}\" width=\"{pw}\" height=\"{ph}\" fill=\"none\" stroke=\"#888\"/>\n"
+        );
+        let step = if hi - lo > 10.0 { 2.0 } else { 1.0 };
+        let mut t = lo;
+        while t <= hi + 1e-9 {
+            svg += &format!(
+                "<text x=\"{}\" y=\"{}\" text-anchor=\"end\">{t:.0}</text>\n",
+                left - 5.0,
+                y_of(t) + 4.0
+            );
+            t += step;
+        }
+        for (i, l) in Level::ALL.iter().enumerate() {
+            svg += &format!(
+                "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{}</text>\n",
+                x_of(i),
+                top + ph + 18.0,
+                l.name()
+            );
+        }
+        // Series side by side around each level (offset 8 px), ±1 std as a bar.
+        for (j, (v, color)) in series.iter().enumerate() {
+            let dx = (j as f64 - 1.0) * 8.0;
+            let pts: Vec<(f64, f64, f64)> = truth
+                .iter()
+                .filter_map(|&g| {
+                    let (y, sd) = point(g, *v, *m)?;
+                    Some((x_of(g.level()?) + dx, y, if sd.is_nan() { 0.0 } else { sd }))
+                })
+                .collect();
+            if pts.len() > 1 {
+                let path: Vec<String> = pts
+                    .iter()
+                    .map(|(x, y, _)| format!("{x:.1},{:.1}", y_of(*y)))
+                    .collect();
+                svg += &format!(
+                    "<polyline points=\"{}\" fill=\"none\" stroke=\"{color}\" stroke-width=\"2\"/>\n",
+                    path.join(" ")
+                );
+            }
+            for (x, y, sd) in pts {
+                if sd > 0.0 {
+                    svg += &format!(
+                        "<line x1=\"{x:.1}\" x2=\"{x:.1}\" y1=\"{:.1}\" y2=\"{:.1}\" stroke=\"{color}\"/>\n",
+                        y_of(y - sd),
+                        y_of(y + sd)
+                    );
+                }
+                svg += &format!(
+                    "<circle cx=\"{x:.1}\" cy=\"{:.1}\" r=\"4\" fill=\"{color}\"/>\n",
+                    y_of(y)
+                );
+            }
+        }
+        svg += "</g>\n";
+    }
+    for (i, (v, color)) in series.iter().enumerate() {
+        let x = left + i as f64 * 170.0;
+        let y = top + ph + 50.0;
+        svg += &format!(
+            "<rect x=\"{x}\" y=\"{}\" width=\"12\" height=\"12\" fill=\"{color}\"/><text x=\"{}\" y=\"{y}\">{}</text>\n",
+            y - 10.0,
+            x + 18.0,
+            v.name()
+        );
+    }
+    svg += &format!(
+        "<text x=\"{left}\" y=\"{}\">x: the ground-truth generator's inconsistency level (SPEC.md §20.6); mean ± 1 std over seeds</text>\n</svg>\n",
+        top + ph + 75.0
+    );
+    svg
+}

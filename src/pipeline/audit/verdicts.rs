@@ -1,0 +1,470 @@
+//! From the jobs' results to the claims' verdicts: the metric of each claim, the paired
+//! differences per unit (seed at a numerics revision), and the decision rule of [`super::stats`]
+//! (SPEC.md §21.2).
+
+use super::jobs::JobResult;
+use super::stats;
+use super::{AuditConfig, GeneratorKind, Variant};
+use crate::pipeline::evaluate::{ClassSums, Row, ViewRecord};
+
+/// The metric a claim compares (on the evaluation poses, final scene of each variant).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Metric {
+    PsnrAll,
+    PsnrExisting,
+    PsnrExtrapolated,
+}
+
+impl Metric {
+    pub(crate) fn of(self, r: &Row) -> f64 {
+        match self {
+            Metric::PsnrAll => r.psnr_all,
+            Metric::PsnrExisting => r.psnr_existing,
+            Metric::PsnrExtrapolated => r.psnr_extrapolated,
+        }
+    }
+
+    /// The per-view sums of the metric's pixel class.
+    fn class(self, v: &ViewRecord) -> &ClassSums {
+        match self {
+            Metric::PsnrAll => &v.all,
+            Metric::PsnrExisting => &v.existing,
+            Metric::PsnrExtrapolated => &v.extrapolated,
+        }
+    }
+
+    pub(crate) fn label(self) -> &'static str {
+        match self {
+            Metric::PsnrAll => "PSNR all",
+            Metric::PsnrExisting => "PSNR existing",
+            Metric::PsnrExtrapolated => "PSNR extrapolated",
+        }
+    }
+}
+
+/// How a claim compares the full method with a variant.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Direction {
+    /// The full method is better.
+    Beats,
+    /// The full method is not worse.
+    DoesNotHurt,
+}
+
+/// A claim of the paper: the full method against one variant on one metric.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct Claim {
+    pub id: &'static str,
+    pub variant: Variant,
+    pub metric: Metric,
+    pub direction: Direction,
+    /// What the paper reports (and where).
+    pub paper: &'static str,
+}
+
+/// The claims the audit tests (SPEC.md §21.2).
+pub const CLAIMS: [Claim; 12] = [
+    Claim {
+        id: "independent views",
+        variant: Variant::EvenViews,
+        metric: Metric::PsnrAll,
+        direction: Direction::Beats,
+        paper: "Table 4, ScanNet++ PSNR: 23.79 vs 20.27 (−3.52 dB)",
+    },
+    Claim {
+        id: "depth supervision",
+        variant: Variant::NoDepthSupervision,
+        metric: Metric::PsnrAll,
+        direction: Direction::Beats,
+        paper: "Table 4, ScanNet++ PSNR: 23.79 vs 23.66 (−0.13 dB)",
+    },
+    Claim {
+        id: "QA-Mask SH 5 over SH 3",
+        variant: Variant::QaSh3,
+        metric: Metric::PsnrAll,
+        direction: Direction::Beats,
+        paper: "Table 4, ScanNet++ PSNR: 23.79 vs 22.45 (−1.34 dB)",
+    },
+    Claim {
+        id: "QA-Mask SH 5 over SH 4",
+        variant: Variant::QaSh4,
+        metric: Metric::PsnrAll,
+        direction: Direction::Beats,
+        paper: "Table 4, ScanNet++ PSNR: 23.79 vs 23.28 (−0.51 dB)",
+    },
+    Claim {
+        id: "QA-Mask (whole image)",
+        variant: Variant::NoQaMask,
+        metric: Metric::PsnrAll,
+        direction: Direction::Beats,
+        paper: "Table 4, Mip-NeRF 360 CLIP-IQA: 0.404 vs 0.343 (no PSNR given)",
+    },
+    Claim {
+        id: "DIBR propagation",
+        variant: Variant::NoPropagation,
+        metric: Metric::PsnrAll,
+        direction: Direction::Beats,
+        paper: "Table 4, Mip-NeRF 360 CLIP-IQA: 0.404 vs 0.316 (no PSNR given)",
+    },
+    Claim {
+        id: "QA-Mask protects existing regions",
+        variant: Variant::NoQaMask,
+        metric: Metric::PsnrExisting,
+        direction: Direction::Beats,
+        paper: "Table 3, existing PSNR: DiFix3D+ 28.11 → 28.58, GenFusion 26.49 → 28.33",
+    },
+    Claim {
+        id: "QA-Mask does not hurt extrapolation",
+        variant: Variant::NoQaMask,
+        metric: Metric::PsnrExtrapolated,
+        direction: Direction::DoesNotHurt,
+        paper: "Table 3, extrapolated PSNR: DiFix3D+ 10.23 → 10.20, GenFusion 15.04 → 15.10",
+    },
+    Claim {
+        id: "QA-Mask over opacity maps, existing",
+        variant: Variant::OpacityMask,
+        metric: Metric::PsnrExisting,
+        direction: Direction::Beats,
+        paper: "Table 3, existing PSNR: DiFix3D+ 28.15 → 28.58, GenFusion 28.03 → 28.33",
+    },
+    Claim {
+        id: "QA-Mask over opacity maps, extrapolated",
+        variant: Variant::OpacityMask,
+        metric: Metric::PsnrExtrapolated,
+        direction: Direction::DoesNotHurt,
+        paper: "Table 3, extrapolated PSNR: DiFix3D+ 10.17 → 10.20, GenFusion 15.04 → 15.10",
+    },
+    Claim {
+        id: "interpolation stage",
+        variant: Variant::NoInterpolation,
+        metric: Metric::PsnrAll,
+        direction: Direction::Beats,
+        paper: "§3.3.3 (design; no ablation number)",
+    },
+    Claim {
+        id: "video depth for dependent views",
+        variant: Variant::Stage2RenderFit,
+        metric: Metric::PsnrAll,
+        direction: Direction::Beats,
+        paper: "§3.3 (design: DIBR-based video depth alignment 'throughout the process'; no ablation number)",
+    },
+];
+
+/// A claim tested under one generator (SPEC.md §21.2).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Verdict {
+    #[serde(flatten)]
+    pub claim: Claim,
+    pub generator: String,
+    /// The Holm family: the room × generator family (`classical`, `truth`).
+    pub family: String,
+    /// Paired units (a seed at a numerics revision) with both runs and a finite
+    /// difference, and the revisions among them.
+    pub seeds: usize,
+    pub revisions: Vec<u32>,
+    /// Mean and sample standard deviation of `full − variant` over the units (std is NaN,
+    /// `null` in JSON, with one).
+    pub mean_diff: f64,
+    #[serde(with = "crate::io::json_float")]
+    pub std_diff: f64,
+    /// The value the test compares Δ with: 0, or `−margin` for a "does not hurt" claim.
+    pub null: f64,
+    /// The t interval (two-sided, level `1 − α`, before the family's correction) and what
+    /// the p-value comes from; absent with one unit.
+    pub method: Option<stats::Method>,
+    pub ci: Option<[f64; 2]>,
+    /// The BCa interval (from [`stats::Rule::bootstrap_from`] units).
+    pub bca: Option<[f64; 2]>,
+    /// Holm-adjusted two-sided p-value of the null value.
+    #[serde(with = "crate::io::json_float")]
+    pub p_holm: f64,
+    /// The smallest true distance from the null value found with the rule's power at the
+    /// family's first Holm level, for the measured spread.
+    #[serde(with = "crate::io::json_float")]
+    pub min_detectable: f64,
+    /// Percentile interval of a bootstrap over units, then over the evaluation views of
+    /// each unit (pooled PSNR of the resampled views), over the `hierarchical_units`
+    /// units with per-view records; absent with fewer than two.
+    pub hierarchical: Option<[f64; 2]>,
+    pub hierarchical_units: usize,
+    /// `holds`, `contradicted`, `inconclusive`, or `inconclusive (1 seed)`.
+    pub verdict: String,
+}
+
+/// Mean and sample standard deviation (NaN for fewer than 2 values).
+pub(super) fn mean_std(v: &[f64]) -> (f64, f64) {
+    let n = v.len() as f64;
+    let m = v.iter().sum::<f64>() / n;
+    if v.len() < 2 {
+        return (m, f64::NAN);
+    }
+    let var = v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (n - 1.0);
+    (m, var.sqrt())
+}
+
+/// A stable seed for a claim's bootstraps: the first 64 bits of SHA-256 of its names.
+fn bootstrap_seed(claim: &Claim, generator: &str, what: &str) -> u64 {
+    let h = crate::io::sha256_hex(format!("{what}\0{}\0{generator}", claim.id).as_bytes());
+    u64::from_str_radix(&h[..16], 16).expect("hex")
+}
+
+/// Replicates of the hierarchical bootstrap.
+pub const HIERARCHICAL_REPLICATES: usize = 2000;
+
+/// The hierarchical bootstrap's 95 % percentile interval of the mean paired difference
+/// of `metric`: units resampled with replacement, then each unit's evaluation views
+/// (the same views for both runs of the pair), the metric recomputed as pooled PSNR of
+/// the resampled views. Units without per-view records (or with different view lists)
+/// are left out; `None` below two units.
+fn hierarchical(
+    pairs: &[Pair],
+    metric: Metric,
+    alpha: f64,
+    seed: u64,
+) -> (Option<[f64; 2]>, usize) {
+    let units: Vec<(&[ViewRecord], &[ViewRecord])> = pairs
+        .iter()
+        .map(|p| (&p.full.last.views[..], &p.variant.last.views[..]))
+        .filter(|(a, b)| {
+            !a.is_empty()
+                && a.len() == b.len()
+                && a.iter().zip(b.iter()).all(|(x, y)| x.view == y.view)
+        })
+        .collect();
+    let n = units.len();
+    if n < 2 {
+        return (None, n);
+    }
+    let mut u = crate::rng::Uniform::new(seed);
+    let mut reps = Vec::with_capacity(HIERARCHICAL_REPLICATES);
+    let mut picks: Vec<usize> = Vec::new();
+    for _ in 0..HIERARCHICAL_REPLICATES {
+        let (mut sum, mut count) = (0.0, 0usize);
+        for _ in 0..n {
+            let (a, b) = units[u.below(n as u32) as usize];
+            picks.clear();
+            picks.extend((0..a.len()).map(|_| u.below(a.len() as u32) as usize));
+            let pa = ClassSums::psnr(picks.iter().map(|&i| metric.class(&a[i])));
+            let pb = ClassSums::psnr(picks.iter().map(|&i| metric.class(&b[i])));
+            let d = pa - pb;
+            if d.is_finite() {
+                sum += d;
+                count += 1;
+            }
+        }
+        if count > 0 {
+            reps.push(sum / count as f64);
+        }
+    }
+    if reps.is_empty() {
+        return (None, n);
+    }
+    reps.sort_by(f64::total_cmp);
+    let at = |q: f64| stats::quantile_sorted(&reps, q);
+    (Some([at(alpha / 2.0), at(1.0 - alpha / 2.0)]), n)
+}
+
+/// One draw of a claim's pair: a seed at a numerics revision (SPEC.md §21.2; the unit of
+/// the test is the seed, [`seed_means`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Pair<'a> {
+    pub seed: u32,
+    pub revision: u32,
+    pub full: &'a JobResult,
+    pub variant: &'a JobResult,
+}
+
+/// The pairs (full, `variant`) of `generator` in `pool`: both runs of one seed at one
+/// numerics revision, in (seed, revision) order. Pairs of one seed at several revisions
+/// count once, at the newest revision, when either run is bit for bit the same (a
+/// revision that did not change it; metrics compared, per-view records aside): an
+/// independent draw needs both runs to differ.
+pub fn pairs<'a>(pool: &'a [JobResult], generator: &str, variant: Variant) -> Vec<Pair<'a>> {
+    let cell = |v: Variant| {
+        pool.iter()
+            .filter(move |r| r.generator == generator && r.variant == v.name())
+    };
+    let mut out: Vec<Pair<'a>> = Vec::new();
+    for full in cell(Variant::Full) {
+        let Some(other) = cell(variant)
+            .find(|r| r.seed == full.seed && r.numerics_revision == full.numerics_revision)
+        else {
+            continue;
+        };
+        out.push(Pair {
+            seed: full.seed,
+            revision: full.numerics_revision,
+            full,
+            variant: other,
+        });
+    }
+    // Newest revision first, so that of two bit-identical draws the one kept is the newer
+    // (which carries the per-view records of later versions).
+    out.sort_by_key(|p| (p.seed, std::cmp::Reverse(p.revision)));
+    let bits = |r: &JobResult| serde_json::to_string(&metrics_only(&r.last)).expect("serializes");
+    let mut kept: Vec<Pair<'a>> = Vec::new();
+    for p in out {
+        // Another revision's pair is an independent draw only if neither run reproduces
+        // the kept pair's: a pair sharing one run with it would be correlated with it.
+        let same = kept.iter().any(|q| {
+            q.seed == p.seed && (bits(q.full) == bits(p.full) || bits(q.variant) == bits(p.variant))
+        });
+        if !same {
+            kept.push(p);
+        }
+    }
+    kept.sort_by_key(|p| (p.seed, p.revision));
+    kept
+}
+
+/// The unit of the test is the seed: per seed, the mean of its pairs' differences
+/// `full − variant` over the revisions that drew it (`pairs` in (seed, revision) order).
+/// Two draws of one seed at different revisions share the seed's random streams and are
+/// correlated (measured between revisions 2 and 4: r = 0.27 [0.07, 0.45] on gallery,
+/// −0.08 [−0.28, 0.12] on lounge; SPEC.md §21.2), so a revision adds precision to its seed,
+/// not a unit.
+pub fn seed_means(pairs: &[Pair], metric: Metric) -> Vec<f64> {
+    let mut out = Vec::new();
+    let mut k = 0;
+    while k < pairs.len() {
+        let seed = pairs[k].seed;
+        let group: Vec<f64> = pairs[k..]
+            .iter()
+            .take_while(|p| p.seed == seed)
+            .map(|p| metric.of(&p.full.last) - metric.of(&p.variant.last))
+            .collect();
+        k += group.len();
+        out.push(group.iter().sum::<f64>() / group.len() as f64);
+    }
+    out
+}
+
+/// Per seed, its pair at the newest revision (the hierarchical bootstrap's unit).
+fn newest_per_seed<'a>(pairs: &[Pair<'a>]) -> Vec<Pair<'a>> {
+    let mut out: Vec<Pair<'a>> = Vec::new();
+    for p in pairs {
+        match out.last_mut() {
+            Some(q) if q.seed == p.seed => *q = p.clone(),
+            _ => out.push(p.clone()),
+        }
+    }
+    out
+}
+
+/// A row's metrics without its per-view records (what two draws are compared on: a sample
+/// written before the records existed has the same metrics bits without them).
+pub(super) fn metrics_only(r: &Row) -> Row {
+    Row {
+        views: Vec::new(),
+        ..r.clone()
+    }
+}
+
+/// Every claim whose variant was run, per generator, judged by `rule` within each
+/// generator family (SPEC.md §21.2).
+pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Vec<Verdict> {
+    struct Cell<'a> {
+        claim: Claim,
+        generator: GeneratorKind,
+        pairs: Vec<Pair<'a>>,
+        diffs: Vec<f64>,
+    }
+    let mut cells = Vec::new();
+    for claim in CLAIMS {
+        if !cfg.variants.contains(&claim.variant) {
+            continue;
+        }
+        for &generator in &cfg.generators {
+            // Samples of another pipeline configuration of these cells measure something
+            // else ([`JobResult::config`]; empty: recorded before configurations were, by a
+            // binary whose method revision 5 changed, so another one).
+            let (full_cfg, variant_cfg) = match (
+                cfg.config_digest(generator, Variant::Full),
+                cfg.config_digest(generator, claim.variant),
+            ) {
+                (Ok(a), Ok(b)) => (a, b),
+                _ => continue,
+            };
+            let same_config = |r: &JobResult, want: &str| r.config == want;
+            let pairs: Vec<Pair> = pairs(pool, &generator.name(), claim.variant)
+                .into_iter()
+                .filter(|p| same_config(p.full, &full_cfg) && same_config(p.variant, &variant_cfg))
+                .filter(|p| {
+                    let d = claim.metric.of(&p.full.last) - claim.metric.of(&p.variant.last);
+                    d.is_finite()
+                })
+                .collect();
+            if pairs.is_empty() {
+                continue;
+            }
+            let diffs = seed_means(&pairs, claim.metric);
+            cells.push(Cell {
+                claim,
+                generator,
+                pairs,
+                diffs,
+            });
+        }
+    }
+    let null = |c: &Claim| match c.direction {
+        Direction::Beats => 0.0,
+        Direction::DoesNotHurt => -rule.margin,
+    };
+    let mut out: Vec<Option<Verdict>> = cells.iter().map(|_| None).collect();
+    for family in ["classical", "truth"] {
+        let members: Vec<usize> = (0..cells.len())
+            .filter(|&i| cells[i].generator.family() == family)
+            .collect();
+        let data: Vec<stats::ClaimData> = members
+            .iter()
+            .map(|&i| {
+                let c = &cells[i];
+                stats::ClaimData {
+                    diffs: &c.diffs,
+                    null: null(&c.claim),
+                    seed: bootstrap_seed(&c.claim, &c.generator.name(), "bca"),
+                }
+            })
+            .collect();
+        for (&i, j) in members.iter().zip(rule.judge(&data)) {
+            let c = &cells[i];
+            let g = c.generator.name();
+            let (mean, std) = mean_std(&c.diffs);
+            let mut revisions: Vec<u32> = c.pairs.iter().map(|p| p.revision).collect();
+            revisions.sort_unstable();
+            revisions.dedup();
+            let (hier, hier_units) = hierarchical(
+                &newest_per_seed(&c.pairs),
+                c.claim.metric,
+                rule.alpha,
+                bootstrap_seed(&c.claim, &g, "hierarchical"),
+            );
+            let verdict = if j.test.is_none() {
+                "inconclusive (1 seed)".to_string()
+            } else {
+                j.outcome.word().to_string()
+            };
+            out[i] = Some(Verdict {
+                claim: c.claim,
+                family: family.into(),
+                generator: g,
+                seeds: c.diffs.len(),
+                revisions,
+                mean_diff: mean,
+                std_diff: std,
+                null: null(&c.claim),
+                method: j.test.map(|t| t.method),
+                ci: j.test.map(|t| [t.lo, t.hi]),
+                bca: j.test.and_then(|t| t.bca),
+                p_holm: j.p_holm,
+                min_detectable: j.min_detectable(rule),
+                hierarchical: hier,
+                hierarchical_units: hier_units,
+                verdict,
+            });
+        }
+    }
+    out.into_iter().flatten().collect()
+}
