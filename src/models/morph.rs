@@ -21,7 +21,8 @@ pub const END_SIZES_DIFFER: &str = "the end frames differ in size or channels";
 /// Whether `e` says that a clip cannot be made between its two keyframes (an intermediate
 /// camera sees neither, or they differ in size) rather than that something failed: the
 /// pipeline records such a clip and leaves it out (SPEC.md §20.3–20.4). Decided by the
-/// error's kind ([`ErrorKind::Degenerate`]), never by its text.
+/// error's kind ([`ErrorKind::Degenerate`]), never by its text; the kind also marks a
+/// clip's video depth that no alignment fits, so apply this to a clip's generation only.
 pub fn cannot_make_clip(e: &Error) -> bool {
     e.kind == ErrorKind::Degenerate
 }

@@ -185,18 +185,6 @@ impl Level {
             Level::High => "high",
         }
     }
-
-    /// The level called `name` (`none` or `0`, `low`, `high`).
-    pub fn by_name(name: &str) -> Result<Level> {
-        match name {
-            "none" | "0" => Ok(Level::None),
-            "low" => Ok(Level::Low),
-            "high" => Ok(Level::High),
-            _ => Err(Error::invalid(format!(
-                "unknown inconsistency level '{name}' (none, low or high)"
-            ))),
-        }
-    }
 }
 
 impl Hallucination {

@@ -64,7 +64,8 @@ impl Isa {
     pub(crate) fn detect() -> Isa {
         #[cfg(target_arch = "x86_64")]
         {
-            if std::is_x86_feature_detected!("avx512f") {
+            // The AVX-512F forms use AVX2 too (and `Kernel::avx2` reads "at least AVX2").
+            if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx2") {
                 return Isa::Avx512;
             }
             if std::is_x86_feature_detected!("avx2") {

@@ -3,9 +3,13 @@
 //! lower floor, and no two modules (at any depth) reach each other in a cycle.
 //!
 //! The graph is read from the source text: a reference is a path `crate::a::b…` or
-//! `super::…` outside comments (doc links are not imports), resolved to the longest module
-//! it names. A module's references to its own ancestors and descendants are not edges: a
-//! `mod.rs` declares and re-exports its children and holds the vocabulary they share.
+//! `super::…` outside comments and strings (doc links are not imports; `super` counts the
+//! inline modules a path sits in), resolved to the longest module it names and then through
+//! that module's `pub use` re-exports (named or glob) to the module defining the item. A
+//! module's references to its own ancestors and descendants are not edges: a `mod.rs`
+//! declares and re-exports its children and holds the vocabulary they share. Not read:
+//! raw strings with unbalanced quotes, nested block comments, paths built by macros (none
+//! in `src/` today).
 
 use super::common::repo_root;
 use std::collections::{BTreeMap, BTreeSet};
@@ -84,22 +88,54 @@ fn strip_comments(s: &str) -> String {
 }
 
 /// Every path a text names from `crate::` or `super::` (brace groups expanded), as the
-/// list of its segments after `crate` (`super` resolved against `module`).
+/// list of its segments after `crate`. `super` is resolved against `module` plus the
+/// inline modules (`mod tests { … }`) the path sits in.
 fn referenced_paths(module: &[&str], text: &str) -> Vec<Vec<String>> {
     let mut out = Vec::new();
     let bytes = text.as_bytes();
     let ident = |c: u8| c.is_ascii_alphanumeric() || c == b'_';
+    // Inline modules open at this position: (name, brace depth inside it).
+    let mut inline: Vec<(String, usize)> = Vec::new();
+    let (mut depth, mut pending): (usize, Option<String>) = (0, None);
     for start in 0..bytes.len() {
+        match bytes[start] {
+            b'{' => {
+                depth += 1;
+                if let Some(name) = pending.take() {
+                    inline.push((name, depth));
+                }
+            }
+            b'}' => {
+                if inline.last().is_some_and(|&(_, d)| d == depth) {
+                    inline.pop();
+                }
+                depth = depth.saturating_sub(1);
+            }
+            b';' => pending = None,
+            _ => {}
+        }
         if start > 0 && (ident(bytes[start - 1]) || bytes[start - 1] == b':') {
             continue;
         }
         let rest = &text[start..];
+        if let Some(r) = rest.strip_prefix("mod ") {
+            let r = r.trim_start();
+            let n = r
+                .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+                .unwrap_or(r.len());
+            if n > 0 && r[n..].trim_start().starts_with('{') {
+                pending = Some(r[..n].to_string());
+            }
+            continue;
+        }
         let (mut base, mut tail): (Vec<String>, &str) =
             if let Some(t) = rest.strip_prefix("crate::") {
                 (Vec::new(), t)
             } else if rest.starts_with("super::") {
-                // `super` of `a::b` is `a`, whether `b` is a file or a folder's `mod.rs`.
+                // `super` of `a::b` is `a`, whether `b` is a file, a folder's `mod.rs` or an
+                // inline module.
                 let mut base: Vec<String> = module.iter().map(|s| s.to_string()).collect();
+                base.extend(inline.iter().map(|(n, _)| n.clone()));
                 let mut t = rest;
                 while let Some(r) = t.strip_prefix("super::") {
                     base.pop();
@@ -110,6 +146,50 @@ fn referenced_paths(module: &[&str], text: &str) -> Vec<Vec<String>> {
                 continue;
             };
         expand(&mut base, &mut tail, &mut out);
+    }
+    out
+}
+
+/// What each module re-exports: (module, name) → the path it stands for, from
+/// `pub use` / `pub(crate) use` items (a name relative to the module is its child's);
+/// and (module, `*`) → the modules it re-exports whole.
+fn reexports(mods: &BTreeMap<String, String>) -> BTreeMap<(String, String), Vec<String>> {
+    let mut out = BTreeMap::new();
+    for (m, text) in mods {
+        let parts: Vec<&str> = m.split("::").collect();
+        for stmt in text.split(';') {
+            let s = stmt.trim();
+            let Some(rest) = s
+                .strip_prefix("pub use ")
+                .or_else(|| s.strip_prefix("pub(crate) use "))
+                .or_else(|| s.strip_prefix("pub(super) use "))
+            else {
+                continue;
+            };
+            // A path relative to the module: its child (what `pub use child::x` means).
+            let rel = if rest.starts_with("crate::") || rest.starts_with("super::") {
+                rest.to_string()
+            } else {
+                format!("crate::{m}::{rest}")
+            };
+            for path in referenced_paths(&parts, &rel) {
+                let Some(name) = path.last().cloned() else {
+                    continue;
+                };
+                let key = if name.is_empty() {
+                    "*".to_string()
+                } else {
+                    name
+                };
+                let entry: &mut Vec<String> = out.entry((m.clone(), key.clone())).or_default();
+                let target = if key == "*" {
+                    path[..path.len() - 1].join("::")
+                } else {
+                    path.join("::")
+                };
+                entry.push(target);
+            }
+        }
     }
     out
 }
@@ -164,6 +244,9 @@ fn expand(base: &mut [String], tail: &mut &str, out: &mut Vec<Vec<String>>) {
             .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
             .unwrap_or(t.len());
         if n == 0 {
+            if t.starts_with('*') {
+                path.push(String::new());
+            }
             break;
         }
         path.push(t[..n].to_string());
@@ -199,19 +282,61 @@ fn floors(doc: &str) -> BTreeMap<String, u32> {
     out
 }
 
+/// The module a path names: its longest prefix that is a module, followed through that
+/// module's re-exports (named or glob) to the module that defines the item.
+fn resolve(
+    mods: &BTreeMap<String, String>,
+    re: &BTreeMap<(String, String), Vec<String>>,
+    path: &[String],
+    hops: usize,
+) -> Option<String> {
+    let k = (1..=path.len())
+        .rev()
+        .find(|&k| mods.contains_key(&path[..k].join("::")))?;
+    let module = path[..k].join("::");
+    let Some(item) = path.get(k).filter(|s| !s.is_empty()) else {
+        return Some(module);
+    };
+    if hops < 8 {
+        if let Some(targets) = re.get(&(module.clone(), item.clone())) {
+            let target: Vec<String> = targets[0].split("::").map(String::from).collect();
+            return resolve(mods, re, &target, hops + 1);
+        }
+        // A glob re-export of a module that defines or re-exports the item.
+        for g in re
+            .get(&(module.clone(), "*".to_string()))
+            .into_iter()
+            .flatten()
+        {
+            let defines = mods.get(g).is_some_and(|text| {
+                [
+                    "fn", "struct", "enum", "const", "static", "type", "trait", "mod",
+                ]
+                .iter()
+                .any(|kw| text.contains(&format!("{kw} {item}")))
+            });
+            if defines || re.contains_key(&(g.clone(), item.clone())) {
+                let mut target: Vec<String> = g.split("::").map(String::from).collect();
+                target.push(item.clone());
+                return resolve(mods, re, &target, hops + 1);
+            }
+        }
+    }
+    Some(module)
+}
+
 /// The module graph: module → modules it references (excluding its ancestors and
-/// descendants).
+/// descendants), each reference followed through re-exports to where the item lives.
 fn graph(mods: &BTreeMap<String, String>) -> BTreeMap<String, BTreeSet<String>> {
+    let re = reexports(mods);
     let mut edges: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
     for (m, text) in mods {
         let parts: Vec<&str> = m.split("::").collect();
         let set = edges.entry(m.clone()).or_default();
         for path in referenced_paths(&parts, text) {
-            let target = (1..=path.len())
-                .rev()
-                .map(|k| path[..k].join("::"))
-                .find(|p| mods.contains_key(p));
-            let Some(t) = target else { continue };
+            let Some(t) = resolve(mods, &re, &path, 0) else {
+                continue;
+            };
             let related =
                 t == *m || m.starts_with(&format!("{t}::")) || t.starts_with(&format!("{m}::"));
             if !related {
@@ -331,6 +456,25 @@ fn architecture_checker_reads_references() {
     let got = referenced_paths(&["x", "y", "z"], &text);
     let got: Vec<String> = got.iter().map(|p| p.join("::")).collect();
     assert_eq!(got, ["x::a::b::C", "x::a::d", "e::g"]);
+    // `super` inside an inline module is the file's module.
+    let got = referenced_paths(&["x", "y"], "mod tests { use super::Z; }\nuse super::W;");
+    let got: Vec<String> = got.iter().map(|p| p.join("::")).collect();
+    assert_eq!(got, ["x::y::Z", "x::W"]);
+    // A re-export is followed to the module that defines the item.
+    let mods: BTreeMap<String, String> = [
+        ("p", "pub use q::Thing; pub use r::*;"),
+        ("p::q", "pub struct Thing;"),
+        ("p::r", "pub fn helper() {}"),
+        ("s", "use crate::p::Thing; fn f() { crate::p::helper(); }"),
+    ]
+    .into_iter()
+    .map(|(m, t)| (m.to_string(), t.to_string()))
+    .collect();
+    let g = graph(&mods);
+    assert_eq!(
+        g["s"],
+        BTreeSet::from(["p::q".to_string(), "p::r".to_string()])
+    );
     let mut e = BTreeMap::new();
     e.insert("a".to_string(), BTreeSet::from(["b".to_string()]));
     e.insert("b".to_string(), BTreeSet::from(["a".to_string()]));
