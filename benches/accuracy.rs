@@ -647,7 +647,7 @@ fn training(quick: bool, points: &mut Vec<Point>) {
 /// up to that stage (the evaluation excluded). Full runs only (`paper` takes over
 /// an hour on one thread); the quick preset's rows are the demo's report.
 fn pipeline_presets(quick: bool, points: &mut Vec<Point>) {
-    use unseen::pipeline::{self, Event, PipelineConfig, RunOptions, rundir::TIMING_FILE};
+    use unseen::pipeline::{self, Event, PipelineConfig, Preset, RunOptions, rundir::TIMING_FILE};
     use unseen::train::run::{Checkpointing, train_run};
     use unseen::train::trainer::TrainConfig;
     if quick {
@@ -687,9 +687,9 @@ fn pipeline_presets(quick: bool, points: &mut Vec<Point>) {
             eprintln!("   {step}: {seconds:.1} s");
         }
     };
-    for preset in ["quick", "paper"] {
-        let cfg = PipelineConfig::preset(preset).expect("preset");
-        let out = dir.0.join(preset);
+    for preset in [Preset::Quick, Preset::Paper] {
+        let cfg = PipelineConfig::preset(preset);
+        let out = dir.0.join(preset.name());
         let outcome = pipeline::run_with(&cfg, &inputs, &out, &RunOptions::default(), &log)
             .expect("pipeline run");
         let metrics = outcome.metrics.expect("evaluation poses");
@@ -702,7 +702,7 @@ fn pipeline_presets(quick: bool, points: &mut Vec<Point>) {
         let stage_of = |name: &str| name.split('/').next().unwrap_or("").to_string();
         for row in &metrics.rows {
             // The original is the same for both presets: one row.
-            if row.scene == "original" && preset != "quick" {
+            if row.scene == "original" && preset != Preset::Quick {
                 continue;
             }
             // The original's training, then the steps up to the last of this stage (the
@@ -729,7 +729,7 @@ fn pipeline_presets(quick: bool, points: &mut Vec<Point>) {
                     "{knob}: extrapolated PSNR {:.2} dB, existing {:.2} dB, train-half {:.2} dB, {} Gaussians",
                     row.psnr_extrapolated, row.psnr_existing, row.psnr_train_half, row.gaussians
                 ),
-                default: preset == "paper" && row.scene != "original",
+                default: preset == Preset::Paper && row.scene != "original",
                 metric: "extrapolated-pixel MSE",
                 error: 10f64.powf(-row.psnr_extrapolated / 10.0),
                 seconds,

@@ -6,7 +6,9 @@ use unseen::error::Result;
 use unseen::io::image::{
     ImageF32, check_same_size, read_exr, read_png, to_u8, write_exr, write_png,
 };
-use unseen::models::{DepthHint, depth_estimator, inpainter};
+use unseen::models::{
+    DepthHint, DepthModel, InpaintDefault, InpaintModel, Model, depth_estimator, inpainter,
+};
 
 #[derive(Args)]
 pub struct InpaintArgs {
@@ -19,7 +21,7 @@ pub struct InpaintArgs {
     out: PathBuf,
     /// `telea` or `onnx:CARD.json`.
     #[arg(long, default_value = "telea")]
-    method: String,
+    method: InpaintModel,
     /// Telea radius (OpenCV's `inpaintRadius`).
     #[arg(long, default_value_t = 3.0)]
     radius: f64,
@@ -34,7 +36,7 @@ pub struct DepthArgs {
     out: PathBuf,
     /// `depth-fill` or `onnx:CARD.json`.
     #[arg(long, default_value = "depth-fill")]
-    method: String,
+    method: DepthModel,
     /// Known depth (EXR, channel Y; ≤ 0 or not finite = unknown), for `depth-fill`.
     #[arg(long)]
     hint: Option<PathBuf>,
@@ -56,7 +58,7 @@ fn read_mask(path: &Path, image: &Path, img: &ImageF32) -> Result<Vec<bool>> {
 pub fn run_inpaint(a: &InpaintArgs) -> Result<()> {
     let img = read_png(&a.image)?;
     let mask = read_mask(&a.mask, &a.image, &img)?;
-    let out = if a.method == "telea" {
+    let out = if a.method == Model::Classical(InpaintDefault::Telea) {
         // 8-bit in, 8-bit arithmetic: the same values as cv2.inpaint (SPEC.md §19.1).
         let bytes: Vec<u8> = img.data.iter().map(|&v| to_u8(v)).collect();
         let r = unseen::models::telea::inpaint(

@@ -8,16 +8,25 @@ use std::time::Instant;
 use unseen::error::{Error, Result};
 use unseen::pipeline::compare::compare;
 use unseen::pipeline::{
-    self, Hallucination, Inconsistency, Inputs, MaskSource, PipelineConfig, RunOptions, Scope,
-    SlotNames, Stage2Depth, TruthDepth, load_inputs,
+    self, Hallucination, Inconsistency, Inputs, MaskSource, PipelineConfig, Preset, RunOptions,
+    Scope, SlotNames, Stage2Depth, TruthDepth, load_inputs,
 };
 use unseen::train::run::{Checkpointing, train_run};
 use unseen::train::trainer::TrainConfig;
 
 #[derive(Clone, Copy, ValueEnum)]
-pub enum Preset {
+pub enum PresetArg {
     Quick,
     Paper,
+}
+
+impl From<PresetArg> for Preset {
+    fn from(p: PresetArg) -> Self {
+        match p {
+            PresetArg::Quick => Preset::Quick,
+            PresetArg::Paper => Preset::Paper,
+        }
+    }
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -74,7 +83,7 @@ pub struct ExtrapolateArgs {
     #[arg(long)]
     out: PathBuf,
     #[arg(long, value_enum, default_value = "quick")]
-    preset: Preset,
+    preset: PresetArg,
     /// A JSON PipelineConfig over the preset (any subset of fields).
     #[arg(long)]
     config: Option<PathBuf>,
@@ -195,17 +204,13 @@ impl Knobs {
 }
 
 fn config_from(preset: Preset, file: Option<&Path>, knobs: &Knobs) -> Result<PipelineConfig> {
-    let name = match preset {
-        Preset::Quick => "quick",
-        Preset::Paper => "paper",
-    };
     let mut c = match file {
-        None => PipelineConfig::preset(name)?,
+        None => PipelineConfig::preset(preset),
         Some(p) => {
             let text = std::fs::read(p).map_err(|e| Error::io(p, e))?;
             let over: serde_json::Value = serde_json::from_slice(&text)
                 .map_err(|e| Error::parse(p, format!("invalid JSON: {e}")))?;
-            PipelineConfig::with_overrides(name, over, p)?
+            PipelineConfig::with_overrides(preset, over, p)?
         }
     };
     knobs.apply(&mut c)?;
@@ -224,7 +229,7 @@ pub fn run_extrapolate(a: &ExtrapolateArgs) -> Result<()> {
         }
         return Ok(());
     }
-    let cfg = config_from(a.preset, a.config.as_deref(), &a.knobs)?;
+    let cfg = config_from(a.preset.into(), a.config.as_deref(), &a.knobs)?;
     let inputs = load_inputs(&a.run, &a.views, a.eval.as_deref(), a.dataset.as_deref())?;
     if let Some(sub) = &a.emit_slurm {
         return emit_extrapolate(a, &cfg, &inputs, sub);
@@ -284,7 +289,7 @@ fn emit_extrapolate(
         "--out".into(),
         show(abs(&a.out)?),
         "--preset".into(),
-        cfg.preset.clone(),
+        cfg.preset.to_string(),
         "--config".into(),
         show(config),
     ];
@@ -515,7 +520,7 @@ pub struct AuditArgs {
     #[arg(long)]
     out: PathBuf,
     #[arg(long, value_enum, default_value = "quick")]
-    preset: Preset,
+    preset: PresetArg,
     /// Variants, comma-separated (default: all): full, no_qa_mask, opacity_mask,
     /// even_views, no_depth_supervision, no_propagation, qa_sh3, qa_sh4, no_interpolation, stage2_render_fit.
     #[arg(long, value_delimiter = ',')]
@@ -604,11 +609,8 @@ fn parse_seeds(s: &str) -> std::result::Result<std::ops::Range<u32>, String> {
 /// `unseen audit`: every job (or one), then the report.
 pub fn run_audit(a: &AuditArgs) -> Result<()> {
     use unseen::pipeline::audit::{self, AuditConfig, GeneratorKind, Variant, cluster};
-    let preset = match a.preset {
-        Preset::Quick => "quick",
-        Preset::Paper => "paper",
-    };
-    let mut cfg = AuditConfig::preset(preset)?;
+    let preset = Preset::from(a.preset);
+    let mut cfg = AuditConfig::preset(preset);
     if let Some(p) = &a.config {
         let text = std::fs::read(p).map_err(|e| Error::io(p, e))?;
         let over: serde_json::Value = serde_json::from_slice(&text)
@@ -749,7 +751,7 @@ fn list_audit(cfg: &unseen::pipeline::audit::AuditConfig, a: &AuditArgs) -> Resu
 fn emit_audit(
     cfg: &unseen::pipeline::audit::AuditConfig,
     a: &AuditArgs,
-    preset: &str,
+    preset: Preset,
     sub: &Path,
 ) -> Result<()> {
     use unseen::pipeline::audit::cluster;
@@ -768,7 +770,7 @@ fn emit_audit(
         "--out".into(),
         show(abs(&a.out)?),
         "--preset".into(),
-        preset.into(),
+        preset.to_string(),
         "--config".into(),
         show(config),
         "--variants".into(),

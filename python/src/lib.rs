@@ -663,8 +663,9 @@ fn extrapolate(
     resume: bool,
     threads: Option<usize>,
 ) -> PyResult<(Option<PathBuf>, Vec<String>)> {
+    let preset: unseen::pipeline::Preset = preset.parse().map_err(py_err)?;
     let cfg = match config {
-        None => unseen::pipeline::config::PipelineConfig::preset(preset),
+        None => Ok(unseen::pipeline::config::PipelineConfig::preset(preset)),
         Some(text) => {
             let src = std::path::Path::new("<config argument>");
             serde_json::from_str(&text)

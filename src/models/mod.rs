@@ -14,6 +14,7 @@
 //! Images are [`ImageF32`] in `[0, 1]` (any channel count unless a slot says otherwise);
 //! masks are row-major `bool`, true = to be generated.
 
+pub mod choice;
 pub mod classical;
 pub mod morph;
 #[cfg(feature = "onnx")]
@@ -23,7 +24,10 @@ pub mod telea;
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::io::image::ImageF32;
-use std::path::Path;
+pub use choice::{
+    Classical, DepthDefault, DepthModel, FixerDefault, FixerModel, InpaintDefault, InpaintModel,
+    Model, VideoDefault, VideoModel,
+};
 
 /// What a depth map holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -159,14 +163,9 @@ pub trait ArtifactFixer: Send + Sync {
     fn fix(&self, render: &ImageF32, reference: Option<&ImageF32>) -> Result<ImageF32>;
 }
 
-/// `onnx:CARD.json` → the card path.
-fn onnx_card(name: &str) -> Option<&Path> {
-    name.strip_prefix("onnx:").map(Path::new)
-}
-
-/// The error of an `onnx:` slot in a build without the `onnx` feature.
+/// The error of an ONNX model in a build without the `onnx` feature.
 #[cfg(not(feature = "onnx"))]
-fn without_onnx(card: &Path) -> Error {
+fn without_onnx(card: &std::path::Path) -> Error {
     Error::invalid(
         "this build has no ONNX support (the Python binding and builds without the `onnx` \
          feature); run the model with the `unseen` command line",
@@ -174,96 +173,57 @@ fn without_onnx(card: &Path) -> Error {
     .at(card)
 }
 
-/// A classical default of a slot: its name and how to make it.
-type Classical<'a, T> = (&'a str, fn() -> Box<T>);
-
-/// The model called `name` for `slot`: an `onnx:CARD.json` card, loaded by `onnx`, or one
-/// of the `classical` defaults by name; any other name is an error listing the known ones.
-fn pick<T: ?Sized>(
-    slot: &str,
-    name: &str,
-    classical: &[Classical<T>],
-    onnx: impl FnOnce(&Path) -> Result<Box<T>>,
-) -> Result<Box<T>> {
-    if let Some(card) = onnx_card(name) {
-        return onnx(card);
-    }
-    match classical.iter().find(|(n, _)| *n == name) {
-        Some((_, make)) => Ok(make()),
-        None => {
-            let known: Vec<&str> = classical.iter().map(|(n, _)| *n).collect();
-            Err(Error::invalid(format!(
-                "unknown {slot} '{name}' (known: {}, or onnx:CARD.json)",
-                known.join(", ")
-            )))
-        }
-    }
-}
-
-/// The loader of an ONNX model type `$ty` (a `$slot`) for [`pick`]: a clear error in a build without
-/// the `onnx` feature (where `$ty` does not exist: the cfg removes it before it is named).
-macro_rules! onnx_model {
-    ($slot:ty, $ty:path) => {{
+/// The ONNX model type `$ty` (a `$slot`) loaded from `$card`, or in a build without the
+/// `onnx` feature a clear error (where `$ty` does not exist: the cfg removes it before it
+/// is named).
+macro_rules! load_onnx {
+    ($slot:ty, $ty:path, $card:expr) => {{
         #[cfg(feature = "onnx")]
-        let load = |card: &Path| -> Result<Box<$slot>> { Ok(Box::new(<$ty>::load(card)?)) };
+        let model: Result<Box<$slot>> = Ok(Box::new(<$ty>::load($card)?));
         #[cfg(not(feature = "onnx"))]
-        let load = |card: &Path| -> Result<Box<$slot>> { Err(without_onnx(card)) };
-        load
+        let model: Result<Box<$slot>> = Err(without_onnx($card));
+        model
     }};
 }
 
-/// The inpainter called `name`: `telea` (radius 3) or `onnx:CARD.json`.
-pub fn inpainter(name: &str) -> Result<Box<dyn Inpainter>> {
-    let telea: fn() -> Box<dyn Inpainter> = || Box::new(classical::Telea::default());
-    pick(
-        "inpainter",
-        name,
-        &[("telea", telea)],
-        onnx_model!(dyn Inpainter, onnx::OnnxInpainter),
-    )
+/// The inpainter `m`: Telea (radius 3) or an ONNX model.
+pub fn inpainter(m: &InpaintModel) -> Result<Box<dyn Inpainter>> {
+    match m {
+        Model::Classical(InpaintDefault::Telea) => Ok(Box::new(classical::Telea::default())),
+        Model::Onnx(card) => load_onnx!(dyn Inpainter, onnx::OnnxInpainter, card),
+    }
 }
 
-/// The depth estimator called `name`: `depth-fill` or `onnx:CARD.json`.
-pub fn depth_estimator(name: &str) -> Result<Box<dyn DepthEstimator>> {
-    let fill: fn() -> Box<dyn DepthEstimator> = || Box::new(classical::DepthFill::default());
-    pick(
-        "depth estimator",
-        name,
-        &[("depth-fill", fill)],
-        onnx_model!(dyn DepthEstimator, onnx::OnnxDepth),
-    )
+/// The depth estimator `m`: depth fill or an ONNX model.
+pub fn depth_estimator(m: &DepthModel) -> Result<Box<dyn DepthEstimator>> {
+    match m {
+        Model::Classical(DepthDefault::DepthFill) => Ok(Box::new(classical::DepthFill::default())),
+        Model::Onnx(card) => load_onnx!(dyn DepthEstimator, onnx::OnnxDepth, card),
+    }
 }
 
-/// The video depth estimator called `name`: `depth-fill` (per frame, needs hints) or
-/// `onnx:CARD.json` (an image model run per frame).
-pub fn video_depth_estimator(name: &str) -> Result<Box<dyn VideoDepthEstimator>> {
-    let fill: fn() -> Box<dyn VideoDepthEstimator> = || Box::new(classical::DepthFill::default());
-    pick(
-        "video depth estimator",
-        name,
-        &[("depth-fill", fill)],
-        onnx_model!(dyn VideoDepthEstimator, onnx::OnnxDepth),
-    )
+/// The video depth estimator `m`: depth fill per frame (needs hints) or an ONNX image
+/// model run per frame.
+pub fn video_depth_estimator(m: &DepthModel) -> Result<Box<dyn VideoDepthEstimator>> {
+    match m {
+        Model::Classical(DepthDefault::DepthFill) => Ok(Box::new(classical::DepthFill::default())),
+        Model::Onnx(card) => load_onnx!(dyn VideoDepthEstimator, onnx::OnnxDepth, card),
+    }
 }
 
-/// The artifact fixer called `name`: `identity`, `bilateral` or `onnx:CARD.json`.
-pub fn artifact_fixer(name: &str) -> Result<Box<dyn ArtifactFixer>> {
-    let identity: fn() -> Box<dyn ArtifactFixer> = || Box::new(classical::Identity);
-    let bilateral: fn() -> Box<dyn ArtifactFixer> = || Box::new(classical::Bilateral::default());
-    pick(
-        "artifact fixer",
-        name,
-        &[("identity", identity), ("bilateral", bilateral)],
-        onnx_model!(dyn ArtifactFixer, onnx::OnnxFixer),
-    )
+/// The artifact fixer `m`: identity, bilateral or an ONNX model.
+pub fn artifact_fixer(m: &FixerModel) -> Result<Box<dyn ArtifactFixer>> {
+    match m {
+        Model::Classical(FixerDefault::Identity) => Ok(Box::new(classical::Identity)),
+        Model::Classical(FixerDefault::Bilateral) => Ok(Box::new(classical::Bilateral::default())),
+        Model::Onnx(card) => load_onnx!(dyn ArtifactFixer, onnx::OnnxFixer, card),
+    }
 }
 
-/// The video generator called `name`: `morph`.
-pub fn video_generator(name: &str) -> Result<Box<dyn VideoGenerator>> {
-    match name {
-        "morph" => Ok(Box::new(morph::Morph::default())),
-        _ => Err(Error::invalid(format!(
-            "unknown video generator '{name}' (known: morph)"
-        ))),
+/// The video generator `m`: the morph (the slot takes no ONNX model; parsing refuses one).
+pub fn video_generator(m: &VideoModel) -> Result<Box<dyn VideoGenerator>> {
+    match m {
+        Model::Classical(VideoDefault::Morph) => Ok(Box::new(morph::Morph::default())),
+        Model::Onnx(card) => Err(Error::invalid("the video slot takes no ONNX model").at(card)),
     }
 }

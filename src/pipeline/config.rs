@@ -2,9 +2,15 @@
 //! Each ablation of the paper is one independent switch.
 
 use crate::error::{Error, Result};
+use crate::models::{
+    DepthDefault, DepthModel, FixerDefault, FixerModel, InpaintDefault, InpaintModel, Model,
+    VideoDefault, VideoModel,
+};
 use crate::train::densify::DensifyConfig;
 use crate::train::loss::LossWeights;
 use crate::warp::align::Space;
+use std::fmt;
+use std::str::FromStr;
 
 /// Where the per-pixel weights of the generated supervision come from (paper Eq. 7).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -18,30 +24,91 @@ pub enum MaskSource {
     None,
 }
 
+/// What fills one slot: a model, or the labelled ground-truth generator. Written in a
+/// configuration as the model's name (`telea`, `onnx:CARD.json`, …) or `truth`; parsed
+/// once, where the configuration is read.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Slot<M> {
+    Model(M),
+    /// The ground-truth generator (an upper bound, SPEC.md §20.6).
+    Truth,
+}
+
+/// A slot's `truth` in a configuration.
+pub(super) const TRUTH: &str = "truth";
+
+impl<M> Slot<M> {
+    pub fn is_truth(&self) -> bool {
+        matches!(self, Slot::Truth)
+    }
+
+    /// The model `f` makes of this slot's model; the truth stays the truth.
+    pub fn try_map<N>(&self, f: impl FnOnce(&M) -> Result<N>) -> Result<Slot<N>> {
+        Ok(match self {
+            Slot::Model(m) => Slot::Model(f(m)?),
+            Slot::Truth => Slot::Truth,
+        })
+    }
+}
+
+impl<M: FromStr<Err = Error>> FromStr for Slot<M> {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        if s == TRUTH {
+            Ok(Slot::Truth)
+        } else {
+            s.parse().map(Slot::Model)
+        }
+    }
+}
+
+impl<M: fmt::Display> fmt::Display for Slot<M> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Slot::Model(m) => m.fmt(f),
+            Slot::Truth => f.write_str(TRUTH),
+        }
+    }
+}
+
+impl<M: fmt::Display> serde::Serialize for Slot<M> {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
+}
+
+impl<'de, M: FromStr<Err = Error>> serde::Deserialize<'de> for Slot<M> {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        let text = String::deserialize(d)?;
+        text.parse()
+            .map_err(|e: Error| serde::de::Error::custom(e.message))
+    }
+}
+
 /// Which generators fill the slots.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SlotNames {
     /// `telea`, `onnx:CARD.json`, or `truth` (the labelled ground-truth generator).
-    pub inpaint: String,
+    pub inpaint: Slot<InpaintModel>,
     /// `depth-fill`, `onnx:CARD.json` or `truth`.
-    pub depth: String,
+    pub depth: Slot<DepthModel>,
     /// `morph` or `truth` (morph between stored truths).
-    pub video: String,
+    pub video: Slot<VideoModel>,
     /// `depth-fill`, `onnx:CARD.json` or `truth` (the truth video's own depths).
-    pub video_depth: String,
+    pub video_depth: Slot<DepthModel>,
     /// `identity`, `bilateral`, `onnx:CARD.json` or `truth`.
-    pub fixer: String,
+    pub fixer: Slot<FixerModel>,
 }
 
 impl Default for SlotNames {
     fn default() -> Self {
         SlotNames {
-            inpaint: "telea".into(),
-            depth: "depth-fill".into(),
-            video: "morph".into(),
-            video_depth: "depth-fill".into(),
-            fixer: "identity".into(),
+            inpaint: Slot::Model(Model::Classical(InpaintDefault::Telea)),
+            depth: Slot::Model(Model::Classical(DepthDefault::DepthFill)),
+            video: Slot::Model(Model::Classical(VideoDefault::Morph)),
+            video_depth: Slot::Model(Model::Classical(DepthDefault::DepthFill)),
+            fixer: Slot::Model(Model::Classical(FixerDefault::Identity)),
         }
     }
 }
@@ -50,25 +117,21 @@ impl SlotNames {
     /// Every slot from the ground-truth generator.
     pub fn truth() -> Self {
         SlotNames {
-            inpaint: "truth".into(),
-            depth: "truth".into(),
-            video: "truth".into(),
-            video_depth: "truth".into(),
-            fixer: "truth".into(),
+            inpaint: Slot::Truth,
+            depth: Slot::Truth,
+            video: Slot::Truth,
+            video_depth: Slot::Truth,
+            fixer: Slot::Truth,
         }
     }
 
     /// True when any slot is the ground-truth generator.
     pub fn uses_truth(&self) -> bool {
-        [
-            &self.inpaint,
-            &self.depth,
-            &self.video,
-            &self.video_depth,
-            &self.fixer,
-        ]
-        .iter()
-        .any(|s| s.as_str() == "truth")
+        self.inpaint.is_truth()
+            || self.depth.is_truth()
+            || self.video.is_truth()
+            || self.video_depth.is_truth()
+            || self.fixer.is_truth()
     }
 }
 
@@ -281,12 +344,50 @@ impl Default for ReconConfig {
     }
 }
 
+/// A named set of settings: the paper's, or the demo's quick ones.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Preset {
+    /// Minutes on 2 cores at the bundled rooms' size ([`PipelineConfig::quick`]).
+    Quick,
+    /// The paper's settings ([`PipelineConfig::paper`]).
+    Paper,
+}
+
+impl Preset {
+    pub fn name(self) -> &'static str {
+        match self {
+            Preset::Quick => "quick",
+            Preset::Paper => "paper",
+        }
+    }
+}
+
+impl FromStr for Preset {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "quick" => Ok(Preset::Quick),
+            "paper" => Ok(Preset::Paper),
+            _ => Err(Error::invalid(format!(
+                "unknown preset '{s}' (quick or paper)"
+            ))),
+        }
+    }
+}
+
+impl fmt::Display for Preset {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 /// The whole pipeline.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct PipelineConfig {
-    /// `quick` or `paper` (informative: the fields are what counts).
-    pub preset: String,
+    /// The preset the fields started from (informative: the fields are what counts).
+    pub preset: Preset,
     /// Seed of every random choice; each stage draws from `stage_seed(seed, name)`.
     pub seed: u64,
     pub slots: SlotNames,
@@ -364,7 +465,7 @@ impl PipelineConfig {
     /// QA-Mask SH 5 with 20 000 iterations, λ = 0.7 / 0.2 / 0.1.
     pub fn paper() -> Self {
         PipelineConfig {
-            preset: "paper".into(),
+            preset: Preset::Paper,
             seed: 0,
             slots: SlotNames::default(),
             inconsistency: Inconsistency::NONE,
@@ -408,7 +509,7 @@ impl PipelineConfig {
             }),
         };
         PipelineConfig {
-            preset: "quick".into(),
+            preset: Preset::Quick,
             inpaintings: 1,
             video_frames: 5,
             qa_iterations: 300,
@@ -420,23 +521,20 @@ impl PipelineConfig {
         }
     }
 
-    /// `quick` or `paper`.
-    pub fn preset(name: &str) -> Result<Self> {
-        match name {
-            "quick" => Ok(Self::quick()),
-            "paper" => Ok(Self::paper()),
-            _ => Err(Error::invalid(format!(
-                "unknown preset '{name}' (quick or paper)"
-            ))),
+    /// The settings of `preset`.
+    pub fn preset(preset: Preset) -> Self {
+        match preset {
+            Preset::Quick => Self::quick(),
+            Preset::Paper => Self::paper(),
         }
     }
 
-    /// The preset `name` with `overrides` (a JSON object, possibly partial: its members
+    /// The `preset` with `overrides` (a JSON object, possibly partial: its members
     /// replace the preset's, objects merged member by member) applied; `source` names the
     /// overrides in errors (a file, or a caller's argument). Not yet validated: callers
     /// apply their own settings first, then [`PipelineConfig::validate`].
     pub fn with_overrides(
-        name: &str,
+        preset: Preset,
         overrides: serde_json::Value,
         source: &std::path::Path,
     ) -> Result<Self> {
@@ -456,7 +554,7 @@ impl PipelineConfig {
                 "a pipeline config must be a JSON object",
             ));
         }
-        let mut v = serde_json::to_value(Self::preset(name)?).expect("serializes");
+        let mut v = serde_json::to_value(Self::preset(preset)).expect("serializes");
         merge(&mut v, overrides);
         serde_json::from_value(v)
             .map_err(|e| Error::parse(source, format!("invalid pipeline config: {e}")))

@@ -14,7 +14,11 @@
 //! hallucination (content no training view saw differs per call, so independent
 //! generations conflict).
 
-use super::config::{Hallucination, Inconsistency, SlotNames, TruthDepth};
+use super::config::{
+    Hallucination, Inconsistency, PipelineConfig, Slot, SlotNames, TRUTH, TruthDepth,
+};
+use super::inputs::Inputs;
+use super::poses::same_pose;
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::io::image::ImageF32;
@@ -448,85 +452,103 @@ impl Content {
     }
 }
 
-enum Slot<T: ?Sized> {
-    Model(Box<T>),
-    Truth,
+/// One of the five slots, as a step's key names it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SlotKind {
+    Inpaint,
+    Depth,
+    Video,
+    VideoDepth,
+    Fixer,
+}
+
+impl SlotKind {
+    /// The slot's name in a step's key (and in the configuration).
+    pub fn name(self) -> &'static str {
+        match self {
+            SlotKind::Inpaint => "inpaint",
+            SlotKind::Depth => "depth",
+            SlotKind::Video => "video",
+            SlotKind::VideoDepth => "video_depth",
+            SlotKind::Fixer => "fixer",
+        }
+    }
 }
 
 /// The five slots of the pipeline.
 pub struct Generators {
-    inpaint: Slot<dyn Inpainter>,
-    depth: Slot<dyn DepthEstimator>,
-    video: Slot<dyn VideoGenerator>,
-    video_depth: Slot<dyn VideoDepthEstimator>,
-    fixer: Slot<dyn ArtifactFixer>,
+    inpaint: Slot<Box<dyn Inpainter>>,
+    depth: Slot<Box<dyn DepthEstimator>>,
+    video: Slot<Box<dyn VideoGenerator>>,
+    video_depth: Slot<Box<dyn VideoDepthEstimator>>,
+    fixer: Slot<Box<dyn ArtifactFixer>>,
     pub truth: Option<GroundTruth>,
-    /// Per slot, what identifies its behaviour (a model's fingerprint, or `truth`).
-    fingerprints: BTreeMap<&'static str, String>,
     /// The run's seed (inpainting seeds are drawn from it by key).
     seed: u64,
 }
 
 impl Generators {
-    /// Build the slots by name; `truth` must be given when any slot is `truth`.
+    /// Build the slots; `truth` must be given when any slot is the ground-truth generator.
     pub fn new(names: &SlotNames, truth: Option<GroundTruth>, seed: u64) -> Result<Generators> {
         if names.uses_truth() && truth.is_none() {
             return Err(Error::invalid(
                 "the ground-truth generator needs a dataset with the candidate views' images and depths",
             ));
         }
-        if names.video_depth == "truth" && names.video != "truth" {
+        if names.video_depth.is_truth() && !names.video.is_truth() {
             return Err(Error::invalid(
                 "video_depth 'truth' is the truth video's own depth: it needs video 'truth'",
             ));
         }
-        /// The slot called `name`: the ground-truth generator, or the model `load` makes.
-        fn slot<T: ?Sized>(name: &str, load: impl Fn(&str) -> Result<Box<T>>) -> Result<Slot<T>> {
-            Ok(if name == "truth" {
-                Slot::Truth
-            } else {
-                Slot::Model(load(name)?)
-            })
-        }
-        let mut g = Generators {
-            inpaint: slot(&names.inpaint, models::inpainter)?,
-            depth: slot(&names.depth, models::depth_estimator)?,
-            video: slot(&names.video, models::video_generator)?,
-            video_depth: slot(&names.video_depth, models::video_depth_estimator)?,
-            fixer: slot(&names.fixer, models::artifact_fixer)?,
+        Ok(Generators {
+            inpaint: names.inpaint.try_map(models::inpainter)?,
+            depth: names.depth.try_map(models::depth_estimator)?,
+            video: names.video.try_map(models::video_generator)?,
+            video_depth: names.video_depth.try_map(models::video_depth_estimator)?,
+            fixer: names.fixer.try_map(models::artifact_fixer)?,
             truth,
-            fingerprints: BTreeMap::new(),
             seed,
-        };
-        fn fp<T: ?Sized>(s: &Slot<T>, f: impl Fn(&T) -> String) -> String {
+        })
+    }
+
+    /// What identifies the behaviour of slot `kind`: its model's fingerprint (a learned
+    /// model's card and weight hashes), or `truth`.
+    fn fingerprint(&self, kind: SlotKind) -> String {
+        fn of<T: ?Sized>(s: &Slot<Box<T>>, f: impl Fn(&T) -> String) -> String {
             match s {
                 Slot::Model(m) => f(m),
-                Slot::Truth => "truth".into(),
+                Slot::Truth => TRUTH.into(),
             }
         }
-        g.fingerprints = BTreeMap::from([
-            ("inpaint", fp(&g.inpaint, |m| m.fingerprint())),
-            ("depth", fp(&g.depth, |m| m.fingerprint())),
-            ("video", fp(&g.video, |m| m.fingerprint())),
-            ("video_depth", fp(&g.video_depth, |m| m.fingerprint())),
-            ("fixer", fp(&g.fixer, |m| m.fingerprint())),
-        ]);
-        Ok(g)
+        match kind {
+            SlotKind::Inpaint => of(&self.inpaint, |m| m.fingerprint()),
+            SlotKind::Depth => of(&self.depth, |m| m.fingerprint()),
+            SlotKind::Video => of(&self.video, |m| m.fingerprint()),
+            SlotKind::VideoDepth => of(&self.video_depth, |m| m.fingerprint()),
+            SlotKind::Fixer => of(&self.fixer, |m| m.fingerprint()),
+        }
+    }
+
+    /// Whether slot `kind` is the ground-truth generator.
+    fn is_truth(&self, kind: SlotKind) -> bool {
+        match kind {
+            SlotKind::Inpaint => self.inpaint.is_truth(),
+            SlotKind::Depth => self.depth.is_truth(),
+            SlotKind::Video => self.video.is_truth(),
+            SlotKind::VideoDepth => self.video_depth.is_truth(),
+            SlotKind::Fixer => self.fixer.is_truth(),
+        }
     }
 
     /// The part of a step's key that names the slots it calls: each slot's fingerprint
-    /// (a learned model's card and weight hashes) and, when one is the ground-truth
-    /// generator, its inconsistency and seed. Variants that differ only in slots a step
-    /// does not call share that step.
-    pub fn key(&self, config: &super::PipelineConfig, used: &[&str]) -> serde_json::Value {
+    /// and, when one is the ground-truth generator, its inconsistency and seed. Variants
+    /// that differ only in slots a step does not call share that step.
+    pub fn key(&self, config: &PipelineConfig, used: &[SlotKind]) -> serde_json::Value {
         let mut m = serde_json::Map::new();
-        let mut truth = false;
         for &u in used {
-            let f = self.fingerprints.get(u).cloned().unwrap_or_default();
-            truth |= f == "truth";
-            m.insert(u.into(), f.into());
+            m.insert(u.name().into(), self.fingerprint(u).into());
         }
-        if truth {
+        if used.iter().any(|&u| self.is_truth(u)) {
             m.insert(
                 "truth".into(),
                 serde_json::json!({
@@ -829,4 +851,67 @@ pub fn clip_key(video: &Video) -> String {
         (Some(a), Some(b)) => format!("clip:{}->{}", a.name, b.name),
         _ => "clip".to_string(),
     }
+}
+
+/// The truth of the candidate views, from the dataset (for the ground-truth generator).
+pub fn candidate_truth(inputs: &Inputs) -> Result<Vec<Truth>> {
+    inputs
+        .candidates
+        .iter()
+        .map(|c| {
+            let v = inputs
+                .data
+                .views
+                .iter()
+                .find(|v| v.camera.name == c.name)
+                .ok_or_else(|| {
+                    Error::invalid(format!(
+                        "the ground-truth generator needs candidate '{}' in the dataset",
+                        c.name
+                    ))
+                })?;
+            if (v.camera.width, v.camera.height) != (c.width, c.height) || !same_pose(&v.camera, c) {
+                return Err(Error::invalid(format!(
+                    "candidate '{}' differs in size or pose from the dataset's view of that name: the ground-truth generator cannot use its truth",
+                    c.name
+                ))
+                .at(&inputs.data.root));
+            }
+            let depth = v.depth.clone().ok_or_else(|| {
+                Error::invalid(format!(
+                    "the ground-truth generator needs the depth of candidate '{}'",
+                    c.name
+                ))
+            })?;
+            Ok(Truth {
+                camera: c.clone(),
+                image: v.image.clone(),
+                depth,
+            })
+        })
+        .collect()
+}
+
+/// The training views' cameras and depths, from which the hallucinating ground-truth
+/// generator tells seen content from unseen (empty when it does not hallucinate).
+pub fn training_truth(inputs: &Inputs, config: &PipelineConfig) -> Result<Vec<(Camera, Vec<f32>)>> {
+    if config.hallucination == Hallucination::None {
+        return Ok(Vec::new());
+    }
+    inputs
+        .data
+        .train
+        .iter()
+        .map(|&i| {
+            let v = &inputs.data.views[i];
+            let d = v.depth.clone().ok_or_else(|| {
+                Error::invalid(format!(
+                    "the hallucinating ground-truth generator needs the depth of training view '{}' (to tell what the training views saw)",
+                    v.camera.name
+                ))
+                .at(&inputs.data.root)
+            })?;
+            Ok((v.camera.clone(), d))
+        })
+        .collect()
 }

@@ -11,7 +11,7 @@
 
 use super::StageCtx;
 use super::artifacts::{load_image, save_image, scene_of, stem};
-use super::generators::Generators;
+use super::generators::{Generators, SlotKind};
 use super::recon::{self, Refresh, Supervision, reconstruct};
 use super::rundir::StepDone;
 use super::stage1::{Stage1, independent_supervision, load_video, video_supervision};
@@ -48,7 +48,7 @@ pub fn run(
     let fkey = serde_json::json!({
         "stage2": s2.recon.digest,
         "videos": s2.videos.digest,
-        "slots": gens.key(config, &["fixer"]),
+        "slots": gens.key(config, &[SlotKind::Fixer]),
     });
     let fixer = dir.step("interpolate/fixer", fkey, on_event, |w| {
         // The fixer poses, in order: the keyframes, then each clip's intermediate frames.
@@ -90,7 +90,7 @@ pub fn run(
             "stage1_views": s1.views.iter().map(|s| &s.digest).collect::<Vec<_>>(),
             "videos": s2.videos.digest,
             "fixer_every": config.fixer_every,
-            "slots": gens.key(config, &["fixer"]),
+            "slots": gens.key(config, &[SlotKind::Fixer]),
         }),
     )?;
     let recon_step = dir.step("interpolate/recon", rkey, on_event, |w| {

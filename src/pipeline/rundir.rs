@@ -269,15 +269,10 @@ impl RunDir {
             files: Vec::new(),
             guard: self.guard.clone(),
         };
-        compute(&mut w).map_err(|e| {
-            if e.message.starts_with(&format!("step {name}")) {
-                e
-            } else {
-                Error {
-                    message: format!("step {name}: {}", e.message),
-                    ..e
-                }
-            }
+        // Steps do not nest, so the step's name is never in the message yet.
+        compute(&mut w).map_err(|e| Error {
+            message: format!("step {name}: {}", e.message),
+            ..e
         })?;
         let mut files = w.files;
         files.sort_by(|a, b| a.path.cmp(&b.path));

@@ -20,11 +20,12 @@ use super::artifacts::{
     load_depth, load_image, load_mask, load_scene, save_depth, save_image, save_mask, save_scene,
     stem,
 };
-use super::generators::Generators;
+use super::generators::{Generators, SlotKind};
+use super::poses::nearest_training;
 use super::recon::{self, Supervision, reconstruct};
 use super::rundir::StepDone;
 use super::views::{Views, apply_alignment, training_depth, warp_depth};
-use super::{PipelineConfig, StageCtx, nearest_training};
+use super::{PipelineConfig, StageCtx};
 use crate::camera::Camera;
 use crate::camera::inria::{cameras_json_string, read_cameras_json};
 use crate::error::{Error, Result};
@@ -218,7 +219,7 @@ fn independent_view(
     let key = serde_json::json!({
         "views": views.step.digest,
         "view": name,
-        "slots": gens.key(config, &["video", "video_depth"]),
+        "slots": gens.key(config, &[SlotKind::Video, SlotKind::VideoDepth]),
         "video_sources": config.video_sources,
         "video_frames": config.video_frames,
         "align_space": config.align_space,

@@ -14,16 +14,17 @@
 //! trajectory keyframe and the clips' intermediate frames, weighted by the mask of the
 //! stage-1 scene.
 
+use super::StageCtx;
 use super::artifacts::{
     load_depth, load_image, load_mask, read_json, save_depth, save_image, save_mask, scene_of, stem,
 };
 use super::config::Stage2Depth;
-use super::generators::Generators;
+use super::generators::{Generators, SlotKind};
+use super::poses::nearest_training;
 use super::recon::{self, Supervision, reconstruct};
 use super::rundir::StepDone;
 use super::stage1::{Stage1, align_clip, save_video, video_supervision};
 use super::views::{MIN_ALIGN_PIXELS, Views, apply_alignment, render_rgba, training_depth};
-use super::{StageCtx, nearest_training};
 use crate::camera::Camera;
 use crate::error::{Error, ErrorKind, Result};
 use crate::io::image::ImageF32;
@@ -97,7 +98,7 @@ pub fn run(ctx: &StageCtx, gens: &Generators, views: &Views, s1: &Stage1) -> Res
             "views": views.step.digest,
             "stage1": s1.recon.digest,
             "propagate": s1.propagate.as_ref().map(|s| &s.digest),
-            "slots": gens.key(config, &["inpaint", "depth", "video", "video_depth"]),
+            "slots": gens.key(config, &[SlotKind::Inpaint, SlotKind::Depth, SlotKind::Video, SlotKind::VideoDepth]),
             "coverage_alpha": config.coverage_alpha,
             "align_space": config.align_space,
             "stage2_depth": config.stage2_depth,
@@ -264,7 +265,7 @@ pub fn run(ctx: &StageCtx, gens: &Generators, views: &Views, s1: &Stage1) -> Res
         "views": views.step.digest,
         "stage1": s1.views.iter().map(|s| &s.digest).collect::<Vec<_>>(),
         "dependent": dependent.as_ref().map(|s| &s.digest),
-        "slots": gens.key(config, &["video"]),
+        "slots": gens.key(config, &[SlotKind::Video]),
         "video_frames": config.video_frames,
     });
     let videos = dir.step("stage2/videos", vkey, on_event, |w| {

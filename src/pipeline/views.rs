@@ -2,7 +2,7 @@
 //!
 //! 1. per candidate: render the scene; inpainting mask `M` = alpha < `coverage_alpha`;
 //!    `n` inpaintings (the inpaint slot, one key each) and their depths `R` (depth slot);
-//! 2. the closest training camera `P` ([`super::pose_distance`]); its depth DIBR-warped to
+//! 2. the closest training camera `P` ([`super::poses::pose_distance`]); its depth DIBR-warped to
 //!    the candidate; least squares `s, t` of `R` against it (Eq. 2) in the alignment
 //!    space; `D = (s·R + t)` on `M` (Eq. 3; `1/(s·R + t)` in disparity space);
 //! 3. per inpainting the range of `D` on `M`, their mean (Eq. 4), the frustum of `M`'s
@@ -19,9 +19,10 @@
 use super::artifacts::{
     load_depth, load_image, load_mask, read_json, save_depth, save_image, save_mask, stem,
 };
-use super::generators::Generators;
+use super::generators::{Generators, SlotKind};
+use super::poses::{nearest_training, same_pose};
 use super::rundir::StepDone;
-use super::{Event, Inputs, StageCtx, nearest_training, same_pose};
+use super::{Event, Inputs, StageCtx};
 use crate::camera::Camera;
 use crate::camera::inria::{cameras_json_string, read_cameras_json};
 use crate::collide::frustum::{Outline, Polyhedron, depth_range, mean_range, write_obj};
@@ -282,7 +283,7 @@ pub fn run(ctx: &StageCtx, gens: &Generators) -> Result<Views> {
     let key = serde_json::json!({
         "scene": inputs.scene_sha256,
         "candidates": inputs.candidates_sha256,
-        "slots": gens.key(config, &["inpaint", "depth"]),
+        "slots": gens.key(config, &[SlotKind::Inpaint, SlotKind::Depth]),
         "coverage_alpha": config.coverage_alpha,
         "inpaintings": config.inpaintings,
         "align_space": config.align_space,

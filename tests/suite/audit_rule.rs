@@ -316,7 +316,7 @@ fn committed_mechanisms_audits_follow_from_their_samples() {
         let dataset = reference(&format!("scenes/{room}"));
         let tmp = TempDir::new(&format!("mechanisms-{room}"));
         std::fs::copy(committed.join("samples.json"), tmp.join("samples.json")).unwrap();
-        let mut cfg = AuditConfig::preset("quick").unwrap();
+        let mut cfg = AuditConfig::preset(unseen::pipeline::Preset::Quick);
         cfg.variants = [
             "full",
             "even_views",

@@ -116,7 +116,7 @@ fn classical_slots_and_registry() {
     hint[0] = f32::NAN;
     hint[1] = -1.0;
     let img = ImageF32::new(w, h, 3, vec![0.5; w * h * 3]).unwrap();
-    let est = depth_estimator("depth-fill").unwrap();
+    let est = depth_estimator(&"depth-fill".parse().unwrap()).unwrap();
     let d = est
         .estimate(
             &img,
@@ -148,7 +148,10 @@ fn classical_slots_and_registry() {
     // Inpainting by name: telea fills only the mask.
     let mut u = unseen::rng::Uniform::new(3);
     let rgb = ImageF32::new(w, h, 3, (0..w * h * 3).map(|_| u.unit()).collect()).unwrap();
-    let t = inpainter("telea").unwrap().inpaint(&rgb, &mask).unwrap();
+    let t = inpainter(&"telea".parse().unwrap())
+        .unwrap()
+        .inpaint(&rgb, &mask)
+        .unwrap();
     for (p, &m) in mask.iter().enumerate() {
         if !m {
             assert_eq!(&t.data[3 * p..3 * p + 3], &rgb.data[3 * p..3 * p + 3]);
@@ -156,14 +159,20 @@ fn classical_slots_and_registry() {
     }
     // Fixers: identity is exact; bilateral keeps a flat image and a strong edge.
     assert_eq!(
-        artifact_fixer("identity").unwrap().fix(&rgb, None).unwrap(),
+        artifact_fixer(&"identity".parse().unwrap())
+            .unwrap()
+            .fix(&rgb, None)
+            .unwrap(),
         rgb
     );
     let step: Vec<f32> = (0..w * h)
         .map(|i| if i % w < 12 { 0.1 } else { 0.9 })
         .collect();
     let s = ImageF32::new(w, h, 1, step.clone()).unwrap();
-    let b = artifact_fixer("bilateral").unwrap().fix(&s, None).unwrap();
+    let b = artifact_fixer(&"bilateral".parse().unwrap())
+        .unwrap()
+        .fix(&s, None)
+        .unwrap();
     for (x, y) in b.data.iter().zip(&step) {
         assert!((x - y).abs() < 1e-5, "edge kept: {x} vs {y}");
     }
@@ -174,7 +183,7 @@ fn classical_slots_and_registry() {
         rgb.data.iter().map(|v| 0.5 + 0.02 * (v - 0.5)).collect(),
     )
     .unwrap();
-    let sm = artifact_fixer("bilateral")
+    let sm = artifact_fixer(&"bilateral".parse().unwrap())
         .unwrap()
         .fix(&noisy, None)
         .unwrap();
@@ -185,16 +194,18 @@ fn classical_slots_and_registry() {
     );
     // Unknown names are clear errors.
     for e in [
-        inpainter("lama").err().unwrap(),
-        depth_estimator("midas").err().unwrap(),
-        artifact_fixer("difix").err().unwrap(),
-        video_generator("dynamicrafter").err().unwrap(),
+        "lama".parse::<unseen::models::InpaintModel>().unwrap_err(),
+        "midas".parse::<unseen::models::DepthModel>().unwrap_err(),
+        "difix".parse::<unseen::models::FixerModel>().unwrap_err(),
+        "dynamicrafter"
+            .parse::<unseen::models::VideoModel>()
+            .unwrap_err(),
     ] {
         assert!(e.to_string().contains("unknown"), "{e}");
     }
-    assert!(video_generator("morph").is_ok());
+    assert!(video_generator(&"morph".parse().unwrap()).is_ok());
     // Video depth: per frame, the same maps as the image estimator.
-    let vd = unseen::models::video_depth_estimator("depth-fill").unwrap();
+    let vd = unseen::models::video_depth_estimator(&"depth-fill".parse().unwrap()).unwrap();
     let h1 = DepthHint {
         depth: &hint,
         mask: Some(&mask),

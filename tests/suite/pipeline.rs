@@ -385,17 +385,32 @@ fn bad_pipeline_input_is_one_clear_error() {
     let out = t.path().join("outside-run");
     let e = pipeline::run(&cfg, &inp_out, &out, false, &quiet).unwrap_err();
     assert!(e.to_string().contains("'outside'"), "{e}");
-    // A slot that fails: an unknown model is named before anything runs.
-    let cfg = PipelineConfig {
-        slots: SlotNames {
-            inpaint: "nope".into(),
-            ..SlotNames::default()
-        },
-        ..tiny_config()
-    };
-    let out = t.path().join("slot");
-    let e = pipeline::run(&cfg, &inp, &out, false, &quiet).unwrap_err();
-    assert!(e.to_string().contains("nope"), "{e}");
+    // An unknown model is refused where the configuration is read, naming the model, the
+    // known ones and the file.
+    let file = t.path().join("slot.json");
+    let e = PipelineConfig::with_overrides(
+        unseen::pipeline::Preset::Quick,
+        serde_json::json!({"slots": {"inpaint": "nope"}}),
+        &file,
+    )
+    .unwrap_err();
+    let text = e.to_string();
+    assert!(
+        text.contains("slot.json")
+            && text.contains("unknown inpainter 'nope' (known: telea, or onnx:CARD.json)"),
+        "{e}"
+    );
+    let e = PipelineConfig::with_overrides(
+        unseen::pipeline::Preset::Quick,
+        serde_json::json!({"slots": {"video": "onnx:v.json"}}),
+        &file,
+    )
+    .unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("unknown video generator 'onnx:v.json'"),
+        "{e}"
+    );
 }
 
 /// A batch engine's fan-out (SPEC.md §20.8): detection alone, then each independent view's
@@ -546,14 +561,17 @@ fn view_names_map_to_distinct_safe_folders() {
 #[test]
 fn slot_fingerprints_follow_the_model_files() {
     use unseen::models::inpainter;
-    assert_eq!(inpainter("telea").unwrap().fingerprint(), "telea");
+    assert_eq!(
+        inpainter(&"telea".parse().unwrap()).unwrap().fingerprint(),
+        "telea"
+    );
     let t = TempDir::new("pipeline-fingerprint");
     let src = reference("onnx/inpaint_tiny");
     for e in std::fs::read_dir(&src).unwrap().flatten() {
         std::fs::copy(e.path(), t.path().join(e.file_name())).unwrap();
     }
     let card = t.path().join("card.json");
-    let name = format!("onnx:{}", card.display());
+    let name = format!("onnx:{}", card.display()).parse().unwrap();
     let a = inpainter(&name).unwrap().fingerprint();
     assert!(a.starts_with("onnx:") && a.len() == 5 + 64 + 1 + 64, "{a}");
     let text = std::fs::read_to_string(&card).unwrap();
@@ -918,8 +936,7 @@ fn sample(
         seed,
         numerics_revision: revision,
         crate_version: "0.1.0".into(),
-        config: unseen::pipeline::audit::AuditConfig::preset("quick")
-            .unwrap()
+        config: unseen::pipeline::audit::AuditConfig::preset(unseen::pipeline::Preset::Quick)
             .config_digest(
                 unseen::pipeline::audit::GeneratorKind::by_name("truth-low").unwrap(),
                 unseen::pipeline::audit::Variant::by_name(variant).unwrap(),
@@ -1212,7 +1229,7 @@ fn audit_samples_round_trip_and_damaged_files_are_clear_errors() {
     let mut s = Samples::new(Provenance {
         dataset: "lounge".into(),
         dataset_digest: "ab".repeat(32),
-        preset: "quick".into(),
+        preset: unseen::pipeline::Preset::Quick,
         train_iterations: 1500,
         train_resolution: 2,
     });
@@ -1910,7 +1927,7 @@ fn a_single_candidate_view_runs_in_both_families() {
             interpolation: false,
             ..tiny_config()
         };
-        let out = t.path().join(&cfg.slots.inpaint);
+        let out = t.path().join(cfg.slots.inpaint.to_string());
         let o = pipeline::run(&cfg, &inp, &out, false, &quiet).unwrap();
         let plan: unseen::pipeline::views::Plan =
             serde_json::from_slice(&std::fs::read(out.join("views/plan.json")).unwrap()).unwrap();

@@ -23,8 +23,8 @@
 //! [`cluster`] (the same audit as batch jobs).
 
 use super::{
-    Hallucination, Inconsistency, Level, MaskSource, PipelineConfig, SlotNames, Stage2Depth,
-    TruthDepth,
+    Hallucination, Inconsistency, Level, MaskSource, PipelineConfig, Preset, SlotNames,
+    Stage2Depth, TruthDepth,
 };
 use crate::error::{Error, Result};
 use crate::train::trainer::TrainConfig;
@@ -245,15 +245,12 @@ impl AuditConfig {
         }
     }
 
-    /// `quick` or `paper` (the pipeline preset of the same name, and the grid above).
-    pub fn preset(name: &str) -> Result<AuditConfig> {
-        let base = PipelineConfig::preset(name)?;
-        let grid = if name == "paper" {
-            Self::paper()
-        } else {
-            Self::quick()
-        };
-        Ok(AuditConfig { base, ..grid })
+    /// The grid of `preset` (above) on the pipeline preset of the same name.
+    pub fn preset(preset: Preset) -> AuditConfig {
+        match preset {
+            Preset::Quick => Self::quick(),
+            Preset::Paper => Self::paper(),
+        }
     }
 
     pub fn validate(&self) -> Result<()> {

@@ -53,7 +53,7 @@ pub(super) fn gather(
     let mut pool = Samples::new(samples::Provenance {
         dataset: samples::dataset_name(dataset),
         dataset_digest: samples::dataset_digest(dataset)?,
-        preset: cfg.base.preset.clone(),
+        preset: cfg.base.preset,
         train_iterations: cfg.train_iterations,
         train_resolution: cfg.train_resolution,
     });

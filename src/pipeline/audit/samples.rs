@@ -10,6 +10,7 @@
 
 use super::JobResult;
 use crate::error::{Error, Result};
+use crate::pipeline::Preset;
 use std::path::Path;
 
 /// The file of an audit folder that holds its samples.
@@ -26,7 +27,7 @@ pub struct Provenance {
     /// [`dataset_digest`] of the dataset; empty when imported from a report written before
     /// it was recorded (then only the name is compared).
     pub dataset_digest: String,
-    pub preset: String,
+    pub preset: Preset,
     /// Training of the original scene.
     pub train_iterations: u32,
     pub train_resolution: u32,
@@ -87,7 +88,7 @@ struct LegacyReport {
     numerics_revision: u32,
     crate_version: String,
     dataset: String,
-    preset: String,
+    preset: Preset,
     train_iterations: u32,
     train_resolution: u32,
     results: Vec<JobResult>,
