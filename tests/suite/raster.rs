@@ -483,6 +483,24 @@ fn projection_simd_matches_scalar_bitwise() {
     }
 }
 
+/// The antialiased mode renders forward only (SPEC.md §5.8): asking for its backward is one
+/// clear error, not a gradient of the plain mode.
+#[test]
+fn antialiased_backward_is_a_clear_error() {
+    let scene = random_scene(50, 1, 5, 0.01, 0.2);
+    let cam = default_camera(32, 24);
+    let opts = RenderOptions {
+        antialiased: true,
+        ..RenderOptions::default()
+    };
+    assert!(render(&scene, &cam, &opts).is_ok(), "the forward runs");
+    let e = unseen::raster::backward::render_for_backward(&scene, &cam, &opts)
+        .err()
+        .expect("the backward refuses");
+    assert_eq!(e.kind, unseen::error::ErrorKind::Invalid);
+    assert!(e.message.contains("antialiased"), "{e}");
+}
+
 /// Cut-offs other than gsplat's (a forward-only knob, SPEC.md §5.5): every kernel form
 /// gives the same bits under each, the knob changes the image, and the backward refuses it.
 #[test]
