@@ -22,11 +22,14 @@ use super::config::Stage2Depth;
 use super::generators::{Generators, SlotKind};
 use super::poses::nearest_training;
 use super::recon::{self, Supervision, reconstruct};
-use super::rundir::StepDone;
+use super::rundir::{StepDone, StepWriter};
 use super::stage1::{Stage1, align_clip, save_video, video_supervision};
-use super::views::{MIN_ALIGN_PIXELS, Views, apply_alignment, render_rgba, training_depth};
+use super::views::{
+    Dependent, MIN_ALIGN_PIXELS, Views, apply_alignment, render_rgba, training_depth,
+};
 use crate::camera::Camera;
 use crate::error::{Error, ErrorKind, Result};
+use crate::gaussian::Gaussians;
 use crate::io::image::ImageF32;
 use crate::models::{DepthHint, Keyframe};
 use crate::warp::align::{Alignment, Frame, Space, least_squares};
@@ -81,241 +84,22 @@ pub fn neighbour_pairs(n: usize) -> Vec<(usize, usize)> {
     }
 }
 
-#[allow(clippy::too_many_arguments)]
+/// Stage 2's three steps (or verify them on disk): the dependent views, the trajectory's
+/// clips, the reconstruction.
 pub fn run(ctx: &StageCtx, gens: &Generators, views: &Views, s1: &Stage1) -> Result<Stage2> {
     let StageCtx {
         config,
-        inputs,
         dir,
         on_event,
+        ..
     } = *ctx;
     let mut steps = Vec::new();
     let s1_scene = scene_of(&s1.recon)?;
-    let dependent = if views.plan.dependent.is_empty() {
-        None
-    } else {
-        let key = serde_json::json!({
-            "views": views.step.digest,
-            "stage1": s1.recon.digest,
-            "propagate": s1.propagate.as_ref().map(|s| &s.digest),
-            "slots": gens.key(config, &[SlotKind::Inpaint, SlotKind::Depth, SlotKind::Video, SlotKind::VideoDepth]),
-            "coverage_alpha": config.coverage_alpha,
-            "align_space": config.align_space,
-            "stage2_depth": config.stage2_depth,
-            "video_frames": config.video_frames,
-            "ransac": [config.ransac_threshold, config.ransac_iterations as f64],
-            "seed": config.seed,
-        });
-        let step = dir.step("stage2/dependent", key, on_event, |w| {
-            let mut records = Vec::new();
-            for dep in &views.plan.dependent {
-                let cam = views.camera(&dep.name)?;
-                let (wd, ht) = (cam.width as usize, cam.height as usize);
-                let (rgb, alpha, ed) = render_rgba(&s1_scene, cam, inputs.background)?;
-                // The un-extrapolated gap: what the stage-1 scene does not cover and, with
-                // propagation, what no warp of an independent view reached either.
-                let uncovered = alpha.iter().map(|&a| a < config.coverage_alpha);
-                let mask: Vec<bool> = match &s1.propagate {
-                    Some(p) => load_mask(&p.dir.join(stem(&dep.name)), "covered")?
-                        .iter()
-                        .zip(uncovered)
-                        .map(|(&c, u)| !c && u)
-                        .collect(),
-                    None => uncovered.collect(),
-                };
-                let ip = if mask.iter().any(|&m| m) {
-                    gens.inpaint(cam, &rgb, &mask, &format!("stage2:{}", dep.name))?
-                } else {
-                    rgb.clone()
-                };
-                let known: Vec<f32> = ed
-                    .iter()
-                    .zip(&alpha)
-                    .map(|(&d, &a)| if a > 0.5 { d } else { 0.0 })
-                    .collect();
-                let est = gens.depth(
-                    cam,
-                    &ip,
-                    DepthHint {
-                        depth: &known,
-                        mask: None,
-                    },
-                )?;
-                let space = config.align_space.unwrap_or(est.kind.space());
-                // As in detection (§20.2): too little known depth and a depth-kind
-                // estimate → used as it is; a disparity estimate cannot be.
-                let known_px = known.iter().filter(|&&d| d > 0.0).count();
-                let a = if known_px < MIN_ALIGN_PIXELS && space == Space::Depth {
-                    Alignment::identity(known_px)
-                } else {
-                    least_squares(
-                        &[Frame {
-                            estimate: &est.values,
-                            depth: &known,
-                        }],
-                        space,
-                    )
-                    .map_err(|e| {
-                        Error::invalid(format!(
-                            "dependent view '{}': cannot align its depth to the stage-1 scene ({})",
-                            dep.name, e.message
-                        ))
-                    })?
-                };
-                let fit = apply_alignment(&est, &a, space);
-                let s = stem(&dep.name);
-                let fit_record = serde_json::json!({"space": space, "alignment": a});
-                // The paper's depth (§3.3: DIBR-based video depth alignment throughout): a
-                // clip from the nearest training view to the inpainted view; the render
-                // fit above is its end keyframe's depth hint, and the depth itself where
-                // no clip can be made or aligned (recorded).
-                let (d, record) = match config.stage2_depth {
-                    Stage2Depth::RenderFit => (
-                        fit,
-                        serde_json::json!({"view": dep.name, "method": "render_fit", "render_fit": fit_record}),
-                    ),
-                    Stage2Depth::Video => {
-                        let src = nearest_training(&inputs.data, cam, 1)[0];
-                        let sv = &inputs.data.views[src];
-                        let sd = training_depth(inputs, src)?;
-                        let clip = gens.video(
-                            Keyframe {
-                                image: &sv.image,
-                                camera: &sv.camera,
-                                depth: Some(&sd),
-                            },
-                            Keyframe {
-                                image: &ip,
-                                camera: cam,
-                                depth: Some(&fit),
-                            },
-                            config.video_frames as usize,
-                        );
-                        let aligned = match clip {
-                            Ok(v) => align_clip(
-                                config,
-                                gens,
-                                &v,
-                                &sd,
-                                &sv.camera,
-                                &fit,
-                                cam,
-                                &format!("stage2:{}", dep.name),
-                            )
-                            .map(|r| (v, r)),
-                            Err(e) if crate::models::morph::cannot_make_clip(&e) => {
-                                Err(e)
-                            }
-                            Err(e) => return Err(e),
-                        };
-                        match aligned {
-                            Ok((v, (depths, va, vspace))) => {
-                                save_video(
-                                    w,
-                                    &format!("{s}/video"),
-                                    &v.frames,
-                                    &v.cameras,
-                                    Some(&depths),
-                                )?;
-                                let last = depths.last().cloned().expect("a clip has frames");
-                                (
-                                    last,
-                                    serde_json::json!({
-                                        "view": dep.name,
-                                        "method": "video",
-                                        "source": sv.camera.name,
-                                        "space": vspace,
-                                        "alignment": va,
-                                        "render_fit": fit_record,
-                                    }),
-                                )
-                            }
-                            // No clip, or no alignment of its depth: the render fit.
-                            Err(e) if e.kind == ErrorKind::Degenerate => {
-                                (
-                                fit,
-                                serde_json::json!({
-                                    "view": dep.name,
-                                    "method": "render_fit",
-                                    "source": sv.camera.name,
-                                    "video_failed": e.message,
-                                    "render_fit": fit_record,
-                                }),
-                            )
-                            }
-                            Err(e) => return Err(e),
-                        }
-                    }
-                };
-                records.push(record);
-                save_image(w, &format!("{s}/render"), &rgb)?;
-                save_mask(w, &format!("{s}/inpaint"), &mask, wd, ht)?;
-                save_image(w, &format!("{s}/inpaint"), &ip)?;
-                save_depth(w, &format!("{s}/inpaint"), &d, wd, ht)?;
-            }
-            w.json("dependent.json", &serde_json::json!({ "views": records }))?;
-            Ok(())
-        })?;
-        steps.push(step.clone());
-        Some(step)
-    };
+    let dependent = dependent_step(ctx, gens, views, s1, &s1_scene)?;
+    steps.extend(dependent.clone());
     let keys = keyframes(views, s1, dependent.as_ref())?;
     let pairs = neighbour_pairs(keys.len());
-    let vkey = serde_json::json!({
-        "views": views.step.digest,
-        "stage1": s1.views.iter().map(|s| &s.digest).collect::<Vec<_>>(),
-        "dependent": dependent.as_ref().map(|s| &s.digest),
-        "slots": gens.key(config, &[SlotKind::Video]),
-        "video_frames": config.video_frames,
-    });
-    let videos = dir.step("stage2/videos", vkey, on_event, |w| {
-        // A clip the video slot cannot make (`morph` across a turn where an intermediate
-        // camera sees neither end) is recorded and left out, as in stage 1.
-        let (mut made, mut failed) = (Vec::new(), Vec::new());
-        for (k, &(a, b)) in pairs.iter().enumerate() {
-            let (ka, kb) = (&keys[a], &keys[b]);
-            let v = match gens.video(
-                Keyframe {
-                    image: &ka.image,
-                    camera: &ka.camera,
-                    depth: Some(&ka.depth),
-                },
-                Keyframe {
-                    image: &kb.image,
-                    camera: &kb.camera,
-                    depth: Some(&kb.depth),
-                },
-                config.video_frames as usize,
-            ) {
-                Ok(v) => v,
-                Err(e) if crate::models::morph::cannot_make_clip(&e) => {
-                    failed.push(serde_json::json!({
-                        "pair": [&ka.camera.name, &kb.camera.name],
-                        "error": e.message,
-                    }));
-                    continue;
-                }
-                Err(e) => return Err(e),
-            };
-            save_video(
-                w,
-                &format!("video_{k}"),
-                &v.frames,
-                &v.cameras,
-                v.depths.as_deref(),
-            )?;
-            made.push(k);
-        }
-        w.json(
-            "videos.json",
-            &serde_json::json!({
-                "pairs": pairs.iter().map(|&(a, b)| [&keys[a].camera.name, &keys[b].camera.name]).collect::<Vec<_>>(),
-                "made": made,
-                "failed_clips": failed,
-            }),
-        )?;
-        Ok(())
-    })?;
+    let videos = videos_step(ctx, gens, views, s1, dependent.as_ref(), &keys, &pairs)?;
     steps.push(videos.clone());
     let (weights, rkey) = recon::weights_and_key(
         ctx,
@@ -360,6 +144,311 @@ pub fn run(ctx: &StageCtx, gens: &Generators, views: &Views, s1: &Stage1) -> Res
         dependent,
         videos,
         recon: recon_step,
+    })
+}
+
+/// Step `stage2/dependent` (none without dependent views): every dependent view inpainted
+/// and given its depth ([`complete_dependent`]), the methods in `dependent.json`.
+fn dependent_step(
+    ctx: &StageCtx,
+    gens: &Generators,
+    views: &Views,
+    s1: &Stage1,
+    s1_scene: &Gaussians,
+) -> Result<Option<StepDone>> {
+    let StageCtx {
+        config,
+        dir,
+        on_event,
+        ..
+    } = *ctx;
+    if views.plan.dependent.is_empty() {
+        return Ok(None);
+    }
+    let key = serde_json::json!({
+        "views": views.step.digest,
+        "stage1": s1.recon.digest,
+        "propagate": s1.propagate.as_ref().map(|s| &s.digest),
+        "slots": gens.key(config, &[SlotKind::Inpaint, SlotKind::Depth, SlotKind::Video, SlotKind::VideoDepth]),
+        "coverage_alpha": config.coverage_alpha,
+        "align_space": config.align_space,
+        "stage2_depth": config.stage2_depth,
+        "video_frames": config.video_frames,
+        "ransac": [config.ransac_threshold, config.ransac_iterations as f64],
+        "seed": config.seed,
+    });
+    let step = dir.step("stage2/dependent", key, on_event, |w| {
+        let mut records = Vec::new();
+        for dep in &views.plan.dependent {
+            records.push(complete_dependent(ctx, gens, views, s1, s1_scene, dep, w)?);
+        }
+        w.json("dependent.json", &serde_json::json!({ "views": records }))?;
+        Ok(())
+    })?;
+    Ok(Some(step))
+}
+
+/// One dependent view `dep`: the stage-1 render, its gap inpainted and the gap's depth;
+/// writes them (and the clip of the depth's video alignment) to `w`; returns the view's
+/// record of how its depth was made.
+fn complete_dependent(
+    ctx: &StageCtx,
+    gens: &Generators,
+    views: &Views,
+    s1: &Stage1,
+    s1_scene: &Gaussians,
+    dep: &Dependent,
+    w: &mut StepWriter,
+) -> Result<serde_json::Value> {
+    let StageCtx { config, inputs, .. } = *ctx;
+    let camera = views.camera(&dep.name)?;
+    let (width, height) = (camera.width as usize, camera.height as usize);
+    let (rgb, alpha, ed) = render_rgba(s1_scene, camera, inputs.background)?;
+    // The un-extrapolated gap: what the stage-1 scene does not cover and, with
+    // propagation, what no warp of an independent view reached either.
+    let uncovered = alpha.iter().map(|&a| a < config.coverage_alpha);
+    let mask: Vec<bool> = match &s1.propagate {
+        Some(p) => load_mask(&p.dir.join(stem(&dep.name)), "covered")?
+            .iter()
+            .zip(uncovered)
+            .map(|(&c, u)| !c && u)
+            .collect(),
+        None => uncovered.collect(),
+    };
+    let inpainted = if mask.iter().any(|&m| m) {
+        gens.inpaint(camera, &rgb, &mask, &format!("stage2:{}", dep.name))?
+    } else {
+        rgb.clone()
+    };
+    let fit = render_fit(ctx, gens, camera, &dep.name, &inpainted, &alpha, &ed)?;
+    let s = stem(&dep.name);
+    // The paper's depth (§3.3: DIBR-based video depth alignment throughout): a clip from
+    // the nearest training view to the inpainted view; the render fit is its end
+    // keyframe's depth hint, and the depth itself where no clip can be made or aligned
+    // (recorded).
+    let (depth, record) = match config.stage2_depth {
+        Stage2Depth::RenderFit => (
+            fit.depth,
+            serde_json::json!({"view": dep.name, "method": "render_fit", "render_fit": fit.record}),
+        ),
+        Stage2Depth::Video => video_depth(ctx, gens, camera, &dep.name, &inpainted, fit, w)?,
+    };
+    save_image(w, &format!("{s}/render"), &rgb)?;
+    save_mask(w, &format!("{s}/inpaint"), &mask, width, height)?;
+    save_image(w, &format!("{s}/inpaint"), &inpainted)?;
+    save_depth(w, &format!("{s}/inpaint"), &depth, width, height)?;
+    Ok(record)
+}
+
+/// A dependent view's depth fitted to the stage-1 render, and how (`space`, `alignment`).
+struct RenderFit {
+    depth: Vec<f32>,
+    record: serde_json::Value,
+}
+
+/// The depth slot's estimate of an inpainted dependent view (`camera`, `name`),
+/// least-squares fitted to the stage-1 render's expected depth `ed` where the render is
+/// opaque (`alpha` > 0.5).
+fn render_fit(
+    ctx: &StageCtx,
+    gens: &Generators,
+    camera: &Camera,
+    name: &str,
+    inpainted: &ImageF32,
+    alpha: &[f32],
+    ed: &[f32],
+) -> Result<RenderFit> {
+    let config = ctx.config;
+    let known: Vec<f32> = ed
+        .iter()
+        .zip(alpha)
+        .map(|(&d, &a)| if a > 0.5 { d } else { 0.0 })
+        .collect();
+    let estimate = gens.depth(
+        camera,
+        inpainted,
+        DepthHint {
+            depth: &known,
+            mask: None,
+        },
+    )?;
+    let space = config.align_space.unwrap_or(estimate.kind.space());
+    // As in detection (§20.2): too little known depth and a depth-kind estimate → used as
+    // it is; a disparity estimate cannot be.
+    let known_px = known.iter().filter(|&&d| d > 0.0).count();
+    let alignment = if known_px < MIN_ALIGN_PIXELS && space == Space::Depth {
+        Alignment::identity(known_px)
+    } else {
+        least_squares(
+            &[Frame {
+                estimate: &estimate.values,
+                depth: &known,
+            }],
+            space,
+        )
+        .map_err(|e| {
+            Error::invalid(format!(
+                "dependent view '{name}': cannot align its depth to the stage-1 scene ({})",
+                e.message
+            ))
+        })?
+    };
+    Ok(RenderFit {
+        depth: apply_alignment(&estimate, &alignment, space),
+        record: serde_json::json!({"space": space, "alignment": alignment}),
+    })
+}
+
+/// The paper's depth of an inpainted dependent view (`camera`, `name`): a clip from the
+/// nearest training view to it, its depth aligned as stage 1 aligns a clip, the last
+/// frame's depth; the clip is written to `w`. Where no clip can be made or aligned, the
+/// render fit, with the reason recorded.
+fn video_depth(
+    ctx: &StageCtx,
+    gens: &Generators,
+    camera: &Camera,
+    name: &str,
+    inpainted: &ImageF32,
+    fit: RenderFit,
+    w: &mut StepWriter,
+) -> Result<(Vec<f32>, serde_json::Value)> {
+    let StageCtx { config, inputs, .. } = *ctx;
+    let source = nearest_training(&inputs.data, camera, 1)[0];
+    let sv = &inputs.data.views[source];
+    let source_depth = training_depth(inputs, source)?;
+    let clip = gens.video(
+        Keyframe {
+            image: &sv.image,
+            camera: &sv.camera,
+            depth: Some(&source_depth),
+        },
+        Keyframe {
+            image: inpainted,
+            camera,
+            depth: Some(&fit.depth),
+        },
+        config.video_frames as usize,
+    );
+    let aligned = match clip {
+        Ok(v) => align_clip(
+            config,
+            gens,
+            &v,
+            &source_depth,
+            &sv.camera,
+            &fit.depth,
+            camera,
+            &format!("stage2:{name}"),
+        )
+        .map(|r| (v, r)),
+        Err(e) if crate::models::morph::cannot_make_clip(&e) => Err(e),
+        Err(e) => return Err(e),
+    };
+    match aligned {
+        Ok((v, (depths, alignment, space))) => {
+            save_video(
+                w,
+                &format!("{}/video", stem(name)),
+                &v.frames,
+                &v.cameras,
+                Some(&depths),
+            )?;
+            let last = depths.last().cloned().expect("a clip has frames");
+            let record = serde_json::json!({
+                "view": name,
+                "method": "video",
+                "source": sv.camera.name,
+                "space": space,
+                "alignment": alignment,
+                "render_fit": fit.record,
+            });
+            Ok((last, record))
+        }
+        // No clip, or no alignment of its depth: the render fit.
+        Err(e) if e.kind == ErrorKind::Degenerate => {
+            let record = serde_json::json!({
+                "view": name,
+                "method": "render_fit",
+                "source": sv.camera.name,
+                "video_failed": e.message,
+                "render_fit": fit.record,
+            });
+            Ok((fit.depth, record))
+        }
+        Err(e) => Err(e),
+    }
+}
+
+/// Step `stage2/videos`: a clip between every two neighbours of the closed trajectory
+/// `keys` (`pairs`); a clip the video slot cannot make (`morph` across a turn where an
+/// intermediate camera sees neither end) is recorded and left out, as in stage 1.
+fn videos_step(
+    ctx: &StageCtx,
+    gens: &Generators,
+    views: &Views,
+    s1: &Stage1,
+    dependent: Option<&StepDone>,
+    keys: &[Keyview],
+    pairs: &[(usize, usize)],
+) -> Result<StepDone> {
+    let StageCtx {
+        config,
+        dir,
+        on_event,
+        ..
+    } = *ctx;
+    let key = serde_json::json!({
+        "views": views.step.digest,
+        "stage1": s1.views.iter().map(|s| &s.digest).collect::<Vec<_>>(),
+        "dependent": dependent.map(|s| &s.digest),
+        "slots": gens.key(config, &[SlotKind::Video]),
+        "video_frames": config.video_frames,
+    });
+    dir.step("stage2/videos", key, on_event, |w| {
+        let (mut made, mut failed) = (Vec::new(), Vec::new());
+        for (k, &(a, b)) in pairs.iter().enumerate() {
+            let (ka, kb) = (&keys[a], &keys[b]);
+            let v = match gens.video(
+                Keyframe {
+                    image: &ka.image,
+                    camera: &ka.camera,
+                    depth: Some(&ka.depth),
+                },
+                Keyframe {
+                    image: &kb.image,
+                    camera: &kb.camera,
+                    depth: Some(&kb.depth),
+                },
+                config.video_frames as usize,
+            ) {
+                Ok(v) => v,
+                Err(e) if crate::models::morph::cannot_make_clip(&e) => {
+                    failed.push(serde_json::json!({
+                        "pair": [&ka.camera.name, &kb.camera.name],
+                        "error": e.message,
+                    }));
+                    continue;
+                }
+                Err(e) => return Err(e),
+            };
+            save_video(
+                w,
+                &format!("video_{k}"),
+                &v.frames,
+                &v.cameras,
+                v.depths.as_deref(),
+            )?;
+            made.push(k);
+        }
+        w.json(
+            "videos.json",
+            &serde_json::json!({
+                "pairs": pairs.iter().map(|&(a, b)| [&keys[a].camera.name, &keys[b].camera.name]).collect::<Vec<_>>(),
+                "made": made,
+                "failed_clips": failed,
+            }),
+        )?;
+        Ok(())
     })
 }
 

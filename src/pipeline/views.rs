@@ -21,7 +21,7 @@ use super::artifacts::{
 };
 use super::generators::{Generators, SlotKind};
 use super::poses::{nearest_training, same_pose};
-use super::rundir::StepDone;
+use super::rundir::{StepDone, StepWriter};
 use super::{Event, Inputs, StageCtx};
 use crate::camera::Camera;
 use crate::camera::inria::{cameras_json_string, read_cameras_json};
@@ -291,271 +291,15 @@ pub fn run(ctx: &StageCtx, gens: &Generators) -> Result<Views> {
 
     });
     let step = dir.step("views", key, on_event, |w| {
-        let mut records = Vec::new();
-        let mut active: Vec<usize> = Vec::new();
-        let mut masks: Vec<Vec<bool>> = Vec::new();
-        let mut ranges: Vec<[f64; 2]> = Vec::new();
-        let mut covered = Vec::new();
-        let mut set_aside = Vec::new();
-        for (ci, cam) in inputs.candidates.iter().enumerate() {
-            let s = stem(&cam.name);
-            let (wd, ht) = (cam.width as usize, cam.height as usize);
-            // A candidate at a training view's pose has nothing to extrapolate; a second
-            // candidate with the same camera would only collide with the first.
-            let same_training = inputs
-                .data
-                .train
-                .iter()
-                .map(|&t| &inputs.data.views[t].camera)
-                .find(|t| same_pose(t, cam));
-            let same_candidate = inputs.candidates[..ci]
-                .iter()
-                .find(|p| {
-                    same_pose(p, cam)
-                        && (p.width, p.height, p.fx, p.fy, p.cx, p.cy)
-                            == (cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy)
-                });
-            let repeat = match (same_training, same_candidate) {
-                (Some(t), _) => Some(format!(
-                    "has the pose of training view '{}': nothing to extrapolate there",
-                    t.name
-                )),
-                (None, Some(p)) => Some(format!("is the same camera as candidate '{}'", p.name)),
-                (None, None) => None,
-            };
-            if let Some(reason) = repeat {
-                set_aside.push(SetAside {
-                    name: cam.name.clone(),
-                    reason,
-                });
-                records.push(Candidate {
-                    name: cam.name.clone(),
-                    masked: 0,
-                    nearest_training: None,
-                    space: None,
-                    alignments: Vec::new(),
-                    ranges: Vec::new(),
-                    range: None,
-                });
-                continue;
-            }
-            let (rgb, alpha, ed) = render_rgba(&inputs.scene, cam, inputs.background)?;
-            let mask: Vec<bool> = alpha.iter().map(|&a| a < config.coverage_alpha).collect();
-            save_image(w, &format!("{s}/render"), &rgb)?;
-            save_mask(w, &format!("{s}/inpaint"), &mask, wd, ht)?;
-            let masked = mask.iter().filter(|&&m| m).count();
-            let mut rec = Candidate {
-                name: cam.name.clone(),
-                masked,
-                nearest_training: None,
-                space: None,
-                alignments: Vec::new(),
-                ranges: Vec::new(),
-                range: None,
-            };
-            if masked == 0 {
-                covered.push(cam.name.clone());
-                records.push(rec);
-                continue;
-            }
-            let aside = |rec: Candidate, reason: String, set_aside: &mut Vec<SetAside>| {
-                set_aside.push(SetAside {
-                    name: rec.name.clone(),
-                    reason,
-                });
-                Candidate {
-                    nearest_training: None,
-                    space: None,
-                    alignments: Vec::new(),
-                    ranges: Vec::new(),
-                    range: None,
-                    ..rec
-                }
-            };
-            if masked == wd * ht
-                && let Some(slot) = gens.inpaint_needs_known()
-            {
-                records.push(aside(
-                    rec,
-                    format!(
-                        "sees nothing of the scene (alpha < {} at every pixel) and the inpaint slot '{slot}' fills only from known pixels",
-                        config.coverage_alpha
-                    ),
-                    &mut set_aside,
-                ));
-                continue;
-            }
-            // Eq. 2's target: the depth of the closest training view (by pose distance)
-            // that shares at least MIN_ALIGN_PIXELS with the candidate, warped here; where
-            // it leaves a hole, the scene's own expected depth where the scene is opaque.
-            let need = MIN_ALIGN_PIXELS.max(wd * ht / 100);
-            let mut found = None;
-            for p in nearest_training(&inputs.data, cam, inputs.data.train.len()) {
-                let pcam = &inputs.data.views[p].camera;
-                let mut warped = warp_depth(&training_depth(inputs, p)?, pcam, cam)?;
-                for (k, d) in warped.iter_mut().enumerate() {
-                    if *d <= 0.0 && alpha[k] >= 0.5 {
-                        *d = ed[k];
-                    }
-                }
-                if warped.iter().filter(|&&d| d > 0.0).count() >= need {
-                    found = Some((pcam, warped));
-                    break;
-                }
-            }
-            // Without any reference (the candidate shares no surface with the training
-            // views or the scene), a metric estimate is used as it is (identity alignment)
-            // and a disparity estimate sets the candidate aside.
-            let (reference, warped) = match found {
-                Some((pcam, w)) => (Some(pcam.name.clone()), w),
-                None => (None, vec![0f32; wd * ht]),
-            };
-            if reference.is_none()
-                && let Some(slot) = gens.depth_needs_known()
-            {
-                records.push(aside(
-                    rec,
-                    format!(
-                        "no training view shares {need} pixels of known depth with it, nor does the scene cover them, and the depth slot '{slot}' only extends known depth"
-                    ),
-                    &mut set_aside,
-                ));
-                continue;
-            }
-            rec.nearest_training = reference.clone();
-            // Eq. 4 over `n` inpaintings only when they can differ: a deterministic slot
-            // would give `n` equal ranges (SPEC.md §20.2).
-            let n = if gens.inpaintings_differ() {
-                config.inpaintings as usize
-            } else {
-                1
-            };
-            let mut why = None;
-            for j in 0..n {
-                let ip = gens.inpaint(cam, &rgb, &mask, &format!("views:{}:{j}", cam.name))?;
-                let hint = DepthHint {
-                    depth: &warped,
-                    mask: None,
-                };
-                let est = gens.depth(cam, &ip, hint)?;
-                let space = config.align_space.unwrap_or(est.kind.space());
-                let a = match &reference {
-                    Some(r) => match least_squares(
-                        &[Frame {
-                            estimate: &est.values,
-                            depth: &warped,
-                        }],
-                        space,
-                    ) {
-                        Ok(a) => a,
-                        Err(e) => {
-                            why = Some(format!(
-                                "its depth cannot be aligned to training view '{r}' ({})",
-                                e.message
-                            ));
-                            break;
-                        }
-                    },
-                    None if space == Space::Depth => Alignment::identity(0),
-                    None => {
-                        why = Some(format!(
-                            "no training view shares {need} pixels of known depth with it, nor does the scene cover them, so its {space:?} estimate cannot be aligned (is the view behind or outside the scene?)"
-                        ));
-                        break;
-                    }
-                };
-                let d = apply_alignment(&est, &a, space);
-                let range = match depth_range(&d, &mask) {
-                    Ok(r) => r,
-                    Err(e) => {
-                        why = Some(format!(
-                            "inpainting {j}: {} after alignment, so it has no frustum",
-                            e.message
-                        ));
-                        break;
-                    }
-                };
-                save_image(w, &format!("{s}/inpaint_{j}"), &ip)?;
-                save_depth(w, &format!("{s}/inpaint_{j}"), &d, wd, ht)?;
-                rec.space = Some(space);
-                rec.alignments.push([a.scale, a.offset]);
-                rec.ranges.push(range);
-            }
-            if let Some(reason) = why {
-                records.push(aside(rec, reason, &mut set_aside));
-                continue;
-            }
-            let range = mean_range(&rec.ranges)?;
-            rec.range = Some(range);
-            masks.push(mask);
-            ranges.push(range);
-            active.push(ci);
-            records.push(rec);
+        let mut found = Found::default();
+        for (index, camera) in inputs.candidates.iter().enumerate() {
+            let (record, verdict) = assess(ctx, gens, index, camera, w)?;
+            found.add(index, record, verdict);
         }
-        if active.is_empty() {
-            let mut why = format!(
-                "nothing to extrapolate: of {} candidate views the scene covers {}",
-                inputs.candidates.len(),
-                covered.len()
-            );
-            for a in &set_aside {
-                why += &format!("; '{}' is set aside: {}", a.name, a.reason);
-            }
-            return Err(Error::invalid(why));
+        if found.active.is_empty() {
+            return Err(found.nothing_to_extrapolate(inputs.candidates.len()));
         }
-        let name = |i: usize| inputs.candidates[i].name.clone();
-        let cams: Vec<&Camera> = active.iter().map(|&i| &inputs.candidates[i]).collect();
-        let (polys, sel) = select_regions(&cams, &masks, &ranges, Outline::BoundingBox, None)?;
-        let centers: Vec<DVec3> = cams.iter().map(|c| c.center).collect();
-        let (independent, tour) = if config.independent_detection {
-            (sel.independent.clone(), sel.trajectory.clone())
-        } else {
-            let (k, m) = (sel.independent.len(), active.len());
-            let even: Vec<usize> = (0..k).map(|j| j * m / k).collect();
-            let (t, _) = closed_tour(&even, &centers);
-            (even, t)
-        };
-        let (dependent, gap_cams) = assign_dependents(&active, &independent, &tour, &centers, |i| {
-            &inputs.candidates[active[i]]
-        })?;
-        let mut trajectory = Vec::new();
-        for &t in &tour {
-            trajectory.push(name(active[t]));
-            let mut here: Vec<&Dependent> = dependent
-                .iter()
-                .filter(|d| d.between[0] == name(active[t]))
-                .collect();
-            here.sort_by(|a, b| a.t.total_cmp(&b.t));
-            trajectory.extend(here.iter().map(|d| d.name.clone()));
-        }
-        let plan = Plan {
-            candidates: records,
-            covered,
-            set_aside,
-            collisions: sel
-                .edges
-                .iter()
-                .map(|&(i, j)| [name(active[i]), name(active[j])])
-                .collect(),
-            detection: config.independent_detection,
-            independent: independent.iter().map(|&i| name(active[i])).collect(),
-            tour: tour.iter().map(|&i| name(active[i])).collect(),
-            dependent,
-            trajectory,
-            gap_cameras: Vec::new(),
-        };
-        w.json("plan.json", &plan)?;
-        let mut all: Vec<Camera> = inputs.candidates.clone();
-        all.extend(gap_cams.iter().map(|g| g.camera.clone()));
-        let text = cameras_json_string(&all);
-        w.put("cameras.json", |p| write_text(p, &text))?;
-        w.put("frustums.obj", |p| write_obj(p, &polys))?;
-        let svg = frustums_svg(&polys, &plan, &cams, &inputs.data.train_cameras());
-        w.put("frustums.svg", |p| write_text(p, &svg))?;
-        if let Some(gt) = gens.truth.as_ref().filter(|g| g.hallucinates()) {
-            conflict_picture(gens, gt, &plan, inputs, w)?;
-        }
-        Ok(())
+        write_plan(ctx, gens, found, w)
     })?;
     let views = load(step)?;
     for a in &views.plan.set_aside {
@@ -565,6 +309,303 @@ pub fn run(ctx: &StageCtx, gens: &Generators) -> Result<Views> {
         )));
     }
     Ok(views)
+}
+
+/// What detection concludes of one candidate.
+enum Verdict {
+    /// The scene covers it: nothing to inpaint.
+    Covered,
+    /// Left out, for this reason (SPEC.md §20.2).
+    SetAside(String),
+    /// To extrapolate: its inpainting mask and its depth range (Eq. 4).
+    Active { mask: Vec<bool>, range: [f64; 2] },
+}
+
+/// The candidates as [`assess`] found them, in candidate order.
+#[derive(Default)]
+struct Found {
+    records: Vec<Candidate>,
+    covered: Vec<String>,
+    set_aside: Vec<SetAside>,
+    /// Indices of the active candidates, with their masks and ranges.
+    active: Vec<usize>,
+    masks: Vec<Vec<bool>>,
+    ranges: Vec<[f64; 2]>,
+}
+
+impl Found {
+    fn add(&mut self, index: usize, record: Candidate, verdict: Verdict) {
+        match verdict {
+            Verdict::Covered => {
+                self.covered.push(record.name.clone());
+                self.records.push(record);
+            }
+            Verdict::SetAside(reason) => {
+                self.set_aside.push(SetAside {
+                    name: record.name.clone(),
+                    reason,
+                });
+                // A candidate set aside keeps its name and mask size only.
+                self.records.push(Candidate {
+                    nearest_training: None,
+                    space: None,
+                    alignments: Vec::new(),
+                    ranges: Vec::new(),
+                    range: None,
+                    ..record
+                });
+            }
+            Verdict::Active { mask, range } => {
+                self.masks.push(mask);
+                self.ranges.push(range);
+                self.active.push(index);
+                self.records.push(record);
+            }
+        }
+    }
+
+    /// The error of a run in which no candidate is left to extrapolate.
+    fn nothing_to_extrapolate(&self, candidates: usize) -> Error {
+        let mut why = format!(
+            "nothing to extrapolate: of {candidates} candidate views the scene covers {}",
+            self.covered.len()
+        );
+        for a in &self.set_aside {
+            why += &format!("; '{}' is set aside: {}", a.name, a.reason);
+        }
+        Error::invalid(why)
+    }
+}
+
+/// Candidate `index` (`camera`): a repeat of a training view or an earlier candidate, covered
+/// by the scene, set aside, or active with its inpaintings' aligned depths (steps 1–3 of
+/// the module's list; the renders, masks, inpaintings and depths written to `w`).
+fn assess(
+    ctx: &StageCtx,
+    gens: &Generators,
+    index: usize,
+    camera: &Camera,
+    w: &mut StepWriter,
+) -> Result<(Candidate, Verdict)> {
+    let StageCtx { config, inputs, .. } = *ctx;
+    let s = stem(&camera.name);
+    let (width, height) = (camera.width as usize, camera.height as usize);
+    let mut record = Candidate {
+        name: camera.name.clone(),
+        masked: 0,
+        nearest_training: None,
+        space: None,
+        alignments: Vec::new(),
+        ranges: Vec::new(),
+        range: None,
+    };
+    if let Some(reason) = repeat(inputs, index, camera) {
+        return Ok((record, Verdict::SetAside(reason)));
+    }
+    let (rgb, alpha, ed) = render_rgba(&inputs.scene, camera, inputs.background)?;
+    let mask: Vec<bool> = alpha.iter().map(|&a| a < config.coverage_alpha).collect();
+    save_image(w, &format!("{s}/render"), &rgb)?;
+    save_mask(w, &format!("{s}/inpaint"), &mask, width, height)?;
+    record.masked = mask.iter().filter(|&&m| m).count();
+    if record.masked == 0 {
+        return Ok((record, Verdict::Covered));
+    }
+    if record.masked == width * height
+        && let Some(slot) = gens.inpaint_needs_known()
+    {
+        let reason = format!(
+            "sees nothing of the scene (alpha < {} at every pixel) and the inpaint slot '{slot}' fills only from known pixels",
+            config.coverage_alpha
+        );
+        return Ok((record, Verdict::SetAside(reason)));
+    }
+    let need = MIN_ALIGN_PIXELS.max(width * height / 100);
+    let (reference, warped) = match reference_depth(inputs, camera, &alpha, &ed, need)? {
+        Some((training, warped)) => (Some(training.name.clone()), warped),
+        None => (None, vec![0f32; width * height]),
+    };
+    if reference.is_none()
+        && let Some(slot) = gens.depth_needs_known()
+    {
+        let reason = format!(
+            "no training view shares {need} pixels of known depth with it, nor does the scene cover them, and the depth slot '{slot}' only extends known depth"
+        );
+        return Ok((record, Verdict::SetAside(reason)));
+    }
+    record.nearest_training = reference.clone();
+    // Eq. 4 over `n` inpaintings only when they can differ: a deterministic slot would
+    // give `n` equal ranges (SPEC.md §20.2).
+    let n = if gens.inpaintings_differ() {
+        config.inpaintings as usize
+    } else {
+        1
+    };
+    for j in 0..n {
+        let inpainted = gens.inpaint(camera, &rgb, &mask, &format!("views:{}:{j}", camera.name))?;
+        let hint = DepthHint {
+            depth: &warped,
+            mask: None,
+        };
+        let estimate = gens.depth(camera, &inpainted, hint)?;
+        let space = config.align_space.unwrap_or(estimate.kind.space());
+        let alignment = match &reference {
+            Some(r) => match least_squares(
+                &[Frame {
+                    estimate: &estimate.values,
+                    depth: &warped,
+                }],
+                space,
+            ) {
+                Ok(a) => a,
+                Err(e) => {
+                    let reason = format!(
+                        "its depth cannot be aligned to training view '{r}' ({})",
+                        e.message
+                    );
+                    return Ok((record, Verdict::SetAside(reason)));
+                }
+            },
+            None if space == Space::Depth => Alignment::identity(0),
+            None => {
+                let reason = format!(
+                    "no training view shares {need} pixels of known depth with it, nor does the scene cover them, so its {space:?} estimate cannot be aligned (is the view behind or outside the scene?)"
+                );
+                return Ok((record, Verdict::SetAside(reason)));
+            }
+        };
+        let depth = apply_alignment(&estimate, &alignment, space);
+        let range = match depth_range(&depth, &mask) {
+            Ok(r) => r,
+            Err(e) => {
+                let reason = format!(
+                    "inpainting {j}: {} after alignment, so it has no frustum",
+                    e.message
+                );
+                return Ok((record, Verdict::SetAside(reason)));
+            }
+        };
+        save_image(w, &format!("{s}/inpaint_{j}"), &inpainted)?;
+        save_depth(w, &format!("{s}/inpaint_{j}"), &depth, width, height)?;
+        record.space = Some(space);
+        record.alignments.push([alignment.scale, alignment.offset]);
+        record.ranges.push(range);
+    }
+    let range = mean_range(&record.ranges)?;
+    record.range = Some(range);
+    Ok((record, Verdict::Active { mask, range }))
+}
+
+/// Why candidate `index` has nothing of its own to extrapolate, if so: it has a training
+/// view's pose, or it is the same camera as an earlier candidate (which it would only
+/// collide with).
+fn repeat(inputs: &Inputs, index: usize, camera: &Camera) -> Option<String> {
+    let training = inputs
+        .data
+        .train
+        .iter()
+        .map(|&t| &inputs.data.views[t].camera)
+        .find(|t| same_pose(t, camera));
+    if let Some(t) = training {
+        return Some(format!(
+            "has the pose of training view '{}': nothing to extrapolate there",
+            t.name
+        ));
+    }
+    let intrinsics = |c: &Camera| (c.width, c.height, c.fx, c.fy, c.cx, c.cy);
+    inputs.candidates[..index]
+        .iter()
+        .find(|p| same_pose(p, camera) && intrinsics(p) == intrinsics(camera))
+        .map(|p| format!("is the same camera as candidate '{}'", p.name))
+}
+
+/// Eq. 2's target for `camera`: the depth of the closest training view (by pose distance)
+/// that shares at least `need` known pixels with it, warped here; where the warp leaves a
+/// hole, the scene's own expected depth `ed` where the scene is opaque (`alpha` ≥ 0.5).
+/// `None` when no training view shares enough (the candidate shares no surface with the
+/// training views or the scene).
+fn reference_depth<'i>(
+    inputs: &'i Inputs,
+    camera: &Camera,
+    alpha: &[f32],
+    ed: &[f32],
+    need: usize,
+) -> Result<Option<(&'i Camera, Vec<f32>)>> {
+    for p in nearest_training(&inputs.data, camera, inputs.data.train.len()) {
+        let training = &inputs.data.views[p].camera;
+        let mut warped = warp_depth(&training_depth(inputs, p)?, training, camera)?;
+        for (k, d) in warped.iter_mut().enumerate() {
+            if *d <= 0.0 && alpha[k] >= 0.5 {
+                *d = ed[k];
+            }
+        }
+        if warped.iter().filter(|&&d| d > 0.0).count() >= need {
+            return Ok(Some((training, warped)));
+        }
+    }
+    Ok(None)
+}
+
+/// Step 4 of the module's list on the active candidates of `found`: the collision graph,
+/// the independent set and its tour, the dependent views and the gap cameras; writes
+/// `plan.json`, `cameras.json` and the frustum pictures.
+fn write_plan(ctx: &StageCtx, gens: &Generators, found: Found, w: &mut StepWriter) -> Result<()> {
+    let StageCtx { config, inputs, .. } = *ctx;
+    let active = &found.active;
+    let name = |i: usize| inputs.candidates[active[i]].name.clone();
+    let cams: Vec<&Camera> = active.iter().map(|&i| &inputs.candidates[i]).collect();
+    let (polys, sel) = select_regions(
+        &cams,
+        &found.masks,
+        &found.ranges,
+        Outline::BoundingBox,
+        None,
+    )?;
+    let centers: Vec<DVec3> = cams.iter().map(|c| c.center).collect();
+    let (independent, tour) = if config.independent_detection {
+        (sel.independent.clone(), sel.trajectory.clone())
+    } else {
+        let (k, m) = (sel.independent.len(), active.len());
+        let even: Vec<usize> = (0..k).map(|j| j * m / k).collect();
+        let (t, _) = closed_tour(&even, &centers);
+        (even, t)
+    };
+    let (dependent, gap_cams) = assign_dependents(active, &independent, &tour, &centers, |i| {
+        &inputs.candidates[active[i]]
+    })?;
+    let mut trajectory = Vec::new();
+    for &t in &tour {
+        trajectory.push(name(t));
+        let mut here: Vec<&Dependent> = dependent
+            .iter()
+            .filter(|d| d.between[0] == name(t))
+            .collect();
+        here.sort_by(|a, b| a.t.total_cmp(&b.t));
+        trajectory.extend(here.iter().map(|d| d.name.clone()));
+    }
+    let plan = Plan {
+        candidates: found.records,
+        covered: found.covered,
+        set_aside: found.set_aside,
+        collisions: sel.edges.iter().map(|&(i, j)| [name(i), name(j)]).collect(),
+        detection: config.independent_detection,
+        independent: independent.iter().map(|&i| name(i)).collect(),
+        tour: tour.iter().map(|&i| name(i)).collect(),
+        dependent,
+        trajectory,
+        gap_cameras: Vec::new(),
+    };
+    w.json("plan.json", &plan)?;
+    let mut all: Vec<Camera> = inputs.candidates.clone();
+    all.extend(gap_cams.iter().map(|g| g.camera.clone()));
+    let text = cameras_json_string(&all);
+    w.put("cameras.json", |p| write_text(p, &text))?;
+    w.put("frustums.obj", |p| write_obj(p, &polys))?;
+    let svg = frustums_svg(&polys, &plan, &cams, &inputs.data.train_cameras());
+    w.put("frustums.svg", |p| write_text(p, &svg))?;
+    if let Some(gt) = gens.truth.as_ref().filter(|g| g.hallucinates()) {
+        conflict_picture(gens, gt, &plan, inputs, w)?;
+    }
+    Ok(())
 }
 
 /// The hallucinating generator's conflict, for people (SPEC.md §20.6): two independent
@@ -577,7 +618,7 @@ fn conflict_picture(
     gt: &super::generators::GroundTruth,
     plan: &Plan,
     inputs: &Inputs,
-    w: &mut crate::pipeline::rundir::StepWriter,
+    w: &mut StepWriter,
 ) -> Result<()> {
     let order = plan
         .independent
