@@ -78,20 +78,23 @@ pub fn run(
         Ok(())
     })?;
     steps.push(fixer.clone());
+    // What the reconstruction reads besides the stage-2 scene and its mask.
+    let upstream = serde_json::json!({
+        "stage2": s2.recon.digest,
+        "fixer": fixer.digest,
+        "stage1_views": s1.views.iter().map(|s| &s.digest).collect::<Vec<_>>(),
+        "videos": s2.videos.digest,
+        "fixer_every": config.fixer_every,
+        "slots": gens.key(config, &[SlotKind::Fixer]),
+    });
+    let start = (&s2_scene, &s2.recon);
     let (weights, rkey) = recon::weights_and_key(
         ctx,
         &config.interpolate,
-        (&s2_scene, &s2.recon),
+        start,
         "stage2",
         &mut steps,
-        serde_json::json!({
-            "stage2": s2.recon.digest,
-            "fixer": fixer.digest,
-            "stage1_views": s1.views.iter().map(|s| &s.digest).collect::<Vec<_>>(),
-            "videos": s2.videos.digest,
-            "fixer_every": config.fixer_every,
-            "slots": gens.key(config, &[SlotKind::Fixer]),
-        }),
+        upstream,
     )?;
     let recon_step = dir.step("interpolate/recon", rkey, on_event, |w| {
         let mut generated: Vec<Supervision> = Vec::new();

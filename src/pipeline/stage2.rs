@@ -101,18 +101,15 @@ pub fn run(ctx: &StageCtx, gens: &Generators, views: &Views, s1: &Stage1) -> Res
     let pairs = neighbour_pairs(keys.len());
     let videos = videos_step(ctx, gens, views, s1, dependent.as_ref(), &keys, &pairs)?;
     steps.push(videos.clone());
-    let (weights, rkey) = recon::weights_and_key(
-        ctx,
-        &config.stage2,
-        (&s1_scene, &s1.recon),
-        "stage1",
-        &mut steps,
-        serde_json::json!({
-            "stage1": s1.recon.digest,
-            "videos": videos.digest,
-            "dependent": dependent.as_ref().map(|s| &s.digest),
-        }),
-    )?;
+    // What the reconstruction reads besides the stage-1 scene and its mask.
+    let upstream = serde_json::json!({
+        "stage1": s1.recon.digest,
+        "videos": videos.digest,
+        "dependent": dependent.as_ref().map(|s| &s.digest),
+    });
+    let start = (&s1_scene, &s1.recon);
+    let (weights, rkey) =
+        recon::weights_and_key(ctx, &config.stage2, start, "stage1", &mut steps, upstream)?;
     let recon_step = dir.step("stage2/recon", rkey, on_event, |w| {
         let mut generated: Vec<Supervision> = keys
             .iter()

@@ -29,31 +29,33 @@ pub struct LossWeights {
 }
 
 impl LossWeights {
+    /// Every term off: the base the others are written over.
+    const ZERO: LossWeights = LossWeights {
+        l1: 0.0,
+        l2: 0.0,
+        dssim: 0.0,
+        depth: 0.0,
+    };
     /// INRIA 3DGS: `(1 − 0.2)·L1 + 0.2·D-SSIM` (`lambda_dssim = 0.2`).
     pub const INRIA: LossWeights = LossWeights {
         l1: 0.8,
-        l2: 0.0,
         dssim: 0.2,
-        depth: 0.0,
+        ..Self::ZERO
     };
     /// The paper's Eq. 7 with λ1, λ2, λ3 = 0.7, 0.2, 0.1 (§4, "Implementation details").
     pub const PAPER: LossWeights = LossWeights {
         l1: 0.7,
-        l2: 0.0,
         dssim: 0.2,
         depth: 0.1,
+        ..Self::ZERO
     };
     pub const L1: LossWeights = LossWeights {
         l1: 1.0,
-        l2: 0.0,
-        dssim: 0.0,
-        depth: 0.0,
+        ..Self::ZERO
     };
     pub const L2: LossWeights = LossWeights {
-        l1: 0.0,
         l2: 1.0,
-        dssim: 0.0,
-        depth: 0.0,
+        ..Self::ZERO
     };
 }
 
