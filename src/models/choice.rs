@@ -7,8 +7,8 @@ use std::fmt;
 use std::path::PathBuf;
 use std::str::FromStr;
 
-/// The classical defaults of one slot.
-pub trait Classical: Copy + PartialEq + fmt::Debug + 'static {
+/// The classical defaults of one slot (built by `defaults!`).
+pub trait Defaults: Copy + fmt::Debug + 'static {
     /// The slot, as errors name it ("inpainter").
     const SLOT: &'static str;
     /// Every default, in the order errors list them.
@@ -19,7 +19,9 @@ pub trait Classical: Copy + PartialEq + fmt::Debug + 'static {
     fn name(self) -> &'static str;
 }
 
-/// A slot's model: a classical default or an ONNX model given by its card.
+/// A slot's model: a classical default or an ONNX model given by its card. (The video slot
+/// takes no ONNX model: its text is refused when parsed, and a `VideoModel::Onnx` built in
+/// code is refused when the slot is made.)
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Model<C> {
     Classical(C),
@@ -30,7 +32,7 @@ pub enum Model<C> {
 /// The prefix of an ONNX model's card in a configuration.
 const ONNX_PREFIX: &str = "onnx:";
 
-impl<C: Classical> FromStr for Model<C> {
+impl<C: Defaults> FromStr for Model<C> {
     type Err = Error;
 
     fn from_str(s: &str) -> Result<Self> {
@@ -52,7 +54,7 @@ impl<C: Classical> FromStr for Model<C> {
     }
 }
 
-impl<C: Classical> fmt::Display for Model<C> {
+impl<C: Defaults> fmt::Display for Model<C> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Model::Classical(c) => f.write_str(c.name()),
@@ -61,7 +63,7 @@ impl<C: Classical> fmt::Display for Model<C> {
     }
 }
 
-/// A slot's defaults: the enum, and its [`Classical`] impl from the names given.
+/// A slot's defaults: the enum, and its [`Defaults`] impl from the names given.
 macro_rules! defaults {
     (
         $(#[$doc:meta])*
@@ -74,7 +76,7 @@ macro_rules! defaults {
             $($(#[$vdoc])* $variant,)+
         }
 
-        impl Classical for $name {
+        impl Defaults for $name {
             const SLOT: &'static str = $slot;
             const ALL: &'static [Self] = &[$($name::$variant,)+];
             const ONNX: bool = $onnx;
@@ -97,10 +99,19 @@ defaults! {
 }
 
 defaults! {
-    /// The default of the depth and video-depth slots.
+    /// The depth slot's default.
     DepthDefault: "depth estimator", onnx true,
     {
-        /// The known depths, holes filled from their borders (per frame in a video).
+        /// The known depths, holes filled from their borders.
+        DepthFill = "depth-fill",
+    }
+}
+
+defaults! {
+    /// The video-depth slot's default.
+    VideoDepthDefault: "video depth estimator", onnx true,
+    {
+        /// [`DepthDefault::DepthFill`] on every frame.
         DepthFill = "depth-fill",
     }
 }
@@ -127,8 +138,10 @@ defaults! {
 
 /// The inpainting slot's model.
 pub type InpaintModel = Model<InpaintDefault>;
-/// The depth (and video-depth) slots' model.
+/// The depth slot's model.
 pub type DepthModel = Model<DepthDefault>;
+/// The video-depth slot's model.
+pub type VideoDepthModel = Model<VideoDepthDefault>;
 /// The video slot's model.
 pub type VideoModel = Model<VideoDefault>;
 /// The artifact-removal slot's model.

@@ -14,7 +14,7 @@
 //! Images are [`ImageF32`] in `[0, 1]` (any channel count unless a slot says otherwise);
 //! masks are row-major `bool`, true = to be generated.
 
-pub mod choice;
+mod choice;
 pub mod classical;
 pub mod morph;
 #[cfg(feature = "onnx")]
@@ -25,8 +25,8 @@ use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::io::image::ImageF32;
 pub use choice::{
-    Classical, DepthDefault, DepthModel, FixerDefault, FixerModel, InpaintDefault, InpaintModel,
-    Model, VideoDefault, VideoModel,
+    Defaults, DepthDefault, DepthModel, FixerDefault, FixerModel, InpaintDefault, InpaintModel,
+    Model, VideoDefault, VideoDepthDefault, VideoDepthModel, VideoModel,
 };
 
 /// What a depth map holds.
@@ -204,9 +204,11 @@ pub fn depth_estimator(m: &DepthModel) -> Result<Box<dyn DepthEstimator>> {
 
 /// The video depth estimator `m`: depth fill per frame (needs hints) or an ONNX image
 /// model run per frame.
-pub fn video_depth_estimator(m: &DepthModel) -> Result<Box<dyn VideoDepthEstimator>> {
+pub fn video_depth_estimator(m: &VideoDepthModel) -> Result<Box<dyn VideoDepthEstimator>> {
     match m {
-        Model::Classical(DepthDefault::DepthFill) => Ok(Box::new(classical::DepthFill::default())),
+        Model::Classical(VideoDepthDefault::DepthFill) => {
+            Ok(Box::new(classical::DepthFill::default()))
+        }
         Model::Onnx(card) => load_onnx!(dyn VideoDepthEstimator, onnx::OnnxDepth, card),
     }
 }

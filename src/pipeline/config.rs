@@ -4,7 +4,7 @@
 use crate::error::{Error, Result};
 use crate::models::{
     DepthDefault, DepthModel, FixerDefault, FixerModel, InpaintDefault, InpaintModel, Model,
-    VideoDefault, VideoModel,
+    VideoDefault, VideoDepthDefault, VideoDepthModel, VideoModel,
 };
 use crate::train::densify::DensifyConfig;
 use crate::train::loss::LossWeights;
@@ -24,9 +24,10 @@ pub enum MaskSource {
     None,
 }
 
-/// What fills one slot: a model, or the labelled ground-truth generator. Written in a
-/// configuration as the model's name (`telea`, `onnx:CARD.json`, …) or `truth`; parsed
-/// once, where the configuration is read.
+/// What fills one slot: a model, or the labelled ground-truth generator. In a configuration
+/// (`M` a model's name, [`crate::models::Model`]) it is written as the model's name
+/// (`telea`, `onnx:CARD.json`, …) or `truth`, parsed once where the configuration is read;
+/// the running pipeline holds the models themselves in it (`M` a boxed slot trait).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Slot<M> {
     Model(M),
@@ -96,7 +97,7 @@ pub struct SlotNames {
     /// `morph` or `truth` (morph between stored truths).
     pub video: Slot<VideoModel>,
     /// `depth-fill`, `onnx:CARD.json` or `truth` (the truth video's own depths).
-    pub video_depth: Slot<DepthModel>,
+    pub video_depth: Slot<VideoDepthModel>,
     /// `identity`, `bilateral`, `onnx:CARD.json` or `truth`.
     pub fixer: Slot<FixerModel>,
 }
@@ -107,7 +108,7 @@ impl Default for SlotNames {
             inpaint: Slot::Model(Model::Classical(InpaintDefault::Telea)),
             depth: Slot::Model(Model::Classical(DepthDefault::DepthFill)),
             video: Slot::Model(Model::Classical(VideoDefault::Morph)),
-            video_depth: Slot::Model(Model::Classical(DepthDefault::DepthFill)),
+            video_depth: Slot::Model(Model::Classical(VideoDepthDefault::DepthFill)),
             fixer: Slot::Model(Model::Classical(FixerDefault::Identity)),
         }
     }
@@ -123,6 +124,17 @@ impl SlotNames {
             video_depth: Slot::Truth,
             fixer: Slot::Truth,
         }
+    }
+
+    /// The rule between slots: `video_depth: truth` is the truth video's own depth, so it
+    /// needs `video: truth`.
+    pub fn validate(&self) -> Result<()> {
+        if self.video_depth.is_truth() && !self.video.is_truth() {
+            return Err(Error::invalid(
+                "video_depth 'truth' is the truth video's own depth: it needs video 'truth'",
+            ));
+        }
+        Ok(())
     }
 
     /// True when any slot is the ground-truth generator.
@@ -345,8 +357,7 @@ impl Default for ReconConfig {
 }
 
 /// A named set of settings: the paper's, or the demo's quick ones.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Preset {
     /// Minutes on 2 cores at the bundled rooms' size ([`PipelineConfig::quick`]).
     Quick,
@@ -355,6 +366,10 @@ pub enum Preset {
 }
 
 impl Preset {
+    /// Every preset.
+    pub const ALL: [Preset; 2] = [Preset::Quick, Preset::Paper];
+
+    /// The preset's name in a configuration and on the command line.
     pub fn name(self) -> &'static str {
         match self {
             Preset::Quick => "quick",
@@ -366,13 +381,24 @@ impl Preset {
 impl FromStr for Preset {
     type Err = Error;
     fn from_str(s: &str) -> Result<Self> {
-        match s {
-            "quick" => Ok(Preset::Quick),
-            "paper" => Ok(Preset::Paper),
-            _ => Err(Error::invalid(format!(
-                "unknown preset '{s}' (quick or paper)"
-            ))),
-        }
+        Preset::ALL
+            .into_iter()
+            .find(|p| p.name() == s)
+            .ok_or_else(|| Error::invalid(format!("unknown preset '{s}' (quick or paper)")))
+    }
+}
+
+impl serde::Serialize for Preset {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        s.serialize_str(self.name())
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for Preset {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        let text = String::deserialize(d)?;
+        text.parse()
+            .map_err(|e: Error| serde::de::Error::custom(e.message))
     }
 }
 
@@ -561,6 +587,7 @@ impl PipelineConfig {
     }
 
     pub fn validate(&self) -> Result<()> {
+        self.slots.validate()?;
         let bad = |m: String| Err(Error::invalid(m));
         if !(self.coverage_alpha > 0.0 && self.coverage_alpha <= 1.0) {
             return bad(format!(
@@ -630,5 +657,64 @@ impl PipelineConfig {
             },
             ..self.loss
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::PathBuf;
+
+    /// Slots and presets are written as the same text they were read from: what
+    /// `config.json`, step keys and the audit's config digests hash.
+    #[test]
+    fn slots_and_presets_are_written_as_their_names() {
+        let slots = SlotNames {
+            inpaint: Slot::Model(Model::Onnx(PathBuf::from("./cards//lama.json"))),
+            depth: Slot::Truth,
+            video: Slot::Model(Model::Classical(VideoDefault::Morph)),
+            video_depth: Slot::Model(Model::Classical(VideoDepthDefault::DepthFill)),
+            fixer: Slot::Model(Model::Classical(FixerDefault::Bilateral)),
+        };
+        let text = serde_json::to_string(&slots).unwrap();
+        assert_eq!(
+            text,
+            r#"{"inpaint":"onnx:./cards//lama.json","depth":"truth","video":"morph","video_depth":"depth-fill","fixer":"bilateral"}"#
+        );
+        assert_eq!(serde_json::from_str::<SlotNames>(&text).unwrap(), slots);
+        assert_eq!(serde_json::to_string(&Preset::Paper).unwrap(), r#""paper""#);
+        assert_eq!(
+            serde_json::from_str::<Preset>(r#""quick""#).unwrap(),
+            Preset::Quick
+        );
+        let e = serde_json::from_str::<Preset>(r#""custom""#).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("unknown preset 'custom' (quick or paper)"),
+            "{e}"
+        );
+        let e = serde_json::from_str::<SlotNames>(r#"{"video_depth":"midas"}"#).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("unknown video depth estimator 'midas'"),
+            "{e}"
+        );
+        // A missing slot is its default.
+        let partial: SlotNames = serde_json::from_str(r#"{"fixer":"truth"}"#).unwrap();
+        assert_eq!(
+            partial,
+            SlotNames {
+                fixer: Slot::Truth,
+                ..SlotNames::default()
+            }
+        );
+        // The rule between slots.
+        let e = SlotNames {
+            video_depth: Slot::Truth,
+            ..SlotNames::default()
+        }
+        .validate()
+        .unwrap_err();
+        assert!(e.message.contains("it needs video 'truth'"), "{e}");
     }
 }

@@ -463,6 +463,14 @@ pub enum SlotKind {
 }
 
 impl SlotKind {
+    pub const ALL: [SlotKind; 5] = [
+        SlotKind::Inpaint,
+        SlotKind::Depth,
+        SlotKind::Video,
+        SlotKind::VideoDepth,
+        SlotKind::Fixer,
+    ];
+
     /// The slot's name in a step's key (and in the configuration).
     pub fn name(self) -> &'static str {
         match self {
@@ -495,11 +503,7 @@ impl Generators {
                 "the ground-truth generator needs a dataset with the candidate views' images and depths",
             ));
         }
-        if names.video_depth.is_truth() && !names.video.is_truth() {
-            return Err(Error::invalid(
-                "video_depth 'truth' is the truth video's own depth: it needs video 'truth'",
-            ));
-        }
+        names.validate()?;
         Ok(Generators {
             inpaint: names.inpaint.try_map(models::inpainter)?,
             depth: names.depth.try_map(models::depth_estimator)?,
@@ -914,4 +918,19 @@ pub fn training_truth(inputs: &Inputs, config: &PipelineConfig) -> Result<Vec<(C
             Ok((v.camera.clone(), d))
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A step's key names each slot as the configuration's field of that slot does.
+    #[test]
+    fn slot_kinds_are_named_as_the_configuration_fields() {
+        let fields = serde_json::to_value(SlotNames::default()).unwrap();
+        let fields: Vec<&String> = fields.as_object().unwrap().keys().collect();
+        let mut kinds: Vec<&str> = SlotKind::ALL.iter().map(|k| k.name()).collect();
+        kinds.sort_unstable();
+        assert_eq!(fields, kinds, "(the object's keys come sorted)");
+    }
 }

@@ -96,7 +96,9 @@ pub fn run(ctx: &StageCtx, gens: &Generators, views: &Views, s1: &Stage1) -> Res
     let mut steps = Vec::new();
     let s1_scene = scene_of(&s1.recon)?;
     let dependent = dependent_step(ctx, gens, views, s1, &s1_scene)?;
-    steps.extend(dependent.clone());
+    if let Some(d) = &dependent {
+        steps.push(d.clone());
+    }
     let keys = keyframes(views, s1, dependent.as_ref())?;
     let pairs = neighbour_pairs(keys.len());
     let videos = videos_step(ctx, gens, views, s1, dependent.as_ref(), &keys, &pairs)?;
@@ -217,7 +219,7 @@ fn complete_dependent(
     } else {
         rgb.clone()
     };
-    let fit = render_fit(ctx, gens, camera, &dep.name, &inpainted, &alpha, &ed)?;
+    let fit = render_fit(ctx, gens, camera, &inpainted, &alpha, &ed)?;
     let s = stem(&dep.name);
     // The paper's depth (§3.3: DIBR-based video depth alignment throughout): a clip from
     // the nearest training view to the inpainted view; the render fit is its end
@@ -228,7 +230,7 @@ fn complete_dependent(
             fit.depth,
             serde_json::json!({"view": dep.name, "method": "render_fit", "render_fit": fit.record}),
         ),
-        Stage2Depth::Video => video_depth(ctx, gens, camera, &dep.name, &inpainted, fit, w)?,
+        Stage2Depth::Video => video_depth(ctx, gens, camera, &inpainted, fit, w)?,
     };
     save_image(w, &format!("{s}/render"), &rgb)?;
     save_mask(w, &format!("{s}/inpaint"), &mask, width, height)?;
@@ -243,14 +245,13 @@ struct RenderFit {
     record: serde_json::Value,
 }
 
-/// The depth slot's estimate of an inpainted dependent view (`camera`, `name`),
+/// The depth slot's estimate of an inpainted dependent view (at `camera`),
 /// least-squares fitted to the stage-1 render's expected depth `ed` where the render is
 /// opaque (`alpha` > 0.5).
 fn render_fit(
     ctx: &StageCtx,
     gens: &Generators,
     camera: &Camera,
-    name: &str,
     inpainted: &ImageF32,
     alpha: &[f32],
     ed: &[f32],
@@ -285,8 +286,8 @@ fn render_fit(
         )
         .map_err(|e| {
             Error::invalid(format!(
-                "dependent view '{name}': cannot align its depth to the stage-1 scene ({})",
-                e.message
+                "dependent view '{}': cannot align its depth to the stage-1 scene ({})",
+                camera.name, e.message
             ))
         })?
     };
@@ -296,7 +297,7 @@ fn render_fit(
     })
 }
 
-/// The paper's depth of an inpainted dependent view (`camera`, `name`): a clip from the
+/// The paper's depth of an inpainted dependent view (at `camera`): a clip from the
 /// nearest training view to it, its depth aligned as stage 1 aligns a clip, the last
 /// frame's depth; the clip is written to `w`. Where no clip can be made or aligned, the
 /// render fit, with the reason recorded.
@@ -304,12 +305,12 @@ fn video_depth(
     ctx: &StageCtx,
     gens: &Generators,
     camera: &Camera,
-    name: &str,
     inpainted: &ImageF32,
     fit: RenderFit,
     w: &mut StepWriter,
 ) -> Result<(Vec<f32>, serde_json::Value)> {
     let StageCtx { config, inputs, .. } = *ctx;
+    let name = &camera.name;
     let source = nearest_training(&inputs.data, camera, 1)[0];
     let sv = &inputs.data.views[source];
     let source_depth = training_depth(inputs, source)?;
@@ -338,8 +339,8 @@ fn video_depth(
             &format!("stage2:{name}"),
         )
         .map(|r| (v, r)),
-        Err(e) if crate::models::morph::cannot_make_clip(&e) => Err(e),
-        Err(e) => return Err(e),
+        Err(e) if !crate::models::morph::cannot_make_clip(&e) => return Err(e),
+        Err(e) => Err(e),
     };
     match aligned {
         Ok((v, (depths, alignment, space))) => {

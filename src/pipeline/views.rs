@@ -292,8 +292,8 @@ pub fn run(ctx: &StageCtx, gens: &Generators) -> Result<Views> {
     });
     let step = dir.step("views", key, on_event, |w| {
         let mut found = Found::default();
-        for (index, camera) in inputs.candidates.iter().enumerate() {
-            let (record, verdict) = assess(ctx, gens, index, camera, w)?;
+        for index in 0..inputs.candidates.len() {
+            let (record, verdict) = assess(ctx, gens, index, w)?;
             found.add(index, record, verdict);
         }
         if found.active.is_empty() {
@@ -377,17 +377,17 @@ impl Found {
     }
 }
 
-/// Candidate `index` (`camera`): a repeat of a training view or an earlier candidate, covered
+/// Candidate `index`: a repeat of a training view or an earlier candidate, covered
 /// by the scene, set aside, or active with its inpaintings' aligned depths (steps 1–3 of
 /// the module's list; the renders, masks, inpaintings and depths written to `w`).
 fn assess(
     ctx: &StageCtx,
     gens: &Generators,
     index: usize,
-    camera: &Camera,
     w: &mut StepWriter,
 ) -> Result<(Candidate, Verdict)> {
     let StageCtx { config, inputs, .. } = *ctx;
+    let camera = &inputs.candidates[index];
     let s = stem(&camera.name);
     let (width, height) = (camera.width as usize, camera.height as usize);
     let mut record = Candidate {
