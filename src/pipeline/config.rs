@@ -80,10 +80,18 @@ impl<M: fmt::Display> serde::Serialize for Slot<M> {
 
 impl<'de, M: FromStr<Err = Error>> serde::Deserialize<'de> for Slot<M> {
     fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
-        let text = String::deserialize(d)?;
-        text.parse()
-            .map_err(|e: Error| serde::de::Error::custom(e.message))
+        from_text(d)
     }
+}
+
+/// A value written in a configuration as its text (a slot, a preset): the string, parsed
+/// by `T`'s `FromStr`, its error the parse error's message.
+fn from_text<'de, D: serde::Deserializer<'de>, T: FromStr<Err = Error>>(
+    d: D,
+) -> std::result::Result<T, D::Error> {
+    let text = <String as serde::Deserialize>::deserialize(d)?;
+    text.parse()
+        .map_err(|e: Error| serde::de::Error::custom(e.message))
 }
 
 /// Which generators fill the slots.
@@ -396,9 +404,7 @@ impl serde::Serialize for Preset {
 
 impl<'de> serde::Deserialize<'de> for Preset {
     fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
-        let text = String::deserialize(d)?;
-        text.parse()
-            .map_err(|e: Error| serde::de::Error::custom(e.message))
+        from_text(d)
     }
 }
 
