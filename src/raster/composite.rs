@@ -387,7 +387,7 @@ fn blend_group_lanes<const DEPTH: bool, const TRACK: bool>(
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
     use super::{Cut, GROUP, Group, Members, SIGMA_CLAMP, TileSplat};
-    use crate::math::fastexp::exp_avx2;
+    use crate::math::fastexp::exp_avx2_in_range;
     use std::arch::x86_64::*;
 
     /// Registers per group: 16 pixels are two 8-lane halves.
@@ -446,19 +446,21 @@ mod avx2 {
             for h in 0..H {
                 let dx = _mm256_sub_ps(mx, pxv[h]);
                 let sum = _mm256_add_ps(_mm256_mul_ps(_mm256_mul_ps(ca, dx), dx), cdd);
-                let sigma = _mm256_add_ps(
-                    _mm256_mul_ps(c(0.5), sum),
+                // −σ exactly, and `max(−σ, −30) = −min(σ, 30)` (`max_ps(a, b)` is
+                // `a > b ? a : b`, b when unordered, as `min_ps` was): the exponential's
+                // argument lies in [−30, 0] in every valid lane (SPEC.md §5.7).
+                let neg_sigma = _mm256_sub_ps(
+                    _mm256_mul_ps(c(-0.5), sum),
                     _mm256_mul_ps(_mm256_mul_ps(cb, dx), dyv),
                 );
-                // `min_ps(a, b)` is `a < b ? a : b` (b when unordered): the scalar select.
-                let clamped = _mm256_min_ps(sigma, c(SIGMA_CLAMP));
+                let x = _mm256_max_ps(neg_sigma, c(-SIGMA_CLAMP));
                 // SAFETY: this function runs only on CPUs with AVX2.
-                let e = unsafe { exp_avx2(_mm256_xor_ps(clamped, c(-0.0))) };
+                let e = unsafe { exp_avx2_in_range(x) };
                 alphas[h] = _mm256_min_ps(_mm256_mul_ps(op, e), clamp);
                 valids[h] = _mm256_and_ps(
                     act[h],
                     _mm256_and_ps(
-                        _mm256_cmp_ps::<_CMP_GE_OQ>(sigma, zero),
+                        _mm256_cmp_ps::<_CMP_LE_OQ>(neg_sigma, zero),
                         _mm256_cmp_ps::<_CMP_GE_OQ>(alphas[h], threshold),
                     ),
                 );
@@ -513,12 +515,18 @@ pub(crate) use avx512::splat_alpha16;
 #[cfg(target_arch = "x86_64")]
 mod avx512 {
     use super::{Cut, GROUP, Group, Members, SIGMA_CLAMP, Splat, TileSplat};
-    use crate::math::fastexp::exp_avx512;
+    use crate::math::fastexp::exp_avx512_in_range;
     use std::arch::x86_64::*;
 
-    /// σ and α of splat `s` at the 16 pixel centres `px` of the row at `py` under the α
-    /// clamp `clamp`: [`super::splat_alpha`]'s operations lane for lane (the same bits).
-    /// Shared by the blend and the frozen-blend record.
+    /// −σ and α of splat `s` at the 16 pixel centres `px` of the row at `py` under the α
+    /// clamp `clamp`: [`super::splat_alpha`]'s values lane for lane (the same bits), with
+    /// −σ in place of σ (`σ ≥ 0` is `−σ ≤ 0`, both false for NaN). Round-to-nearest is
+    /// symmetric, so `(−½)·sum − (B·dx)·dy` is exactly `−(½·sum + (B·dx)·dy)`, and
+    /// `max(−σ, −30)` is `−min(σ, 30)` (NaN → −30 in both: the second operand), so the
+    /// sign flip costs nothing. The exponential skips its range clamps: a lane with
+    /// `σ ≥ 0` has its argument in `[−30, 0]`, and a lane with `σ < 0` or NaN is not valid,
+    /// so its α (unspecified) is never used. Shared by the blend and the frozen-blend
+    /// record.
     #[inline]
     #[target_feature(enable = "avx512f")]
     pub(crate) fn splat_alpha16(s: &Splat, px: __m512, py: f32, clamp: __m512) -> (__m512, __m512) {
@@ -527,15 +535,17 @@ mod avx512 {
         let (cdd, dyv) = (c(s.conic[2] * dy * dy), c(dy));
         let dx = _mm512_sub_ps(c(s.mean[0]), px);
         let sum = _mm512_add_ps(_mm512_mul_ps(_mm512_mul_ps(c(s.conic[0]), dx), dx), cdd);
-        let sigma = _mm512_add_ps(
-            _mm512_mul_ps(c(0.5), sum),
+        let neg_sigma = _mm512_sub_ps(
+            _mm512_mul_ps(c(-0.5), sum),
             _mm512_mul_ps(_mm512_mul_ps(c(s.conic[1]), dx), dyv),
         );
-        let clamped = _mm512_min_ps(sigma, c(SIGMA_CLAMP));
-        let neg = _mm512_xor_si512(_mm512_castps_si512(clamped), _mm512_set1_epi32(i32::MIN));
+        let x = _mm512_max_ps(neg_sigma, c(-SIGMA_CLAMP));
         // SAFETY: this function runs only on CPUs with AVX-512F.
-        let e = unsafe { exp_avx512(_mm512_castsi512_ps(neg)) };
-        (sigma, _mm512_min_ps(_mm512_mul_ps(c(s.opacity), e), clamp))
+        let e = unsafe { exp_avx512_in_range(x) };
+        (
+            neg_sigma,
+            _mm512_min_ps(_mm512_mul_ps(c(s.opacity), e), clamp),
+        )
     }
 
     /// # Safety
@@ -574,16 +584,19 @@ mod avx512 {
             }
             pairs += GROUP as u64;
             let s = &ts.s;
-            let (sigma, alpha) = splat_alpha16(s, pxv, py, clamp);
-            let valid = _mm512_mask_cmp_ps_mask::<_CMP_GE_OQ>(act, sigma, zero)
-                & _mm512_cmp_ps_mask::<_CMP_GE_OQ>(alpha, threshold);
+            let (neg_sigma, alpha) = splat_alpha16(s, pxv, py, clamp);
+            // Active, σ ≥ 0 and α ≥ the threshold: the masked compares chain the ands.
+            let valid = _mm512_mask_cmp_ps_mask::<_CMP_GE_OQ>(
+                _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(act, neg_sigma, zero),
+                alpha,
+                threshold,
+            );
             let nt = _mm512_mul_ps(t, _mm512_sub_ps(c(1.0), alpha));
             let stop = _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(valid, nt, stop_at);
             let blend = valid & !stop;
             let w = _mm512_mul_ps(alpha, t);
-            let acc = |v: __m512, k: f32| {
-                _mm512_mask_blend_ps(blend, v, _mm512_add_ps(v, _mm512_mul_ps(c(k), w)))
-            };
+            // `v + k·w` where blending, `v` elsewhere: one masked add.
+            let acc = |v: __m512, k: f32| _mm512_mask_add_ps(v, blend, v, _mm512_mul_ps(c(k), w));
             r = acc(r, s.color[0]);
             g = acc(g, s.color[1]);
             b = acc(b, s.color[2]);
@@ -593,7 +606,7 @@ mod avx512 {
             if TRACK {
                 n = _mm512_mask_blend_epi32(blend, n, _mm512_set1_epi32(ts.pos1 as i32));
             }
-            t = _mm512_mask_blend_ps(blend, t, nt);
+            t = _mm512_mask_mov_ps(t, blend, nt);
             act &= !stop;
         }
         // SAFETY: as above.

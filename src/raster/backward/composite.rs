@@ -466,7 +466,7 @@ mod avx2 {
         ALPHA_THRESHOLD, Acc, Entry, LANES, NC, RECOVER_EPS, RowState, SIGMA_CLAMP, VISIT_INDEX,
         fields,
     };
-    use crate::math::fastexp::exp_avx2;
+    use crate::math::fastexp::exp_avx2_in_range;
     use std::arch::x86_64::*;
 
     /// # Safety
@@ -530,19 +530,20 @@ mod avx2 {
                 let active = _mm256_castsi256_ps(_mm256_cmpgt_epi32(n[h], posv));
                 let dx = _mm256_sub_ps(c(s.mean[0]), pxv[h]);
                 let sum = _mm256_add_ps(_mm256_mul_ps(_mm256_mul_ps(c(s.conic[0]), dx), dx), cdd);
-                let sigma = _mm256_add_ps(
-                    _mm256_mul_ps(c(0.5), sum),
+                // −σ and the exponential in range, as the AVX-512F form (SPEC.md §5.7).
+                let neg_sigma = _mm256_sub_ps(
+                    _mm256_mul_ps(c(-0.5), sum),
                     _mm256_mul_ps(_mm256_mul_ps(c(s.conic[1]), dx), dyv),
                 );
-                let clamped = _mm256_min_ps(sigma, c(SIGMA_CLAMP));
+                let x = _mm256_max_ps(neg_sigma, c(-SIGMA_CLAMP));
                 // SAFETY: AVX2 is available in this function.
-                let e = unsafe { exp_avx2(_mm256_xor_ps(clamped, c(-0.0))) };
+                let e = unsafe { exp_avx2_in_range(x) };
                 let a = _mm256_mul_ps(c(s.opacity), e);
                 let alpha = _mm256_min_ps(a, c(max_alpha));
                 valids[h] = _mm256_and_ps(
                     active,
                     _mm256_and_ps(
-                        _mm256_cmp_ps::<_CMP_GE_OQ>(sigma, zero),
+                        _mm256_cmp_ps::<_CMP_LE_OQ>(neg_sigma, zero),
                         _mm256_cmp_ps::<_CMP_GE_OQ>(alpha, c(ALPHA_THRESHOLD)),
                     ),
                 );
@@ -641,7 +642,7 @@ mod avx512 {
         ALPHA_THRESHOLD, Acc, Entry, LANES, NC, RECOVER_EPS, RowState, SIGMA_CLAMP, VISIT_INDEX,
         fields,
     };
-    use crate::math::fastexp::exp_avx512;
+    use crate::math::fastexp::exp_avx512_in_range;
     use std::arch::x86_64::*;
 
     /// # Safety
@@ -697,17 +698,22 @@ mod avx512 {
             );
             let dx = _mm512_sub_ps(c(s.mean[0]), pxv);
             let sum = _mm512_add_ps(_mm512_mul_ps(_mm512_mul_ps(c(s.conic[0]), dx), dx), cdd);
-            let sigma = _mm512_add_ps(
-                _mm512_mul_ps(c(0.5), sum),
+            // −σ exactly, and the exponential without its range clamps, as the forward
+            // kernel computes them (`composite::avx512::splat_alpha16`): a valid lane's
+            // argument `max(−σ, −30) = −min(σ, 30)` lies in [−30, 0].
+            let neg_sigma = _mm512_sub_ps(
+                _mm512_mul_ps(c(-0.5), sum),
                 _mm512_mul_ps(_mm512_mul_ps(c(s.conic[1]), dx), dyv),
             );
-            let clamped = _mm512_min_ps(sigma, c(SIGMA_CLAMP));
             // SAFETY: AVX-512F is available in this function.
-            let e = unsafe { exp_avx512(neg(clamped)) };
+            let e = unsafe { exp_avx512_in_range(_mm512_max_ps(neg_sigma, c(-SIGMA_CLAMP))) };
             let a = _mm512_mul_ps(c(s.opacity), e);
             let alpha = _mm512_min_ps(a, c(max_alpha));
-            let valid = _mm512_mask_cmp_ps_mask::<_CMP_GE_OQ>(active, sigma, zero)
-                & _mm512_cmp_ps_mask::<_CMP_GE_OQ>(alpha, c(ALPHA_THRESHOLD));
+            let valid = _mm512_mask_cmp_ps_mask::<_CMP_GE_OQ>(
+                _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(active, neg_sigma, zero),
+                alpha,
+                c(ALPHA_THRESHOLD),
+            );
             let mut cv = [zero; NC];
             let one_minus = _mm512_sub_ps(c(1.0), alpha);
             // `max_ps(a, b)` is `a > b ? a : b`: the scalar select with the operands so.

@@ -152,7 +152,7 @@ unsafe fn blended_alpha_avx512(
     // SAFETY: AVX-512F is available (the caller's contract); the loads and the store are
     // of 16-lane arrays.
     unsafe {
-        let (sigma, alpha) = splat_alpha16(
+        let (neg_sigma, alpha) = splat_alpha16(
             s,
             _mm512_loadu_ps(px.as_ptr()),
             py,
@@ -166,7 +166,7 @@ unsafe fn blended_alpha_avx512(
         };
         let valid = inside
             & _mm512_cmpgt_epu32_mask(nv, _mm512_set1_epi32(pos as i32))
-            & _mm512_cmp_ps_mask::<_CMP_GE_OQ>(sigma, _mm512_setzero_ps())
+            & _mm512_cmp_ps_mask::<_CMP_LE_OQ>(neg_sigma, _mm512_setzero_ps())
             & _mm512_cmp_ps_mask::<_CMP_GE_OQ>(alpha, _mm512_set1_ps(ALPHA_THRESHOLD));
         _mm512_storeu_ps(a.as_mut_ptr(), _mm512_maskz_mov_ps(valid, alpha));
     }
