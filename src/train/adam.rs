@@ -81,8 +81,6 @@ pub(crate) struct StepScalars {
     ob2: f32,
     eps: f32,
     bc2_sqrt: f32,
-    /// RN(1 / `bc2_sqrt`), for [`scaled_root`]'s exact quotient.
-    bc2_recip: f32,
     step_size: f32,
     /// A decaying moment's step cannot move an x with |x| strictly above this (bits; see
     /// [`update`]): `2²⁵·(|step_size|·(2⁻¹²⁶/ε·(1 + 2⁻¹⁰) + 2⁻¹⁴⁹) + 2⁻¹⁴⁹)` rounded to f32
@@ -92,13 +90,6 @@ pub(crate) struct StepScalars {
 }
 
 impl StepScalars {
-    /// Whether [`scaled_root`] may divide by `bc2_sqrt` with fused multiply-adds: `bc2_sqrt`
-    /// in [2⁻²⁰, 1] (`begin` gives [2⁻¹², 1] for every β2 the configuration accepts), so that
-    /// for a finite √v the corrections neither underflow nor overflow.
-    fn exact_recip(&self) -> bool {
-        (2f32.powi(-20)..=1.0).contains(&self.bc2_sqrt)
-    }
-
     fn new(b1: f32, b2: f32, eps: f32, bc2_sqrt: f32, step_size: f32) -> StepScalars {
         // |δ| for |m'| < 2⁻¹²⁶ and a denominator ≥ ε (`bc2_sqrt ≥ 0`, as `begin` gives): the
         // quotient and the product each rounded (relative 2⁻²³ in the normal range,
@@ -120,7 +111,6 @@ impl StepScalars {
             ob2: 1.0 - b2,
             eps,
             bc2_sqrt,
-            bc2_recip: 1.0 / bc2_sqrt,
             step_size,
             x_min_bits: x_min.to_bits(),
         }
@@ -132,51 +122,13 @@ impl StepScalars {
 /// operations whatever the vector width, so the bits do not depend on it. [`update`] calls
 /// it for all but blocks of decaying moments.
 #[inline(always)]
-fn update_plain<const FMA: bool>(
-    x: &mut [f32],
-    m: &mut [f32],
-    v: &mut [f32],
-    g: &[f32],
-    k: StepScalars,
-) {
+fn update_plain(x: &mut [f32], m: &mut [f32], v: &mut [f32], g: &[f32], k: StepScalars) {
     for (((x, m), v), &g) in x.iter_mut().zip(m.iter_mut()).zip(v.iter_mut()).zip(g) {
         *m = k.b1 * *m + k.ob1 * g;
         *v = k.b2 * *v + k.ob2 * (g * g);
-        let denom = scaled_root::<FMA>(*v, k) + k.eps;
+        let denom = v.sqrt() / k.bc2_sqrt + k.eps;
         *x -= k.step_size * (*m / denom);
     }
-}
-
-/// `√v / bc2_sqrt`, correctly rounded. With `FMA` (a CPU with fused multiply-add and
-/// [`StepScalars::exact_recip`]) without a division — the update is bound by its
-/// divider, which also takes the square root and the other quotient, so this third of its
-/// work moves to the FMA ports: with `y = RN(1/c)` (within half an ulp of `1/c`) and
-/// `s = √v`, `q₀ = RN(s·y)` is within 1.5 ulp of `s/c`, one correction
-/// `q₁ = RN(q₀ + RN(s − c·q₀)·y)` brings it within one ulp, and a second
-/// `q₂ = RN(q₁ + (s − c·q₁)·y)` is `RN(s/c)` exactly (Markstein's theorem: the remainder
-/// `s − c·q₁` of a quotient within one ulp is exact in one FMA, and one correction with a
-/// reciprocal within half an ulp rounds correctly; P. Markstein, IBM J. Res. Dev. 34(1),
-/// 1990; J.-M. Muller et al., *Handbook of Floating-Point Arithmetic*, §4.7). No step
-/// under- or overflows for `c ∈ [2⁻²⁰, 1]` and `s` zero or at least 2⁻⁷⁵ (`√` of the
-/// least subnormal). `s` infinite or NaN takes `s` itself, which is what the quotient
-/// gives (test `fma_quotient_is_the_division`, exhaustive over s's significand for the
-/// default β2's first steps).
-#[inline(always)]
-fn scaled_root<const FMA: bool>(v: f32, k: StepScalars) -> f32 {
-    quotient::<FMA>(v.sqrt(), k)
-}
-
-/// `s / bc2_sqrt` as [`scaled_root`] computes it.
-#[inline(always)]
-fn quotient<const FMA: bool>(s: f32, k: StepScalars) -> f32 {
-    if !FMA {
-        return s / k.bc2_sqrt;
-    }
-    let (c, y) = (k.bc2_sqrt, k.bc2_recip);
-    let q0 = s * y;
-    let q1 = (-q0).mul_add(c, s).mul_add(y, q0);
-    let q2 = (-q1).mul_add(c, s).mul_add(y, q1);
-    if s < f32::INFINITY { q2 } else { s }
 }
 
 /// Whether f32 bits are those of a subnormal (zero excluded).
@@ -201,7 +153,7 @@ const BLOCK: usize = 64;
 /// subnormal of x, m, v, g a decaying moment → [`update_decaying`]; otherwise the plain
 /// update (the same bits at the assists' pace; rare).
 #[inline(always)]
-fn update<const FMA: bool>(x: &mut [f32], m: &mut [f32], v: &mut [f32], g: &[f32], k: StepScalars) {
+fn update(x: &mut [f32], m: &mut [f32], v: &mut [f32], g: &[f32], k: StepScalars) {
     let blocks = x
         .chunks_mut(BLOCK)
         .zip(m.chunks_mut(BLOCK))
@@ -220,9 +172,9 @@ fn update<const FMA: bool>(x: &mut [f32], m: &mut [f32], v: &mut [f32], g: &[f32
             }
         }
         if decay {
-            update_decaying::<FMA>(x, m, v, g, k);
+            update_decaying(x, m, v, g, k);
         } else {
-            update_plain::<FMA>(x, m, v, g, k);
+            update_plain(x, m, v, g, k);
         }
     }
 }
@@ -245,13 +197,7 @@ fn decaying(xb: u32, vb: u32, gb: u32, k: StepScalars) -> bool {
 /// spacing; with m = +0 the plain arithmetic subtracts ±0 from x ≠ 0, which also gives x.
 /// Their v is the plain arithmetic's (g·g = +0 either way).
 #[inline(always)]
-fn update_decaying<const FMA: bool>(
-    x: &mut [f32],
-    m: &mut [f32],
-    v: &mut [f32],
-    g: &[f32],
-    k: StepScalars,
-) {
+fn update_decaying(x: &mut [f32], m: &mut [f32], v: &mut [f32], g: &[f32], k: StepScalars) {
     const ROUND: f64 = 6_755_399_441_055_744.0; // 1.5·2^52: RNE to an integer below 2^51
     let b1 = f64::from(k.b1);
     for (((x, m), v), &g) in x.iter_mut().zip(m.iter_mut()).zip(v.iter_mut()).zip(g) {
@@ -260,7 +206,7 @@ fn update_decaying<const FMA: bool>(
         let m_in = if special { 0.0 } else { *m };
         let m_new = k.b1 * m_in + k.ob1 * g;
         *v = k.b2 * *v + k.ob2 * (g * g);
-        let denom = scaled_root::<FMA>(*v, k) + k.eps;
+        let denom = v.sqrt() / k.bc2_sqrt + k.eps;
         *x -= k.step_size * (m_new / denom);
         let j = ((f64::from(mb & 0x007F_FFFF) * b1 + ROUND) - ROUND) as u32;
         // The product's sign (β1 may be −0, which the config accepts).
@@ -274,8 +220,7 @@ fn update_decaying<const FMA: bool>(
     }
 }
 
-/// [`update`] compiled for `isa` (the same code, auto-vectorized 4, 8 or 16 wide), with
-/// [`scaled_root`]'s FMA quotient where the CPU has FMA (the same bits either way).
+/// [`update`] compiled for `isa` (the same code, auto-vectorized 4, 8 or 16 wide).
 fn update_dispatch(
     isa: Isa,
     x: &mut [f32],
@@ -288,36 +233,21 @@ fn update_dispatch(
     {
         #[target_feature(enable = "avx2")]
         fn avx2(x: &mut [f32], m: &mut [f32], v: &mut [f32], g: &[f32], k: StepScalars) {
-            update::<false>(x, m, v, g, k)
-        }
-        #[target_feature(enable = "avx2,fma")]
-        fn avx2_fma(x: &mut [f32], m: &mut [f32], v: &mut [f32], g: &[f32], k: StepScalars) {
-            update::<true>(x, m, v, g, k)
-        }
-        #[target_feature(enable = "avx512f,fma")]
-        fn avx512(x: &mut [f32], m: &mut [f32], v: &mut [f32], g: &[f32], k: StepScalars) {
-            update::<true>(x, m, v, g, k)
+            update(x, m, v, g, k)
         }
         #[target_feature(enable = "avx512f")]
-        fn avx512_div(x: &mut [f32], m: &mut [f32], v: &mut [f32], g: &[f32], k: StepScalars) {
-            update::<false>(x, m, v, g, k)
+        fn avx512(x: &mut [f32], m: &mut [f32], v: &mut [f32], g: &[f32], k: StepScalars) {
+            update(x, m, v, g, k)
         }
-        let exact = k.exact_recip();
-        let fma = exact && std::is_x86_feature_detected!("fma");
         match isa {
-            // SAFETY: `isa` comes from `Isa::detect`, which saw the feature (and FMA was
-            // detected for the FMA forms).
-            Isa::Avx512 if fma => return unsafe { avx512(x, m, v, g, k) },
-            // SAFETY: as above.
-            Isa::Avx512 => return unsafe { avx512_div(x, m, v, g, k) },
-            // SAFETY: as above.
-            Isa::Avx2 if fma => return unsafe { avx2_fma(x, m, v, g, k) },
+            // SAFETY: `isa` comes from `Isa::detect`, which saw the feature.
+            Isa::Avx512 => return unsafe { avx512(x, m, v, g, k) },
             // SAFETY: as above.
             Isa::Avx2 => return unsafe { avx2(x, m, v, g, k) },
             Isa::Baseline => {}
         }
     }
-    update::<false>(x, m, v, g, k)
+    update(x, m, v, g, k)
 }
 
 /// Step count and bias-correction products of one group.
@@ -713,7 +643,7 @@ mod tests {
             }
             let plain = {
                 let (mut x, mut m, mut v) = (x.clone(), m.clone(), v.clone());
-                update_plain::<false>(&mut x, &mut m, &mut v, &g, k);
+                update_plain(&mut x, &mut m, &mut v, &g, k);
                 [bits(&x), bits(&m), bits(&v)]
             };
             let isas = [Isa::Baseline, Isa::detect()];
@@ -739,7 +669,7 @@ mod tests {
             if decaying_only {
                 // Only normal values and decaying moments: the decaying form itself.
                 let (mut x2, mut m2, mut v2) = (x.clone(), m.clone(), v.clone());
-                update_decaying::<false>(&mut x2, &mut m2, &mut v2, &g, k);
+                update_decaying(&mut x2, &mut m2, &mut v2, &g, k);
                 assert_eq!(
                     [bits(&x2), bits(&m2), bits(&v2)],
                     plain,
@@ -749,57 +679,6 @@ mod tests {
             }
         }
         assert!(decayed > 100, "{decayed} blocks of decaying moments");
-    }
-
-    /// [`quotient`]'s FMA form is the division, bit for bit: for every significand of s
-    /// (at three exponents, and zero, the least √ of a subnormal, +∞, NaN) against the
-    /// divisors of the default β2's first 64 steps, then every 97th to 30 000, and the ends
-    /// of the admissible range.
-    #[test]
-    #[cfg(target_arch = "x86_64")]
-    fn fma_quotient_is_the_division() {
-        if !std::is_x86_feature_detected!("fma") {
-            return;
-        }
-        #[target_feature(enable = "fma")]
-        fn check(k: StepScalars, scale: f32) -> usize {
-            let mut wrong = 0;
-            for bits in 0x3F80_0000u32..0x4000_0000 {
-                let s = f32::from_bits(bits) * scale;
-                wrong +=
-                    usize::from(quotient::<true>(s, k).to_bits() != (s / k.bc2_sqrt).to_bits());
-            }
-            for s in [0.0, 2f32.powi(-75), f32::INFINITY, f32::NAN, -f32::NAN] {
-                wrong +=
-                    usize::from(quotient::<true>(s, k).to_bits() != (s / k.bc2_sqrt).to_bits());
-            }
-            wrong
-        }
-        let beta2 = f64::from(AdamConfig::default().beta2);
-        let mut divisors = Vec::new();
-        let mut pow = 1.0f64;
-        for t in 1..=30_000u32 {
-            pow *= beta2;
-            if t <= 64 || t % 97 == 0 {
-                divisors.push((1.0 - pow).sqrt() as f32);
-            }
-        }
-        divisors.extend([2f32.powi(-20), 2f32.powi(-12), 0.75f32.next_down(), 1.0]);
-        for (i, &c) in divisors.iter().enumerate() {
-            let k = StepScalars::new(0.9, 0.999, 1e-15, c, 1e-3);
-            assert!(k.exact_recip(), "{c}");
-            // Every significand, at one of three exponents in turn (the significands decide
-            // where nothing under- or overflows).
-            let scale = [1.0, 2f32.powi(-60), 2f32.powi(40)][i % 3];
-            // SAFETY: FMA was detected above.
-            let wrong = unsafe { check(k, scale) };
-            assert_eq!(
-                wrong,
-                0,
-                "divisor {c:e} (bits {:#x}), scale {scale:e}",
-                c.to_bits()
-            );
-        }
     }
 
     /// `step_with` with `visible` gives the bits of `step_sparse` with the same gradient and
