@@ -682,7 +682,7 @@ fn frozen_replay_matches_full_render_and_backward() {
             scene.means[i][0] = 40.0;
         }
     }
-    // The replay's SH backward has an AVX2 loop (`Kernel::Auto`) and the scalar one; its
+    // The replay has AVX-512F and AVX2 loops (`Kernel::Auto`) and the scalar ones; its
     // colours are evaluated in the kernel's lanes (AVX-512F, AVX2 or one at a time) for the
     // visible Gaussians only, staged side by side.
     let cases = [

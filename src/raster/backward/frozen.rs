@@ -10,7 +10,10 @@
 //! exp.
 //!
 //! The SH backward's per-visit loop has an AVX2 form (`visit_avx2`, full-width visits,
-//! when the record's kernel allows AVX2), the scalar loop's operations one for one.
+//! when the record's kernel allows AVX2), the scalar loop's operations one for one. With
+//! AVX-512F the forward replay of a tile row and the backward's transmittance recovery run
+//! sixteen lanes per instruction (`replay_row_avx512`, `recover_visit_avx512`: a visit's α
+//! expanded into its lanes, masks for the lanes that blend).
 //!
 //! A lane that did not blend has `fac = 0`: its term `0·v` is ±0 where the full pass adds
 //! a masked +0.0, and since the accumulators are never −0.0 (SPEC.md §5.8) the sums agree.
@@ -365,6 +368,72 @@ impl FrozenBlend {
         ws.record = self.id;
     }
 
+    /// The forward replay of tile row `r` (its visits front to back, the record's order
+    /// reversed): per lane `c += col·w` with the forward's `w = α·T`, `T ← T·(1 − α)`, from
+    /// `T = 1`, skipping lanes that did not blend. Colour planes, one per channel.
+    #[inline(always)]
+    fn replay_row(&self, r: usize, colors: &[[f32; 3]]) -> [[f32; LANES]; 3] {
+        let mut c = [[0f32; LANES]; 3];
+        let mut tr = [1f32; LANES];
+        let mut a_end = self.row_alpha[r + 1];
+        for v in (self.row_visits[r]..self.row_visits[r + 1]).rev() {
+            let col = colors[self.bins.ids[self.visit_k[v] as usize] as usize];
+            let [first, count] = self.visit_lanes[v].map(usize::from);
+            let alphas = &self.alpha[a_end - count..a_end];
+            a_end -= count;
+            for (j, &a) in alphas.iter().enumerate() {
+                if a > 0.0 {
+                    let l = first + j;
+                    let wt = a * tr[l];
+                    for ch in 0..3 {
+                        c[ch][l] += col[ch] * wt;
+                    }
+                    tr[l] *= 1.0 - a;
+                }
+            }
+        }
+        c
+    }
+
+    /// [`FrozenBlend::replay_row`] sixteen lanes per instruction: a visit's α expanded
+    /// into its lanes (`vexpandps`), the lanes that blend as a mask, the same multiplies
+    /// and adds per lane (masked adds and multiplies keep the other lanes as they are).
+    ///
+    /// # Safety
+    /// The CPU must support AVX-512F.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    unsafe fn replay_row_avx512(&self, r: usize, colors: &[[f32; 3]]) -> [[f32; LANES]; 3] {
+        use std::arch::x86_64::*;
+        let zero = _mm512_setzero_ps();
+        let one = _mm512_set1_ps(1.0);
+        let (mut c, mut tr) = ([zero; 3], one);
+        let mut a_end = self.row_alpha[r + 1];
+        for v in (self.row_visits[r]..self.row_visits[r + 1]).rev() {
+            let col = colors[self.bins.ids[self.visit_k[v] as usize] as usize];
+            let [first, count] = self.visit_lanes[v].map(usize::from);
+            let alphas = &self.alpha[a_end - count..a_end];
+            a_end -= count;
+            let run = run_mask(first, alphas.len());
+            // SAFETY: the expanding load reads popcount(run) = `alphas.len()` values from
+            // the start of `alphas`.
+            let a = unsafe { _mm512_maskz_expandloadu_ps(run, alphas.as_ptr()) };
+            let blends = _mm512_mask_cmp_ps_mask::<_CMP_GT_OQ>(run, a, zero);
+            let wt = _mm512_mul_ps(a, tr);
+            for (ch, c) in c.iter_mut().enumerate() {
+                let term = _mm512_mul_ps(_mm512_set1_ps(col[ch]), wt);
+                *c = _mm512_mask_add_ps(*c, blends, *c, term);
+            }
+            tr = _mm512_mask_mul_ps(tr, blends, tr, _mm512_sub_ps(one, a));
+        }
+        let mut out = [[0f32; LANES]; 3];
+        for (o, c) in out.iter_mut().zip(c) {
+            // SAFETY: `o` holds 16 f32.
+            unsafe { _mm512_storeu_ps(o.as_mut_ptr(), c) };
+        }
+        out
+    }
+
     /// The RGB render for the scene's current SH: the same bits as a full render.
     pub fn render_rgb(&self, scene: &Gaussians) -> Result<Vec<f32>> {
         let mut rgb = Vec::new();
@@ -385,6 +454,8 @@ impl FrozenBlend {
         let (w, h) = (self.cam.width as usize, self.cam.height as usize);
         let (bg, apply) = (self.opts.background, self.plan.apply_background);
         let (colors, bins) = (&ws.colors, &self.bins);
+        #[cfg(target_arch = "x86_64")]
+        let avx512 = self.kernel.avx512();
         rgb.clear();
         rgb.resize(w * h * 3, 0.0);
         // Per band, per tile row: the visits front to back (the record's order reversed),
@@ -398,31 +469,22 @@ impl FrozenBlend {
                     let (x0, cols) = (tx * TILE_SIZE, TILE_SIZE.min(w - tx * TILE_SIZE));
                     for row in 0..rows {
                         let r = t * TILE_SIZE + row;
-                        let mut c = [[0f32; 3]; LANES];
-                        let mut tr = [1f32; LANES];
-                        let mut a_end = self.row_alpha[r + 1];
-                        for v in (self.row_visits[r]..self.row_visits[r + 1]).rev() {
-                            let col = colors[bins.ids[self.visit_k[v] as usize] as usize];
-                            let [first, count] = self.visit_lanes[v].map(usize::from);
-                            let alphas = &self.alpha[a_end - count..a_end];
-                            a_end -= count;
-                            for (j, &a) in alphas.iter().enumerate() {
-                                if a > 0.0 {
-                                    let l = first + j;
-                                    let wt = a * tr[l];
-                                    for ch in 0..3 {
-                                        c[l][ch] += col[ch] * wt;
-                                    }
-                                    tr[l] *= 1.0 - a;
-                                }
-                            }
-                        }
-                        for (l, c) in c.iter().enumerate().take(cols) {
+                        #[cfg(target_arch = "x86_64")]
+                        let c = if avx512 {
+                            // SAFETY: `avx512` only when the CPU has AVX-512F.
+                            unsafe { self.replay_row_avx512(r, colors) }
+                        } else {
+                            self.replay_row(r, colors)
+                        };
+                        #[cfg(not(target_arch = "x86_64"))]
+                        let c = self.replay_row(r, colors);
+                        for l in 0..cols {
                             let i = (ty * TILE_SIZE + row) * w + x0 + l;
                             let out = &mut band[3 * (row * w + x0 + l)..][..3];
                             let t = self.final_t[i];
                             for ch in 0..3 {
-                                out[ch] = if apply { c[ch] + t * bg[ch] } else { c[ch] };
+                                let c = c[ch][l];
+                                out[ch] = if apply { c + t * bg[ch] } else { c };
                             }
                         }
                     }
@@ -445,7 +507,7 @@ impl FrozenBlend {
         let (w, h) = (self.cam.width as usize, self.cam.height as usize);
         ws.bands.resize_with(bins.tiles_y, Default::default);
         #[cfg(target_arch = "x86_64")]
-        let avx2 = self.kernel.avx2();
+        let (avx2, avx512) = (self.kernel.avx2(), self.kernel.avx512());
         // Per band, in the full backward's orders: background in (tile, row, pixel) order,
         // then the visits into their (tile, splat) lane-pair accumulators, reduced per tile
         // into the band's intersection range.
@@ -498,15 +560,16 @@ impl FrozenBlend {
                             let pos = self.visit_k[v] as usize - bins.offsets[t];
                             used = used.max(pos + 1);
                             let [first, count] = self.visit_lanes[v].map(usize::from);
-                            let mut fac = [0f32; LANES];
-                            for (j, &a) in self.alpha[a0..a0 + count].iter().enumerate() {
-                                if a > 0.0 {
-                                    let l = first + j;
-                                    let (_, tn, f) = recover(tt[l], a);
-                                    fac[l] = f;
-                                    tt[l] = tn;
-                                }
-                            }
+                            let alphas = &self.alpha[a0..a0 + count];
+                            #[cfg(target_arch = "x86_64")]
+                            let fac = if avx512 {
+                                // SAFETY: `avx512` only when the CPU has AVX-512F.
+                                unsafe { recover_visit_avx512(&mut tt, alphas, first) }
+                            } else {
+                                recover_visit(&mut tt, alphas, first)
+                            };
+                            #[cfg(not(target_arch = "x86_64"))]
+                            let fac = recover_visit(&mut tt, alphas, first);
                             a0 += count;
                             #[cfg(target_arch = "x86_64")]
                             if avx2 && cols == LANES {
@@ -642,6 +705,65 @@ impl FrozenBlend {
         }
         Ok(grads)
     }
+}
+
+/// The lanes `[first, first + len)` as a 16-lane mask (`len ≤ 16 − first`).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn run_mask(first: usize, len: usize) -> u16 {
+    (((1u32 << len) - 1) << first) as u16
+}
+
+/// One visit of the SH backward's walk, back to front: for each lane of the run that
+/// blended (α > 0), [`recover`] steps its transmittance `tt` back over the splat and gives
+/// the splat's weight; the weights, 0 elsewhere.
+#[inline(always)]
+fn recover_visit(tt: &mut [f32; LANES], alphas: &[f32], first: usize) -> [f32; LANES] {
+    let mut fac = [0f32; LANES];
+    for (j, &a) in alphas.iter().enumerate() {
+        if a > 0.0 {
+            let l = first + j;
+            let (_, tn, f) = recover(tt[l], a);
+            fac[l] = f;
+            tt[l] = tn;
+        }
+    }
+    fac
+}
+
+/// [`recover_visit`] sixteen lanes per instruction: [`recover`]'s operations lane for lane
+/// (`max_ps(1 − α, ε)` is its select: `a > b ? a : b`), the run's α expanded into its lanes.
+///
+/// # Safety
+/// The CPU must support AVX-512F.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn recover_visit_avx512(
+    tt: &mut [f32; LANES],
+    alphas: &[f32],
+    first: usize,
+) -> [f32; LANES] {
+    use std::arch::x86_64::*;
+    let zero = _mm512_setzero_ps();
+    let run = run_mask(first, alphas.len());
+    let mut fac = [0f32; LANES];
+    // SAFETY: the expanding load reads popcount(run) = `alphas.len()` values from the start
+    // of `alphas`; `tt` and `fac` hold 16 f32.
+    unsafe {
+        let a = _mm512_maskz_expandloadu_ps(run, alphas.as_ptr());
+        let blends = _mm512_mask_cmp_ps_mask::<_CMP_GT_OQ>(run, a, zero);
+        let t = _mm512_loadu_ps(tt.as_ptr());
+        let den = _mm512_max_ps(
+            _mm512_sub_ps(_mm512_set1_ps(1.0), a),
+            _mm512_set1_ps(super::composite::RECOVER_EPS),
+        );
+        let ra = _mm512_div_ps(_mm512_set1_ps(1.0), den);
+        let tn = _mm512_mul_ps(t, ra);
+        let f = _mm512_mul_ps(a, tn);
+        _mm512_storeu_ps(fac.as_mut_ptr(), _mm512_maskz_mov_ps(blends, f));
+        _mm512_storeu_ps(tt.as_mut_ptr(), _mm512_mask_mov_ps(t, blends, tn));
+    }
+    fac
 }
 
 /// One full-width visit of [`FrozenBlend::color_backward`] in AVX2: per channel, the 16
