@@ -86,9 +86,10 @@ pub unsafe fn exp_avx2(x: std::arch::x86_64::__m256) -> std::arch::x86_64::__m25
 }
 
 /// [`exp_avx2`] without its two input clamps: for `x` in `[-87, 88]` the same bits (the
-/// clamps change nothing there); outside, an unspecified value. For kernels whose lanes
-/// outside the range are masked out anyway (the blends: `x = −min(σ, 30)` of a lane with
-/// `σ ≥ 0` lies in `[-30, 0]`), two instructions fewer per call.
+/// clamps change nothing there); outside, an unspecified value (above 88 the exponent field
+/// wraps, and the result may be subnormal: callers keep masked-out lanes below 88 too). For
+/// kernels whose lanes outside the range are masked out anyway (the blends: `x = −min(σ,
+/// 30)` of a lane with `σ ≥ 0` lies in `[-30, 0]`), fewer instructions per call.
 ///
 /// # Safety
 /// The CPU must support AVX2.
@@ -135,7 +136,8 @@ pub unsafe fn exp_avx512(x: std::arch::x86_64::__m512) -> std::arch::x86_64::__m
 }
 
 /// [`exp_avx512`] without its two input clamps, as [`exp_avx2_in_range`]: the same bits
-/// for `x` in `[-87, 88]`, an unspecified value outside.
+/// for `x` in `[-87, 88]`, an unspecified value outside (normal, ∞, 0 or NaN: `vscalefps`
+/// saturates instead of wrapping).
 ///
 /// # Safety
 /// The CPU must support AVX-512F.

@@ -446,14 +446,16 @@ mod avx2 {
             for h in 0..H {
                 let dx = _mm256_sub_ps(mx, pxv[h]);
                 let sum = _mm256_add_ps(_mm256_mul_ps(_mm256_mul_ps(ca, dx), dx), cdd);
-                // −σ exactly, and `max(−σ, −30) = −min(σ, 30)` (`max_ps(a, b)` is
-                // `a > b ? a : b`, b when unordered, as `min_ps` was): the exponential's
-                // argument lies in [−30, 0] in every valid lane (SPEC.md §5.7).
+                // −σ (up to the sign of a zero), and `max(−σ, −30) = −min(σ, 30)`
+                // (`max_ps(a, b)` is `a > b ? a : b`, b when unordered, as `min_ps` was):
+                // the exponential's argument lies in [−30, 0] in every valid lane (SPEC.md
+                // §5.7). The upper clamp at 0 changes no valid lane; it keeps an invalid
+                // one (σ < 0) from building a subnormal `2^k` (slow, never used).
                 let neg_sigma = _mm256_sub_ps(
                     _mm256_mul_ps(c(-0.5), sum),
                     _mm256_mul_ps(_mm256_mul_ps(cb, dx), dyv),
                 );
-                let x = _mm256_max_ps(neg_sigma, c(-SIGMA_CLAMP));
+                let x = _mm256_min_ps(c(0.0), _mm256_max_ps(neg_sigma, c(-SIGMA_CLAMP)));
                 // SAFETY: this function runs only on CPUs with AVX2.
                 let e = unsafe { exp_avx2_in_range(x) };
                 alphas[h] = _mm256_min_ps(_mm256_mul_ps(op, e), clamp);
@@ -521,12 +523,13 @@ mod avx512 {
     /// −σ and α of splat `s` at the 16 pixel centres `px` of the row at `py` under the α
     /// clamp `clamp`: [`super::splat_alpha`]'s values lane for lane (the same bits), with
     /// −σ in place of σ (`σ ≥ 0` is `−σ ≤ 0`, both false for NaN). Round-to-nearest is
-    /// symmetric, so `(−½)·sum − (B·dx)·dy` is exactly `−(½·sum + (B·dx)·dy)`, and
+    /// symmetric, so `(−½)·sum − (B·dx)·dy` is `−(½·sum + (B·dx)·dy)` except for the sign
+    /// of an exactly cancelling zero (`exp(+0)` and `exp(−0)` are the same 1.0), and
     /// `max(−σ, −30)` is `−min(σ, 30)` (NaN → −30 in both: the second operand), so the
     /// sign flip costs nothing. The exponential skips its range clamps: a lane with
     /// `σ ≥ 0` has its argument in `[−30, 0]`, and a lane with `σ < 0` or NaN is not valid,
-    /// so its α (unspecified) is never used. Shared by the blend and the frozen-blend
-    /// record.
+    /// so its α (unspecified: normal, ∞ or NaN, as `vscalefps` saturates) is never used.
+    /// Shared by the blend and the frozen-blend record.
     #[inline]
     #[target_feature(enable = "avx512f")]
     pub(crate) fn splat_alpha16(s: &Splat, px: __m512, py: f32, clamp: __m512) -> (__m512, __m512) {

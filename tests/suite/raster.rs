@@ -742,3 +742,133 @@ fn tiles_change_no_output_bit() {
         }
     }
 }
+
+/// The blend kernels' exact rewrites (SPEC.md §5.7: −σ in place of σ, the exponential
+/// without its range clamps, masked accumulation) on the splats that probe them: centres
+/// exactly on pixel centres with B < 0, = 0 and > 0 (σ = +0 from a cancelling −0, the case
+/// where −σ's zero may differ in sign), conics that are not positive definite (σ far below 0
+/// over most of the tile: lanes whose unclamped exponential is garbage must stay masked
+/// out), a NaN conic, α at the clamp. Forward (every output) and backward (every gradient)
+/// of the scalar, AVX2 and Auto kernels compared bit for bit.
+#[test]
+fn kernels_agree_on_centred_and_degenerate_splats() {
+    use unseen::raster::RenderReport;
+    use unseen::raster::backward::PixelGrads;
+    use unseen::raster::backward::composite::composite_backward;
+    use unseen::raster::composite::{Want, composite};
+    use unseen::raster::project::{Projected, Splat};
+    use unseen::raster::tile::bin;
+    use unseen::rng::Uniform;
+    let (w, h) = (40usize, 36usize);
+    let mut u = Uniform::new(11);
+    let mut splats = Vec::new();
+    for k in 0..60 {
+        let (x, y) = ((k * 7 % w) as f32 + 0.5, (k * 5 % h) as f32 + 0.5);
+        let b = [-0.3, 0.0, 0.3][k % 3];
+        splats.push(Splat {
+            mean: [x, y],
+            conic: [0.5, b, 0.4],
+            opacity: [0.5, 0.995, 1.0, 0.02][k % 4],
+            color: [u.unit(), u.unit(), u.unit()],
+            depth: 1.0 + u.unit(),
+        });
+    }
+    for k in 0..30 {
+        // Not positive definite: B² > A·C, σ ≈ −B·|dx·dy| down to about −900.
+        splats.push(Splat {
+            mean: [u.range(0.0, w as f32), u.range(0.0, h as f32)],
+            conic: [0.2, [3.0, -4.0, 2.5][k % 3], 0.1],
+            opacity: 0.7,
+            color: [u.unit(), u.unit(), u.unit()],
+            depth: 0.5 + u.unit(),
+        });
+    }
+    splats.push(Splat {
+        mean: [10.5, 10.5],
+        conic: [f32::NAN, 0.0, 1.0],
+        opacity: 0.5,
+        color: [0.5; 3],
+        depth: 1.0,
+    });
+    let radii = vec![[14, 14]; splats.len()];
+    let p = Projected { splats, radii };
+    let scene = random_scene(1, 0, 1, 0.01, 0.1);
+    let opts = RenderOptions::default();
+    let plan = RenderPlan::new(&scene, &opts);
+    let want = Want {
+        rgb: true,
+        alpha: true,
+        depth: true,
+        expected_depth: true,
+        backward_state: true,
+    };
+    let bg = [0.1, 0.2, 0.3];
+    let kernels = [Kernel::Scalar, Kernel::Avx2, Kernel::Auto];
+    let outs: Vec<_> = kernels
+        .iter()
+        .map(|&k| {
+            let bins = bin(&p, w, h, k);
+            let out = composite(
+                w,
+                h,
+                &p,
+                &bins,
+                &plan,
+                bg,
+                want,
+                k,
+                &mut RenderReport::default(),
+            );
+            (bins, out)
+        })
+        .collect();
+    let (bins, reference) = &outs[0];
+    let images = |o: &unseen::raster::composite::CompositeOut| {
+        let f = |v: &Option<Vec<f32>>| bits(v.as_deref().unwrap());
+        [
+            f(&o.rgb),
+            f(&o.alpha),
+            f(&o.depth),
+            f(&o.expected_depth),
+            f(&o.final_t),
+        ]
+    };
+    assert!(reference.alpha.as_ref().unwrap().iter().any(|&a| a > 0.5));
+    for ((_, out), k) in outs.iter().zip(kernels).skip(1) {
+        assert!(images(out) == images(reference), "forward, {k:?}");
+        assert_eq!(out.n_contrib, reference.n_contrib, "n_contrib, {k:?}");
+    }
+    let n = w * h;
+    let v: Vec<f32> = (0..4 * n).map(|_| u.range(-1.0, 1.0)).collect();
+    let g = PixelGrads {
+        v_rgb: Some(&v[..3 * n]),
+        v_alpha: Some(&v[3 * n..]),
+        v_depth: None,
+        v_expected_depth: None,
+        final_t: reference.final_t.as_deref().unwrap(),
+        n_contrib: reference.n_contrib.as_deref().unwrap(),
+        depth: None,
+    };
+    let grads = |k| {
+        let r = composite_backward(
+            w,
+            h,
+            &p,
+            bins,
+            plan.cull_rows,
+            plan.conventions.max_alpha(),
+            bg,
+            &g,
+            true,
+            k,
+        );
+        let mut all: Vec<f32> = unseen::raster::backward::SplatGrad::floats(&r.splats).to_vec();
+        all.extend(r.background);
+        (bits(&all), r.pairs)
+    };
+    let reference = grads(Kernel::Scalar);
+    assert!(reference.0.iter().any(|&b| b != 0));
+    for k in [Kernel::Avx2, Kernel::Auto] {
+        assert!(grads(k) == reference, "backward, {k:?}");
+    }
+}

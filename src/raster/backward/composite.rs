@@ -530,12 +530,13 @@ mod avx2 {
                 let active = _mm256_castsi256_ps(_mm256_cmpgt_epi32(n[h], posv));
                 let dx = _mm256_sub_ps(c(s.mean[0]), pxv[h]);
                 let sum = _mm256_add_ps(_mm256_mul_ps(_mm256_mul_ps(c(s.conic[0]), dx), dx), cdd);
-                // −σ and the exponential in range, as the AVX-512F form (SPEC.md §5.7).
+                // −σ and the exponential in range, as the forward's AVX2 form (SPEC.md
+                // §5.7; the clamp at 0 keeps invalid lanes off subnormals).
                 let neg_sigma = _mm256_sub_ps(
                     _mm256_mul_ps(c(-0.5), sum),
                     _mm256_mul_ps(_mm256_mul_ps(c(s.conic[1]), dx), dyv),
                 );
-                let x = _mm256_max_ps(neg_sigma, c(-SIGMA_CLAMP));
+                let x = _mm256_min_ps(c(0.0), _mm256_max_ps(neg_sigma, c(-SIGMA_CLAMP)));
                 // SAFETY: AVX2 is available in this function.
                 let e = unsafe { exp_avx2_in_range(x) };
                 let a = _mm256_mul_ps(c(s.opacity), e);
@@ -698,8 +699,8 @@ mod avx512 {
             );
             let dx = _mm512_sub_ps(c(s.mean[0]), pxv);
             let sum = _mm512_add_ps(_mm512_mul_ps(_mm512_mul_ps(c(s.conic[0]), dx), dx), cdd);
-            // −σ exactly, and the exponential without its range clamps, as the forward
-            // kernel computes them (`composite::avx512::splat_alpha16`): a valid lane's
+            // −σ (up to the sign of a zero), and the exponential without its range
+            // clamps, as the forward kernel computes them (`composite::avx512::splat_alpha16`): a valid lane's
             // argument `max(−σ, −30) = −min(σ, 30)` lies in [−30, 0].
             let neg_sigma = _mm512_sub_ps(
                 _mm512_mul_ps(c(-0.5), sum),
