@@ -10,10 +10,11 @@
 //! exp.
 //!
 //! The SH backward's per-visit loop has an AVX2 form (`visit_avx2`, full-width visits,
-//! when the record's kernel allows AVX2), the scalar loop's operations one for one. With
-//! AVX-512F the forward replay of a tile row and the backward's transmittance recovery run
-//! sixteen lanes per instruction (`replay_row_avx512`, `recover_visit_avx512`: a visit's α
-//! expanded into its lanes, masks for the lanes that blend).
+//! when the record's kernel allows AVX2), the scalar loop's operations one for one. The
+//! forward replay of a tile row and the backward's transmittance recovery run sixteen lanes
+//! per instruction on AVX-512F (`replay_row_avx512`, `recover_visit_avx512`: a visit's α
+//! expanded into its lanes) and eight on AVX2 (`replay_row_avx2`, `recover_visit_avx2`: the
+//! α placed in a 16-lane row), with masks for the lanes that blend.
 //!
 //! A lane that did not blend has `fac = 0`: its term `0·v` is ±0 where the full pass adds
 //! a masked +0.0, and since the accumulators are never −0.0 (SPEC.md §5.8) the sums agree.
@@ -434,6 +435,49 @@ impl FrozenBlend {
         out
     }
 
+    /// [`FrozenBlend::replay_row`] eight lanes per instruction: a visit's α placed in its
+    /// lanes of a 16-lane row (0 elsewhere, lanes that do not blend either), the same
+    /// multiplies and adds per lane under the mask of the lanes that blend.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn replay_row_avx2(&self, r: usize, colors: &[[f32; 3]]) -> [[f32; LANES]; 3] {
+        use std::arch::x86_64::*;
+        let zero = _mm256_setzero_ps();
+        let one = _mm256_set1_ps(1.0);
+        let (mut c, mut tr) = ([[zero; 2]; 3], [one; 2]);
+        let mut a_end = self.row_alpha[r + 1];
+        for v in (self.row_visits[r]..self.row_visits[r + 1]).rev() {
+            let col = colors[self.bins.ids[self.visit_k[v] as usize] as usize];
+            let [first, count] = self.visit_lanes[v].map(usize::from);
+            let mut a = [0f32; LANES];
+            a[first..first + count].copy_from_slice(&self.alpha[a_end - count..a_end]);
+            a_end -= count;
+            for h in 0..2 {
+                // SAFETY: `a[8h..8h + 8]` holds 8 f32.
+                let av = unsafe { _mm256_loadu_ps(a.as_ptr().add(8 * h)) };
+                let blends = _mm256_cmp_ps::<_CMP_GT_OQ>(av, zero);
+                let wt = _mm256_mul_ps(av, tr[h]);
+                for (ch, c) in c.iter_mut().enumerate() {
+                    let sum = _mm256_add_ps(c[h], _mm256_mul_ps(_mm256_set1_ps(col[ch]), wt));
+                    c[h] = _mm256_blendv_ps(c[h], sum, blends);
+                }
+                let next = _mm256_mul_ps(tr[h], _mm256_sub_ps(one, av));
+                tr[h] = _mm256_blendv_ps(tr[h], next, blends);
+            }
+        }
+        let mut out = [[0f32; LANES]; 3];
+        for (o, c) in out.iter_mut().zip(c) {
+            for (h, c) in c.into_iter().enumerate() {
+                // SAFETY: `o[8h..8h + 8]` holds 8 f32.
+                unsafe { _mm256_storeu_ps(o.as_mut_ptr().add(8 * h), c) };
+            }
+        }
+        out
+    }
+
     /// The RGB render for the scene's current SH: the same bits as a full render.
     pub fn render_rgb(&self, scene: &Gaussians) -> Result<Vec<f32>> {
         let mut rgb = Vec::new();
@@ -455,7 +499,7 @@ impl FrozenBlend {
         let (bg, apply) = (self.opts.background, self.plan.apply_background);
         let (colors, bins) = (&ws.colors, &self.bins);
         #[cfg(target_arch = "x86_64")]
-        let avx512 = self.kernel.avx512();
+        let (avx2, avx512) = (self.kernel.avx2(), self.kernel.avx512());
         rgb.clear();
         rgb.resize(w * h * 3, 0.0);
         // Per band, per tile row: the visits front to back (the record's order reversed),
@@ -473,6 +517,9 @@ impl FrozenBlend {
                         let c = if avx512 {
                             // SAFETY: `avx512` only when the CPU has AVX-512F.
                             unsafe { self.replay_row_avx512(r, colors) }
+                        } else if avx2 {
+                            // SAFETY: `avx2` only when the CPU has AVX2.
+                            unsafe { self.replay_row_avx2(r, colors) }
                         } else {
                             self.replay_row(r, colors)
                         };
@@ -565,6 +612,9 @@ impl FrozenBlend {
                             let fac = if avx512 {
                                 // SAFETY: `avx512` only when the CPU has AVX-512F.
                                 unsafe { recover_visit_avx512(&mut tt, alphas, first) }
+                            } else if avx2 {
+                                // SAFETY: `avx2` only when the CPU has AVX2.
+                                unsafe { recover_visit_avx2(&mut tt, alphas, first) }
                             } else {
                                 recover_visit(&mut tt, alphas, first)
                             };
@@ -726,6 +776,40 @@ fn recover_visit(tt: &mut [f32; LANES], alphas: &[f32], first: usize) -> [f32; L
             let (_, tn, f) = recover(tt[l], a);
             fac[l] = f;
             tt[l] = tn;
+        }
+    }
+    fac
+}
+
+/// [`recover_visit`] eight lanes per instruction, the run's α placed in its lanes (0
+/// elsewhere): [`recover`]'s operations lane for lane, the weights masked to +0.0 where a
+/// lane does not blend.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn recover_visit_avx2(tt: &mut [f32; LANES], alphas: &[f32], first: usize) -> [f32; LANES] {
+    use std::arch::x86_64::*;
+    let zero = _mm256_setzero_ps();
+    let mut a = [0f32; LANES];
+    a[first..first + alphas.len()].copy_from_slice(alphas);
+    let mut fac = [0f32; LANES];
+    for h in 0..2 {
+        // SAFETY: `a`, `tt` and `fac` hold 16 f32; `8h + 8 ≤ 16`.
+        unsafe {
+            let av = _mm256_loadu_ps(a.as_ptr().add(8 * h));
+            let blends = _mm256_cmp_ps::<_CMP_GT_OQ>(av, zero);
+            let t = _mm256_loadu_ps(tt.as_ptr().add(8 * h));
+            let den = _mm256_max_ps(
+                _mm256_sub_ps(_mm256_set1_ps(1.0), av),
+                _mm256_set1_ps(super::composite::RECOVER_EPS),
+            );
+            let ra = _mm256_div_ps(_mm256_set1_ps(1.0), den);
+            let tn = _mm256_mul_ps(t, ra);
+            let f = _mm256_mul_ps(av, tn);
+            _mm256_storeu_ps(fac.as_mut_ptr().add(8 * h), _mm256_and_ps(blends, f));
+            _mm256_storeu_ps(tt.as_mut_ptr().add(8 * h), _mm256_blendv_ps(t, tn, blends));
         }
     }
     fac
