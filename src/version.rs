@@ -16,5 +16,6 @@ pub const CONVENTIONS_VERSION: u32 = 1;
 /// depth became the non-paper switch `original_view_depth`), Eq. 4's mean as
 /// `r₀ + Σ(rⱼ − r₀)/n` (exact for equal ranges); 6 stage 2's dependent-view depth by video
 /// depth alignment (the least-squares fit to the stage-1 render became the non-paper
-/// `stage2_depth: render_fit`).
-pub const NUMERICS_REVISION: u32 = 6;
+/// `stage2_depth: render_fit`); 7 the projection's 2D covariance from its factor `F = J·W·R·S`
+/// and its determinant as a sum of squared minors (issue #51: stable on needles).
+pub const NUMERICS_REVISION: u32 = 7;

@@ -222,6 +222,11 @@ fn decisions_dict<'py>(py: Python<'py>, d: Decisions) -> PyResult<Bound<'py, PyD
     out.set_item("rgb_error", to_numpy(py, d.rgb_error, &[h, w])?)?;
     out.set_item("depth_error", to_numpy(py, d.depth_error, &[h, w])?)?;
     out.set_item("gaussian_flags", to_numpy(py, d.gaussian_flags, &[n])?)?;
+    out.set_item(
+        "conic_amplification",
+        to_numpy(py, d.conic_amplification, &[n])?,
+    )?;
+    out.set_item("condition", to_numpy(py, d.condition, &[n])?)?;
     let m = PyDict::new(py);
     m.set_item("sigma", d.margins.sigma)?;
     m.set_item("alpha", d.margins.alpha)?;
@@ -229,12 +234,13 @@ fn decisions_dict<'py>(py: Python<'py>, d: Decisions) -> PyResult<Bound<'py, PyD
     m.set_item("transmittance", d.margins.transmittance)?;
     m.set_item("depth", d.margins.depth)?;
     m.set_item("recovery", d.margins.recovery)?;
+    m.set_item("conic", d.margins.conic)?;
     out.set_item("margins", m)?;
     Ok(out)
 }
 
 /// Margins from an optional dict `{"sigma": .., "alpha": .., "mean2d": .., "transmittance": ..,
-/// "depth": .., "recovery": ..}` (SPEC.md §8.1).
+/// "depth": .., "recovery": .., "conic": ..}` (SPEC.md §8.1).
 fn margins(d: Option<&Bound<'_, PyDict>>) -> PyResult<Margins> {
     let mut m = Margins::default();
     if let Some(d) = d {
@@ -248,9 +254,10 @@ fn margins(d: Option<&Bound<'_, PyDict>>) -> PyResult<Margins> {
                 "transmittance" => m.transmittance = v,
                 "depth" => m.depth = v,
                 "recovery" => m.recovery = v,
+                "conic" => m.conic = v,
                 _ => {
                     return Err(PyValueError::new_err(format!(
-                        "margins: expected keys among 'sigma', 'alpha', 'mean2d', 'transmittance', 'depth', 'recovery', got {key:?}"
+                        "margins: expected keys among 'sigma', 'alpha', 'mean2d', 'transmittance', 'depth', 'recovery', 'conic', got {key:?}"
                     )));
                 }
             }

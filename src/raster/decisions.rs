@@ -15,6 +15,13 @@
 //! [`Margins`]; per Gaussian it flags the projection's decisions (opacity cull, near
 //! plane, Jacobian guard) within their margins.
 //!
+//! The projection itself is a source of error only where float32 cannot resolve a
+//! Gaussian's footprint: [`conic_amplification`] bounds how far rounding can move its conic
+//! (a few units of roundoff for ordinary Gaussians, up to the aspect ratio for a needle
+//! lying along a pixel axis or pointing at the camera). That bound widens the Gaussian's σ
+//! error where it exceeds the `sigma` margin, and past the `conic` margin the Gaussian and
+//! the pixels it reaches are flagged beyond float32.
+//!
 //! A Gaussian our projection culls for an opacity just under 1/255 may be kept by a port;
 //! the replay therefore projects with the threshold lowered by the α margin, so such a
 //! Gaussian's pixels are seen (its α there is under 1/255 in our arithmetic: a skip, as
@@ -22,7 +29,9 @@
 //! scalar walk of the tile lists: a diagnostic, not a render path.
 
 use super::composite::{SplatAlpha, splat_alpha};
-use super::project::{ALPHA_THRESHOLD, FAR_PLANE, JACOBIAN_GUARD, NEAR_PLANE, Splat};
+use super::project::{
+    ALPHA_THRESHOLD, CameraF32, EPS2D, FAR_PLANE, JACOBIAN_GUARD, NEAR_PLANE, Splat,
+};
 use super::tile::TILE_SIZE;
 use super::{RenderOptions, RenderPlan, RenderReport};
 use crate::camera::Camera;
@@ -51,10 +60,17 @@ pub const PIXEL_CLAMPED: u8 = 32;
 /// under gsplat's 0.999), so two correct implementations' gradients from this pixel
 /// differ by more than the gradient tolerance.
 pub const PIXEL_RECOVERY: u8 = 64;
+/// Pixel flag: a splat beyond float32 (its Gaussian is flagged
+/// [`GAUSSIAN_ILL_CONDITIONED`]) passes the α test here: no float32 evaluation of its
+/// projection, ours included, resolves its footprint to the comparison's tolerance.
+pub const PIXEL_ILL_CONDITIONED: u8 = 128;
 
 /// The flags that make a pixel's forward outputs ambiguous.
-pub const PIXEL_FORWARD_FLAGS: u8 =
-    PIXEL_ALPHA_THRESHOLD | PIXEL_TRANSMITTANCE_STOP | PIXEL_DEPTH_TIE | PIXEL_SIGMA_SIGN;
+pub const PIXEL_FORWARD_FLAGS: u8 = PIXEL_ALPHA_THRESHOLD
+    | PIXEL_TRANSMITTANCE_STOP
+    | PIXEL_DEPTH_TIE
+    | PIXEL_SIGMA_SIGN
+    | PIXEL_ILL_CONDITIONED;
 /// The flags that make a pixel's contribution to the gradients ambiguous.
 pub const PIXEL_BACKWARD_FLAGS: u8 = PIXEL_FORWARD_FLAGS | PIXEL_ALPHA_CLAMP | PIXEL_RECOVERY;
 
@@ -65,6 +81,16 @@ pub const GAUSSIAN_DEPTH_CULL: u8 = 2;
 /// Gaussian flag: its `x/z` or `y/z` lies within the α margin of the Jacobian guard's
 /// clamp (SPEC.md §5.1): the mean's gradient has a kink there.
 pub const GAUSSIAN_JACOBIAN_CLAMP: u8 = 4;
+/// Gaussian flag: its conic's float32 error bound `CONIC_ROUNDING·u·κ`
+/// ([`conic_amplification`]) exceeds the conic margin: beyond float32.
+pub const GAUSSIAN_ILL_CONDITIONED: u8 = 8;
+
+/// A float32 evaluation of the projection (ours, or a port's by the same cancellation-free
+/// form) gives a conic whose entries lie within `CONIC_ROUNDING·u·κ` of the exact ones
+/// (relative; B relative to `√(A·C)`), `u = 2⁻²⁴` and κ from [`conic_amplification`]:
+/// measured 3.6 on 26 000 ordinary and needle Gaussians (test
+/// `ill_conditioned_conics_match_an_f64_projection`), ×2.
+pub const CONIC_ROUNDING: f64 = 8.0;
 
 /// How far a correct float32 port's values may lie from ours: a decision whose value is
 /// within this distance of its threshold counts as ambiguous. A splat's α at a pixel may
@@ -107,6 +133,13 @@ pub struct Margins {
     /// clamp allows it; two αs of 0.99 already stop the walk, so under `inria` the sum
     /// stays below ≈ 198).
     pub recovery: f32,
+    /// The conic error bound (relative, `CONIC_ROUNDING·u·κ` per implementation) above
+    /// which a Gaussian counts as beyond float32 and its pixels are set aside: 1e-4, five
+    /// times `sigma`. Below it a splat's σ error is `max(sigma, 2·bound)·|σ|₊` (the conic's
+    /// two implementations' rounding, where it exceeds what `sigma` already allows):
+    /// past it the conic's own rounding, not σ's evaluation, decides a port's error over the
+    /// whole footprint.
+    pub conic: f32,
 }
 
 impl Default for Margins {
@@ -118,6 +151,7 @@ impl Default for Margins {
             recovery: 4e-4,
             transmittance: 1e-5,
             depth: 5e-7,
+            conic: 1e-4,
         }
     }
 }
@@ -140,6 +174,7 @@ impl Margins {
             ("transmittance", self.transmittance),
             ("depth", self.depth),
             ("recovery", self.recovery),
+            ("conic", self.conic),
         ] {
             if !(v.is_finite() && (0.0..0.01).contains(&v)) {
                 return Err(Error::invalid(format!(
@@ -183,6 +218,12 @@ pub struct Decisions {
     pub depth_error: Vec<f32>,
     /// Per Gaussian: `GAUSSIAN_*` bits.
     pub gaussian_flags: Vec<u8>,
+    /// Per Gaussian: κ of [`conic_amplification`] (how many units of rounding a float32
+    /// conic may be off by), and the condition number `λ_max/λ_min` of its dilated 2D
+    /// covariance (what the textbook `a·c − b²` form loses: its conic is good only while
+    /// `u·cond` is small); both 0 where the projection culls the Gaussian.
+    pub conic_amplification: Vec<f32>,
+    pub condition: Vec<f32>,
     /// The margins the flags were set with.
     pub margins: Margins,
 }
@@ -245,6 +286,27 @@ pub fn decisions(
     let mut report = RenderReport::default();
     let p = super::project::project(scene, cam, &relaxed, opts, &mut report);
     let bins = super::tile::bin(&p, w, h, opts.kernel);
+    let camf = CameraF32::new(cam);
+    let (kappa, condition): (Vec<f32>, Vec<f32>) = (0..scene.len())
+        .into_par_iter()
+        .map(|i| {
+            if p.radii[i] == [0, 0] {
+                return (0.0, 0.0);
+            }
+            let c = &p.splats[i].conic;
+            // The dilated covariance's eigenvalues are the conic's reciprocals.
+            let (a, b, cc) = (f64::from(c[0]), f64::from(c[1]), f64::from(c[2]));
+            let (mid, rad) = (0.5 * (a + cc), (0.25 * (a - cc) * (a - cc) + b * b).sqrt());
+            let cond = (mid + rad) / (mid - rad).max(f64::MIN_POSITIVE);
+            (conic_amplification(scene, i, &camf) as f32, cond as f32)
+        })
+        .unzip();
+    let unit = f64::from(f32::EPSILON) / 2.0;
+    // Per Gaussian: the conic's relative error bound of one f32 implementation.
+    let rho: Vec<f32> = kappa
+        .iter()
+        .map(|&k| (CONIC_ROUNDING * unit * f64::from(k)) as f32)
+        .collect();
     let (thr, stop, clamp) = (
         ALPHA_THRESHOLD,
         plan.cutoffs.transmittance_stop,
@@ -291,7 +353,11 @@ pub fn decisions(
             let shift = m.mean2d
                 * ((s.conic[0] * dx + s.conic[1] * dy).abs() * s.mean[0].abs()
                     + (s.conic[1] * dx + s.conic[2] * dy).abs() * s.mean[1].abs());
-            let err = m.alpha_error(scale, shift);
+            let r = rho[gid as usize];
+            let err = m.alpha_error(scale, shift) + (2.0 * r - m.sigma).max(0.0) * scale;
+            if r > m.conic && alpha >= thr * (1.0 - err) {
+                out.flags |= PIXEL_ILL_CONDITIONED;
+            }
             let am = rel(alpha, thr) - err;
             out.alpha = out.alpha.min(am);
             if am <= 0.0 {
@@ -332,7 +398,9 @@ pub fn decisions(
                     }
                     let (ndx, ndy) = (n.mean[0] - px, n.mean[1] - py);
                     let na = splat_alpha(n, ndx, ndy, clamp);
-                    let nerr = m.alpha_error(sigma_terms(n, ndx, ndy), 0.0);
+                    let nterms = sigma_terms(n, ndx, ndy);
+                    let nerr = m.alpha_error(nterms, 0.0)
+                        + (2.0 * rho[next as usize] - m.sigma).max(0.0) * nterms;
                     if na.sigma >= 0.0 && na.alpha >= thr * (1.0 - nerr) {
                         out.flags |= PIXEL_DEPTH_TIE;
                         out.depth = out.depth.min(gap as f32 - m.depth);
@@ -368,7 +436,12 @@ pub fn decisions(
         .flat_map_iter(|i| (0..w).map(move |j| (i, j)))
         .map(|(i, j)| walk(i, j))
         .collect();
-    let gaussian_flags = gaussian_decisions(scene, cam, &m);
+    let mut gaussian_flags = gaussian_decisions(scene, cam, &m);
+    for (f, &r) in gaussian_flags.iter_mut().zip(&rho) {
+        if r > m.conic {
+            *f |= GAUSSIAN_ILL_CONDITIONED;
+        }
+    }
     Ok(Decisions {
         width: w,
         height: h,
@@ -381,6 +454,8 @@ pub fn decisions(
         rgb_error: walks.iter().map(|p| p.sensitivity * p.color_max).collect(),
         depth_error: walks.iter().map(|p| p.sensitivity * p.depth_max).collect(),
         gaussian_flags,
+        conic_amplification: kappa,
+        condition,
         margins: m,
     })
 }
@@ -428,4 +503,87 @@ fn gaussian_decisions(scene: &Gaussians, cam: &Camera, m: &Margins) -> Vec<u8> {
             f
         })
         .collect()
+}
+
+/// How far float32 rounding can move a Gaussian's conic, as a multiple of the unit
+/// roundoff: `1 + e_a + e_c + e_d`, evaluated in f64 from the f32 inputs (SPEC.md §8.1).
+/// With `F = J·Q·diag(s)` (`Q = W·R`), every entry of `F`'s row `r` carries an absolute
+/// rounding error of a few ulps of `|J_r|·s_k` (the rotation's entries are good to a few
+/// ulps of 1), so the dilated variance `a = |F₀|² + ε` moves by `2·|F₀|·|J₀|·|s|` ulps:
+/// relative, `e_a = |J₀|·|s|/√a` (likewise `e_c`; the covariance `b` relative to `√(a·c)`
+/// by at most their sum). The determinant's minors `s_i·s_j·(Qᵀ·(J₀ × J₁))_k` carry a few
+/// ulps of `s_i·s_j·|J₀ × J₁|` each: relative to the dilated determinant, `e_d =
+/// 2·|J₀ × J₁|·Σ_k |μ_k|·s_i·s_j / det`. An ordinary Gaussian has each term of order 1; a
+/// needle whose long axis projects (nearly) onto a pixel axis, or points (nearly) at the
+/// camera, has one of them as large as its aspect ratio: no float32 evaluation of the
+/// projection resolves its thin axis there.
+pub fn conic_amplification(scene: &Gaussians, i: usize, cam: &CameraF32) -> f64 {
+    let dot3 = |u: [f64; 3], v: [f64; 3]| (u[0] * v[0] + u[1] * v[1]) + u[2] * v[2];
+    let m = scene.means[i].map(f64::from);
+    let r = cam.r_cw.map(|row| row.map(f64::from));
+    let t: [f64; 3] = std::array::from_fn(|a| {
+        (r[a][0] * m[0] + r[a][1] * m[1]) + r[a][2] * m[2] + f64::from(cam.t_cw[a])
+    });
+    let q = scene.quats[i].map(f64::from);
+    let qn = ((q[0] * q[0] + q[1] * q[1]) + (q[2] * q[2] + q[3] * q[3])).sqrt();
+    let [w, x, y, z] = q.map(|v| v / qn);
+    let rot = [
+        [
+            1.0 - 2.0 * (y * y + z * z),
+            2.0 * (x * y - w * z),
+            2.0 * (x * z + w * y),
+        ],
+        [
+            2.0 * (x * y + w * z),
+            1.0 - 2.0 * (x * x + z * z),
+            2.0 * (y * z - w * x),
+        ],
+        [
+            2.0 * (x * z - w * y),
+            2.0 * (y * z + w * x),
+            1.0 - 2.0 * (x * x + y * y),
+        ],
+    ];
+    let s = scene.log_scales[i].map(|v| f64::from(v).exp());
+    let (fx, fy) = (f64::from(cam.fx), f64::from(cam.fy));
+    let (w, h) = (f64::from(cam.width), f64::from(cam.height));
+    let guard = f64::from(JACOBIAN_GUARD);
+    let clamp = |u: f64, c: f64, f: f64, size: f64| {
+        u.clamp(
+            -(c / f + guard * 0.5 * size / f),
+            (size - c) / f + guard * 0.5 * size / f,
+        )
+    };
+    let z = t[2];
+    let tx = z * clamp(t[0] / z, f64::from(cam.cx), fx, w);
+    let ty = z * clamp(t[1] / z, f64::from(cam.cy), fy, h);
+    let j = [
+        [fx / z, 0.0, -fx * tx / (z * z)],
+        [0.0, fy / z, -fy * ty / (z * z)],
+    ];
+    let q_cam: [[f64; 3]; 3] = std::array::from_fn(|a| {
+        std::array::from_fn(|k| dot3(r[a], [rot[0][k], rot[1][k], rot[2][k]]))
+    });
+    let mut f = [[0.0; 3]; 2];
+    for a in 0..2 {
+        for k in 0..3 {
+            f[a][k] = dot3(j[a], [q_cam[0][k], q_cam[1][k], q_cam[2][k]]) * s[k];
+        }
+    }
+    let eps = f64::from(EPS2D);
+    let (a, c) = (dot3(f[0], f[0]) + eps, dot3(f[1], f[1]) + eps);
+    let jc = [
+        -(j[0][2] * j[1][1]),
+        -(j[0][0] * j[1][2]),
+        j[0][0] * j[1][1],
+    ];
+    let ss = [s[1] * s[2], s[0] * s[2], s[0] * s[1]];
+    let mu: [f64; 3] =
+        std::array::from_fn(|k| ss[k] * dot3([q_cam[0][k], q_cam[1][k], q_cam[2][k]], jc));
+    let det = dot3(mu, mu) + eps * (a + c - 2.0 * eps) + eps * eps;
+    let norm = |v: [f64; 3]| dot3(v, v).sqrt();
+    let e_a = norm(j[0]) * norm(s) / a.sqrt();
+    let e_c = norm(j[1]) * norm(s) / c.sqrt();
+    let e_d = 2.0 * norm(jc) * (0..3).map(|k| mu[k].abs() * ss[k]).sum::<f64>() / det;
+    1.0 + e_a + e_c + e_d
 }

@@ -4,13 +4,18 @@
 //!
 //! 1. `t = R_cw·μ + t_cw`; cull if `z < NEAR_PLANE` or `z > FAR_PLANE` (gsplat
 //!    `persp_proj`; INRIA culls `z <= 0.2`).
-//! 2. `q ← q/|q|` (wxyz), `R(q)`, `s = exp(log_scale)`, `M = R·diag(s)`, `Σ = M·Mᵀ`.
-//! 3. `Σc = W·Σ·Wᵀ` with `W = R_cw`.
+//! 2. `q ← q/|q|` (wxyz), `R(q)`, `s = exp(log_scale)`, `Q = W·R` with `W = R_cw`.
+//! 3. The 2D covariance is never formed from `Σ = M·Mᵀ`: see step 5.
 //! 4. Clamped Jacobian: `tx = z·clamp(x/z, −lim_x_neg, lim_x_pos)` with
 //!    `lim_x_pos = (W−cx)/fx + 0.3·tan_fovx`, `lim_x_neg = cx/fx + 0.3·tan_fovx`,
 //!    `tan_fovx = 0.5·W/fx` (same in y); `J = [[fx/z, 0, −fx·tx/z²], [0, fy/z, −fy·ty/z²]]`.
-//! 5. `Σ2d = J·Σc·Jᵀ + 0.3·I`; cull if `det ≤ 0` or not finite; `conic = (c, −b, a)/det`
-//!    computed as a product with `1/det` (glm's `inverse`).
+//! 5. `F = J·Q·diag(s)` (2×3), `Σ2d = F·Fᵀ = [[a₀, b], [b, c₀]]` (the same matrix as
+//!    `J·W·Σ·Wᵀ·Jᵀ`); its determinant `det₀ = |μ|²`, `μ_k = s_i·s_j·(Qᵀ·(J₀ × J₁))_k`
+//!    (Cauchy–Binet: the 2×2 minors of F, each a product, summed as squares); dilated
+//!    `a = a₀ + 0.3`, `c = c₀ + 0.3`, `det = (det₀ + 0.3·(a₀ + c₀)) + 0.09`; cull if `det`
+//!    is not finite and positive; `conic = (c, −b, a)·(1/det)` (glm's `inverse`). No step
+//!    subtracts two large numbers: a needle 10⁶ times longer than wide keeps its thin
+//!    axis, which `a·c − b²` loses in f32 (SPEC.md §5.1).
 //! 6. `mean2d = (fx·x·(1/z) + cx, fy·y·(1/z) + cy)`.
 //! 7. `o = sigmoid(logit)` (times `sqrt(max(0, det₀/det))` in antialiased mode); cull if
 //!    `o < 1/255`. `k = min(3.33, sqrt(2·ln(255·o)))`, `r = (ceil(k·√a), ceil(k·√c))`
@@ -236,8 +241,8 @@ impl Culls<f32> {
 }
 
 /// The projection's intermediate values for one Gaussian (or one per lane), steps 1–5 of
-/// the module docs up to the undilated 2D covariance. The backward pass recomputes them with
-/// this same code.
+/// the module docs up to the undilated 2D covariance and its determinant. The backward pass
+/// recomputes them with this same code.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Geometry<R: Lanes = f32> {
     /// Camera-space mean.
@@ -245,11 +250,9 @@ pub(crate) struct Geometry<R: Lanes = f32> {
     /// Normalized quaternion and `1/|q|`.
     pub qh: [R; 4],
     pub inv_qn: R,
-    pub rot: [[R; 3]; 3],
     pub s: [R; 3],
-    /// `M = R·diag(s)`.
-    pub m: [[R; 3]; 3],
-    pub sigma_c: [[R; 3]; 3],
+    /// `Q = W·R`: the Gaussian's axes in camera space.
+    pub q_cam: [[R; 3]; 3],
     pub rz: R,
     /// Clamped `tx`, `ty` and whether the clamp was active.
     pub tx: R,
@@ -257,8 +260,26 @@ pub(crate) struct Geometry<R: Lanes = f32> {
     pub x_clamped: R::Mask,
     pub y_clamped: R::Mask,
     pub j: [[R; 3]; 2],
-    /// `J·Σc·Jᵀ` as `(a, b, c)`, before the dilation.
+    /// `P = J·Q` and the factor `F = P·diag(s)` of the 2D covariance (`Σ2d = F·Fᵀ`).
+    pub p: [[R; 3]; 2],
+    pub f: [[R; 3]; 2],
+    /// `F·Fᵀ` as `(a, b, c)`, before the dilation.
     pub cov: [R; 3],
+    /// `det(F·Fᵀ)` as a sum of three squares (Cauchy–Binet), before the dilation.
+    pub det0: R,
+}
+
+impl<R: Lanes> Geometry<R> {
+    /// The dilated 2D covariance `(a₀ + ε, b, c₀ + ε)` and its determinant `(det₀ + ε·(a₀ +
+    /// c₀)) + ε²` (ε = `EPS2D`): a sum of non-negative terms, equal to `(a₀ + ε)(c₀ + ε) −
+    /// b²` in exact arithmetic but without its cancellation.
+    #[inline(always)]
+    pub(crate) fn dilated(&self) -> ([R; 3], R) {
+        let e = R::splat(EPS2D);
+        let [a0, b, c0] = self.cov;
+        let det = (self.det0 + e * (a0 + c0)) + R::splat(EPS2D * EPS2D);
+        ([a0 + e, b, c0 + e], det)
+    }
 }
 
 /// Steps 1–5 for the lanes' `mean`, `quat` and `log_scale`; failed checks go to `culls`.
@@ -296,15 +317,8 @@ pub(crate) fn geometry_lanes<R: Lanes>(
     let qh = [q[0] * inv_qn, q[1] * inv_qn, q[2] * inv_qn, q[3] * inv_qn];
     let rot = quat_to_rotmat(qh);
     let s = [ls[0].exp(), ls[1].exp(), ls[2].exp()];
-    let mut m = rot;
-    for a in 0..3 {
-        for b in 0..3 {
-            m[a][b] = rot[a][b] * s[b];
-        }
-    }
-    let sigma = mat3_mul(&m, &transpose(&m));
-    // 3. Camera covariance.
-    let sigma_c = mat3_mul(&mat3_mul(&r, &sigma), &transpose(&r));
+    // 3. The Gaussian's axes in camera space.
+    let q_cam = mat3_mul(&r, &rot);
     // 4. Clamped Jacobian (the limits are per camera: computed once, in f32).
     let (w, h) = (cam.width as f32, cam.height as f32);
     let tan_fovx = 0.5 * w / cam.fx;
@@ -323,33 +337,48 @@ pub(crate) fn geometry_lanes<R: Lanes>(
         [c(cam.fx) * rz, zero, c(-cam.fx) * tx * rz2],
         [zero, c(cam.fy) * rz, c(-cam.fy) * ty * rz2],
     ];
-    // 5. Σ2d = J·Σc·Jᵀ.
-    let mut js = [[zero; 3]; 2];
+    // 5. Σ2d = F·Fᵀ with F = J·Q·diag(s) (2×3): sums of squares and one dot product.
+    let mut p = [[zero; 3]; 2];
+    let mut f = [[zero; 3]; 2];
     for a in 0..2 {
-        for b in 0..3 {
-            js[a][b] =
-                (j[a][0] * sigma_c[0][b] + j[a][1] * sigma_c[1][b]) + j[a][2] * sigma_c[2][b];
+        for k in 0..3 {
+            p[a][k] = (j[a][0] * q_cam[0][k] + j[a][1] * q_cam[1][k]) + j[a][2] * q_cam[2][k];
+            f[a][k] = p[a][k] * s[k];
         }
     }
-    let mut cov = [zero; 3];
-    for (o, (a, b)) in cov.iter_mut().zip([(0, 0), (0, 1), (1, 1)]) {
-        *o = (js[a][0] * j[b][0] + js[a][1] * j[b][1]) + js[a][2] * j[b][2];
+    let cov = [dot3(f[0], f[0]), dot3(f[0], f[1]), dot3(f[1], f[1])];
+    // det(F·Fᵀ) = |F₀ × F₁|² (Lagrange), and for the rotation Q, F₀ × F₁ = det(S)·S⁻¹·Qᵀ·(J₀ ×
+    // J₁): component k is `s_i·s_j·n_k` ({i, j, k} = {0, 1, 2}), `n = Qᵀ·(J₀ × J₁)`, and
+    // `J₀ × J₁ = (−J₀₂·J₁₁, −J₀₀·J₁₂, J₀₀·J₁₁)` (J₀₁ = J₁₀ = 0). Products and sums of
+    // squares only: a needle's thin axis keeps its relative precision, which `a·c − b²`
+    // cancels away once the entries exceed the thin variance by 2²⁴.
+    let jc = [
+        -(j[0][2] * j[1][1]),
+        -(j[0][0] * j[1][2]),
+        j[0][0] * j[1][1],
+    ];
+    let mut minors = [zero; 3];
+    let ss = [s[1] * s[2], s[0] * s[2], s[0] * s[1]];
+    for k in 0..3 {
+        minors[k] = ss[k] * dot3([q_cam[0][k], q_cam[1][k], q_cam[2][k]], jc);
     }
+    let det0 = dot3(minors, minors);
     Geometry {
         t: [x, y, z],
         qh,
         inv_qn,
-        rot,
         s,
-        m,
-        sigma_c,
+        q_cam,
         rz,
         tx,
         ty,
         x_clamped: xz.lt(lim_x_neg) | xz.gt(lim_x_pos),
         y_clamped: yz.lt(lim_y_neg) | yz.gt(lim_y_pos),
         j,
+        p,
+        f,
         cov,
+        det0,
     }
 }
 
@@ -658,10 +687,7 @@ fn project_block<R: Lanes>(
     let geo = geometry_lanes(mean, quat, log_scale, cam, &mut culls);
     let [x, y, z] = geo.t;
     let (w, h) = (c(cam.width as f32), c(cam.height as f32));
-    let [a0, b, c0] = geo.cov;
-    let det_orig = a0 * c0 - b * b;
-    let (a, cc) = (a0 + c(EPS2D), c0 + c(EPS2D));
-    let det = a * cc - b * b;
+    let ([a, b, cc], det) = geo.dilated();
     culls.check(!(det.gt(c(0.0)) & det.is_finite()), Cull::Degenerate);
     let inv_det = c(1.0) / det;
     let conic = [cc * inv_det, -b * inv_det, a * inv_det];
@@ -673,7 +699,7 @@ fn project_block<R: Lanes>(
     // 7. Opacity and radius.
     let mut opacity = c(1.0) / (c(1.0) + (-logit).exp()); // fastexp::sigmoid
     if antialiased {
-        let ratio = det_orig / det;
+        let ratio = geo.det0 / det;
         opacity = opacity * R::select(ratio.gt(c(0.0)), ratio.sqrt(), c(0.0));
     }
     // `inv_alpha` = 1/threshold (255 by default: the floor is then exactly

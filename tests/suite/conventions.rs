@@ -6,8 +6,9 @@ use unseen::camera::Camera;
 use unseen::gaussian::Gaussians;
 use unseen::raster::backward::{GradGroups, ImageGrads, backward, render_for_backward};
 use unseen::raster::decisions::{
-    GAUSSIAN_OPACITY_CULL, Margins, PIXEL_ALPHA_CLAMP, PIXEL_ALPHA_THRESHOLD, PIXEL_DEPTH_TIE,
-    PIXEL_FORWARD_FLAGS, PIXEL_TRANSMITTANCE_STOP, decisions,
+    GAUSSIAN_ILL_CONDITIONED, GAUSSIAN_OPACITY_CULL, Margins, PIXEL_ALPHA_CLAMP,
+    PIXEL_ALPHA_THRESHOLD, PIXEL_DEPTH_TIE, PIXEL_FORWARD_FLAGS, PIXEL_ILL_CONDITIONED,
+    PIXEL_TRANSMITTANCE_STOP, decisions,
 };
 use unseen::raster::{Conventions, Cutoffs, Kernel, Outputs, RenderOptions, render};
 use unseen::rng::Uniform;
@@ -206,6 +207,70 @@ fn decisions_flag_constructed_near_decisions() {
             "{dz}"
         );
     }
+}
+
+/// A needle 10⁵ times longer than wide lying along the image's x axis is beyond float32 (a
+/// port's rotation rounds its long axis into the thin one's direction by ~10⁵ times the
+/// thin width's precision): it and the pixels it reaches are flagged. The same needle
+/// turned 45° in the image, and an ordinary Gaussian, are not; their conic amplification
+/// stays a few units.
+#[test]
+fn decisions_flag_needles_beyond_float32() {
+    let cam = default_camera(64, 48);
+    let m = Margins::default();
+    let o = opts(Conventions::Inria, Kernel::Auto);
+    let needle = |turn: f32| {
+        let mut g = Gaussians::new(0).unwrap();
+        let h = 0.5 * turn;
+        g.push(
+            [0.0, 0.0, 4.0],
+            [1e3f32.ln(), 1e-2f32.ln(), 1e-2f32.ln()],
+            [h.cos(), 0.0, 0.0, h.sin()],
+            2.0,
+            [0.1, 0.2, 0.3],
+            &[],
+        );
+        decisions(&g, &cam, &o, &m).unwrap()
+    };
+    let flat = needle(0.0);
+    assert!(flat.gaussian_flags[0] & GAUSSIAN_ILL_CONDITIONED != 0);
+    assert!(
+        flat.conic_amplification[0] > 1e4,
+        "{}",
+        flat.conic_amplification[0]
+    );
+    assert!(flat.condition[0] > 1e7, "{}", flat.condition[0]);
+    let centre = 24 * 64 + 32;
+    assert!(flat.pixel_flags[centre] & PIXEL_ILL_CONDITIONED != 0);
+    const { assert!(PIXEL_FORWARD_FLAGS & PIXEL_ILL_CONDITIONED != 0) };
+    // Far above and below the needle no splat passes the α test: no flag.
+    assert_eq!(flat.pixel_flags[32], 0);
+    let turned = needle(std::f32::consts::FRAC_PI_4);
+    assert_eq!(turned.gaussian_flags[0] & GAUSSIAN_ILL_CONDITIONED, 0);
+    assert!(
+        turned.conic_amplification[0] < 10.0,
+        "{}",
+        turned.conic_amplification[0]
+    );
+    assert!(
+        turned.condition[0] > 1e7,
+        "ill-conditioned for a·c − b², resolved here"
+    );
+    assert!(
+        turned
+            .pixel_flags
+            .iter()
+            .all(|f| f & PIXEL_ILL_CONDITIONED == 0)
+    );
+    let mut plain = Gaussians::new(0).unwrap();
+    one(&mut plain, [0.0, 0.0, 4.0], 0.1f32.ln(), 2.0);
+    let d = decisions(&plain, &cam, &o, &m).unwrap();
+    assert_eq!(d.gaussian_flags, vec![0]);
+    assert!(
+        d.conic_amplification[0] < 10.0,
+        "{}",
+        d.conic_amplification[0]
+    );
 }
 
 /// The point of the diagnostics: a "port" that differs from the oracle by float noise (here

@@ -6,10 +6,11 @@
 //! which lanes would gather and scatter).
 //!
 //! Chain (forward in `raster::project`):
-//! `conic = Σ2d⁻¹` → `v_Σ2d = −Σ2d⁻¹·G·Σ2d⁻¹` with `G = [[vA, vB/2], [vB/2, vC]]`;
-//! `Σ2d = J·Σc·Jᵀ (+0.3 I)` → `v_Σc = Jᵀ·V·J`, `v_J = 2·V·J·Σc`;
-//! `Σc = W·Σ·Wᵀ` → `v_Σ = Wᵀ·v_Σc·W`; `Σ = M·Mᵀ` → `v_M = 2·v_Σ·M`;
-//! `M = R·diag(s)` → `v_R = v_M·diag(s)`, `v_s_j = Σ_i v_M_ij·R_ij`, `v_log_s = v_s·s`;
+//! `conic = Σ2d⁻¹` → `v_Σ2d = −Σ2d⁻¹·G·Σ2d⁻¹` with `G = [[vA, vB/2], [vB/2, vC]]`
+//! (Σ2d⁻¹ as the forward computes it, from its cancellation-free determinant);
+//! `Σ2d = F·Fᵀ (+0.3 I)` → `v_F = 2·V·F`; `F = P·diag(s)` → `v_P = v_F·diag(s)`, `v_s_k =
+//! Σ_a v_F_ak·P_ak`, `v_log_s = v_s·s`; `P = J·Q` → `v_J = v_P·Qᵀ`, `v_Q = Jᵀ·v_P`;
+//! `Q = W·R` → `v_R = Wᵀ·v_Q`;
 //! `R(q̂)` → `v_q̂`; `q̂ = q/|q|` → `v_q = (v_q̂ − q̂(q̂·v_q̂))/|q|`;
 //! `J(t)` with the clamp: a clamped `x/z` makes `tx = z·lim`, so its gradient goes to z;
 //! `mean2d(t)`; `t = W·μ + t_w` → `v_μ = Wᵀ·v_t` plus the SH direction term;
@@ -25,8 +26,8 @@ use crate::math::sh::{Dual3, MAX_SH_COEFFS, ShScalar, num_coeffs, sh_basis};
 use crate::raster::kernel::Kernel;
 use crate::raster::plan::RenderPlan;
 use crate::raster::project::{
-    COPY, CameraF32, Culls, EPS2D, Geometry, MAX_REST, Projected, SPLAT_FLOATS, Splat, copy_padded,
-    dot3, gather3, geometry_lanes, lanes_of, mat3_mul, sh_basis_lanes, transpose,
+    COPY, CameraF32, Culls, Geometry, MAX_REST, Projected, SPLAT_FLOATS, Splat, copy_padded, dot3,
+    gather3, geometry_lanes, lanes_of, mat3_mul, sh_basis_lanes, transpose,
 };
 
 /// Field offsets (in f32) of a [`Splat`] and a [`SplatGrad`], which share their layout.
@@ -287,25 +288,25 @@ fn backward_block<R: Lanes>(
     let mut culls = Culls::new();
     let geo = geometry_lanes(mean, q, ls, cam, &mut culls);
     let geo_ok = lanes_of(R::select(culls.ok, c(1.0), zero));
+    let ([a_, b_, c_], det) = geo.dilated();
     let Geometry {
         t: [x, y, _],
         qh,
         inv_qn,
-        rot,
         s,
-        m,
-        sigma_c,
+        q_cam,
         rz,
         tx,
         ty,
         x_clamped,
         y_clamped,
         j,
-        cov,
+        p,
+        f,
+        ..
     } = geo;
     let rz2 = rz * rz;
-    let (a_, b_, c_) = (cov[0] + c(EPS2D), cov[1], cov[2] + c(EPS2D));
-    let inv_det = c(1.0) / (a_ * c_ - b_ * b_);
+    let inv_det = c(1.0) / det;
     let ci = [[c_ * inv_det, -b_ * inv_det], [-b_ * inv_det, a_ * inv_det]];
     // v_Σ2d = −Σ⁻¹·G·Σ⁻¹ with G the symmetric gradient of the conic.
     let half_b = c(0.5) * grad[CONIC + 1];
@@ -322,25 +323,20 @@ fn backward_block<R: Lanes>(
             v_cov[a][b] = -(tmp[a][0] * ci[0][b] + tmp[a][1] * ci[1][b]);
         }
     }
-    // v_Σc = Jᵀ·V·J and v_J = 2·V·J·Σc (V symmetric, Σc symmetric).
-    let mut vj = [[zero; 3]; 2]; // V·J
+    // Σ2d = F·Fᵀ → v_F = 2·V·F; F = P·diag(s) → v_P = v_F·diag(s); P = J·Q → v_J = v_P·Qᵀ
+    // (V symmetric).
+    let mut v_f = [[zero; 3]; 2];
+    let mut v_p = [[zero; 3]; 2];
     for a in 0..2 {
-        for b in 0..3 {
-            vj[a][b] = v_cov[a][0] * j[0][b] + v_cov[a][1] * j[1][b];
-        }
-    }
-    let mut v_sigma_c = [[zero; 3]; 3];
-    for a in 0..3 {
-        for b in 0..3 {
-            v_sigma_c[a][b] = j[0][a] * vj[0][b] + j[1][a] * vj[1][b];
+        for k in 0..3 {
+            v_f[a][k] = c(2.0) * (v_cov[a][0] * f[0][k] + v_cov[a][1] * f[1][k]);
+            v_p[a][k] = v_f[a][k] * s[k];
         }
     }
     let mut v_j = [[zero; 3]; 2];
     for a in 0..2 {
-        for b in 0..3 {
-            v_j[a][b] = c(2.0)
-                * ((vj[a][0] * sigma_c[0][b] + vj[a][1] * sigma_c[1][b])
-                    + vj[a][2] * sigma_c[2][b]);
+        for i in 0..3 {
+            v_j[a][i] = dot3(v_p[a], q_cam[i]);
         }
     }
     // Camera-space mean.
@@ -419,19 +415,11 @@ fn backward_block<R: Lanes>(
         }
     }
     if groups.log_scales || groups.quats {
-        // v_Σ = Wᵀ·v_Σc·W, v_M = 2·v_Σ·M.
-        let v_sigma = mat3_mul(&mat3_mul(&transpose(&r), &v_sigma_c), &r);
-        let mut v_m = mat3_mul(&v_sigma, &m);
-        for a in 0..3 {
-            for b in 0..3 {
-                v_m[a][b] = c(2.0) * v_m[a][b];
-            }
-        }
         if groups.log_scales {
+            // F = P·diag(s): v_s_k = Σ_a v_F[a][k]·P[a][k]; v_log_s = v_s·s.
             let mut v_ls = [zero; 3];
-            for b in 0..3 {
-                let v_s = (v_m[0][b] * rot[0][b] + v_m[1][b] * rot[1][b]) + v_m[2][b] * rot[2][b];
-                v_ls[b] = v_s * s[b];
+            for e in 0..3 {
+                v_ls[e] = (v_f[0][e] * p[0][e] + v_f[1][e] * p[1][e]) * s[e];
             }
             let v = [lanes_of(v_ls[0]), lanes_of(v_ls[1]), lanes_of(v_ls[2])];
             for l in 0..n {
@@ -441,12 +429,14 @@ fn backward_block<R: Lanes>(
             }
         }
         if groups.quats {
-            let mut vr = [[zero; 3]; 3];
-            for a in 0..3 {
-                for b in 0..3 {
-                    vr[a][b] = v_m[a][b] * s[b];
+            // P = J·Q → v_Q = Jᵀ·v_P; Q = W·R → v_R = Wᵀ·v_Q.
+            let mut v_q = [[zero; 3]; 3];
+            for i in 0..3 {
+                for k in 0..3 {
+                    v_q[i][k] = j[0][i] * v_p[0][k] + j[1][i] * v_p[1][k];
                 }
             }
+            let vr = mat3_mul(&transpose(&r), &v_q);
             let [w_, x_, y_, z_] = qh;
             let two = c(2.0);
             let vq = [
