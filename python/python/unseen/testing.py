@@ -191,6 +191,8 @@ class Report:
     #: The known mistake under which the oracle matches the port, if the naming rule
     #: (NAME_MAX_LEFT, NAME_MIN_RATIO) names one.
     likely_cause: str = ""
+    #: The named mistake's text alone (``likely_cause`` may add the share it explains).
+    cause: str = ""
     #: The bound on the excluded fractions this comparison used.
     bound: float = MAX_EXCLUDED_FRACTION
     #: Whether the known mistakes were tried (a failure of values beyond tolerance).
@@ -404,8 +406,7 @@ _FORWARD_UNTRIED = (
 
 def _named(results, base):
     """The naming rule (NAME_MAX_LEFT, NAME_MIN_RATIO) over `results`, a list of
-    ``(failing values left, text)`` sorted fewest first: the best one's text with the share
-    it explains, or ""."""
+    ``(failing values left, text)`` sorted fewest first: the best one's text, or ""."""
     if not base or not results:
         return ""
     left, text = results[0]
@@ -414,7 +415,7 @@ def _named(results, base):
         return ""
     if runner_up <= NAME_MAX_LEFT * base or runner_up < NAME_MIN_RATIO * left:
         return ""
-    return text if left == 0 else f"{text} (explains {1 - left / base:.1%} of the failing values)"
+    return text
 
 
 def _diagnosis(report, results, base):
@@ -422,7 +423,10 @@ def _diagnosis(report, results, base):
     report.base_failing = base
     results.sort(key=lambda r: r[0])
     report.candidates = [(text, left) for left, text in results]
-    report.likely_cause = _named(results, base)
+    report.cause = _named(results, base)
+    left = results[0][0] if report.cause else 0
+    report.likely_cause = report.cause if not left else (
+        f"{report.cause} (explains {1 - left / base:.1%} of the failing values)")
 
 
 #: Per image output: atol, rtol and the per-pixel α-error allowance of the diagnostics.
@@ -850,8 +854,8 @@ class FamilyResult:
         """The causes named by the failing comparisons, without repeats, in order."""
         out = []
         for r in self.reports:
-            if not r.ok and r.likely_cause and r.likely_cause not in out:
-                out.append(r.likely_cause)
+            if not r.ok and r.cause and r.cause not in out:
+                out.append(r.cause)
         return out
 
     def line(self):
@@ -861,9 +865,10 @@ class FamilyResult:
         if self.ok:
             return f"{self.family}: ok ({what})"
         bad = [r for r in self.reports if not r.ok]
-        cause = "; ".join(self.causes) or "none of the known mistakes clearly"
+        cause = ("likely cause: " + "; ".join(self.causes) if self.causes
+                 else "no known mistake named")
         return (f"{self.family}: FAILS ({len(bad)} of {len(self.reports)} comparisons: "
-                f"{what}) — likely cause: {cause}")
+                f"{what}) — {cause}")
 
 
 @dataclass
