@@ -34,7 +34,7 @@ TILE = 16
 
 
 def _composite(means2d, conics, opac, colors, depths, flat_ids, offsets, width, height,
-               background, max_alpha, pixel_offset):
+               background, max_alpha, pixel_offset, transmittance_stop=TRANSMITTANCE_STOP):
     """Front-to-back blending of each 16×16 tile's depth-sorted list (gsplat's rules:
     skip σ < 0 and α < 1/255, α clamped at `max_alpha`, stop before T·(1 − α) ≤ 1e-4),
     vectorised per tile with a cumulative product, differentiable by autograd."""
@@ -63,7 +63,7 @@ def _composite(means2d, conics, opac, colors, depths, flat_ids, offsets, width, 
         al = torch.where(valid, al, torch.zeros_like(al))
         t_incl = torch.cumprod(1.0 - al, dim=1)
         t_before = torch.cat([torch.ones_like(t_incl[:, :1]), t_incl[:, :-1]], dim=1)
-        blended = valid & (t_incl > TRANSMITTANCE_STOP)
+        blended = valid & (t_incl > transmittance_stop)
         w = torch.where(blended, al * t_before, torch.zeros_like(al))
         pix = w @ colors[ids]
         t_final = torch.where(blended, 1.0 - al, torch.ones_like(al)).prod(dim=1)
@@ -76,7 +76,8 @@ def _composite(means2d, conics, opac, colors, depths, flat_ids, offsets, width, 
     return rgb, alpha
 
 
-def gsplat_port(max_alpha, *, sh_sign_band1=1.0, pixel_offset=0.5, alpha_background=False):
+def gsplat_port(max_alpha, *, sh_sign_band1=1.0, pixel_offset=0.5, alpha_background=False,
+                transmittance_stop=TRANSMITTANCE_STOP):
     """The port: gsplat's torch functions, our torch compositor. Returns (render, backward)
     callables for unseen.testing. The keyword arguments make the deliberately wrong ports."""
 
@@ -106,7 +107,7 @@ def gsplat_port(max_alpha, *, sh_sign_band1=1.0, pixel_offset=0.5, alpha_backgro
         offsets = gs._isect_offset_encode(isect_ids, 1, tw, th)
         rgb, alpha = _composite(means2d, conics, opac, colors, depths, flat_ids, offsets,
                                 w, h, [0.0] * 3 if alpha_background else list(background),
-                                max_alpha, pixel_offset)
+                                max_alpha, pixel_offset, transmittance_stop)
         if alpha_background:  # the mistake: C + α·bg
             rgb = rgb + alpha[..., None] * torch.tensor(background, dtype=torch.float32)
         return p, rgb, alpha, dict(means2d=means2d, conics=conics, colors=colors,
@@ -185,3 +186,18 @@ def test_alpha_background_port_fails_check_port_with_its_cause_named():
     assert report.failing == ["random"]
     assert [c[:60] for c in report.families["random"].causes] == [
         "the port adds the background as α·bg, not T·bg (T = 1 − α)"]
+
+
+def test_a_stop_of_1e3_is_named_forward_and_consistent_backward():
+    """The oracle's backward cannot run another stop: check_port names it from the forward,
+    and the backward says the gradients are consistent with it."""
+    render, backward = gsplat_port(GSPLAT_MAX_ALPHA, transmittance_stop=1e-3)
+    report = ut.check_port(render, backward, conventions="gsplat", seed=0,
+                           families=("clamp",), check=False)
+    print(report.message())
+    assert report.families["clamp"].causes == [
+        "the port stops blending at T ≤ 0.001, not at T ≤ 1e-4"]
+    bwd = report.families["clamp"].reports[-1]
+    assert not bwd.ok and bwd.cause == ""
+    assert [c.split(" (")[0] for c in bwd.consistent] == [
+        "the port stops blending at T ≤ 0.001, not at T ≤ 1e-4"]

@@ -205,6 +205,9 @@ class Report:
     candidates: list = field(default_factory=list)
     #: What the diagnosis could not try (e.g. cut-offs, which the oracle's backward refuses).
     untried: str = ""
+    #: Backward: cut-off mistakes the failing gradients are consistent with (localised,
+    #: not reproduced, so never named: see ``_localise_cutoffs``).
+    consistent: list = field(default_factory=list)
     #: The background both sides drew.
     background: tuple = ()
     #: Findings that are not failures (e.g. footprints one side reaches the image with).
@@ -230,6 +233,7 @@ class Report:
         elif self.diagnosed:
             lines.append("  likely cause: none of the known mistakes explains the failing "
                          "values clearly better than the others" + self._closest())
+        lines += [f"  consistent with: {c}" for c in self.consistent]
         if self.diagnosed and self.untried:
             lines.append(f"  not tried: {self.untried}")
         return "\n".join(lines)
@@ -398,8 +402,9 @@ def mistakes(scene, camera, conventions="inria", background=DEFAULT_BACKGROUND):
 #: What the backward diagnosis cannot try, in words.
 _BACKWARD_UNTRIED = (
     "cut-off mistakes (a transmittance stop other than 1e-4, no stop, no α threshold, a 3σ "
-    "radius): the oracle's backward refuses non-default cut-offs, so the gradients cannot "
-    "tell them apart; check_port's forward comparison of the same family names them")
+    "radius) cannot be reproduced: the oracle's backward refuses non-default cut-offs, so "
+    "the gradients can at most be consistent with one (the stops; no α threshold changes "
+    "too many pixels to tell); check_port's forward comparison of the same family names them")
 #: What the forward diagnosis cannot try.
 _FORWARD_UNTRIED = (
     "a footprint radius of 3σ instead of 3.33σ (the oracle has no such knob; it cuts the "
@@ -750,6 +755,44 @@ def _grad_failures(got, want, skip):
     return fails
 
 
+#: The largest share of the image a cut-off may change for the backward to localise it: a
+#: cut-off that changes more (no α threshold changes nearly every pixel) would "explain"
+#: any mistake by zeroing the upstream gradient almost everywhere.
+LOCALISE_MAX_FRACTION = 0.25
+
+
+def _localise_cutoffs(port_backward, got, scene, camera, fwd, v, skip, bg, conventions,
+                      threads, base):
+    """The cut-off mistakes the oracle's backward cannot run, tried the only way it can:
+    for each, the pixels where the cut-off changes the oracle's forward image are found,
+    the upstream gradient is zeroed there too and the port is called again. A cut-off
+    under which at most NAME_MAX_LEFT of the failing gradients remain is *consistent*
+    with the port (not named: any mistake confined to those pixels would pass the same
+    test, and a stop of 1e-3 changes a superset of the pixels no stop does)."""
+    out = []
+    for m in mistakes(scene, camera, conventions, bg):
+        if m.backward_ok:
+            continue
+        kw = dict(conventions=conventions)
+        kw.update(m.kw)
+        alt = render(**m.scene, camera=m.camera, background=list(bg), threads=threads,
+                     outputs=["rgb", "alpha"], **kw)
+        changed = (alt["rgb"] != fwd["rgb"]).any(axis=-1) | (alt["alpha"] != fwd["alpha"])
+        if not changed.any() or changed.mean() > LOCALISE_MAX_FRACTION:
+            continue
+        v2 = v.copy()
+        v2[changed] = 0.0
+        want = backward(**scene, camera=camera, grad_rgb=v2, background=list(bg),
+                        conventions=conventions, threads=threads)
+        got2 = _call_port(port_backward, "backward", "", scene, camera, v2, background=bg)
+        left = _grad_failures(got2, want, skip)
+        if left <= NAME_MAX_LEFT * base:
+            out.append(f"{m.text} (the gradients agree, {left} of {base} failing, once the "
+                       f"upstream gradient is also zero on the {int(changed.sum())} pixels "
+                       f"it changes)")
+    return out
+
+
 def compare_backward(port_backward, scene, camera, grad_rgb=None, *, conventions="inria",
                      background=None, seed=0, margins=None, threads=None, check=True,
                      diagnose=True, max_excluded_fraction=MAX_EXCLUDED_FRACTION):
@@ -822,6 +865,10 @@ def compare_backward(port_backward, scene, camera, grad_rgb=None, *, conventions
             results.append((_grad_failures(got, alt, skip), m.text))
         _diagnosis(report, results, base)
         report.untried = _BACKWARD_UNTRIED
+        if not report.cause:
+            report.consistent = _localise_cutoffs(
+                port_backward, got, scene, camera, fwd, v, skip, bg, conventions, threads,
+                base)
     if check and not report.ok:
         raise AssertionError(report.message())
     return report
