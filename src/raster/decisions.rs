@@ -44,7 +44,8 @@ pub const PIXEL_ALPHA_THRESHOLD: u8 = 1;
 /// Pixel flag: some `T·(1 − α)` lies within the transmittance margin of the 1e-4 stop.
 pub const PIXEL_TRANSMITTANCE_STOP: u8 = 2;
 /// Pixel flag: two consecutive blended splats (or the last blended one and the splat that
-/// stopped the walk) have depths within the tie margin: a port may order them otherwise.
+/// stopped the walk) have depths within the tie margin but not bit-equal: a port may order
+/// them otherwise. Bit-equal depths are ordered by Gaussian index on both sides.
 pub const PIXEL_DEPTH_TIE: u8 = 4;
 /// Pixel flag: some blended splat's unclamped `o·exp(−σ)` lies within the α margin of the
 /// clamp: the forward is continuous there, the backward's opacity and geometry gradients
@@ -373,7 +374,9 @@ pub fn decisions(
             if tm <= 0.0 {
                 out.flags |= PIXEL_TRANSMITTANCE_STOP;
             }
-            if let Some(z) = prev_depth {
+            // Bit-equal depths are no tie: both sides order them by Gaussian index (the
+            // documented order, SPEC.md §5.3); only a gap within rounding is ambiguous.
+            if let Some(z) = prev_depth.filter(|z| z.to_bits() != s.depth.to_bits()) {
                 let (lo, hi) = if z <= s.depth {
                     (z, s.depth)
                 } else {
@@ -395,6 +398,9 @@ pub fn decisions(
                     let gap = (f64::from(n.depth) - f64::from(s.depth)) / f64::from(n.depth);
                     if gap > f64::from(m.depth) {
                         break;
+                    }
+                    if n.depth.to_bits() == s.depth.to_bits() {
+                        continue; // follows in index order on both sides
                     }
                     let (ndx, ndy) = (n.mean[0] - px, n.mean[1] - py);
                     let na = splat_alpha(n, ndx, ndy, clamp);

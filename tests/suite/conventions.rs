@@ -196,8 +196,9 @@ fn decisions_flag_constructed_near_decisions() {
     one(&mut g, [0.0, 0.0, 2.0], 0.1f32.ln(), LOGIT_ONE);
     one(&mut g, [0.0, 0.0, 3.0], 0.1f32.ln(), LOGIT_ONE);
     assert!(flags(&g, Conventions::Inria).0 & PIXEL_TRANSMITTANCE_STOP != 0);
-    // Two half-transparent splats at the same depth: a tie; 1e-4 apart: none.
-    for (dz, tie) in [(0.0, true), (1e-4, false)] {
+    // Two half-transparent splats an ulp apart in depth: a tie; at the same depth: none
+    // (both sides order bit-equal depths by index, SPEC.md §5.3); 1e-4 apart: none.
+    for (dz, tie) in [(2.0f32.next_up() - 2.0, true), (0.0, false), (1e-4, false)] {
         let mut g = Gaussians::new(0).unwrap();
         one(&mut g, [0.0, 0.0, 2.0], 0.1f32.ln(), 0.0);
         one(&mut g, [1e-3, 0.0, 2.0 + dz], 0.1f32.ln(), 0.0);
