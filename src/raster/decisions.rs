@@ -512,7 +512,8 @@ fn gaussian_decisions(scene: &Gaussians, cam: &Camera, m: &Margins) -> Vec<u8> {
 }
 
 /// How far float32 rounding can move a Gaussian's conic, as a multiple of the unit
-/// roundoff: `1 + e_a + e_c + e_d`, evaluated in f64 from the f32 inputs (SPEC.md §8.1).
+/// roundoff: `(1 + e_a + e_c + e_d + e_t)·e_q`, evaluated in f64 from the f32 inputs
+/// (SPEC.md §8.1).
 /// With `F = J·Q·diag(s)` (`Q = W·R`), every entry of `F`'s row `r` carries an absolute
 /// rounding error of a few ulps of `|J_r|·s_k` (the rotation's entries are good to a few
 /// ulps of 1), so the dilated variance `a = |F₀|² + ε` moves by `2·|F₀|·|J₀|·|s|` ulps:
@@ -522,7 +523,12 @@ fn gaussian_decisions(scene: &Gaussians, cam: &Camera, m: &Margins) -> Vec<u8> {
 /// 2·|J₀ × J₁|·Σ_k |μ_k|·s_i·s_j / det`. An ordinary Gaussian has each term of order 1; a
 /// needle whose long axis projects (nearly) onto a pixel axis, or points (nearly) at the
 /// camera, has one of them as large as its aspect ratio: no float32 evaluation of the
-/// projection resolves its thin axis there.
+/// projection resolves its thin axis there. Two more sources scale every term: the
+/// camera-space mean, whose coordinates carry a few ulps of their terms' magnitudes `m_a =
+/// Σ_k |W_ak·μ_k| + |t_a|` (large against z near the plane, with the camera far from the
+/// origin), moves J by `e_t = (2·m_z + m_x + m_y)/z`; and a quaternion whose squares are
+/// f32 subnormals (`|q|² < 2⁻¹²⁶`) gives a rotation good only to `2⁻¹⁴⁹/|q|²`, `e_q =
+/// max(1, 2⁻¹⁴⁹/(u·|q|²))` units of roundoff.
 pub fn conic_amplification(scene: &Gaussians, i: usize, cam: &CameraF32) -> f64 {
     let dot3 = |u: [f64; 3], v: [f64; 3]| (u[0] * v[0] + u[1] * v[1]) + u[2] * v[2];
     let m = scene.means[i].map(f64::from);
@@ -588,8 +594,14 @@ pub fn conic_amplification(scene: &Gaussians, i: usize, cam: &CameraF32) -> f64 
         std::array::from_fn(|k| ss[k] * dot3([q_cam[0][k], q_cam[1][k], q_cam[2][k]], jc));
     let det = dot3(mu, mu) + eps * (a + c - 2.0 * eps) + eps * eps;
     let norm = |v: [f64; 3]| dot3(v, v).sqrt();
+    let terms = |a: usize| {
+        (0..3).map(|k| (r[a][k] * m[k]).abs()).sum::<f64>() + f64::from(cam.t_cw[a]).abs()
+    };
+    let e_t = (2.0 * terms(2) + terms(0) + terms(1)) / z;
+    let unit = f64::from(f32::EPSILON) / 2.0;
+    let e_q = (2f64.powi(-149) / (unit * qn * qn)).max(1.0);
     let e_a = norm(j[0]) * norm(s) / a.sqrt();
     let e_c = norm(j[1]) * norm(s) / c.sqrt();
     let e_d = 2.0 * norm(jc) * (0..3).map(|k| mu[k].abs() * ss[k]).sum::<f64>() / det;
-    1.0 + e_a + e_c + e_d
+    (1.0 + e_a + e_c + e_d + e_t) * e_q
 }
