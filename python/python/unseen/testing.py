@@ -538,8 +538,9 @@ def _diagnose_textbook(report, got, want, keys, conic_bad=None):
     values left outside the footprints of the Gaussians `textbook_ill_conditioned` finds
     (the oracle cannot render the textbook form, so the footprint localises it, as the
     backward localises cut-offs). Named under the naming rule against every emulated
-    mistake's count; with no failing image value, named from the failing conics when at
-    most NAME_MAX_LEFT of them belong to other Gaussians."""
+    mistake's count (and, when the port returns its conics, only if some of theirs fail);
+    with no failing image value, named from the failing conics when at most
+    NAME_MAX_LEFT of them belong to other Gaussians."""
     diag = want["diagnostics"]
     idx = textbook_ill_conditioned(diag)
     if not len(idx):
@@ -563,7 +564,9 @@ def _diagnose_textbook(report, got, want, keys, conic_bad=None):
         text = _textbook_text(idx[concerned], cond, [weight[k] for k in concerned])
         others = [n for _, n in report.candidates]
         report.candidates = sorted(report.candidates + [(text, left)], key=lambda c: c[1])
-        if left <= NAME_MAX_LEFT * base and all(
+        # A port that returns its conics must also get some of theirs wrong.
+        conics_agree = conic_bad is not None and not conic_bad[idx].any()
+        if not conics_agree and left <= NAME_MAX_LEFT * base and all(
                 n > NAME_MAX_LEFT * base and n >= NAME_MIN_RATIO * left for n in others):
             report.cause = text
             report.likely_cause = text if not left else (
@@ -579,7 +582,7 @@ def _diagnose_textbook(report, got, want, keys, conic_bad=None):
 
 
 def _diagnose_render(report, got, base, scene, camera, conventions, bg, keys, threads,
-                     margins, base_fail):
+                     margins, base_fail, conic_bad=None):
     """Try every known mistake on the forward; record the naming rule's verdict."""
     results = []
     bg_arr = np.asarray(bg, dtype=np.float64)
@@ -603,16 +606,18 @@ def _diagnose_render(report, got, base, scene, camera, conventions, bg, keys, th
             # The decisions refuse other cut-offs: those keep the base's flags and bounds.
             diag = want.get("diagnostics", diag)
             # A hypothesis whose own render sets aside more than the comparison's bound
-            # cannot be judged by this scene: it explains nothing (on `hard` a moved needle
-            # can set aside 97 % of the image, "explaining" any failure).
-            if ((diag["pixel_flags"] & PIXEL_FORWARD_FLAGS) != 0).mean() > report.bound:
+            # (and than the oracle's render) cannot be judged by this scene: it explains
+            # nothing (on `hard` a moved needle can set aside 97 % of the image,
+            # "explaining" any failure).
+            aside = ((diag["pixel_flags"] & PIXEL_FORWARD_FLAGS) != 0).mean()
+            if "diagnostics" in want and aside > max(report.bound, report.excluded_fraction):
                 results.append((base_fail, m.text))
                 continue
         results.append((_render_failures(got, want, diag, keys, rgb_extra), m.text))
     _diagnosis(report, results, base_fail)
     report.untried = _FORWARD_UNTRIED
     if not report.cause:
-        _diagnose_textbook(report, got, base, keys)
+        _diagnose_textbook(report, got, base, keys, conic_bad)
 
 
 def _check_excluded(report, bound, margins):
@@ -854,6 +859,7 @@ def compare_render(port, scene, camera, *, conventions="inria", background=None,
             # Relative to each Gaussian's largest entry (thin splats cancel in B).
             per = np.abs(wc).max(axis=1, keepdims=True)
             per = np.where(per > 0, per, 1.0)
+            conic_bad = np.zeros(n, dtype=bool)
             f = _check("conics", g / per, wc / per, CONICS_REL_TO_MAX, 0.0, ~drawn, None, None)
             if f:
                 f.port, f.oracle = float(g[f.where]), float(wc[f.where])
@@ -869,7 +875,7 @@ def compare_render(port, scene, camera, *, conventions="inria", background=None,
     base = sum(f.count for f in report.failures if f.quantity in keys and not f.note)
     if base and diagnose:
         _diagnose_render(report, got, want, scene, camera, conventions, list(bg), keys,
-                         threads, margins, base)
+                         threads, margins, base, conic_bad)
     elif conic_bad is not None and diagnose:
         _diagnose_textbook(report, got, want, keys, conic_bad)
     if check and not report.ok:
