@@ -75,7 +75,9 @@ MAX_EXCLUDED_FRACTION = 2e-2
 #: The bound for the ``hard`` scene family, ambiguous by design (exact depth ties, elongated
 #: Gaussians whose σ cancels to ≈ 0, Gaussians of scale 1e3 whose means project ~1e5 px
 #: away, so that the mean's rounding moves σ everywhere): measured 3–45 % set aside at
-#: 128×96 and 256×256 (seeds 0–3). There the harness checks what it can judge.
+#: 128×96 and 256×256 (seeds 0–3) before numerics revision 7. There the harness checks what
+#: it can judge. Revision 7 (with PIXEL_ILL_CONDITIONED set aside) measures 1–83 % at
+#: check_port's sizes, seeds 0–39: above this bound on 19 of 80 cases (SPEC.md §8.1, open).
 HARD_MAX_EXCLUDED_FRACTION = 0.5
 
 # -- The background and the naming rule ----------------------------------------------------
