@@ -217,3 +217,16 @@ def test_gsplat_port_fails_hard_naming_the_ill_conditioned_projection():
     assert "none of the known mistakes" not in report.message()
     for r in report.families["hard"].reports:
         assert not r.ok and r.cause.startswith(ut.TEXTBOOK_MISTAKE), r.message()
+
+
+def test_gsplat_port_backward_on_hard_notes_the_projection():
+    """The backward cannot localise the textbook projection (a needle's footprint box is
+    the whole image): its failing comparison names no mistake but says the scene holds
+    Gaussians that projection cannot resolve (≈ 5 s)."""
+    _, backward = gsplat_port(GSPLAT_MAX_ALPHA)
+    s, cam = ut.scene(1500, 3, 1, width=80, height=64, family="hard", dtype=np.float32)
+    r = ut.compare_backward(backward, s, cam, conventions="gsplat", check=False,
+                            max_excluded_fraction=ut.HARD_MAX_EXCLUDED_FRACTION)
+    print(r.message())
+    assert not r.ok and r.cause == ""
+    assert any(n.startswith(ut.TEXTBOOK_MISTAKE) for n in r.notes)

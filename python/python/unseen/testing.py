@@ -1008,6 +1008,16 @@ def compare_backward(port_backward, scene, camera, grad_rgb=None, *, conventions
             report.consistent = _localise_cutoffs(
                 port_backward, got, scene, camera, fwd, v, skip, bg, conventions, threads,
                 base)
+            ill = textbook_ill_conditioned(diag)
+            if len(ill):
+                # Not localised: a needle's footprint box covers the image, so zeroing the
+                # upstream gradient there would pass any port.
+                cond = np.asarray(diag["condition"], dtype=np.float64)
+                report.notes.append(
+                    f"{_textbook_text(ill, cond, [0] * len(ill))}: the scene holds Gaussians "
+                    f"a float32 textbook projection cannot resolve; the backward cannot "
+                    f"tell that mistake from others (check_port's forward comparison of the "
+                    f"same family names it)")
     if check and not report.ok:
         raise AssertionError(report.message())
     return report
