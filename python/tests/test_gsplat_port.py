@@ -229,4 +229,5 @@ def test_gsplat_port_backward_on_hard_notes_the_projection():
                             max_excluded_fraction=ut.HARD_MAX_EXCLUDED_FRACTION)
     print(r.message())
     assert not r.ok and r.cause == ""
-    assert any(n.startswith(ut.TEXTBOOK_MISTAKE) for n in r.notes)
+    assert any(n.startswith("the scene holds Gaussians a float32 textbook projection")
+               for n in r.notes)

@@ -526,13 +526,18 @@ def _footprints(want, idx, height, width):
     return inside, boxes
 
 
-def _textbook_text(idx, cond, weight):
-    """The mistake's text with the Gaussians it concerns (most failing values first)."""
+def _textbook_items(idx, cond, weight):
+    """The Gaussians `idx` with their condition numbers (most failing values first)."""
     order = sorted(range(len(idx)), key=lambda k: (-weight[k], -cond[idx[k]], idx[k]))
     items = ", ".join(f"{int(idx[k])} (condition {cond[idx[k]]:.3g})"
                       for k in order[:CULL_LIST])
     more = f" and {len(idx) - CULL_LIST} more" if len(idx) > CULL_LIST else ""
-    return f"{TEXTBOOK_MISTAKE}: {len(idx)} Gaussians: {items}{more}"
+    return f"{len(idx)} Gaussians: {items}{more}"
+
+
+def _textbook_text(idx, cond, weight):
+    """The mistake's text with the Gaussians it concerns (most failing values first)."""
+    return f"{TEXTBOOK_MISTAKE}: {_textbook_items(idx, cond, weight)}"
 
 
 def _diagnose_textbook(report, got, want, keys, conic_bad=None):
@@ -1014,10 +1019,10 @@ def compare_backward(port_backward, scene, camera, grad_rgb=None, *, conventions
                 # upstream gradient there would pass any port.
                 cond = np.asarray(diag["condition"], dtype=np.float64)
                 report.notes.append(
-                    f"{_textbook_text(ill, cond, [0] * len(ill))}: the scene holds Gaussians "
-                    f"a float32 textbook projection cannot resolve; the backward cannot "
-                    f"tell that mistake from others (check_port's forward comparison of the "
-                    f"same family names it)")
+                    f"the scene holds Gaussians a float32 textbook projection (J·Σc·Jᵀ, "
+                    f"a·c − b²) cannot resolve, {_textbook_items(ill, cond, [0] * len(ill))}; "
+                    f"the backward cannot tell that mistake from others (check_port's "
+                    f"forward comparison of the same family names it)")
     if check and not report.ok:
         raise AssertionError(report.message())
     return report
