@@ -20,7 +20,10 @@ family every failing quantity, its worst pixel or Gaussian, the Gaussians only o
 draws and — when one explains it clearly better than every other — the mistake (another
 α clamp, pixel centres without the 0.5 offset, an SH band of the wrong sign, xyzw
 quaternions, a camera-to-world viewmat, INRIA's near plane 0.2, α·bg or no background,
-a transmittance stop of 1e-3, missing cut-offs).
+a transmittance stop of 1e-3, missing cut-offs, and — on `hard`, whose needles of scale 1e3
+are the ill-conditioned case — a float32 projection of the textbook form J·Σc·Jᵀ with
+det = a·c − b², listing the Gaussians whose thin axis it loses: port the stable form of
+SPEC.md §5.1 instead).
 """
 
 import pytest

@@ -118,9 +118,12 @@ def test_float_noise_passes_with_depth(family, seed):
                            outputs=("rgb", "alpha", "depth"))
 
 
-#: The families a correct port must pass whatever its float noise: not ``hard``, where the
-#: oracle's projection of ill-conditioned Gaussians (scales 1e3, quaternions of norm 1e-20)
-#: moves with the last bit of a parameter (being fixed in src/raster/project.rs).
+#: The families a correct port must pass whatever its float noise: not ``hard``. There the
+#: forward passes (seeds 1–5, revision 7) but the backward does not: ±1.2e-7 on a needle's
+#: parameters (scale 1e3) turns it by ~1e-7 rad, which moves its own means and scales
+#: gradients by up to 40 % (seed 1, Gaussian 1252, condition 4e7, not flagged): the noise
+#: changes the scene, not just a port's rounding. (Seed 0's ``hard`` fails without noise
+#: too: the oracle sets aside more than HARD_MAX_EXCLUDED_FRACTION, SPEC.md §8.1.)
 ORDINARY = ("random", "near_plane", "rolled", "clamp")
 
 

@@ -1,0 +1,173 @@
+"""An independent NumPy port (tests/numpy_port.py, written from gsplat's formulas) through
+unseen.testing, issue #51: the float64 port of the textbook projection and the float32 port
+of the stable one (SPEC.md §5.1) pass every family, ``hard`` included, at check_port's two
+sizes; the float32 textbook port passes the ordinary families and fails ``hard`` with the
+ill-conditioned projection named, with the Gaussians it concerns, never "none of the known
+mistakes". No torch needed.
+
+UNSEEN_NUMPY_PORT_SEEDS sets how many seeds run (default 3, ≈ 15 s; the acceptance
+measurement used 20: docs/notes/rationale.md §8.1).
+"""
+
+import os
+import re
+
+import numpy as np
+import pytest
+
+import unseen
+from unseen import testing
+
+import numpy_port
+
+SEEDS = range(int(os.environ.get("UNSEEN_NUMPY_PORT_SEEDS", "3")))
+CASES = list(enumerate(testing.CHECK_FORWARD_CASES))
+ORDINARY = ("random", "near_plane", "rolled", "clamp")
+
+
+def _case(seed, family, case):
+    n, w, h = testing.CHECK_FORWARD_CASES[case]
+    dtype = np.float32 if case % 2 == 0 else np.float64  # as check_port
+    s, cam = testing.scene(n, 3, seed, width=w, height=h, family=family, dtype=dtype)
+    return s, cam, testing.background_for(seed, family, case)
+
+
+def _compare(port, seed, family, case):
+    s, cam, bg = _case(seed, family, case)
+    bound = (testing.HARD_MAX_EXCLUDED_FRACTION if family == "hard"
+             else testing.MAX_EXCLUDED_FRACTION)
+    return s, testing.compare_render(port, s, cam, background=bg, check=False,
+                                     max_excluded_fraction=bound)
+
+
+def _values_pass(report):
+    """Every value and intermediate within tolerance. The one failure allowed is the
+    oracle's own: a scene it sets aside more of than the bound (test_oracle_stays_within_
+    its_bound_on_hard follows that separately)."""
+    kinds = [f.quantity for f in report.failures]
+    return kinds in ([], ["excluded pixels"])
+
+
+def test_the_port_is_independent_and_exact_on_a_simple_scene():
+    """A sanity check of the port itself: float64 and float32, textbook and stable, agree
+    with each other to float32 rounding on an ordinary scene (they share no code with the
+    oracle, so the comparisons below test the harness, not a copy of it)."""
+    s, cam, bg = _case(0, "random", 1)
+    outs = [numpy_port.port(dt, pr)(s, cam, background=bg)
+            for dt in (np.float64, np.float32) for pr in ("textbook", "stable")]
+    for o in outs[1:]:
+        np.testing.assert_allclose(o["rgb"], outs[0]["rgb"], atol=2e-5)
+        np.testing.assert_array_equal(o["radii"] > 0, outs[0]["radii"] > 0)
+    ref = unseen.render(**s, camera=cam, background=list(bg))
+    assert np.abs(outs[0]["rgb"] - ref["rgb"]).max() < 1e-4
+
+
+@pytest.mark.parametrize("case", [c for c, _ in CASES])
+@pytest.mark.parametrize("seed", SEEDS)
+def test_float64_textbook_and_float32_stable_ports_pass_hard(seed, case):
+    for port in (numpy_port.port(np.float64, "textbook"),
+                 numpy_port.port(np.float32, "stable")):
+        _, report = _compare(port, seed, "hard", case)
+        print(f"{port.__name__} seed {seed} case {case}: set aside "
+              f"{report.excluded_fraction:.2%}")
+        assert _values_pass(report), report.message()
+
+
+@pytest.mark.parametrize("family", ORDINARY)
+@pytest.mark.parametrize("seed", SEEDS)
+def test_every_port_passes_the_ordinary_families(seed, family):
+    """The textbook float32 form too: there no Gaussian's condition reaches 200."""
+    for case, _ in CASES:
+        for dt, pr in ((np.float64, "textbook"), (np.float32, "stable"),
+                       (np.float32, "textbook")):
+            _, report = _compare(numpy_port.port(dt, pr), seed, family, case)
+            assert _values_pass(report), report.message()
+
+
+@pytest.mark.parametrize("case", [c for c, _ in CASES])
+@pytest.mark.parametrize("seed", SEEDS)
+def test_float32_textbook_port_fails_hard_naming_the_projection(seed, case):
+    s, report = _compare(numpy_port.port(np.float32, "textbook"), seed, "hard", case)
+    msg = report.message()
+    print(msg)
+    assert not _values_pass(report)
+    assert "none of the known mistakes" not in msg
+    assert report.cause.startswith(testing.TEXTBOOK_MISTAKE), msg
+    # The Gaussians named, with their condition numbers: the needles of scale 1e3 (hard's
+    # ill-conditioned case), nothing else.
+    named = [int(i) for i in re.findall(r"(\d+) \(condition ", report.cause)]
+    assert named
+    assert np.all(np.exp(s["scales"][named, 0]) > 999.0)
+
+
+def test_a_mistake_that_sets_aside_the_image_explains_nothing():
+    """On ``hard`` the xyzw hypothesis moves the needles so that the oracle, rendered under
+    it, sets aside 97 % of the image: it must not "explain" the textbook port's failures
+    (it was named before the rule)."""
+    s, report = _compare(numpy_port.port(np.float32, "textbook"), 1, "hard", 0)
+    xyzw = dict(report.candidates)["the port reads quaternions as xyzw, not wxyz"]
+    assert xyzw == report.base_failing
+    assert report.cause.startswith(testing.TEXTBOOK_MISTAKE)
+
+
+def test_ill_conditioned_threshold_separates_the_families():
+    """TEXTBOOK_ROUNDING·u·condition ≥ 1 holds for no Gaussian of the ordinary families
+    and for every needle of ``hard`` the oracle draws."""
+    for family in ORDINARY + ("hard",):
+        s, cam, _ = _case(0, family, 0)
+        d = unseen.render(**s, camera=cam, diagnostics=True)["diagnostics"]
+        ill = testing.textbook_ill_conditioned(d)
+        if family != "hard":
+            assert len(ill) == 0 and d["condition"].max() < 200, family
+        else:
+            needles = np.flatnonzero((np.exp(s["scales"][:, 0]) > 999.0)
+                                     & (d["condition"] > 0))
+            assert set(needles) == set(ill)
+
+
+def test_conics_alone_name_the_projection():
+    """A port whose images pass but whose conics of ill-conditioned Gaussians are off (its
+    images computed otherwise) is named from the conics."""
+    s, cam, bg = _case(1, "hard", 1)
+    stable = numpy_port.port(np.float32, "stable")
+    textbook = numpy_port.port(np.float32, "textbook")
+
+    def port(scene, camera, *, background):
+        out = stable(scene, camera, background=background)
+        out["conics"] = textbook(scene, camera, background=background)["conics"]
+        return out
+
+    report = testing.compare_render(port, s, cam, background=bg, check=False,
+                                     max_excluded_fraction=testing.HARD_MAX_EXCLUDED_FRACTION)
+    assert [f.quantity for f in report.failures] == ["conics"]
+    assert report.cause.startswith(testing.TEXTBOOK_MISTAKE), report.message()
+    # ... and not from conics of other Gaussians: the same port with the ordinary family.
+    s, cam, bg = _case(1, "random", 1)
+    report = testing.compare_render(port, s, cam, background=bg, check=False)
+    assert report.ok
+
+
+# Measured on revision 7, the oracle itself sets aside more of ``hard`` than
+# HARD_MAX_EXCLUDED_FRACTION at 128×96 on seeds 0, 7, 11, 14, 15, 18, 21–24, 26, 29, 31–35,
+# 37 (52–83 %) and at 64×48 on seed 39 (51 %): the α-near-1/255 margin of the scale-1e3
+# needles, widened by 2ρ·|σ|₊ (SPEC.md §8.1), covers 44–80 % of the image. A fix belongs
+# in raster::decisions; when it lands this test passes and the strict xfail fails: drop
+# the mark.
+
+
+@pytest.mark.xfail(strict=True, reason="revision 7: the oracle sets aside 51–83 % of hard "
+                   "on 19 of 80 check_port cases (seeds 0–39)")
+def test_oracle_stays_within_its_bound_on_hard():
+    """Issue #51: unseen as the port stays within HARD_MAX_EXCLUDED_FRACTION on ``hard``
+    for seeds 0–39 at check_port's sizes (the diagnostics alone: ≈ 5 s)."""
+    over = {0: [], 1: []}
+    for seed in range(40):
+        for case, _ in CASES:
+            s, cam, bg = _case(seed, "hard", case)
+            d = unseen.render(**s, camera=cam, background=list(bg),
+                              diagnostics=True)["diagnostics"]
+            aside = ((d["pixel_flags"] & testing.PIXEL_FORWARD_FLAGS) != 0).mean()
+            if aside > testing.HARD_MAX_EXCLUDED_FRACTION:
+                over[case].append(seed)
+    print(over)
+    assert over == {0: [], 1: []}, over
