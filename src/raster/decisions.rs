@@ -16,7 +16,7 @@
 //! plane, Jacobian guard) within their margins.
 //!
 //! The projection itself is a source of error only where float32 cannot resolve a
-//! Gaussian's footprint: [`conic_amplification`] bounds how far rounding can move its conic
+//! Gaussian's footprint: [`conic_rounding`] bounds how far rounding can move its conic
 //! (a few units of roundoff for ordinary Gaussians, up to the aspect ratio for a needle
 //! lying along a pixel axis or pointing at the camera). That bound widens the Gaussian's σ
 //! error where it exceeds the `sigma` margin, and past the `conic` margin the Gaussian and
@@ -83,12 +83,12 @@ pub const GAUSSIAN_DEPTH_CULL: u8 = 2;
 /// clamp (SPEC.md §5.1): the mean's gradient has a kink there.
 pub const GAUSSIAN_JACOBIAN_CLAMP: u8 = 4;
 /// Gaussian flag: its conic's float32 error bound `CONIC_ROUNDING·u·κ`
-/// ([`conic_amplification`]) exceeds the conic margin: beyond float32.
+/// ([`conic_rounding`]) exceeds the conic margin: beyond float32.
 pub const GAUSSIAN_ILL_CONDITIONED: u8 = 8;
 
 /// A float32 evaluation of the projection (ours, or a port's by the same cancellation-free
 /// form) gives a conic whose entries lie within `CONIC_ROUNDING·u·κ` of the exact ones
-/// (relative; B relative to `√(A·C)`), `u = 2⁻²⁴` and κ from [`conic_amplification`]:
+/// (relative; B relative to `√(A·C)`), `u = 2⁻²⁴` and κ from [`conic_rounding`]:
 /// measured 3.6 on 26 000 ordinary and needle Gaussians (test
 /// `ill_conditioned_conics_match_an_f64_projection`), ×2.
 pub const CONIC_ROUNDING: f64 = 8.0;
@@ -219,7 +219,7 @@ pub struct Decisions {
     pub depth_error: Vec<f32>,
     /// Per Gaussian: `GAUSSIAN_*` bits.
     pub gaussian_flags: Vec<u8>,
-    /// Per Gaussian: κ of [`conic_amplification`] (how many units of rounding a float32
+    /// Per Gaussian: κ of [`conic_rounding`] (how many units of rounding a float32
     /// conic may be off by), and the condition number `λ_max/λ_min` of its dilated 2D
     /// covariance (what the textbook `a·c − b²` form loses: its conic is good only while
     /// `u·cond` is small); both 0 where the projection culls the Gaussian.
@@ -247,6 +247,15 @@ struct PixelWalk {
 /// (σ itself unless `B·dx·dy` cancels part of it); σ's rounding scales with it.
 fn sigma_terms(s: &Splat, dx: f32, dy: f32) -> f32 {
     0.5 * (s.conic[0].abs() * dx * dx + s.conic[2].abs() * dy * dy) + (s.conic[1] * dx * dy).abs()
+}
+
+/// `ln(o·exp(−σ)/thr)`, the distance of a splat's unclamped α from the threshold in units
+/// of σ, in f64: a port whose σ differs by `err` (the relative α error `e_α`) decides the
+/// α test the other way only where it is within `±err`. Its first-order form `|α/thr − 1|`
+/// would flag every pixel where `err ≥ 1`, which far out on a large splat (σ ≫ 1, α ≈ 0
+/// on both sides) is no decision at all.
+fn log_gap(opacity: f32, sigma: f32, thr: f32) -> f32 {
+    (f64::from(opacity).ln() - f64::from(sigma) - f64::from(thr).ln()) as f32
 }
 
 /// `|v/t − 1|` in f64 (exact enough for a margin, and no overflow).
@@ -288,26 +297,12 @@ pub fn decisions(
     let p = super::project::project(scene, cam, &relaxed, opts, &mut report);
     let bins = super::tile::bin(&p, w, h, opts.kernel);
     let camf = CameraF32::new(cam);
-    let (kappa, condition): (Vec<f32>, Vec<f32>) = (0..scene.len())
+    // Per visible Gaussian: how float32 rounding may move its conic (f64, from its inputs).
+    let rounding: Vec<Option<ConicRounding>> = (0..scene.len())
         .into_par_iter()
-        .map(|i| {
-            if p.radii[i] == [0, 0] {
-                return (0.0, 0.0);
-            }
-            let c = &p.splats[i].conic;
-            // The dilated covariance's eigenvalues are the conic's reciprocals.
-            let (a, b, cc) = (f64::from(c[0]), f64::from(c[1]), f64::from(c[2]));
-            let (mid, rad) = (0.5 * (a + cc), (0.25 * (a - cc) * (a - cc) + b * b).sqrt());
-            let cond = (mid + rad) / (mid - rad).max(f64::MIN_POSITIVE);
-            (conic_amplification(scene, i, &camf) as f32, cond as f32)
-        })
-        .unzip();
-    let unit = f64::from(f32::EPSILON) / 2.0;
-    // Per Gaussian: the conic's relative error bound of one f32 implementation.
-    let rho: Vec<f32> = kappa
-        .iter()
-        .map(|&k| (CONIC_ROUNDING * unit * f64::from(k)) as f32)
+        .map(|i| (p.radii[i] != [0, 0]).then(|| conic_rounding(scene, i, &camf)))
         .collect();
+    let unit = f64::from(f32::EPSILON) / 2.0;
     let (thr, stop, clamp) = (
         ALPHA_THRESHOLD,
         plan.cutoffs.transmittance_stop,
@@ -354,12 +349,13 @@ pub fn decisions(
             let shift = m.mean2d
                 * ((s.conic[0] * dx + s.conic[1] * dy).abs() * s.mean[0].abs()
                     + (s.conic[1] * dx + s.conic[2] * dy).abs() * s.mean[1].abs());
-            let r = rho[gid as usize];
-            let err = m.alpha_error(scale, shift) + (2.0 * r - m.sigma).max(0.0) * scale;
-            if r > m.conic && alpha >= thr * (1.0 - err) {
+            let conic_err = conic_sigma_error(&rounding[gid as usize], dx, dy, sigma);
+            let err = m.alpha_error(scale, shift) + conic_err;
+            let lg = log_gap(s.opacity, sigma, thr);
+            if conic_err > m.conic && lg >= -err {
                 out.flags |= PIXEL_ILL_CONDITIONED;
             }
-            let am = rel(alpha, thr) - err;
+            let am = lg.abs() - err;
             out.alpha = out.alpha.min(am);
             if am <= 0.0 {
                 out.flags |= PIXEL_ALPHA_THRESHOLD;
@@ -404,10 +400,9 @@ pub fn decisions(
                     }
                     let (ndx, ndy) = (n.mean[0] - px, n.mean[1] - py);
                     let na = splat_alpha(n, ndx, ndy, clamp);
-                    let nterms = sigma_terms(n, ndx, ndy);
-                    let nerr = m.alpha_error(nterms, 0.0)
-                        + (2.0 * rho[next as usize] - m.sigma).max(0.0) * nterms;
-                    if na.sigma >= 0.0 && na.alpha >= thr * (1.0 - nerr) {
+                    let nerr = m.alpha_error(sigma_terms(n, ndx, ndy), 0.0)
+                        + conic_sigma_error(&rounding[next as usize], ndx, ndy, na.sigma);
+                    if na.sigma >= 0.0 && log_gap(n.opacity, na.sigma, thr) >= -nerr {
                         out.flags |= PIXEL_DEPTH_TIE;
                         out.depth = out.depth.min(gap as f32 - m.depth);
                     }
@@ -443,11 +438,17 @@ pub fn decisions(
         .map(|(i, j)| walk(i, j))
         .collect();
     let mut gaussian_flags = gaussian_decisions(scene, cam, &m);
-    for (f, &r) in gaussian_flags.iter_mut().zip(&rho) {
-        if r > m.conic {
+    for (f, r) in gaussian_flags.iter_mut().zip(&rounding) {
+        if r.is_some_and(|r| CONIC_ROUNDING * unit * r.amplification > f64::from(m.conic)) {
             *f |= GAUSSIAN_ILL_CONDITIONED;
         }
     }
+    let field = |get: fn(&ConicRounding) -> f64| -> Vec<f32> {
+        rounding
+            .iter()
+            .map(|r| r.as_ref().map_or(0.0, |r| get(r) as f32))
+            .collect()
+    };
     Ok(Decisions {
         width: w,
         height: h,
@@ -460,8 +461,8 @@ pub fn decisions(
         rgb_error: walks.iter().map(|p| p.sensitivity * p.color_max).collect(),
         depth_error: walks.iter().map(|p| p.sensitivity * p.depth_max).collect(),
         gaussian_flags,
-        conic_amplification: kappa,
-        condition,
+        conic_amplification: field(|r| r.amplification),
+        condition: field(|r| r.condition),
         margins: m,
     })
 }
@@ -529,7 +530,7 @@ fn gaussian_decisions(scene: &Gaussians, cam: &Camera, m: &Margins) -> Vec<u8> {
 /// origin), moves J by `e_t = (2·m_z + m_x + m_y)/z`; and a quaternion whose squares are
 /// f32 subnormals (`|q|² < 2⁻¹²⁶`) gives a rotation good only to `2⁻¹⁴⁹/|q|²`, `e_q =
 /// max(1, 2⁻¹⁴⁹/(u·|q|²))` units of roundoff.
-pub fn conic_amplification(scene: &Gaussians, i: usize, cam: &CameraF32) -> f64 {
+pub fn conic_rounding(scene: &Gaussians, i: usize, cam: &CameraF32) -> ConicRounding {
     let dot3 = |u: [f64; 3], v: [f64; 3]| (u[0] * v[0] + u[1] * v[1]) + u[2] * v[2];
     let m = scene.means[i].map(f64::from);
     let r = cam.r_cw.map(|row| row.map(f64::from));
@@ -603,5 +604,62 @@ pub fn conic_amplification(scene: &Gaussians, i: usize, cam: &CameraF32) -> f64 
     let e_a = norm(j[0]) * norm(s) / a.sqrt();
     let e_c = norm(j[1]) * norm(s) / c.sqrt();
     let e_d = 2.0 * norm(jc) * (0..3).map(|k| mu[k].abs() * ss[k]).sum::<f64>() / det;
-    (1.0 + e_a + e_c + e_d + e_t) * e_q
+    let b = dot3(f[0], f[1]);
+    let lmax = 0.5 * (a + c) + (0.25 * (a - c) * (a - c) + b * b).sqrt();
+    let gamma = CONIC_ROUNDING * unit * e_q;
+    ConicRounding {
+        amplification: (1.0 + e_a + e_c + e_d + e_t) * e_q,
+        condition: lmax * lmax / det,
+        conic: [c / det, -b / det, a / det],
+        f,
+        row_scale: [gamma * norm(j[0]), gamma * norm(j[1])],
+        s,
+        relative: gamma * (1.0 + e_d + e_t),
+    }
+}
+
+/// How float32 rounding may move one Gaussian's conic ([`conic_rounding`]).
+#[derive(Clone, Copy, Debug)]
+pub struct ConicRounding {
+    /// κ: the conic's entries lie within `CONIC_ROUNDING·u·κ` (relative) of the exact ones.
+    pub amplification: f64,
+    /// `λ_max/λ_min` of the dilated 2D covariance.
+    pub condition: f64,
+    /// The exact conic (in f64 from the f32 inputs): the bound's `w = conic·d` must not carry
+    /// the f32 conic's own rounding, which across a needle is a spurious component along it.
+    conic: [f64; 3],
+    /// The factor `F = J·Q·diag(s)` (exact, in f64), the bound's `γ·|J_r|` per row (`γ =
+    /// CONIC_ROUNDING·u·e_q`), the scales, and the relative part `γ·(1 + e_d + e_t)`.
+    f: [[f64; 3]; 2],
+    row_scale: [f64; 2],
+    s: [f64; 3],
+    relative: f64,
+}
+
+impl ConicRounding {
+    /// A bound of how far the conic's rounding moves σ at the offset whose conic gradient
+    /// is `w = conic·d`: σ = ½·dᵀ·(F·Fᵀ + ε)⁻¹·d moves by `−(wᵀ·δF)·(Fᵀ·w)` when F moves by
+    /// δF, and each column k of δF is within `γ·|J_r|·s_k` per row r, so
+    /// `|δσ| ≤ Σ_k (|w₀|·γ|J₀| + |w₁|·γ|J₁|)·s_k·|w·F_k| + γ·(1 + e_d + e_t)·σ` (the
+    /// determinant's and the mean's rounding scale σ as a whole). Tighter than
+    /// `ρ·|σ|₊` where it matters: across a needle near its centre `w·F_long ≈ 0`, so its
+    /// long axis's rounding (a tilt of ~γ radians) counts only in proportion to the
+    /// distance along it.
+    pub fn sigma_error(&self, w: [f64; 2], sigma: f64) -> f64 {
+        let row = w[0].abs() * self.row_scale[0] + w[1].abs() * self.row_scale[1];
+        let cols: f64 = (0..3)
+            .map(|k| self.s[k] * (w[0] * self.f[0][k] + w[1] * self.f[1][k]).abs())
+            .sum();
+        row * cols + self.relative * sigma.abs()
+    }
+}
+
+/// [`ConicRounding::sigma_error`] at offset `(dx, dy)` from the splat's centre (0 where the
+/// Gaussian has no bound: it was culled).
+fn conic_sigma_error(r: &Option<ConicRounding>, dx: f32, dy: f32, sigma: f32) -> f32 {
+    r.as_ref().map_or(0.0, |r| {
+        let [a, b, c] = r.conic;
+        let (dx, dy) = (f64::from(dx), f64::from(dy));
+        r.sigma_error([a * dx + b * dy, b * dx + c * dy], f64::from(sigma)) as f32
+    })
 }

@@ -569,7 +569,7 @@ fn ill_conditioned_conics_match_an_f64_projection() {
                 let ent = (0..3)
                     .map(|k| (s.conic[k] as f64 - want[k]).abs() / max)
                     .fold(0f64, f64::max);
-                let kappa = unseen::raster::decisions::conic_amplification(&g, i, &c);
+                let kappa = unseen::raster::decisions::conic_rounding(&g, i, &c).amplification;
                 let ulps = tr.abs().max(ent) / (kappa * f64::from(f32::EPSILON) / 2.0);
                 worst = (worst.0.max(tr.abs()), worst.1.max(ent), worst.2.max(ulps));
                 over += usize::from(tr.abs() > 0.01);
