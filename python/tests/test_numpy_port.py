@@ -100,13 +100,13 @@ def test_float32_textbook_port_fails_hard_naming_the_projection(seed, case):
     assert np.all(np.exp(s["scales"][named, 0]) > 999.0)
 
 
-def test_a_mistake_that_sets_aside_the_image_explains_nothing():
-    """On ``hard`` the xyzw hypothesis moves the needles so that the oracle, rendered under
-    it, sets aside 97 % of the image: it must not "explain" the textbook port's failures
-    (it was named before the rule)."""
+def test_a_mistake_that_moves_the_needles_explains_nothing():
+    """On ``hard`` the xyzw hypothesis moves the needles, so the oracle rendered under it
+    sets much of the image aside (97 % before the per-pixel conic bound): it must not
+    "explain" the textbook port's failures (it was named before the naming rule)."""
     s, report = _compare(numpy_port.port(np.float32, "textbook"), 1, "hard", 0)
     xyzw = dict(report.candidates)["the port reads quaternions as xyzw, not wxyz"]
-    assert xyzw == report.base_failing
+    assert xyzw >= report.base_failing
     assert report.cause.startswith(testing.TEXTBOOK_MISTAKE)
 
 
@@ -147,16 +147,15 @@ def test_conics_alone_name_the_projection():
     assert report.ok
 
 
-# Measured on revision 7, the oracle itself sets aside more of ``hard`` than
-# HARD_MAX_EXCLUDED_FRACTION at 128×96 on seeds 0, 7, 11, 14, 15, 18, 21–24, 26, 29, 31–35,
-# 37 (52–83 %) and at 64×48 on seed 39 (51 %): the α-near-1/255 margin of the scale-1e3
-# needles, widened by 2ρ·|σ|₊ (SPEC.md §8.1), covers 44–80 % of the image. A fix belongs
-# in raster::decisions; when it lands this test passes and the strict xfail fails: drop
-# the mark.
+# Before the per-pixel conic bound and the log-form α margin (SPEC.md §8.1) the oracle set
+# aside 51–83 % of hard on 19 of 80 cases; now only seed 35 at 128×96 exceeds the bound, by
+# depth ties (47.6 % of its image) whose cause is not yet understood. When it is fixed this
+# test passes and the strict xfail fails: drop the mark.
 
 
-@pytest.mark.xfail(strict=True, reason="revision 7: the oracle sets aside 51–83 % of hard "
-                   "on 19 of 80 check_port cases (seeds 0–39)")
+@pytest.mark.xfail(strict=True, reason="seed 35 at 128×96 sets aside 60 % of hard (47.6 % "
+                   "of the image flagged as depth ties, 6 % beyond float32); the other 79 "
+                   "of 80 cases stay within 50 % (median 11.7 %)")
 def test_oracle_stays_within_its_bound_on_hard():
     """Issue #51: unseen as the port stays within HARD_MAX_EXCLUDED_FRACTION on ``hard``
     for seeds 0–39 at check_port's sizes (the diagnostics alone: ≈ 5 s)."""

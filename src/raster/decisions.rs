@@ -134,12 +134,12 @@ pub struct Margins {
     /// clamp allows it; two αs of 0.99 already stop the walk, so under `inria` the sum
     /// stays below ≈ 198).
     pub recovery: f32,
-    /// The conic error bound (relative, `CONIC_ROUNDING·u·κ` per implementation) above
-    /// which a Gaussian counts as beyond float32 and its pixels are set aside: 1e-4, five
-    /// times `sigma`. Below it a splat's σ error is `max(sigma, 2·bound)·|σ|₊` (the conic's
-    /// two implementations' rounding, where it exceeds what `sigma` already allows):
-    /// past it the conic's own rounding, not σ's evaluation, decides a port's error over the
-    /// whole footprint.
+    /// How far the conic's rounding may move a splat's α at a pixel (relative: σ's error by
+    /// [`ConicRounding::sigma_error`]) before the pixel counts as beyond float32 and is set
+    /// aside: 1e-3. Below it the bound joins the pixel's α error, which the comparison
+    /// allows for (at 1e-3 that is at most 1e-3 of the pixel's value, 100× a colour's
+    /// tolerance: past it an allowance would hide real mistakes). A Gaussian whose entry
+    /// bound `CONIC_ROUNDING·u·κ_geo` exceeds it is flagged.
     pub conic: f32,
 }
 
@@ -152,7 +152,7 @@ impl Default for Margins {
             recovery: 4e-4,
             transmittance: 1e-5,
             depth: 5e-7,
-            conic: 1e-4,
+            conic: 1e-3,
         }
     }
 }
@@ -439,7 +439,7 @@ pub fn decisions(
         .collect();
     let mut gaussian_flags = gaussian_decisions(scene, cam, &m);
     for (f, r) in gaussian_flags.iter_mut().zip(&rounding) {
-        if r.is_some_and(|r| CONIC_ROUNDING * unit * r.amplification > f64::from(m.conic)) {
+        if r.is_some_and(|r| CONIC_ROUNDING * unit * r.geometric > f64::from(m.conic)) {
             *f |= GAUSSIAN_ILL_CONDITIONED;
         }
     }
@@ -609,12 +609,13 @@ pub fn conic_rounding(scene: &Gaussians, i: usize, cam: &CameraF32) -> ConicRoun
     let gamma = CONIC_ROUNDING * unit * e_q;
     ConicRounding {
         amplification: (1.0 + e_a + e_c + e_d + e_t) * e_q,
+        geometric: (1.0 + e_a + e_c + e_d) * e_q,
         condition: lmax * lmax / det,
         conic: [c / det, -b / det, a / det],
         f,
         row_scale: [gamma * norm(j[0]), gamma * norm(j[1])],
         s,
-        relative: gamma * (1.0 + e_d + e_t),
+        relative: gamma * (1.0 + e_d),
     }
 }
 
@@ -623,13 +624,18 @@ pub fn conic_rounding(scene: &Gaussians, i: usize, cam: &CameraF32) -> ConicRoun
 pub struct ConicRounding {
     /// κ: the conic's entries lie within `CONIC_ROUNDING·u·κ` (relative) of the exact ones.
     pub amplification: f64,
+    /// κ without the camera-space mean's share `e_t`: that share scales σ as a whole, as
+    /// two implementations' rounding of z does near the plane, which the `sigma` margin
+    /// already allows (its ×2.5 for near-plane scenes); it neither widens a splat's error
+    /// nor flags a Gaussian.
+    pub geometric: f64,
     /// `λ_max/λ_min` of the dilated 2D covariance.
     pub condition: f64,
     /// The exact conic (in f64 from the f32 inputs): the bound's `w = conic·d` must not carry
     /// the f32 conic's own rounding, which across a needle is a spurious component along it.
     conic: [f64; 3],
     /// The factor `F = J·Q·diag(s)` (exact, in f64), the bound's `γ·|J_r|` per row (`γ =
-    /// CONIC_ROUNDING·u·e_q`), the scales, and the relative part `γ·(1 + e_d + e_t)`.
+    /// CONIC_ROUNDING·u·e_q`), the scales, and the relative part `γ·(1 + e_d)`.
     f: [[f64; 3]; 2],
     row_scale: [f64; 2],
     s: [f64; 3],
@@ -640,8 +646,9 @@ impl ConicRounding {
     /// A bound of how far the conic's rounding moves σ at the offset whose conic gradient
     /// is `w = conic·d`: σ = ½·dᵀ·(F·Fᵀ + ε)⁻¹·d moves by `−(wᵀ·δF)·(Fᵀ·w)` when F moves by
     /// δF, and each column k of δF is within `γ·|J_r|·s_k` per row r, so
-    /// `|δσ| ≤ Σ_k (|w₀|·γ|J₀| + |w₁|·γ|J₁|)·s_k·|w·F_k| + γ·(1 + e_d + e_t)·σ` (the
-    /// determinant's and the mean's rounding scale σ as a whole). Tighter than
+    /// `|δσ| ≤ Σ_k (|w₀|·γ|J₀| + |w₁|·γ|J₁|)·s_k·|w·F_k| + γ·(1 + e_d)·σ` (the
+    /// determinant's rounding scales σ as a whole; the mean's, `e_t`, see
+    /// [`ConicRounding::geometric`]). Tighter than
     /// `ρ·|σ|₊` where it matters: across a needle near its centre `w·F_long ≈ 0`, so its
     /// long axis's rounding (a tilt of ~γ radians) counts only in proportion to the
     /// distance along it.
