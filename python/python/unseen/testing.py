@@ -78,7 +78,7 @@ MAX_EXCLUDED_FRACTION = 2e-2
 #: 128×96 and 256×256 (seeds 0–3) before numerics revision 7. There the harness checks what
 #: it can judge. With revision 7 and the per-pixel conic bound (SPEC.md §8.1): median
 #: 11.7 % at check_port's sizes, seeds 0–39, above this bound on 1 of 80 cases (seed 35 at
-#: 128×96, 60 %: depth ties, open).
+#: 128×96, 60 %: two image-wide Gaussians 1 ulp apart in z, a genuine tie).
 HARD_MAX_EXCLUDED_FRACTION = 0.5
 
 # -- The background and the naming rule ----------------------------------------------------
