@@ -53,25 +53,7 @@ pub fn forward64_cut(
             continue;
         }
         let s = [q[3].exp(), q[4].exp(), q[5].exp()];
-        let qn = (q[6] * q[6] + q[7] * q[7] + q[8] * q[8] + q[9] * q[9]).sqrt();
-        let (qw, qx, qy, qz) = (q[6] / qn, q[7] / qn, q[8] / qn, q[9] / qn);
-        let rot = [
-            [
-                1.0 - 2.0 * (qy * qy + qz * qz),
-                2.0 * (qx * qy - qw * qz),
-                2.0 * (qx * qz + qw * qy),
-            ],
-            [
-                2.0 * (qx * qy + qw * qz),
-                1.0 - 2.0 * (qx * qx + qz * qz),
-                2.0 * (qy * qz - qw * qx),
-            ],
-            [
-                2.0 * (qx * qz - qw * qy),
-                2.0 * (qy * qz + qw * qx),
-                1.0 - 2.0 * (qx * qx + qy * qy),
-            ],
-        ];
+        let rot = rotation64([q[6], q[7], q[8], q[9]]);
         let mut sig = [[0.0; 3]; 3];
         for a in 0..3 {
             for b in 0..3 {
@@ -182,6 +164,29 @@ pub fn forward64_cut(
         out[3][pi] = dd / (1.0 - tt).max(1e-10);
     }
     out
+}
+
+/// The rotation of a wxyz quaternion, normalized in f64.
+pub fn rotation64(q: [f64; 4]) -> [[f64; 3]; 3] {
+    let qn = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
+    let [w, x, y, z] = q.map(|v| v / qn);
+    [
+        [
+            1.0 - 2.0 * (y * y + z * z),
+            2.0 * (x * y - w * z),
+            2.0 * (x * z + w * y),
+        ],
+        [
+            2.0 * (x * y + w * z),
+            1.0 - 2.0 * (x * x + z * z),
+            2.0 * (y * z - w * x),
+        ],
+        [
+            2.0 * (x * z - w * y),
+            2.0 * (y * z + w * x),
+            1.0 - 2.0 * (x * x + y * y),
+        ],
+    ]
 }
 
 /// Raw parameters flattened per Gaussian: mean 3, log-scale 3, quat 4, logit 1, dc 3, rest.
