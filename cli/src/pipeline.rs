@@ -535,6 +535,10 @@ pub struct AuditArgs {
     /// (`samples.json`) and in `--merge` files: seeds accumulate.
     #[arg(long)]
     seeds: Option<String>,
+    /// The planned sample per claim (default 16): verdicts are taken on the first N seeds
+    /// of the pool; a claim with fewer is an interim look, not a verdict.
+    #[arg(long, value_name = "N")]
+    planned_seeds: Option<usize>,
     /// Pool the samples of another audit (its `samples.json`, or an `audit.json` of an
     /// earlier version) into the report; repeatable. Refused when it measures another
     /// dataset, preset or original-scene training.
@@ -637,6 +641,9 @@ pub fn run_audit(a: &AuditArgs) -> Result<()> {
     }
     if let Some(n) = a.train_iterations {
         cfg.train_iterations = n;
+    }
+    if let Some(n) = a.planned_seeds {
+        cfg.planned_seeds = n;
     }
     if let Some(r) = a.train_resolution {
         if r == 0 {

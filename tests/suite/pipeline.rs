@@ -791,6 +791,7 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
         seeds: 0..2,
         train_iterations: 300,
         train_resolution: 4,
+        planned_seeds: 2,
     };
     let dir = t.path().join("audit");
     // A pipeline job before its original scene: a clear error naming the job to run.
@@ -828,9 +829,12 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
     for v in &report.verdicts {
         assert_eq!(v.seeds, 2);
         assert!(v.mean_diff.is_finite() && v.std_diff.is_finite(), "{v:?}");
-        // Both seeds have per-view records: the seeds-then-views bootstrap runs.
-        let [lo, hi] = v.hierarchical.unwrap();
-        assert!(lo <= hi && v.hierarchical_units == 2, "{v:?}");
+        // Both seeds have per-view records, but two units are too few for the
+        // seeds-then-views interval (HIERARCHICAL_MIN_UNITS).
+        assert!(
+            v.hierarchical.is_none() && v.hierarchical_units == 2,
+            "{v:?}"
+        );
         assert!(
             ["holds", "contradicted", "inconclusive"].contains(&v.verdict.as_str()),
             "{v:?}"
@@ -950,10 +954,11 @@ fn sample(
 }
 
 /// The verdicts of pooled samples (SPEC.md §21.2): a unit is a seed at a revision, a pair
-/// another revision reproduced bit for bit counts once, a "does not hurt" claim is tested
-/// against the margin (the lounge case of the old rule, −0.68 ± 0.45 dB over 3 seeds, is
-/// no longer *holds*), and a loss beyond the margin that sixteen units pin down is
-/// *contradicted*.
+/// another revision reproduced bit for bit counts once, a claim below its planned sample is
+/// an interim look (the lounge case of the old rule, −0.68 ± 0.45 dB over 3 seeds, is no
+/// longer *holds*), a "does not hurt" claim is tested against the margin and a loss beyond
+/// it that the planned twelve units show is *contradicted*, seeds beyond the plan are
+/// judged nowhere, and identical differences give no verdict.
 #[test]
 fn audit_verdicts_pool_seeds_and_revisions_and_test_non_inferiority() {
     use unseen::pipeline::audit::{AuditConfig, GeneratorKind, Variant, stats::Rule, verdicts};
@@ -974,22 +979,34 @@ fn audit_verdicts_pool_seeds_and_revisions_and_test_non_inferiority() {
     }
     let v = verdicts(&cfg, &pool, &rule);
     let ni = claim(&v, "QA-Mask does not hurt extrapolation");
-    assert_eq!((ni.seeds, ni.null), (3, -0.2));
+    assert_eq!((ni.seeds, ni.judged, ni.null), (3, 3, -0.2));
     assert!((ni.mean_diff + 0.6833333).abs() < 1e-6, "{ni:?}");
-    assert_eq!(ni.verdict, "inconclusive", "{ni:?}");
-    let [lo, hi] = ni.ci.unwrap();
-    assert!(lo < -0.2 && hi > -0.2 && ni.min_detectable > 0.5, "{ni:?}");
+    // (19.8 − 20 rounds to just above −0.2: that seed counts above the null value.)
+    assert!(
+        (ni.median_diff + 0.7).abs() < 1e-9 && ni.below == 2,
+        "{ni:?}"
+    );
+    assert_eq!(ni.verdict, "interim (3 of 16 seeds)", "{ni:?}");
+    // Three seeds cannot reach the family's Holm level (2/8 > 0.05/3): no interval of the
+    // median, an infinite MDE.
+    assert!(
+        ni.ci.is_none() && ni.min_detectable == f64::INFINITY,
+        "{ni:?}"
+    );
     // The same three seeds recomputed at revision 4 with the same metrics bits (and the
     // per-view records revision 3 did not write): one draw each.
-    let record = |psnr: f64| unseen::pipeline::evaluate::ViewRecord {
-        view: "v".into(),
-        all: unseen::pipeline::evaluate::ClassSums {
+    let record = |psnr: f64| {
+        let sums = unseen::pipeline::evaluate::ClassSums {
             pixels: 1,
             squared_error: 3.0 * 10f64.powf(-psnr / 10.0),
             ssim_sum: 0.5,
-        },
-        existing: Default::default(),
-        extrapolated: Default::default(),
+        };
+        unseen::pipeline::evaluate::ViewRecord {
+            view: "v".into(),
+            all: sums,
+            existing: sums,
+            extrapolated: sums,
+        }
     };
     for (seed, d) in [(0, -0.2), (1, -0.7), (2, -1.15)] {
         for (variant, psnr) in [("full", 20.0 + d), ("no_qa_mask", 20.0)] {
@@ -1010,22 +1027,40 @@ fn audit_verdicts_pool_seeds_and_revisions_and_test_non_inferiority() {
     // The draw kept is the one with the records: the views bootstrap runs on all three.
     assert_eq!(again.hierarchical_units, 3, "{again:?}");
     // Nine more seeds at revision 4 and four of the first seeds at revision 5 (other
-    // bits: another draw of those seeds, averaged into them): twelve units, a loss beyond
-    // the margin is contradicted.
+    // bits: another draw of those seeds, averaged into them): twelve units, with a plan of
+    // twelve a loss beyond the margin is contradicted. All with per-view records: the
+    // hierarchical interval (from ten units) runs on the newest draw of each seed.
+    let with_record = |variant: &str, seed: u32, revision: u32, psnr: f64| {
+        let mut s = sample(variant, seed, revision, psnr);
+        s.last.views.push(record(psnr));
+        s
+    };
     for seed in 3..12 {
         let d = -0.68 + 0.05 * (seed as f64 - 7.5);
-        pool.push(sample("full", seed, 4, 20.0 + d));
-        pool.push(sample("no_qa_mask", seed, 4, 20.0));
+        pool.push(with_record("full", seed, 4, 20.0 + d));
+        pool.push(with_record("no_qa_mask", seed, 4, 20.0));
     }
     for seed in 0..4 {
         let d = -0.6 - 0.03 * seed as f64;
-        pool.push(sample("full", seed, 5, 20.1 + d));
-        pool.push(sample("no_qa_mask", seed, 5, 20.1));
+        pool.push(with_record("full", seed, 5, 20.1 + d));
+        pool.push(with_record("no_qa_mask", seed, 5, 20.1));
     }
     // A revision that changed only one run of a pair gives no independent draw: seed 4 at
     // revision 5 shares its no_qa_mask run with revision 4's and is not counted.
     pool.push(sample("full", 4, 5, 19.0));
     pool.push(sample("no_qa_mask", 4, 5, 20.0));
+    assert_eq!(
+        claim(
+            &verdicts(&cfg, &pool, &rule),
+            "QA-Mask does not hurt extrapolation"
+        )
+        .verdict,
+        "interim (12 of 16 seeds)"
+    );
+    let rule = Rule {
+        planned: 12,
+        ..Rule::default()
+    };
     let v = verdicts(&cfg, &pool, &rule);
     let ni = claim(&v, "QA-Mask does not hurt extrapolation");
     assert_eq!((ni.seeds, ni.revisions.clone()), (12, vec![4, 5]), "{ni:?}");
@@ -1041,18 +1076,69 @@ fn audit_verdicts_pool_seeds_and_revisions_and_test_non_inferiority() {
     assert!((ni.mean_diff - means.iter().sum::<f64>() / 12.0).abs() < 1e-12);
     assert_eq!(
         ni.method,
-        Some(unseen::pipeline::audit::stats::Method::StudentTAndBca)
+        Some(unseen::pipeline::audit::stats::Method::Sign)
     );
+    // Eleven units with records (seed 4's draw kept is revision 5's, written without);
+    // one view each, so the interval lies within the newest draws' differences.
+    let [lo, hi] = ni.hierarchical.expect("eleven units");
+    assert_eq!(ni.hierarchical_units, 11, "{ni:?}");
+    assert!(-0.71 < lo && lo < hi && hi < -0.5, "{ni:?}");
+    // Every unit below −0.2: p = 2·2⁻¹², ×3 by Holm.
+    assert_eq!((ni.above, ni.below), (0, 12), "{ni:?}");
+    assert!((ni.p_holm - 3.0 * 2.0 / 4096.0).abs() < 1e-15, "{ni:?}");
     assert_eq!(ni.verdict, "contradicted", "{ni:?}");
     // The three claims on no_qa_mask are one Holm family; the "better" claims see the
     // same loss and are contradicted too.
     for id in ["QA-Mask (whole image)", "QA-Mask protects existing regions"] {
         assert_eq!(claim(&v, id).verdict, "contradicted");
     }
-    // One seed: no interval.
-    let one = verdicts(&cfg, &pool[..2], &rule);
-    assert_eq!(one[0].verdict, "inconclusive (1 seed)");
+    // Seeds beyond the plan are judged nowhere: eight more that gain 1 dB change nothing
+    // but the count.
+    let mut more = pool.clone();
+    for seed in 12..20 {
+        more.push(sample("full", seed, 4, 21.0));
+        more.push(sample("no_qa_mask", seed, 4, 20.0));
+    }
+    let beyond = claim(
+        &verdicts(&cfg, &more, &rule),
+        "QA-Mask does not hurt extrapolation",
+    );
+    assert_eq!((beyond.seeds, beyond.judged), (20, 12));
+    assert_eq!(
+        (beyond.verdict.as_str(), beyond.p_holm, beyond.mean_diff),
+        (ni.verdict.as_str(), ni.p_holm, ni.mean_diff)
+    );
+    // One seed: interim, no interval.
+    let one = verdicts(&cfg, &pool[..2], &Rule::default());
+    assert_eq!(one[0].verdict, "interim (1 of 16 seeds)");
     assert!(one[0].ci.is_none());
+    // Twelve seeds whose runs agree bit for bit (Δ = 0), or differ by the same amount on
+    // every seed: no verdict, whatever the plan.
+    for (d, why) in [
+        (
+            0.0,
+            "no verdict (Δ = 0 on every seed: the variant computes what full computes)",
+        ),
+        (
+            0.5,
+            "no verdict (the same Δ on every seed: one draw, not n)",
+        ),
+    ] {
+        let same: Vec<_> = (0..12)
+            .flat_map(|seed| {
+                [
+                    sample("full", seed, 4, 20.0 + d),
+                    sample("no_qa_mask", seed, 4, 20.0),
+                ]
+            })
+            .collect();
+        let v = verdicts(&cfg, &same, &rule);
+        assert!(v.iter().all(|x| x.verdict == why), "{v:?}");
+        assert!(
+            v.iter()
+                .all(|x| x.min_detectable.is_nan() && x.p_holm.is_nan())
+        );
+    }
 }
 
 /// Evenly spaced views (the ablation of independent view detection) with the classical

@@ -211,6 +211,10 @@ pub struct AuditConfig {
     /// Training of the original scene on the dataset's training half.
     pub train_iterations: u32,
     pub train_resolution: u32,
+    /// The planned sample per claim (seeds; SPEC.md §21.2): verdicts on the first
+    /// `planned_seeds` seeds, interim looks before ([`stats::PLANNED_SEEDS`] in both
+    /// presets).
+    pub planned_seeds: usize,
 }
 
 impl AuditConfig {
@@ -224,6 +228,7 @@ impl AuditConfig {
             seeds: 0..1,
             train_iterations: 1500,
             train_resolution: 2,
+            planned_seeds: stats::PLANNED_SEEDS,
         }
     }
 
@@ -242,6 +247,7 @@ impl AuditConfig {
             seeds: 0..3,
             train_iterations: 30_000,
             train_resolution: 1,
+            planned_seeds: stats::PLANNED_SEEDS,
         }
     }
 
@@ -266,6 +272,11 @@ impl AuditConfig {
         if dup_v || dup_g {
             return Err(Error::invalid(
                 "a variant or generator is listed twice (each is one set of jobs)",
+            ));
+        }
+        if self.planned_seeds < 2 {
+            return Err(Error::invalid(
+                "the planned sample needs at least 2 seeds (one seed has no spread to judge)",
             ));
         }
         if !self.variants.contains(&Variant::Full) {

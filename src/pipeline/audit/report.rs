@@ -118,7 +118,10 @@ pub(super) fn finish(
         pool.insert(r.clone());
     }
     pool.write(&dir.join(samples::SAMPLES_FILE))?;
-    let rule = stats::Rule::default();
+    let rule = stats::Rule {
+        planned: cfg.planned_seeds,
+        ..stats::Rule::default()
+    };
     let (seeds, revisions) = pool.seeds_and_revisions();
     let names = |mut v: Vec<String>| {
         v.dedup();
@@ -245,12 +248,12 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
     }
     let r = &report.rule;
     s += &format!(
-        "## Claims\n\n**How to read this.** Δ = full − variant (dB), one value per seed: both runs of a seed start from the same original scene with the same random numbers, so Δ is paired; the same seed at another numerics revision is another draw when both of its runs changed (a pair sharing a run's bits with one already counted counts once), and a seed's Δ is the mean of its draws (draws of one seed are correlated: the seed is the unit). *95 % CI*: Student's t with n − 1 degrees of freedom; from {} seeds a verdict also needs the BCa bootstrap over seeds ({} replicates, seeded; its interval in *BCa*) to agree, since the bootstrap alone is too liberal at these sizes (SPEC.md §21.2). A claim that the full method is better **holds** when Δ is significantly above 0 and is **contradicted** when it is significantly below; a claim that the full method *does not hurt* (non-inferiority) holds when Δ is significantly above −{} dB (the margin) and is contradicted when significantly below it. *Significantly*: the two-sided p-value of that null value, after Holm's correction over the claims of the same generator family (classical; truth at every level) on this dataset, is below α = {}. Otherwise **inconclusive**: the *MDE* column is the smallest true distance from the null value that this many seeds find with {:.0} % power at the family's strictest Holm level, for the measured spread — an effect smaller than that could be there. *Hierarchical*: a 95 % percentile interval from resampling seeds, then each seed's evaluation views (pooled PSNR), over the seeds with per-view records: wider than the seed CI where views disagree. The paper's numbers are from ScanNet++ / Mip-NeRF 360 with diffusion generators: compare directions, not values.\n\n| claim | metric | paper | generator | n | Δ (dB) | 95 % CI | BCa | hierarchical | p (Holm) | MDE (dB) | verdict |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
-        r.bootstrap_from,
-        r.replicates,
+        "## Claims\n\n**How to read this.** Δ = full − variant (dB), one value per seed: both runs of a seed start from the same original scene with the same random numbers, so Δ is paired; the same seed at another numerics revision is another draw when both of its runs changed (a pair sharing a run's bits with one already counted counts once), and a seed's Δ is the mean of its draws (draws of one seed are correlated: the seed is the unit). **The plan**: each claim is judged once, on its first {} seeds (seed order); with fewer it is **interim** — a look at a growing pool, not a verdict (stopping at the first decisive look would make false verdicts several times as likely) — and seeds beyond the plan are judged nowhere. **The test** is the sign test of the *median* Δ: the count of seeds above (+) and below (−) the null value against a fair coin, exact for every distribution of Δ (skewed ones too, where no test of the mean keeps its error rate at these sizes; SPEC.md §21.2). A claim that the full method is better **holds** when the median Δ is significantly above 0 and is **contradicted** when significantly below; a claim that the full method *does not hurt* (non-inferiority) holds when the median Δ is significantly above −{} dB (the margin) and is contradicted when significantly below it. *Significantly*: the two-sided p-value, after Holm's correction over the claims of the same generator family (classical; truth: every truth-* generator together) on this dataset, is below α = {}. Otherwise **inconclusive**: the *MDE* column is the smallest shift of the median from the null value that this many seeds find with {:.0} % power at the family's strictest Holm level, were Δ normal with the measured spread (∞: too few seeds to reach that level) — an effect smaller than that could be there. **No verdict** where every seed gave the same Δ: the seeds do not vary the comparison (Δ = 0: the variant computes what the full method computes). *95 % CI*: the median's distribution-free interval (order statistics, from 6 seeds). *Hierarchical*: a 95 % percentile interval of the mean from resampling seeds, then each seed's evaluation views (pooled PSNR), from {} seeds with per-view records. The paper's numbers are from ScanNet++ / Mip-NeRF 360 with diffusion generators: compare directions, not values.\n\n| claim | metric | paper | generator | n | median Δ (dB) | + / − | 95 % CI | mean ± sd | hierarchical | p (Holm) | MDE (dB) | verdict |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        r.planned,
         r.margin,
         r.alpha,
-        100.0 * r.power
+        100.0 * r.power,
+        super::verdicts::HIERARCHICAL_MIN_UNITS,
     );
     let interval = |ci: Option<[f64; 2]>| {
         ci.map_or_else(
@@ -261,6 +264,8 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
     let num = |x: f64, digits: usize| {
         if x.is_finite() {
             format!("{x:.digits$}")
+        } else if x == f64::INFINITY {
+            "∞".into()
         } else {
             "–".into()
         }
@@ -271,16 +276,23 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
         } else {
             String::new()
         };
+        let n = if v.seeds > v.judged {
+            format!("{} (+{} beyond the plan)", v.judged, v.seeds - v.judged)
+        } else {
+            v.judged.to_string()
+        };
         s += &format!(
-            "| {} | {} | {} | {} | {} | {:+.2}{null} | {} | {} | {} | {} | {} | **{}** |\n",
+            "| {} | {} | {} | {} | {n} | {:+.2}{null} | {} / {} | {} | {:+.2} ± {} | {} | {} | {} | **{}** |\n",
             v.claim.id,
             v.claim.metric.label(),
             v.claim.paper,
             v.generator,
-            v.seeds,
-            v.mean_diff,
+            v.median_diff,
+            v.above,
+            v.below,
             interval(v.ci),
-            interval(v.bca),
+            v.mean_diff,
+            num(v.std_diff, 2),
             interval(v.hierarchical),
             if v.p_holm.is_finite() {
                 format!("{:.3}", v.p_holm)

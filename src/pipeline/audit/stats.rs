@@ -1,17 +1,16 @@
-//! The statistics of the audit's verdicts (SPEC.md §21.2): confidence intervals of a mean
-//! paired difference over seeds (Student's t for few seeds, a seeded BCa bootstrap from
-//! [`Rule::bootstrap_from`] seeds), Holm's step-down correction within a family of claims,
-//! and the minimum effect a test detects with a given power (noncentral t).
+//! The statistics of the audit's verdicts (SPEC.md §21.2): the sign test of a median
+//! paired difference over seeds (exact for every distribution, from the binomial tail), its
+//! distribution-free interval, Holm's step-down correction within a family of claims, the
+//! planned sample that separates verdicts from interim looks, and the minimum shift a test
+//! detects with a given power. Also Student's t and the normal distribution (the rule the
+//! sign test replaced, and the quantile the power needs).
 //!
 //! Written from the definitions: the t distribution's CDF by its finite trigonometric
 //! series for integer degrees of freedom (Abramowitz & Stegun 26.7.3–4), the normal CDF by
-//! the error function's series and continued fraction (A&S 7.1.6, 7.1.14), BCa by Efron
-//! (1987, "Better bootstrap confidence intervals", JASA 82:171), Holm (1979, "A simple
-//! sequentially rejective multiple test procedure", Scand. J. Statist. 6:65). No allocation
-//! but the bootstrap's replicate array; single-threaded, so the same bits for any thread
-//! count.
-
-use crate::rng::Uniform;
+//! the error function's series and continued fraction (A&S 7.1.6, 7.1.14), the sign test
+//! and its order-statistic interval (Conover, "Practical Nonparametric Statistics", 3rd
+//! ed., §3.4), Holm (1979, "A simple sequentially rejective multiple test procedure",
+//! Scand. J. Statist. 6:65). Single-threaded, so the same bits for any thread count.
 use std::f64::consts::{FRAC_2_SQRT_PI, PI};
 
 /// `P(T ≤ t)` for Student's t with `df ≥ 1` degrees of freedom.
@@ -188,49 +187,63 @@ pub fn normal_quantile(p: f64) -> f64 {
     x
 }
 
-/// ln Γ(ν/2) for a positive integer ν, exactly summed: Γ(k) = (k−1)!,
-/// Γ(k + ½) = √π·(1·3···(2k−1))/2ᵏ.
-fn ln_gamma_half(nu: u32) -> f64 {
-    let (mut s, mut z) = if nu.is_multiple_of(2) {
-        (0.0, 1.0)
-    } else {
-        (0.5 * PI.ln(), 0.5)
-    };
-    while z < nu as f64 / 2.0 - 0.25 {
-        s += z.ln();
-        z += 1.0;
+/// `ln C(n, k)`, summed exactly enough for `n` up to millions (`Σ ln((n − j)/(j + 1))`
+/// over the shorter side).
+fn ln_choose(n: usize, k: usize) -> f64 {
+    let k = k.min(n - k);
+    (0..k).map(|j| ((n - j) as f64 / (j + 1) as f64).ln()).sum()
+}
+
+/// `P(X ≥ k)` for `X ~ Binomial(n, p)`, `0 ≤ p ≤ 1`: the terms summed in log space from
+/// the largest down (no underflow of `pⁿ` for large n; relative error ~1e-14).
+pub fn binomial_upper_tail(n: usize, k: usize, p: f64) -> f64 {
+    if k == 0 {
+        return 1.0;
     }
-    s
+    if k > n || p <= 0.0 {
+        return 0.0;
+    }
+    if p >= 1.0 {
+        return 1.0;
+    }
+    let (lp, lq) = (p.ln(), (-p).ln_1p());
+    let terms: Vec<f64> = (k..=n)
+        .map(|j| ln_choose(n, j) + j as f64 * lp + (n - j) as f64 * lq)
+        .collect();
+    let top = terms.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let sum: f64 = terms.iter().map(|t| (t - top).exp()).sum();
+    (top + sum.ln()).exp().min(1.0)
 }
 
 /// What a test's p-values come from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Method {
-    /// Student's t: interval `m ± t(1−α/2, n−1)·sd/√n`.
-    StudentT,
-    /// Student's t and Efron's bias-corrected and accelerated (BCa) percentile bootstrap
-    /// over the seeds, each p-value the larger of the two: a verdict needs both. (The BCa
-    /// alone is not calibrated at these sizes: measured false verdicts 4–10 % per side at
-    /// n = 10–20 where 2.5 % is stated, SPEC.md §21.2.)
-    StudentTAndBca,
+    /// The sign test of the median: `#{d > θ₀}` against Binomial(n, ½), exact for every
+    /// distribution of the differences (SPEC.md §21.2).
+    Sign,
 }
 
-/// The test of a mean paired difference against a null value.
+/// The test of the median paired difference against a null value.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct Test {
     pub n: usize,
+    pub median: f64,
     pub mean: f64,
     /// Sample standard deviation (n − 1).
     pub sd: f64,
     pub method: Method,
-    /// The two-sided `1 − α` t interval.
-    pub lo: f64,
-    pub hi: f64,
-    /// The two-sided `1 − α` BCa interval (with [`Method::StudentTAndBca`]).
-    pub bca: Option<[f64; 2]>,
-    /// One-sided p-values of the null value `θ₀`: `p_above` of H₀ "Δ ≤ θ₀" (small when Δ
-    /// is above it), `p_below` of H₀ "Δ ≥ θ₀".
+    /// Differences above and below the null value (the rest equal it).
+    pub above: usize,
+    pub below: usize,
+    /// The distribution-free two-sided `1 − α` interval of the median, `[d₍ₖ₎, d₍ₙ₊₁₋ₖ₎]`
+    /// (order statistics; coverage ≥ 1 − α for any continuous distribution); `None`
+    /// below 6 differences, where no such k exists at α = 0.05.
+    pub interval: Option<[f64; 2]>,
+    /// One-sided p-values of the null value `θ₀`: `p_above` of H₀ "median ≤ θ₀",
+    /// `P(Binomial(n, ½) ≥ above)`; `p_below` of H₀ "median ≥ θ₀". Valid for any
+    /// distribution, atoms included (H₀ implies `P(d > θ₀) ≤ ½`; a difference equal to
+    /// θ₀ counts for neither side).
     pub p_above: f64,
     pub p_below: f64,
 }
@@ -251,12 +264,15 @@ pub struct Rule {
     pub margin: f64,
     /// Power at which the minimum detectable effect is stated.
     pub power: f64,
-    /// From this many seeds a verdict also needs the BCa bootstrap's p-value
-    /// ([`Method::StudentTAndBca`]).
-    pub bootstrap_from: usize,
-    /// Bootstrap replicates.
-    pub replicates: usize,
+    /// The planned sample: a claim is judged on its first `planned` units (seeds, in seed
+    /// order) once it has them; before, its outcome is [`Outcome::Interim`].
+    pub planned: usize,
 }
+
+/// The planned sample of an audit (seeds per claim): 16. At 16 the sign test reaches the
+/// strictest Holm level of an 11-claim family (`2·P(X ≥ 14) = 0.0042 < 0.05/11`) and finds
+/// a shift of the median of 1.5 standard deviations with 80 % power there.
+pub const PLANNED_SEEDS: usize = 16;
 
 impl Default for Rule {
     fn default() -> Rule {
@@ -264,8 +280,7 @@ impl Default for Rule {
             alpha: 0.05,
             margin: 0.2,
             power: 0.8,
-            bootstrap_from: 10,
-            replicates: 10_000,
+            planned: PLANNED_SEEDS,
         }
     }
 }
@@ -277,6 +292,11 @@ pub enum Outcome {
     Holds,
     Contradicted,
     Inconclusive,
+    /// Fewer units than planned: a look at a growing pool, not a verdict.
+    Interim,
+    /// Every unit gave the same difference (0: the variant computes what the full method
+    /// computes): the seeds do not vary the comparison, so there is one draw, not n.
+    NoVerdict,
 }
 
 impl Outcome {
@@ -285,163 +305,107 @@ impl Outcome {
             Outcome::Holds => "holds",
             Outcome::Contradicted => "contradicted",
             Outcome::Inconclusive => "inconclusive",
+            Outcome::Interim => "interim",
+            Outcome::NoVerdict => "no verdict",
         }
     }
 }
 
-/// One claim of a family: its paired differences, the null value of its test (0 for "the
-/// full method is better", `−margin` for "does not hurt") and its bootstrap seed.
+/// One claim of a family: its paired differences in unit (seed) order and the null value
+/// of its test (0 for "the full method is better", `−margin` for "does not hurt").
 #[derive(Clone, Debug)]
 pub struct ClaimData<'a> {
     pub diffs: &'a [f64],
     pub null: f64,
-    pub seed: u64,
 }
 
 /// A claim's judgement within its family.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct Judgement {
     pub outcome: Outcome,
-    /// `None` with fewer than two finite differences (no spread, no test).
+    /// The test of the units judged (the first [`Rule::planned`]); `None` without units.
     pub test: Option<Test>,
-    /// Holm-adjusted two-sided p-value of the null value.
+    /// Holm-adjusted two-sided p-value of the null value (NaN without a test).
     pub p_holm: f64,
     /// Claims with a test in the family (Holm's `m`).
     pub family_tests: usize,
 }
 
 impl Rule {
-    /// The test of `d` (finite values) against `null`: Student's t, and from
-    /// [`Rule::bootstrap_from`] values also the BCa bootstrap (seeded by `seed`), each
-    /// p-value the larger of the two. `None` below two values.
-    pub fn test(&self, d: &[f64], null: f64, seed: u64) -> Option<Test> {
+    /// The sign test of `d` (finite values) against `null`; `None` when empty.
+    pub fn test(&self, d: &[f64], null: f64) -> Option<Test> {
         let n = d.len();
-        if n < 2 {
+        if n == 0 {
             return None;
         }
-        let nf = n as f64;
-        let mean = d.iter().sum::<f64>() / nf;
-        let ss: f64 = d.iter().map(|x| (x - mean) * (x - mean)).sum();
-        let sd = (ss / (nf - 1.0)).sqrt();
-        if sd == 0.0 || !sd.is_finite() {
-            // Every seed gave the same difference (or the spread overflows): nothing to
-            // measure the mean against, so no verdict either way.
-            return Some(Test {
-                n,
-                mean,
-                sd,
-                method: Method::StudentT,
-                lo: mean,
-                hi: mean,
-                bca: None,
-                p_above: 1.0,
-                p_below: 1.0,
-            });
-        }
-        let se = sd / nf.sqrt();
-        let q = student_t_quantile(1.0 - self.alpha / 2.0, (n - 1) as u32);
-        let below = student_t_cdf((mean - null) / se, (n - 1) as u32);
-        let mut test = Test {
+        let mut sorted = d.to_vec();
+        sorted.sort_by(f64::total_cmp);
+        let median = quantile_sorted(&sorted, 0.5);
+        let mean = d.iter().sum::<f64>() / n as f64;
+        let sd = if n > 1 {
+            (d.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n - 1) as f64).sqrt()
+        } else {
+            f64::NAN
+        };
+        let above = d.iter().filter(|&&x| x > null).count();
+        let below = d.iter().filter(|&&x| x < null).count();
+        // The largest k with P(X ≤ k − 1) ≤ α/2 (X ~ Binomial(n, ½), symmetric).
+        let k = (1..=n / 2)
+            .take_while(|&k| binomial_upper_tail(n, n - k + 1, 0.5) <= self.alpha / 2.0)
+            .last();
+        Some(Test {
             n,
+            median,
             mean,
             sd,
-            method: Method::StudentT,
-            lo: mean - q * se,
-            hi: mean + q * se,
-            bca: None,
-            p_above: 1.0 - below,
-            p_below: below,
-        };
-        if n >= self.bootstrap_from {
-            let (interval, p_above) = self.bca(d, mean, ss, null, seed);
-            // A bootstrap that could not be computed (an overflowing spread) agrees with
-            // nothing.
-            let p_above = if p_above.is_nan() { 1.0 } else { p_above };
-            test.method = Method::StudentTAndBca;
-            test.bca = Some(interval);
-            test.p_above = test.p_above.max(p_above);
-            test.p_below = test.p_below.max(1.0 - p_above);
-        }
-        Some(test)
+            method: Method::Sign,
+            above,
+            below,
+            interval: k.map(|k| [sorted[k - 1], sorted[n - k]]),
+            p_above: binomial_upper_tail(n, above, 0.5),
+            p_below: binomial_upper_tail(n, below, 0.5),
+        })
     }
 
-    /// The BCa interval of the mean of `d` and the one-sided p-value of H₀ "Δ ≤ null"
-    /// (the nominal lower-tail level at which the interval's lower end is `null`).
-    fn bca(&self, d: &[f64], mean: f64, ss: f64, null: f64, seed: u64) -> ([f64; 2], f64) {
-        let n = d.len();
-        let b = self.replicates;
-        let mut u = Uniform::new(seed);
-        let mut reps: Vec<f64> = (0..b)
-            .map(|_| (0..n).map(|_| d[u.below(n as u32) as usize]).sum::<f64>() / n as f64)
-            .collect();
-        reps.sort_by(f64::total_cmp);
-        // Fraction of replicates below x (ties count half), kept inside (0, 1).
-        let frac = |x: f64| {
-            let below = reps.partition_point(|&r| r < x);
-            let not_above = reps.partition_point(|&r| r <= x);
-            let f = (below as f64 + 0.5 * (not_above - below) as f64) / b as f64;
-            f.clamp(0.5 / b as f64, 1.0 - 0.5 / b as f64)
-        };
-        let z0 = normal_quantile(frac(mean));
-        // Acceleration by the jackknife of the mean: θ̄ − θ₍ᵢ₎ = (dᵢ − m)/(n − 1).
-        let cube: f64 = d.iter().map(|x| (x - mean).powi(3)).sum();
-        let a = cube / (6.0 * ss.powf(1.5));
-        // The replicate quantile at BCa's adjusted level for nominal z.
-        let endpoint =
-            |z: f64| quantile_sorted(&reps, normal_cdf(z0 + (z0 + z) / (1.0 - a * (z0 + z))));
-        let zq = normal_quantile(1.0 - self.alpha / 2.0);
-        // The nominal level at which the lower endpoint is the null value: with
-        // w = Φ⁻¹(fraction below θ₀), z0 + u/(1 − a·u) = w for u = z0 + z. The fraction is
-        // not clamped here: a null beyond every replicate takes the limit w = ∓∞ (else
-        // the p-value would have a floor of ~1/B that no Holm level below it could
-        // clear), and where `1 + a·c ≤ 0` no nominal level reaches the null: p is 0 or 1.
-        let below = reps.partition_point(|&r| r < null);
-        let not_above = reps.partition_point(|&r| r <= null);
-        let q = (below as f64 + 0.5 * (not_above - below) as f64) / b as f64;
-        let w = if q <= 0.0 {
-            f64::NEG_INFINITY
-        } else if q >= 1.0 {
-            f64::INFINITY
-        } else {
-            normal_quantile(q)
-        };
-        let c = w - z0;
-        let denominator = 1.0 + a * c;
-        let p = if denominator <= 0.0 {
-            if c < 0.0 { 0.0 } else { 1.0 }
-        } else if c.is_infinite() {
-            // c/(1 + a·c) → 1/a (or c itself when a = 0).
-            let u = if a != 0.0 { 1.0 / a } else { c };
-            normal_cdf(u - z0)
-        } else {
-            normal_cdf(c / denominator - z0)
-        };
-        ([endpoint(-zq), endpoint(zq)], p)
-    }
-
-    /// Judge a family of claims: each claim's test of its null value, Holm's step-down
-    /// correction of the two-sided p-values over the claims with a test, and the outcome:
-    /// *holds* where the adjusted p is below α and Δ is above the null value,
-    /// *contradicted* where it is below α and Δ is below, *inconclusive* otherwise.
+    /// Judge a family of claims: each claim's first [`Rule::planned`] units tested against
+    /// its null value; Holm's step-down correction of the two-sided p-values over the
+    /// claims with a test and some spread (interim ones included: Holm holds for any
+    /// p-values, and a look that cannot become a verdict only removes rejections); the
+    /// outcome *no verdict* where every unit gave the same difference, *interim* below the
+    /// planned sample, else *holds* where the adjusted p is below α and the differences
+    /// lie above the null value (more above than below), *contradicted* where below,
+    /// *inconclusive* otherwise.
     pub fn judge(&self, family: &[ClaimData]) -> Vec<Judgement> {
+        let judged: Vec<&[f64]> = family
+            .iter()
+            .map(|c| &c.diffs[..c.diffs.len().min(self.planned)])
+            .collect();
         let tests: Vec<Option<Test>> = family
             .iter()
-            .map(|c| self.test(c.diffs, c.null, c.seed))
+            .zip(&judged)
+            .map(|(c, d)| self.test(d, c.null))
             .collect();
+        let spread = |d: &[f64]| d.iter().any(|x| x.to_bits() != d[0].to_bits());
         let raw: Vec<f64> = tests
             .iter()
-            .map(|t| t.map_or(f64::NAN, |t| t.p_two_sided()))
+            .zip(&judged)
+            .map(|(t, d)| match t {
+                Some(t) if spread(d) => t.p_two_sided(),
+                _ => f64::NAN,
+            })
             .collect();
         let adjusted = holm(&raw);
         let m = raw.iter().filter(|p| !p.is_nan()).count().max(1);
         family
             .iter()
             .zip(tests)
-            .zip(adjusted)
-            .map(|((c, test), p_holm)| {
+            .zip(judged.iter().zip(adjusted))
+            .map(|((c, test), (d, p_holm))| {
                 let outcome = match test {
-                    Some(t) if p_holm < self.alpha && t.mean > c.null => Outcome::Holds,
-                    Some(t) if p_holm < self.alpha && t.mean < c.null => Outcome::Contradicted,
+                    Some(_) if d.len() > 1 && !spread(d) => Outcome::NoVerdict,
+                    _ if c.diffs.len() < self.planned => Outcome::Interim,
+                    Some(t) if p_holm < self.alpha && t.above > t.below => Outcome::Holds,
+                    Some(t) if p_holm < self.alpha && t.below > t.above => Outcome::Contradicted,
                     _ => Outcome::Inconclusive,
                 };
                 Judgement {
@@ -456,14 +420,49 @@ impl Rule {
 }
 
 impl Judgement {
-    /// The smallest true distance from the null value that the claim's test finds with
-    /// the rule's power at the family's first Holm level `α/m`, for the measured sd (the t
-    /// test's figure, also stated for bootstrap intervals). NaN without a test.
+    /// The smallest shift of the median from the null value that the claim's sign test
+    /// finds with the rule's power at the family's first Holm level `α/m`, were the
+    /// differences normal with the measured sd ([`sign_min_detectable`]). NaN without a
+    /// test or spread.
     pub fn min_detectable(&self, rule: &Rule) -> f64 {
         self.test.map_or(f64::NAN, |t| {
-            min_detectable_effect(t.n, t.sd, rule.alpha / self.family_tests as f64, rule.power)
+            sign_min_detectable(t.n, t.sd, rule.alpha / self.family_tests as f64, rule.power)
         })
     }
+}
+
+/// The fewest of `n` differences that must lie on one side of the null value for the
+/// two-sided sign test to fall below `alpha` (`n + 1`: never).
+pub fn sign_critical(n: usize, alpha: f64) -> usize {
+    (0..=n)
+        .find(|&k| 2.0 * binomial_upper_tail(n, k, 0.5) < alpha)
+        .unwrap_or(n + 1)
+}
+
+/// The shift δ of the median (in the units of `sd`) that the two-sided sign test at level
+/// `alpha` finds in the claimed direction with probability `power` from `n` differences
+/// drawn from a normal distribution of standard deviation `sd`: each lies beyond the
+/// null value with `p = Φ(δ/sd)`, so the power is `P(Binomial(n, p) ≥ c)` with `c` of
+/// [`sign_critical`]; `p` by bisection. ∞ when `n` differences cannot reach `alpha`, NaN
+/// without a finite positive sd.
+pub fn sign_min_detectable(n: usize, sd: f64, alpha: f64, power: f64) -> f64 {
+    if n < 2 || !(sd.is_finite() && sd > 0.0) {
+        return f64::NAN;
+    }
+    let c = sign_critical(n, alpha);
+    if c > n {
+        return f64::INFINITY;
+    }
+    let (mut lo, mut hi) = (0.5f64, 1.0f64);
+    for _ in 0..100 {
+        let mid = 0.5 * (lo + hi);
+        if binomial_upper_tail(n, c, mid) < power {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    normal_quantile(hi) * sd
 }
 
 /// The `level`-quantile of ascending `sorted` (non-empty) by linear interpolation between
@@ -489,70 +488,6 @@ pub fn holm(p: &[f64]) -> Vec<f64> {
         out[i] = running;
     }
     out
-}
-
-/// Power of the two-sided one-sample t test at level `alpha` with `n` samples when the
-/// true mean is `lambda` standard errors from the null value, in the direction of the
-/// claim: `P(T′ > t(1−α/2, n−1))` for the noncentral T′, by integrating
-/// `Φ(λ − c·s)` against the density of `s = √(χ²ᵥ/ν)` (Simpson, ≥ 4 000 panels).
-pub fn t_power(n: usize, lambda: f64, alpha: f64) -> f64 {
-    assert!(n >= 2);
-    let nu = (n - 1) as u32;
-    let nuf = nu as f64;
-    let c = student_t_quantile(1.0 - alpha / 2.0, nu);
-    // Density of s: 2·(ν/2)^(ν/2)/Γ(ν/2) · s^(ν−1) · e^(−ν s²/2).
-    let ln_k = std::f64::consts::LN_2 + 0.5 * nuf * (0.5 * nuf).ln() - ln_gamma_half(nu);
-    let dens = |s: f64| {
-        if s <= 0.0 {
-            return if nu == 1 { ln_k.exp() } else { 0.0 };
-        }
-        (ln_k + (nuf - 1.0) * s.ln() - 0.5 * nuf * s * s).exp()
-    };
-    // The density is below e^(−40) of its peak beyond `top`; Φ(λ − c·s) turns from 1 to 0
-    // over ~1/c in s, which the panels resolve with ≥ 20 points.
-    let top = 1.0 + 9.0 / nuf.sqrt();
-    let panels = (4000usize)
-        .max((20.0 * c * top).ceil() as usize)
-        .next_multiple_of(2);
-    let h = top / panels as f64;
-    let mut sum = 0.0;
-    for i in 0..=panels {
-        let s = i as f64 * h;
-        let w = if i == 0 || i == panels {
-            1.0
-        } else if i % 2 == 1 {
-            4.0
-        } else {
-            2.0
-        };
-        sum += w * dens(s) * normal_cdf(lambda - c * s);
-    }
-    sum * h / 3.0
-}
-
-/// The smallest true mean difference (in the units of `sd`) the two-sided t test at level
-/// `alpha` finds in the claimed direction with probability `power`, from `n` seeds whose
-/// differences spread with standard deviation `sd`. NaN below two seeds.
-pub fn min_detectable_effect(n: usize, sd: f64, alpha: f64, power: f64) -> f64 {
-    if n < 2 || !sd.is_finite() {
-        return f64::NAN;
-    }
-    let (mut lo, mut hi) = (0.0f64, 1.0f64);
-    while t_power(n, hi, alpha) < power {
-        hi *= 2.0;
-        if hi > 1e6 {
-            return f64::INFINITY;
-        }
-    }
-    for _ in 0..60 {
-        let mid = 0.5 * (lo + hi);
-        if t_power(n, mid, alpha) < power {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    hi * sd / (n as f64).sqrt()
 }
 
 #[cfg(test)]
@@ -623,15 +558,36 @@ mod tests {
         assert!(a[3].is_nan());
     }
 
-    /// With a known sd, the t test's power at λ = 0 is α/2 in the claimed direction, and
-    /// for many seeds the minimum detectable effect tends to (z(1−α/2) + z(power))·sd/√n.
+    /// The binomial tail against exact fractions, the sign test's p-values and its
+    /// distribution-free interval, the critical count and the minimum detectable shift.
     #[test]
-    fn power_and_minimum_detectable_effect() {
-        assert!((t_power(5, 0.0, 0.05) - 0.025).abs() < 1e-7);
-        assert!((t_power(2, 0.0, 0.05) - 0.025).abs() < 1e-6);
-        let n = 2000;
-        let mde = min_detectable_effect(n, 1.0, 0.05, 0.8);
-        let z = (1.959963984540054 + 0.8416212335729143) / (n as f64).sqrt();
-        assert!((mde / z - 1.0).abs() < 2e-3, "{mde} vs {z}");
+    fn sign_test_is_exact() {
+        // P(X ≥ 14 | n = 16) = (1 + 16 + 120)/2¹⁶; P(X ≥ 0) = 1; P(X ≥ 17) = 0.
+        assert!((binomial_upper_tail(16, 14, 0.5) - 137.0 / 65536.0).abs() < 1e-16);
+        assert_eq!(binomial_upper_tail(16, 0, 0.5), 1.0);
+        assert_eq!(binomial_upper_tail(16, 17, 0.5), 0.0);
+        // P(X ≥ 2 | n = 3, p = 0.3) = 3·0.09·0.7 + 0.027.
+        assert!((binomial_upper_tail(3, 2, 0.3) - 0.216).abs() < 1e-15);
+        // Far tails of large n stay finite (0.5¹⁵⁰⁰ underflows).
+        let t = binomial_upper_tail(1500, 1500, 0.5);
+        assert!(t == 0.0 || t.is_finite());
+        assert!((binomial_upper_tail(2000, 1000, 0.5) - 0.5 - 0.5 * 0.017836).abs() < 1e-4);
+        assert_eq!(sign_critical(16, 0.05 / 11.0), 14);
+        assert_eq!(sign_critical(8, 0.05 / 11.0), 9); // 2/256 > 0.0045: never
+        assert_eq!(sign_critical(6, 0.05), 6);
+        let rule = Rule::default();
+        let d: Vec<f64> = (1..=16).map(|k| k as f64 / 10.0 - 0.35).collect();
+        let t = rule.test(&d, 0.0).unwrap();
+        // Three below 0 (−0.25, −0.15, −0.05), thirteen above.
+        assert_eq!((t.above, t.below), (13, 3));
+        assert!((t.p_above - binomial_upper_tail(16, 13, 0.5)).abs() == 0.0);
+        // n = 16: k = 4 (P(X ≤ 3) = 697/65536 ≤ 0.025 < P(X ≤ 4)): [d₍₄₎, d₍₁₃₎].
+        assert_eq!(t.interval, Some([d[3], d[12]]));
+        assert_eq!(rule.test(&d[..5], 0.0).unwrap().interval, None);
+        assert_eq!(sign_min_detectable(8, 1.0, 0.05 / 11.0, 0.8), f64::INFINITY);
+        // At the minimum detectable shift the power is the rule's.
+        let mde = sign_min_detectable(16, 0.33, 0.05 / 11.0, 0.8);
+        let p = normal_cdf(mde / 0.33);
+        assert!((binomial_upper_tail(16, 14, p) - 0.8).abs() < 1e-9, "{mde}");
     }
 }

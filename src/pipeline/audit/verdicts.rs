@@ -160,36 +160,43 @@ pub struct Verdict {
     pub generator: String,
     /// The Holm family: the room × generator family (`classical`, `truth`).
     pub family: String,
-    /// Paired units (a seed at a numerics revision) with both runs and a finite
-    /// difference, and the revisions among them.
+    /// Units (seeds) with both runs and a finite difference in the pool, the revisions
+    /// among them, and how many of them the test judged: the first `planned` in seed
+    /// order (the rest are beyond the plan and left out of everything below).
     pub seeds: usize,
     pub revisions: Vec<u32>,
-    /// Mean and sample standard deviation of `full − variant` over the units (std is NaN,
-    /// `null` in JSON, with one).
+    pub judged: usize,
+    pub planned: usize,
+    /// Median, mean and sample standard deviation of `full − variant` over the judged
+    /// units (std is NaN, `null` in JSON, with one).
+    pub median_diff: f64,
     pub mean_diff: f64,
     #[serde(with = "crate::io::json_float")]
     pub std_diff: f64,
     /// The value the test compares Δ with: 0, or `−margin` for a "does not hurt" claim.
     pub null: f64,
-    /// The t interval (two-sided, level `1 − α`, before the family's correction) and what
-    /// the p-value comes from; absent with one unit.
+    /// What the p-value comes from, the judged differences above and below the null
+    /// value, and the median's distribution-free interval (two-sided, level `1 − α`,
+    /// before the family's correction; absent below 6 units).
     pub method: Option<stats::Method>,
+    pub above: usize,
+    pub below: usize,
     pub ci: Option<[f64; 2]>,
-    /// The BCa interval (from [`stats::Rule::bootstrap_from`] units).
-    pub bca: Option<[f64; 2]>,
     /// Holm-adjusted two-sided p-value of the null value.
     #[serde(with = "crate::io::json_float")]
     pub p_holm: f64,
-    /// The smallest true distance from the null value found with the rule's power at the
-    /// family's first Holm level, for the measured spread.
+    /// The smallest shift of the median from the null value found with the rule's power
+    /// at the family's first Holm level, for the measured spread (∞, `null` in JSON:
+    /// this many units cannot reach that level).
     #[serde(with = "crate::io::json_float")]
     pub min_detectable: f64,
     /// Percentile interval of a bootstrap over units, then over the evaluation views of
     /// each unit (pooled PSNR of the resampled views), over the `hierarchical_units`
-    /// units with per-view records; absent with fewer than two.
+    /// judged units with per-view records; absent below [`HIERARCHICAL_MIN_UNITS`].
     pub hierarchical: Option<[f64; 2]>,
     pub hierarchical_units: usize,
-    /// `holds`, `contradicted`, `inconclusive`, or `inconclusive (1 seed)`.
+    /// `holds`, `contradicted`, `inconclusive`, `interim (n of N seeds)` or `no verdict
+    /// (…)` with its reason.
     pub verdict: String,
 }
 
@@ -213,6 +220,14 @@ fn bootstrap_seed(claim: &Claim, generator: &str, what: &str) -> u64 {
 /// Replicates of the hierarchical bootstrap.
 pub const HIERARCHICAL_REPLICATES: usize = 2000;
 
+/// The fewest units the hierarchical interval is computed from: 10. A percentile bootstrap
+/// of a mean over n units has the spread of the plug-in variance, `√((n − 1)/n)` of the
+/// sample's, so its nominal 95 % interval covers like a t interval of half-width
+/// `1.96·√((n − 1)/n)`: `2·F_t(1.96·√((n − 1)/n); n − 1) − 1` = 60 % at 2 units, 85 % at 5,
+/// 90.4 % at 10 (test `hierarchical_interval_needs_ten_units`): from 10 it covers at
+/// least 90 % for normal units.
+pub const HIERARCHICAL_MIN_UNITS: usize = 10;
+
 /// The hierarchical bootstrap's 95 % percentile interval of the mean paired difference
 /// of `metric`: units resampled with replacement, then each unit's evaluation views
 /// (the same views for both runs of the pair), the metric recomputed as pooled PSNR of
@@ -234,7 +249,7 @@ fn hierarchical(
         })
         .collect();
     let n = units.len();
-    if n < 2 {
+    if n < HIERARCHICAL_MIN_UNITS {
         return (None, n);
     }
     let mut u = crate::rng::Uniform::new(seed);
@@ -369,6 +384,7 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
         claim: Claim,
         generator: GeneratorKind,
         pairs: Vec<Pair<'a>>,
+        seeds: usize,
         diffs: Vec<f64>,
     }
     let mut cells = Vec::new();
@@ -399,11 +415,24 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
             if pairs.is_empty() {
                 continue;
             }
-            let diffs = seed_means(&pairs, claim.metric);
+            let mut diffs = seed_means(&pairs, claim.metric);
+            // The planned sample: the first `planned` seeds (seed order); later ones are
+            // beyond the plan (counted in `seeds`, judged nowhere).
+            let seeds = diffs.len();
+            diffs.truncate(rule.planned);
+            let last = pairs
+                .iter()
+                .map(|p| p.seed)
+                .collect::<std::collections::BTreeSet<u32>>()
+                .into_iter()
+                .nth(diffs.len() - 1)
+                .expect("a seed per difference");
+            let pairs: Vec<Pair> = pairs.into_iter().filter(|p| p.seed <= last).collect();
             cells.push(Cell {
                 claim,
                 generator,
                 pairs,
+                seeds,
                 diffs,
             });
         }
@@ -424,7 +453,6 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
                 stats::ClaimData {
                     diffs: &c.diffs,
                     null: null(&c.claim),
-                    seed: bootstrap_seed(&c.claim, &c.generator.name(), "bca"),
                 }
             })
             .collect();
@@ -441,25 +469,42 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
                 rule.alpha,
                 bootstrap_seed(&c.claim, &g, "hierarchical"),
             );
-            let verdict = if j.test.is_none() {
-                "inconclusive (1 seed)".to_string()
-            } else {
-                j.outcome.word().to_string()
+            let verdict = match j.outcome {
+                stats::Outcome::Interim => {
+                    format!("interim ({} of {} seeds)", c.diffs.len(), rule.planned)
+                }
+                stats::Outcome::NoVerdict if c.diffs.iter().all(|&d| d == 0.0) => {
+                    "no verdict (Δ = 0 on every seed: the variant computes what full computes)"
+                        .to_string()
+                }
+                stats::Outcome::NoVerdict => {
+                    "no verdict (the same Δ on every seed: one draw, not n)".to_string()
+                }
+                o => o.word().to_string(),
             };
+            let median = j.test.map_or(f64::NAN, |t| t.median);
             out[i] = Some(Verdict {
                 claim: c.claim,
                 family: family.into(),
                 generator: g,
-                seeds: c.diffs.len(),
+                seeds: c.seeds,
                 revisions,
+                judged: c.diffs.len(),
+                planned: rule.planned,
+                median_diff: median,
                 mean_diff: mean,
                 std_diff: std,
                 null: null(&c.claim),
                 method: j.test.map(|t| t.method),
-                ci: j.test.map(|t| [t.lo, t.hi]),
-                bca: j.test.and_then(|t| t.bca),
+                above: j.test.map_or(0, |t| t.above),
+                below: j.test.map_or(0, |t| t.below),
+                ci: j.test.and_then(|t| t.interval),
                 p_holm: j.p_holm,
-                min_detectable: j.min_detectable(rule),
+                min_detectable: if matches!(j.outcome, stats::Outcome::NoVerdict) {
+                    f64::NAN
+                } else {
+                    j.min_detectable(rule)
+                },
                 hierarchical: hier,
                 hierarchical_units: hier_units,
                 verdict,
