@@ -90,7 +90,8 @@ def quat_to_rotmat(q):
     return r
 
 
-def project(scene, camera, dtype=np.float64, projection="textbook"):
+def project(scene, camera, dtype=np.float64, projection="textbook",
+            max_extent_sigma=MAX_EXTENT_SIGMA):
     """Per-Gaussian projection: dict of means2d (N, 2), conics (N, 3), colors (N, 3), depths
     (N,), opacities (N,), radii (N, 2) int32 (0 where culled), all in `dtype`."""
     if projection not in ("textbook", "stable"):
@@ -165,7 +166,7 @@ def project(scene, camera, dtype=np.float64, projection="textbook"):
         means2d = np.stack([fx * x / z + cx, fy * y / z + cy], 1)
         opac = f(1) / (f(1) + np.exp(-logits))
         ok &= opac >= f(ALPHA_THRESHOLD)
-        extent = np.minimum(f(MAX_EXTENT_SIGMA),
+        extent = np.minimum(f(max_extent_sigma),
                             np.sqrt(f(2) * np.log(opac / f(ALPHA_THRESHOLD))))
         rx = np.ceil(extent * np.sqrt(a))
         ry = np.ceil(extent * np.sqrt(c))
@@ -238,14 +239,16 @@ def rasterize(proj, width, height, background, max_alpha=MAX_ALPHA["inria"]):
     return rgb, alpha
 
 
-def port(dtype=np.float64, projection="textbook", conventions="inria"):
+def port(dtype=np.float64, projection="textbook", conventions="inria",
+         max_extent_sigma=MAX_EXTENT_SIGMA):
     """A render callable for ``unseen.testing``: ``render(scene, camera, *, background)``
     returning rgb, alpha and the per-Gaussian intermediates (float32, as a port hands them
-    over; radii int32)."""
+    over; radii int32). ``max_extent_sigma=3.0`` makes the INRIA-style 3σ footprint cap
+    mistake (the oracle's is 3.33σ)."""
     max_alpha = MAX_ALPHA[conventions]
 
     def render(scene, camera, *, background):
-        proj = project(scene, camera, dtype, projection)
+        proj = project(scene, camera, dtype, projection, max_extent_sigma)
         rgb, alpha = rasterize(proj, camera.width, camera.height, background, max_alpha)
         out = {k: v.astype(np.float32) for k, v in proj.items()
                if k not in ("radii", "_ok")}

@@ -100,6 +100,21 @@ def test_float32_textbook_port_fails_hard_naming_the_projection(seed, case):
     assert np.all(np.exp(s["scales"][named, 0]) > 999.0)
 
 
+@pytest.mark.parametrize("seed", range(10))
+def test_a_three_sigma_footprint_fails_check_port_on_every_seed(seed):
+    """Issue #51: a port that caps the footprint at 3σ (INRIA's) instead of the oracle's
+    3.33σ fails check_port on every seed (its radii, and the pixels between 3 and 3.33σ where
+    α still reaches 1/255), with no wrong cause named: the oracle cannot render that
+    mistake, so it says so."""
+    render = numpy_port.port(np.float32, "stable", max_extent_sigma=3.0)
+    report = testing.check_port(render, seed=seed, families=ORDINARY, check=False)
+    assert report.failing, report.message()
+    msg = report.message()
+    assert "likely cause: none of the known mistakes" in msg or "not tried" in msg, msg
+    for fam in report.failing:
+        assert not [c for c in report.families[fam].causes if c], msg
+
+
 def test_a_mistake_that_moves_the_needles_explains_nothing():
     """On ``hard`` the xyzw hypothesis moves the needles, so the oracle rendered under it
     sets much of the image aside (97 % before the per-pixel conic bound): it must not
