@@ -194,22 +194,29 @@ fn ln_choose(n: usize, k: usize) -> f64 {
     (0..k).map(|j| ((n - j) as f64 / (j + 1) as f64).ln()).sum()
 }
 
-/// `P(X ≥ k)` for `X ~ Binomial(n, p)`, `0 ≤ p ≤ 1`: the terms summed in log space from
-/// the largest down (no underflow of `pⁿ` for large n; relative error ~1e-14).
+/// `P(X ≥ k)` for `X ~ Binomial(n, p)`, `0 ≤ p ≤ 1`: the terms `ln P(X = j)` by the
+/// recurrence `+ ln((n − j)/(j + 1)) + ln(p/(1 − p))` from `j = k` (O(n)), summed relative
+/// to the largest (no underflow of `pⁿ` for large n). Relative error ≲ 1e-13 for n ≤ 16,
+/// growing like n·ε (≈ 1e-11 at n = 20 000: the recurrence's rounding).
 pub fn binomial_upper_tail(n: usize, k: usize, p: f64) -> f64 {
     if k == 0 {
         return 1.0;
     }
-    if k > n || p <= 0.0 {
+    if k > n || p <= 0.0 || p.is_nan() {
         return 0.0;
     }
     if p >= 1.0 {
         return 1.0;
     }
     let (lp, lq) = (p.ln(), (-p).ln_1p());
-    let terms: Vec<f64> = (k..=n)
-        .map(|j| ln_choose(n, j) + j as f64 * lp + (n - j) as f64 * lq)
-        .collect();
+    let mut t = ln_choose(n, k) + k as f64 * lp + (n - k) as f64 * lq;
+    let mut terms = Vec::with_capacity(n - k + 1);
+    for j in k..=n {
+        terms.push(t);
+        if j < n {
+            t += ((n - j) as f64 / (j + 1) as f64).ln() + lp - lq;
+        }
+    }
     let top = terms.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let sum: f64 = terms.iter().map(|t| (t - top).exp()).sum();
     (top + sum.ln()).exp().min(1.0)
@@ -264,14 +271,16 @@ pub struct Rule {
     pub margin: f64,
     /// Power at which the minimum detectable effect is stated.
     pub power: f64,
-    /// The planned sample: a claim is judged on its first `planned` units (seeds, in seed
-    /// order) once it has them; before, its outcome is [`Outcome::Interim`].
+    /// The planned sample: a claim is judged once it has `planned` units (the audit's plan
+    /// is seeds 0 to `planned − 1`); before, its outcome is [`Outcome::Interim`].
     pub planned: usize,
 }
 
-/// The planned sample of an audit (seeds per claim): 16. At 16 the sign test reaches the
-/// strictest Holm level of an 11-claim family (`2·P(X ≥ 14) = 0.0042 < 0.05/11`) and finds
-/// a shift of the median of 1.5 standard deviations with 80 % power there.
+/// The planned sample of an audit: seeds 0 to 15 of every claim. At 16 the sign test reaches
+/// the strictest Holm level of the presets' families — 12 claims per generator (`2·P(X ≥
+/// 15) = 2·17/2¹⁶ = 0.00052 < 0.05/12`; 14 of 16, 0.0042, does not), and the paper preset's
+/// 36 truth claims — and finds a shift of the median of 1.63 standard deviations with 80 %
+/// power at the 12-claim level (1.30 at 11 or fewer, where 14 of 16 suffice).
 pub const PLANNED_SEEDS: usize = 16;
 
 impl Default for Rule {
@@ -325,10 +334,14 @@ pub struct Judgement {
     pub outcome: Outcome,
     /// The test of the units judged (the first [`Rule::planned`]); `None` without units.
     pub test: Option<Test>,
-    /// Holm-adjusted two-sided p-value of the null value (NaN without a test).
+    /// Holm-adjusted two-sided p-value of the null value (NaN without a test; an interim
+    /// claim's own, as if it were complete: the others' entered it at p = 1).
     pub p_holm: f64,
     /// Claims with a test in the family (Holm's `m`).
     pub family_tests: usize,
+    /// The test was significant but the mean lies on the other side of the null value than
+    /// the median (or on it): no verdict either way (the outcome is inconclusive).
+    pub median_and_mean_disagree: bool,
 }
 
 impl Rule {
@@ -368,13 +381,15 @@ impl Rule {
     }
 
     /// Judge a family of claims: each claim's first [`Rule::planned`] units tested against
-    /// its null value; Holm's step-down correction of the two-sided p-values over the
-    /// claims with a test and some spread (interim ones included: Holm holds for any
-    /// p-values, and a look that cannot become a verdict only removes rejections); the
-    /// outcome *no verdict* where every unit gave the same difference, *interim* below the
-    /// planned sample, else *holds* where the adjusted p is below α and the differences
-    /// lie above the null value (more above than below), *contradicted* where below,
-    /// *inconclusive* otherwise.
+    /// its null value, then Holm's step-down correction of the two-sided p-values over the
+    /// claims with a test and some spread. A claim below its plan enters Holm at p = 1 (still
+    /// counted in m): a complete claim's verdict does not depend on other claims' interim
+    /// looks, and as they complete its adjusted p can only fall. The outcome: *no verdict*
+    /// where every unit gave the same difference, *interim* below the planned sample, else
+    /// *holds* where the adjusted p is below α and more units lie above the null value than
+    /// below and so does the mean, *contradicted* likewise below, *inconclusive* otherwise
+    /// (also where the median and the mean disagree: then the claim means different things
+    /// for the typical seed and on average).
     pub fn judge(&self, family: &[ClaimData]) -> Vec<Judgement> {
         let judged: Vec<&[f64]> = family
             .iter()
@@ -385,12 +400,15 @@ impl Rule {
             .zip(&judged)
             .map(|(c, d)| self.test(d, c.null))
             .collect();
-        let spread = |d: &[f64]| d.iter().any(|x| x.to_bits() != d[0].to_bits());
+        // (`==`: +0.0 and −0.0 are the same difference.)
+        let spread = |d: &[f64]| d.iter().any(|&x| x != d[0]);
+        let complete = |d: &[f64]| d.len() >= self.planned;
         let raw: Vec<f64> = tests
             .iter()
             .zip(&judged)
             .map(|(t, d)| match t {
-                Some(t) if spread(d) => t.p_two_sided(),
+                Some(t) if spread(d) && complete(d) => t.p_two_sided(),
+                Some(_) if spread(d) => 1.0,
                 _ => f64::NAN,
             })
             .collect();
@@ -400,12 +418,35 @@ impl Rule {
             .iter()
             .zip(tests)
             .zip(judged.iter().zip(adjusted))
-            .map(|((c, test), (d, p_holm))| {
+            .enumerate()
+            .map(|(i, ((c, test), (d, p_holm)))| {
+                // An interim claim's adjusted p as if it were complete (for the report).
+                let p_holm = match test {
+                    Some(t) if spread(d) && !complete(d) => {
+                        let mut look = raw.clone();
+                        look[i] = t.p_two_sided();
+                        holm(&look)[i]
+                    }
+                    _ => p_holm,
+                };
+                let significant = p_holm < self.alpha;
+                let side = |t: &Test| {
+                    if t.above > t.below && t.mean > c.null {
+                        Some(Outcome::Holds)
+                    } else if t.below > t.above && t.mean < c.null {
+                        Some(Outcome::Contradicted)
+                    } else {
+                        None
+                    }
+                };
+                let mut disagree = false;
                 let outcome = match test {
                     Some(_) if d.len() > 1 && !spread(d) => Outcome::NoVerdict,
-                    _ if c.diffs.len() < self.planned => Outcome::Interim,
-                    Some(t) if p_holm < self.alpha && t.above > t.below => Outcome::Holds,
-                    Some(t) if p_holm < self.alpha && t.below > t.above => Outcome::Contradicted,
+                    _ if !complete(d) => Outcome::Interim,
+                    Some(t) if significant => side(&t).unwrap_or_else(|| {
+                        disagree = true;
+                        Outcome::Inconclusive
+                    }),
                     _ => Outcome::Inconclusive,
                 };
                 Judgement {
@@ -413,6 +454,7 @@ impl Rule {
                     test,
                     p_holm,
                     family_tests: m,
+                    median_and_mean_disagree: disagree,
                 }
             })
             .collect()
@@ -446,7 +488,7 @@ pub fn sign_critical(n: usize, alpha: f64) -> usize {
 /// [`sign_critical`]; `p` by bisection. ∞ when `n` differences cannot reach `alpha`, NaN
 /// without a finite positive sd.
 pub fn sign_min_detectable(n: usize, sd: f64, alpha: f64, power: f64) -> f64 {
-    if n < 2 || !(sd.is_finite() && sd > 0.0) {
+    if n < 2 || !(sd.is_finite() && sd > 0.0) || !(power > 0.0 && power < 1.0) {
         return f64::NAN;
     }
     let c = sign_critical(n, alpha);
@@ -573,6 +615,7 @@ mod tests {
         assert!(t == 0.0 || t.is_finite());
         assert!((binomial_upper_tail(2000, 1000, 0.5) - 0.5 - 0.5 * 0.017836).abs() < 1e-4);
         assert_eq!(sign_critical(16, 0.05 / 11.0), 14);
+        assert_eq!(sign_critical(16, 0.05 / 12.0), 15); // 2·137/2¹⁶ = 0.00418 > 0.05/12
         assert_eq!(sign_critical(8, 0.05 / 11.0), 9); // 2/256 > 0.0045: never
         assert_eq!(sign_critical(6, 0.05), 6);
         let rule = Rule::default();
@@ -589,5 +632,69 @@ mod tests {
         let mde = sign_min_detectable(16, 0.33, 0.05 / 11.0, 0.8);
         let p = normal_cdf(mde / 0.33);
         assert!((binomial_upper_tail(16, 14, p) - 0.8).abs() < 1e-9, "{mde}");
+        assert!((mde / 0.33 - 1.30).abs() < 0.005, "{mde}");
+        assert!((sign_min_detectable(16, 1.0, 0.05 / 12.0, 0.8) - 1.63).abs() < 0.005);
+        assert!(sign_min_detectable(16, 1.0, 0.05, 1.0).is_nan());
+        // Large n: linear time, and the tail of a fair coin at its mean.
+        let t = binomial_upper_tail(20_000, 10_000, 0.5);
+        assert!((t - 0.5 - 0.5 * 0.005641).abs() < 1e-5, "{t}");
+    }
+
+    /// A complete claim's verdict does not depend on its family's interim looks: they enter
+    /// Holm at p = 1. A significant sign test whose mean lies on the other side is no verdict.
+    #[test]
+    fn interim_claims_do_not_move_complete_ones() {
+        let rule = Rule {
+            planned: 16,
+            ..Rule::default()
+        };
+        // A: 15 of 16 above 0 (p = 2·17/2¹⁶); B, C: six seeds each.
+        let a: Vec<f64> = (0..16)
+            .map(|k| if k < 15 { 1.0 + k as f64 } else { -1.0 })
+            .collect();
+        let judge = |b: &[f64]| {
+            let fam = [
+                ClaimData {
+                    diffs: &a,
+                    null: 0.0,
+                },
+                ClaimData {
+                    diffs: b,
+                    null: 0.0,
+                },
+                ClaimData {
+                    diffs: b,
+                    null: 0.0,
+                },
+            ];
+            rule.judge(&fam)
+        };
+        let flat = [1.0, -1.0, 2.0, -2.0, 3.0, -3.0];
+        let strong = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
+        let (x, y) = (judge(&flat), judge(&strong));
+        assert_eq!(x[0].outcome, Outcome::Holds);
+        assert_eq!((x[0].outcome, x[0].p_holm), (y[0].outcome, y[0].p_holm));
+        assert!((x[0].p_holm - 3.0 * 2.0 * 17.0 / 65536.0).abs() < 1e-15);
+        assert_eq!(y[1].outcome, Outcome::Interim);
+        // 15 of 16 above 0 but one far below: the median says better, the mean worse.
+        let mut d = vec![0.1; 16];
+        d[0] = -10.0;
+        let j = &rule.judge(&[ClaimData {
+            diffs: &d,
+            null: 0.0,
+        }])[0];
+        assert_eq!(j.outcome, Outcome::Inconclusive);
+        assert!(j.median_and_mean_disagree && j.p_holm < 0.05);
+        // +0.0 and −0.0 are no spread.
+        let z = [0.0, -0.0, 0.0];
+        let j = &Rule {
+            planned: 3,
+            ..Rule::default()
+        }
+        .judge(&[ClaimData {
+            diffs: &z,
+            null: 0.0,
+        }])[0];
+        assert_eq!(j.outcome, Outcome::NoVerdict);
     }
 }

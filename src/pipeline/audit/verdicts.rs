@@ -161,8 +161,8 @@ pub struct Verdict {
     /// The Holm family: the room × generator family (`classical`, `truth`).
     pub family: String,
     /// Units (seeds) with both runs and a finite difference in the pool, the revisions
-    /// among them, and how many of them the test judged: the first `planned` in seed
-    /// order (the rest are beyond the plan and left out of everything below).
+    /// among the judged ones, and how many the test judged: those of the plan, seeds 0 to
+    /// `planned − 1` (the rest are beyond it and left out of everything below).
     pub seeds: usize,
     pub revisions: Vec<u32>,
     pub judged: usize,
@@ -415,19 +415,13 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
             if pairs.is_empty() {
                 continue;
             }
-            let mut diffs = seed_means(&pairs, claim.metric);
-            // The planned sample: the first `planned` seeds (seed order); later ones are
-            // beyond the plan (counted in `seeds`, judged nowhere).
-            let seeds = diffs.len();
-            diffs.truncate(rule.planned);
-            let last = pairs
-                .iter()
-                .map(|p| p.seed)
-                .collect::<std::collections::BTreeSet<u32>>()
-                .into_iter()
-                .nth(diffs.len() - 1)
-                .expect("a seed per difference");
-            let pairs: Vec<Pair> = pairs.into_iter().filter(|p| p.seed <= last).collect();
+            // The plan is seeds 0 to `planned − 1`: later seeds are beyond it (counted in
+            // `seeds`, judged nowhere); a planned seed without a finite Δ keeps the claim
+            // interim.
+            let seeds = seed_means(&pairs, claim.metric).len();
+            let planned = u32::try_from(rule.planned).unwrap_or(u32::MAX);
+            let pairs: Vec<Pair> = pairs.into_iter().filter(|p| p.seed < planned).collect();
+            let diffs = seed_means(&pairs, claim.metric);
             cells.push(Cell {
                 claim,
                 generator,
@@ -479,6 +473,9 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
                 }
                 stats::Outcome::NoVerdict => {
                     "no verdict (the same Δ on every seed: one draw, not n)".to_string()
+                }
+                stats::Outcome::Inconclusive if j.median_and_mean_disagree => {
+                    "inconclusive (the median and the mean lie on opposite sides)".to_string()
                 }
                 o => o.word().to_string(),
             };
