@@ -120,6 +120,10 @@ pub fn evaluate(
     })
 }
 
+/// The folder of a training run (`unseen train`'s output) that `unseen eval` writes into;
+/// not a pipeline step (a pipeline run's evaluation steps are `pipeline::steps::Step::Eval`).
+const TRAIN_RUN_EVAL: &str = "eval";
+
 /// Evaluate a run's saved scene (`iteration`, default the latest) on a split of
 /// `dataset` (loaded as the run's config says), writing render | truth images into
 /// `RUN/eval/<split>[_iteration_N]/` and merging the report into `RUN/eval.json` under
@@ -149,7 +153,7 @@ pub fn evaluate_run(
         split,
         cfg.background,
         cfg.conventions,
-        Some(&run.join("eval").join(&name)),
+        Some(&run.join(TRAIN_RUN_EVAL).join(&name)),
     )?;
     let path = run.join("eval.json");
     let mut all: serde_json::Map<String, serde_json::Value> = std::fs::read(&path)

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 use unseen::error::{Error, Result};
 use unseen::pipeline::compare::compare;
+use unseen::pipeline::steps::{Stage, Step};
 use unseen::pipeline::{
     self, Hallucination, Inconsistency, Inputs, MaskSource, PipelineConfig, Preset, RunOptions,
     Scope, SlotNames, Stage2Depth, TruthDepth, load_inputs,
@@ -92,11 +93,11 @@ pub struct ExtrapolateArgs {
     resume: bool,
     /// Compute only this step (e.g. `stage1/bridge_004`), whose inputs must be done in
     /// OUT: one job of a batch engine. Implies continuing OUT.
-    #[arg(long, conflicts_with = "until")]
-    only: Option<String>,
+    #[arg(long, conflicts_with = "until", value_parser = parse_step)]
+    only: Option<Step>,
     /// Compute the steps up to and including this one (e.g. `views`), then stop.
-    #[arg(long)]
-    until: Option<String>,
+    #[arg(long, value_parser = parse_step)]
+    until: Option<Step>,
     /// Worker threads (default: all cores); results are the same bits for any count.
     #[arg(long)]
     threads: Option<usize>,
@@ -316,15 +317,16 @@ fn emit_extrapolate(
     let small = cluster::least_request(cpus);
     let waves = [
         ArrayWave {
-            name: "views".into(),
+            name: Stage::Views.name().into(),
             tasks: 1,
             request: small.clone(),
             body: format!(
-                "{cmd} --resume --until views {threads}\n{cmd} --stage1-steps > {steps}\n"
+                "{cmd} --resume --until {} {threads}\n{cmd} --stage1-steps > {steps}\n",
+                Step::Views
             ),
         },
         ArrayWave {
-            name: "stage1".into(),
+            name: Stage::Stage1.name().into(),
             tasks: inputs.candidates.len(),
             request: small,
             body: format!(
@@ -591,6 +593,11 @@ pub struct AuditArgs {
     /// Worker threads (default: all cores); results are the same bits for any count.
     #[arg(long)]
     threads: Option<usize>,
+}
+
+/// `--only` / `--until`: a step's folder name (`unseen::pipeline::steps::Step`).
+fn parse_step(s: &str) -> std::result::Result<Step, String> {
+    s.parse().map_err(|e: Error| e.to_string())
 }
 
 /// `--seeds`: `K` (0..K) or `A..B`, not empty.

@@ -77,24 +77,10 @@ impl Comparison {
     }
 }
 
-/// Rank of a step in pipeline order.
+/// Rank of a step folder in pipeline order ([`Step::rank`]; a folder that is no step, e.g.
+/// an oracle dump's, after every step), then by name.
 fn rank(step: &str) -> (u32, String) {
-    let r = match step {
-        "views" => 0,
-        "qa/original" => 3,
-        "stage1/propagate" => 2,
-        "stage1/recon" => 4,
-        "stage2/dependent" => 5,
-        "stage2/videos" => 6,
-        "qa/stage1" => 7,
-        "stage2/recon" => 8,
-        "interpolate/fixer" => 9,
-        "qa/stage2" => 10,
-        "interpolate/recon" => 11,
-        s if s.starts_with("stage1/") => 1,
-        s if s.starts_with("eval/") => 12,
-        _ => 13,
-    };
+    let r = step.parse::<super::steps::Step>().map_or(13, |s| s.rank());
     (r, step.to_string())
 }
 

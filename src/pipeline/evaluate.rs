@@ -6,6 +6,8 @@
 
 use super::artifacts::{load_mask, read_json, save_mask, scene_of, stem};
 use super::rundir::StepDone;
+use super::steps::Stage;
+use super::steps::Step;
 use super::{Inputs, StageCtx};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -177,7 +179,7 @@ pub fn masks(ctx: &StageCtx) -> Result<StepDone> {
         "train": data.train.iter().map(|&i| &data.views[i].camera.name).collect::<Vec<_>>(),
         "tolerance": VISIBILITY_DEPTH_TOLERANCE,
     });
-    dir.step("eval/masks", key, on_event, |w| {
+    dir.step(&Step::EvalMasks, key, on_event, |w| {
         let train: Vec<(&Camera, &[f32])> = data
             .train
             .iter()
@@ -243,7 +245,7 @@ pub fn run(
         // recorded is not reused).
         let key =
             serde_json::json!({"scene": digest, "masks": masks.digest, "records": "per-view"});
-        let st = dir.step(&format!("eval/{name}"), key, on_event, |w| {
+        let st = dir.step(&Step::Eval(name.to_string()), key, on_event, |w| {
             let row = score(inputs, &scene, name, &existing, w)?;
             w.json("metrics.json", &row)?;
             Ok(())
@@ -262,7 +264,7 @@ pub fn run(
         rows,
     };
     let text = serde_json::to_string_pretty(&summary).expect("serializes") + "\n";
-    crate::io::write_text(&dir.root.join("eval").join("summary.json"), &text)?;
+    crate::io::write_text(&Stage::Eval.dir(&dir.root).join("summary.json"), &text)?;
     Ok((summary, steps))
 }
 

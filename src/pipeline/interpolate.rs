@@ -17,6 +17,7 @@ use super::rundir::StepDone;
 use super::stage1::{Stage1, independent_supervision, load_video, video_supervision};
 use super::stage2::made_clips;
 use super::stage2::{Stage2, keyframes, neighbour_pairs};
+use super::steps::Step;
 use super::views::{Views, render_rgb};
 use crate::error::Result;
 use std::collections::BTreeMap;
@@ -50,7 +51,7 @@ pub fn run(
         "videos": s2.videos.digest,
         "slots": gens.key(config, &[SlotKind::Fixer]),
     });
-    let fixer = dir.step("interpolate/fixer", fkey, on_event, |w| {
+    let fixer = dir.step(&Step::Fixer, fkey, on_event, |w| {
         // The fixer poses, in order: the keyframes, then each clip's intermediate frames.
         let mut cams: Vec<crate::camera::Camera> = Vec::new();
         for k in &keys {
@@ -96,7 +97,7 @@ pub fn run(
         &mut steps,
         upstream,
     )?;
-    let recon_step = dir.step("interpolate/recon", rkey, on_event, |w| {
+    let recon_step = dir.step(&Step::Interpolation, rkey, on_event, |w| {
         let mut generated: Vec<Supervision> = Vec::new();
         for (name, s) in views.plan.independent.iter().zip(&s1.views) {
             // The inpainted view itself is a keyframe below; keep its clips' frames.

@@ -28,6 +28,7 @@ pub mod report;
 pub mod rundir;
 pub mod stage1;
 pub mod stage2;
+pub mod steps;
 pub mod views;
 
 pub use config::{
@@ -164,7 +165,7 @@ pub fn run_with(
         }),
         Ok(_) if target.is_some() => Err(Error::invalid(format!(
             "this run has no step called '{}' (the steps are listed in steps.json)",
-            target.unwrap_or_default()
+            target.map(|t| t.to_string()).unwrap_or_default()
         ))
         .at(out)),
         r => r,
@@ -197,7 +198,7 @@ fn run_in(ctx: &StageCtx) -> Result<Outcome> {
     let eval_masks = (!inputs.evaluation.is_empty()).then(|| evaluate::masks(ctx));
 
     on_event(Event::Stage {
-        name: "views".into(),
+        name: steps::Stage::Views.name().into(),
     });
     let views = views::run(ctx, &gens)?;
     steps.push(views.step.clone());
@@ -208,13 +209,13 @@ fn run_in(ctx: &StageCtx) -> Result<Outcome> {
     }
 
     on_event(Event::Stage {
-        name: "stage1".into(),
+        name: steps::Stage::Stage1.name().into(),
     });
     let s1 = stage1::run(ctx, &gens, &views)?;
     steps.extend(s1.steps.iter().cloned());
 
     on_event(Event::Stage {
-        name: "stage2".into(),
+        name: steps::Stage::Stage2.name().into(),
     });
     let s2 = stage2::run(ctx, &gens, &views, &s1)?;
     steps.extend(s2.steps.iter().cloned());
@@ -227,7 +228,7 @@ fn run_in(ctx: &StageCtx) -> Result<Outcome> {
     ];
     if config.interpolation {
         on_event(Event::Stage {
-            name: "interpolate".into(),
+            name: steps::Stage::Interpolate.name().into(),
         });
         let ip = interpolate::run(ctx, &gens, &views, &s1, &s2)?;
         steps.extend(ip.steps.iter().cloned());
@@ -239,7 +240,7 @@ fn run_in(ctx: &StageCtx) -> Result<Outcome> {
         None => None,
         Some(masks) => {
             on_event(Event::Stage {
-                name: "eval".into(),
+                name: steps::Stage::Eval.name().into(),
             });
             let (summary, st) = evaluate::run(ctx, &scenes, masks?)?;
             steps.extend(st);

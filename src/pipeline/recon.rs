@@ -12,6 +12,7 @@
 use super::artifacts::{save_scene, stem};
 use super::config::{MaskSource, PipelineConfig, ReconConfig};
 use super::rundir::{StepDone, StepWriter};
+use super::steps::Step;
 use super::{Event, Inputs, StageCtx};
 use crate::camera::Camera;
 use crate::dataset::{Dataset, View};
@@ -83,10 +84,11 @@ pub fn weights(
         MaskSource::Opacity => Ok((Weights::Opacity(scene.clone()), None)),
         MaskSource::Qa => {
             let qa = qa_config(config);
-            let step_name = format!("qa/{name}");
+            let qa_step = Step::QaMask(name.to_string());
+            let step_name = qa_step.to_string();
             let key = serde_json::json!({"scene": scene_digest, "qa": qa});
             let views: Vec<Camera> = inputs.data.train_cameras();
-            let step = dir.step(&step_name, key, on_event, |w| {
+            let step = dir.step(&qa_step, key, on_event, |w| {
                 let mut g = mask_scene(scene, &qa)?;
                 fine_tune(&mut g, &views, &qa, &mut |p| {
                     if p.iteration % 50 == 0 || p.iteration == p.iterations {

@@ -4,6 +4,7 @@
 use super::Outcome;
 use super::artifacts::{read_json, stem};
 use super::config::PipelineConfig;
+use super::steps::Step;
 use super::views::Plan;
 use crate::error::Result;
 use std::path::Path;
@@ -15,7 +16,7 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let plan: Plan = read_json(&run.join("views").join("plan.json"))?;
+    let plan: Plan = read_json(&Step::Views.dir(run).join("plan.json"))?;
     let mut md = String::from("# unseen: scene extrapolation\n\n");
     md += &format!(
         "Preset `{}`, slots: inpaint `{}`, depth `{}`, video `{}`, video depth `{}`, fixer `{}`{}; \
@@ -81,14 +82,15 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
     md += &format!(
         "## Independent views (§3.2)\n\n{} candidates, {} already covered, {} frustum \
          collisions; independent: {}; closed trajectory: {}. Frustums of the inpainted \
-         regions: `{prefix}/views/frustums.obj` (open it in a mesh viewer); from above (independent \
+         regions: `{prefix}/{views}/frustums.obj` (open it in a mesh viewer); from above (independent \
          views filled, training cameras grey, the trajectory red):\n\n\
-         ![frustums from above]({prefix}/views/frustums.svg)\n\n",
+         ![frustums from above]({prefix}/{views}/frustums.svg)\n\n",
         plan.candidates.len(),
         plan.covered.len(),
         plan.collisions.len(),
         plan.independent.join(", "),
         plan.trajectory.join(" → "),
+        views = Step::Views,
     );
     if !plan.set_aside.is_empty() {
         md += "**Set aside** (left out of detection, as the covered ones; SPEC.md §20.2):\n\n";
@@ -101,34 +103,42 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
     for c in plan.candidates.iter().filter(|c| c.masked > 0).take(6) {
         let s = stem(&c.name);
         md += &format!(
-            "| {0} | ![]({1}/views/{s}/render.png) | ![]({1}/views/{s}/inpaint.mask.png) | ![]({1}/views/{s}/inpaint_0.png) |\n",
-            c.name, prefix
+            "| {0} | ![]({1}/{2}/{s}/render.png) | ![]({1}/{2}/{s}/inpaint.mask.png) | ![]({1}/{2}/{s}/inpaint_0.png) |\n",
+            c.name,
+            prefix,
+            Step::Views
         );
     }
-    if let Ok(c) = read_json::<serde_json::Value>(&run.join("views").join("conflict.json")) {
+    if let Ok(c) = read_json::<serde_json::Value>(&Step::Views.dir(run).join("conflict.json")) {
         md += &format!(
             "\n**Conflicting generations** (the hallucinating ground-truth generator): two \
              independent generations of {}; on its {} pixels no training view saw they differ \
              by {:.1} dB PSNR — what independent view detection keeps apart.\n\n\
              | generation a | generation b |\n|---|---|\n\
-             | ![]({prefix}/views/conflict_a.png) | ![]({prefix}/views/conflict_b.png) |\n",
+             | ![]({prefix}/{views}/conflict_a.png) | ![]({prefix}/{views}/conflict_b.png) |\n",
             c["view"].as_str().unwrap_or("?"),
             c["unseen_pixels"],
-            c["psnr_db"].as_f64().unwrap_or(f64::NAN)
+            c["psnr_db"].as_f64().unwrap_or(f64::NAN),
+            views = Step::Views,
         );
     }
     md += "\n## Stage 1 and 2 (§3.3)\n\n| view | kind | image | weights (QA-Mask heat map) |\n|---|---|---|---|\n";
     for name in plan.trajectory.iter().take(8) {
         let s = stem(name);
         let independent = plan.independent.contains(name);
-        let img = if independent {
-            format!("{prefix}/stage1/{s}/inpaint.png")
+        let (img, recon) = if independent {
+            (
+                format!("{prefix}/{}/inpaint.png", Step::Independent(s.clone())),
+                Step::Stage1Recon,
+            )
         } else {
-            format!("{prefix}/stage2/dependent/{s}/inpaint.png")
+            (
+                format!("{prefix}/{}/{s}/inpaint.png", Step::Dependent),
+                Step::Stage2Recon,
+            )
         };
-        let stage = if independent { "stage1" } else { "stage2" };
         md += &format!(
-            "| {name} | {} | ![]({img}) | ![]({prefix}/{stage}/recon/weights/{s}.png) |\n",
+            "| {name} | {} | ![]({img}) | ![]({prefix}/{recon}/weights/{s}.png) |\n",
             if independent {
                 "independent"
             } else {
@@ -136,7 +146,7 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
             }
         );
     }
-    let propagated = run.join("stage1/propagate");
+    let propagated = Step::Propagate.dir(run);
     let shown: Vec<&super::views::Dependent> = plan
         .dependent
         .iter()
@@ -148,13 +158,18 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
         for d in shown {
             let s = stem(&d.name);
             md += &format!(
-                "| {} | {} – {} | ![]({prefix}/stage1/propagate/{s}/warped.png) | ![]({prefix}/stage1/propagate/{s}/covered.mask.png) | ![]({prefix}/stage2/dependent/{s}/render.png) | ![]({prefix}/stage2/dependent/{s}/inpaint.mask.png) |\n",
-                d.name, d.between[0], d.between[1]
+                "| {} | {} – {} | ![]({prefix}/{p}/{s}/warped.png) | ![]({prefix}/{p}/{s}/covered.mask.png) | ![]({prefix}/{q}/{s}/render.png) | ![]({prefix}/{q}/{s}/inpaint.mask.png) |\n",
+                d.name,
+                d.between[0],
+                d.between[1],
+                p = Step::Propagate,
+                q = Step::Dependent,
             );
         }
         md += "\n";
     }
-    if let Ok(d) = read_json::<serde_json::Value>(&run.join("stage2/dependent/dependent.json")) {
+    if let Ok(d) = read_json::<serde_json::Value>(&Step::Dependent.dir(run).join("dependent.json"))
+    {
         let views = d["views"].as_array().cloned().unwrap_or_default();
         if !views.is_empty() {
             md += &format!(
@@ -207,7 +222,7 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
         md += "## Evaluation views (render | truth)\n\n";
         for r in &m.rows {
             md += &format!("**{}**\n\n", r.scene);
-            let dir = run.join("eval").join(&r.scene);
+            let dir = Step::Eval(r.scene.clone()).dir(run);
             let mut pngs: Vec<String> = std::fs::read_dir(&dir)
                 .map(|d| {
                     d.flatten()
@@ -218,7 +233,7 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
                 .unwrap_or_default();
             pngs.sort();
             for p in pngs.iter().take(2) {
-                md += &format!("![]({prefix}/eval/{}/{p}) ", r.scene);
+                md += &format!("![]({prefix}/{}/{p}) ", Step::Eval(r.scene.clone()));
             }
             md += "\n\n";
         }

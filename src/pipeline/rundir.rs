@@ -16,6 +16,7 @@
 //! digest, so everything downstream is keyed exactly as if it had been computed here.
 
 use super::Event;
+use super::steps::Step;
 use crate::error::{Error, Result};
 use crate::io::manifest::{FileEntry, Manifest, inputs_sha256};
 use crate::io::{
@@ -25,15 +26,15 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 /// Which steps a run computes (SPEC.md §20.8): all, or one step alone (its inputs must be
-/// done: a batch engine's worker), or everything up to one step, or everything before the
-/// first step whose name starts with a prefix (the audit's shared-steps jobs).
+/// done: a batch engine's worker), or everything up to one step, or everything before one
+/// step (the audit's shared-steps jobs).
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub enum Scope {
     #[default]
     All,
-    Only(String),
-    Until(String),
-    Before(String),
+    Only(Step),
+    Until(Step),
+    Before(Step),
 }
 
 /// An open run directory.
@@ -147,7 +148,7 @@ impl RunDir {
             // whenever the step is recomputed, so its temporaries go with it; other jobs'
             // steps in flight are left alone.
             remove_stale_temporaries(root)?;
-            remove_stale_temporaries(&root.join("eval"))?;
+            remove_stale_temporaries(&super::steps::Stage::Eval.dir(root))?;
         }
         Ok(RunDir {
             root: root.to_path_buf(),
@@ -172,11 +173,11 @@ impl RunDir {
         Ok(self)
     }
 
-    /// Run step `name` (a relative folder, e.g. `stage1/view_x`) from `inputs` unless a
-    /// verified result exists; `compute` writes its files through the [`StepWriter`].
+    /// Run `step` (its folder, e.g. `stage1/view_x`) from `inputs` unless a verified result
+    /// exists; `compute` writes its files through the [`StepWriter`].
     pub fn step(
         &self,
-        name: &str,
+        step: &Step,
         inputs: serde_json::Value,
         on_event: &(dyn Fn(Event) + Sync),
         compute: impl FnOnce(&mut StepWriter) -> Result<()>,
@@ -185,15 +186,15 @@ impl RunDir {
         if self.finished.load(Ordering::SeqCst) {
             return Err(Error::invalid(SCOPE_DONE));
         }
-        if let Scope::Before(prefix) = &self.scope
-            && name.starts_with(prefix.as_str())
-        {
+        if matches!(&self.scope, Scope::Before(s) if s == step) {
             self.finished.store(true, Ordering::SeqCst);
             return Err(Error::invalid(SCOPE_DONE));
         }
         self.guard.check()?;
-        let is_target = matches!(&self.scope, Scope::Only(s) | Scope::Until(s) if s == name);
-        let dir = self.root.join(name);
+        let is_target = matches!(&self.scope, Scope::Only(s) | Scope::Until(s) if s == step);
+        let name = step.to_string();
+        let name = name.as_str();
+        let dir = step.dir(&self.root);
         let inputs = serde_json::json!({ "run": self.base, "step": inputs });
         let inputs_sha256 = inputs_sha256(&inputs);
         // A step already done here (`--resume`, scoped runs) or in the cache.
@@ -220,7 +221,7 @@ impl RunDir {
         }
         // In an `--only` run, a step that is not the target and has a folder here is another
         // worker's (in flight, or left damaged): never replaced from the cache.
-        let others = matches!(&self.scope, Scope::Only(only) if only != name) && dir.exists();
+        let others = matches!(&self.scope, Scope::Only(only) if only != step) && dir.exists();
         let cached = self
             .cache_entry(name, &inputs_sha256)
             .filter(|_| !others)
@@ -247,7 +248,7 @@ impl RunDir {
             }
         }
         if let Scope::Only(only) = &self.scope
-            && only != name
+            && only != step
         {
             // Not this worker's step (another worker may be writing it): left alone.
             return Err(Error::invalid(format!(

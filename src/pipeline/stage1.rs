@@ -24,6 +24,7 @@ use super::generators::{Generators, SlotKind};
 use super::poses::nearest_training;
 use super::recon::{self, Supervision, reconstruct};
 use super::rundir::StepDone;
+use super::steps::Step;
 use super::views::{Views, apply_alignment, training_depth, warp_depth};
 use super::{PipelineConfig, StageCtx};
 use crate::camera::Camera;
@@ -168,7 +169,7 @@ pub fn run(ctx: &StageCtx, gens: &Generators, views: &Views) -> Result<Stage1> {
             "propagate": propagate.as_ref().map(|s| &s.digest),
         }),
     );
-    let recon_step = dir.step("stage1/recon", key, on_event, |w| {
+    let recon_step = dir.step(&Step::Stage1Recon, key, on_event, |w| {
         let mut init = inputs.scene.clone();
         let mut generated = Vec::new();
         for (name, s) in views.plan.independent.iter().zip(&per_view) {
@@ -228,7 +229,7 @@ fn independent_view(
         "sh_degree": inputs.scene.sh_degree,
         "seed": config.seed,
     });
-    dir.step(&format!("stage1/{}", stem(name)), key, on_event, |w| {
+    dir.step(&Step::Independent(stem(name)), key, on_event, |w| {
         let cam = views.camera(name)?;
         let (wd, ht) = (cam.width as usize, cam.height as usize);
         let (ip, d0) = views.inpainting(name, 0)?;
@@ -434,7 +435,7 @@ fn propagate(ctx: &StageCtx, views: &Views, per_view: &[StepDone]) -> Result<Ste
         "views": views.step.digest,
         "independent": per_view.iter().map(|s| &s.digest).collect::<Vec<_>>(),
     });
-    dir.step("stage1/propagate", key, on_event, |w| {
+    dir.step(&Step::Propagate, key, on_event, |w| {
         let source = |name: &str| -> Result<(&Camera, ImageF32, Vec<f32>)> {
             let k = views
                 .plan

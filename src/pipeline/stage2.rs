@@ -24,6 +24,7 @@ use super::poses::nearest_training;
 use super::recon::{self, Supervision, reconstruct};
 use super::rundir::{StepDone, StepWriter};
 use super::stage1::{Stage1, align_clip, save_video, video_supervision};
+use super::steps::Step;
 use super::views::{
     Dependent, MIN_ALIGN_PIXELS, Views, apply_alignment, render_rgba, training_depth,
 };
@@ -112,7 +113,7 @@ pub fn run(ctx: &StageCtx, gens: &Generators, views: &Views, s1: &Stage1) -> Res
     let start = (&s1_scene, &s1.recon);
     let (weights, rkey) =
         recon::weights_and_key(ctx, &config.stage2, start, "stage1", &mut steps, upstream)?;
-    let recon_step = dir.step("stage2/recon", rkey, on_event, |w| {
+    let recon_step = dir.step(&Step::Stage2Recon, rkey, on_event, |w| {
         let mut generated: Vec<Supervision> = keys
             .iter()
             .map(|k| Supervision {
@@ -176,7 +177,7 @@ fn dependent_step(
         "ransac": [config.ransac_threshold, config.ransac_iterations as f64],
         "seed": config.seed,
     });
-    let step = dir.step("stage2/dependent", key, on_event, |w| {
+    let step = dir.step(&Step::Dependent, key, on_event, |w| {
         let mut records = Vec::new();
         for dep in &views.plan.dependent {
             records.push(complete_dependent(ctx, gens, views, s1, s1_scene, dep, w)?);
@@ -402,7 +403,7 @@ fn videos_step(
         "slots": gens.key(config, &[SlotKind::Video]),
         "video_frames": config.video_frames,
     });
-    dir.step("stage2/videos", key, on_event, |w| {
+    dir.step(&Step::Videos, key, on_event, |w| {
         let (mut made, mut failed) = (Vec::new(), Vec::new());
         for (k, &(a, b)) in pairs.iter().enumerate() {
             let (ka, kb) = (&keys[a], &keys[b]);

@@ -22,6 +22,7 @@ use super::artifacts::{
 use super::generators::{Generators, SlotKind};
 use super::poses::{nearest_training, same_pose};
 use super::rundir::{StepDone, StepWriter};
+use super::steps::Step;
 use super::{Event, Inputs, StageCtx};
 use crate::camera::Camera;
 use crate::camera::inria::{cameras_json_string, read_cameras_json};
@@ -94,19 +95,20 @@ pub struct Plan {
 /// The per-view stage-1 steps of the run `out` (`stage1/<view>` for each independent view
 /// of its finished views step, in plan order): what a batch engine fans out after
 /// `--until views` (SPEC.md §20.8).
-pub fn stage1_steps(out: &std::path::Path) -> Result<Vec<String>> {
-    let path = out.join("views").join("plan.json");
+pub fn stage1_steps(out: &std::path::Path) -> Result<Vec<Step>> {
+    let path = Step::Views.dir(out).join("plan.json");
     if !path.is_file() {
-        return Err(Error::invalid(
-            "the views step is not done here (run with --until views first)",
-        )
+        return Err(Error::invalid(format!(
+            "the views step is not done here (run with --until {} first)",
+            Step::Views
+        ))
         .at(out));
     }
     let plan: Plan = read_json(&path)?;
     Ok(plan
         .independent
         .iter()
-        .map(|n| format!("stage1/{}", super::stem(n)))
+        .map(|n| Step::Independent(super::stem(n)))
         .collect())
 }
 
@@ -290,7 +292,7 @@ pub fn run(ctx: &StageCtx, gens: &Generators) -> Result<Views> {
         "independent_detection": config.independent_detection,
 
     });
-    let step = dir.step("views", key, on_event, |w| {
+    let step = dir.step(&Step::Views, key, on_event, |w| {
         let mut found = Found::default();
         for index in 0..inputs.candidates.len() {
             let (record, verdict) = assess(ctx, gens, index, w)?;

@@ -480,3 +480,86 @@ fn architecture_checker_reads_references() {
     e.insert("b".to_string(), BTreeSet::from(["a".to_string()]));
     assert_eq!(cycles(&e), vec![vec!["a".to_string(), "b".to_string()]]);
 }
+
+/// The string literals of a Rust source text outside comments, each with the 6 characters of code
+/// before it (to tell `join("views")` from a JSON key).
+fn string_literals(s: &str) -> Vec<(String, String)> {
+    let b = s.as_bytes();
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < b.len() {
+        if b[i..].starts_with(b"//") {
+            while i < b.len() && b[i] != b'\n' {
+                i += 1;
+            }
+        } else if b[i..].starts_with(b"/*") {
+            i = s[i + 2..].find("*/").map_or(b.len(), |k| i + 2 + k + 2);
+        } else if b[i] == b'"' && !(i > 0 && matches!(b[i - 1], b'\'' | b'\\')) {
+            let before = s[..i]
+                .char_indices()
+                .rev()
+                .nth(5)
+                .map_or("", |(k, _)| &s[k..i]);
+            let mut j = i + 1;
+            while j < b.len() && b[j] != b'"' {
+                j += if b[j] == b'\\' { 2 } else { 1 };
+            }
+            out.push((s[i + 1..j.min(b.len())].to_string(), before.to_string()));
+            i = j + 1;
+        } else {
+            i += 1;
+        }
+    }
+    out
+}
+
+/// Issue #53: a step's folder name is written only in `pipeline::steps` (`Step`'s
+/// `Display` / `FromStr`). Anywhere else in the engine or the CLI, a string literal holding
+/// a step path (`stage1/…`, `…/eval/…`, `--until views`) or a `join("<stage folder>")` is a
+/// second copy of the run's structure that a renamed step would silently break.
+#[test]
+fn step_names_live_in_steps_rs() {
+    let root = repo_root();
+    let folders = ["views", "stage1", "stage2", "interpolate", "eval", "qa"];
+    let mut found = Vec::new();
+    let mut stack = vec![root.join("src"), root.join("cli/src")];
+    while let Some(dir) = stack.pop() {
+        for e in std::fs::read_dir(&dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+                continue;
+            }
+            if p.extension().is_none_or(|x| x != "rs") || p.ends_with("pipeline/steps.rs") {
+                continue;
+            }
+            let text = std::fs::read_to_string(&p).unwrap();
+            for (lit, before) in string_literals(&text) {
+                let path_like = folders.iter().any(|f| {
+                    lit.match_indices(&format!("{f}/")).any(|(k, _)| {
+                        k == 0 || matches!(lit.as_bytes()[k - 1], b'/' | b'}' | b' ' | b'(')
+                    }) || lit.ends_with(&format!("/{f}"))
+                        || lit.contains(&format!("--until {f}"))
+                        || lit.contains(&format!("--only {f}"))
+                });
+                let joined = folders.contains(&lit.as_str()) && before.ends_with("join(");
+                if path_like || joined {
+                    found.push(format!(
+                        "{}: \"{lit}\"",
+                        p.strip_prefix(&root).unwrap().display()
+                    ));
+                }
+            }
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "step names outside pipeline/steps.rs: {found:#?}"
+    );
+    // The scanner sees what it must.
+    let probe =
+        "let a = dir.join(\"eval\"); // \"stage1/x\"\nlet b = format!(\"{p}/stage2/videos\");";
+    let lits = string_literals(probe);
+    assert_eq!(lits.len(), 2, "{lits:?}");
+    assert_eq!(lits[0], ("eval".to_string(), ".join(".to_string()));
+}

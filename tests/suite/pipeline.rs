@@ -418,6 +418,7 @@ fn bad_pipeline_input_is_one_clear_error() {
 /// a job whose inputs are not done is a clear error.
 #[test]
 fn per_view_jobs_then_resume_equal_one_run() {
+    use unseen::pipeline::steps::Step;
     use unseen::pipeline::{RunOptions, Scope};
     let run_scoped = |cfg, inp, out: &Path, resume, scope, on_event: &(dyn Fn(Event) + Sync)| {
         let opts = RunOptions {
@@ -437,20 +438,12 @@ fn per_view_jobs_then_resume_equal_one_run() {
     let whole = t.path().join("whole");
     pipeline::run(&cfg, &inp, &whole, false, &quiet).unwrap();
     let out = t.path().join("batch");
-    let o = run_scoped(
-        &cfg,
-        &inp,
-        &out,
-        false,
-        Scope::Until("views".into()),
-        &quiet,
-    )
-    .unwrap();
+    let o = run_scoped(&cfg, &inp, &out, false, Scope::Until(Step::Views), &quiet).unwrap();
     assert!(o.scene.is_none());
     assert!(!out.join("stage1").exists(), "nothing after views ran");
-    // Again, with views done: still nothing after it. A step name that does not exist is
-    // an error.
-    run_scoped(&cfg, &inp, &out, true, Scope::Until("views".into()), &quiet).unwrap();
+    // Again, with views done: still nothing after it. A name that is no step does not
+    // parse; a step this run does not have is an error.
+    run_scoped(&cfg, &inp, &out, true, Scope::Until(Step::Views), &quiet).unwrap();
     assert!(
         !out.join("stage1").exists(),
         "--until on a done step stops there"
@@ -461,12 +454,14 @@ fn per_view_jobs_then_resume_equal_one_run() {
         &inp,
         &typo,
         false,
-        Scope::Until("stage9".into()),
+        Scope::Until(Step::Eval("stage9".into())),
         &quiet,
     )
     .unwrap_err()
     .to_string();
-    assert!(e.contains("no step called 'stage9'"), "{e}");
+    assert!(e.contains("no step called 'eval/stage9'"), "{e}");
+    let e = "stage9".parse::<Step>().unwrap_err().to_string();
+    assert!(e.contains("'stage9' is not a step of a run"), "{e}");
     let plan: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("views/plan.json")).unwrap()).unwrap();
     let independent: Vec<String> = plan["independent"]
@@ -482,7 +477,7 @@ fn per_view_jobs_then_resume_equal_one_run() {
         &inp,
         &out,
         true,
-        Scope::Only("stage1/recon".into()),
+        Scope::Only(Step::Stage1Recon),
         &quiet,
     )
     .unwrap_err()
@@ -493,9 +488,9 @@ fn per_view_jobs_then_resume_equal_one_run() {
     );
     // One job per independent view, last first (order does not matter).
     for v in independent.iter().rev() {
-        let step = format!("stage1/{v}");
+        let step = Step::Independent(v.clone());
         run_scoped(&cfg, &inp, &out, true, Scope::Only(step.clone()), &quiet).unwrap();
-        assert!(out.join(&step).join("manifest.json").is_file(), "{step}");
+        assert!(step.dir(&out).join("manifest.json").is_file(), "{step}");
     }
     assert!(!out.join("stage1/recon").exists());
     let skipped = std::sync::Mutex::new(Vec::new());
@@ -1647,7 +1642,7 @@ fn stage2_depth_by_video_alignment_recovers_the_relative_map_and_render_fit_is_t
         "the paper's method is the default"
     );
     let until = RunOptions {
-        scope: Scope::Until("stage2/dependent".into()),
+        scope: Scope::Until(unseen::pipeline::steps::Step::Dependent),
         ..RunOptions::default()
     };
     let fit_cfg = PipelineConfig {

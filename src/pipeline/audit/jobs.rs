@@ -4,6 +4,7 @@
 use super::{AuditConfig, GeneratorKind, Variant, config_digest};
 use crate::error::{Error, Result};
 use crate::pipeline::evaluate::{Row, Summary};
+use crate::pipeline::steps::Step;
 use crate::pipeline::{Event, PipelineConfig, RunOptions, Scope};
 use crate::train::checkpoint::checkpoint_path;
 use crate::train::run::{Checkpointing, latest_ply, read_config, train_run};
@@ -32,8 +33,8 @@ pub enum Job {
     },
 }
 
-/// Where a [`Job::Shared`] stops: before the first step whose name starts with this.
-pub const SHARED_BEFORE: &str = "stage1/recon";
+/// Where a [`Job::Shared`] stops: before this step.
+pub const SHARED_BEFORE: Step = Step::Stage1Recon;
 
 impl Job {
     /// The job's name on the command line: `original/seed-K`,
@@ -127,12 +128,11 @@ pub struct StepCost {
     pub seconds: f64,
 }
 
-/// Stage names as the audit reports them (`qa/<scene>` is `qa-mask`).
+/// Stage names as the audit reports them (`qa/<scene>` is `qa-mask`); a name that is no
+/// step (a sample written by another version) is its own stage.
 fn stage_of(step: &str) -> String {
-    match step.split('/').next().unwrap_or("") {
-        "qa" => "qa-mask".into(),
-        s => s.into(),
-    }
+    step.parse::<Step>()
+        .map_or_else(|_| step.to_string(), |s| s.stage().name().to_string())
 }
 
 /// What the step cache saves, per stage (in first-seen order): step executions over all
@@ -206,7 +206,7 @@ pub fn run_job(
             Ok(None)
         }
         Job::Shared { generator, seed } => {
-            let scope = Scope::Before(SHARED_BEFORE.into());
+            let scope = Scope::Before(SHARED_BEFORE);
             pipeline_job(
                 cfg,
                 dataset,

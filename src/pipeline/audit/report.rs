@@ -328,14 +328,7 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
         }
     }
     s += "\n*compute*: the seconds each step took where it was computed; steps shared through the cache are counted in every variant that uses them.\n\n## Compute per stage (s, mean over seeds)\n\n";
-    let stages = [
-        "views",
-        "qa-mask",
-        "stage1",
-        "stage2",
-        "interpolate",
-        "eval",
-    ];
+    let stages = crate::pipeline::steps::Stage::ALL.map(|s| s.name());
     s += &format!(
         "| generator | variant | {} |\n|---|---|{}\n",
         stages.join(" | "),
