@@ -28,7 +28,7 @@
 //! in the render, and a flag where it comes within the margin). The replay costs one
 //! scalar walk of the tile lists: a diagnostic, not a render path.
 
-use super::composite::{SplatAlpha, splat_alpha};
+use super::composite::{SplatAlpha, splat_alpha, splat_sigma};
 use super::project::{
     ALPHA_THRESHOLD, CameraF32, EPS2D, FAR_PLANE, JACOBIAN_GUARD, NEAR_PLANE, Splat,
 };
@@ -260,11 +260,59 @@ impl PixelWalk {
 
 /// A listed splat with what its walk needs per pixel, gathered once per tile: `ln` of its
 /// opacity (f64) and its Gaussian's σ-error bound ([`ConicRounding::sigma_error`]).
+/// With it, f32 constants (each rounded up) of a cheap lower bound of the splat's α margin
+/// where σ is large: there `|lg| ≥ σ − (ln o − ln thr)`, and by Cauchy–Schwarz the σ-error
+/// bound is at most `k·|w|² + relative·σ`, `|w|² ≤ (|A|·|dx| + |B|·|dy|)² + (|B|·|dx| +
+/// |C|·|dy|)²` (the exact conic's entries).
 #[derive(Clone, Copy)]
 struct Staged {
     splat: Splat,
+    /// `ln o − ln thr + 1e-4`: from this σ on, `o·exp(−σ)` is under the threshold by more
+    /// than `exp`'s and the product's rounding.
+    sigma_cut: f32,
+    /// `ln o − ln thr`.
+    ln_ratio: f32,
+    conic_abs: [f32; 3],
+    /// `|row_scale|·Σ_k s_k·|F_k|`.
+    k: f32,
+    relative: f32,
     ln_opacity: f64,
     bound: Option<SigmaBound>,
+}
+
+/// The relative slack of the skip's bound over the rounding of its f32 evaluation and of
+/// the margin it bounds (each a few units of 2⁻²⁴ of their largest term).
+const SKIP_SLACK: f32 = 1e-5;
+
+/// `x` rounded up to f32 (NaN stays NaN).
+fn up(x: f64) -> f32 {
+    let y = x as f32;
+    if f64::from(y) < x { y.next_up() } else { y }
+}
+
+impl Staged {
+    fn new(splat: Splat, ln_thr: f64, bound: Option<SigmaBound>) -> Staged {
+        let ln_opacity = f64::from(splat.opacity).ln();
+        let ratio = ln_opacity - ln_thr;
+        let (conic_abs, k, relative) = bound.map_or(([0.0; 3], 0.0, 0.0), |b| {
+            let cols: f64 = (0..3).map(|c| b.s[c] * b.f[0][c].hypot(b.f[1][c])).sum();
+            (
+                b.conic.map(|v| up(v.abs())),
+                up(b.row_scale[0].hypot(b.row_scale[1]) * cols),
+                up(b.relative),
+            )
+        });
+        Staged {
+            splat,
+            sigma_cut: up(ratio + 1e-4),
+            ln_ratio: up(ratio),
+            conic_abs,
+            k,
+            relative,
+            ln_opacity,
+            bound,
+        }
+    }
 }
 
 /// The magnitude of σ's terms at offset `(dx, dy)`: `½(|A|·dx² + |C|·dy²) + |B·dx·dy|`
@@ -360,9 +408,7 @@ pub fn decisions(
         for (k, st) in list.iter().enumerate() {
             let s = &st.splat;
             let (dx, dy) = (s.mean[0] - px, s.mean[1] - py);
-            let SplatAlpha {
-                sigma, a, alpha, ..
-            } = splat_alpha(s, dx, dy, clamp);
+            let sigma = splat_sigma(s, dx, dy);
             // σ's rounding: a few ulps of the sum of its terms' magnitudes.
             let scale = sigma_terms(s, dx, dy);
             // (σ = 0 with no terms is the exact centre: 0 in any implementation.)
@@ -375,8 +421,23 @@ pub fn decisions(
             let shift = m.mean2d
                 * ((s.conic[0] * dx + s.conic[1] * dy).abs() * s.mean[0].abs()
                     + (s.conic[1] * dx + s.conic[2] * dy).abs() * s.mean[1].abs());
+            let ea = m.alpha_error(scale, shift);
+            // Far out on the splat (α certainly under 1/255, a skip): when a lower bound of
+            // its α margin `|lg| − err` exceeds the pixel's smallest so far and 0, the splat
+            // changes nothing (no flag, no minimum) and its f64 terms are not evaluated.
+            if sigma >= st.sigma_cut {
+                let (adx, ady) = (dx.abs(), dy.abs());
+                let w0 = st.conic_abs[0] * adx + st.conic_abs[1] * ady;
+                let w1 = st.conic_abs[1] * adx + st.conic_abs[2] * ady;
+                let e = ea + (st.k * (w0 * w0 + w1 * w1) + st.relative * sigma);
+                let low = (sigma - st.ln_ratio) - e - SKIP_SLACK * (sigma + st.ln_ratio.abs() + e);
+                if low > out.alpha.max(0.0) {
+                    continue;
+                }
+            }
+            let SplatAlpha { a, alpha, .. } = splat_alpha(s, dx, dy, clamp);
             let conic_err = conic_sigma_error(&st.bound, dx, dy, sigma);
-            let err = m.alpha_error(scale, shift) + conic_err;
+            let err = ea + conic_err;
             let lg = log_gap(st.ln_opacity, sigma, ln_thr);
             if conic_err > m.conic && lg >= -err {
                 out.flags |= PIXEL_ILL_CONDITIONED;
@@ -470,11 +531,7 @@ pub fn decisions(
                 staged.clear();
                 staged.extend(bins.tile(ty * bins.tiles_x + tx).iter().map(|&gid| {
                     let s = p.splats[gid as usize];
-                    Staged {
-                        splat: s,
-                        ln_opacity: f64::from(s.opacity).ln(),
-                        bound: rounding[gid as usize].map(|r| r.bound),
-                    }
+                    Staged::new(s, ln_thr, rounding[gid as usize].map(|r| r.bound))
                 }));
                 let rows = band.len() / w;
                 for di in 0..rows {
