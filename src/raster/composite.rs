@@ -288,12 +288,18 @@ pub(crate) struct SplatAlpha {
     pub alpha: f32,
 }
 
+/// σ of a splat at offset `(dx, dy)`: the first step of [`splat_alpha`].
+#[inline(always)]
+pub(crate) fn splat_sigma(s: &Splat, dx: f32, dy: f32) -> f32 {
+    0.5 * (s.conic[0] * dx * dx + s.conic[2] * dy * dy) + s.conic[1] * dx * dy
+}
+
 /// σ and α of a splat at offset `(dx, dy)` under the α clamp `max_alpha`: the one scalar
 /// definition shared by the forward and backward passes (the AVX2 kernels mirror it
 /// operation for operation).
 #[inline(always)]
 pub(crate) fn splat_alpha(s: &Splat, dx: f32, dy: f32, max_alpha: f32) -> SplatAlpha {
-    let sigma = 0.5 * (s.conic[0] * dx * dx + s.conic[2] * dy * dy) + s.conic[1] * dx * dy;
+    let sigma = splat_sigma(s, dx, dy);
     let e = exp(-(if sigma < SIGMA_CLAMP {
         sigma
     } else {

@@ -28,7 +28,7 @@
 //! in the render, and a flag where it comes within the margin). The replay costs one
 //! scalar walk of the tile lists: a diagnostic, not a render path.
 
-use super::composite::{SplatAlpha, splat_alpha};
+use super::composite::{SplatAlpha, splat_alpha, splat_sigma};
 use super::project::{
     ALPHA_THRESHOLD, CameraF32, EPS2D, FAR_PLANE, JACOBIAN_GUARD, NEAR_PLANE, Splat,
 };
@@ -231,6 +231,7 @@ pub struct Decisions {
 }
 
 /// What one pixel's walk found.
+#[derive(Clone, Copy)]
 struct PixelWalk {
     flags: u8,
     /// `Σ T_k·α_k·e_α,k` and the largest colour channel (with the background).
@@ -244,6 +245,76 @@ struct PixelWalk {
     clamp: f32,
 }
 
+impl PixelWalk {
+    const EMPTY: PixelWalk = PixelWalk {
+        flags: 0,
+        sensitivity: 0.0,
+        color_max: 0.0,
+        depth_max: 0.0,
+        alpha: 0.0,
+        transmittance: 0.0,
+        depth: 0.0,
+        clamp: 0.0,
+    };
+}
+
+/// A listed splat with what its walk needs per pixel, gathered once per tile: `ln` of its
+/// opacity (f64) and its Gaussian's σ-error bound ([`ConicRounding::sigma_error`]).
+/// With it, f32 constants (each rounded up) of a cheap lower bound of the splat's α margin
+/// where σ is large: there `|lg| ≥ σ − (ln o − ln thr)`, and by Cauchy–Schwarz the σ-error
+/// bound is at most `k·|w|² + relative·σ`, `|w|² ≤ (|A|·|dx| + |B|·|dy|)² + (|B|·|dx| +
+/// |C|·|dy|)²` (the exact conic's entries).
+#[derive(Clone, Copy)]
+struct Staged {
+    splat: Splat,
+    /// `ln o − ln thr + 1e-4`: from this σ on, `o·exp(−σ)` is under the threshold by more
+    /// than `exp`'s and the product's rounding.
+    sigma_cut: f32,
+    /// `ln o − ln thr`.
+    ln_ratio: f32,
+    conic_abs: [f32; 3],
+    /// `|row_scale|·Σ_k s_k·|F_k|`.
+    k: f32,
+    relative: f32,
+    ln_opacity: f64,
+    bound: Option<SigmaBound>,
+}
+
+/// The relative slack of the skip's bound over the rounding of its f32 evaluation and of
+/// the margin it bounds (each a few units of 2⁻²⁴ of their largest term).
+const SKIP_SLACK: f32 = 1e-5;
+
+/// `x` rounded up to f32 (NaN stays NaN).
+fn up(x: f64) -> f32 {
+    let y = x as f32;
+    if f64::from(y) < x { y.next_up() } else { y }
+}
+
+impl Staged {
+    fn new(splat: Splat, ln_thr: f64, bound: Option<SigmaBound>) -> Staged {
+        let ln_opacity = f64::from(splat.opacity).ln();
+        let ratio = ln_opacity - ln_thr;
+        let (conic_abs, k, relative) = bound.map_or(([0.0; 3], 0.0, 0.0), |b| {
+            let cols: f64 = (0..3).map(|c| b.s[c] * b.f[0][c].hypot(b.f[1][c])).sum();
+            (
+                b.conic.map(|v| up(v.abs())),
+                up(b.row_scale[0].hypot(b.row_scale[1]) * cols),
+                up(b.relative),
+            )
+        });
+        Staged {
+            splat,
+            sigma_cut: up(ratio + 1e-4),
+            ln_ratio: up(ratio),
+            conic_abs,
+            k,
+            relative,
+            ln_opacity,
+            bound,
+        }
+    }
+}
+
 /// The magnitude of σ's terms at offset `(dx, dy)`: `½(|A|·dx² + |C|·dy²) + |B·dx·dy|`
 /// (σ itself unless `B·dx·dy` cancels part of it); σ's rounding scales with it.
 fn sigma_terms(s: &Splat, dx: f32, dy: f32) -> f32 {
@@ -255,8 +326,10 @@ fn sigma_terms(s: &Splat, dx: f32, dy: f32) -> f32 {
 /// α test the other way only where it is within `±err`. Its first-order form `|α/thr − 1|`
 /// would flag every pixel where `err ≥ 1`, which far out on a large splat (σ ≫ 1, α ≈ 0
 /// on both sides) is no decision at all.
-fn log_gap(opacity: f32, sigma: f32, thr: f32) -> f32 {
-    (f64::from(opacity).ln() - f64::from(sigma) - f64::from(thr).ln()) as f32
+/// `ln_opacity` and `ln_thr` are `ln` of the f32 opacity and threshold in f64, computed once
+/// per splat and per call.
+fn log_gap(ln_opacity: f64, sigma: f32, ln_thr: f64) -> f32 {
+    (ln_opacity - f64::from(sigma) - ln_thr) as f32
 }
 
 /// `|v/t − 1|` in f64 (exact enough for a margin, and no overflow).
@@ -311,8 +384,9 @@ pub fn decisions(
     );
     let m = *margins;
     let bg_max = opts.background.iter().fold(0.0f32, |a, &b| a.max(b.abs()));
-    let walk = |i: usize, j: usize| -> PixelWalk {
-        let t = (i / TILE_SIZE) * bins.tiles_x + j / TILE_SIZE;
+    let ln_thr = f64::from(thr).ln();
+    // One pixel's walk over its tile's list, staged (`Staged`, in list order).
+    let walk = |list: &[Staged], i: usize, j: usize| -> PixelWalk {
         let (px, py) = (j as f32 + 0.5, i as f32 + 0.5);
         let mut out = PixelWalk {
             flags: 0,
@@ -331,13 +405,10 @@ pub fn decisions(
         // `Σ α/(1 − α)` over the blended splats: how much the backward's division by
         // `1 − α` amplifies α's own rounding in the recovered transmittance.
         let mut amplification = 0.0f64;
-        let list = bins.tile(t);
-        for (k, &gid) in list.iter().enumerate() {
-            let s = &p.splats[gid as usize];
+        for (k, st) in list.iter().enumerate() {
+            let s = &st.splat;
             let (dx, dy) = (s.mean[0] - px, s.mean[1] - py);
-            let SplatAlpha {
-                sigma, a, alpha, ..
-            } = splat_alpha(s, dx, dy, clamp);
+            let sigma = splat_sigma(s, dx, dy);
             // σ's rounding: a few ulps of the sum of its terms' magnitudes.
             let scale = sigma_terms(s, dx, dy);
             // (σ = 0 with no terms is the exact centre: 0 in any implementation.)
@@ -350,9 +421,24 @@ pub fn decisions(
             let shift = m.mean2d
                 * ((s.conic[0] * dx + s.conic[1] * dy).abs() * s.mean[0].abs()
                     + (s.conic[1] * dx + s.conic[2] * dy).abs() * s.mean[1].abs());
-            let conic_err = conic_sigma_error(&rounding[gid as usize], dx, dy, sigma);
-            let err = m.alpha_error(scale, shift) + conic_err;
-            let lg = log_gap(s.opacity, sigma, thr);
+            let ea = m.alpha_error(scale, shift);
+            // Far out on the splat (α certainly under 1/255, a skip): when a lower bound of
+            // its α margin `|lg| − err` exceeds the pixel's smallest so far and 0, the splat
+            // changes nothing (no flag, no minimum) and its f64 terms are not evaluated.
+            if sigma >= st.sigma_cut {
+                let (adx, ady) = (dx.abs(), dy.abs());
+                let w0 = st.conic_abs[0] * adx + st.conic_abs[1] * ady;
+                let w1 = st.conic_abs[1] * adx + st.conic_abs[2] * ady;
+                let e = ea + (st.k * (w0 * w0 + w1 * w1) + st.relative * sigma);
+                let low = (sigma - st.ln_ratio) - e - SKIP_SLACK * (sigma + st.ln_ratio.abs() + e);
+                if low > out.alpha.max(0.0) {
+                    continue;
+                }
+            }
+            let SplatAlpha { a, alpha, .. } = splat_alpha(s, dx, dy, clamp);
+            let conic_err = conic_sigma_error(&st.bound, dx, dy, sigma);
+            let err = ea + conic_err;
+            let lg = log_gap(st.ln_opacity, sigma, ln_thr);
             if conic_err > m.conic && lg >= -err {
                 out.flags |= PIXEL_ILL_CONDITIONED;
             }
@@ -390,8 +476,8 @@ pub fn decisions(
                 // A port that orders a following splat of (nearly) the same depth first
                 // blends it before deciding on this one: a tie with any that follows
                 // within the margin and passes the α test (lists are sorted by depth).
-                for &next in &list[k + 1..] {
-                    let n = &p.splats[next as usize];
+                for nst in &list[k + 1..] {
+                    let n = &nst.splat;
                     let gap = (f64::from(n.depth) - f64::from(s.depth)) / f64::from(n.depth);
                     if gap > f64::from(m.depth) {
                         break;
@@ -402,8 +488,8 @@ pub fn decisions(
                     let (ndx, ndy) = (n.mean[0] - px, n.mean[1] - py);
                     let na = splat_alpha(n, ndx, ndy, clamp);
                     let nerr = m.alpha_error(sigma_terms(n, ndx, ndy), 0.0)
-                        + conic_sigma_error(&rounding[next as usize], ndx, ndy, na.sigma);
-                    if na.sigma >= 0.0 && log_gap(n.opacity, na.sigma, thr) >= -nerr {
+                        + conic_sigma_error(&nst.bound, ndx, ndy, na.sigma);
+                    if na.sigma >= 0.0 && log_gap(nst.ln_opacity, na.sigma, ln_thr) >= -nerr {
                         out.flags |= PIXEL_DEPTH_TIE;
                         out.depth = out.depth.min(gap as f32 - m.depth);
                     }
@@ -433,11 +519,28 @@ pub fn decisions(
         }
         out
     };
-    let walks: Vec<PixelWalk> = (0..h)
-        .into_par_iter()
-        .flat_map_iter(|i| (0..w).map(move |j| (i, j)))
-        .map(|(i, j)| walk(i, j))
-        .collect();
+    // Tile by tile (its list staged once, contiguous, for its 256 pixels), each band of
+    // tile rows filling its own rows of the row-major result: every pixel's walk is
+    // independent of the others and of the thread count.
+    let mut walks: Vec<PixelWalk> = vec![PixelWalk::EMPTY; w * h];
+    walks
+        .par_chunks_mut(TILE_SIZE * w.max(1))
+        .enumerate()
+        .for_each_init(Vec::new, |staged: &mut Vec<Staged>, (ty, band)| {
+            for tx in 0..bins.tiles_x {
+                staged.clear();
+                staged.extend(bins.tile(ty * bins.tiles_x + tx).iter().map(|&gid| {
+                    let s = p.splats[gid as usize];
+                    Staged::new(s, ln_thr, rounding[gid as usize].map(|r| r.bound))
+                }));
+                let rows = band.len() / w;
+                for di in 0..rows {
+                    for j in tx * TILE_SIZE..((tx + 1) * TILE_SIZE).min(w) {
+                        band[di * w + j] = walk(staged, ty * TILE_SIZE + di, j);
+                    }
+                }
+            }
+        });
     let mut gaussian_flags = gaussian_decisions(scene, cam, &m);
     for (f, r) in gaussian_flags.iter_mut().zip(&rounding) {
         if r.is_some_and(|r| CONIC_ROUNDING * unit * r.geometric > f64::from(m.conic)) {
@@ -612,11 +715,13 @@ pub fn conic_rounding(scene: &Gaussians, i: usize, cam: &CameraF32) -> ConicRoun
         amplification: (1.0 + e_a + e_c + e_d + e_t) * e_q,
         geometric: (1.0 + e_a + e_c + e_d) * e_q,
         condition: lmax * lmax / det,
-        conic: [c / det, -b / det, a / det],
-        f,
-        row_scale: [gamma * norm(j[0]), gamma * norm(j[1])],
-        s,
-        relative: gamma * (1.0 + e_d),
+        bound: SigmaBound {
+            conic: [c / det, -b / det, a / det],
+            f,
+            row_scale: [gamma * norm(j[0]), gamma * norm(j[1])],
+            s,
+            relative: gamma * (1.0 + e_d),
+        },
     }
 }
 
@@ -632,6 +737,12 @@ pub struct ConicRounding {
     pub geometric: f64,
     /// `λ_max/λ_min` of the dilated 2D covariance.
     pub condition: f64,
+    bound: SigmaBound,
+}
+
+/// What [`ConicRounding::sigma_error`] reads.
+#[derive(Clone, Copy, Debug)]
+struct SigmaBound {
     /// The exact conic (in f64 from the f32 inputs): the bound's `w = conic·d` must not carry
     /// the f32 conic's own rounding, which across a needle is a spurious component along it.
     conic: [f64; 3],
@@ -654,6 +765,12 @@ impl ConicRounding {
     /// long axis's rounding (a tilt of ~γ radians) counts only in proportion to the
     /// distance along it.
     pub fn sigma_error(&self, w: [f64; 2], sigma: f64) -> f64 {
+        self.bound.sigma_error(w, sigma)
+    }
+}
+
+impl SigmaBound {
+    fn sigma_error(&self, w: [f64; 2], sigma: f64) -> f64 {
         let row = w[0].abs() * self.row_scale[0] + w[1].abs() * self.row_scale[1];
         let cols: f64 = (0..3)
             .map(|k| self.s[k] * (w[0] * self.f[0][k] + w[1] * self.f[1][k]).abs())
@@ -664,7 +781,7 @@ impl ConicRounding {
 
 /// [`ConicRounding::sigma_error`] at offset `(dx, dy)` from the splat's centre (0 where the
 /// Gaussian has no bound: it was culled).
-fn conic_sigma_error(r: &Option<ConicRounding>, dx: f32, dy: f32, sigma: f32) -> f32 {
+fn conic_sigma_error(r: &Option<SigmaBound>, dx: f32, dy: f32, sigma: f32) -> f32 {
     r.as_ref().map_or(0.0, |r| {
         let [a, b, c] = r.conic;
         let (dx, dy) = (f64::from(dx), f64::from(dy));
