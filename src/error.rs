@@ -90,3 +90,43 @@ impl fmt::Display for Error {
 }
 
 impl std::error::Error for Error {}
+
+/// The crate's one text idiom for a fieldless enum, from one table of names: `ALL` (every
+/// value, in order), `name()`, `Display` and `FromStr` (an unknown name is an
+/// [`ErrorKind::Invalid`] error listing the names). Configuration files and the command line
+/// both read these names.
+macro_rules! text_enum {
+    ($t:ident, $what:literal, { $($v:ident => $s:literal),+ $(,)? }) => {
+        impl $t {
+            /// Every value, in order.
+            pub const ALL: [$t; [$($s),+].len()] = [$($t::$v),+];
+
+            /// The value's name in a configuration and on the command line.
+            pub fn name(self) -> &'static str {
+                match self {
+                    $($t::$v => $s),+
+                }
+            }
+        }
+
+        impl std::fmt::Display for $t {
+            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str(self.name())
+            }
+        }
+
+        impl std::str::FromStr for $t {
+            type Err = $crate::error::Error;
+            fn from_str(s: &str) -> $crate::error::Result<$t> {
+                Self::ALL.into_iter().find(|v| v.name() == s).ok_or_else(|| {
+                    $crate::error::Error::invalid(format!(
+                        concat!("unknown ", $what, " '{}' ({})"),
+                        s,
+                        [$($s),+].join(", ")
+                    ))
+                })
+            }
+        }
+    };
+}
+pub(crate) use text_enum;

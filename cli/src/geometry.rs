@@ -33,8 +33,8 @@ pub struct WarpArgs {
     /// Output folder: warped.png, depth.exr, holes.png, warp.json.
     #[arg(long)]
     out: PathBuf,
-    #[arg(long, value_enum, default_value = "nearest")]
-    footprint: FootprintArg,
+    #[arg(long, value_parser = crate::one_of(&Footprint::ALL, Footprint::name), default_value = "nearest")]
+    footprint: Footprint,
     /// Crack closing radius (0 = off).
     #[arg(long, default_value_t = 0)]
     close_cracks: u32,
@@ -44,12 +44,6 @@ pub struct WarpArgs {
     /// Relative depth band of one surface.
     #[arg(long, default_value_t = WarpOptions::default().depth_tolerance)]
     depth_tolerance: f32,
-}
-
-#[derive(Clone, Copy, clap::ValueEnum)]
-pub enum FootprintArg {
-    Nearest,
-    Bilinear,
 }
 
 #[derive(Args)]
@@ -79,17 +73,11 @@ pub struct ViewsArgs {
     #[arg(long)]
     depth_ranges: PathBuf,
     /// Frustum outline: the mask's bounding box (the paper) or its convex hull.
-    #[arg(long, value_enum, default_value = "bounding-box")]
-    outline: OutlineArg,
+    #[arg(long, value_parser = crate::one_of(&Outline::ALL, Outline::name), default_value = "bounding_box")]
+    outline: Outline,
     /// Output folder: views.json, frustums.obj.
     #[arg(long)]
     out: PathBuf,
-}
-
-#[derive(Clone, Copy, clap::ValueEnum)]
-pub enum OutlineArg {
-    BoundingBox,
-    Hull,
 }
 
 pub fn run_warp(a: &WarpArgs) -> Result<()> {
@@ -115,10 +103,7 @@ pub fn run_warp(a: &WarpArgs) -> Result<()> {
     )?;
     let depth = depth.data;
     let opts = WarpOptions {
-        footprint: match a.footprint {
-            FootprintArg::Nearest => Footprint::Nearest,
-            FootprintArg::Bilinear => Footprint::Bilinear,
-        },
+        footprint: a.footprint,
         depth_tolerance: a.depth_tolerance,
         close_cracks: a.close_cracks,
         grow_holes: a.grow_holes,
@@ -213,10 +198,7 @@ fn read_ranges(path: &Path) -> Result<BTreeMap<String, [f64; 2]>> {
 pub fn run_views(a: &ViewsArgs) -> Result<()> {
     let cams = inria::read_cameras_json(&a.cameras)?;
     let ranges = read_ranges(&a.depth_ranges)?;
-    let outline = match a.outline {
-        OutlineArg::BoundingBox => Outline::BoundingBox,
-        OutlineArg::Hull => Outline::Hull,
-    };
+    let outline = a.outline;
     let mut cand = Vec::new();
     let mut masks = Vec::new();
     let mut rs = Vec::new();
@@ -263,7 +245,7 @@ pub fn run_views(a: &ViewsArgs) -> Result<()> {
         .collect();
     let json = serde_json::json!({
         "candidates": a.candidates,
-        "outline": match outline { Outline::BoundingBox => "bounding_box", Outline::Hull => "hull" },
+        "outline": outline.name(),
         "collisions": pairs(&sel.edges),
         "independent": names(&sel.independent),
         "trajectory": names(&sel.trajectory),

@@ -125,3 +125,18 @@ fn main() -> ExitCode {
         }
     }
 }
+
+/// A value parser over one of the engine's enums (its `ALL` and `name`, the names its
+/// configuration files use): `--help` lists the names, a wrong one is refused by clap.
+pub(crate) fn one_of<T: Copy + Send + Sync + 'static>(
+    all: &'static [T],
+    name: fn(T) -> &'static str,
+) -> impl clap::builder::TypedValueParser<Value = T> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(all.iter().map(|&v| name(v))).map(move |s| {
+        all.iter()
+            .copied()
+            .find(|&v| name(v) == s)
+            .expect("clap admits only the possible values")
+    })
+}

@@ -6,6 +6,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use unseen::error::{Error, Result};
+use unseen::pipeline::Level;
 use unseen::pipeline::compare::compare;
 use unseen::pipeline::steps::{Stage, Step};
 use unseen::pipeline::{
@@ -16,61 +17,12 @@ use unseen::train::run::{Checkpointing, train_run};
 use unseen::train::trainer::TrainConfig;
 
 #[derive(Clone, Copy, ValueEnum)]
-pub enum PresetArg {
-    Quick,
-    Paper,
-}
-
-impl From<PresetArg> for Preset {
-    fn from(p: PresetArg) -> Self {
-        match p {
-            PresetArg::Quick => Preset::Quick,
-            PresetArg::Paper => Preset::Paper,
-        }
-    }
-}
-
-#[derive(Clone, Copy, ValueEnum)]
 pub enum Generator {
     /// The classical slots (Telea, depth-fill, morph, identity; the default) unless
     /// --config names others.
     Classical,
     /// The labelled ground-truth generator (needs the candidates' truth in the dataset).
     Truth,
-}
-
-#[derive(Clone, Copy, ValueEnum)]
-pub enum Level {
-    None,
-    Low,
-    High,
-}
-
-impl From<Level> for unseen::pipeline::Level {
-    fn from(l: Level) -> Self {
-        match l {
-            Level::None => Self::None,
-            Level::Low => Self::Low,
-            Level::High => Self::High,
-        }
-    }
-}
-
-/// The ground-truth generator's depth (labelled modes, SPEC.md §20.6).
-#[derive(Clone, Copy, ValueEnum)]
-pub enum TruthDepthArg {
-    /// Metric camera-z depth (default).
-    Metric,
-    /// Disparity up to a seeded affine map per image / per clip, with flicker and a mild
-    /// distortion at the inconsistency level: what a depth model returns.
-    Relative,
-}
-
-#[derive(Clone, Copy, ValueEnum)]
-pub enum MaskArg {
-    Qa,
-    Opacity,
-    None,
 }
 
 #[derive(Args)]
@@ -83,8 +35,8 @@ pub struct ExtrapolateArgs {
     /// Output run directory.
     #[arg(long)]
     out: PathBuf,
-    #[arg(long, value_enum, default_value = "quick")]
-    preset: PresetArg,
+    #[arg(long, value_parser = crate::one_of(&Preset::ALL, Preset::name), default_value = "quick")]
+    preset: Preset,
     /// A JSON PipelineConfig over the preset (any subset of fields).
     #[arg(long)]
     config: Option<PathBuf>,
@@ -130,17 +82,21 @@ pub struct Knobs {
     #[arg(long, value_enum)]
     generator: Option<Generator>,
     /// Inconsistency of the ground-truth generator.
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = crate::one_of(&Level::ALL, Level::name))]
     inconsistency: Option<Level>,
-    /// Depth of the ground-truth generator's depth slots.
-    #[arg(long, value_enum)]
-    truth_depth: Option<TruthDepthArg>,
+    /// Depth of the ground-truth generator's depth slots (labelled modes):
+    /// metric camera-z depth (default), or relative — disparity up to a seeded affine map
+    /// per image / per clip, with flicker and a mild distortion at the inconsistency level,
+    /// what a depth model returns.
+    #[arg(long, value_parser = crate::one_of(&TruthDepth::ALL, TruthDepth::name))]
+    truth_depth: Option<TruthDepth>,
     /// The ground-truth generator's hallucination of content no training view saw
     /// (labelled mode: differs per call, so independent generations conflict).
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = crate::one_of(&Level::ALL, Level::name))]
     hallucination: Option<Level>,
-    #[arg(long, value_enum)]
-    mask: Option<MaskArg>,
+    /// Weights of the generated supervision: the QA-Mask (the paper), 1 − alpha, or none.
+    #[arg(long, value_parser = crate::one_of(&MaskSource::ALL, MaskSource::name))]
+    mask: Option<MaskSource>,
     #[arg(long)]
     seed: Option<u64>,
     /// Ablations.
@@ -171,23 +127,16 @@ impl Knobs {
             };
         }
         if let Some(l) = self.inconsistency {
-            c.inconsistency = Inconsistency::at(l.into());
+            c.inconsistency = Inconsistency::at(l);
         }
         if let Some(d) = self.truth_depth {
-            c.truth_depth = match d {
-                TruthDepthArg::Metric => TruthDepth::Metric,
-                TruthDepthArg::Relative => TruthDepth::Relative,
-            };
+            c.truth_depth = d;
         }
         if let Some(l) = self.hallucination {
-            c.hallucination = Hallucination::at(l.into());
+            c.hallucination = Hallucination::at(l);
         }
         if let Some(m) = self.mask {
-            c.mask_source = match m {
-                MaskArg::Qa => MaskSource::Qa,
-                MaskArg::Opacity => MaskSource::Opacity,
-                MaskArg::None => MaskSource::None,
-            };
+            c.mask_source = m;
         }
         if let Some(s) = self.seed {
             c.seed = s;
@@ -230,7 +179,7 @@ pub fn run_extrapolate(a: &ExtrapolateArgs) -> Result<()> {
         }
         return Ok(());
     }
-    let cfg = config_from(a.preset.into(), a.config.as_deref(), &a.knobs)?;
+    let cfg = config_from(a.preset, a.config.as_deref(), &a.knobs)?;
     let inputs = load_inputs(&a.run, &a.views, a.eval.as_deref(), a.dataset.as_deref())?;
     if let Some(sub) = &a.emit_slurm {
         return emit_extrapolate(a, &cfg, &inputs, sub);
@@ -521,8 +470,8 @@ pub struct AuditArgs {
     /// Audit directory (continued when it exists: finished jobs are verified and kept).
     #[arg(long)]
     out: PathBuf,
-    #[arg(long, value_enum, default_value = "quick")]
-    preset: PresetArg,
+    #[arg(long, value_parser = crate::one_of(&Preset::ALL, Preset::name), default_value = "quick")]
+    preset: Preset,
     /// Variants, comma-separated (default: all): full, no_qa_mask, opacity_mask,
     /// even_views, no_depth_supervision, no_propagation, qa_sh3, qa_sh4, no_interpolation, stage2_render_fit.
     #[arg(long, value_delimiter = ',')]
@@ -620,7 +569,7 @@ fn parse_seeds(s: &str) -> std::result::Result<std::ops::Range<u32>, String> {
 /// `unseen audit`: every job (or one), then the report.
 pub fn run_audit(a: &AuditArgs) -> Result<()> {
     use unseen::pipeline::audit::{self, AuditConfig, GeneratorKind, Variant, cluster};
-    let preset = Preset::from(a.preset);
+    let preset = a.preset;
     let mut cfg = AuditConfig::preset(preset);
     if let Some(p) = &a.config {
         let text = std::fs::read(p).map_err(|e| Error::io(p, e))?;

@@ -25,6 +25,8 @@ pub enum Outline {
     Hull,
 }
 
+crate::error::text_enum!(Outline, "outline", { BoundingBox => "bounding_box", Hull => "hull" });
+
 /// A convex polyhedron with outward-oriented polygon faces (for export and inspection).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Polyhedron {

@@ -24,6 +24,8 @@ pub enum MaskSource {
     None,
 }
 
+crate::error::text_enum!(MaskSource, "mask source", { Qa => "qa", Opacity => "opacity", None => "none" });
+
 /// What fills one slot: a model, or the labelled ground-truth generator. In a configuration
 /// (`M` a model's name, [`crate::models::Model`]) it is written as the model's name
 /// (`telea`, `onnx:CARD.json`, …) or `truth`, parsed once where the configuration is read;
@@ -231,6 +233,8 @@ pub enum TruthDepth {
     Relative,
 }
 
+crate::error::text_enum!(TruthDepth, "truth depth", { Metric => "metric", Relative => "relative" });
+
 /// How stage 2 obtains the depth of an inpainted dependent view (SPEC.md §20.4).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -256,19 +260,7 @@ pub enum Level {
     High,
 }
 
-impl Level {
-    /// Every level, in order.
-    pub const ALL: [Level; 3] = [Level::None, Level::Low, Level::High];
-
-    /// `none`, `low` or `high`.
-    pub fn name(self) -> &'static str {
-        match self {
-            Level::None => "none",
-            Level::Low => "low",
-            Level::High => "high",
-        }
-    }
-}
+crate::error::text_enum!(Level, "level", { None => "none", Low => "low", High => "high" });
 
 impl Hallucination {
     /// The hallucination of a level.
@@ -373,28 +365,7 @@ pub enum Preset {
     Paper,
 }
 
-impl Preset {
-    /// Every preset.
-    pub const ALL: [Preset; 2] = [Preset::Quick, Preset::Paper];
-
-    /// The preset's name in a configuration and on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            Preset::Quick => "quick",
-            Preset::Paper => "paper",
-        }
-    }
-}
-
-impl FromStr for Preset {
-    type Err = Error;
-    fn from_str(s: &str) -> Result<Self> {
-        Preset::ALL
-            .into_iter()
-            .find(|p| p.name() == s)
-            .ok_or_else(|| Error::invalid(format!("unknown preset '{s}' (quick or paper)")))
-    }
-}
+crate::error::text_enum!(Preset, "preset", { Quick => "quick", Paper => "paper" });
 
 impl serde::Serialize for Preset {
     fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
@@ -405,12 +376,6 @@ impl serde::Serialize for Preset {
 impl<'de> serde::Deserialize<'de> for Preset {
     fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
         from_text(d)
-    }
-}
-
-impl fmt::Display for Preset {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
     }
 }
 
@@ -696,7 +661,7 @@ mod tests {
         let e = serde_json::from_str::<Preset>(r#""custom""#).unwrap_err();
         assert!(
             e.to_string()
-                .contains("unknown preset 'custom' (quick or paper)"),
+                .contains("unknown preset 'custom' (quick, paper)"),
             "{e}"
         );
         let e = serde_json::from_str::<SlotNames>(r#"{"video_depth":"midas"}"#).unwrap_err();

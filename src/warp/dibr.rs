@@ -31,6 +31,8 @@ pub enum Footprint {
     Bilinear,
 }
 
+crate::error::text_enum!(Footprint, "footprint", { Nearest => "nearest", Bilinear => "bilinear" });
+
 /// Warp settings (defaults: nearest, 1 % depth tolerance, no cleaning).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default)]
