@@ -9,6 +9,7 @@ use unseen::camera::{Camera, inria};
 use unseen::dataset::Split;
 use unseen::error::{Error, Result};
 use unseen::eval::evaluate_run;
+use unseen::pipeline::MaskSource;
 use unseen::pipeline::recon::Weights;
 use unseen::qamask::{
     QaMaskConfig, fine_tune, mask_scene, parse_color, read_mask_dir, write_mask_dir,
@@ -53,8 +54,8 @@ pub struct TrainArgs {
     /// Per-pixel loss weights for fine-tuning (needs --init): none, opacity (1 − alpha
     /// of the initial scene) or qa (needs --mask-dir). With a mask the loss is the
     /// paper's Eq. 7 (λ = 0.7, 0.2, 0.1).
-    #[arg(long, default_value = "none")]
-    mask: String,
+    #[arg(long, default_value = "none", value_parser = crate::one_of(&MaskSource::ALL, MaskSource::name))]
+    mask: MaskSource,
     /// QA-Mask directory written by `unseen qa-mask`.
     #[arg(long)]
     mask_dir: Option<PathBuf>,
@@ -158,7 +159,7 @@ pub fn run_train(a: TrainArgs) -> Result<()> {
         )?
     };
     let (scene, weights) = match init {
-        None if mask != "none" => {
+        None if mask != MaskSource::None => {
             return Err(Error::invalid(
                 "--mask needs --init RUN (it weights a fine-tune)",
             ));
@@ -166,19 +167,14 @@ pub fn run_train(a: TrainArgs) -> Result<()> {
         None => (None, Weights::None),
         Some(run) => {
             let (_, scene) = read_run_scene(&run, None)?;
-            let weights = match mask.as_str() {
-                "none" => Weights::None,
-                "opacity" => Weights::Opacity(scene.clone()),
-                "qa" => {
+            let weights = match mask {
+                MaskSource::None => Weights::None,
+                MaskSource::Opacity => Weights::Opacity(scene.clone()),
+                MaskSource::Qa => {
                     let Some(dir) = &mask_dir else {
                         return Err(Error::invalid("--mask qa needs --mask-dir DIR"));
                     };
                     Weights::Qa(Box::new(read_mask_dir(dir)?))
-                }
-                m => {
-                    return Err(Error::invalid(format!(
-                        "unknown --mask '{m}' (none, opacity or qa)"
-                    )));
                 }
             };
             if !matches!(weights, Weights::None) {
