@@ -643,24 +643,7 @@ pub fn conic_rounding(scene: &Gaussians, i: usize, cam: &CameraF32) -> ConicRoun
     });
     let q = scene.quats[i].map(f64::from);
     let qn = ((q[0] * q[0] + q[1] * q[1]) + (q[2] * q[2] + q[3] * q[3])).sqrt();
-    let [w, x, y, z] = q.map(|v| v / qn);
-    let rot = [
-        [
-            1.0 - 2.0 * (y * y + z * z),
-            2.0 * (x * y - w * z),
-            2.0 * (x * z + w * y),
-        ],
-        [
-            2.0 * (x * y + w * z),
-            1.0 - 2.0 * (x * x + z * z),
-            2.0 * (y * z - w * x),
-        ],
-        [
-            2.0 * (x * z - w * y),
-            2.0 * (y * z + w * x),
-            1.0 - 2.0 * (x * x + y * y),
-        ],
-    ];
+    let rot = crate::math::rotation_f64(q);
     let s = scene.log_scales[i].map(|v| f64::from(v).exp());
     let (fx, fy) = (f64::from(cam.fx), f64::from(cam.fy));
     let (w, h) = (f64::from(cam.width), f64::from(cam.height));

@@ -3,9 +3,10 @@
 //! the same bits from every kernel, the documented skip counts, and the images within
 //! [`HARD_CASE_ATOL`] of the f64 twin of the forward (`twin::forward64`) evaluated on
 //! the Gaussians the f32 rasterizer is specified to draw.
-use super::twin::{flatten, forward64, rotation64};
+use super::twin::{flatten, forward64};
 use unseen::camera::Camera;
 use unseen::gaussian::Gaussians;
+use unseen::math::rotation_f64;
 use unseen::raster::backward::{GradGroups, Gradients, ImageGrads, backward, render_for_backward};
 use unseen::raster::{Kernel, Outputs, RenderOptions, RenderReport, render};
 use unseen::scene::default_camera;
@@ -454,7 +455,7 @@ fn conic64(g: &Gaussians, i: usize, cam: &unseen::raster::project::CameraF32) ->
     if t[2] < f64::from(0.01f32) {
         return None;
     }
-    let rot = rotation64(g.quats[i].map(f64::from));
+    let rot = rotation_f64(g.quats[i].map(f64::from));
     let s = g.log_scales[i].map(|v| f64::from(v).exp());
     let (fx, fy, cx, cy) = (cam.fx as f64, cam.fy as f64, cam.cx as f64, cam.cy as f64);
     let (wd, ht) = (cam.width as f64, cam.height as f64);

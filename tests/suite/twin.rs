@@ -3,6 +3,7 @@
 //! same rules as the f32 rasterizer (SPEC.md §5) in f64.
 use unseen::camera::Camera;
 use unseen::gaussian::Gaussians;
+use unseen::math::rotation_f64;
 use unseen::math::sh::{num_coeffs, sh_basis};
 use unseen::rng::Uniform;
 
@@ -53,7 +54,7 @@ pub fn forward64_cut(
             continue;
         }
         let s = [q[3].exp(), q[4].exp(), q[5].exp()];
-        let rot = rotation64([q[6], q[7], q[8], q[9]]);
+        let rot = rotation_f64([q[6], q[7], q[8], q[9]]);
         let mut sig = [[0.0; 3]; 3];
         for a in 0..3 {
             for b in 0..3 {
@@ -164,29 +165,6 @@ pub fn forward64_cut(
         out[3][pi] = dd / (1.0 - tt).max(1e-10);
     }
     out
-}
-
-/// The rotation of a wxyz quaternion, normalized in f64.
-pub fn rotation64(q: [f64; 4]) -> [[f64; 3]; 3] {
-    let qn = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
-    let [w, x, y, z] = q.map(|v| v / qn);
-    [
-        [
-            1.0 - 2.0 * (y * y + z * z),
-            2.0 * (x * y - w * z),
-            2.0 * (x * z + w * y),
-        ],
-        [
-            2.0 * (x * y + w * z),
-            1.0 - 2.0 * (x * x + z * z),
-            2.0 * (y * z - w * x),
-        ],
-        [
-            2.0 * (x * z - w * y),
-            2.0 * (y * z + w * x),
-            1.0 - 2.0 * (x * x + y * y),
-        ],
-    ]
 }
 
 /// Raw parameters flattened per Gaussian: mean 3, log-scale 3, quat 4, logit 1, dc 3, rest.

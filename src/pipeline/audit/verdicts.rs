@@ -497,11 +497,7 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
                 below: j.test.map_or(0, |t| t.below),
                 ci: j.test.and_then(|t| t.interval),
                 p_holm: j.p_holm,
-                min_detectable: if matches!(j.outcome, stats::Outcome::NoVerdict) {
-                    f64::NAN
-                } else {
-                    j.min_detectable(rule)
-                },
+                min_detectable: j.min_detectable(rule),
                 hierarchical: hier,
                 hierarchical_units: hier_units,
                 verdict,
