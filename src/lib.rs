@@ -14,8 +14,12 @@
 //! [`warp`] (DIBR, depth alignment), [`collide`] (frustums, GJK, independent views),
 //! [`models`] (generator slots), [`eval`], [`oracle`] (array dumps), and on top
 //! [`pipeline`]: the paper's system — independent views, stage 1, stage 2, interpolation —
-//! with a resumable run directory and stage-by-stage comparison (SPEC.md §20).
+//! with a resumable run directory and stage-by-stage comparison (SPEC.md §20) — and above it
+//! [`batch`] (a run's waves on a batch engine, its cost, Slurm) and [`audit`] (the paper's
+//! claims checked on a dataset with ground truth, SPEC.md §21).
 
+pub mod audit;
+pub mod batch;
 pub mod camera;
 pub mod collide;
 pub mod dataset;

@@ -218,7 +218,7 @@ fn emit_extrapolate(
     inputs: &Inputs,
     sub: &Path,
 ) -> Result<()> {
-    use unseen::pipeline::audit::cluster::{self, ArrayWave, shell_quote};
+    use unseen::batch::{self as cluster, ArrayWave, shell_quote};
     let abs = |p: &Path| std::path::absolute(p).map_err(|e| Error::io(p, e));
     let sub = abs(sub)?;
     if sub.is_file() {
@@ -452,8 +452,8 @@ pub struct SlurmArgs {
 }
 
 impl SlurmArgs {
-    fn options(&self) -> unseen::pipeline::audit::cluster::SlurmOptions {
-        unseen::pipeline::audit::cluster::SlurmOptions {
+    fn options(&self) -> unseen::batch::SlurmOptions {
+        unseen::batch::SlurmOptions {
             partition: self.slurm_partition.clone(),
             account: self.slurm_account.clone(),
             extra: self.slurm_extra.clone(),
@@ -568,7 +568,7 @@ fn parse_seeds(s: &str) -> std::result::Result<std::ops::Range<u32>, String> {
 
 /// `unseen audit`: every job (or one), then the report.
 pub fn run_audit(a: &AuditArgs) -> Result<()> {
-    use unseen::pipeline::audit::{self, AuditConfig, GeneratorKind, Variant, cluster};
+    use unseen::audit::{self, AuditConfig, GeneratorKind, Variant, cluster};
     let preset = a.preset;
     let mut cfg = AuditConfig::preset(preset);
     if let Some(p) = &a.config {
@@ -671,10 +671,10 @@ pub fn run_audit(a: &AuditArgs) -> Result<()> {
 }
 
 /// `--list [--estimate]`: the jobs wave by wave.
-fn list_audit(cfg: &unseen::pipeline::audit::AuditConfig, a: &AuditArgs) -> Result<()> {
-    use unseen::pipeline::audit::cluster;
+fn list_audit(cfg: &unseen::audit::AuditConfig, a: &AuditArgs) -> Result<()> {
+    use unseen::audit::cluster;
     if !a.estimate {
-        for j in unseen::pipeline::audit::jobs(cfg) {
+        for j in unseen::audit::jobs(cfg) {
             println!("{}", j.name());
         }
         return Ok(());
@@ -712,12 +712,12 @@ fn list_audit(cfg: &unseen::pipeline::audit::AuditConfig, a: &AuditArgs) -> Resu
 /// `--emit-slurm SUB`: the submission folder; the workers' command line names the grid
 /// in absolute paths and the resolved pipeline configuration (a copy in SUB).
 fn emit_audit(
-    cfg: &unseen::pipeline::audit::AuditConfig,
+    cfg: &unseen::audit::AuditConfig,
     a: &AuditArgs,
     preset: Preset,
     sub: &Path,
 ) -> Result<()> {
-    use unseen::pipeline::audit::cluster;
+    use unseen::audit::cluster;
     let abs = |p: &Path| std::path::absolute(p).map_err(|e| Error::io(p, e));
     let sub = abs(sub)?;
     unseen::io::create_dir_all(&sub)?;

@@ -19,8 +19,8 @@ fuzz_target!(|data: &[u8]| {
     let p = common::file_with("config.json", data);
     let _ = unseen::train::run::read_config(p.parent().unwrap());
     let p = common::file_with("samples.json", data);
-    if let Ok(s) = unseen::pipeline::audit::Samples::read(&p) {
-        use unseen::pipeline::audit::{AuditConfig, stats::Rule, verdicts};
+    if let Ok(s) = unseen::audit::Samples::read(&p) {
+        use unseen::audit::{AuditConfig, stats::Rule, verdicts};
         let rule = Rule {
             replicates: 100,
             ..Rule::default()

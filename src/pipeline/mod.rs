@@ -15,7 +15,6 @@
 //! a command line only draws them.
 
 pub mod artifacts;
-pub mod audit;
 pub mod compare;
 pub mod config;
 pub mod evaluate;

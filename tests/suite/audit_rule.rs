@@ -8,7 +8,7 @@
 //! at a growing pool is a verdict), the `m > 2·sd` rule and the inverted "does not hurt".
 
 use crate::suite::common::{TempDir, reference};
-use unseen::pipeline::audit::stats::{
+use unseen::audit::stats::{
     ClaimData, Outcome, Rule, normal_cdf, normal_quantile, sign_min_detectable, student_t_cdf,
 };
 use unseen::rng::Uniform;
@@ -375,7 +375,7 @@ fn t_and_bca(family: &[ClaimData], _planned: usize) -> Vec<Outcome> {
         .iter()
         .map(|&(a, b, _)| (2.0 * a.min(b)).min(1.0))
         .collect();
-    let adjusted = unseen::pipeline::audit::stats::holm(&raw);
+    let adjusted = unseen::audit::stats::holm(&raw);
     family
         .iter()
         .zip(p.iter().zip(adjusted))
@@ -534,7 +534,7 @@ fn audit_rule_is_calibrated_and_the_rules_it_replaced_are_not() {
 /// √((n − 1)/n); n − 1) − 1`, is below 90 % under 10 units and at least 90 % from 10.
 #[test]
 fn hierarchical_interval_needs_ten_units() {
-    use unseen::pipeline::audit::HIERARCHICAL_MIN_UNITS;
+    use unseen::audit::HIERARCHICAL_MIN_UNITS;
     let coverage = |n: usize| {
         let nf = n as f64;
         2.0 * student_t_cdf(1.959963984540054 * ((nf - 1.0) / nf).sqrt(), (n - 1) as u32) - 1.0
@@ -554,7 +554,7 @@ fn hierarchical_interval_needs_ten_units() {
 /// committed verdicts still stand).
 #[test]
 fn committed_mechanisms_audits_follow_from_their_samples() {
-    use unseen::pipeline::audit::{self, AuditConfig, GeneratorKind, Variant};
+    use unseen::audit::{self, AuditConfig, GeneratorKind, Variant};
     for room in ["lounge", "gallery"] {
         let committed = reference(&format!("audit/{room}-mechanisms"));
         let dataset = reference(&format!("scenes/{room}"));

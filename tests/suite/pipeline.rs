@@ -774,7 +774,7 @@ fn step_cache_shares_equal_steps_across_runs() {
 /// everything (the same results bit for bit).
 #[test]
 fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
-    use unseen::pipeline::audit::{self, AuditConfig, GeneratorKind, Job, Variant};
+    use unseen::audit::{self, AuditConfig, GeneratorKind, Job, Variant};
     let t = TempDir::new("pipeline-audit");
     let cfg = AuditConfig {
         base: PipelineConfig {
@@ -909,12 +909,7 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
 }
 
 /// A sample of the audit with the given PSNR (all classes) of its final scene.
-fn sample(
-    variant: &str,
-    seed: u32,
-    revision: u32,
-    psnr: f64,
-) -> unseen::pipeline::audit::JobResult {
+fn sample(variant: &str, seed: u32, revision: u32, psnr: f64) -> unseen::audit::JobResult {
     use unseen::pipeline::evaluate::Row;
     let row = Row {
         scene: "interpolate".into(),
@@ -929,16 +924,16 @@ fn sample(
         gaussians: 1,
         views: vec![],
     };
-    unseen::pipeline::audit::JobResult {
+    unseen::audit::JobResult {
         generator: "truth-low".into(),
         variant: variant.into(),
         seed,
         numerics_revision: revision,
         crate_version: "0.1.0".into(),
-        config: unseen::pipeline::audit::AuditConfig::preset(unseen::pipeline::Preset::Quick)
+        config: unseen::audit::AuditConfig::preset(unseen::pipeline::Preset::Quick)
             .config_digest(
-                unseen::pipeline::audit::GeneratorKind::by_name("truth-low").unwrap(),
-                unseen::pipeline::audit::Variant::by_name(variant).unwrap(),
+                unseen::audit::GeneratorKind::by_name("truth-low").unwrap(),
+                unseen::audit::Variant::by_name(variant).unwrap(),
             )
             .unwrap(),
         original: row.clone(),
@@ -956,14 +951,14 @@ fn sample(
 /// judged nowhere, and identical differences give no verdict.
 #[test]
 fn audit_verdicts_pool_seeds_and_revisions_and_test_non_inferiority() {
-    use unseen::pipeline::audit::{AuditConfig, GeneratorKind, Variant, stats::Rule, verdicts};
+    use unseen::audit::{AuditConfig, GeneratorKind, Variant, stats::Rule, verdicts};
     let cfg = AuditConfig {
         variants: vec![Variant::Full, Variant::NoQaMask],
         generators: vec![GeneratorKind::Truth(unseen::pipeline::Level::Low)],
         ..AuditConfig::quick()
     };
     let rule = Rule::default();
-    let claim = |v: &[unseen::pipeline::audit::Verdict], id: &str| {
+    let claim = |v: &[unseen::audit::Verdict], id: &str| {
         v.iter().find(|x| x.claim.id == id).unwrap().clone()
     };
     // Three seeds at revision 3, Δ = −0.2, −0.7, −1.15 (mean −0.68, sd 0.48).
@@ -1061,18 +1056,12 @@ fn audit_verdicts_pool_seeds_and_revisions_and_test_non_inferiority() {
     assert_eq!((ni.seeds, ni.revisions.clone()), (12, vec![4, 5]), "{ni:?}");
     // Seed 0's unit is the mean of its two draws (−0.2 at revision 4, −0.6 at 5): the
     // twelve units' mean is the mean of the seed means.
-    let pairs = unseen::pipeline::audit::pairs(&pool, "truth-low", Variant::NoQaMask);
-    let means = unseen::pipeline::audit::seed_means(
-        &pairs,
-        unseen::pipeline::audit::Metric::PsnrExtrapolated,
-    );
+    let pairs = unseen::audit::pairs(&pool, "truth-low", Variant::NoQaMask);
+    let means = unseen::audit::seed_means(&pairs, unseen::audit::Metric::PsnrExtrapolated);
     assert_eq!(means.len(), 12);
     assert!((means[0] + 0.4).abs() < 1e-9, "{means:?}");
     assert!((ni.mean_diff - means.iter().sum::<f64>() / 12.0).abs() < 1e-12);
-    assert_eq!(
-        ni.method,
-        Some(unseen::pipeline::audit::stats::Method::Sign)
-    );
+    assert_eq!(ni.method, Some(unseen::audit::stats::Method::Sign));
     // Eleven units with records (seed 4's draw kept is revision 5's, written without);
     // one view each, so the interval lies within the newest draws' differences.
     let [lo, hi] = ni.hierarchical.expect("eleven units");
@@ -1304,8 +1293,8 @@ fn cli_audit_bad_input_is_one_clear_error() {
 /// extreme values parse and are judged without a panic.
 #[test]
 fn audit_samples_round_trip_and_damaged_files_are_clear_errors() {
-    use unseen::pipeline::audit::samples::{Provenance, Samples};
-    use unseen::pipeline::audit::{AuditConfig, stats::Rule, verdicts};
+    use unseen::audit::samples::{Provenance, Samples};
+    use unseen::audit::{AuditConfig, stats::Rule, verdicts};
     let t = TempDir::new("pipeline-audit-samples");
     let mut s = Samples::new(Provenance {
         dataset: "lounge".into(),
@@ -1356,7 +1345,7 @@ fn audit_samples_round_trip_and_damaged_files_are_clear_errors() {
     s2.write(&path).unwrap();
     let back = Samples::read(&path).unwrap();
     let cfg = AuditConfig {
-        generators: vec![unseen::pipeline::audit::GeneratorKind::Truth(
+        generators: vec![unseen::audit::GeneratorKind::Truth(
             unseen::pipeline::Level::Low,
         )],
         ..AuditConfig::quick()

@@ -10,9 +10,16 @@
 use super::AuditConfig;
 use super::jobs::{Job, JobResult, check_inputs, jobs, original_done, require_original, run_job};
 use super::report::{Report, finish, gather};
+use crate::batch::cost::{
+    BASE_BYTES, ORIGINAL_BYTES_PER_PIXEL, ORIGINAL_SECONDS_PER_ITERATION_PIXEL,
+    PIPELINE_BYTES_PER_PIXEL, PIPELINE_SECONDS_PER_ITERATION_PIXEL, pipeline_work,
+};
+use crate::batch::{
+    ArrayWave, Cost, Request, SlurmOptions, least_request, request, shell_quote, write_submission,
+};
 use crate::error::{Error, Result};
 use crate::io::{sha256_hex, write_text};
-use crate::pipeline::{Event, MaskSource, PipelineConfig};
+use crate::pipeline::Event;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -347,27 +354,6 @@ fn take(
 
 // ------------------------------------------------------------------------ estimates
 
-/// Seconds per training iteration per pixel on 2 threads, measured on the demo (lounge,
-/// quick preset, 80×60, 2-vCPU Xeon, Sapphire Rapids class): the original scene's 1 500
-/// iterations took 17.0 s (46 k Gaussians) — 2.4 µs; the pipeline's reconstructions and
-/// QA-Mask fine-tunes (1 600 + 900 iterations) 71.6 s — 6.0 µs (more Gaussians per pixel).
-pub const ORIGINAL_SECONDS_PER_ITERATION_PIXEL: f64 = 2.4e-6;
-pub const PIPELINE_SECONDS_PER_ITERATION_PIXEL: f64 = 6.0e-6;
-/// Peak resident memory per training pixel, same runs: 134 MB (original) and 324 MB
-/// (pipeline) at 4 800 pixels, over a fixed 50 MB.
-pub const ORIGINAL_BYTES_PER_PIXEL: f64 = 28_000.0;
-pub const PIPELINE_BYTES_PER_PIXEL: f64 = 68_000.0;
-pub const BASE_BYTES: f64 = 50e6;
-
-/// What a job is expected to cost on 2 threads.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Cost {
-    pub seconds: f64,
-    pub peak_rss_bytes: f64,
-    /// From this audit's own finished jobs of the same kind, not the calibration above.
-    pub measured: bool,
-}
-
 /// The work of a job in training iteration-pixels: the model behind [`estimate`].
 fn work(cfg: &AuditConfig, job: &Job, pixels: f64) -> f64 {
     let pc = match *job {
@@ -385,33 +371,6 @@ fn work(cfg: &AuditConfig, job: &Job, pixels: f64) -> f64 {
         // The original scene's QA-Mask (the stage-1 generations are small beside it).
         Job::Shared { .. } => f64::from(pc.qa_iterations) * pixels,
         Job::Run { .. } => pipeline_work(&pc, pixels),
-    }
-}
-
-/// The training iteration-pixels of a whole pipeline run: its reconstructions and its
-/// QA-Mask fine-tunes (3, 2 without interpolation, none without the QA-Mask).
-pub fn pipeline_work(pc: &PipelineConfig, pixels: f64) -> f64 {
-    let recon = pc.stage1.iterations
-        + pc.stage2.iterations
-        + if pc.interpolation {
-            pc.interpolate.iterations
-        } else {
-            0
-        };
-    let qa_masks = match (pc.mask_source, pc.interpolation) {
-        (MaskSource::Qa, true) => 3.0,
-        (MaskSource::Qa, false) => 2.0,
-        _ => 0.0,
-    };
-    (f64::from(recon) + qa_masks * f64::from(pc.qa_iterations)) * pixels
-}
-
-/// A whole pipeline run's expected [`Cost`] by the calibration.
-pub fn pipeline_cost(pc: &PipelineConfig, pixels: f64) -> Cost {
-    Cost {
-        seconds: PIPELINE_SECONDS_PER_ITERATION_PIXEL * pipeline_work(pc, pixels),
-        peak_rss_bytes: BASE_BYTES + PIPELINE_BYTES_PER_PIXEL * pixels,
-        measured: false,
     }
 }
 
@@ -517,162 +476,6 @@ fn measured_cost(dir: &Path, job: &Job) -> Option<(f64, f64)> {
 
 // ------------------------------------------------------------------------- Slurm
 
-/// Resource requests over an estimate: a job's `--time` is [`TIME_FACTOR`] times its
-/// expected seconds (other CPUs, a loaded node, a slower file system; a job over its time
-/// is killed and must run again), at least [`MIN_TIME_SECONDS`]; its `--mem` is
-/// [`MEMORY_FACTOR`] times its expected peak, at least [`MIN_MEMORY_BYTES`].
-pub const TIME_FACTOR: f64 = 3.0;
-pub const MIN_TIME_SECONDS: f64 = 600.0;
-pub const MEMORY_FACTOR: f64 = 2.0;
-pub const MIN_MEMORY_BYTES: f64 = 1e9;
-
-/// Options of a Slurm submission folder.
-#[derive(Clone, Debug, Default)]
-pub struct SlurmOptions {
-    pub partition: Option<String>,
-    pub account: Option<String>,
-    /// More `#SBATCH` options, one per entry (e.g. `--qos=long`).
-    pub extra: Vec<String>,
-    /// At most this many tasks of one array at once (`--array=…%N`).
-    pub throttle: Option<u32>,
-    /// CPUs per task (the worker's thread count); 2 when unset.
-    pub cpus: Option<u32>,
-}
-
-/// The resource request of a wave: the largest of its jobs'.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Request {
-    pub cpus: u32,
-    pub memory_mb: u64,
-    pub time_minutes: u64,
-}
-
-/// [`Request`] of a wave's costs.
-pub fn request(costs: &[Cost], cpus: u32) -> Request {
-    let seconds = costs.iter().map(|c| c.seconds).fold(0.0, f64::max);
-    let bytes = costs.iter().map(|c| c.peak_rss_bytes).fold(0.0, f64::max);
-    let time = (seconds * TIME_FACTOR).max(MIN_TIME_SECONDS);
-    let mem = (bytes * MEMORY_FACTOR).max(MIN_MEMORY_BYTES);
-    Request {
-        cpus,
-        memory_mb: (mem / 1e6).ceil() as u64,
-        time_minutes: (time / 60.0).ceil() as u64,
-    }
-}
-
-/// A word for `sh`: single-quoted unless it is plain.
-pub fn shell_quote(s: &str) -> String {
-    let plain = !s.is_empty()
-        && s.bytes()
-            .all(|b| b.is_ascii_alphanumeric() || b"-_./=:,+@%".contains(&b));
-    if plain {
-        s.into()
-    } else {
-        format!("'{}'", s.replace('\'', r"'\''"))
-    }
-}
-
-/// One job array of a submission folder: `tasks` tasks, each running `body` (a shell
-/// script's lines after the `#SBATCH` header; `$SLURM_ARRAY_TASK_ID` is the task).
-#[derive(Clone, Debug)]
-pub struct ArrayWave {
-    pub name: String,
-    pub tasks: usize,
-    pub request: Request,
-    pub body: String,
-}
-
-/// Write the Slurm submission folder `out`: per wave `wave-N-<name>.sbatch` (a job array,
-/// `--output=logs/<name>-%a.out`, relative to `out`, from where `submit.sh` submits), the optional `merge.sbatch`, and `submit.sh`, which
-/// submits each wave after the one before succeeded (`afterok`), the merge after every wave
-/// ended (`afterany`: it names what failed), prints the ids and writes `job-ids.txt`.
-pub fn write_submission(
-    out: &Path,
-    waves: &[ArrayWave],
-    merge: Option<&ArrayWave>,
-    opts: &SlurmOptions,
-) -> Result<()> {
-    let logs = out.join("logs");
-    crate::io::create_dir_all(&logs)?;
-    let script = |w: &ArrayWave, array: bool| {
-        let r = &w.request;
-        let mut s = format!(
-            "#!/bin/bash\n#SBATCH --job-name=unseen-{}\n#SBATCH --cpus-per-task={}\n\
-             #SBATCH --mem={}M\n#SBATCH --time={}\n#SBATCH --output={}\n\
-             #SBATCH --open-mode=append\n#SBATCH --kill-on-invalid-dep=yes\n",
-            w.name,
-            r.cpus,
-            r.memory_mb,
-            slurm_time(r.time_minutes),
-            // Relative to the submission folder (submit.sh submits from there): a path with
-            // a space or a quote cannot be an `#SBATCH` value.
-            if array {
-                format!("logs/{}-%a.out", w.name)
-            } else {
-                format!("logs/{}.out", w.name)
-            }
-        );
-        if array {
-            let throttle = opts.throttle.map_or(String::new(), |t| format!("%{t}"));
-            s += &format!("#SBATCH --array=0-{}{throttle}\n", w.tasks.max(1) - 1);
-        }
-        if let Some(p) = &opts.partition {
-            s += &format!("#SBATCH --partition={p}\n");
-        }
-        if let Some(a) = &opts.account {
-            s += &format!("#SBATCH --account={a}\n");
-        }
-        for e in &opts.extra {
-            s += &format!("#SBATCH {e}\n");
-        }
-        s + "set -eu\n" + &w.body
-    };
-    let mut submit = String::from(
-        "#!/bin/sh\n# Submit the waves to Slurm; prints the job ids.\nset -eu\n\
-         cd \"$(dirname \"$0\")\"\n\
-         # sbatch --parsable prints <id> or <id>;<cluster>; a refused job stops the script.\n\
-         id() { r=$(sbatch --parsable \"$@\") || exit 1; [ -n \"$r\" ] || exit 1; echo \"${r%%;*}\"; }\n",
-    );
-    let mut ids: Vec<String> = Vec::new();
-    for (i, w) in waves.iter().enumerate() {
-        let stem = format!("wave-{}-{}", i + 1, w.name);
-        write_text(&out.join(format!("{stem}.sbatch")), &script(w, true))?;
-        let var = format!("w{}", i + 1);
-        let dep = ids
-            .last()
-            .map_or(String::new(), |p| format!(" --dependency=afterok:${p}"));
-        submit += &format!(
-            "{var}=$(id{dep} {stem}.sbatch)\necho \"{}: ${var} ({} tasks)\"\n",
-            w.name, w.tasks
-        );
-        ids.push(var);
-    }
-    let mut all: Vec<String> = ids.iter().map(|v| format!("${v}")).collect();
-    if let Some(m) = merge {
-        write_text(&out.join("merge.sbatch"), &script(m, false))?;
-        submit += &format!(
-            "merge=$(id --dependency=afterany:{} merge.sbatch)\necho \"merge: $merge\"\n",
-            all.join(":")
-        );
-        all.push("$merge".into());
-    }
-    submit += &format!("echo {} > job-ids.txt\n", all.join(" "));
-    let path = out.join("submit.sh");
-    write_text(&path, &submit)?;
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755))
-            .map_err(|e| Error::io(&path, e))?;
-    }
-    Ok(())
-}
-
-/// The smallest request ([`MIN_TIME_SECONDS`], [`MIN_MEMORY_BYTES`]) on `cpus` CPUs.
-pub fn least_request(cpus: u32) -> Request {
-    request(&[], cpus)
-}
-
 /// Write a Slurm submission folder `out` for the audit ([`write_submission`]): also
 /// `jobs.txt` (every job, wave by wave) and per wave `wave-N-<name>.txt` (its jobs; array
 /// task i runs line i+1 as `unseen … --only JOB`); the merge runs `unseen … --collect`.
@@ -736,16 +539,6 @@ pub fn emit_slurm(
     Ok(emitted)
 }
 
-/// `--time` as Slurm reads it: `D-HH:MM:00`.
-fn slurm_time(minutes: u64) -> String {
-    format!(
-        "{}-{:02}:{:02}:00",
-        minutes / 1440,
-        minutes % 1440 / 60,
-        minutes % 60
-    )
-}
-
 /// The log the submission folder `submission` gives `job` ([`emit_slurm`]'s names).
 pub fn log_in_submission(cfg: &AuditConfig, submission: &Path, job: &Job) -> Option<String> {
     waves(cfg).into_iter().find_map(|w| {
@@ -789,22 +582,5 @@ mod tests {
         let listed = jobs(&cfg);
         assert!(listed.iter().all(|j| flat.contains(j)));
         assert_eq!(w[1].jobs[0].folder(), "runs/classical/full/seed-3");
-    }
-
-    #[test]
-    fn requests_have_their_safety_factors_and_floors() {
-        let c = |s: f64, b: f64| Cost {
-            seconds: s,
-            peak_rss_bytes: b,
-            measured: false,
-        };
-        let r = request(&[c(3600.0, 3e9), c(10.0, 1e6)], 4);
-        assert_eq!((r.cpus, r.memory_mb, r.time_minutes), (4, 6000, 180));
-        let r = request(&[c(1.0, 1e6)], 2);
-        assert_eq!((r.memory_mb, r.time_minutes), (1000, 10));
-        assert_eq!(slurm_time(180), "0-03:00:00");
-        assert_eq!(slurm_time(1441), "1-00:01:00");
-        assert_eq!(shell_quote("a b'c"), r"'a b'\''c'");
-        assert_eq!(shell_quote("/x/y-z.json"), "/x/y-z.json");
     }
 }

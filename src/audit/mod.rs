@@ -6,7 +6,7 @@
 //! mechanism claims: QA-Mask protects existing regions from *inconsistent* generated
 //! content; independent views avoid *conflicting* content). Each (generator, variant, seed)
 //! is one job with its own run directory; all jobs share one step cache
-//! ([`super::RunOptions::cache`]), so a step whose inputs several variants share (the
+//! ([`crate::pipeline::RunOptions::cache`]), so a step whose inputs several variants share (the
 //! views, the per-view generation, a QA-Mask of a given degree) is computed once.
 //!
 //! A claim is tested on the paired differences `d = full − variant` of the metric over
@@ -22,11 +22,11 @@
 //! `audit.md`, the plot), [`samples`] (pooling batches), [`stats`] (the tests) and
 //! [`cluster`] (the same audit as batch jobs).
 
-use super::{
+use crate::error::{Error, Result};
+use crate::pipeline::{
     Hallucination, Inconsistency, Level, MaskSource, PipelineConfig, Preset, SlotNames,
     Stage2Depth, TruthDepth,
 };
-use crate::error::{Error, Result};
 use crate::train::trainer::TrainConfig;
 
 pub mod cluster;

@@ -1,0 +1,88 @@
+//! What a batch job is expected to cost (SPEC.md §21.4): the calibration of seconds and
+//! memory per training iteration-pixel, a whole pipeline run's work, and the resource
+//! request (`--time`, `--mem`) a wave of jobs asks for.
+
+use crate::pipeline::{MaskSource, PipelineConfig};
+
+/// Seconds per training iteration per pixel on 2 threads, measured on the demo (lounge,
+/// quick preset, 80×60, 2-vCPU Xeon, Sapphire Rapids class): the original scene's 1 500
+/// iterations took 17.0 s (46 k Gaussians) — 2.4 µs; the pipeline's reconstructions and
+/// QA-Mask fine-tunes (1 600 + 900 iterations) 71.6 s — 6.0 µs (more Gaussians per pixel).
+pub const ORIGINAL_SECONDS_PER_ITERATION_PIXEL: f64 = 2.4e-6;
+pub const PIPELINE_SECONDS_PER_ITERATION_PIXEL: f64 = 6.0e-6;
+/// Peak resident memory per training pixel, same runs: 134 MB (original) and 324 MB
+/// (pipeline) at 4 800 pixels, over a fixed 50 MB.
+pub const ORIGINAL_BYTES_PER_PIXEL: f64 = 28_000.0;
+pub const PIPELINE_BYTES_PER_PIXEL: f64 = 68_000.0;
+pub const BASE_BYTES: f64 = 50e6;
+
+/// What a job is expected to cost on 2 threads.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Cost {
+    pub seconds: f64,
+    pub peak_rss_bytes: f64,
+    /// From this audit's own finished jobs of the same kind, not the calibration above.
+    pub measured: bool,
+}
+
+/// The training iteration-pixels of a whole pipeline run: its reconstructions and its
+/// QA-Mask fine-tunes (3, 2 without interpolation, none without the QA-Mask).
+pub fn pipeline_work(pc: &PipelineConfig, pixels: f64) -> f64 {
+    let recon = pc.stage1.iterations
+        + pc.stage2.iterations
+        + if pc.interpolation {
+            pc.interpolate.iterations
+        } else {
+            0
+        };
+    let qa_masks = match (pc.mask_source, pc.interpolation) {
+        (MaskSource::Qa, true) => 3.0,
+        (MaskSource::Qa, false) => 2.0,
+        _ => 0.0,
+    };
+    (f64::from(recon) + qa_masks * f64::from(pc.qa_iterations)) * pixels
+}
+
+/// A whole pipeline run's expected [`Cost`] by the calibration.
+pub fn pipeline_cost(pc: &PipelineConfig, pixels: f64) -> Cost {
+    Cost {
+        seconds: PIPELINE_SECONDS_PER_ITERATION_PIXEL * pipeline_work(pc, pixels),
+        peak_rss_bytes: BASE_BYTES + PIPELINE_BYTES_PER_PIXEL * pixels,
+        measured: false,
+    }
+}
+
+/// Resource requests over an estimate: a job's `--time` is [`TIME_FACTOR`] times its
+/// expected seconds (other CPUs, a loaded node, a slower file system; a job over its time
+/// is killed and must run again), at least [`MIN_TIME_SECONDS`]; its `--mem` is
+/// [`MEMORY_FACTOR`] times its expected peak, at least [`MIN_MEMORY_BYTES`].
+pub const TIME_FACTOR: f64 = 3.0;
+pub const MIN_TIME_SECONDS: f64 = 600.0;
+pub const MEMORY_FACTOR: f64 = 2.0;
+pub const MIN_MEMORY_BYTES: f64 = 1e9;
+
+/// The resource request of a wave: the largest of its jobs'.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Request {
+    pub cpus: u32,
+    pub memory_mb: u64,
+    pub time_minutes: u64,
+}
+
+/// [`Request`] of a wave's costs.
+pub fn request(costs: &[Cost], cpus: u32) -> Request {
+    let seconds = costs.iter().map(|c| c.seconds).fold(0.0, f64::max);
+    let bytes = costs.iter().map(|c| c.peak_rss_bytes).fold(0.0, f64::max);
+    let time = (seconds * TIME_FACTOR).max(MIN_TIME_SECONDS);
+    let mem = (bytes * MEMORY_FACTOR).max(MIN_MEMORY_BYTES);
+    Request {
+        cpus,
+        memory_mb: (mem / 1e6).ceil() as u64,
+        time_minutes: (time / 60.0).ceil() as u64,
+    }
+}
+
+/// The smallest request ([`MIN_TIME_SECONDS`], [`MIN_MEMORY_BYTES`]) on `cpus` CPUs.
+pub fn least_request(cpus: u32) -> Request {
+    request(&[], cpus)
+}
