@@ -8,7 +8,7 @@ use std::time::Instant;
 use unseen::error::{Error, Result};
 use unseen::pipeline::Level;
 use unseen::pipeline::compare::compare;
-use unseen::pipeline::steps::{Stage, Step};
+use unseen::pipeline::steps::Step;
 use unseen::pipeline::{
     self, Hallucination, Inconsistency, Inputs, MaskSource, PipelineConfig, Preset, RunOptions,
     Scope, SlotNames, Stage2Depth, TruthDepth, load_inputs,
@@ -48,8 +48,16 @@ pub struct ExtrapolateArgs {
     #[arg(long, conflicts_with = "until", value_parser = parse_step)]
     only: Option<Step>,
     /// Compute the steps up to and including this one (e.g. `views`), then stop.
-    #[arg(long, value_parser = parse_step)]
+    #[arg(long, conflicts_with = "wave", value_parser = parse_step)]
     until: Option<Step>,
+    /// Compute wave K (or waves A-B) of the run's plan (`--plan` lists them), whose earlier
+    /// waves must be done in OUT: one job of a batch engine. Implies continuing OUT.
+    #[arg(long, conflicts_with = "only", value_parser = parse_waves)]
+    wave: Option<(usize, usize)>,
+    /// With --wave: only the I-th step of the wave (nothing when it has fewer): one task
+    /// of a batch engine's job array.
+    #[arg(long, requires = "wave")]
+    task: Option<usize>,
     /// Worker threads (default: all cores); results are the same bits for any count.
     #[arg(long)]
     threads: Option<usize>,
@@ -63,12 +71,14 @@ pub struct ExtrapolateArgs {
     /// computed is copied from it instead (same bits).
     #[arg(long)]
     cache: Option<PathBuf>,
-    /// Print the per-view stage-1 steps of OUT (its views step must be done) and exit.
-    #[arg(long, conflicts_with_all = ["only", "until", "emit_slurm"])]
-    stage1_steps: bool,
-    /// Write a Slurm submission folder for this run (the views, the stage-1 views as a job
-    /// array, then the rest; submit.sh) and run nothing.
-    #[arg(long, conflicts_with_all = ["only", "until"])]
+    /// Print the run's plan, wave by wave, and exit: what detection found when OUT's views
+    /// step is done, else the largest plan (every candidate independent).
+    #[arg(long, conflicts_with_all = ["only", "until", "wave", "emit_slurm"])]
+    plan: bool,
+    /// Write a Slurm submission folder for this run (a job array per wave of the plan that
+    /// fans out, the waves between them as one job, the whole run last; submit.sh) and run
+    /// nothing.
+    #[arg(long, conflicts_with_all = ["only", "until", "wave"])]
     emit_slurm: Option<PathBuf>,
     #[command(flatten)]
     slurm: SlurmArgs,
@@ -173,22 +183,28 @@ fn config_from(preset: Preset, file: Option<&Path>, knobs: &Knobs) -> Result<Pip
 }
 
 pub fn run_extrapolate(a: &ExtrapolateArgs) -> Result<()> {
-    if a.stage1_steps {
-        for s in pipeline::views::stage1_steps(&a.out)? {
-            println!("{s}");
+    let cfg = config_from(a.preset, a.config.as_deref(), &a.knobs)?;
+    let inputs = load_inputs(&a.run, &a.views, a.eval.as_deref(), a.dataset.as_deref())?;
+    if a.plan {
+        for (k, w) in pipeline::plan_of(&cfg, &inputs, &a.out)?.iter().enumerate() {
+            let steps: Vec<String> = w.steps.iter().map(|p| p.step.to_string()).collect();
+            println!("wave {k}: {}", steps.join(" "));
         }
         return Ok(());
     }
-    let cfg = config_from(a.preset, a.config.as_deref(), &a.knobs)?;
-    let inputs = load_inputs(&a.run, &a.views, a.eval.as_deref(), a.dataset.as_deref())?;
     if let Some(sub) = &a.emit_slurm {
         return emit_extrapolate(a, &cfg, &inputs, sub);
     }
     let draw = super::progress::drawer();
-    let scope = match (&a.only, &a.until) {
-        (Some(s), _) => Scope::Only(s.clone()),
-        (None, Some(s)) => Scope::Until(s.clone()),
-        (None, None) => Scope::All,
+    let scope = match (&a.only, &a.until, a.wave) {
+        (Some(s), _, _) => Scope::Only(s.clone()),
+        (None, Some(s), _) => Scope::Until(s.clone()),
+        (None, None, Some((first, last))) => Scope::Waves {
+            first,
+            last,
+            task: a.task,
+        },
+        (None, None, None) => Scope::All,
     };
     let opts = RunOptions {
         resume: a.resume || (scope != Scope::All && a.out.is_dir()),
@@ -208,40 +224,30 @@ pub fn run_extrapolate(a: &ExtrapolateArgs) -> Result<()> {
     Ok(())
 }
 
-/// `extrapolate --emit-slurm SUB`: wave 1 computes the views step and lists the stage-1
-/// steps into SUB/stage1-steps.txt; wave 2 is an array over the candidates (an upper bound
-/// of the independent views; a task past the list has nothing to do); wave 3 finishes the
-/// run with `--resume`. Every job runs the resolved configuration (SUB/pipeline-config.json).
+/// `extrapolate --emit-slurm SUB`: the submission folder of `unseen::batch::extrapolate`
+/// over this command line (paths absolute).
 fn emit_extrapolate(
     a: &ExtrapolateArgs,
     cfg: &PipelineConfig,
     inputs: &Inputs,
     sub: &Path,
 ) -> Result<()> {
-    use unseen::batch::{self as cluster, ArrayWave, shell_quote};
-    let abs = |p: &Path| std::path::absolute(p).map_err(|e| Error::io(p, e));
-    let sub = abs(sub)?;
-    if sub.is_file() {
-        return Err(Error::invalid("the submission path is a file").at(&sub));
-    }
-    unseen::io::create_dir_all(&sub)?;
-    let config = sub.join("pipeline-config.json");
-    let text = serde_json::to_string_pretty(cfg).expect("serializes") + "\n";
-    unseen::io::write_text(&config, &text)?;
+    let abs = |p: &Path| {
+        std::path::absolute(p)
+            .map(|p| p.display().to_string())
+            .map_err(|e| Error::io(p, e))
+    };
     let exe = std::env::current_exe().map_err(|e| Error::io(Path::new("unseen"), e))?;
-    let show = |p: PathBuf| shell_quote(&p.display().to_string());
     let mut cmd = vec![
-        show(exe),
+        exe.display().to_string(),
         "extrapolate".into(),
-        show(abs(&a.run)?),
+        abs(&a.run)?,
         "--views".into(),
-        show(abs(&a.views)?),
+        abs(&a.views)?,
         "--out".into(),
-        show(abs(&a.out)?),
+        abs(&a.out)?,
         "--preset".into(),
         cfg.preset.to_string(),
-        "--config".into(),
-        show(config),
     ];
     for (flag, p) in [
         ("--eval", &a.eval),
@@ -249,53 +255,15 @@ fn emit_extrapolate(
         ("--cache", &a.cache),
     ] {
         if let Some(p) = p {
-            cmd.extend([flag.to_string(), show(abs(p)?)]);
+            cmd.extend([flag.to_string(), abs(p)?]);
         }
     }
-    let cmd = cmd.join(" ");
+    let sub = std::path::absolute(sub).map_err(|e| Error::io(sub, e))?;
     let opts = a.slurm.options();
-    let cpus = opts.cpus.unwrap_or(2).max(1);
-    let threads = format!("--threads \"${{SLURM_CPUS_PER_TASK:-{cpus}}}\"");
-    let steps = shell_quote(&sub.join("stage1-steps.txt").display().to_string());
-    // The candidates are at the run's resolution: the pipeline's image size.
-    let pixels = inputs
-        .candidates
-        .first()
-        .map_or(0.0, |c| f64::from(c.width) * f64::from(c.height));
-    let whole = cluster::request(&[cluster::pipeline_cost(cfg, pixels)], cpus);
-    let small = cluster::least_request(cpus);
-    let waves = [
-        ArrayWave {
-            name: Stage::Views.name().into(),
-            tasks: 1,
-            request: small.clone(),
-            body: format!(
-                "{cmd} --resume --until {} {threads}\n{cmd} --stage1-steps > {steps}\n",
-                Step::Views
-            ),
-        },
-        ArrayWave {
-            name: Stage::Stage1.name().into(),
-            tasks: inputs.candidates.len(),
-            request: small,
-            body: format!(
-                "step=$(sed -n \"$((SLURM_ARRAY_TASK_ID + 1))p\" {steps})\n\
-                 if [ -z \"$step\" ]; then echo \"no stage-1 view $SLURM_ARRAY_TASK_ID\"; exit 0; fi\n\
-                 exec {cmd} --only \"$step\" {threads}\n"
-            ),
-        },
-        ArrayWave {
-            name: "finish".into(),
-            tasks: 1,
-            request: whole,
-            body: format!("exec {cmd} --resume {threads}\n"),
-        },
-    ];
-    cluster::write_submission(&sub, &waves, None, &opts)?;
-    for w in &waves {
+    for (w, r) in unseen::batch::extrapolate::emit_slurm(cfg, inputs, &cmd, &sub, &opts)? {
         println!(
             "{}: {} tasks, --cpus-per-task={} --mem={}M --time={} min",
-            w.name, w.tasks, w.request.cpus, w.request.memory_mb, w.request.time_minutes
+            w.name, w.tasks, r.cpus, r.memory_mb, r.time_minutes
         );
     }
     println!("submit with: {}", sub.join("submit.sh").display());
@@ -545,6 +513,18 @@ pub struct AuditArgs {
 }
 
 /// `--only` / `--until`: a step's folder name (`unseen::pipeline::steps::Step`).
+/// `K` or `A-B` (plan waves).
+fn parse_waves(s: &str) -> std::result::Result<(usize, usize), String> {
+    let n = |t: &str| {
+        t.parse::<usize>()
+            .map_err(|_| format!("'{s}' is not a wave (K or A-B)"))
+    };
+    match s.split_once('-') {
+        None => n(s).map(|k| (k, k)),
+        Some((a, b)) => Ok((n(a)?, n(b)?)),
+    }
+}
+
 fn parse_step(s: &str) -> std::result::Result<Step, String> {
     s.parse().map_err(|e: Error| e.to_string())
 }

@@ -2,7 +2,8 @@
 //! memory per training iteration-pixel, a whole pipeline run's work, and the resource
 //! request (`--time`, `--mem`) a wave of jobs asks for.
 
-use crate::pipeline::{MaskSource, PipelineConfig};
+use crate::pipeline::PipelineConfig;
+use crate::pipeline::steps::{Shape, Step, plan};
 
 /// Seconds per training iteration per pixel on 2 threads, measured on the demo (lounge,
 /// quick preset, 80×60, 2-vCPU Xeon, Sapphire Rapids class): the original scene's 1 500
@@ -25,31 +26,44 @@ pub struct Cost {
     pub measured: bool,
 }
 
-/// The training iteration-pixels of a whole pipeline run: its reconstructions and its
-/// QA-Mask fine-tunes (3, 2 without interpolation, none without the QA-Mask).
-pub fn pipeline_work(pc: &PipelineConfig, pixels: f64) -> f64 {
-    let recon = pc.stage1.iterations
-        + pc.stage2.iterations
-        + if pc.interpolation {
-            pc.interpolate.iterations
-        } else {
-            0
-        };
-    let qa_masks = match (pc.mask_source, pc.interpolation) {
-        (MaskSource::Qa, true) => 3.0,
-        (MaskSource::Qa, false) => 2.0,
-        _ => 0.0,
+/// The training iteration-pixels of one step: a reconstruction's iterations, a QA-Mask's
+/// fine-tune; the other steps (detection, generation, warping, evaluation) are small
+/// beside them.
+pub fn step_work(pc: &PipelineConfig, step: &Step, pixels: f64) -> f64 {
+    let iterations = match step {
+        Step::Stage1Recon => pc.stage1.iterations,
+        Step::Stage2Recon => pc.stage2.iterations,
+        Step::Interpolation => pc.interpolate.iterations,
+        Step::QaMask(_) => pc.qa_iterations,
+        _ => 0,
     };
-    (f64::from(recon) + qa_masks * f64::from(pc.qa_iterations)) * pixels
+    f64::from(iterations) * pixels
+}
+
+/// The training iteration-pixels of a whole pipeline run: the sum over its plan's steps
+/// (three reconstructions and three QA-Mask fine-tunes; two of each without
+/// interpolation, no QA-Mask without it).
+pub fn pipeline_work(pc: &PipelineConfig, pixels: f64) -> f64 {
+    let shape = Shape::bound(vec![String::new()], false);
+    plan(pc, &shape)
+        .iter()
+        .flat_map(|w| &w.steps)
+        .map(|p| step_work(pc, &p.step, pixels))
+        .sum()
+}
+
+/// Work in training iteration-pixels at the pipeline's calibration, as a [`Cost`].
+pub fn pipeline_cost_of(work: f64, pixels: f64) -> Cost {
+    Cost {
+        seconds: PIPELINE_SECONDS_PER_ITERATION_PIXEL * work,
+        peak_rss_bytes: BASE_BYTES + PIPELINE_BYTES_PER_PIXEL * pixels,
+        measured: false,
+    }
 }
 
 /// A whole pipeline run's expected [`Cost`] by the calibration.
 pub fn pipeline_cost(pc: &PipelineConfig, pixels: f64) -> Cost {
-    Cost {
-        seconds: PIPELINE_SECONDS_PER_ITERATION_PIXEL * pipeline_work(pc, pixels),
-        peak_rss_bytes: BASE_BYTES + PIPELINE_BYTES_PER_PIXEL * pixels,
-        measured: false,
-    }
+    pipeline_cost_of(pipeline_work(pc, pixels), pixels)
 }
 
 /// Resource requests over an estimate: a job's `--time` is [`TIME_FACTOR`] times its

@@ -5,6 +5,7 @@
 //! schedules: Slurm does.
 
 pub mod cost;
+pub mod extrapolate;
 pub mod slurm;
 
 pub use cost::{Cost, Request, least_request, pipeline_cost, pipeline_work, request};

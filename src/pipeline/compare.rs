@@ -80,7 +80,9 @@ impl Comparison {
 /// Rank of a step folder in pipeline order ([`Step::rank`]; a folder that is no step, e.g.
 /// an oracle dump's, after every step), then by name.
 fn rank(step: &str) -> (u32, String) {
-    let r = step.parse::<super::steps::Step>().map_or(13, |s| s.rank());
+    let r = step
+        .parse::<super::steps::Step>()
+        .map_or(u32::MAX, |s| s.rank());
     (r, step.to_string())
 }
 

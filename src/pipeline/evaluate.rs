@@ -6,9 +6,10 @@
 
 use super::artifacts::{load_mask, read_json, save_mask, scene_of, stem};
 use super::rundir::StepDone;
+use super::steps::Scene;
 use super::steps::Stage;
 use super::steps::Step;
-use super::{Inputs, StageCtx};
+use super::{Inputs, Run};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gaussian::Gaussians;
@@ -160,112 +161,112 @@ pub fn existing_pixels(cam: &Camera, depth: &[f32], train: &[(&Camera, &[f32])])
     out
 }
 
-/// The existing-pixel masks of the evaluation poses (step `eval/masks`).
-pub fn masks(ctx: &StageCtx) -> Result<StepDone> {
-    let StageCtx {
-        inputs,
-        dir,
-        on_event,
-        ..
-    } = *ctx;
-    let data = &inputs.data;
-    let names: Vec<&str> = inputs
-        .evaluation
-        .iter()
-        .map(|&i| data.views[i].camera.name.as_str())
-        .collect();
-    let key = serde_json::json!({
-        "evaluation": names,
-        "train": data.train.iter().map(|&i| &data.views[i].camera.name).collect::<Vec<_>>(),
-        "tolerance": VISIBILITY_DEPTH_TOLERANCE,
-    });
-    dir.step(&Step::EvalMasks, key, on_event, |w| {
-        let train: Vec<(&Camera, &[f32])> = data
-            .train
+impl Run<'_> {
+    /// The existing-pixel masks of the evaluation poses (step `eval/masks`).
+    pub fn eval_masks(&self) -> Result<StepDone> {
+        let inputs = self.inputs;
+        let data = &inputs.data;
+        let names: Vec<&str> = inputs
+            .evaluation
             .iter()
-            .filter_map(|&i| {
-                let v = &data.views[i];
-                v.depth.as_deref().map(|d| (&v.camera, d))
-            })
+            .map(|&i| data.views[i].camera.name.as_str())
             .collect();
-        for &i in &inputs.evaluation {
-            let v = &data.views[i];
-            let d = v.depth.as_deref().expect("checked by load_inputs");
-            let m = existing_pixels(&v.camera, d, &train);
-            save_mask(
-                w,
-                &stem(&v.camera.name),
-                &m,
-                v.camera.width as usize,
-                v.camera.height as usize,
-            )?;
-        }
-        Ok(())
-    })
-}
-
-/// Evaluate `scenes` (`None` = the original scene; else a reconstruction step) with the
-/// masks of [`masks`].
-pub fn run(
-    ctx: &StageCtx,
-    scenes: &[(String, Option<StepDone>)],
-    masks: StepDone,
-) -> Result<(Summary, Vec<StepDone>)> {
-    let StageCtx {
-        inputs,
-        dir,
-        on_event,
-        ..
-    } = *ctx;
-    let data = &inputs.data;
-    let existing: Vec<Vec<bool>> = inputs
-        .evaluation
-        .iter()
-        .map(|&i| {
-            let v = &data.views[i];
-            let m = load_mask(&masks.dir, &stem(&v.camera.name))?;
-            if m.len() != v.image.width * v.image.height {
-                return Err(Error::invalid(format!(
-                    "the existing-pixel mask of '{}' does not have the view's size",
-                    v.camera.name
-                ))
-                .at(&masks.dir));
+        let key = serde_json::json!({
+            "evaluation": names,
+            "train": data.train.iter().map(|&i| &data.views[i].camera.name).collect::<Vec<_>>(),
+            "tolerance": VISIBILITY_DEPTH_TOLERANCE,
+        });
+        self.step(&Step::EvalMasks, key, |w| {
+            let train: Vec<(&Camera, &[f32])> = data
+                .train
+                .iter()
+                .filter_map(|&i| {
+                    let v = &data.views[i];
+                    v.depth.as_deref().map(|d| (&v.camera, d))
+                })
+                .collect();
+            for &i in &inputs.evaluation {
+                let v = &data.views[i];
+                let d = v.depth.as_deref().expect("checked by load_inputs");
+                let m = existing_pixels(&v.camera, d, &train);
+                save_mask(
+                    w,
+                    &stem(&v.camera.name),
+                    &m,
+                    v.camera.width as usize,
+                    v.camera.height as usize,
+                )?;
             }
-            Ok(m)
-        })
-        .collect::<Result<_>>()?;
-    let mut steps = vec![masks.clone()];
-    let mut rows = Vec::new();
-    for (name, step) in scenes {
-        let (scene, digest): (Gaussians, String) = match step {
-            None => (inputs.scene.clone(), inputs.scene_sha256.clone()),
-            Some(s) => (scene_of(s)?, s.digest.clone()),
-        };
-        // `records`: the metrics carry per-view sums (a step cached before they were
-        // recorded is not reused).
-        let key =
-            serde_json::json!({"scene": digest, "masks": masks.digest, "records": "per-view"});
-        let st = dir.step(&Step::Eval(name.to_string()), key, on_event, |w| {
-            let row = score(inputs, &scene, name, &existing, w)?;
-            w.json("metrics.json", &row)?;
             Ok(())
-        })?;
-        rows.push(read_json::<Row>(&st.dir.join("metrics.json"))?);
-        steps.push(st);
+        })
     }
-    let total: usize = existing.iter().map(|m| m.len()).sum();
-    let ex: usize = existing
-        .iter()
-        .map(|m| m.iter().filter(|&&b| b).count())
-        .sum();
-    let summary = Summary {
-        evaluation_views: inputs.evaluation.len(),
-        existing_fraction: ex as f64 / total.max(1) as f64,
-        rows,
-    };
-    let text = serde_json::to_string_pretty(&summary).expect("serializes") + "\n";
-    crate::io::write_text(&Stage::Eval.dir(&dir.root).join("summary.json"), &text)?;
-    Ok((summary, steps))
+
+    /// Evaluate those of `scenes` the scope selects (`None` = the original scene; else a
+    /// reconstruction step) with the masks of [`Run::eval_masks`]; `eval/summary.json` is
+    /// written when every scene of the run is evaluated.
+    pub fn evaluate(
+        &self,
+        scenes: &[(Scene, Option<StepDone>)],
+        masks: StepDone,
+    ) -> Result<(Summary, Vec<StepDone>)> {
+        let inputs = self.inputs;
+        let data = &inputs.data;
+        let existing: Vec<Vec<bool>> = inputs
+            .evaluation
+            .iter()
+            .map(|&i| {
+                let v = &data.views[i];
+                let m = load_mask(&masks.dir, &stem(&v.camera.name))?;
+                if m.len() != v.image.width * v.image.height {
+                    return Err(Error::invalid(format!(
+                        "the existing-pixel mask of '{}' does not have the view's size",
+                        v.camera.name
+                    ))
+                    .at(&masks.dir));
+                }
+                Ok(m)
+            })
+            .collect::<Result<_>>()?;
+        let mut steps = vec![masks.clone()];
+        let mut rows = Vec::new();
+        let all = scenes.len() == super::steps::scenes(self.config).len();
+        for (name, step) in scenes {
+            if !self.wants(&Step::Eval(*name)) {
+                continue;
+            }
+            let name = name.name();
+            let (scene, digest): (Gaussians, String) = match step {
+                None => (inputs.scene.clone(), inputs.scene_sha256.clone()),
+                Some(s) => (scene_of(s)?, s.digest.clone()),
+            };
+            // `records`: the metrics carry per-view sums (a step cached before they were
+            // recorded is not reused).
+            let key =
+                serde_json::json!({"scene": digest, "masks": masks.digest, "records": "per-view"});
+            let st = self.step(&Step::Eval(name.parse()?), key, |w| {
+                let row = score(inputs, &scene, name, &existing, w)?;
+                w.json("metrics.json", &row)?;
+                Ok(())
+            })?;
+            rows.push(read_json::<Row>(&st.dir.join("metrics.json"))?);
+            steps.push(st);
+        }
+        let total: usize = existing.iter().map(|m| m.len()).sum();
+        let ex: usize = existing
+            .iter()
+            .map(|m| m.iter().filter(|&&b| b).count())
+            .sum();
+        let summary = Summary {
+            evaluation_views: inputs.evaluation.len(),
+            existing_fraction: ex as f64 / total.max(1) as f64,
+            rows,
+        };
+        if all && summary.rows.len() == scenes.len() {
+            let text = serde_json::to_string_pretty(&summary).expect("serializes") + "\n";
+            crate::io::write_text(&Stage::Eval.dir(&self.dir.root).join("summary.json"), &text)?;
+        }
+        Ok((summary, steps))
+    }
 }
 
 fn score(

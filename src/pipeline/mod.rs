@@ -15,8 +15,10 @@
 //! a command line only draws them.
 
 pub mod artifacts;
+pub mod clips;
 pub mod compare;
 pub mod config;
+pub mod depth;
 pub mod evaluate;
 pub mod generators;
 pub mod inputs;
@@ -41,9 +43,9 @@ use generators::{Generators, GroundTruth};
 pub use generators::{candidate_truth, training_truth};
 pub use inputs::{Inputs, RESERVED_VIEW_NAMES, load_inputs};
 pub use poses::{nearest_training, pose_distance, same_pose};
-pub use rundir::Scope;
-use rundir::{RunDir, StepDone};
+use rundir::{Mode, RunDir, StepDone};
 use std::path::{Path, PathBuf};
+pub use steps::{Scene, Scope, Selection, Shape, Stage, Step, Wave};
 
 /// Progress of a run, for a progress display or a log.
 #[derive(Clone, Debug, PartialEq)]
@@ -78,14 +80,55 @@ pub enum Event {
     Note(String),
 }
 
-/// What every stage of a run reads, carried by reference: the configuration, the inputs,
-/// the run directory (with its step cache) and where progress events go.
+/// One run: what every stage reads, carried by reference — the configuration, the inputs,
+/// the run directory (with its step cache), where progress events go, the generators and
+/// the steps the run's scope selects. The stages are its methods (`views`, `stage1`,
+/// `stage2`, `interpolate`, `eval_masks`, `evaluate`), each taking what the stages before
+/// it produced.
 #[derive(Clone, Copy)]
-pub struct StageCtx<'a> {
+pub struct Run<'a> {
     pub config: &'a PipelineConfig,
     pub inputs: &'a Inputs,
     pub dir: &'a RunDir,
     pub on_event: &'a (dyn Fn(Event) + Sync),
+    pub gens: &'a Generators,
+    pub selection: &'a Selection,
+}
+
+impl Run<'_> {
+    /// The scope computes `step` or reads it.
+    pub fn wants(&self, step: &Step) -> bool {
+        self.selection.wants(step)
+    }
+
+    /// Step `step` through the run directory ([`RunDir::step`]): computed when the scope
+    /// computes it, verified when the scope only reads it.
+    pub fn step(
+        &self,
+        step: &Step,
+        inputs: serde_json::Value,
+        compute: impl FnOnce(&mut rundir::StepWriter) -> Result<()>,
+    ) -> Result<StepDone> {
+        let mode = if self.selection.computes(step) {
+            Mode::Compute
+        } else if self.selection.wants(step) {
+            Mode::Verify
+        } else {
+            return Err(Error::invalid(format!(
+                "internal: step {step} is outside the run's selection"
+            )));
+        };
+        self.dir.step(step, mode, inputs, self.on_event, compute)
+    }
+
+    /// Announce `stage` when the scope has steps in it.
+    fn begin(&self, stage: Stage) {
+        if self.selection.wants_stage(stage) {
+            (self.on_event)(Event::Stage {
+                name: stage.name().into(),
+            });
+        }
+    }
 }
 
 /// What a finished run produced.
@@ -109,6 +152,31 @@ pub struct RunOptions {
     /// A step cache shared with other runs (SPEC.md §20.8): steps with equal inputs are
     /// computed once.
     pub cache: Option<PathBuf>,
+}
+
+/// The plan of a run of `inputs` under `config` into `out` ([`steps::plan`]): what
+/// detection found when `out`'s views step is done (its `views/plan.json`), else the
+/// largest plan, every candidate independent.
+pub fn plan_of(config: &PipelineConfig, inputs: &Inputs, out: &Path) -> Result<Vec<Wave>> {
+    let evaluation = !inputs.evaluation.is_empty();
+    let path = Step::Views.dir(out).join("plan.json");
+    let shape = if path.is_file() {
+        let plan: views::Plan = artifacts::read_json(&path)?;
+        Shape {
+            independent: plan.independent.iter().map(|n| stem(n)).collect(),
+            dependent: !plan.dependent.is_empty(),
+            evaluation,
+        }
+    } else {
+        bound_shape(inputs)
+    };
+    Ok(steps::plan(config, &shape))
+}
+
+/// The largest shape of a run of `inputs` ([`Shape::bound`]): every candidate independent.
+pub fn bound_shape(inputs: &Inputs) -> Shape {
+    let candidates = inputs.candidates.iter().map(|c| stem(&c.name)).collect();
+    Shape::bound(candidates, !inputs.evaluation.is_empty())
 }
 
 /// Run the whole pipeline into `out` (resuming a previous run with `resume`).
@@ -135,49 +203,40 @@ pub fn run_with(
     on_event: &(dyn Fn(Event) + Sync),
 ) -> Result<Outcome> {
     config.validate()?;
-    let target = match &opts.scope {
-        Scope::All => None,
-        Scope::Only(s) | Scope::Until(s) | Scope::Before(s) => Some(s.clone()),
-    };
+    // The scope is checked against the largest plan before anything is written.
+    let bound = steps::plan(config, &bound_shape(inputs));
+    let before_views = Selection::new(&opts.scope, &bound).map_err(|e| e.at(out))?;
     if let Some(c) = &opts.cache
         && c.is_file()
     {
         return Err(Error::invalid("the step cache path is a file").at(c));
     }
-    let mut dir = RunDir::open(out, opts.resume, opts.scope.clone(), &inputs.digest)?;
+    let scoped = opts.scope != Scope::All;
+    let mut dir = RunDir::open(out, opts.resume, scoped, &inputs.digest)?;
     if let Some(c) = &opts.cache {
         dir = dir.with_cache(c)?;
     }
-    let ctx = StageCtx {
+    run_in(
         config,
         inputs,
-        dir: &dir,
+        &dir,
+        &opts.scope,
+        (&bound, &before_views),
         on_event,
-    };
-    match run_in(&ctx) {
-        // Anything after a scoped run's last step (a later step, or a sibling of an
-        // `--only` step that is not needed) ends the run there.
-        Err(_) if dir.scope_finished() => Ok(Outcome {
-            steps: Vec::new(),
-            scene: None,
-            metrics: None,
-        }),
-        Ok(_) if target.is_some() => Err(Error::invalid(format!(
-            "this run has no step called '{}' (the steps are listed in steps.json)",
-            target.map(|t| t.to_string()).unwrap_or_default()
-        ))
-        .at(out)),
-        r => r,
-    }
+    )
 }
 
-fn run_in(ctx: &StageCtx) -> Result<Outcome> {
-    let StageCtx {
-        config,
-        inputs,
-        dir,
-        on_event,
-    } = *ctx;
+/// The run: detection (when the scope reads it), then the plan of what detection found,
+/// the scope's selection of it, and the stages in order, each stopping where the
+/// selection does.
+fn run_in(
+    config: &PipelineConfig,
+    inputs: &Inputs,
+    dir: &RunDir,
+    scope: &Scope,
+    (bound, before_views): (&[Wave], &Selection),
+    on_event: &(dyn Fn(Event) + Sync),
+) -> Result<Outcome> {
     let out = dir.root.as_path();
     let config_text = serde_json::to_string_pretty(config).expect("config serializes") + "\n";
     crate::io::write_text(&out.join("config.json"), &config_text)?;
@@ -192,70 +251,106 @@ fn run_in(ctx: &StageCtx) -> Result<Outcome> {
     };
     let mut gens = Generators::new(&config.slots, truth, config.seed)?;
     let mut steps = Vec::new();
-    // Read only the dataset: attempted first, its error (if any) kept until it is needed,
-    // so `--only` of a later step does not need it.
-    let eval_masks = (!inputs.evaluation.is_empty()).then(|| evaluate::masks(ctx));
-
-    on_event(Event::Stage {
-        name: steps::Stage::Views.name().into(),
-    });
-    let views = views::run(ctx, &gens)?;
+    let mut scenes = vec![(Scene::Original, None)];
+    let first = Run {
+        config,
+        inputs,
+        dir,
+        on_event,
+        gens: &gens,
+        selection: before_views,
+    };
+    if !first.wants(&Step::Views) {
+        // Nothing the scope selects reads detection: at most the original scene's QA-Mask
+        // and evaluation.
+        if first.wants(&Step::QaMask(Scene::Original)) {
+            first.begin(Stage::QaMask);
+            let (_, qa) = first.weights(&inputs.scene, &inputs.scene_sha256, Scene::Original)?;
+            steps.extend(qa);
+        }
+        return first.finish(steps, &scenes, bound);
+    }
+    first.begin(Stage::Views);
+    let views = first.views()?;
     steps.push(views.step.clone());
     if let Some(gt) = gens.truth.as_mut() {
         for g in &views.plan.gap_cameras {
             gt.add_between(&g.camera, &g.between[0], &g.between[1])?;
         }
     }
+    let shape = Shape {
+        independent: views.plan.independent.iter().map(|n| stem(n)).collect(),
+        dependent: !views.plan.dependent.is_empty(),
+        evaluation: !inputs.evaluation.is_empty(),
+    };
+    let waves = steps::plan(config, &shape);
+    let selection = Selection::new(scope, &waves).map_err(|e| e.at(out))?;
+    let run = Run {
+        config,
+        inputs,
+        dir,
+        on_event,
+        gens: &gens,
+        selection: &selection,
+    };
 
-    on_event(Event::Stage {
-        name: steps::Stage::Stage1.name().into(),
-    });
-    let s1 = stage1::run(ctx, &gens, &views)?;
-    steps.extend(s1.steps.iter().cloned());
+    run.begin(Stage::Stage1);
+    let Some(s1) = run.stage1(&views, &mut steps)? else {
+        return run.finish(steps, &scenes, &waves);
+    };
+    scenes.push((Scene::Stage1, Some(s1.recon.clone())));
 
-    on_event(Event::Stage {
-        name: steps::Stage::Stage2.name().into(),
-    });
-    let s2 = stage2::run(ctx, &gens, &views, &s1)?;
-    steps.extend(s2.steps.iter().cloned());
+    run.begin(Stage::Stage2);
+    let Some(s2) = run.stage2(&views, &s1, &mut steps)? else {
+        return run.finish(steps, &scenes, &waves);
+    };
+    scenes.push((Scene::Stage2, Some(s2.recon.clone())));
 
-    let mut last = s2.recon.clone();
-    let mut scenes = vec![
-        ("original".to_string(), None),
-        ("stage1".to_string(), Some(s1.recon.clone())),
-        ("stage2".to_string(), Some(s2.recon.clone())),
-    ];
     if config.interpolation {
-        on_event(Event::Stage {
-            name: steps::Stage::Interpolate.name().into(),
-        });
-        let ip = interpolate::run(ctx, &gens, &views, &s1, &s2)?;
-        steps.extend(ip.steps.iter().cloned());
-        last = ip.recon.clone();
-        scenes.push(("interpolate".to_string(), Some(ip.recon)));
+        run.begin(Stage::Interpolate);
+        let Some(ip) = run.interpolate(&views, &s1, &s2, &mut steps)? else {
+            return run.finish(steps, &scenes, &waves);
+        };
+        scenes.push((Scene::Interpolate, Some(ip.recon)));
     }
+    run.finish(steps, &scenes, &waves)
+}
 
-    let metrics = match eval_masks {
-        None => None,
-        Some(masks) => {
-            on_event(Event::Stage {
-                name: steps::Stage::Eval.name().into(),
-            });
-            let (summary, st) = evaluate::run(ctx, &scenes, masks?)?;
+impl Run<'_> {
+    /// Evaluate the scenes made (those the scope selects) and close the run: a run of its
+    /// whole plan writes `steps.json` (its steps in order: what `compare` walks; steps of
+    /// an earlier configuration left in the folder are not part of this run) and
+    /// `timings.json`.
+    fn finish(
+        &self,
+        mut steps: Vec<StepDone>,
+        scenes: &[(Scene, Option<StepDone>)],
+        waves: &[Wave],
+    ) -> Result<Outcome> {
+        let metrics = if self.wants(&Step::EvalMasks) {
+            self.begin(Stage::Eval);
+            let masks = self.eval_masks()?;
+            let (summary, st) = self.evaluate(scenes, masks)?;
             steps.extend(st);
             Some(summary)
+        } else {
+            None
+        };
+        let whole = self.selection.is_whole(waves);
+        if whole {
+            let out = self.dir.root.as_path();
+            let names: Vec<&str> = steps.iter().map(|s| s.name.as_str()).collect();
+            let text = serde_json::to_string_pretty(&names).expect("serializes") + "\n";
+            crate::io::write_text(&out.join("steps.json"), &text)?;
+            let t =
+                serde_json::to_string_pretty(&self.dir.timings(&steps)).expect("serializes") + "\n";
+            crate::io::write_text(&out.join("timings.json"), &t)?;
         }
-    };
-    // The run's steps in order (what `compare` walks: steps of an earlier configuration
-    // left in the folder are not part of this run) and their times.
-    let names: Vec<&str> = steps.iter().map(|s| s.name.as_str()).collect();
-    let text = serde_json::to_string_pretty(&names).expect("serializes") + "\n";
-    crate::io::write_text(&out.join("steps.json"), &text)?;
-    let t = serde_json::to_string_pretty(&dir.timings(&steps)).expect("serializes") + "\n";
-    crate::io::write_text(&out.join("timings.json"), &t)?;
-    Ok(Outcome {
-        steps,
-        scene: Some(last.dir.join("scene.ply")),
-        metrics,
-    })
+        let last = scenes.last().and_then(|(_, s)| s.as_ref());
+        Ok(Outcome {
+            scene: last.filter(|_| whole).map(|s| s.dir.join("scene.ply")),
+            steps,
+            metrics,
+        })
+    }
 }

@@ -12,8 +12,8 @@
 use super::artifacts::{save_scene, stem};
 use super::config::{MaskSource, PipelineConfig, ReconConfig};
 use super::rundir::{StepDone, StepWriter};
-use super::steps::Step;
-use super::{Event, Inputs, StageCtx};
+use super::steps::{Scene, Step};
+use super::{Event, Inputs, Run};
 use crate::camera::Camera;
 use crate::dataset::{Dataset, View};
 use crate::error::{Error, Result};
@@ -64,71 +64,51 @@ pub fn qa_config(config: &PipelineConfig) -> QaMaskConfig {
     }
 }
 
-/// The weights for a reconstruction of the scene in `scene_step/scene_file`: the QA-Mask
-/// is fine-tuned in its own step `qa/<name>` (shared by every variant with the same scene
-/// and QA settings).
-pub fn weights(
-    ctx: &StageCtx,
-    scene: &Gaussians,
-    scene_digest: &str,
-    name: &str,
-) -> Result<(Weights, Option<StepDone>)> {
-    let StageCtx {
-        config,
-        inputs,
-        dir,
-        on_event,
-    } = *ctx;
-    match config.mask_source {
-        MaskSource::None => Ok((Weights::None, None)),
-        MaskSource::Opacity => Ok((Weights::Opacity(scene.clone()), None)),
-        MaskSource::Qa => {
-            let qa = qa_config(config);
-            let qa_step = Step::QaMask(name.to_string());
-            let step_name = qa_step.to_string();
-            let key = serde_json::json!({"scene": scene_digest, "qa": qa});
-            let views: Vec<Camera> = inputs.data.train_cameras();
-            let step = dir.step(&qa_step, key, on_event, |w| {
-                let mut g = mask_scene(scene, &qa)?;
-                fine_tune(&mut g, &views, &qa, &mut |p| {
-                    if p.iteration % 50 == 0 || p.iteration == p.iterations {
-                        on_event(Event::Iterations {
-                            step: step_name.clone(),
-                            done: p.iteration,
-                            total: p.iterations,
-                            loss: p.loss,
-                        });
-                    }
+impl Run<'_> {
+    /// The weights for a reconstruction of `scene` (its digest `scene_digest`): the
+    /// QA-Mask is fine-tuned in its own step `qa/<name>` (shared by every variant with the
+    /// same scene and QA settings).
+    pub fn weights(
+        &self,
+        scene: &Gaussians,
+        scene_digest: &str,
+        name: Scene,
+    ) -> Result<(Weights, Option<StepDone>)> {
+        let (config, on_event) = (self.config, self.on_event);
+        match config.mask_source {
+            MaskSource::None => Ok((Weights::None, None)),
+            MaskSource::Opacity => Ok((Weights::Opacity(scene.clone()), None)),
+            MaskSource::Qa => {
+                let qa = qa_config(config);
+                let qa_step = Step::QaMask(name);
+                let step_name = qa_step.to_string();
+                let key = serde_json::json!({"scene": scene_digest, "qa": qa});
+                let views: Vec<Camera> = self.inputs.data.train_cameras();
+                let step = self.step(&qa_step, key, |w| {
+                    let mut g = mask_scene(scene, &qa)?;
+                    fine_tune(&mut g, &views, &qa, &mut |p| {
+                        if p.iteration % 50 == 0 || p.iteration == p.iterations {
+                            on_event(Event::Iterations {
+                                step: step_name.clone(),
+                                done: p.iteration,
+                                total: p.iterations,
+                                loss: p.loss,
+                            });
+                        }
+                    })?;
+                    // The mask directory's files, through the step (whose manifest closes it).
+                    let (ply, text) = mask_files(&g, &qa)?;
+                    w.put("point_cloud.ply", |p| {
+                        crate::io::write_atomic(p, |f| std::io::Write::write_all(f, &ply))
+                    })?;
+                    w.put("qa_mask.json", |p| crate::io::write_text(p, &text))?;
+                    Ok(())
                 })?;
-                // The mask directory's files, through the step (whose manifest closes it).
-                let (ply, text) = mask_files(&g, &qa)?;
-                w.put("point_cloud.ply", |p| {
-                    crate::io::write_atomic(p, |f| std::io::Write::write_all(f, &ply))
-                })?;
-                w.put("qa_mask.json", |p| crate::io::write_text(p, &text))?;
-                Ok(())
-            })?;
-            let (g, c) = read_mask_dir(&step.dir)?;
-            Ok((Weights::Qa(Box::new((g, c))), Some(step)))
+                let (g, c) = read_mask_dir(&step.dir)?;
+                Ok((Weights::Qa(Box::new((g, c))), Some(step)))
+            }
         }
     }
-}
-
-/// The start of a reconstruction of the scene of step `start` (stage 2's, interpolation's):
-/// its mask weights, under the name `masked` (the QA-Mask step, if one runs, joins
-/// `steps`), and the reconstruction step's key, `upstream` with [`recon_key`]'s settings.
-pub fn weights_and_key(
-    ctx: &StageCtx,
-    recon: &ReconConfig,
-    (scene, start): (&Gaussians, &StepDone),
-    masked: &str,
-    steps: &mut Vec<StepDone>,
-    upstream: serde_json::Value,
-) -> Result<(Weights, serde_json::Value)> {
-    let (weights, qa) = weights(ctx, scene, &start.digest, masked)?;
-    steps.extend(qa.clone());
-    let key = recon_key(ctx.config, recon, qa.as_ref(), upstream);
-    Ok((weights, key))
 }
 
 /// The key of a reconstruction step: `upstream` (the digests of the steps it reads) with
@@ -184,145 +164,144 @@ pub fn original_views(config: &PipelineConfig, inputs: &Inputs) -> Vec<View> {
         .collect()
 }
 
-/// Fine-tune `init` on the original training views and `generated` (with `refresh`, some
-/// of whose targets are remade on the fly), write `scene.ply` and the weight maps' heat
-/// images into `w`; returns the scene.
-#[allow(clippy::too_many_arguments)]
-pub fn reconstruct(
-    ctx: &StageCtx,
-    recon: &ReconConfig,
-    init: Gaussians,
-    generated: &[Supervision],
-    weights: &Weights,
-    refresh: Option<&Refresh>,
-    stage: &str,
-    w: &mut StepWriter,
-) -> Result<Gaussians> {
-    let StageCtx {
-        config,
-        inputs,
-        on_event,
-        ..
-    } = *ctx;
-    let mut views = original_views(config, inputs);
-    let n_orig = views.len();
-    let mut masks: Vec<Option<Vec<f32>>> = vec![None; n_orig];
-    let mut summary = Vec::new();
-    let mut pictures = std::collections::BTreeSet::new();
-    for g in generated {
-        let n = (g.camera.width * g.camera.height) as usize;
-        if g.image.data.len() != n * 3 {
-            return Err(Error::invalid(format!(
-                "generated view '{}' is not an RGB image of its camera's size",
-                g.camera.name
-            )));
-        }
-        let mut m = weights.at(&g.camera)?;
-        if let Some(cov) = &g.coverage {
-            let m = m.get_or_insert_with(|| vec![1.0; n]);
-            for (v, &c) in m.iter_mut().zip(cov) {
-                if !c {
-                    *v = 0.0;
+impl Run<'_> {
+    /// Fine-tune `init` on the original training views and `generated` (with `refresh`, some
+    /// of whose targets are remade on the fly), write `scene.ply` and the weight maps' heat
+    /// images into `w` (`stage` names its seed and progress); returns the scene.
+    #[allow(clippy::too_many_arguments)]
+    pub fn reconstruct(
+        &self,
+        recon: &ReconConfig,
+        init: Gaussians,
+        generated: &[Supervision],
+        weights: &Weights,
+        refresh: Option<&Refresh>,
+        stage: Scene,
+        w: &mut StepWriter,
+    ) -> Result<Gaussians> {
+        let (config, inputs, on_event) = (self.config, self.inputs, self.on_event);
+        let stage = stage.name();
+        let mut views = original_views(config, inputs);
+        let n_orig = views.len();
+        let mut masks: Vec<Option<Vec<f32>>> = vec![None; n_orig];
+        let mut summary = Vec::new();
+        let mut pictures = std::collections::BTreeSet::new();
+        for g in generated {
+            let n = (g.camera.width * g.camera.height) as usize;
+            if g.image.data.len() != n * 3 {
+                return Err(Error::invalid(format!(
+                    "generated view '{}' is not an RGB image of its camera's size",
+                    g.camera.name
+                )));
+            }
+            let mut m = weights.at(&g.camera)?;
+            if let Some(cov) = &g.coverage {
+                let m = m.get_or_insert_with(|| vec![1.0; n]);
+                for (v, &c) in m.iter_mut().zip(cov) {
+                    if !c {
+                        *v = 0.0;
+                    }
                 }
             }
-        }
-        let mean = m
-            .as_ref()
-            .map_or(1.0, |m| m.iter().map(|&v| v as f64).sum::<f64>() / n as f64);
-        // One picture per camera (a camera supervised twice, e.g. a keyframe and its
-        // fixed render, has one weight map).
-        let pic = format!("weights/{}.png", stem(&g.camera.name));
-        if let Some(m) = m.as_ref().filter(|_| !pictures.contains(&pic)) {
-            pictures.insert(pic.clone());
-            let heat = ImageF32::new(
-                g.camera.width as usize,
-                g.camera.height as usize,
-                3,
-                crate::qamask::heat_map(m),
-            )?;
-            w.put(&pic, |p| crate::io::image::write_png(p, &heat))?;
-        }
-        summary.push(serde_json::json!({
-            "view": g.camera.name,
-            "mean_weight": mean,
-            "depth": g.depth.is_some() && config.depth_supervision,
-        }));
-        masks.push(m);
-        views.push(View {
-            camera: g.camera.clone(),
-            image: g.image.clone(),
-            depth: if config.depth_supervision {
-                g.depth.clone()
-            } else {
-                None
-            },
-        });
-    }
-    let data = Dataset {
-        root: inputs.data.root.clone(),
-        layout: inputs.data.layout,
-        train: (0..views.len()).collect(),
-        views,
-        points: None,
-        test: Vec::new(),
-        heldout: Vec::new(),
-    };
-    let cfg = TrainConfig {
-        iterations: recon.iterations,
-        seed: stage_seed(config.seed, stage),
-        sh_degree: init.sh_degree,
-        densify: recon.densify,
-        loss: config.recon_loss(),
-        background: inputs.background,
-        save_iterations: Vec::new(),
-        ..TrainConfig::default()
-    };
-    let deg = init.sh_degree;
-    let mut trainer = Trainer::from_gaussians(&data, cfg, init, deg)?;
-    trainer.masks = masks;
-    let mut refreshed = 0u32;
-    while trainer.iteration < recon.iterations {
-        if let Some(r) = refresh {
-            let it = trainer.iteration;
-            if it > 0 && r.every > 0 && it % r.every == 0 {
-                for &k in &r.views {
-                    let cam = &generated[k].camera;
-                    let rgb = super::views::render_rgb(&trainer.gaussians, cam, inputs.background)?;
-                    trainer.replace_image(n_orig + k, (r.fix)(cam, &rgb)?)?;
-                }
-                refreshed += 1;
+            let mean = m
+                .as_ref()
+                .map_or(1.0, |m| m.iter().map(|&v| v as f64).sum::<f64>() / n as f64);
+            // One picture per camera (a camera supervised twice, e.g. a keyframe and its
+            // fixed render, has one weight map).
+            let pic = format!("weights/{}.png", stem(&g.camera.name));
+            if let Some(m) = m.as_ref().filter(|_| !pictures.contains(&pic)) {
+                pictures.insert(pic.clone());
+                let heat = ImageF32::new(
+                    g.camera.width as usize,
+                    g.camera.height as usize,
+                    3,
+                    crate::qamask::heat_map(m),
+                )?;
+                w.put(&pic, |p| crate::io::image::write_png(p, &heat))?;
             }
-        }
-        let p = trainer.step()?;
-        if p.iteration % 50 == 0 || p.iteration == p.iterations {
-            on_event(Event::Iterations {
-                step: stage.to_string(),
-                done: p.iteration,
-                total: p.iterations,
-                loss: p.loss_ema,
+            summary.push(serde_json::json!({
+                "view": g.camera.name,
+                "mean_weight": mean,
+                "depth": g.depth.is_some() && config.depth_supervision,
+            }));
+            masks.push(m);
+            views.push(View {
+                camera: g.camera.clone(),
+                image: g.image.clone(),
+                depth: if config.depth_supervision {
+                    g.depth.clone()
+                } else {
+                    None
+                },
             });
         }
-    }
-    if let Some(r) = refresh {
-        // The targets the last part trained on, for people and for a port's diff.
-        for &k in &r.views {
-            let img = trainer.dataset.views[n_orig + k].image.clone();
-            let rel = format!("refreshed/{}.png", stem(&generated[k].camera.name));
-            w.put(&rel, |p| crate::io::image::write_png(p, &img))?;
+        let data = Dataset {
+            root: inputs.data.root.clone(),
+            layout: inputs.data.layout,
+            train: (0..views.len()).collect(),
+            views,
+            points: None,
+            test: Vec::new(),
+            heldout: Vec::new(),
+        };
+        let cfg = TrainConfig {
+            iterations: recon.iterations,
+            seed: stage_seed(config.seed, stage),
+            sh_degree: init.sh_degree,
+            densify: recon.densify,
+            loss: config.recon_loss(),
+            background: inputs.background,
+            save_iterations: Vec::new(),
+            ..TrainConfig::default()
+        };
+        let deg = init.sh_degree;
+        let mut trainer = Trainer::from_gaussians(&data, cfg, init, deg)?;
+        trainer.masks = masks;
+        let mut refreshed = 0u32;
+        while trainer.iteration < recon.iterations {
+            if let Some(r) = refresh {
+                let it = trainer.iteration;
+                if it > 0 && r.every > 0 && it % r.every == 0 {
+                    for &k in &r.views {
+                        let cam = &generated[k].camera;
+                        let rgb =
+                            super::depth::render_rgb(&trainer.gaussians, cam, inputs.background)?;
+                        trainer.replace_image(n_orig + k, (r.fix)(cam, &rgb)?)?;
+                    }
+                    refreshed += 1;
+                }
+            }
+            let p = trainer.step()?;
+            if p.iteration % 50 == 0 || p.iteration == p.iterations {
+                on_event(Event::Iterations {
+                    step: stage.to_string(),
+                    done: p.iteration,
+                    total: p.iterations,
+                    loss: p.loss_ema,
+                });
+            }
         }
+        if let Some(r) = refresh {
+            // The targets the last part trained on, for people and for a port's diff.
+            for &k in &r.views {
+                let img = trainer.dataset.views[n_orig + k].image.clone();
+                let rel = format!("refreshed/{}.png", stem(&generated[k].camera.name));
+                w.put(&rel, |p| crate::io::image::write_png(p, &img))?;
+            }
+        }
+        let g = trainer.gaussians;
+        save_scene(w, "scene.ply", &g)?;
+        w.json(
+            "supervision.json",
+            &serde_json::json!({
+                "original_views": n_orig,
+                "original_views_depth": config.supervises_original_depth(),
+                "generated": summary,
+                "iterations": recon.iterations,
+                "refreshed": refreshed,
+                "gaussians": g.len(),
+            }),
+        )?;
+        Ok(g)
     }
-    let g = trainer.gaussians;
-    save_scene(w, "scene.ply", &g)?;
-    w.json(
-        "supervision.json",
-        &serde_json::json!({
-            "original_views": n_orig,
-            "original_views_depth": config.supervises_original_depth(),
-            "generated": summary,
-            "iterations": recon.iterations,
-            "refreshed": refreshed,
-            "gaussians": g.len(),
-        }),
-    )?;
-    Ok(g)
 }

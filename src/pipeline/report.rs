@@ -222,7 +222,12 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
         md += "## Evaluation views (render | truth)\n\n";
         for r in &m.rows {
             md += &format!("**{}**\n\n", r.scene);
-            let dir = Step::Eval(r.scene.clone()).dir(run);
+            // A row of a scene this version does not make has no pictures to show.
+            let Ok(scene) = r.scene.parse() else {
+                continue;
+            };
+            let step = Step::Eval(scene);
+            let dir = step.dir(run);
             let mut pngs: Vec<String> = std::fs::read_dir(&dir)
                 .map(|d| {
                     d.flatten()
@@ -233,7 +238,7 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
                 .unwrap_or_default();
             pngs.sort();
             for p in pngs.iter().take(2) {
-                md += &format!("![]({prefix}/{}/{p}) ", Step::Eval(r.scene.clone()));
+                md += &format!("![]({prefix}/{step}/{p}) ");
             }
             md += "\n\n";
         }

@@ -25,29 +25,17 @@ use crate::io::{
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-/// Which steps a run computes (SPEC.md §20.8): all, or one step alone (its inputs must be
-/// done: a batch engine's worker), or everything up to one step, or everything before one
-/// step (the audit's shared-steps jobs).
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub enum Scope {
-    #[default]
-    All,
-    Only(Step),
-    Until(Step),
-    Before(Step),
-}
-
 /// An open run directory.
 pub struct RunDir {
     pub root: PathBuf,
     resume: bool,
-    scope: Scope,
+    /// A scoped run (`--only`, `--until`, a wave): steps done here are verified and
+    /// reused even without `resume`.
+    scoped: bool,
     /// Digest of everything the run reads (scene, dataset views, candidates, crate and
     /// conventions version): part of every step's inputs, so no step is reused across
     /// different data.
     base: String,
-    /// Set once the scope's last step is done: later steps stop the run.
-    finished: std::sync::atomic::AtomicBool,
     /// Shared step cache ([`RunDir::with_cache`]).
     cache: Option<PathBuf>,
     /// The output folder as opened: checked before every step and every file.
@@ -106,9 +94,15 @@ impl RootGuard {
     }
 }
 
-/// The message of the error that ends a scoped run after its last step (caught by
-/// [`super::run`], never shown).
-pub(crate) const SCOPE_DONE: &str = "the requested steps are done";
+/// How a run treats one step of its selection ([`super::steps::Selection`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mode {
+    /// Computed, unless a verified result with the same inputs is here or in the cache.
+    Compute,
+    /// Read by a step of the scope and not part of it: it must be done (here, or in the
+    /// cache); a folder here that does not verify is another worker's and is left alone.
+    Verify,
+}
 
 /// What a finished (or verified) step hands downstream.
 #[derive(Clone, Debug)]
@@ -123,8 +117,8 @@ pub struct StepDone {
 impl RunDir {
     /// Open `root` for a new run (it must not exist or be empty) or, with `resume`, for
     /// continuing one.
-    pub fn open(root: &Path, resume: bool, scope: Scope, base: &str) -> Result<RunDir> {
-        if scope != Scope::All && !resume && root.is_dir() {
+    pub fn open(root: &Path, resume: bool, scoped: bool, base: &str) -> Result<RunDir> {
+        if scoped && !resume && root.is_dir() {
             return Err(Error::invalid(
                 "--only and --until continue a run directory: pass --resume",
             )
@@ -153,9 +147,8 @@ impl RunDir {
         Ok(RunDir {
             root: root.to_path_buf(),
             resume,
-            scope,
+            scoped,
             base: base.to_string(),
-            finished: std::sync::atomic::AtomicBool::new(false),
             cache: None,
             guard: RootGuard::new(root)?,
         })
@@ -174,24 +167,17 @@ impl RunDir {
     }
 
     /// Run `step` (its folder, e.g. `stage1/view_x`) from `inputs` unless a verified result
-    /// exists; `compute` writes its files through the [`StepWriter`].
+    /// exists; `compute` writes its files through the [`StepWriter`]. With [`Mode::Verify`]
+    /// the step is never computed: not done is an error.
     pub fn step(
         &self,
         step: &Step,
+        mode: Mode,
         inputs: serde_json::Value,
         on_event: &(dyn Fn(Event) + Sync),
         compute: impl FnOnce(&mut StepWriter) -> Result<()>,
     ) -> Result<StepDone> {
-        use std::sync::atomic::Ordering;
-        if self.finished.load(Ordering::SeqCst) {
-            return Err(Error::invalid(SCOPE_DONE));
-        }
-        if matches!(&self.scope, Scope::Before(s) if s == step) {
-            self.finished.store(true, Ordering::SeqCst);
-            return Err(Error::invalid(SCOPE_DONE));
-        }
         self.guard.check()?;
-        let is_target = matches!(&self.scope, Scope::Only(s) | Scope::Until(s) if s == step);
         let name = step.to_string();
         let name = name.as_str();
         let dir = step.dir(&self.root);
@@ -200,9 +186,6 @@ impl RunDir {
         // A step already done here (`--resume`, scoped runs) or in the cache.
         let reuse = |dir: PathBuf, digest: String, event: Event| {
             on_event(event);
-            if is_target {
-                self.finished.store(true, Ordering::SeqCst);
-            }
             Ok(StepDone {
                 name: name.into(),
                 dir,
@@ -213,15 +196,15 @@ impl RunDir {
         // Why a step folder here is not taken: said once, before the step is recomputed,
         // so that a damaged file is never silently replaced.
         let mut not_taken = None;
-        if self.resume || self.scope != Scope::All {
+        if self.resume || self.scoped {
             match check(&dir, &inputs_sha256) {
                 Ok(digest) => return reuse(dir, digest, Event::StepSkipped { step: name.into() }),
                 Err(why) => not_taken = why,
             }
         }
-        // In an `--only` run, a step that is not the target and has a folder here is another
-        // worker's (in flight, or left damaged): never replaced from the cache.
-        let others = matches!(&self.scope, Scope::Only(only) if only != step) && dir.exists();
+        // A step the scope only reads that has a folder here is another worker's (in
+        // flight, or left damaged): never replaced from the cache.
+        let others = mode == Mode::Verify && dir.exists();
         let cached = self
             .cache_entry(name, &inputs_sha256)
             .filter(|_| !others)
@@ -247,14 +230,12 @@ impl RunDir {
                 return reuse(dir, digest, Event::StepCached { step: name.into() });
             }
         }
-        if let Scope::Only(only) = &self.scope
-            && only != step
-        {
+        if mode == Mode::Verify {
             // Not this worker's step (another worker may be writing it): left alone.
             return Err(Error::invalid(format!(
-                    "step {name} is not done in this run directory and comes before --only {only} (run up to it first with --until {name}; or is there no step called {only}?)"
-                ))
-                .at(&self.root));
+                "step {name} is not done in this run directory and the requested steps read it (run up to it first with --until {name})"
+            ))
+            .at(&self.root));
         }
         if let Some(why) = not_taken {
             on_event(Event::Note(format!("{name}: {why}: recomputed")));
@@ -298,9 +279,6 @@ impl RunDir {
             step: name.into(),
             seconds: secs,
         });
-        if is_target {
-            self.finished.store(true, Ordering::SeqCst);
-        }
         Ok(StepDone {
             name: name.into(),
             dir,
@@ -313,11 +291,6 @@ impl RunDir {
     fn cache_entry(&self, name: &str, inputs_sha256: &str) -> Option<PathBuf> {
         let key = sha256_hex(format!("{name}\n{inputs_sha256}").as_bytes());
         self.cache.as_ref().map(|c| c.join(key))
-    }
-
-    /// True once a scoped run's last step is done.
-    pub fn scope_finished(&self) -> bool {
-        self.finished.load(std::sync::atomic::Ordering::SeqCst)
     }
 
     /// What each of `steps` cost when it was computed (this run or an earlier one).

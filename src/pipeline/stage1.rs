@@ -16,85 +16,36 @@
 //! views, the inpainted views, the clips' intermediate frames and the propagated views
 //! ([`super::recon`]).
 
+use super::Run;
 use super::artifacts::{
     load_depth, load_image, load_mask, load_scene, save_depth, save_image, save_mask, save_scene,
     stem,
 };
-use super::generators::{Generators, SlotKind};
+use super::clips::{align_clip, save_video, video_supervision};
+use super::depth::training_depth;
+use super::generators::SlotKind;
 use super::poses::nearest_training;
-use super::recon::{self, Supervision, reconstruct};
+use super::recon::{self, Supervision};
 use super::rundir::StepDone;
-use super::steps::Step;
-use super::views::{Views, apply_alignment, training_depth, warp_depth};
-use super::{PipelineConfig, StageCtx};
+use super::steps::{Scene, Step};
+use super::views::Views;
 use crate::camera::Camera;
-use crate::camera::inria::{cameras_json_string, read_cameras_json};
 use crate::error::{Error, Result};
 use crate::io::image::ImageF32;
-use crate::io::write_text;
-use crate::models::{DepthHint, Keyframe, Video};
+use crate::models::Keyframe;
 use crate::rng::Uniform;
 use crate::rng::stage_seed;
 use crate::train::trainer::init_from_points;
-use crate::warp::align::{Alignment, Frame, RansacConfig, Space, ransac};
 use crate::warp::dibr::{WarpOptions, warp};
 use rayon::prelude::*;
 use std::path::Path;
 
-/// Stage 1's steps and results.
+/// Stage 1's results.
 pub struct Stage1 {
-    pub steps: Vec<StepDone>,
     /// Per independent view, in `plan.independent` order.
     pub views: Vec<StepDone>,
     pub propagate: Option<StepDone>,
     pub recon: StepDone,
-}
-
-/// A clip as stored: `video_<k>/frame_<j>.exr` (+ `.depth.exr`), `video_<k>/cameras.json`.
-pub struct StoredVideo {
-    pub frames: Vec<ImageF32>,
-    pub cameras: Vec<Camera>,
-    /// Aligned metric depth per frame, when known.
-    pub depths: Option<Vec<Vec<f32>>>,
-}
-
-pub(crate) fn save_video(
-    w: &mut super::rundir::StepWriter,
-    dir: &str,
-    frames: &[ImageF32],
-    cameras: &[Camera],
-    depths: Option<&[Vec<f32>]>,
-) -> Result<()> {
-    for (j, f) in frames.iter().enumerate() {
-        save_image(w, &format!("{dir}/frame_{j:02}"), f)?;
-        if let Some(d) = depths {
-            save_depth(w, &format!("{dir}/frame_{j:02}"), &d[j], f.width, f.height)?;
-        }
-    }
-    let text = cameras_json_string(cameras);
-    w.put(&format!("{dir}/cameras.json"), |p| write_text(p, &text))?;
-    Ok(())
-}
-
-pub(crate) fn load_video(dir: &Path) -> Result<StoredVideo> {
-    let cameras = read_cameras_json(&dir.join("cameras.json"))?;
-    let mut frames = Vec::new();
-    let mut depths = Vec::new();
-    let mut all_depth = true;
-    for (j, c) in cameras.iter().enumerate() {
-        let s = format!("frame_{j:02}");
-        frames.push(load_image(dir, &s)?);
-        if dir.join(format!("{s}.depth.exr")).is_file() {
-            depths.push(load_depth(dir, &s, c.width as usize, c.height as usize)?);
-        } else {
-            all_depth = false;
-        }
-    }
-    Ok(StoredVideo {
-        frames,
-        cameras,
-        depths: all_depth.then_some(depths),
-    })
 }
 
 /// Pixels of `mask` every `stride`-th in x and y with a valid depth, unprojected to
@@ -127,109 +78,105 @@ pub fn unproject(
     (xyz, rgb)
 }
 
-/// Run stage 1 (or verify it on disk).
-pub fn run(ctx: &StageCtx, gens: &Generators, views: &Views) -> Result<Stage1> {
-    let StageCtx {
-        config,
-        inputs,
-        dir,
-        on_event,
-    } = *ctx;
-    // The QA-Mask of the original scene and the per-view steps read nothing of each other:
-    // each is attempted before any error stops the stage, so `--only` any one of them
-    // needs only detection (an out-of-scope sibling's "not done" ends the run once the
-    // target is done).
-    let qa_result = recon::weights(ctx, &inputs.scene, &inputs.scene_sha256, "original");
-    let per_view: Vec<Result<StepDone>> = views
-        .plan
-        .independent
-        .par_iter()
-        .map(|name| independent_view(ctx, gens, views, name))
-        // No short circuit: every view runs to its end; the first error in view order is
-        // reported.
-        .collect();
-    let (weights, qa) = qa_result?;
-    let per_view: Vec<StepDone> = per_view.into_iter().collect::<Result<_>>()?;
-    let mut steps: Vec<StepDone> = qa.iter().cloned().collect();
-    steps.extend(per_view.iter().cloned());
-    let propagate = if config.propagation && !views.plan.dependent.is_empty() {
-        let s = propagate(ctx, views, &per_view)?;
-        steps.push(s.clone());
-        Some(s)
-    } else {
-        None
-    };
-    let key = recon::recon_key(
-        config,
-        &config.stage1,
-        qa.as_ref(),
-        serde_json::json!({
-            "scene": inputs.scene_sha256,
-            "views": per_view.iter().map(|s| &s.digest).collect::<Vec<_>>(),
-            "propagate": propagate.as_ref().map(|s| &s.digest),
-        }),
-    );
-    let recon_step = dir.step(&Step::Stage1Recon, key, on_event, |w| {
-        let mut init = inputs.scene.clone();
-        let mut generated = Vec::new();
-        for (name, s) in views.plan.independent.iter().zip(&per_view) {
-            let cam = views.camera(name)?;
-            if s.dir.join("points.ply").is_file() {
-                let pts = load_scene(&s.dir, "points.ply")?;
-                init.append(&pts);
-            }
-            generated.extend(independent_supervision(cam, &s.dir)?);
+impl Run<'_> {
+    /// Stage 1's steps that the scope selects (or verifies), in order, appended to `steps`;
+    /// the stage's results when the scope reaches its reconstruction.
+    pub fn stage1(&self, views: &Views, steps: &mut Vec<StepDone>) -> Result<Option<Stage1>> {
+        let (config, inputs) = (self.config, self.inputs);
+        // The QA-Mask of the original scene and the per-view steps read nothing of each
+        // other: each is attempted before any error stops the stage.
+        let masked = self.wants(&Step::QaMask(Scene::Original)) || self.wants(&Step::Stage1Recon);
+        let qa_result =
+            masked.then(|| self.weights(&inputs.scene, &inputs.scene_sha256, Scene::Original));
+        let per_view: Vec<Result<StepDone>> = views
+            .plan
+            .independent
+            .par_iter()
+            .filter(|name| self.wants(&Step::Independent(stem(name))))
+            .map(|name| self.independent_view(views, name))
+            // No short circuit: every view runs to its end; the first error in view order
+            // is reported.
+            .collect();
+        let qa_result = qa_result.transpose()?;
+        let per_view: Vec<StepDone> = per_view.into_iter().collect::<Result<_>>()?;
+        if let Some((_, qa)) = &qa_result {
+            steps.extend(qa.iter().cloned());
         }
-        if let Some(p) = &propagate {
-            generated.extend(propagated_supervision(views, &p.dir)?);
-        }
-        reconstruct(
-            ctx,
+        steps.extend(per_view.iter().cloned());
+        let propagate = if self.wants(&Step::Propagate) {
+            let s = self.propagate(views, &per_view)?;
+            steps.push(s.clone());
+            Some(s)
+        } else {
+            None
+        };
+        let Some((weights, qa)) = qa_result.filter(|_| self.wants(&Step::Stage1Recon)) else {
+            return Ok(None);
+        };
+        let key = recon::recon_key(
+            config,
             &config.stage1,
-            init,
-            &generated,
-            &weights,
-            None,
-            "stage1",
-            w,
-        )?;
-        Ok(())
-    })?;
-    steps.push(recon_step.clone());
-    Ok(Stage1 {
-        steps,
-        views: per_view,
-        propagate,
-        recon: recon_step,
-    })
-}
+            qa.as_ref(),
+            serde_json::json!({
+                "scene": inputs.scene_sha256,
+                "views": per_view.iter().map(|s| &s.digest).collect::<Vec<_>>(),
+                "propagate": propagate.as_ref().map(|s| &s.digest),
+            }),
+        );
+        let recon_step = self.step(&Step::Stage1Recon, key, |w| {
+            let mut init = inputs.scene.clone();
+            let mut generated = Vec::new();
+            for (name, s) in views.plan.independent.iter().zip(&per_view) {
+                let cam = views.camera(name)?;
+                if s.dir.join("points.ply").is_file() {
+                    let pts = load_scene(&s.dir, "points.ply")?;
+                    init.append(&pts);
+                }
+                generated.extend(independent_supervision(cam, &s.dir)?);
+            }
+            if let Some(p) = &propagate {
+                generated.extend(propagated_supervision(views, &p.dir)?);
+            }
+            self.reconstruct(
+                &config.stage1,
+                init,
+                &generated,
+                &weights,
+                None,
+                Scene::Stage1,
+                w,
+            )?;
+            Ok(())
+        })?;
+        steps.push(recon_step.clone());
+        Ok(Some(Stage1 {
+            views: per_view,
+            propagate,
+            recon: recon_step,
+        }))
+    }
 
-/// The per-view step of an independent view.
-fn independent_view(
-    ctx: &StageCtx,
-    gens: &Generators,
-    views: &Views,
-    name: &str,
-) -> Result<StepDone> {
-    let StageCtx {
-        config,
-        inputs,
-        dir,
-        on_event,
-    } = *ctx;
-    let key = serde_json::json!({
-        "views": views.step.digest,
-        "view": name,
-        "slots": gens.key(config, &[SlotKind::Video, SlotKind::VideoDepth]),
-        "video_sources": config.video_sources,
-        "video_frames": config.video_frames,
-        "align_space": config.align_space,
-        "ransac": [config.ransac_threshold, config.ransac_iterations as f64],
-        "init_stride": config.init_stride,
-        "sh_degree": inputs.scene.sh_degree,
-        "seed": config.seed,
-    });
-    dir.step(&Step::Independent(stem(name)), key, on_event, |w| {
+    /// The per-view step of an independent view.
+    fn independent_view(&self, views: &Views, name: &str) -> Result<StepDone> {
+        let Run {
+            config,
+            inputs,
+            gens,
+            ..
+        } = *self;
+        let key = serde_json::json!({
+            "views": views.step.digest,
+            "view": name,
+            "slots": gens.key(config, &[SlotKind::Video, SlotKind::VideoDepth]),
+            "video_sources": config.video_sources,
+            "video_frames": config.video_frames,
+            "align_space": config.align_space,
+            "ransac": [config.ransac_threshold, config.ransac_iterations as f64],
+            "init_stride": config.init_stride,
+            "sh_degree": inputs.scene.sh_degree,
+            "seed": config.seed,
+        });
+        self.step(&Step::Independent(stem(name)), key, |w| {
         let cam = views.camera(name)?;
         let (wd, ht) = (cam.width as usize, cam.height as usize);
         let (ip, d0) = views.inpainting(name, 0)?;
@@ -320,80 +267,7 @@ fn independent_view(
         )?;
         Ok(())
     })
-}
-
-/// The start of [`align_clip`]'s error when the clip's depth admits no fit (too few valid
-/// pixels, degenerate estimates): a caller with another depth to fall back on matches it.
-const NO_ALIGNMENT: &str = "the clip's video depth admits no alignment";
-
-/// DIBR-based video depth alignment (paper §3.3.1, Eq. 5–6) of one clip from a training
-/// view (`start_depth`: its dense depth at `start_cam`) to a generated view (`end_cam`,
-/// whose current depth `end_depth` is only a hint): video depth of every frame, aligned by
-/// one RANSAC over all frames against the start depth DIBR-warped to every frame. Returns
-/// the aligned metric depth of every frame (the last is the generated view's `D`), the
-/// fit and its space. `view` names the generated view in the RANSAC seed.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn align_clip(
-    config: &PipelineConfig,
-    gens: &Generators,
-    video: &Video,
-    start_depth: &[f32],
-    start_cam: &Camera,
-    end_depth: &[f32],
-    end_cam: &Camera,
-    view: &str,
-) -> Result<(Vec<Vec<f32>>, Alignment, Space)> {
-    // Eq. 5's target: the start frame's depth warped to every frame.
-    let targets: Vec<Vec<f32>> = video
-        .cameras
-        .iter()
-        .map(|c| warp_depth(start_depth, start_cam, c))
-        .collect::<Result<_>>()?;
-    // What the caller knows of each frame, for estimators that extend known depth: the
-    // start frame's warped depth, else the end keyframe's warped there. Only the former
-    // is Eq. 5's target.
-    let known: Vec<Vec<f32>> = video
-        .cameras
-        .iter()
-        .zip(&targets)
-        .map(|(c, t)| {
-            let end = warp_depth(end_depth, end_cam, c)?;
-            Ok(t.iter()
-                .zip(&end)
-                .map(|(&a, &b)| if a > 0.0 { a } else { b })
-                .collect())
-        })
-        .collect::<Result<_>>()?;
-    let hints: Vec<DepthHint> = known
-        .iter()
-        .map(|t| DepthHint {
-            depth: t,
-            mask: None,
-        })
-        .collect();
-    let est = gens.video_depth(video, &hints)?;
-    let space = config.align_space.unwrap_or(est[0].kind.space());
-    let frames: Vec<Frame> = est
-        .iter()
-        .zip(&targets)
-        .map(|(e, t)| Frame {
-            estimate: &e.values,
-            depth: t,
-        })
-        .collect();
-    let a = ransac(
-        &frames,
-        space,
-        &RansacConfig {
-            threshold: config.ransac_threshold,
-            iterations: config.ransac_iterations,
-            seed: stage_seed(config.seed, &format!("ransac:{view}")),
-            ..RansacConfig::default()
-        },
-    )
-    .map_err(|e| Error::degenerate(format!("{NO_ALIGNMENT}: {}", e.message)))?;
-    let depths = est.iter().map(|e| apply_alignment(e, &a, space)).collect();
-    Ok((depths, a, space))
+    }
 }
 
 /// The supervision a stage-1 view step provides: the inpainted view (with `D_I`) and the
@@ -414,82 +288,69 @@ pub fn independent_supervision(cam: &Camera, dir: &Path) -> Result<Vec<Supervisi
     Ok(out)
 }
 
-/// The intermediate frames of a stored clip (the end frames are views already).
-pub fn video_supervision(dir: &Path) -> Result<Vec<Supervision>> {
-    let v = load_video(dir)?;
-    let n = v.frames.len();
-    Ok((1..n.saturating_sub(1))
-        .map(|j| Supervision {
-            camera: v.cameras[j].clone(),
-            image: v.frames[j].clone(),
-            depth: v.depths.as_ref().map(|d| d[j].clone()),
-            coverage: None,
-        })
-        .collect())
-}
-
-/// DIBR propagation of the independent views to the dependent ones.
-fn propagate(ctx: &StageCtx, views: &Views, per_view: &[StepDone]) -> Result<StepDone> {
-    let StageCtx { dir, on_event, .. } = *ctx;
-    let key = serde_json::json!({
-        "views": views.step.digest,
-        "independent": per_view.iter().map(|s| &s.digest).collect::<Vec<_>>(),
-    });
-    dir.step(&Step::Propagate, key, on_event, |w| {
-        let source = |name: &str| -> Result<(&Camera, ImageF32, Vec<f32>)> {
-            let k = views
-                .plan
-                .independent
-                .iter()
-                .position(|n| n == name)
-                .ok_or_else(|| Error::invalid(format!("'{name}' is not independent")))?;
-            let cam = views.camera(name)?;
-            let d = &per_view[k].dir;
-            Ok((
-                cam,
-                load_image(d, "inpaint")?,
-                load_depth(d, "inpaint", cam.width as usize, cam.height as usize)?,
-            ))
-        };
-        for dep in &views.plan.dependent {
-            let to = views.camera(&dep.name)?;
-            let (wd, ht) = (to.width as usize, to.height as usize);
-            let mut image = ImageF32::new(wd, ht, 3, vec![0.0; wd * ht * 3])?;
-            let mut depth = vec![0f32; wd * ht];
-            let mut ends = vec![dep.between[0].as_str()];
-            if dep.between[1] != dep.between[0] {
-                ends.push(dep.between[1].as_str());
-            }
-            for e in ends {
-                let (from, img, d) = source(e)?;
-                let wp = warp(
-                    &img,
-                    &d,
-                    from,
-                    to,
-                    &WarpOptions {
-                        close_cracks: 1,
-                        ..WarpOptions::default()
-                    },
-                )?;
-                #[allow(clippy::needless_range_loop)]
-                for p in 0..wd * ht {
-                    let z = wp.depth[p];
-                    if !wp.holes[p] && z > 0.0 && (depth[p] == 0.0 || z < depth[p]) {
-                        depth[p] = z;
-                        image.data[p * 3..p * 3 + 3]
-                            .copy_from_slice(&wp.image.data[p * 3..p * 3 + 3]);
+impl Run<'_> {
+    /// DIBR propagation of the independent views to the dependent ones.
+    fn propagate(&self, views: &Views, per_view: &[StepDone]) -> Result<StepDone> {
+        let key = serde_json::json!({
+            "views": views.step.digest,
+            "independent": per_view.iter().map(|s| &s.digest).collect::<Vec<_>>(),
+        });
+        self.step(&Step::Propagate, key, |w| {
+            let source = |name: &str| -> Result<(&Camera, ImageF32, Vec<f32>)> {
+                let k = views
+                    .plan
+                    .independent
+                    .iter()
+                    .position(|n| n == name)
+                    .ok_or_else(|| Error::invalid(format!("'{name}' is not independent")))?;
+                let cam = views.camera(name)?;
+                let d = &per_view[k].dir;
+                Ok((
+                    cam,
+                    load_image(d, "inpaint")?,
+                    load_depth(d, "inpaint", cam.width as usize, cam.height as usize)?,
+                ))
+            };
+            for dep in &views.plan.dependent {
+                let to = views.camera(&dep.name)?;
+                let (wd, ht) = (to.width as usize, to.height as usize);
+                let mut image = ImageF32::new(wd, ht, 3, vec![0.0; wd * ht * 3])?;
+                let mut depth = vec![0f32; wd * ht];
+                let mut ends = vec![dep.between[0].as_str()];
+                if dep.between[1] != dep.between[0] {
+                    ends.push(dep.between[1].as_str());
+                }
+                for e in ends {
+                    let (from, img, d) = source(e)?;
+                    let wp = warp(
+                        &img,
+                        &d,
+                        from,
+                        to,
+                        &WarpOptions {
+                            close_cracks: 1,
+                            ..WarpOptions::default()
+                        },
+                    )?;
+                    #[allow(clippy::needless_range_loop)]
+                    for p in 0..wd * ht {
+                        let z = wp.depth[p];
+                        if !wp.holes[p] && z > 0.0 && (depth[p] == 0.0 || z < depth[p]) {
+                            depth[p] = z;
+                            image.data[p * 3..p * 3 + 3]
+                                .copy_from_slice(&wp.image.data[p * 3..p * 3 + 3]);
+                        }
                     }
                 }
+                let covered: Vec<bool> = depth.iter().map(|&z| z > 0.0).collect();
+                let s = stem(&dep.name);
+                save_image(w, &format!("{s}/warped"), &image)?;
+                save_depth(w, &format!("{s}/warped"), &depth, wd, ht)?;
+                save_mask(w, &format!("{s}/covered"), &covered, wd, ht)?;
             }
-            let covered: Vec<bool> = depth.iter().map(|&z| z > 0.0).collect();
-            let s = stem(&dep.name);
-            save_image(w, &format!("{s}/warped"), &image)?;
-            save_depth(w, &format!("{s}/warped"), &depth, wd, ht)?;
-            save_mask(w, &format!("{s}/covered"), &covered, wd, ht)?;
-        }
-        Ok(())
-    })
+            Ok(())
+        })
+    }
 }
 
 /// The propagated views as supervision (weighted by coverage).

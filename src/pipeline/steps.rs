@@ -1,12 +1,35 @@
-//! The steps of a run as one type (SPEC.md §20.8): every step folder of a run directory is a
-//! [`Step`], written and parsed only here (`Display` / `FromStr`), with the [`Stage`] it
-//! belongs to and its place in pipeline order. The runner, `compare`, the audit's step
-//! sharing and report and the batch fan-out read steps from this type, never from string
-//! literals (test `step_names_live_in_steps_rs`).
+//! The steps of a run as one type, and the run as one plan of them (SPEC.md §20.8).
+//!
+//! Every step folder of a run directory is a [`Step`], written and parsed only here
+//! (`Display` / `FromStr`), with the [`Stage`] it belongs to and its place in pipeline
+//! order. [`plan`] lists a run's steps in dependency [`Wave`]s, each step with the steps it
+//! reads; a [`Scope`] (`--only`, `--until`, a batch worker's wave) becomes a [`Selection`]
+//! of that plan: the steps to compute and the steps that must already be done. The runner,
+//! `compare`, the audit's step sharing and report and the batch fan-out read steps from
+//! here, never from string literals (test `step_names_live_in_steps_rs`).
 
+use super::config::{MaskSource, PipelineConfig};
 use crate::error::{Error, Result};
+use std::collections::BTreeSet;
 use std::fmt;
 use std::str::FromStr;
+
+/// A scene of a run: the original and the reconstruction each stage ends with. A QA-Mask
+/// is fine-tuned on a scene; every scene is evaluated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Scene {
+    Original,
+    Stage1,
+    Stage2,
+    Interpolate,
+}
+
+crate::error::text_enum!(Scene, "scene", {
+    Original => "original",
+    Stage1 => "stage1",
+    Stage2 => "stage2",
+    Interpolate => "interpolate",
+});
 
 /// One step of a run, named by its folder under the run directory.
 #[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -18,7 +41,7 @@ pub enum Step {
     /// `stage1/propagate`: DIBR propagation of the independent views.
     Propagate,
     /// `qa/<scene>`: the QA-Mask fine-tuned on a scene (`original`, `stage1`, `stage2`).
-    QaMask(String),
+    QaMask(Scene),
     /// `stage1/recon`: the stage-1 reconstruction.
     Stage1Recon,
     /// `stage2/dependent`: the dependent views.
@@ -34,7 +57,7 @@ pub enum Step {
     /// `eval/masks`: the evaluation masks.
     EvalMasks,
     /// `eval/<scene>`: one scene's evaluation.
-    Eval(String),
+    Eval(Scene),
 }
 
 /// The stages of a run, in order: what the audit reports costs by.
@@ -99,23 +122,25 @@ impl Step {
     }
 
     /// The step's place in pipeline order (ties broken by name): the order `compare`
-    /// lists steps in. The QA-Mask of a scene comes after the step that made the scene.
+    /// lists steps in, every step after the steps it reads (test
+    /// `every_plan_orders_its_steps_for_every_reader`). The QA-Mask of a scene comes after
+    /// the step that made the scene.
     pub fn rank(&self) -> u32 {
         match self {
             Step::Views => 0,
             Step::Independent(_) => 1,
             Step::Propagate => 2,
-            Step::QaMask(s) if s == "original" => 3,
+            Step::QaMask(Scene::Original) => 3,
             Step::Stage1Recon => 4,
             Step::Dependent => 5,
             Step::Videos => 6,
-            Step::QaMask(s) if s == "stage1" => 7,
+            Step::QaMask(Scene::Stage1) => 7,
             Step::Stage2Recon => 8,
             Step::Fixer => 9,
-            Step::QaMask(s) if s == "stage2" => 10,
-            Step::QaMask(_) => 10,
+            Step::QaMask(Scene::Stage2 | Scene::Interpolate) => 10,
             Step::Interpolation => 11,
-            Step::EvalMasks | Step::Eval(_) => 12,
+            Step::EvalMasks => 12,
+            Step::Eval(_) => 13,
         }
     }
 
@@ -159,6 +184,7 @@ impl FromStr for Step {
                 .then(|| rest.to_string())
                 .ok_or_else(bad)
         };
+        let scene = |rest: &str| rest.parse::<Scene>().map_err(|_| bad());
         Ok(match s {
             "views" => Step::Views,
             "stage1/propagate" => Step::Propagate,
@@ -173,12 +199,312 @@ impl FromStr for Step {
                 let (head, rest) = s.split_once('/').ok_or_else(bad)?;
                 match head {
                     "stage1" => Step::Independent(one(rest)?),
-                    "qa" => Step::QaMask(one(rest)?),
-                    "eval" => Step::Eval(one(rest)?),
+                    "qa" => Step::QaMask(scene(rest)?),
+                    "eval" => Step::Eval(scene(rest)?),
                     _ => return Err(bad()),
                 }
             }
         })
+    }
+}
+
+// ------------------------------------------------------------------------------ the plan
+
+/// What detection decided that shapes a run's steps. Before detection, [`Shape::bound`]:
+/// every candidate independent and dependent views present — the most steps the run can
+/// have.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Shape {
+    /// The independent views' file stems, in plan order.
+    pub independent: Vec<String>,
+    /// Whether detection left dependent views (stage 2's `dependent` step and stage 1's
+    /// propagation exist only then).
+    pub dependent: bool,
+    /// Whether evaluation poses were given (the `eval/…` steps).
+    pub evaluation: bool,
+}
+
+impl Shape {
+    /// The largest shape of a run over `candidates` (their file stems).
+    pub fn bound(candidates: Vec<String>, evaluation: bool) -> Shape {
+        Shape {
+            independent: candidates,
+            dependent: true,
+            evaluation,
+        }
+    }
+}
+
+/// A step of a plan and the steps whose output it reads.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Planned {
+    pub step: Step,
+    pub after: Vec<Step>,
+}
+
+/// Steps that read nothing of each other, once every earlier wave is done: a batch engine
+/// runs them at once. In pipeline order.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Wave {
+    pub steps: Vec<Planned>,
+}
+
+/// A run's steps in dependency waves (SPEC.md §20.8). A step's wave is the longest chain of
+/// reads before it in the run's *bound* shape ([`Shape::bound`]: dependent views present),
+/// so the waves are numbered alike before and after detection: a wave that detection
+/// leaves without steps (no dependent views: no propagation, no `stage2/dependent`) is
+/// kept, empty.
+pub fn plan(config: &PipelineConfig, shape: &Shape) -> Vec<Wave> {
+    let bound = Shape {
+        independent: vec![String::new()],
+        dependent: true,
+        evaluation: shape.evaluation,
+    };
+    // Waves of the bound graph, by step kind (every independent view alike).
+    let kind = |s: &Step| match s {
+        Step::Independent(_) => Step::Independent(String::new()),
+        s => s.clone(),
+    };
+    let mut level: std::collections::BTreeMap<Step, usize> = Default::default();
+    for p in graph(config, &bound) {
+        let l = p
+            .after
+            .iter()
+            .map(|a| level[&kind(a)] + 1)
+            .max()
+            .unwrap_or(0);
+        level.insert(p.step, l);
+    }
+    let mut waves = vec![Wave::default(); level.values().max().map_or(0, |m| m + 1)];
+    for p in graph(config, shape) {
+        waves[level[&kind(&p.step)]].steps.push(p);
+    }
+    for w in &mut waves {
+        w.steps
+            .sort_by(|a, b| (a.step.rank(), &a.step).cmp(&(b.step.rank(), &b.step)));
+    }
+    waves
+}
+
+/// Every step of `shape` with the steps it reads, each after everything it reads: the
+/// run's data flow as one table.
+fn graph(config: &PipelineConfig, shape: &Shape) -> Vec<Planned> {
+    let qa = config.mask_source == MaskSource::Qa;
+    let propagate = config.propagation && shape.dependent;
+    let independent: Vec<Step> = shape
+        .independent
+        .iter()
+        .map(|v| Step::Independent(v.clone()))
+        .collect();
+    // The views step and every independent view: what every later step's keyframes read.
+    let detected = || std::iter::once(Step::Views).chain(independent.iter().cloned());
+    let mut g = Vec::new();
+    let mut add = |step: Step, after: Vec<Step>| g.push(Planned { step, after });
+    let when = |c: bool, s: Step| c.then_some(s);
+    add(Step::Views, vec![]);
+    if qa {
+        add(Step::QaMask(Scene::Original), vec![]);
+    }
+    for v in &independent {
+        add(v.clone(), vec![Step::Views]);
+    }
+    if propagate {
+        add(Step::Propagate, detected().collect());
+    }
+    let s1: Vec<Step> = detected()
+        .chain(when(propagate, Step::Propagate))
+        .chain(when(qa, Step::QaMask(Scene::Original)))
+        .collect();
+    add(Step::Stage1Recon, s1);
+    let dependent = when(shape.dependent, Step::Dependent);
+    if shape.dependent {
+        let after = detected()
+            .chain(when(propagate, Step::Propagate))
+            .chain([Step::Stage1Recon])
+            .collect();
+        add(Step::Dependent, after);
+    }
+    add(Step::Videos, detected().chain(dependent.clone()).collect());
+    if qa {
+        add(Step::QaMask(Scene::Stage1), vec![Step::Stage1Recon]);
+    }
+    let s2 = detected()
+        .chain(dependent.clone())
+        .chain([Step::Stage1Recon, Step::Videos])
+        .chain(when(qa, Step::QaMask(Scene::Stage1)))
+        .collect();
+    add(Step::Stage2Recon, s2);
+    if config.interpolation {
+        let fixer = detected()
+            .chain(dependent.clone())
+            .chain([Step::Videos, Step::Stage2Recon])
+            .collect();
+        add(Step::Fixer, fixer);
+        if qa {
+            add(Step::QaMask(Scene::Stage2), vec![Step::Stage2Recon]);
+        }
+        let ip = detected()
+            .chain(dependent.clone())
+            .chain([Step::Videos, Step::Stage2Recon, Step::Fixer])
+            .chain(when(qa, Step::QaMask(Scene::Stage2)))
+            .collect();
+        add(Step::Interpolation, ip);
+    }
+    if shape.evaluation {
+        add(Step::EvalMasks, vec![]);
+        for (scene, made_by) in scenes(config) {
+            add(
+                Step::Eval(scene),
+                std::iter::once(Step::EvalMasks).chain(made_by).collect(),
+            );
+        }
+    }
+    g
+}
+
+/// The scenes a run makes, in order, with the step that makes each (none for the
+/// original): what the evaluation compares.
+pub fn scenes(config: &PipelineConfig) -> Vec<(Scene, Option<Step>)> {
+    let mut s = vec![
+        (Scene::Original, None),
+        (Scene::Stage1, Some(Step::Stage1Recon)),
+        (Scene::Stage2, Some(Step::Stage2Recon)),
+    ];
+    if config.interpolation {
+        s.push((Scene::Interpolate, Some(Step::Interpolation)));
+    }
+    s
+}
+
+/// Which steps a run computes (SPEC.md §20.8).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub enum Scope {
+    /// Every step of the plan.
+    #[default]
+    All,
+    /// One step alone; the steps it reads must be done (a batch engine's worker).
+    Only(Step),
+    /// One step and every step it reads, directly or not.
+    Until(Step),
+    /// Every step that does not read this one, directly or not (the audit's shared steps).
+    Before(Step),
+    /// Waves `first..=last` of the plan ([`plan`]); with `task`, only the `task`-th step
+    /// of each (none where a wave has fewer): a batch engine's array task. The steps they
+    /// read must be done.
+    Waves {
+        first: usize,
+        last: usize,
+        task: Option<usize>,
+    },
+}
+
+/// A [`Scope`] applied to a plan: the steps to compute and the steps that must already be
+/// done (verified on disk or in the step cache, never computed).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Selection {
+    compute: BTreeSet<Step>,
+    verify: BTreeSet<Step>,
+}
+
+impl Selection {
+    /// `scope` over `waves`; a scope naming a step or wave the plan does not have is an
+    /// error naming it.
+    pub fn new(scope: &Scope, waves: &[Wave]) -> Result<Selection> {
+        let planned: Vec<&Planned> = waves.iter().flat_map(|w| &w.steps).collect();
+        let all: BTreeSet<Step> = planned.iter().map(|p| p.step.clone()).collect();
+        let find = |s: &Step| {
+            if all.contains(s) {
+                Ok(s.clone())
+            } else {
+                let names: Vec<String> = planned.iter().map(|p| p.step.to_string()).collect();
+                Err(Error::invalid(format!(
+                    "this run has no step called '{s}' (its steps: {})",
+                    names.join(", ")
+                )))
+            }
+        };
+        // Everything `from` reads, directly or not.
+        let ancestors = |from: &BTreeSet<Step>| {
+            let mut out = BTreeSet::new();
+            for p in planned.iter().rev() {
+                if from.contains(&p.step) || out.contains(&p.step) {
+                    out.extend(p.after.iter().cloned());
+                }
+            }
+            out
+        };
+        let (compute, verify) = match scope {
+            Scope::All => (all.clone(), BTreeSet::new()),
+            Scope::Only(s) => {
+                let one = BTreeSet::from([find(s)?]);
+                let before = ancestors(&one);
+                (one, before)
+            }
+            Scope::Until(s) => {
+                let mut up = BTreeSet::from([find(s)?]);
+                up.extend(ancestors(&up));
+                (up, BTreeSet::new())
+            }
+            Scope::Before(s) => {
+                let mut after = BTreeSet::from([find(s)?]);
+                for p in &planned {
+                    if p.after.iter().any(|a| after.contains(a)) {
+                        after.insert(p.step.clone());
+                    }
+                }
+                (all.difference(&after).cloned().collect(), BTreeSet::new())
+            }
+            &Scope::Waves { first, last, task } => {
+                if first > last || last >= waves.len() {
+                    return Err(Error::invalid(format!(
+                        "this run has waves 0 to {}; there is no wave {first}{}",
+                        waves.len().saturating_sub(1),
+                        if first == last {
+                            String::new()
+                        } else {
+                            format!("-{last}")
+                        }
+                    )));
+                }
+                let chosen: BTreeSet<Step> = waves[first..=last]
+                    .iter()
+                    .flat_map(|w| match task {
+                        None => w.steps.iter().collect::<Vec<_>>(),
+                        Some(t) => w.steps.get(t).into_iter().collect(),
+                    })
+                    .map(|p| p.step.clone())
+                    .collect();
+                let before = ancestors(&chosen).difference(&chosen).cloned().collect();
+                (chosen, before)
+            }
+        };
+        Ok(Selection { compute, verify })
+    }
+
+    /// The step is computed (or reused when its inputs match).
+    pub fn computes(&self, s: &Step) -> bool {
+        self.compute.contains(s)
+    }
+
+    /// The step is computed, or must already be done.
+    pub fn wants(&self, s: &Step) -> bool {
+        self.compute.contains(s) || self.verify.contains(s)
+    }
+
+    /// Some step of `stage` is computed or read.
+    pub fn wants_stage(&self, stage: Stage) -> bool {
+        self.compute
+            .iter()
+            .chain(&self.verify)
+            .any(|s| s.stage() == stage)
+    }
+
+    /// Every step of `waves` is computed.
+    pub fn is_whole(&self, waves: &[Wave]) -> bool {
+        waves
+            .iter()
+            .flat_map(|w| &w.steps)
+            .all(|p| self.compute.contains(&p.step))
     }
 }
 
@@ -193,17 +519,17 @@ mod tests {
             Step::Views,
             Step::Independent("view_07".into()),
             Step::Propagate,
-            Step::QaMask("original".into()),
+            Step::QaMask(Scene::Original),
             Step::Stage1Recon,
             Step::Dependent,
             Step::Videos,
-            Step::QaMask("stage1".into()),
+            Step::QaMask(Scene::Stage1),
             Step::Stage2Recon,
             Step::Fixer,
-            Step::QaMask("stage2".into()),
+            Step::QaMask(Scene::Stage2),
             Step::Interpolation,
             Step::EvalMasks,
-            Step::Eval("stage2".into()),
+            Step::Eval(Scene::Stage2),
         ];
         for s in &all {
             assert_eq!(s.to_string().parse::<Step>().unwrap(), *s);
@@ -214,11 +540,138 @@ mod tests {
             "{all:?}"
         );
         for bad in [
-            "", "stage1", "stage1/", "stage3/x", "qa/a/b", "eval", "view",
+            "",
+            "stage1",
+            "stage1/",
+            "stage3/x",
+            "qa/a/b",
+            "qa/x",
+            "eval/stage9",
+            "eval",
+            "view",
         ] {
             assert!(bad.parse::<Step>().is_err(), "{bad}");
         }
         assert_eq!(Step::Stage1Recon.stage().name(), "stage1");
-        assert_eq!(Step::QaMask("x".into()).stage().name(), "qa-mask");
+        assert_eq!(Step::QaMask(Scene::Stage1).stage().name(), "qa-mask");
+    }
+
+    /// Every configuration switch that adds or removes steps, and both shapes detection
+    /// can leave.
+    fn every_plan() -> Vec<(PipelineConfig, Shape, Vec<Wave>)> {
+        let mut out = Vec::new();
+        for mask_source in MaskSource::ALL {
+            for (propagation, interpolation, evaluation, dependent) in
+                (0..16).map(|b| (b & 1 != 0, b & 2 != 0, b & 4 != 0, b & 8 != 0))
+            {
+                for n in [1, 3] {
+                    let config = PipelineConfig {
+                        mask_source,
+                        propagation,
+                        interpolation,
+                        ..PipelineConfig::preset(super::super::Preset::Quick)
+                    };
+                    let shape = Shape {
+                        independent: (0..n).map(|k| format!("view_{k}")).collect(),
+                        dependent,
+                        evaluation,
+                    };
+                    let waves = plan(&config, &shape);
+                    out.push((config, shape, waves));
+                }
+            }
+        }
+        out
+    }
+
+    /// What a new step must get right to flow through the runner, `compare`, the audit's
+    /// step sharing and the batch fan-out, over every shape of plan: each step once; each
+    /// after the steps it reads — in a later wave (a batch engine runs the waves in order)
+    /// and later in `compare`'s order (the first divergent step is upstream of the rest);
+    /// the waves numbered alike before and after detection; the audit's shared job
+    /// (`Before(stage1/recon)`) selects the steps that do not read the stage-1
+    /// reconstruction; `--until` every step that no other reads is the whole run.
+    #[test]
+    fn every_plan_orders_its_steps_for_every_reader() {
+        for (config, shape, waves) in every_plan() {
+            let at: std::collections::BTreeMap<&Step, usize> = waves
+                .iter()
+                .enumerate()
+                .flat_map(|(k, w)| w.steps.iter().map(move |p| (&p.step, k)))
+                .collect();
+            let n: usize = waves.iter().map(|w| w.steps.len()).sum();
+            assert_eq!(at.len(), n, "a step twice: {waves:?}");
+            for p in waves.iter().flat_map(|w| &w.steps) {
+                for a in &p.after {
+                    assert!(at[a] < at[&p.step], "{a} not before {}", p.step);
+                    let order = |s: &Step| (s.rank(), s.to_string());
+                    assert!(order(a) < order(&p.step), "compare lists {} first", p.step);
+                }
+            }
+            let bound = Shape::bound(shape.independent.clone(), shape.evaluation);
+            assert_eq!(plan(&config, &bound).len(), waves.len(), "{shape:?}");
+            let shared = Selection::new(&Scope::Before(Step::Stage1Recon), &waves).unwrap();
+            let whole = Selection::new(&Scope::All, &waves).unwrap();
+            for p in waves.iter().flat_map(|w| &w.steps) {
+                let reads_recon = {
+                    let mut up = BTreeSet::from([p.step.clone()]);
+                    for q in waves.iter().flat_map(|w| &w.steps).rev() {
+                        if up.contains(&q.step) {
+                            up.extend(q.after.iter().cloned());
+                        }
+                    }
+                    up.contains(&Step::Stage1Recon)
+                };
+                assert_eq!(shared.computes(&p.step), !reads_recon, "{}", p.step);
+                assert!(whole.computes(&p.step));
+            }
+            // `--until` each step no other reads: together, the whole run.
+            let steps: Vec<&Planned> = waves.iter().flat_map(|w| &w.steps).collect();
+            let mut until = Selection::default();
+            for p in &steps {
+                if !steps.iter().any(|q| q.after.contains(&p.step)) {
+                    let s = Selection::new(&Scope::Until(p.step.clone()), &waves).unwrap();
+                    until.compute.extend(s.compute);
+                }
+            }
+            assert!(until.is_whole(&waves), "{shape:?}");
+        }
+    }
+
+    /// A scope names a step or wave of the plan, or is an error naming it; `--only` and a
+    /// wave's task compute their steps alone and verify what those read.
+    #[test]
+    fn scopes_select_from_the_plan() {
+        let config = PipelineConfig::preset(super::super::Preset::Quick);
+        let shape = Shape::bound(vec!["a".into(), "b".into()], true);
+        let waves = plan(&config, &shape);
+        let only = Selection::new(&Scope::Only(Step::Independent("b".into())), &waves).unwrap();
+        assert!(only.computes(&Step::Independent("b".into())));
+        assert!(!only.computes(&Step::Views) && only.wants(&Step::Views));
+        assert!(!only.wants(&Step::Independent("a".into())));
+        let task = Scope::Waves {
+            first: 1,
+            last: 1,
+            task: Some(1),
+        };
+        assert_eq!(Selection::new(&task, &waves).unwrap(), only);
+        let past = Scope::Waves {
+            first: 1,
+            last: 1,
+            task: Some(9),
+        };
+        assert!(Selection::new(&past, &waves).unwrap().compute.is_empty());
+        for bad in [
+            Scope::Only(Step::Independent("c".into())),
+            Scope::Until(Step::QaMask(Scene::Interpolate)),
+            Scope::Waves {
+                first: 0,
+                last: waves.len(),
+                task: None,
+            },
+        ] {
+            let e = Selection::new(&bad, &waves).unwrap_err().to_string();
+            assert!(e.contains("no step called") || e.contains("no wave"), "{e}");
+        }
     }
 }

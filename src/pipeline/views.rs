@@ -19,11 +19,12 @@
 use super::artifacts::{
     load_depth, load_image, load_mask, read_json, save_depth, save_image, save_mask, stem,
 };
+use super::depth::{MIN_ALIGN_PIXELS, apply_alignment, render_rgba, training_depth, warp_depth};
 use super::generators::{Generators, SlotKind};
 use super::poses::{nearest_training, same_pose};
 use super::rundir::{StepDone, StepWriter};
 use super::steps::Step;
-use super::{Event, Inputs, StageCtx};
+use super::{Event, Inputs, Run};
 use crate::camera::Camera;
 use crate::camera::inria::{cameras_json_string, read_cameras_json};
 use crate::collide::frustum::{Outline, Polyhedron, depth_range, mean_range, write_obj};
@@ -31,16 +32,11 @@ use crate::collide::independent::{closed_tour, select_regions};
 use crate::error::{Error, Result};
 use crate::io::image::ImageF32;
 use crate::io::write_text;
+use crate::models::DepthHint;
 use crate::models::morph::interpolate_camera;
-use crate::models::{DepthHint, DepthMap};
-use crate::raster::{Outputs, RenderOptions, render};
 use crate::warp::align::{Alignment, Frame, Space, least_squares};
-use crate::warp::dibr::{WarpOptions, warp};
 use glam::DVec3;
 use std::collections::BTreeMap;
-
-/// Fewest known-depth pixels a candidate must share with its reference training view.
-pub const MIN_ALIGN_PIXELS: usize = 16;
 
 /// One candidate's record.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -90,26 +86,6 @@ pub struct Plan {
     pub trajectory: Vec<String>,
     #[serde(skip)]
     pub gap_cameras: Vec<GapCamera>,
-}
-
-/// The per-view stage-1 steps of the run `out` (`stage1/<view>` for each independent view
-/// of its finished views step, in plan order): what a batch engine fans out after
-/// `--until views` (SPEC.md §20.8).
-pub fn stage1_steps(out: &std::path::Path) -> Result<Vec<Step>> {
-    let path = Step::Views.dir(out).join("plan.json");
-    if !path.is_file() {
-        return Err(Error::invalid(format!(
-            "the views step is not done here (run with --until {} first)",
-            Step::Views
-        ))
-        .at(out));
-    }
-    let plan: Plan = read_json(&path)?;
-    Ok(plan
-        .independent
-        .iter()
-        .map(|n| Step::Independent(super::stem(n)))
-        .collect())
 }
 
 /// A candidate left out of detection, and why (SPEC.md §20.2).
@@ -162,155 +138,46 @@ impl Views {
     }
 }
 
-/// Aligned metric depth from an estimate: `s·R + t`, or its inverse in disparity space;
-/// non-positive or non-finite results are 0 (unknown).
-pub fn apply_alignment(est: &DepthMap, a: &Alignment, space: Space) -> Vec<f32> {
-    est.values
-        .iter()
-        .map(|&r| {
-            let m = a.scale * r as f64 + a.offset;
-            let d = match space {
-                Space::Depth => m,
-                Space::Disparity => 1.0 / m,
-            };
-            if d.is_finite() && d > 0.0 {
-                d as f32
-            } else {
-                0.0
+impl Run<'_> {
+    /// Run detection (or verify it on disk).
+    pub fn views(&self) -> Result<Views> {
+        let Run {
+            config,
+            inputs,
+            on_event,
+            gens,
+            ..
+        } = *self;
+        let key = serde_json::json!({
+            "scene": inputs.scene_sha256,
+            "candidates": inputs.candidates_sha256,
+            "slots": gens.key(config, &[SlotKind::Inpaint, SlotKind::Depth]),
+            "coverage_alpha": config.coverage_alpha,
+            "inpaintings": config.inpaintings,
+            "align_space": config.align_space,
+            "independent_detection": config.independent_detection,
+
+        });
+        let step = self.step(&Step::Views, key, |w| {
+            let mut found = Found::default();
+            for index in 0..inputs.candidates.len() {
+                let (record, verdict) = assess(self, index, w)?;
+                found.add(index, record, verdict);
             }
-        })
-        .collect()
-}
-
-/// The metric depth of a training view: the dataset's, else the scene's expected depth.
-pub fn training_depth(inputs: &Inputs, vi: usize) -> Result<Vec<f32>> {
-    let v = &inputs.data.views[vi];
-    if let Some(d) = &v.depth {
-        return Ok(d.clone());
-    }
-    let r = render(
-        &inputs.scene,
-        &v.camera,
-        &RenderOptions {
-            background: inputs.background,
-            outputs: Outputs {
-                rgb: false,
-                alpha: true,
-                expected_depth: true,
-                ..Outputs::default()
-            },
-            ..RenderOptions::default()
-        },
-    )?;
-    let a = r.alpha.expect("alpha");
-    Ok(r.expected_depth
-        .expect("expected depth")
-        .iter()
-        .zip(&a)
-        .map(|(&d, &al)| if al > 0.5 { d } else { 0.0 })
-        .collect())
-}
-
-/// Warp a metric depth map from one camera to another (nearest, crack closing 1).
-pub fn warp_depth(depth: &[f32], from: &Camera, to: &Camera) -> Result<Vec<f32>> {
-    let img = ImageF32::new(from.width as usize, from.height as usize, 1, depth.to_vec())?;
-    let w = warp(
-        &img,
-        depth,
-        from,
-        to,
-        &WarpOptions {
-            close_cracks: 1,
-            ..WarpOptions::default()
-        },
-    )?;
-    Ok(w.depth)
-}
-
-/// Render RGB alone (what the fixer reads): the same RGB bits as [`render_rgba`] without
-/// the depth accumulation (`raster::plan`'s skips are exact).
-pub fn render_rgb(
-    scene: &crate::gaussian::Gaussians,
-    cam: &Camera,
-    background: [f32; 3],
-) -> Result<ImageF32> {
-    let r = render(
-        scene,
-        cam,
-        &RenderOptions {
-            background,
-            outputs: Outputs::RGB,
-            ..RenderOptions::default()
-        },
-    )?;
-    ImageF32::new(r.width, r.height, 3, r.rgb.expect("rgb"))
-}
-
-/// Render RGB, alpha and expected depth.
-pub fn render_rgba(
-    scene: &crate::gaussian::Gaussians,
-    cam: &Camera,
-    background: [f32; 3],
-) -> Result<(ImageF32, Vec<f32>, Vec<f32>)> {
-    let r = render(
-        scene,
-        cam,
-        &RenderOptions {
-            background,
-            outputs: Outputs {
-                rgb: true,
-                alpha: true,
-                expected_depth: true,
-                ..Outputs::default()
-            },
-            ..RenderOptions::default()
-        },
-    )?;
-    let (w, h) = (r.width, r.height);
-    Ok((
-        ImageF32::new(w, h, 3, r.rgb.expect("rgb"))?,
-        r.alpha.expect("alpha"),
-        r.expected_depth.expect("expected depth"),
-    ))
-}
-
-/// Run detection (or verify it on disk).
-pub fn run(ctx: &StageCtx, gens: &Generators) -> Result<Views> {
-    let StageCtx {
-        config,
-        inputs,
-        dir,
-        on_event,
-    } = *ctx;
-    let key = serde_json::json!({
-        "scene": inputs.scene_sha256,
-        "candidates": inputs.candidates_sha256,
-        "slots": gens.key(config, &[SlotKind::Inpaint, SlotKind::Depth]),
-        "coverage_alpha": config.coverage_alpha,
-        "inpaintings": config.inpaintings,
-        "align_space": config.align_space,
-        "independent_detection": config.independent_detection,
-
-    });
-    let step = dir.step(&Step::Views, key, on_event, |w| {
-        let mut found = Found::default();
-        for index in 0..inputs.candidates.len() {
-            let (record, verdict) = assess(ctx, gens, index, w)?;
-            found.add(index, record, verdict);
+            if found.active.is_empty() {
+                return Err(found.nothing_to_extrapolate(inputs.candidates.len()));
+            }
+            write_plan(self, found, w)
+        })?;
+        let views = load(step)?;
+        for a in &views.plan.set_aside {
+            on_event(Event::Note(format!(
+                "warning: candidate '{}' is set aside: {}",
+                a.name, a.reason
+            )));
         }
-        if found.active.is_empty() {
-            return Err(found.nothing_to_extrapolate(inputs.candidates.len()));
-        }
-        write_plan(ctx, gens, found, w)
-    })?;
-    let views = load(step)?;
-    for a in &views.plan.set_aside {
-        on_event(Event::Note(format!(
-            "warning: candidate '{}' is set aside: {}",
-            a.name, a.reason
-        )));
+        Ok(views)
     }
-    Ok(views)
 }
 
 /// What detection concludes of one candidate.
@@ -382,13 +249,13 @@ impl Found {
 /// Candidate `index`: a repeat of a training view or an earlier candidate, covered
 /// by the scene, set aside, or active with its inpaintings' aligned depths (steps 1–3 of
 /// the module's list; the renders, masks, inpaintings and depths written to `w`).
-fn assess(
-    ctx: &StageCtx,
-    gens: &Generators,
-    index: usize,
-    w: &mut StepWriter,
-) -> Result<(Candidate, Verdict)> {
-    let StageCtx { config, inputs, .. } = *ctx;
+fn assess(run: &Run, index: usize, w: &mut StepWriter) -> Result<(Candidate, Verdict)> {
+    let Run {
+        config,
+        inputs,
+        gens,
+        ..
+    } = *run;
     let camera = &inputs.candidates[index];
     let s = stem(&camera.name);
     let (width, height) = (camera.width as usize, camera.height as usize);
@@ -550,8 +417,13 @@ fn reference_depth<'i>(
 /// Step 4 of the module's list on the active candidates of `found`: the collision graph,
 /// the independent set and its tour, the dependent views and the gap cameras; writes
 /// `plan.json`, `cameras.json` and the frustum pictures.
-fn write_plan(ctx: &StageCtx, gens: &Generators, found: Found, w: &mut StepWriter) -> Result<()> {
-    let StageCtx { config, inputs, .. } = *ctx;
+fn write_plan(run: &Run, found: Found, w: &mut StepWriter) -> Result<()> {
+    let Run {
+        config,
+        inputs,
+        gens,
+        ..
+    } = *run;
     let active = &found.active;
     let name = |i: usize| inputs.candidates[active[i]].name.clone();
     let cams: Vec<&Camera> = active.iter().map(|&i| &inputs.candidates[i]).collect();

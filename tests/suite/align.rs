@@ -277,7 +277,7 @@ fn relative_truth_depth_is_undone_by_alignment_to_the_seeded_map() {
             "seed {seed}: fitted {a:?}, seeded s {s} t {o}"
         );
         far_from_identity += usize::from((a.scale - 1.0).abs() > 0.2);
-        let aligned = unseen::pipeline::views::apply_alignment(&est, &a, est.kind.space());
+        let aligned = unseen::pipeline::depth::apply_alignment(&est, &a, est.kind.space());
         for (&x, &d) in aligned.iter().zip(&t.depth) {
             if d > 0.0 {
                 assert!((x / d - 1.0).abs() < 1e-5, "seed {seed}: {x} for {d}");

@@ -224,11 +224,12 @@ fn the_estimate_lists_every_wave_and_uses_what_the_audit_measured() {
     );
 }
 
-/// `extrapolate --emit-slurm`: three waves (the views, a stage-1 array over the
-/// candidates, the rest), valid shell; `--stage1-steps` lists the per-view steps once the
-/// views step is done, and before it is a clear error.
+/// `extrapolate --emit-slurm`: one job array per wave of the plan that fans out (the
+/// stage-1 array over every candidate), the waves between them as one job, the whole run
+/// last; valid shell; `--plan` lists the largest plan before detection and what
+/// detection found after it.
 #[test]
-fn extrapolate_emits_its_per_view_fan_out_and_lists_its_stage1_steps() {
+fn extrapolate_emits_the_waves_of_its_plan_and_lists_them() {
     let t = TempDir::new("cluster-extrapolate");
     let run = super::pipeline::tiny_run(t.path());
     let cfg = super::pipeline::tiny_config_file(t.path());
@@ -250,33 +251,69 @@ fn extrapolate_emits_its_per_view_fan_out_and_lists_its_stage1_steps() {
     let printed = ok(&ex(&["--emit-slurm".as_ref(), sub.as_os_str()]));
     assert!(printed.contains("stage1: 12 tasks"), "{printed}");
     assert!(!out.exists(), "--emit-slurm ran something");
-    for (stem, n) in [
-        ("wave-1-views", 1),
-        ("wave-2-stage1", 12),
-        ("wave-3-finish", 1),
-    ] {
-        let s = std::fs::read_to_string(sub.join(format!("{stem}.sbatch"))).unwrap();
-        assert!(s.contains(&format!("#SBATCH --array=0-{}\n", n - 1)), "{s}");
-        assert!(s.contains("pipeline-config.json"), "{s}");
-        if let Ok(st) = Command::new("bash")
-            .arg("-n")
-            .arg(sub.join(format!("{stem}.sbatch")))
-            .status()
-        {
-            assert!(st.success(), "{stem} is not valid shell");
+    let mut sbatch: Vec<String> = std::fs::read_dir(&sub)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".sbatch"))
+        .collect();
+    sbatch.sort();
+    assert_eq!(
+        sbatch.first().map(String::as_str),
+        Some("wave-1-views.sbatch")
+    );
+    assert!(
+        sbatch.last().unwrap().ends_with("-finish.sbatch"),
+        "{sbatch:?}"
+    );
+    for name in &sbatch {
+        let s = std::fs::read_to_string(sub.join(name)).unwrap();
+        assert!(
+            s.contains("pipeline-config.json") && s.contains("--resume"),
+            "{s}"
+        );
+        if name == "wave-2-stage1.sbatch" {
+            assert!(s.contains("#SBATCH --array=0-11\n"), "{s}");
+            assert!(
+                s.contains("--wave 1 --task \"$SLURM_ARRAY_TASK_ID\""),
+                "{s}"
+            );
+        }
+        if name.ends_with("-finish.sbatch") {
+            assert!(!s.contains("--wave"), "the last job is the whole run: {s}");
+        }
+        if let Ok(st) = Command::new("bash").arg("-n").arg(sub.join(name)).status() {
+            assert!(st.success(), "{name} is not valid shell");
         }
     }
-    let o = ex(&["--stage1-steps".as_ref()]);
-    let err = String::from_utf8_lossy(&o.stderr);
     assert!(
-        !o.status.success() && err.contains("the views step is not done here"),
-        "{err}"
+        sbatch.contains(&"wave-2-stage1.sbatch".to_string()),
+        "{sbatch:?}"
     );
+    // Before detection: every candidate in wave 1.
+    let independent = |plan: &str| {
+        let wave1 = plan.lines().find(|l| l.starts_with("wave 1: ")).unwrap();
+        wave1
+            .split(' ')
+            .filter(|s| s.starts_with("stage1/"))
+            .count()
+    };
+    assert_eq!(independent(&ok(&ex(&["--plan".as_ref()]))), 12);
     ok(&ex(&["--until".as_ref(), "views".as_ref()]));
-    let steps = ok(&ex(&["--stage1-steps".as_ref()]));
     let plan: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("views/plan.json")).unwrap()).unwrap();
     let n = plan["independent"].as_array().unwrap().len();
-    assert!(n > 0 && steps.lines().count() == n, "{steps}");
-    assert!(steps.lines().all(|l| l.starts_with("stage1/")), "{steps}");
+    let listed = ok(&ex(&["--plan".as_ref()]));
+    assert!(n > 0 && independent(&listed) == n, "{listed}");
+    // One task of the stage-1 array past the independent views has nothing to do.
+    let o = ok(&ex(&[
+        "--wave".as_ref(),
+        "1".as_ref(),
+        "--task".as_ref(),
+        "11".as_ref(),
+    ]));
+    assert!(o.contains("done: the requested steps"), "{o}");
+    assert!(
+        !out.join("stage1").exists(),
+        "a task past the wave computed a step"
+    );
 }

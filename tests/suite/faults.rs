@@ -718,14 +718,17 @@ fn an_only_worker_never_replaces_a_sibling_folder_from_the_cache() {
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     };
     scoped(&["--until", "views"]);
-    let steps = Command::new(env!("CARGO_BIN_EXE_unseen"))
+    let plan = Command::new(env!("CARGO_BIN_EXE_unseen"))
         .args(with_cache(&run, &cfg, &out, &cache))
-        .arg("--stage1-steps")
+        .arg("--plan")
         .output()
         .unwrap();
-    let steps: Vec<String> = String::from_utf8_lossy(&steps.stdout)
+    // The independent views' steps: wave 1 of the plan detection found.
+    let steps: Vec<String> = String::from_utf8_lossy(&plan.stdout)
         .lines()
-        .map(String::from)
+        .filter_map(|l| l.strip_prefix("wave 1: "))
+        .flat_map(|l| l.split(' ').map(String::from).collect::<Vec<_>>())
+        .filter(|s| s.starts_with("stage1/"))
         .collect();
     assert!(steps.len() >= 2, "{steps:?}");
     // Another worker is writing the first view's step.

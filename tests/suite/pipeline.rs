@@ -418,7 +418,7 @@ fn bad_pipeline_input_is_one_clear_error() {
 /// a job whose inputs are not done is a clear error.
 #[test]
 fn per_view_jobs_then_resume_equal_one_run() {
-    use unseen::pipeline::steps::Step;
+    use unseen::pipeline::steps::{Scene, Step};
     use unseen::pipeline::{RunOptions, Scope};
     let run_scoped = |cfg, inp, out: &Path, resume, scope, on_event: &(dyn Fn(Event) + Sync)| {
         let opts = RunOptions {
@@ -454,12 +454,16 @@ fn per_view_jobs_then_resume_equal_one_run() {
         &inp,
         &typo,
         false,
-        Scope::Until(Step::Eval("stage9".into())),
+        Scope::Until(Step::Eval(Scene::Interpolate)),
         &quiet,
     )
     .unwrap_err()
     .to_string();
-    assert!(e.contains("no step called 'eval/stage9'"), "{e}");
+    assert!(e.contains("no step called 'eval/interpolate'"), "{e}");
+    assert!(
+        !typo.exists(),
+        "a scope the plan does not have writes nothing"
+    );
     let e = "stage9".parse::<Step>().unwrap_err().to_string();
     assert!(e.contains("'stage9' is not a step of a run"), "{e}");
     let plan: serde_json::Value =
@@ -483,7 +487,7 @@ fn per_view_jobs_then_resume_equal_one_run() {
     .unwrap_err()
     .to_string();
     assert!(
-        e.contains("is not done") && e.contains("--only stage1/recon"),
+        e.contains("is not done") && e.contains("run up to it first with --until"),
         "{e}"
     );
     // One job per independent view, last first (order does not matter).
