@@ -595,6 +595,7 @@ pub fn run_audit(a: &AuditArgs) -> Result<()> {
         return emit_audit(&cfg, a, preset, sub);
     }
     let draw = super::progress::drawer();
+    let run = audit::Audit::new(&cfg, &a.dataset, &a.out).with_events(&draw);
     if let Some(only) = &a.only {
         let waves = cluster::waves(&cfg);
         let job = waves
@@ -603,7 +604,7 @@ pub fn run_audit(a: &AuditArgs) -> Result<()> {
             .find(|j| &j.name() == only)
             .ok_or_else(|| Error::invalid(format!("no job '{only}' in this audit (see --list)")))?;
         unseen::sys::with_threads(a.threads, || {
-            cluster::run_job_with_receipt(&cfg, &a.dataset, &a.out, job, a.log.as_deref(), &draw)
+            run.run_job_with_receipt(job, a.log.as_deref())
         })??;
         println!("done: {only}");
         return Ok(());
@@ -614,7 +615,7 @@ pub fn run_audit(a: &AuditArgs) -> Result<()> {
                 .as_ref()
                 .and_then(|s| cluster::log_in_submission(&cfg, s, j))
         };
-        match cluster::collect(&cfg, &a.dataset, &a.out, &a.merge, &log_of)? {
+        match run.collect(&a.merge, &log_of)? {
             Ok(r) => r,
             Err(missing) => {
                 for m in &missing {
@@ -634,11 +635,9 @@ pub fn run_audit(a: &AuditArgs) -> Result<()> {
             }
         }
     } else if a.report_only {
-        audit::report(&cfg, &a.dataset, &a.out, &a.merge)?
+        run.report(&a.merge)?
     } else {
-        unseen::sys::with_threads(a.threads, || {
-            audit::run(&cfg, &a.dataset, &a.out, &a.merge, &draw)
-        })??
+        unseen::sys::with_threads(a.threads, || run.run(&a.merge))??
     };
     for v in &report.verdicts {
         println!(
@@ -652,7 +651,6 @@ pub fn run_audit(a: &AuditArgs) -> Result<()> {
 
 /// `--list [--estimate]`: the jobs wave by wave.
 fn list_audit(cfg: &unseen::audit::AuditConfig, a: &AuditArgs) -> Result<()> {
-    use unseen::audit::cluster;
     if !a.estimate {
         for j in unseen::audit::jobs(cfg) {
             println!("{}", j.name());
@@ -661,7 +659,7 @@ fn list_audit(cfg: &unseen::audit::AuditConfig, a: &AuditArgs) -> Result<()> {
     }
     let gb = |b: f64| b / 1e9;
     let (mut cpu_hours, mut jobs) = (0.0, 0);
-    for (wave, costs) in cluster::estimate(cfg, &a.dataset, &a.out)? {
+    for (wave, costs) in unseen::audit::Audit::new(cfg, &a.dataset, &a.out).estimate()? {
         let hours: f64 = costs.iter().map(|c| c.seconds).sum::<f64>() * 2.0 / 3600.0;
         let peak = costs.iter().map(|c| c.peak_rss_bytes).fold(0.0, f64::max);
         let longest = costs.iter().map(|c| c.seconds).fold(0.0, f64::max);
@@ -697,7 +695,6 @@ fn emit_audit(
     preset: Preset,
     sub: &Path,
 ) -> Result<()> {
-    use unseen::audit::cluster;
     let abs = |p: &Path| std::path::absolute(p).map_err(|e| Error::io(p, e));
     let sub = abs(sub)?;
     unseen::io::create_dir_all(&sub)?;
@@ -739,7 +736,8 @@ fn emit_audit(
         command.extend(["--merge".into(), show(abs(m)?)]);
     }
     let opts = a.slurm.options();
-    let waves = cluster::emit_slurm(cfg, &a.dataset, &a.out, &command, &sub, &opts)?;
+    let waves =
+        unseen::audit::Audit::new(cfg, &a.dataset, &a.out).emit_slurm(&command, &sub, &opts)?;
     for (w, r) in &waves {
         println!(
             "{}: {} jobs, --cpus-per-task={} --mem={}M --time={} min",

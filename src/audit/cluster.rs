@@ -7,19 +7,20 @@
 //! (`unseen audit … --collect`) reads the receipts and the run jobs' `audit_job.json`,
 //! computes nothing, and writes the same report a sequential `unseen audit` writes.
 
-use super::AuditConfig;
-use super::jobs::{Job, JobResult, check_inputs, jobs, original_done, require_original, run_job};
-use super::report::{Report, finish, gather};
+use super::jobs::SHARED_BEFORE;
+use super::jobs::{Job, JobResult, jobs};
+use super::report::Report;
+use super::{Audit, AuditConfig, Variant};
 use crate::batch::cost::{
     BASE_BYTES, ORIGINAL_BYTES_PER_PIXEL, ORIGINAL_SECONDS_PER_ITERATION_PIXEL,
-    PIPELINE_BYTES_PER_PIXEL, PIPELINE_SECONDS_PER_ITERATION_PIXEL, pipeline_work,
+    PIPELINE_BYTES_PER_PIXEL, PIPELINE_SECONDS_PER_ITERATION_PIXEL, pipeline_work, scoped_work,
 };
 use crate::batch::{
     ArrayWave, Cost, Request, SlurmOptions, least_request, request, shell_quote, write_submission,
 };
 use crate::error::{Error, Result};
 use crate::io::{sha256_hex, write_text};
-use crate::pipeline::Event;
+use crate::pipeline::Scope;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -118,61 +119,57 @@ pub fn receipt_path(dir: &Path, job: &Job) -> PathBuf {
 /// (SPEC.md §21.1); so is a job that fails before it wrote anything into a `dir` that did
 /// not exist (bad input found by the job itself: nothing written, SPEC.md §11), which the
 /// merge then names as without receipt.
-pub fn run_job_with_receipt(
-    cfg: &AuditConfig,
-    dataset: &Path,
-    dir: &Path,
-    job: &Job,
-    log: Option<&Path>,
-    on_event: &(dyn Fn(Event) + Sync),
-) -> Result<Option<JobResult>> {
-    let path = receipt_path(dir, job);
-    if path.exists() {
-        std::fs::remove_file(&path).map_err(|e| Error::io(&path, e))?;
+impl Audit<'_> {
+    pub fn run_job_with_receipt(&self, job: &Job, log: Option<&Path>) -> Result<Option<JobResult>> {
+        let dir = self.dir;
+        let path = receipt_path(dir, job);
+        if path.exists() {
+            std::fs::remove_file(&path).map_err(|e| Error::io(&path, e))?;
+        }
+        self.cfg.validate()?;
+        self.check_inputs()?;
+        if let Job::Run { seed, .. } | Job::Shared { seed, .. } = *job {
+            self.require_original(job, seed)?;
+        }
+        let existed = dir.exists();
+        let started = std::time::SystemTime::now();
+        let t0 = std::time::Instant::now();
+        let outcome = self.run_job(job);
+        if outcome.is_err() && !existed && !dir.exists() {
+            return outcome;
+        }
+        let digests = match &outcome {
+            Ok(_) => job_digests(dir, job)?,
+            Err(_) => BTreeMap::new(),
+        };
+        let env = |k: &str| std::env::var(k).ok().filter(|v| !v.is_empty());
+        let batch_job = match (env("SLURM_ARRAY_JOB_ID"), env("SLURM_ARRAY_TASK_ID")) {
+            (Some(a), Some(t)) => Some(format!("{a}_{t}")),
+            _ => env("SLURM_JOB_ID"),
+        };
+        let receipt = Receipt {
+            format: RECEIPT_FORMAT.into(),
+            job: job.name(),
+            host: crate::io::host_name(),
+            pid: std::process::id(),
+            batch_job,
+            log: log.map(|p| p.display().to_string()),
+            started: utc(started),
+            finished: utc(std::time::SystemTime::now()),
+            seconds: t0.elapsed().as_secs_f64(),
+            exit: i32::from(outcome.is_err()),
+            error: outcome.as_ref().err().map(|e| e.to_string()),
+            crate_version: env!("CARGO_PKG_VERSION").into(),
+            numerics_revision: crate::version::NUMERICS_REVISION,
+            digests,
+        };
+        let text = serde_json::to_string_pretty(&receipt).expect("serializes") + "\n";
+        let written = crate::io::create_dir_all(&dir.join("receipts"))
+            .and_then(|()| write_text(&path, &text));
+        let result = outcome?;
+        written?;
+        Ok(result)
     }
-    cfg.validate()?;
-    check_inputs(dataset, dir)?;
-    if let Job::Run { seed, .. } | Job::Shared { seed, .. } = *job {
-        require_original(cfg, dataset, dir, job, seed)?;
-    }
-    let existed = dir.exists();
-    let started = std::time::SystemTime::now();
-    let t0 = std::time::Instant::now();
-    let outcome = run_job(cfg, dataset, dir, job, on_event);
-    if outcome.is_err() && !existed && !dir.exists() {
-        return outcome;
-    }
-    let digests = match &outcome {
-        Ok(_) => job_digests(dir, job)?,
-        Err(_) => BTreeMap::new(),
-    };
-    let env = |k: &str| std::env::var(k).ok().filter(|v| !v.is_empty());
-    let batch_job = match (env("SLURM_ARRAY_JOB_ID"), env("SLURM_ARRAY_TASK_ID")) {
-        (Some(a), Some(t)) => Some(format!("{a}_{t}")),
-        _ => env("SLURM_JOB_ID"),
-    };
-    let receipt = Receipt {
-        format: RECEIPT_FORMAT.into(),
-        job: job.name(),
-        host: crate::io::host_name(),
-        pid: std::process::id(),
-        batch_job,
-        log: log.map(|p| p.display().to_string()),
-        started: utc(started),
-        finished: utc(std::time::SystemTime::now()),
-        seconds: t0.elapsed().as_secs_f64(),
-        exit: i32::from(outcome.is_err()),
-        error: outcome.as_ref().err().map(|e| e.to_string()),
-        crate_version: env!("CARGO_PKG_VERSION").into(),
-        numerics_revision: crate::version::NUMERICS_REVISION,
-        digests,
-    };
-    let text = serde_json::to_string_pretty(&receipt).expect("serializes") + "\n";
-    let written =
-        crate::io::create_dir_all(&dir.join("receipts")).and_then(|()| write_text(&path, &text));
-    let result = outcome?;
-    written?;
-    Ok(result)
 }
 
 /// What a finished job leaves, with its sha256 ([`Receipt::digests`]): an original's
@@ -236,119 +233,115 @@ pub struct Missing {
 /// computed) and reported as [`super::run`] reports them. `log_of` names a job's log for
 /// jobs without a receipt (a receipt names its own). `Ok(Err(missing))`: what is missing
 /// or failed, in wave order; nothing is written then.
-pub fn collect(
-    cfg: &AuditConfig,
-    dataset: &Path,
-    dir: &Path,
-    merge: &[PathBuf],
-    log_of: &dyn Fn(&Job) -> Option<String>,
-) -> Result<std::result::Result<Report, Vec<Missing>>> {
-    cfg.validate()?;
-    check_inputs(dataset, dir)?;
-    let pool = gather(cfg, dataset, dir, merge)?;
-    let mut missing = Vec::new();
-    let mut results = Vec::new();
-    for job in waves(cfg).into_iter().flat_map(|w| w.jobs) {
-        match take(cfg, dataset, dir, &job) {
-            Ok(Some(r)) => results.push(r),
-            Ok(None) => {}
-            Err((why, log)) => missing.push(Missing {
-                job: job.name(),
-                why,
-                log: log.or_else(|| log_of(&job)),
-            }),
+impl Audit<'_> {
+    pub fn collect(
+        &self,
+        merge: &[PathBuf],
+        log_of: &dyn Fn(&Job) -> Option<String>,
+    ) -> Result<std::result::Result<Report, Vec<Missing>>> {
+        self.cfg.validate()?;
+        self.check_inputs()?;
+        let pool = self.gather(merge)?;
+        let mut missing = Vec::new();
+        let mut results = Vec::new();
+        for job in waves(self.cfg).into_iter().flat_map(|w| w.jobs) {
+            match self.take(&job) {
+                Ok(Some(r)) => results.push(r),
+                Ok(None) => {}
+                Err((why, log)) => missing.push(Missing {
+                    job: job.name(),
+                    why,
+                    log: log.or_else(|| log_of(&job)),
+                }),
+            }
         }
+        if !missing.is_empty() {
+            return Ok(Err(missing));
+        }
+        Ok(Ok(self.finish(pool, results)?))
     }
-    if !missing.is_empty() {
-        return Ok(Err(missing));
-    }
-    Ok(Ok(finish(cfg, dir, pool, results)?))
-}
 
-/// A finished job's result (`None` for jobs without one), or why it is not finished and
-/// the log its receipt names.
-fn take(
-    cfg: &AuditConfig,
-    dataset: &Path,
-    dir: &Path,
-    job: &Job,
-) -> std::result::Result<Option<JobResult>, (String, Option<String>)> {
-    let path = receipt_path(dir, job);
-    let bytes = std::fs::read(&path).map_err(|_| {
-        (
-            "no receipt: the job did not end (killed, out of time or memory, cancelled after \
+    /// A finished job's result (`None` for jobs without one), or why it is not finished and
+    /// the log its receipt names.
+    fn take(&self, job: &Job) -> std::result::Result<Option<JobResult>, (String, Option<String>)> {
+        let (cfg, dir) = (self.cfg, self.dir);
+        let path = receipt_path(dir, job);
+        let bytes = std::fs::read(&path).map_err(|_| {
+            (
+                "no receipt: the job did not end (killed, out of time or memory, cancelled after \
              a failed wave, or never submitted)"
-                .to_string(),
-            None,
-        )
-    })?;
-    let r: Receipt = serde_json::from_slice(&bytes)
-        .ok()
-        .filter(|r: &Receipt| r.format == RECEIPT_FORMAT && r.job == job.name())
-        .ok_or_else(|| (format!("{} is not its receipt", path.display()), None))?;
-    let fail = |why: String| (why, r.log.clone());
-    if r.exit != 0 {
-        return Err(fail(format!(
-            "failed on {} after {:.0} s: {}",
-            r.host,
-            r.seconds,
-            r.error.as_deref().unwrap_or("no message")
-        )));
-    }
-    if r.numerics_revision != crate::version::NUMERICS_REVISION {
-        return Err(fail(format!(
-            "computed by numerics revision {} (this binary: {}): run it again",
-            r.numerics_revision,
-            crate::version::NUMERICS_REVISION
-        )));
-    }
-    for (rel, sha) in &r.digests {
-        let ok = std::fs::read(dir.join(rel)).is_ok_and(|b| sha256_hex(&b) == *sha);
-        if !ok {
+                    .to_string(),
+                None,
+            )
+        })?;
+        let r: Receipt = serde_json::from_slice(&bytes)
+            .ok()
+            .filter(|r: &Receipt| r.format == RECEIPT_FORMAT && r.job == job.name())
+            .ok_or_else(|| (format!("{} is not its receipt", path.display()), None))?;
+        let fail = |why: String| (why, r.log.clone());
+        if r.exit != 0 {
             return Err(fail(format!(
-                "{rel} is missing or changed since the job's receipt"
+                "failed on {} after {:.0} s: {}",
+                r.host,
+                r.seconds,
+                r.error.as_deref().unwrap_or("no message")
             )));
         }
-    }
-    match job {
-        Job::Run {
-            generator,
-            variant,
-            seed,
-        } => {
-            let p = dir.join(job.folder()).join("audit_job.json");
-            let result: JobResult = std::fs::read(&p)
-                .ok()
-                .and_then(|b| serde_json::from_slice(&b).ok())
-                .ok_or_else(|| fail(format!("{} cannot be read", p.display())))?;
-            let config = cfg
-                .config_digest(*generator, *variant)
-                .map_err(|e| fail(e.to_string()))?;
-            let same = result.generator == generator.name()
-                && result.variant == variant.name()
-                && result.seed == *seed
-                && result.config == config;
-            if !same {
+        if r.numerics_revision != crate::version::NUMERICS_REVISION {
+            return Err(fail(format!(
+                "computed by numerics revision {} (this binary: {}): run it again",
+                r.numerics_revision,
+                crate::version::NUMERICS_REVISION
+            )));
+        }
+        for (rel, sha) in &r.digests {
+            let ok = std::fs::read(dir.join(rel)).is_ok_and(|b| sha256_hex(&b) == *sha);
+            if !ok {
                 return Err(fail(format!(
-                    "{} is of another job or configuration",
-                    p.display()
+                    "{rel} is missing or changed since the job's receipt"
                 )));
             }
-            Ok(Some(result))
         }
-        Job::Original { seed } => {
-            let run = dir.join(job.folder());
-            if original_done(cfg, dataset, &run, *seed) {
-                Ok(None)
-            } else {
-                Err(fail(
-                    "trained on another dataset or with another training configuration than \
-                     this audit's (or damaged)"
-                        .into(),
-                ))
+        match job {
+            Job::Run {
+                generator,
+                variant,
+                seed,
+            } => {
+                let p = dir.join(job.folder()).join("audit_job.json");
+                let result: JobResult = std::fs::read(&p)
+                    .ok()
+                    .and_then(|b| serde_json::from_slice(&b).ok())
+                    .ok_or_else(|| fail(format!("{} cannot be read", p.display())))?;
+                let config = cfg
+                    .config_digest(*generator, *variant)
+                    .map_err(|e| fail(e.to_string()))?;
+                let same = result.generator == generator.name()
+                    && result.variant == variant.name()
+                    && result.seed == *seed
+                    && result.config == config;
+                if !same {
+                    return Err(fail(format!(
+                        "{} is of another job or configuration",
+                        p.display()
+                    )));
+                }
+                Ok(Some(result))
             }
+            Job::Original { seed } => {
+                let run = dir.join(job.folder());
+                if self.original_done(&run, *seed) {
+                    Ok(None)
+                } else {
+                    Err(fail(
+                        "trained on another dataset or with another training configuration than \
+                     this audit's (or damaged)"
+                            .into(),
+                    ))
+                }
+            }
+            Job::Shared { .. } => Ok(None),
         }
-        Job::Shared { .. } => Ok(None),
     }
 }
 
@@ -356,21 +349,24 @@ fn take(
 
 /// The work of a job in training iteration-pixels: the model behind [`estimate`].
 fn work(cfg: &AuditConfig, job: &Job, pixels: f64) -> f64 {
-    let pc = match *job {
+    let config = |generator, variant, seed| {
+        cfg.pipeline_config(generator, variant, seed)
+            .unwrap_or_else(|_| cfg.base.clone())
+    };
+    match *job {
+        Job::Original { .. } => f64::from(cfg.train_iterations) * pixels,
+        // The `full` run's steps before the stage-1 reconstruction (of them, the original
+        // scene's QA-Mask is the training; the generations are small beside it).
+        Job::Shared { generator, seed } => scoped_work(
+            &config(generator, Variant::Full, seed),
+            &Scope::Before(SHARED_BEFORE),
+            pixels,
+        ),
         Job::Run {
             generator,
             variant,
             seed,
-        } => cfg
-            .pipeline_config(generator, variant, seed)
-            .unwrap_or_else(|_| cfg.base.clone()),
-        _ => cfg.base.clone(),
-    };
-    match job {
-        Job::Original { .. } => f64::from(cfg.train_iterations) * pixels,
-        // The original scene's QA-Mask (the stage-1 generations are small beside it).
-        Job::Shared { .. } => f64::from(pc.qa_iterations) * pixels,
-        Job::Run { .. } => pipeline_work(&pc, pixels),
+        } => pipeline_work(&config(generator, variant, seed), pixels),
     }
 }
 
@@ -389,62 +385,65 @@ fn training_pixels(cfg: &AuditConfig, dataset: &Path) -> Result<f64> {
 /// audit (receipts of successes), their measured seconds and peak memory (the steps'
 /// `cost.json`, the original's `train_stats.json`) replace the calibration for their kind:
 /// seconds per iteration-pixel averaged over them, memory their maximum.
-pub fn estimate(cfg: &AuditConfig, dataset: &Path, dir: &Path) -> Result<Vec<(Wave, Vec<Cost>)>> {
-    let pixels = training_pixels(cfg, dataset)?;
-    let kind = |j: &Job| match j {
-        Job::Original { .. } => 0,
-        Job::Shared { .. } => 1,
-        Job::Run { .. } => 2,
-    };
-    // Measured: (seconds / work summed, work summed, peak memory) per kind.
-    let mut measured = [(0.0f64, 0.0f64, 0.0f64); 3];
-    for job in waves(cfg).iter().flat_map(|w| &w.jobs) {
-        let Some((seconds, peak)) = measured_cost(dir, job) else {
-            continue;
+impl Audit<'_> {
+    pub fn estimate(&self) -> Result<Vec<(Wave, Vec<Cost>)>> {
+        let (cfg, dir) = (self.cfg, self.dir);
+        let pixels = training_pixels(cfg, self.dataset)?;
+        let kind = |j: &Job| match j {
+            Job::Original { .. } => 0,
+            Job::Shared { .. } => 1,
+            Job::Run { .. } => 2,
         };
-        let m = &mut measured[kind(job)];
-        m.0 += seconds;
-        m.1 += work(cfg, job, pixels);
-        m.2 = m.2.max(peak);
+        // Measured: (seconds / work summed, work summed, peak memory) per kind.
+        let mut measured = [(0.0f64, 0.0f64, 0.0f64); 3];
+        for job in waves(cfg).iter().flat_map(|w| &w.jobs) {
+            let Some((seconds, peak)) = measured_cost(dir, job) else {
+                continue;
+            };
+            let m = &mut measured[kind(job)];
+            m.0 += seconds;
+            m.1 += work(cfg, job, pixels);
+            m.2 = m.2.max(peak);
+        }
+        Ok(waves(cfg)
+            .into_iter()
+            .map(|w| {
+                let costs = w
+                    .jobs
+                    .iter()
+                    .map(|j| {
+                        let k = kind(j);
+                        let units = work(cfg, j, pixels);
+                        let (rate, bytes_per_pixel) = match j {
+                            Job::Original { .. } => (
+                                ORIGINAL_SECONDS_PER_ITERATION_PIXEL,
+                                ORIGINAL_BYTES_PER_PIXEL,
+                            ),
+                            _ => (
+                                PIPELINE_SECONDS_PER_ITERATION_PIXEL,
+                                PIPELINE_BYTES_PER_PIXEL,
+                            ),
+                        };
+                        let (s, u, peak) = measured[k];
+                        if u > 0.0 && peak > 0.0 {
+                            Cost {
+                                seconds: s / u * units,
+                                peak_rss_bytes: peak,
+                                measured: true,
+                            }
+                        } else {
+                            Cost {
+                                seconds: rate * units,
+                                peak_rss_bytes: BASE_BYTES + bytes_per_pixel * pixels,
+                                measured: false,
+                            }
+                        }
+                    })
+                    .collect();
+                (w, costs)
+            })
+            .collect())
     }
-    Ok(waves(cfg)
-        .into_iter()
-        .map(|w| {
-            let costs = w
-                .jobs
-                .iter()
-                .map(|j| {
-                    let k = kind(j);
-                    let units = work(cfg, j, pixels);
-                    let (rate, bytes_per_pixel) = match j {
-                        Job::Original { .. } => (
-                            ORIGINAL_SECONDS_PER_ITERATION_PIXEL,
-                            ORIGINAL_BYTES_PER_PIXEL,
-                        ),
-                        _ => (
-                            PIPELINE_SECONDS_PER_ITERATION_PIXEL,
-                            PIPELINE_BYTES_PER_PIXEL,
-                        ),
-                    };
-                    let (s, u, peak) = measured[k];
-                    if u > 0.0 && peak > 0.0 {
-                        Cost {
-                            seconds: s / u * units,
-                            peak_rss_bytes: peak,
-                            measured: true,
-                        }
-                    } else {
-                        Cost {
-                            seconds: rate * units,
-                            peak_rss_bytes: BASE_BYTES + bytes_per_pixel * pixels,
-                            measured: false,
-                        }
-                    }
-                })
-                .collect();
-            (w, costs)
-        })
-        .collect())
 }
 
 /// A finished job's seconds (its receipt) and peak memory (its steps' or training's
@@ -481,62 +480,62 @@ fn measured_cost(dir: &Path, job: &Job) -> Option<(f64, f64)> {
 /// task i runs line i+1 as `unseen … --only JOB`); the merge runs `unseen … --collect`.
 /// `command` is the worker's command line without `--only` (binary first, the audit's grid
 /// in absolute paths). Returns the waves with their requests.
-pub fn emit_slurm(
-    cfg: &AuditConfig,
-    dataset: &Path,
-    dir: &Path,
-    command: &[String],
-    out: &Path,
-    opts: &SlurmOptions,
-) -> Result<Vec<(Wave, Request)>> {
-    if out.is_file() {
-        return Err(Error::invalid("the submission path is a file").at(out));
-    }
-    let estimates = estimate(cfg, dataset, dir)?;
-    let cpus = opts.cpus.unwrap_or(2).max(1);
-    crate::io::create_dir_all(out)?;
-    let logs = out.join("logs");
-    let cmd: Vec<String> = command.iter().map(|a| shell_quote(a)).collect();
-    let cmd = cmd.join(" ");
-    let mut all = String::new();
-    let mut arrays = Vec::new();
-    let mut emitted = Vec::new();
-    for (wave, costs) in estimates {
-        if wave.jobs.is_empty() {
-            continue;
+impl Audit<'_> {
+    pub fn emit_slurm(
+        &self,
+        command: &[String],
+        out: &Path,
+        opts: &SlurmOptions,
+    ) -> Result<Vec<(Wave, Request)>> {
+        if out.is_file() {
+            return Err(Error::invalid("the submission path is a file").at(out));
         }
-        let list: String = wave.jobs.iter().map(|j| j.name() + "\n").collect();
-        all += &list;
-        let list_path = out.join(format!("wave-{}-{}.txt", arrays.len() + 1, wave.name));
-        write_text(&list_path, &list)?;
-        let log = shell_quote(&format!("{}/{}-", logs.display(), wave.name));
-        let body = format!(
-            "job=$(sed -n \"$((SLURM_ARRAY_TASK_ID + 1))p\" {})\n\
+        let estimates = self.estimate()?;
+        let cpus = opts.cpus.unwrap_or(2).max(1);
+        crate::io::create_dir_all(out)?;
+        let logs = out.join("logs");
+        let cmd: Vec<String> = command.iter().map(|a| shell_quote(a)).collect();
+        let cmd = cmd.join(" ");
+        let mut all = String::new();
+        let mut arrays = Vec::new();
+        let mut emitted = Vec::new();
+        for (wave, costs) in estimates {
+            if wave.jobs.is_empty() {
+                continue;
+            }
+            let list: String = wave.jobs.iter().map(|j| j.name() + "\n").collect();
+            all += &list;
+            let list_path = out.join(format!("wave-{}-{}.txt", arrays.len() + 1, wave.name));
+            write_text(&list_path, &list)?;
+            let log = shell_quote(&format!("{}/{}-", logs.display(), wave.name));
+            let body = format!(
+                "job=$(sed -n \"$((SLURM_ARRAY_TASK_ID + 1))p\" {})\n\
              exec {cmd} --only \"$job\" --threads \"${{SLURM_CPUS_PER_TASK:-{cpus}}}\" \
              --log {log}\"$SLURM_ARRAY_TASK_ID\".out\n",
-            shell_quote(&list_path.display().to_string()),
-        );
-        let req = request(&costs, cpus);
-        arrays.push(ArrayWave {
-            name: wave.name.into(),
-            tasks: wave.jobs.len(),
-            request: req.clone(),
-            body,
-        });
-        emitted.push((wave, req));
+                shell_quote(&list_path.display().to_string()),
+            );
+            let req = request(&costs, cpus);
+            arrays.push(ArrayWave {
+                name: wave.name.into(),
+                tasks: wave.jobs.len(),
+                request: req.clone(),
+                body,
+            });
+            emitted.push((wave, req));
+        }
+        write_text(&out.join("jobs.txt"), &all)?;
+        let merge = ArrayWave {
+            name: "merge".into(),
+            tasks: 1,
+            request: least_request(1),
+            body: format!(
+                "exec {cmd} --collect --submission {}\n",
+                shell_quote(&out.display().to_string())
+            ),
+        };
+        write_submission(out, &arrays, Some(&merge), opts)?;
+        Ok(emitted)
     }
-    write_text(&out.join("jobs.txt"), &all)?;
-    let merge = ArrayWave {
-        name: "merge".into(),
-        tasks: 1,
-        request: least_request(1),
-        body: format!(
-            "exec {cmd} --collect --submission {}\n",
-            shell_quote(&out.display().to_string())
-        ),
-    };
-    write_submission(out, &arrays, Some(&merge), opts)?;
-    Ok(emitted)
 }
 
 /// The log the submission folder `submission` gives `job` ([`emit_slurm`]'s names).

@@ -1,7 +1,7 @@
 //! The audit's jobs: which (generator, variant, seed) runs exist, the original scene they
 //! share, one job's pipeline run and its result record, and which steps jobs share.
 
-use super::{AuditConfig, GeneratorKind, Variant, config_digest};
+use super::{Audit, AuditConfig, GeneratorKind, Variant, config_digest};
 use crate::error::{Error, Result};
 use crate::pipeline::evaluate::{Row, Summary};
 use crate::pipeline::steps::Step;
@@ -190,252 +190,237 @@ pub fn sharing(results: &[JobResult]) -> Vec<Sharing> {
 
 /// Run (or verify) one job. Originals are trained once per seed and reused; a pipeline job
 /// continues its run directory (verified steps are skipped) and shares `DIR/cache`.
-pub fn run_job(
-    cfg: &AuditConfig,
-    dataset: &Path,
-    dir: &Path,
-    job: &Job,
-    on_event: &(dyn Fn(Event) + Sync),
-) -> Result<Option<JobResult>> {
-    cfg.validate()?;
-    check_inputs(dataset, dir)?;
-    match *job {
-        Job::Original { seed } => {
-            on_event(Event::Stage { name: job.name() });
-            original(cfg, dataset, dir, seed, on_event)?;
-            Ok(None)
-        }
-        Job::Shared { generator, seed } => {
-            let scope = Scope::Before(SHARED_BEFORE);
-            pipeline_job(
-                cfg,
-                dataset,
-                dir,
-                job,
-                generator,
-                Variant::Full,
-                seed,
-                scope,
-                on_event,
-            )?;
-            Ok(None)
-        }
-        Job::Run {
-            generator,
-            variant,
-            seed,
-        } => {
-            let (pc, outcome) = pipeline_job(
-                cfg,
-                dataset,
-                dir,
-                job,
+impl Audit<'_> {
+    pub fn run_job(&self, job: &Job) -> Result<Option<JobResult>> {
+        let Audit {
+            cfg,
+            dataset,
+            dir,
+            on_event,
+        } = *self;
+        cfg.validate()?;
+        self.check_inputs()?;
+        match *job {
+            Job::Original { seed } => {
+                on_event(Event::Stage { name: job.name() });
+                self.original(seed)?;
+                Ok(None)
+            }
+            Job::Shared { generator, seed } => {
+                let scope = Scope::Before(SHARED_BEFORE);
+                self.pipeline_job(job, (generator, Variant::Full, seed), scope)?;
+                Ok(None)
+            }
+            Job::Run {
                 generator,
                 variant,
                 seed,
-                Scope::All,
-                on_event,
-            )?;
-            let out = dir.join(job.folder());
-            let summary: Summary = outcome.metrics.ok_or_else(|| {
-                Error::invalid("the dataset has no evaluation poses (evaluation.json)").at(dataset)
-            })?;
-            let (first, last) = match (summary.rows.first(), summary.rows.last()) {
-                (Some(f), Some(l)) => (f.clone(), l.clone()),
-                _ => return Err(Error::invalid("the run evaluated no scene").at(&out)),
-            };
-            let mut stage_seconds = std::collections::BTreeMap::new();
-            let mut steps = Vec::new();
-            for step in &outcome.steps {
-                let seconds = std::fs::read(step.dir.join(crate::pipeline::rundir::TIMING_FILE))
-                    .ok()
-                    .and_then(|b| serde_json::from_slice::<crate::io::Cost>(&b).ok())
-                    .map_or(0.0, |c| c.seconds);
-                *stage_seconds.entry(stage_of(&step.name)).or_insert(0.0) += seconds;
-                steps.push(StepCost {
-                    name: step.name.clone(),
-                    digest: step.digest.clone(),
-                    seconds,
-                });
+            } => {
+                let (pc, outcome) =
+                    self.pipeline_job(job, (generator, variant, seed), Scope::All)?;
+                let out = dir.join(job.folder());
+                let summary: Summary = outcome.metrics.ok_or_else(|| {
+                    Error::invalid("the dataset has no evaluation poses (evaluation.json)")
+                        .at(dataset)
+                })?;
+                let (first, last) = match (summary.rows.first(), summary.rows.last()) {
+                    (Some(f), Some(l)) => (f.clone(), l.clone()),
+                    _ => return Err(Error::invalid("the run evaluated no scene").at(&out)),
+                };
+                let mut stage_seconds = std::collections::BTreeMap::new();
+                let mut steps = Vec::new();
+                for step in &outcome.steps {
+                    let seconds =
+                        std::fs::read(step.dir.join(crate::pipeline::rundir::TIMING_FILE))
+                            .ok()
+                            .and_then(|b| serde_json::from_slice::<crate::io::Cost>(&b).ok())
+                            .map_or(0.0, |c| c.seconds);
+                    *stage_seconds.entry(stage_of(&step.name)).or_insert(0.0) += seconds;
+                    steps.push(StepCost {
+                        name: step.name.clone(),
+                        digest: step.digest.clone(),
+                        seconds,
+                    });
+                }
+                let result = JobResult {
+                    generator: generator.name(),
+                    variant: variant.name().into(),
+                    seed,
+                    numerics_revision: crate::version::NUMERICS_REVISION,
+                    crate_version: env!("CARGO_PKG_VERSION").into(),
+                    config: config_digest(&pc),
+                    original: first,
+                    last,
+                    stage_seconds,
+                    steps,
+                };
+                let text = serde_json::to_string_pretty(&result).expect("serializes") + "\n";
+                crate::io::write_text(&out.join("audit_job.json"), &text)?;
+                Ok(Some(result))
             }
-            let result = JobResult {
-                generator: generator.name(),
-                variant: variant.name().into(),
-                seed,
-                numerics_revision: crate::version::NUMERICS_REVISION,
-                crate_version: env!("CARGO_PKG_VERSION").into(),
-                config: config_digest(&pc),
-                original: first,
-                last,
-                stage_seconds,
-                steps,
-            };
-            let text = serde_json::to_string_pretty(&result).expect("serializes") + "\n";
-            crate::io::write_text(&out.join("audit_job.json"), &text)?;
-            Ok(Some(result))
         }
     }
-}
 
-/// Run the pipeline of (`generator`, `variant`, `seed`) in `job`'s folder within `scope`,
-/// continuing what is there and sharing `DIR/cache`; the seed's original scene must be
-/// done. Returns the job's configuration and the run's outcome.
-#[allow(clippy::too_many_arguments)]
-fn pipeline_job(
-    cfg: &AuditConfig,
-    dataset: &Path,
-    dir: &Path,
-    job: &Job,
-    generator: GeneratorKind,
-    variant: Variant,
-    seed: u32,
-    scope: Scope,
-    on_event: &(dyn Fn(Event) + Sync),
-) -> Result<(PipelineConfig, crate::pipeline::Outcome)> {
-    let run = require_original(cfg, dataset, dir, job, seed)?;
-    on_event(Event::Stage { name: job.name() });
-    let inputs = crate::pipeline::load_inputs(
-        &run,
-        &dataset.join("candidates.json"),
-        Some(&dataset.join("evaluation.json")),
-        Some(dataset),
-    )?;
-    let pc = cfg.pipeline_config(generator, variant, seed)?;
-    let out = dir.join(job.folder());
-    let opts = RunOptions {
-        resume: out.is_dir(),
-        cache: Some(dir.join("cache")),
-        scope,
-    };
-    let outcome = crate::pipeline::run_with(&pc, &inputs, &out, &opts, on_event)?;
-    Ok((pc, outcome))
-}
-
-/// The folder of `seed`'s original scene, which `job` needs: an error naming the job to
-/// run first unless it is trained ([`original_done`]).
-pub(super) fn require_original(
-    cfg: &AuditConfig,
-    dataset: &Path,
-    dir: &Path,
-    job: &Job,
-    seed: u32,
-) -> Result<PathBuf> {
-    let run = dir.join(Job::Original { seed }.name());
-    if !original_done(cfg, dataset, &run, seed) {
-        return Err(Error::invalid(format!(
-            "job {} needs the original scene of seed {seed}: run the job {} first",
-            job.name(),
-            Job::Original { seed }.name()
-        ))
-        .at(dir));
+    /// Run the pipeline of (`generator`, `variant`, `seed`) in `job`'s folder within `scope`,
+    /// continuing what is there and sharing `DIR/cache`; the seed's original scene must be
+    /// done. Returns the job's configuration and the run's outcome.
+    fn pipeline_job(
+        &self,
+        job: &Job,
+        (generator, variant, seed): (GeneratorKind, Variant, u32),
+        scope: Scope,
+    ) -> Result<(PipelineConfig, crate::pipeline::Outcome)> {
+        let Audit {
+            cfg,
+            dataset,
+            dir,
+            on_event,
+        } = *self;
+        let run = self.require_original(job, seed)?;
+        on_event(Event::Stage { name: job.name() });
+        let inputs = crate::pipeline::load_inputs(
+            &run,
+            &dataset.join("candidates.json"),
+            Some(&dataset.join("evaluation.json")),
+            Some(dataset),
+        )?;
+        let pc = cfg.pipeline_config(generator, variant, seed)?;
+        let out = dir.join(job.folder());
+        let opts = RunOptions {
+            resume: out.is_dir(),
+            cache: Some(dir.join("cache")),
+            scope,
+        };
+        let outcome = crate::pipeline::run_with(&pc, &inputs, &out, &opts, on_event)?;
+        Ok((pc, outcome))
     }
-    Ok(run)
-}
 
-/// The original scene of `seed` is trained in `run`: its manifest names this dataset and
-/// every file it lists has its hash, and its configuration is this audit's.
-pub(super) fn original_done(cfg: &AuditConfig, dataset: &Path, run: &Path, seed: u32) -> bool {
-    let Ok(m) = crate::io::manifest::Manifest::read(run) else {
-        return false;
-    };
-    let same_path = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
-        (Ok(x), Ok(y)) => x == y,
-        _ => a == b,
-    };
-    let same_data = m
-        .inputs
-        .get("dataset")
-        .and_then(|d| d.as_str())
-        .is_some_and(|d| same_path(Path::new(d), dataset));
-    same_data
-        && m.files.iter().all(|f| {
-            std::fs::read(run.join(&f.path)).is_ok_and(|b| crate::io::sha256_hex(&b) == f.sha256)
-        })
-        && latest_ply(run).is_ok()
-        && read_config(run).is_ok_and(|c| c == cfg.train_config(seed))
-}
-
-/// What every job needs, checked before the first job starts (an audit runs for hours):
-/// the dataset's candidate and evaluation poses, readable, and an output path that is
-/// not a file.
-pub(super) fn check_inputs(dataset: &Path, dir: &Path) -> Result<()> {
-    if dir.is_file() {
-        return Err(Error::invalid("the output path is a file").at(dir));
-    }
-    for f in ["candidates.json", "evaluation.json"] {
-        let p = dataset.join(f);
-        if !p.is_file() {
+    /// The folder of `seed`'s original scene, which `job` needs: an error naming the job to
+    /// run first unless it is trained ([`original_done`]).
+    pub(super) fn require_original(&self, job: &Job, seed: u32) -> Result<PathBuf> {
+        let dir = self.dir;
+        let run = dir.join(Job::Original { seed }.name());
+        if !self.original_done(&run, seed) {
             return Err(Error::invalid(format!(
-                "an audit needs {f} (candidate and evaluation poses with ground truth)"
+                "job {} needs the original scene of seed {seed}: run the job {} first",
+                job.name(),
+                Job::Original { seed }.name()
             ))
-            .at(dataset));
+            .at(dir));
         }
-        crate::camera::inria::read_cameras_json(&p)?;
+        Ok(run)
     }
-    Ok(())
+
+    /// The original scene of `seed` is trained in `run`: its manifest names this dataset and
+    /// every file it lists has its hash, and its configuration is this audit's.
+    pub(super) fn original_done(&self, run: &Path, seed: u32) -> bool {
+        let (cfg, dataset) = (self.cfg, self.dataset);
+        let Ok(m) = crate::io::manifest::Manifest::read(run) else {
+            return false;
+        };
+        let same_path = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
+            (Ok(x), Ok(y)) => x == y,
+            _ => a == b,
+        };
+        let same_data = m
+            .inputs
+            .get("dataset")
+            .and_then(|d| d.as_str())
+            .is_some_and(|d| same_path(Path::new(d), dataset));
+        same_data
+            && m.files.iter().all(|f| {
+                std::fs::read(run.join(&f.path))
+                    .is_ok_and(|b| crate::io::sha256_hex(&b) == f.sha256)
+            })
+            && latest_ply(run).is_ok()
+            && read_config(run).is_ok_and(|c| c == cfg.train_config(seed))
+    }
+
+    /// What every job needs, checked before the first job starts (an audit runs for hours):
+    /// the dataset's candidate and evaluation poses, readable, and an output path that is
+    /// not a file.
+    pub(super) fn check_inputs(&self) -> Result<()> {
+        let (dataset, dir) = (self.dataset, self.dir);
+        if dir.is_file() {
+            return Err(Error::invalid("the output path is a file").at(dir));
+        }
+        for f in ["candidates.json", "evaluation.json"] {
+            let p = dataset.join(f);
+            if !p.is_file() {
+                return Err(Error::invalid(format!(
+                    "an audit needs {f} (candidate and evaluation poses with ground truth)"
+                ))
+                .at(dataset));
+            }
+            crate::camera::inria::read_cameras_json(&p)?;
+        }
+        Ok(())
+    }
 }
 
 /// Iterations between checkpoints of an original-scene training (a killed audit loses at
 /// most this many iterations of it).
 const ORIGINAL_CHECKPOINT_EVERY: u32 = 1000;
 
-fn original(
-    cfg: &AuditConfig,
-    dataset: &Path,
-    dir: &Path,
-    seed: u32,
-    on_event: &(dyn Fn(Event) + Sync),
-) -> Result<PathBuf> {
-    let run = dir.join(Job::Original { seed }.name());
-    if original_done(cfg, dataset, &run, seed) {
-        // A kill between the manifest and the checkpoint's removal leaves the latter.
-        let _ = std::fs::remove_file(checkpoint_path(&run));
-        on_event(Event::StepSkipped {
-            step: Job::Original { seed }.name(),
-        });
-        return Ok(run);
-    }
-    let tc = cfg.train_config(seed);
-    // An interrupted training of this config continues from its checkpoint (same bits,
-    // SPEC.md §14.8); anything else there is started again.
-    let resumable = checkpoint_path(&run).is_file() && read_config(&run).is_ok_and(|c| c == tc);
-    if run.exists() && !resumable {
-        std::fs::remove_dir_all(&run).map_err(|e| Error::io(&run, e))?;
-    }
-    let step = Job::Original { seed }.name();
-    on_event(Event::StepStarted { step: step.clone() });
-    let t0 = std::time::Instant::now();
-    let train = |resume: bool| {
-        let checkpoints = Checkpointing {
-            every: ORIGINAL_CHECKPOINT_EVERY,
-            resume,
-        };
-        train_run(dataset, &run, &tc, None, checkpoints, &mut |p| {
-            if p.iteration % 50 == 0 || p.iteration == tc.iterations {
-                on_event(Event::Iterations {
-                    step: step.clone(),
-                    done: p.iteration,
-                    total: tc.iterations,
-                    loss: p.loss,
-                });
-            }
-        })
-    };
-    if let Err(e) = train(resumable) {
-        if !resumable {
-            return Err(e);
+impl Audit<'_> {
+    fn original(&self, seed: u32) -> Result<PathBuf> {
+        let Audit {
+            cfg,
+            dataset,
+            dir,
+            on_event,
+        } = *self;
+        let run = dir.join(Job::Original { seed }.name());
+        if self.original_done(&run, seed) {
+            // A kill between the manifest and the checkpoint's removal leaves the latter.
+            let _ = std::fs::remove_file(checkpoint_path(&run));
+            on_event(Event::StepSkipped {
+                step: Job::Original { seed }.name(),
+            });
+            return Ok(run);
         }
-        // A checkpoint that does not continue this training (another build's numerics,
-        // another dataset, a damaged file): start again rather than fail every audit.
-        on_event(Event::Note(format!(
-            "{step}: not resumed ({e}); training again"
-        )));
-        std::fs::remove_dir_all(&run).map_err(|e| Error::io(&run, e))?;
-        train(false)?;
+        let tc = cfg.train_config(seed);
+        // An interrupted training of this config continues from its checkpoint (same bits,
+        // SPEC.md §14.8); anything else there is started again.
+        let resumable = checkpoint_path(&run).is_file() && read_config(&run).is_ok_and(|c| c == tc);
+        if run.exists() && !resumable {
+            std::fs::remove_dir_all(&run).map_err(|e| Error::io(&run, e))?;
+        }
+        let step = Job::Original { seed }.name();
+        on_event(Event::StepStarted { step: step.clone() });
+        let t0 = std::time::Instant::now();
+        let train = |resume: bool| {
+            let checkpoints = Checkpointing {
+                every: ORIGINAL_CHECKPOINT_EVERY,
+                resume,
+            };
+            train_run(dataset, &run, &tc, None, checkpoints, &mut |p| {
+                if p.iteration % 50 == 0 || p.iteration == tc.iterations {
+                    on_event(Event::Iterations {
+                        step: step.clone(),
+                        done: p.iteration,
+                        total: tc.iterations,
+                        loss: p.loss,
+                    });
+                }
+            })
+        };
+        if let Err(e) = train(resumable) {
+            if !resumable {
+                return Err(e);
+            }
+            // A checkpoint that does not continue this training (another build's numerics,
+            // another dataset, a damaged file): start again rather than fail every audit.
+            on_event(Event::Note(format!(
+                "{step}: not resumed ({e}); training again"
+            )));
+            std::fs::remove_dir_all(&run).map_err(|e| Error::io(&run, e))?;
+            train(false)?;
+        }
+        on_event(Event::StepFinished {
+            step,
+            seconds: t0.elapsed().as_secs_f64(),
+        });
+        Ok(run)
     }
-    on_event(Event::StepFinished {
-        step,
-        seconds: t0.elapsed().as_secs_f64(),
-    });
-    Ok(run)
 }

@@ -23,11 +23,13 @@
 //! [`cluster`] (the same audit as batch jobs).
 
 use crate::error::{Error, Result};
+use crate::pipeline::Event;
 use crate::pipeline::{
     Hallucination, Inconsistency, Level, MaskSource, PipelineConfig, Preset, SlotNames,
     Stage2Depth, TruthDepth,
 };
 use crate::train::trainer::TrainConfig;
+use std::path::Path;
 
 pub mod cluster;
 pub mod jobs;
@@ -194,6 +196,35 @@ impl GeneratorKind {
             GeneratorKind::Classical | GeneratorKind::Mechanisms(_) => None,
             GeneratorKind::Truth(l) => Some(l as usize),
         }
+    }
+}
+
+/// One audit: its configuration, the dataset, the output folder and where progress goes —
+/// what every job, the merge, the estimate and the report read. The audit's operations are
+/// its methods (`run`, `report`, `run_job`, `run_job_with_receipt`, `collect`, `estimate`,
+/// `emit_slurm`).
+#[derive(Clone, Copy)]
+pub struct Audit<'a> {
+    pub cfg: &'a AuditConfig,
+    pub dataset: &'a Path,
+    pub dir: &'a Path,
+    pub on_event: &'a (dyn Fn(Event) + Sync),
+}
+
+impl<'a> Audit<'a> {
+    /// The audit of `cfg` on `dataset` into `dir`, without progress events.
+    pub fn new(cfg: &'a AuditConfig, dataset: &'a Path, dir: &'a Path) -> Audit<'a> {
+        Audit {
+            cfg,
+            dataset,
+            dir,
+            on_event: &|_| {},
+        }
+    }
+
+    /// The same audit, its progress sent to `on_event`.
+    pub fn with_events(self, on_event: &'a (dyn Fn(Event) + Sync)) -> Audit<'a> {
+        Audit { on_event, ..self }
     }
 }
 

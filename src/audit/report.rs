@@ -1,15 +1,14 @@
 //! The audit's report: gathering the samples, `audit.json`, `audit.md` and its plot.
 
-use super::jobs::{JobResult, check_inputs, jobs, run_job, sharing};
+use super::jobs::{JobResult, jobs, sharing};
 use super::samples::{self, Samples};
 use super::stats;
 use super::verdicts::{Metric, Verdict, mean_std, metrics_only, verdicts};
-use super::{AuditConfig, GeneratorKind, Variant};
+use super::{Audit, AuditConfig, GeneratorKind, Variant};
 use crate::error::{Error, Result};
-use crate::pipeline::Event;
 use crate::pipeline::Level;
 use crate::pipeline::evaluate::Row;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// What `audit.json` holds.
 #[derive(Clone, Debug, serde::Serialize)]
@@ -44,122 +43,113 @@ pub struct Report {
 /// [`samples::SAMPLES_FILE`] and every `merge` file (another audit's samples, or an
 /// `audit.json` of an earlier version). Read before any job runs, so that a file that
 /// cannot be pooled fails the audit at once.
-pub(super) fn gather(
-    cfg: &AuditConfig,
-    dataset: &Path,
-    dir: &Path,
-    merge: &[PathBuf],
-) -> Result<Samples> {
-    let mut pool = Samples::new(samples::Provenance {
-        dataset: samples::dataset_name(dataset),
-        dataset_digest: samples::dataset_digest(dataset)?,
-        preset: cfg.base.preset,
-        train_iterations: cfg.train_iterations,
-        train_resolution: cfg.train_resolution,
-    });
-    let own = dir.join(samples::SAMPLES_FILE);
-    let mut files: Vec<PathBuf> = merge.to_vec();
-    if own.is_file() {
-        files.insert(0, own);
-    }
-    for f in files {
-        let s = Samples::read(&f)?;
-        pool.pool(s, &f)?;
-    }
-    Ok(pool)
-}
-
-/// Run every job of `cfg` that is not done (each resumes its own folder), pool the
-/// results with the samples already in `dir` and in `merge` files, then write
-/// `DIR/samples.json`, `DIR/audit.json`, `DIR/audit.md` and `DIR/inconsistency.svg`.
-pub fn run(
-    cfg: &AuditConfig,
-    dataset: &Path,
-    dir: &Path,
-    merge: &[PathBuf],
-    on_event: &(dyn Fn(Event) + Sync),
-) -> Result<Report> {
-    cfg.validate()?;
-    check_inputs(dataset, dir)?;
-    let pool = gather(cfg, dataset, dir, merge)?;
-    crate::io::create_dir_all(dir)?;
-    let mut results = Vec::new();
-    for job in jobs(cfg) {
-        if let Some(r) = run_job(cfg, dataset, dir, &job, on_event)? {
-            results.push(r);
+impl Audit<'_> {
+    pub(super) fn gather(&self, merge: &[PathBuf]) -> Result<Samples> {
+        let Audit {
+            cfg, dataset, dir, ..
+        } = *self;
+        let mut pool = Samples::new(samples::Provenance {
+            dataset: samples::dataset_name(dataset),
+            dataset_digest: samples::dataset_digest(dataset)?,
+            preset: cfg.base.preset,
+            train_iterations: cfg.train_iterations,
+            train_resolution: cfg.train_resolution,
+        });
+        let own = dir.join(samples::SAMPLES_FILE);
+        let mut files: Vec<PathBuf> = merge.to_vec();
+        if own.is_file() {
+            files.insert(0, own);
         }
+        for f in files {
+            let s = Samples::read(&f)?;
+            pool.pool(s, &f)?;
+        }
+        Ok(pool)
     }
-    finish(cfg, dir, pool, results)
-}
 
-/// The report of the samples in `dir` and `merge` files alone (no job runs).
-pub fn report(cfg: &AuditConfig, dataset: &Path, dir: &Path, merge: &[PathBuf]) -> Result<Report> {
-    cfg.validate()?;
-    check_inputs(dataset, dir)?;
-    let pool = gather(cfg, dataset, dir, merge)?;
-    if pool.samples.is_empty() {
-        return Err(Error::invalid(format!(
-            "no samples to report (no {} here and no --merge file)",
-            samples::SAMPLES_FILE
-        ))
-        .at(dir));
+    /// Run every job of `cfg` that is not done (each resumes its own folder), pool the
+    /// results with the samples already in `dir` and in `merge` files, then write
+    /// `DIR/samples.json`, `DIR/audit.json`, `DIR/audit.md` and `DIR/inconsistency.svg`.
+    pub fn run(&self, merge: &[PathBuf]) -> Result<Report> {
+        self.cfg.validate()?;
+        self.check_inputs()?;
+        let pool = self.gather(merge)?;
+        crate::io::create_dir_all(self.dir)?;
+        let mut results = Vec::new();
+        for job in jobs(self.cfg) {
+            if let Some(r) = self.run_job(&job)? {
+                results.push(r);
+            }
+        }
+        self.finish(pool, results)
     }
-    crate::io::create_dir_all(dir)?;
-    finish(cfg, dir, pool, Vec::new())
-}
 
-pub(super) fn finish(
-    cfg: &AuditConfig,
-    dir: &Path,
-    mut pool: Samples,
-    results: Vec<JobResult>,
-) -> Result<Report> {
-    for r in &results {
-        pool.insert(r.clone());
+    /// The report of the samples in `dir` and `merge` files alone (no job runs).
+    pub fn report(&self, merge: &[PathBuf]) -> Result<Report> {
+        let dir = self.dir;
+        self.cfg.validate()?;
+        self.check_inputs()?;
+        let pool = self.gather(merge)?;
+        if pool.samples.is_empty() {
+            return Err(Error::invalid(format!(
+                "no samples to report (no {} here and no --merge file)",
+                samples::SAMPLES_FILE
+            ))
+            .at(dir));
+        }
+        crate::io::create_dir_all(dir)?;
+        self.finish(pool, Vec::new())
     }
-    pool.write(&dir.join(samples::SAMPLES_FILE))?;
-    let rule = stats::Rule {
-        planned: cfg.planned_seeds,
-        ..stats::Rule::default()
-    };
-    let (seeds, revisions) = pool.seeds_and_revisions();
-    let names = |mut v: Vec<String>| {
-        v.dedup();
-        v
-    };
-    // Samples of another configuration of their cell than this binary's are kept in the
-    // file and left out of everything reported.
-    let other = |r: &JobResult| {
-        let (Ok(g), Ok(v)) = (
-            GeneratorKind::by_name(&r.generator),
-            Variant::by_name(&r.variant),
-        ) else {
-            return false;
+
+    pub(super) fn finish(&self, mut pool: Samples, results: Vec<JobResult>) -> Result<Report> {
+        let (cfg, dir) = (self.cfg, self.dir);
+        for r in &results {
+            pool.insert(r.clone());
+        }
+        pool.write(&dir.join(samples::SAMPLES_FILE))?;
+        let rule = stats::Rule {
+            planned: cfg.planned_seeds,
+            ..stats::Rule::default()
         };
-        cfg.config_digest(g, v).is_ok_and(|d| d != r.config)
-    };
-    let total = pool.samples.len();
-    let usable: Vec<JobResult> = pool.samples.into_iter().filter(|r| !other(r)).collect();
-    let report = Report {
-        crate_version: env!("CARGO_PKG_VERSION").into(),
-        numerics_revision: crate::version::NUMERICS_REVISION,
-        provenance: pool.provenance.clone(),
-        seeds,
-        revisions,
-        samples: usable.len(),
-        other_config: total - usable.len(),
-        generators: names(cfg.generators.iter().map(|g| g.name()).collect()),
-        variants: names(cfg.variants.iter().map(|v| v.name().to_string()).collect()),
-        verdicts: verdicts(cfg, &usable, &rule),
-        rule,
-        results,
-        pool: usable,
-    };
-    let json = serde_json::to_string_pretty(&report).expect("serializes") + "\n";
-    crate::io::write_text(&dir.join("audit.json"), &json)?;
-    crate::io::write_text(&dir.join("inconsistency.svg"), &plot(cfg, &report.pool))?;
-    crate::io::write_text(&dir.join("audit.md"), &markdown(cfg, &report))?;
-    Ok(report)
+        let (seeds, revisions) = pool.seeds_and_revisions();
+        let names = |mut v: Vec<String>| {
+            v.dedup();
+            v
+        };
+        // Samples of another configuration of their cell than this binary's are kept in the
+        // file and left out of everything reported.
+        let other = |r: &JobResult| {
+            let (Ok(g), Ok(v)) = (
+                GeneratorKind::by_name(&r.generator),
+                Variant::by_name(&r.variant),
+            ) else {
+                return false;
+            };
+            cfg.config_digest(g, v).is_ok_and(|d| d != r.config)
+        };
+        let total = pool.samples.len();
+        let usable: Vec<JobResult> = pool.samples.into_iter().filter(|r| !other(r)).collect();
+        let report = Report {
+            crate_version: env!("CARGO_PKG_VERSION").into(),
+            numerics_revision: crate::version::NUMERICS_REVISION,
+            provenance: pool.provenance.clone(),
+            seeds,
+            revisions,
+            samples: usable.len(),
+            other_config: total - usable.len(),
+            generators: names(cfg.generators.iter().map(|g| g.name()).collect()),
+            variants: names(cfg.variants.iter().map(|v| v.name().to_string()).collect()),
+            verdicts: verdicts(cfg, &usable, &rule),
+            rule,
+            results,
+            pool: usable,
+        };
+        let json = serde_json::to_string_pretty(&report).expect("serializes") + "\n";
+        crate::io::write_text(&dir.join("audit.json"), &json)?;
+        crate::io::write_text(&dir.join("inconsistency.svg"), &plot(cfg, &report.pool))?;
+        crate::io::write_text(&dir.join("audit.md"), &markdown(cfg, &report))?;
+        Ok(report)
+    }
 }
 
 /// `mean ± std` over the seeds of one (generator, variant), or `mean` with one seed.

@@ -3,7 +3,7 @@
 //! request (`--time`, `--mem`) a wave of jobs asks for.
 
 use crate::pipeline::PipelineConfig;
-use crate::pipeline::steps::{Shape, Step, plan};
+use crate::pipeline::steps::{Scope, Selection, Shape, Step, plan};
 
 /// Seconds per training iteration per pixel on 2 threads, measured on the demo (lounge,
 /// quick preset, 80×60, 2-vCPU Xeon, Sapphire Rapids class): the original scene's 1 500
@@ -44,10 +44,20 @@ pub fn step_work(pc: &PipelineConfig, step: &Step, pixels: f64) -> f64 {
 /// (three reconstructions and three QA-Mask fine-tunes; two of each without
 /// interpolation, no QA-Mask without it).
 pub fn pipeline_work(pc: &PipelineConfig, pixels: f64) -> f64 {
-    let shape = Shape::bound(vec![String::new()], false);
-    plan(pc, &shape)
+    scoped_work(pc, &Scope::All, pixels)
+}
+
+/// The training iteration-pixels of the steps `scope` computes in a pipeline run (e.g. the
+/// audit's shared job, `Scope::Before(stage1/recon)`: the original scene's QA-Mask).
+pub fn scoped_work(pc: &PipelineConfig, scope: &Scope, pixels: f64) -> f64 {
+    let waves = plan(pc, &Shape::bound(vec![String::new()], false));
+    let Ok(selection) = Selection::new(scope, &waves) else {
+        return 0.0;
+    };
+    waves
         .iter()
         .flat_map(|w| &w.steps)
+        .filter(|p| selection.computes(&p.step))
         .map(|p| step_work(pc, &p.step, pixels))
         .sum()
 }

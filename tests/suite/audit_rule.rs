@@ -572,7 +572,7 @@ fn committed_mechanisms_audits_follow_from_their_samples() {
         cfg.generators = ["classical", "truth-low", "truth-low+hallucinating+relative"]
             .map(|g| GeneratorKind::by_name(g).unwrap())
             .to_vec();
-        let report = audit::report(&cfg, &dataset, &tmp, &[]).unwrap();
+        let report = audit::Audit::new(&cfg, &dataset, &tmp).report(&[]).unwrap();
         assert_eq!(report.seeds, (0..16).collect::<Vec<u32>>(), "{room}");
         assert_eq!(
             report.other_config, 0,

@@ -799,17 +799,22 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
         variant: Variant::Full,
         seed: 0,
     };
-    let e = audit::run_job(&cfg, &lounge(), &dir, &job, &quiet)
+    let lounge = lounge();
+    let e = audit::Audit::new(&cfg, &lounge, &dir)
+        .run_job(&job)
         .unwrap_err()
         .to_string();
     assert!(e.contains("original/seed-0"), "{e}");
     let cached = std::sync::Mutex::new(Vec::new());
-    let report = audit::run(&cfg, &lounge(), &dir, &[], &|e| {
+    let on_cached = |e| {
         if let Event::StepCached { step } = e {
             cached.lock().unwrap().push(step)
         }
-    })
-    .unwrap();
+    };
+    let report = audit::Audit::new(&cfg, &lounge, &dir)
+        .with_events(&on_cached)
+        .run(&[])
+        .unwrap();
     assert_eq!(report.results.len(), 4);
     let cached = cached.into_inner().unwrap();
     assert!(
@@ -861,12 +866,15 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
     assert!(svg.starts_with("<svg") && svg.contains("<circle"));
     // Again: nothing is computed, the results are the same bits.
     let computed = std::sync::Mutex::new(Vec::new());
-    let again = audit::run(&cfg, &lounge(), &dir, &[], &|e| {
+    let on_computed = |e| {
         if let Event::StepFinished { step, .. } | Event::StepStarted { step } = e {
             computed.lock().unwrap().push(step)
         }
-    })
-    .unwrap();
+    };
+    let again = audit::Audit::new(&cfg, &lounge, &dir)
+        .with_events(&on_computed)
+        .run(&[])
+        .unwrap();
     assert!(computed.into_inner().unwrap().is_empty());
     let bits = |r: &audit::Report| serde_json::to_string(&r.results).unwrap();
     assert_eq!(bits(&report), bits(&again));
@@ -874,8 +882,9 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
     let verdicts = |r: &audit::Report| serde_json::to_string(&r.verdicts).unwrap();
     let samples = dir.join(audit::samples::SAMPLES_FILE);
     let elsewhere = t.path().join("elsewhere");
-    let pooled =
-        audit::report(&cfg, &lounge(), &elsewhere, std::slice::from_ref(&samples)).unwrap();
+    let pooled = audit::Audit::new(&cfg, &lounge, &elsewhere)
+        .report(std::slice::from_ref(&samples))
+        .unwrap();
     assert_eq!(verdicts(&pooled), verdicts(&report));
     assert_eq!(pooled.samples, 4);
     // Samples of another original-scene training are not pooled (nothing written).
@@ -883,14 +892,11 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
         train_iterations: 301,
         ..cfg.clone()
     };
-    let e = audit::report(
-        &other,
-        &lounge(),
-        &t.path().join("refused"),
-        std::slice::from_ref(&samples),
-    )
-    .unwrap_err()
-    .to_string();
+    let refused = t.path().join("refused");
+    let e = audit::Audit::new(&other, &lounge, &refused)
+        .report(std::slice::from_ref(&samples))
+        .unwrap_err()
+        .to_string();
     assert!(
         e.contains("trained 300 iterations") && e.contains("samples.json"),
         "{e}"
@@ -901,7 +907,7 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
         seeds: 2..3,
         ..cfg.clone()
     };
-    let grown = audit::run(&more, &lounge(), &dir, &[], &quiet).unwrap();
+    let grown = audit::Audit::new(&more, &lounge, &dir).run(&[]).unwrap();
     assert_eq!((grown.seeds.clone(), grown.samples), (vec![0, 1, 2], 6));
     assert!(
         grown.verdicts.iter().all(|v| v.seeds == 3),
