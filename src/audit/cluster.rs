@@ -111,15 +111,15 @@ pub fn receipt_path(dir: &Path, job: &Job) -> PathBuf {
         .join(format!("{}.json", job.name().replace('/', "__")))
 }
 
-/// [`super::run_job`] with its receipt: the old receipt is removed first (a job killed
-/// this time must not pass for done), the new one written at the end, with the error
-/// when the job failed (the job's error is returned either way). Bad input — an invalid
-/// audit, a dataset without its poses, an output path that is a file, a pipeline job
-/// before its original — is refused before anything is written, receipt included
-/// (SPEC.md §21.1); so is a job that fails before it wrote anything into a `dir` that did
-/// not exist (bad input found by the job itself: nothing written, SPEC.md §11), which the
-/// merge then names as without receipt.
 impl Audit<'_> {
+    /// [`Audit::run_job`] with its receipt: the old receipt is removed first (a job killed
+    /// this time must not pass for done), the new one written at the end, with the error
+    /// when the job failed (the job's error is returned either way). Bad input — an invalid
+    /// audit, a dataset without its poses, an output path that is a file, a pipeline job
+    /// before its original — is refused before anything is written, receipt included
+    /// (SPEC.md §21.1); so is a job that fails before it wrote anything into a `dir` that did
+    /// not exist (bad input found by the job itself: nothing written, SPEC.md §11), which the
+    /// merge then names as without receipt.
     pub fn run_job_with_receipt(&self, job: &Job, log: Option<&Path>) -> Result<Option<JobResult>> {
         let dir = self.dir;
         let path = receipt_path(dir, job);
@@ -228,12 +228,12 @@ pub struct Missing {
     pub log: Option<String>,
 }
 
-/// The merge: every job of every wave must have a receipt of a success whose digests
-/// still verify; the run jobs' results are read from their `audit_job.json` (nothing is
-/// computed) and reported as [`super::run`] reports them. `log_of` names a job's log for
-/// jobs without a receipt (a receipt names its own). `Ok(Err(missing))`: what is missing
-/// or failed, in wave order; nothing is written then.
 impl Audit<'_> {
+    /// The merge: every job of every wave must have a receipt of a success whose digests
+    /// still verify; the run jobs' results are read from their `audit_job.json` (nothing is
+    /// computed) and reported as [`Audit::run`] reports them. `log_of` names a job's log for
+    /// jobs without a receipt (a receipt names its own). `Ok(Err(missing))`: what is missing
+    /// or failed, in wave order; nothing is written then.
     pub fn collect(
         &self,
         merge: &[PathBuf],
@@ -381,11 +381,11 @@ fn training_pixels(cfg: &AuditConfig, dataset: &Path) -> Result<f64> {
     Ok((f64::from(c.width) / r).round() * (f64::from(c.height) / r).round())
 }
 
-/// Every job's expected [`Cost`], wave by wave. Where `dir` holds finished jobs of this
-/// audit (receipts of successes), their measured seconds and peak memory (the steps'
-/// `cost.json`, the original's `train_stats.json`) replace the calibration for their kind:
-/// seconds per iteration-pixel averaged over them, memory their maximum.
 impl Audit<'_> {
+    /// Every job's expected [`Cost`], wave by wave. Where `dir` holds finished jobs of this
+    /// audit (receipts of successes), their measured seconds and peak memory (the steps'
+    /// `cost.json`, the original's `train_stats.json`) replace the calibration for their kind:
+    /// seconds per iteration-pixel averaged over them, memory their maximum.
     pub fn estimate(&self) -> Result<Vec<(Wave, Vec<Cost>)>> {
         let (cfg, dir) = (self.cfg, self.dir);
         let pixels = training_pixels(cfg, self.dataset)?;
@@ -475,12 +475,12 @@ fn measured_cost(dir: &Path, job: &Job) -> Option<(f64, f64)> {
 
 // ------------------------------------------------------------------------- Slurm
 
-/// Write a Slurm submission folder `out` for the audit ([`write_submission`]): also
-/// `jobs.txt` (every job, wave by wave) and per wave `wave-N-<name>.txt` (its jobs; array
-/// task i runs line i+1 as `unseen … --only JOB`); the merge runs `unseen … --collect`.
-/// `command` is the worker's command line without `--only` (binary first, the audit's grid
-/// in absolute paths). Returns the waves with their requests.
 impl Audit<'_> {
+    /// Write a Slurm submission folder `out` for the audit ([`write_submission`]): also
+    /// `jobs.txt` (every job, wave by wave) and per wave `wave-N-<name>.txt` (its jobs; array
+    /// task i runs line i+1 as `unseen … --only JOB`); the merge runs `unseen … --collect`.
+    /// `command` is the worker's command line without `--only` (binary first, the audit's grid
+    /// in absolute paths). Returns the waves with their requests.
     pub fn emit_slurm(
         &self,
         command: &[String],
@@ -538,7 +538,7 @@ impl Audit<'_> {
     }
 }
 
-/// The log the submission folder `submission` gives `job` ([`emit_slurm`]'s names).
+/// The log the submission folder `submission` gives `job` ([`Audit::emit_slurm`]'s names).
 pub fn log_in_submission(cfg: &AuditConfig, submission: &Path, job: &Job) -> Option<String> {
     waves(cfg).into_iter().find_map(|w| {
         let i = w.jobs.iter().position(|j| j == job)?;

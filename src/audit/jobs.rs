@@ -11,7 +11,7 @@ use crate::train::run::{Checkpointing, latest_ply, read_config, train_run};
 use std::path::{Path, PathBuf};
 
 /// One job of an audit: the original scene of a seed, a pipeline run, or (for a batch
-/// engine, [`cluster::waves`]) the steps a seed's variants share under one generator.
+/// engine, [`super::cluster::waves`]) the steps a seed's variants share under one generator.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Job {
     Original {
@@ -188,9 +188,9 @@ pub fn sharing(results: &[JobResult]) -> Vec<Sharing> {
     rows
 }
 
-/// Run (or verify) one job. Originals are trained once per seed and reused; a pipeline job
-/// continues its run directory (verified steps are skipped) and shares `DIR/cache`.
 impl Audit<'_> {
+    /// Run (or verify) one job. Originals are trained once per seed and reused; a pipeline job
+    /// continues its run directory (verified steps are skipped) and shares `DIR/cache`.
     pub fn run_job(&self, job: &Job) -> Result<Option<JobResult>> {
         let Audit {
             cfg,

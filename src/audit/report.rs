@@ -39,11 +39,11 @@ pub struct Report {
     pub pool: Vec<JobResult>,
 }
 
-/// The samples an audit of `cfg` in `dir` pools with its own batch: `dir`'s
-/// [`samples::SAMPLES_FILE`] and every `merge` file (another audit's samples, or an
-/// `audit.json` of an earlier version). Read before any job runs, so that a file that
-/// cannot be pooled fails the audit at once.
 impl Audit<'_> {
+    /// The samples an audit of `cfg` in `dir` pools with its own batch: `dir`'s
+    /// [`samples::SAMPLES_FILE`] and every `merge` file (another audit's samples, or an
+    /// `audit.json` of an earlier version). Read before any job runs, so that a file that
+    /// cannot be pooled fails the audit at once.
     pub(super) fn gather(&self, merge: &[PathBuf]) -> Result<Samples> {
         let Audit {
             cfg, dataset, dir, ..

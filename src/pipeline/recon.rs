@@ -137,7 +137,7 @@ pub fn recon_key(
 /// Generated views whose targets are remade from the scene being trained (paper §3.3.3:
 /// the fixer's outputs of the current renders, added on the fly).
 pub struct Refresh<'f> {
-    /// Indices into the `generated` list of [`reconstruct`].
+    /// Indices into the `generated` list of [`Run::reconstruct`].
     pub views: Vec<usize>,
     /// The targets are remade before iterations `1 + k·every`, `k ≥ 1`.
     pub every: u32,
