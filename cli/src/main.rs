@@ -69,12 +69,13 @@ enum Command {
     Depth(models::DepthArgs),
 }
 
-fn run(cli: Cli) -> Result<()> {
-    match cli.command {
+/// Run a command; its exit code (every command but `compare` exits 0 when it succeeds).
+fn run(cli: Cli) -> Result<ExitCode> {
+    let done = match cli.command {
+        Command::Compare(a) => return Ok(pipeline::run_compare(&a)),
         Command::Demo(a) => pipeline::run_demo(&a),
         Command::Extrapolate(a) => pipeline::run_extrapolate(&a),
         Command::Audit(a) => pipeline::run_audit(&a),
-        Command::Compare(_) => unreachable!("handled in main"),
         Command::Train(a) => train::run_train(a),
         Command::Eval(a) => train::run_eval(a),
         Command::QaMask(a) => train::run_qa_mask(a),
@@ -86,7 +87,8 @@ fn run(cli: Cli) -> Result<()> {
         Command::Views(a) => geometry::run_views(&a),
         Command::Inpaint(a) => models::run_inpaint(&a),
         Command::Depth(a) => models::run_depth(&a),
-    }
+    };
+    done.map(|()| ExitCode::SUCCESS)
 }
 
 /// Ctrl-C (SIGINT) and SIGTERM: remove the temporaries being written, keep every finished
@@ -105,20 +107,8 @@ fn exit_cleanly_on_interrupt() {
 fn main() -> ExitCode {
     unseen::sys::keep_freed_memory();
     exit_cleanly_on_interrupt();
-    let cli = Cli::parse();
-    // compare: 0 agree, 1 diverge, 2 could not compare.
-    if let Command::Compare(a) = &cli.command {
-        return match pipeline::run_compare(a) {
-            Ok(true) => ExitCode::SUCCESS,
-            Ok(false) => ExitCode::from(1),
-            Err(e) => {
-                eprintln!("error: {e}");
-                ExitCode::from(2)
-            }
-        };
-    }
-    match run(cli) {
-        Ok(()) => ExitCode::SUCCESS,
+    match run(Cli::parse()) {
+        Ok(code) => code,
         Err(e) => {
             eprintln!("error: {e}");
             ExitCode::FAILURE

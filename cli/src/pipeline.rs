@@ -282,8 +282,21 @@ pub struct CompareArgs {
     json: Option<PathBuf>,
 }
 
-/// Returns whether the runs agree within the tolerance.
-pub fn run_compare(a: &CompareArgs) -> Result<bool> {
+/// `unseen compare`: exit 0 when the runs agree within the tolerance, 1 when a step
+/// diverges, 2 when they cannot be compared (the error printed).
+pub fn run_compare(a: &CompareArgs) -> std::process::ExitCode {
+    match compare_runs(a) {
+        Ok(true) => std::process::ExitCode::SUCCESS,
+        Ok(false) => std::process::ExitCode::from(1),
+        Err(e) => {
+            eprintln!("error: {e}");
+            std::process::ExitCode::from(2)
+        }
+    }
+}
+
+/// Whether the runs agree within the tolerance.
+fn compare_runs(a: &CompareArgs) -> Result<bool> {
     let c = compare(&a.a, &a.b, a.tolerance)?;
     print!("{}", c.table());
     if let Some(p) = &a.json {
