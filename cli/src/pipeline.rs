@@ -525,8 +525,7 @@ pub struct AuditArgs {
     threads: Option<usize>,
 }
 
-/// `--only` / `--until`: a step's folder name (`unseen::pipeline::steps::Step`).
-/// `K` or `A-B` (plan waves).
+/// `--wave`: `K` or `A-B` (plan waves).
 fn parse_waves(s: &str) -> std::result::Result<(usize, usize), String> {
     let n = |t: &str| {
         t.parse::<usize>()
@@ -538,6 +537,7 @@ fn parse_waves(s: &str) -> std::result::Result<(usize, usize), String> {
     }
 }
 
+/// `--only` / `--until`: a step's folder name (`unseen::pipeline::steps::Step`).
 fn parse_step(s: &str) -> std::result::Result<Step, String> {
     s.parse().map_err(|e: Error| e.to_string())
 }

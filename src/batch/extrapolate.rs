@@ -17,9 +17,9 @@ use std::path::Path;
 /// One job array of an extrapolation's submission.
 #[derive(Clone, Debug, PartialEq)]
 pub struct BatchWave {
-    /// `views`, `stage1`, … (the stage of its first step), `<stage>-chain` for several
-    /// waves run one after another in one job (the stage of the last), `finish` for the
-    /// last job; a repeated name takes its first wave's index.
+    /// `views`, `stage1`, … (the stage of its earliest step in pipeline order),
+    /// `<stage>-chain` for several waves run one after another in one job (the stage of the
+    /// latest), `finish` for the last job; a repeated name takes its first wave's index.
     pub name: String,
     /// The plan waves it runs (`--wave first-last`); the finish job runs what is left.
     pub waves: std::ops::RangeInclusive<usize>,
@@ -44,10 +44,15 @@ pub fn waves(config: &PipelineConfig, bound: &Shape, pixels: f64) -> Vec<BatchWa
             .map(|p| pipeline_cost_of(step_work(config, &p.step, pixels), pixels))
             .collect()
     };
+    // A job is named by the stage of its earliest step in pipeline order (its latest for
+    // a chain, which ends a stage).
     let stage = |k: usize, last: bool| {
-        let steps = &bound[k].steps;
-        let p = if last { steps.last() } else { steps.first() };
-        p.map_or("empty", |p| p.step.stage().name())
+        let ranked = bound[k]
+            .steps
+            .iter()
+            .map(|p| (p.step.rank(), p.step.stage()));
+        let s = if last { ranked.max() } else { ranked.min() };
+        s.map_or("empty", |(_, s)| s.name())
     };
     let mut out: Vec<BatchWave> = Vec::new();
     let mut k = 0;

@@ -7,7 +7,6 @@
 use super::artifacts::{load_mask, read_json, save_mask, scene_of, stem};
 use super::rundir::StepDone;
 use super::steps::Scene;
-use super::steps::Stage;
 use super::steps::Step;
 use super::{Inputs, Run};
 use crate::camera::Camera;
@@ -202,8 +201,7 @@ impl Run<'_> {
     }
 
     /// Evaluate those of `scenes` the scope selects (`None` = the original scene; else a
-    /// reconstruction step) with the masks of [`Run::eval_masks`]; `eval/summary.json` is
-    /// written when every scene of the run is evaluated.
+    /// reconstruction step) with the masks of [`Run::eval_masks`].
     pub fn evaluate(
         &self,
         scenes: &[(Scene, Option<StepDone>)],
@@ -229,7 +227,6 @@ impl Run<'_> {
             .collect::<Result<_>>()?;
         let mut steps = vec![masks.clone()];
         let mut rows = Vec::new();
-        let all = scenes.len() == super::steps::scenes(self.config).len();
         for (name, step) in scenes {
             if !self.wants(&Step::Eval(*name)) {
                 continue;
@@ -261,10 +258,6 @@ impl Run<'_> {
             existing_fraction: ex as f64 / total.max(1) as f64,
             rows,
         };
-        if all && summary.rows.len() == scenes.len() {
-            let text = serde_json::to_string_pretty(&summary).expect("serializes") + "\n";
-            crate::io::write_text(&Stage::Eval.dir(&self.dir.root).join("summary.json"), &text)?;
-        }
         Ok((summary, steps))
     }
 }

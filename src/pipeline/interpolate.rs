@@ -41,6 +41,14 @@ impl Run<'_> {
         steps: &mut Vec<StepDone>,
     ) -> Result<Option<Interpolation>> {
         let (config, inputs, gens) = (self.config, self.inputs, self.gens);
+        let ours = [
+            Step::Fixer,
+            Step::QaMask(Scene::Stage2),
+            Step::Interpolation,
+        ];
+        if !ours.iter().any(|s| self.wants(s)) {
+            return Ok(None);
+        }
         let s2_scene = scene_of(&s2.recon)?;
         let keys = keyframes(views, s1, s2.dependent.as_ref())?;
         let pairs = neighbour_pairs(keys.len());

@@ -146,8 +146,8 @@ pub struct Outcome {
 pub struct RunOptions {
     /// Continue a run: verified steps are skipped, the others recomputed.
     pub resume: bool,
-    /// All steps, one step alone (the steps it reads must be done: a batch engine's
-    /// worker), or the steps up to one.
+    /// Which steps of the run's plan to compute ([`Scope`]): all, one alone or a batch
+    /// task's (the steps they read must be done), the steps up to one, or those before one.
     pub scope: Scope,
     /// A step cache shared with other runs (SPEC.md §20.8): steps with equal inputs are
     /// computed once.
@@ -203,9 +203,21 @@ pub fn run_with(
     on_event: &(dyn Fn(Event) + Sync),
 ) -> Result<Outcome> {
     config.validate()?;
-    // The scope is checked against the largest plan before anything is written.
+    // The scope is checked against the largest plan before anything is written. A step
+    // that reads nothing of detection is the same in every plan of these candidates (and
+    // first in its wave, so a batch task's index names it in both): a selection that does
+    // not read detection is final here; one that does is made again once detection is
+    // known (`run_in`).
     let bound = steps::plan(config, &bound_shape(inputs));
     let before_views = Selection::new(&opts.scope, &bound).map_err(|e| e.at(out))?;
+    if before_views.computed().next().is_none() {
+        // A batch task past its wave's steps: nothing to do, nothing written.
+        return Ok(Outcome {
+            steps: Vec::new(),
+            scene: None,
+            metrics: None,
+        });
+    }
     if let Some(c) = &opts.cache
         && c.is_file()
     {
@@ -317,10 +329,11 @@ fn run_in(
 }
 
 impl Run<'_> {
-    /// Evaluate the scenes made (those the scope selects) and close the run: a run of its
-    /// whole plan writes `steps.json` (its steps in order: what `compare` walks; steps of
-    /// an earlier configuration left in the folder are not part of this run) and
-    /// `timings.json`.
+    /// Evaluate the scenes made (those the scope selects) and close the run: every step
+    /// the selection computes must have run (else an internal error names it); a run of
+    /// its whole plan writes `eval/summary.json`, `steps.json` (its steps in order: what
+    /// `compare` walks; steps of an earlier configuration left in the folder are not part
+    /// of this run) and `timings.json`.
     fn finish(
         &self,
         mut steps: Vec<StepDone>,
@@ -336,9 +349,23 @@ impl Run<'_> {
         } else {
             None
         };
+        if let Some(missed) = self
+            .selection
+            .computed()
+            .find(|s| !steps.iter().any(|d| d.name == s.to_string()))
+        {
+            return Err(Error::invalid(format!(
+                "internal: the run selected step {missed} and never reached it"
+            ))
+            .at(&self.dir.root));
+        }
         let whole = self.selection.is_whole(waves);
         if whole {
             let out = self.dir.root.as_path();
+            if let Some(summary) = &metrics {
+                let text = serde_json::to_string_pretty(summary).expect("serializes") + "\n";
+                crate::io::write_text(&Stage::Eval.dir(out).join("summary.json"), &text)?;
+            }
             let names: Vec<&str> = steps.iter().map(|s| s.name.as_str()).collect();
             let text = serde_json::to_string_pretty(&names).expect("serializes") + "\n";
             crate::io::write_text(&out.join("steps.json"), &text)?;

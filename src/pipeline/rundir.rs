@@ -120,7 +120,7 @@ impl RunDir {
     pub fn open(root: &Path, resume: bool, scoped: bool, base: &str) -> Result<RunDir> {
         if scoped && !resume && root.is_dir() {
             return Err(Error::invalid(
-                "--only and --until continue a run directory: pass --resume",
+                "--only, --until and --wave continue a run directory: pass --resume",
             )
             .at(root));
         }

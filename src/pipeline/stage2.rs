@@ -102,6 +102,15 @@ impl Run<'_> {
         steps: &mut Vec<StepDone>,
     ) -> Result<Option<Stage2>> {
         let config = self.config;
+        let ours = [
+            Step::Dependent,
+            Step::Videos,
+            Step::QaMask(Scene::Stage1),
+            Step::Stage2Recon,
+        ];
+        if !ours.iter().any(|s| self.wants(s)) {
+            return Ok(None);
+        }
         let s1_scene = scene_of(&s1.recon)?;
         let dependent = if self.wants(&Step::Dependent) {
             self.dependent_step(views, s1, &s1_scene)?

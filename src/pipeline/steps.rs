@@ -253,7 +253,8 @@ pub struct Wave {
 /// reads before it in the run's *bound* shape ([`Shape::bound`]: dependent views present),
 /// so the waves are numbered alike before and after detection: a wave that detection
 /// leaves without steps (no dependent views: no propagation, no `stage2/dependent`) is
-/// kept, empty.
+/// kept, empty. In a wave, the steps that read nothing of detection come first, then by
+/// [`Step::rank`] and name.
 pub fn plan(config: &PipelineConfig, shape: &Shape) -> Vec<Wave> {
     let bound = Shape {
         independent: vec![String::new()],
@@ -276,12 +277,28 @@ pub fn plan(config: &PipelineConfig, shape: &Shape) -> Vec<Wave> {
         level.insert(p.step, l);
     }
     let mut waves = vec![Wave::default(); level.values().max().map_or(0, |m| m + 1)];
-    for p in graph(config, shape) {
+    let steps = graph(config, shape);
+    // Steps that read nothing of detection are the same in every plan of the run: first in
+    // their wave, so a batch task's index names the same step before and after detection.
+    let mut detected = BTreeSet::from([Step::Views]);
+    let mut after_detection = BTreeSet::new();
+    for p in &steps {
+        if p.after.iter().any(|a| detected.contains(a)) {
+            detected.insert(p.step.clone());
+            after_detection.insert(p.step.clone());
+        }
+    }
+    for p in steps {
         waves[level[&kind(&p.step)]].steps.push(p);
     }
     for w in &mut waves {
-        w.steps
-            .sort_by(|a, b| (a.step.rank(), &a.step).cmp(&(b.step.rank(), &b.step)));
+        w.steps.sort_by_cached_key(|p| {
+            (
+                after_detection.contains(&p.step),
+                p.step.rank(),
+                p.step.clone(),
+            )
+        });
     }
     waves
 }
@@ -324,7 +341,14 @@ fn graph(config: &PipelineConfig, shape: &Shape) -> Vec<Planned> {
             .collect();
         add(Step::Dependent, after);
     }
-    add(Step::Videos, detected().chain(dependent.clone()).collect());
+    // The clips' keyframes are the independent and dependent views; stage 2 starts from
+    // the stage-1 scene (the runner reaches its steps through stage 1's result), so
+    // `stage2/videos` is after `stage1/recon` even where no dependent view is.
+    let videos = detected()
+        .chain(dependent.clone())
+        .chain([Step::Stage1Recon])
+        .collect();
+    add(Step::Videos, videos);
     if qa {
         add(Step::QaMask(Scene::Stage1), vec![Step::Stage1Recon]);
     }
@@ -455,15 +479,15 @@ impl Selection {
                 (all.difference(&after).cloned().collect(), BTreeSet::new())
             }
             &Scope::Waves { first, last, task } => {
-                if first > last || last >= waves.len() {
+                if first > last {
                     return Err(Error::invalid(format!(
-                        "this run has waves 0 to {}; there is no wave {first}{}",
-                        waves.len().saturating_sub(1),
-                        if first == last {
-                            String::new()
-                        } else {
-                            format!("-{last}")
-                        }
+                        "waves {first}-{last} are no range (the first must not exceed the last)"
+                    )));
+                }
+                if last >= waves.len() {
+                    return Err(Error::invalid(format!(
+                        "this run has waves 0 to {}; there is no wave {last}",
+                        waves.len().saturating_sub(1)
                     )));
                 }
                 let chosen: BTreeSet<Step> = waves[first..=last]
@@ -497,6 +521,11 @@ impl Selection {
             .iter()
             .chain(&self.verify)
             .any(|s| s.stage() == stage)
+    }
+
+    /// The steps to compute.
+    pub fn computed(&self) -> impl Iterator<Item = &Step> {
+        self.compute.iter()
     }
 
     /// Every step of `waves` is computed.
@@ -638,6 +667,40 @@ mod tests {
         }
     }
 
+    /// A batch task (`Waves` with a task index) is resolved as the runner resolves it: on
+    /// the bound plan when that step reads nothing of detection, else on the plan detection
+    /// gave. Over every plan, the tasks of a wave compute each of its steps exactly once
+    /// (the index names the same step before and after detection).
+    #[test]
+    fn batch_tasks_compute_every_step_of_their_wave_once() {
+        for (config, shape, waves) in every_plan() {
+            let mut candidates = shape.independent.clone();
+            candidates.extend(["view_x".to_string(), "view_y".to_string()]);
+            let bound = plan(&config, &Shape::bound(candidates, shape.evaluation));
+            for (k, wave) in waves.iter().enumerate() {
+                let mut done: Vec<Step> = Vec::new();
+                for task in 0..bound[k].steps.len() {
+                    let scope = Scope::Waves {
+                        first: k,
+                        last: k,
+                        task: Some(task),
+                    };
+                    let first = Selection::new(&scope, &bound).unwrap();
+                    let s = if first.wants(&Step::Views) {
+                        Selection::new(&scope, &waves).unwrap()
+                    } else {
+                        first
+                    };
+                    done.extend(s.computed().cloned());
+                }
+                let mut want: Vec<Step> = wave.steps.iter().map(|p| p.step.clone()).collect();
+                done.sort();
+                want.sort();
+                assert_eq!(done, want, "wave {k} of {shape:?}");
+            }
+        }
+    }
+
     /// A scope names a step or wave of the plan, or is an error naming it; `--only` and a
     /// wave's task compute their steps alone and verify what those read.
     #[test]
@@ -649,10 +712,12 @@ mod tests {
         assert!(only.computes(&Step::Independent("b".into())));
         assert!(!only.computes(&Step::Views) && only.wants(&Step::Views));
         assert!(!only.wants(&Step::Independent("a".into())));
+        // Wave 1: the original's evaluation (it reads nothing of detection) first, then
+        // the independent views.
         let task = Scope::Waves {
             first: 1,
             last: 1,
-            task: Some(1),
+            task: Some(2),
         };
         assert_eq!(Selection::new(&task, &waves).unwrap(), only);
         let past = Scope::Waves {
