@@ -5,7 +5,7 @@
 //! (`compare`: 2), prints exactly one `error:` line naming the file, never panics, and
 //! leaves no partial output: nothing at the destination (or the file that was there,
 //! unchanged) and no `.tmp` file.
-use super::common::{TempDir, reference};
+use crate::support::{TempDir, reference};
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::process::Command;

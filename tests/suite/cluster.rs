@@ -4,8 +4,8 @@
 //! done, writes the report a sequential audit writes, byte for byte. `.ci/slurm` runs the
 //! same through a real Slurm.
 
-use super::common::TempDir;
 use super::pipeline::lounge;
+use crate::support::TempDir;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 

@@ -5,8 +5,8 @@
 //! bits as an undisturbed run. Mounting a tmpfs needs root (CAP_SYS_ADMIN); elsewhere the
 //! tests say why they did not run and pass.
 
-use super::common::TempDir;
 use super::pipeline::{lounge, tiny_config_file, tiny_run, walk};
+use crate::support::TempDir;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use unseen::pipeline::compare::compare;

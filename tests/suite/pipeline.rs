@@ -2,7 +2,7 @@
 //! thread-count bit identity, resume after `kill -9`, tampering, `compare`, bad input and
 //! the ground-truth generator's gain on the extrapolated pixels.
 
-use super::common::{TempDir, reference, with_threads};
+use crate::support::{TempDir, reference, with_threads};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use unseen::pipeline::compare::compare;
@@ -554,6 +554,7 @@ fn view_names_map_to_distinct_safe_folders() {
 /// A learned slot is keyed by the hashes of its card and weights, so editing either
 /// invalidates the steps that called it; classical slots by their name.
 #[test]
+#[cfg(feature = "onnx")]
 fn slot_fingerprints_follow_the_model_files() {
     use unseen::models::inpainter;
     assert_eq!(

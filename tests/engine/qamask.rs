@@ -1,7 +1,7 @@
 //! QA-Mask: what the fine-tune may change, determinism, holes, and a short-preset check of
 //! the paper's claim (the mask finds badly reconstructed pixels of the unseen half).
 
-use super::common::{reference, short_train_config, with_threads};
+use crate::support::{reference, short_train_config, with_threads};
 use unseen::camera::Camera;
 use unseen::dataset::{self, Dataset, LoadOptions, Split};
 use unseen::gaussian::{Gaussians, Param};

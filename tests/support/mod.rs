@@ -1,4 +1,6 @@
-//! Helpers shared by the suites.
+//! Helpers shared by the engine's suites (`tests/engine/`) and the program's (`tests/suite/`);
+//! each test binary uses part of them.
+#![allow(dead_code)]
 use std::path::PathBuf;
 
 /// The repository's root: the folder holding `reference_data/`, at or above the manifest
