@@ -4,8 +4,8 @@
 //! done, writes the report a sequential audit writes, byte for byte. `.ci/slurm` runs the
 //! same through a real Slurm.
 
-use super::pipeline::lounge;
 use crate::support::TempDir;
+use crate::support::tiny_run::{TinyRun, lounge};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -230,8 +230,7 @@ fn the_estimate_lists_every_wave_and_uses_what_the_audit_measured() {
 #[test]
 fn extrapolate_emits_its_per_view_fan_out_and_lists_its_stage1_steps() {
     let t = TempDir::new("cluster-extrapolate");
-    let run = super::pipeline::tiny_run(t.path());
-    let cfg = super::pipeline::tiny_config_file(t.path());
+    let (run, cfg) = TinyRun::new().files(&t);
     let (out, sub) = (t.path().join("out"), t.path().join("submit"));
     let ex = |more: &[&std::ffi::OsStr]| {
         Command::new(env!("CARGO_BIN_EXE_unseen"))
