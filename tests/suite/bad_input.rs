@@ -218,6 +218,7 @@ fn check(
 }
 
 #[test]
+#[ignore = "slow tier (~30 s): cargo test -- --include-ignored"]
 fn every_subcommand_answers_bad_input_with_one_error_line_and_no_output() {
     let tmp = TempDir::new("bad-input");
     let base = tmp.path();

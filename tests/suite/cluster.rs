@@ -59,6 +59,7 @@ fn tiny_config(dir: &Path) -> PathBuf {
 }
 
 #[test]
+#[ignore = "slow tier (~45 s): cargo test -- --include-ignored"]
 fn workers_with_receipts_merge_to_the_sequential_report_and_the_merge_names_what_is_missing() {
     let t = TempDir::new("cluster-merge");
     let config = tiny_config(t.path());

@@ -22,6 +22,7 @@ const TRAIN_HALF_DROP_DB: f64 = 0.5;
 fn quiet(_: Event) {}
 
 #[test]
+#[ignore = "slow tier (~20 s): cargo test -- --include-ignored"]
 fn pipeline_extrapolates_and_is_the_same_bits_on_1_2_and_7_threads() {
     let t = TempDir::new("pipeline-threads");
     let Tiny { inp, cfg, .. } = TinyRun::new().build(&t);
@@ -90,6 +91,7 @@ fn pipeline_extrapolates_and_is_the_same_bits_on_1_2_and_7_threads() {
 }
 
 #[test]
+#[ignore = "slow tier (~15 s): cargo test -- --include-ignored"]
 fn resume_after_kill_9_gives_the_same_bits() {
     let t = TempDir::new("pipeline-resume");
     let (run, cfg) = TinyRun::new().files(&t);
@@ -691,6 +693,7 @@ fn step_cache_shares_equal_steps_across_runs() {
 /// verdict for each claim on the variants run, and a second run verifies and reuses
 /// everything (the same results bit for bit).
 #[test]
+#[ignore = "slow tier (~15 s): cargo test -- --include-ignored"]
 fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
     use unseen::audit::{self, AuditConfig, GeneratorKind, Job, Variant};
     let t = TempDir::new("pipeline-audit");
