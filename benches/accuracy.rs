@@ -6,7 +6,7 @@
 //! `reference_data/accuracy/`). A point is on its stage's Pareto front when no other point
 //! of the stage has both less error and less time. Stages (SPEC.md §5.10):
 //! - `forward`: an SH-5 scene rendered in f32 at SH degree 0–5 (and every kernel form at 5)
-//!   against the f64 twin of the forward at degree 5 (`tests/suite/twin.rs`), and the twin;
+//!   against the f64 twin of the forward at degree 5 (`tests/engine/twin.rs`), and the twin;
 //! - `cutoffs`: the blend's cut-offs (`raster::Cutoffs`: alpha threshold 1/255, 1/1000,
 //!   none; transmittance stop 1e-4, 1e-6, none) in f32 against exact blending — the f64
 //!   twin with neither cut-off (and, unlike the rasterizer, no 3.33σ extent and no σ
@@ -24,7 +24,7 @@
 //!   distance (`collide::gjk::proximity_with`);
 //! - `gjk-frustums`: the same knobs on random frustum pairs and pairs with nearly
 //!   parallel facing faces, against the exact distance by exhaustion
-//!   (`tests/suite/polytope.rs`);
+//!   (`tests/engine/polytope.rs`);
 //! - `dibr`, `dibr-edges` (both with `--only dibr`): the warp's footprint and crack
 //!   closing against a ray-traced plane, and the plane behind a card (depth edges);
 //! - `ssim`: the float type (f64 / f32) and window form (separable / direct 11×11) of the
@@ -43,11 +43,11 @@
 
 mod common;
 
-#[path = "../tests/suite/twin.rs"]
+#[path = "../tests/engine/twin.rs"]
 #[allow(dead_code)]
 mod twin;
 
-#[path = "../tests/suite/polytope.rs"]
+#[path = "../tests/engine/polytope.rs"]
 mod polytope;
 
 use common::best;

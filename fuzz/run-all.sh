@@ -5,7 +5,7 @@
 # and the committed seeds (fuzz/seeds/<target>). Appends one line per target to fuzz/runs.log:
 #   date target minutes executions exit-status
 # and leaves any crashing input under fuzz/artifacts/<target>/ (turn each into a test in
-# tests/suite/, see fuzz/README.md).
+# tests/engine/, see fuzz/README.md).
 #
 # Needs cargo-fuzz (`cargo install cargo-fuzz`) and libFuzzer's compiler flags: nightly, or
 # the stable compiler with RUSTC_BOOTSTRAP=1 (set here when the toolchain is not nightly).

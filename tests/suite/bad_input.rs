@@ -5,7 +5,7 @@
 //! (`compare`: 2), prints exactly one `error:` line naming the file, never panics, and
 //! leaves no partial output: nothing at the destination (or the file that was there,
 //! unchanged) and no `.tmp` file.
-use super::common::{TempDir, reference};
+use crate::support::{TempDir, reference};
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -218,6 +218,7 @@ fn check(
 }
 
 #[test]
+#[ignore = "slow tier (~30 s): cargo test -- --include-ignored"]
 fn every_subcommand_answers_bad_input_with_one_error_line_and_no_output() {
     let tmp = TempDir::new("bad-input");
     let base = tmp.path();

@@ -1,5 +1,5 @@
 //! The `unseen` binary: outputs, and one clear error line for bad input.
-use super::common::{TempDir, reference};
+use crate::support::{TempDir, reference};
 use std::path::PathBuf;
 use std::process::Command;
 use unseen::io::image::{read_exr, read_png};

@@ -4,8 +4,8 @@
 //! done, writes the report a sequential audit writes, byte for byte. `.ci/slurm` runs the
 //! same through a real Slurm.
 
-use super::common::TempDir;
-use super::pipeline::lounge;
+use crate::support::TempDir;
+use crate::support::tiny_run::{TinyRun, lounge};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -59,6 +59,7 @@ fn tiny_config(dir: &Path) -> PathBuf {
 }
 
 #[test]
+#[ignore = "slow tier (~45 s): cargo test -- --include-ignored"]
 fn workers_with_receipts_merge_to_the_sequential_report_and_the_merge_names_what_is_missing() {
     let t = TempDir::new("cluster-merge");
     let config = tiny_config(t.path());
@@ -231,8 +232,7 @@ fn the_estimate_lists_every_wave_and_uses_what_the_audit_measured() {
 #[test]
 fn extrapolate_emits_the_waves_of_its_plan_and_lists_them() {
     let t = TempDir::new("cluster-extrapolate");
-    let run = super::pipeline::tiny_run(t.path());
-    let cfg = super::pipeline::tiny_config_file(t.path());
+    let (run, cfg) = TinyRun::new().files(&t);
     let (out, sub) = (t.path().join("out"), t.path().join("submit"));
     let ex = |more: &[&std::ffi::OsStr]| {
         Command::new(env!("CARGO_BIN_EXE_unseen"))

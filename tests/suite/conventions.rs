@@ -1,6 +1,6 @@
 //! Convention profiles (SPEC.md §5.2: the α clamp of INRIA / gsplat ≥ 1.5.4 and of gsplat
 //! 1.0–1.5.3) and the decision diagnostics a port harness builds on (SPEC.md §8.1).
-use super::common::{TempDir, bits, reference, with_threads};
+use crate::support::{TempDir, bits, reference, with_threads};
 use std::process::Command;
 use unseen::camera::Camera;
 use unseen::gaussian::Gaussians;
@@ -456,7 +456,7 @@ fn training_runs_under_their_configured_profile() {
     )
     .unwrap();
     // The point-cloud initialisation with opacities of 0.9975: the clamps bind at once.
-    let cfg = super::common::short_train_config(20);
+    let cfg = crate::support::short_train_config(20);
     let mut init = Trainer::new(&d, cfg.clone()).unwrap().gaussians;
     init.opacity_logits.iter_mut().for_each(|o| *o = 6.0);
     let run = |c| {

@@ -5,8 +5,8 @@
 //! bits as an undisturbed run. Mounting a tmpfs needs root (CAP_SYS_ADMIN); elsewhere the
 //! tests say why they did not run and pass.
 
-use super::common::TempDir;
-use super::pipeline::{lounge, tiny_config_file, tiny_run, walk};
+use crate::support::tiny_run::{TinyRun, lounge};
+use crate::support::{TempDir, walk};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use unseen::pipeline::compare::compare;
@@ -167,8 +167,7 @@ fn extrapolate_args(run: &Path, cfg: &Path, out: &Path, resume: bool) -> Vec<std
 #[test]
 fn extrapolate_on_a_full_disk_fails_cleanly_and_resumes_to_the_same_bits() {
     let t = TempDir::new("faults-extrapolate-enospc");
-    let run = tiny_run(t.path());
-    let cfg = tiny_config_file(t.path());
+    let (run, cfg) = TinyRun::new().files(&t);
     let args = |out: &Path, resume: bool| extrapolate_args(&run, &cfg, out, resume);
     let reference = t.path().join("reference");
     let o = unseen(
@@ -354,8 +353,7 @@ fn an_audit_job_on_a_full_disk_fails_cleanly_and_reruns_to_the_same_bits() {
 #[test]
 fn extrapolate_on_a_disk_turned_read_only_fails_cleanly_and_resumes_to_the_same_bits() {
     let t = TempDir::new("faults-extrapolate-erofs");
-    let run = tiny_run(t.path());
-    let cfg = tiny_config_file(t.path());
+    let (run, cfg) = TinyRun::new().files(&t);
     let reference = t.path().join("reference");
     extrapolate_ok(&run, &cfg, &reference, false);
     let Some(disk) = Tmpfs::mount(&t.path().join("disk"), 64 << 20) else {
@@ -405,8 +403,7 @@ fn extrapolate_on_a_disk_turned_read_only_fails_cleanly_and_resumes_to_the_same_
 #[test]
 fn extrapolate_whose_output_folder_vanishes_fails_cleanly_and_resumes_to_the_same_bits() {
     let t = TempDir::new("faults-extrapolate-vanished");
-    let run = tiny_run(t.path());
-    let cfg = tiny_config_file(t.path());
+    let (run, cfg) = TinyRun::new().files(&t);
     let reference = t.path().join("reference");
     extrapolate_ok(&run, &cfg, &reference, false);
     let out = t.path().join("out");
@@ -439,8 +436,9 @@ fn extrapolate_whose_output_folder_vanishes_fails_cleanly_and_resumes_to_the_sam
 /// equal the undisturbed run step for step, bit for bit (`compare`, tolerance 0), with no
 /// temporary left, and the next kills start a new folder. The last folder is resumed to
 /// the end and checked the same way. The long version:
-/// `UNSEEN_SOAK_KILLS=500 UNSEEN_SOAK_SEED=<s> cargo test --release --test tests soak`.
+/// `UNSEEN_SOAK_KILLS=500 UNSEEN_SOAK_SEED=<s> cargo test --release --test tests soak -- --ignored`
 #[test]
+#[ignore = "slow tier (~75 s): cargo test -- --include-ignored"]
 fn soak_extrapolate_killed_at_random_moments_resumes_to_the_same_bits() {
     let kills: usize = std::env::var("UNSEEN_SOAK_KILLS")
         .ok()
@@ -451,8 +449,7 @@ fn soak_extrapolate_killed_at_random_moments_resumes_to_the_same_bits() {
         .and_then(|v| v.parse().ok())
         .unwrap_or(36);
     let t = TempDir::new("faults-soak");
-    let run = tiny_run(t.path());
-    let cfg = tiny_config_file(t.path());
+    let (run, cfg) = TinyRun::new().files(&t);
     let reference = t.path().join("reference");
     let started = std::time::Instant::now();
     let o = Command::new(env!("CARGO_BIN_EXE_unseen"))
@@ -584,8 +581,7 @@ fn on_host(host: &str, args: &[std::ffi::OsString]) -> Command {
 #[test]
 fn two_workers_racing_on_the_same_steps_both_succeed_and_leave_one_verified_entry_each() {
     let t = TempDir::new("faults-cache-race");
-    let run = tiny_run(t.path());
-    let cfg = tiny_config_file(t.path());
+    let (run, cfg) = TinyRun::new().files(&t);
     let reference = t.path().join("reference");
     extrapolate_ok(&run, &cfg, &reference, false);
     let cache = t.path().join("cache");
@@ -620,8 +616,7 @@ fn two_workers_racing_on_the_same_steps_both_succeed_and_leave_one_verified_entr
 #[test]
 fn a_worker_killed_while_publishing_to_the_cache_leaves_nothing_the_next_one_takes() {
     let t = TempDir::new("faults-cache-kill");
-    let run = tiny_run(t.path());
-    let cfg = tiny_config_file(t.path());
+    let (run, cfg) = TinyRun::new().files(&t);
     let reference = t.path().join("reference");
     extrapolate_ok(&run, &cfg, &reference, false);
     let Some(disk) = Tmpfs::mount(&t.path().join("disk"), 1 << 30) else {
@@ -699,8 +694,7 @@ fn a_worker_killed_while_publishing_to_the_cache_leaves_nothing_the_next_one_tak
 #[test]
 fn an_only_worker_never_replaces_a_sibling_folder_from_the_cache() {
     let t = TempDir::new("faults-cache-sibling");
-    let run = tiny_run(t.path());
-    let cfg = tiny_config_file(t.path());
+    let (run, cfg) = TinyRun::new().files(&t);
     let cache = t.path().join("cache");
     let first = t.path().join("first");
     let o = Command::new(env!("CARGO_BIN_EXE_unseen"))

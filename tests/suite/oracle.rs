@@ -1,6 +1,6 @@
 //! `unseen oracle`: the dumped arrays load, hash as the manifest says, and agree with the
 //! library's own render and gradients.
-use super::common::reference;
+use crate::support::reference;
 use sha2::{Digest, Sha256};
 use std::process::Command;
 use unseen::io::npy::read_npy_f32;
@@ -8,7 +8,7 @@ use unseen::io::npy::read_npy_f32;
 #[test]
 fn oracle_backward_dump_is_complete_and_consistent() {
     let demo = reference("demo");
-    let out = super::common::TempDir::path_only("oracle");
+    let out = crate::support::TempDir::path_only("oracle");
     // A target: the render of another camera, written by `unseen render`.
     let tdir = out.join("target");
     let st = Command::new(env!("CARGO_BIN_EXE_unseen"))
@@ -100,7 +100,7 @@ fn oracle_l1_dssim_loss() {
     let target: Vec<f32> = (0..40 * 30 * 3)
         .map(|i| ((i * 37) % 101) as f32 / 100.0)
         .collect();
-    let dir = super::common::TempDir::path_only("oracle-ssim");
+    let dir = crate::support::TempDir::path_only("oracle-ssim");
     let t = Targets {
         rgb: &target,
         loss: Loss::L1DSsim,
@@ -143,7 +143,7 @@ fn compare_names_oracle_dumps_by_their_folder() {
     use unseen::gaussian::ply::read_ply;
     use unseen::pipeline::compare::compare;
     let demo = reference("demo");
-    let t = super::common::TempDir::new("oracle-compare");
+    let t = crate::support::TempDir::new("oracle-compare");
     let (scene, _) = read_ply(&demo.join("scene.ply")).unwrap();
     let cam = read_cameras_json(&demo.join("cameras.json"))
         .unwrap()

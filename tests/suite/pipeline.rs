@@ -2,13 +2,12 @@
 //! thread-count bit identity, resume after `kill -9`, tampering, `compare`, bad input and
 //! the ground-truth generator's gain on the extrapolated pixels.
 
-use super::common::{TempDir, reference, with_threads};
-use std::path::{Path, PathBuf};
+use crate::support::tiny_run::{Tiny, TinyRun, lounge, tiny_config};
+use crate::support::{TempDir, reference, walk, with_threads};
+use std::path::Path;
 use std::process::Command;
 use unseen::pipeline::compare::compare;
-use unseen::pipeline::{self, Event, Inputs, PipelineConfig, ReconConfig, SlotNames, load_inputs};
-use unseen::train::run::train_run;
-use unseen::train::trainer::TrainConfig;
+use unseen::pipeline::{self, Event, Inputs, PipelineConfig, SlotNames, load_inputs};
 
 /// Extrapolated-pixel PSNR gain of the tiny ground-truth run over the original scene that
 /// the test requires. Measured 7.1 dB (9.03 → 16.15 dB on the 12 evaluation bridge
@@ -20,65 +19,13 @@ const TINY_EXTRAPOLATED_GAIN_DB: f64 = 5.0;
 /// Largest drop of the training half's PSNR allowed (the 0.5 dB; +1.0 dB measured).
 const TRAIN_HALF_DROP_DB: f64 = 0.5;
 
-pub(super) fn lounge() -> PathBuf {
-    reference("scenes/lounge")
-}
-
-/// A 300-iteration original scene at 40×30.
-pub(super) fn tiny_run(dir: &Path) -> PathBuf {
-    let run = dir.join("run");
-    let cfg = TrainConfig {
-        iterations: 300,
-        resolution: 4,
-        save_iterations: vec![],
-        ..TrainConfig::default()
-    };
-    train_run(&lounge(), &run, &cfg, None, Default::default(), &mut |_| {}).unwrap();
-    run
-}
-
-/// The quick preset shrunk to seconds.
-pub(super) fn tiny_config() -> PipelineConfig {
-    let r = |iterations| ReconConfig {
-        iterations,
-        densify: None,
-    };
-    PipelineConfig {
-        slots: SlotNames::truth(),
-        qa_iterations: 30,
-        video_frames: 3,
-        stage1: r(60),
-        stage2: r(60),
-        interpolate: r(40),
-        fixer_every: 20,
-        ..PipelineConfig::quick()
-    }
-}
-
-pub(super) fn tiny_config_file(dir: &Path) -> PathBuf {
-    let p = dir.join("tiny.json");
-    std::fs::write(&p, serde_json::to_string(&tiny_config()).unwrap()).unwrap();
-    p
-}
-
-fn inputs(run: &Path) -> Inputs {
-    load_inputs(
-        run,
-        &lounge().join("candidates.json"),
-        Some(&lounge().join("evaluation.json")),
-        Some(&lounge()),
-    )
-    .unwrap()
-}
-
 fn quiet(_: Event) {}
 
 #[test]
+#[ignore = "slow tier (~20 s): cargo test -- --include-ignored"]
 fn pipeline_extrapolates_and_is_the_same_bits_on_1_2_and_7_threads() {
     let t = TempDir::new("pipeline-threads");
-    let run = tiny_run(t.path());
-    let inp = inputs(&run);
-    let cfg = tiny_config();
+    let Tiny { inp, cfg, .. } = TinyRun::new().build(&t);
     let mut outs = Vec::new();
     for threads in [1, 2, 7] {
         let out = t.path().join(format!("ex{threads}"));
@@ -144,10 +91,10 @@ fn pipeline_extrapolates_and_is_the_same_bits_on_1_2_and_7_threads() {
 }
 
 #[test]
+#[ignore = "slow tier (~15 s): cargo test -- --include-ignored"]
 fn resume_after_kill_9_gives_the_same_bits() {
     let t = TempDir::new("pipeline-resume");
-    let run = tiny_run(t.path());
-    let cfg = tiny_config_file(t.path());
+    let (run, cfg) = TinyRun::new().files(&t);
     let args = |out: &Path| -> Vec<String> {
         [
             "extrapolate",
@@ -247,28 +194,10 @@ fn resume_after_kill_9_gives_the_same_bits() {
     assert_eq!(cmp(&t.path().join("nothing-here")).status.code(), Some(2));
 }
 
-pub(super) fn walk(d: &Path) -> Vec<PathBuf> {
-    let mut out = Vec::new();
-    for e in std::fs::read_dir(d).unwrap().flatten() {
-        let p = e.path();
-        if p.is_dir() {
-            out.extend(walk(&p));
-        } else {
-            out.push(p);
-        }
-    }
-    out
-}
-
 #[test]
 fn tampered_artifacts_are_recomputed_and_compare_names_the_first_divergent_step() {
     let t = TempDir::new("pipeline-tamper");
-    let run = tiny_run(t.path());
-    let inp = inputs(&run);
-    let cfg = PipelineConfig {
-        interpolation: false,
-        ..tiny_config()
-    };
+    let Tiny { inp, cfg, .. } = TinyRun::new().config(|c| c.interpolation = false).build(&t);
     let a = t.path().join("a");
     pipeline::run(&cfg, &inp, &a, false, &quiet).unwrap();
     let b = t.path().join("b");
@@ -315,7 +244,7 @@ fn tampered_artifacts_are_recomputed_and_compare_names_the_first_divergent_step(
 #[test]
 fn bad_pipeline_input_is_one_clear_error() {
     let t = TempDir::new("pipeline-bad");
-    let run = tiny_run(t.path());
+    let run = TinyRun::new().train(&t);
     let cands = lounge().join("candidates.json");
     let err = |r: unseen::Result<Inputs>| r.err().map(|e| e.to_string()).unwrap_or_default();
     // Empty view list.
@@ -355,7 +284,7 @@ fn bad_pipeline_input_is_one_clear_error() {
     assert!(e.contains("stale") && e.contains("iteration_999999"), "{e}");
     std::fs::remove_dir_all(&stale).unwrap();
     // An output folder that holds something, without --resume; an output path that is a file.
-    let inp = inputs(&run);
+    let inp = TinyRun::new().inputs(&run);
     let busy = t.path().join("busy");
     std::fs::create_dir_all(&busy).unwrap();
     std::fs::write(busy.join("x"), "x").unwrap();
@@ -429,12 +358,7 @@ fn per_view_jobs_then_resume_equal_one_run() {
         pipeline::run_with(cfg, inp, out, &opts, on_event)
     };
     let t = TempDir::new("pipeline-batch");
-    let run = tiny_run(t.path());
-    let inp = inputs(&run);
-    let cfg = PipelineConfig {
-        interpolation: false,
-        ..tiny_config()
-    };
+    let Tiny { inp, cfg, .. } = TinyRun::new().config(|c| c.interpolation = false).build(&t);
     let whole = t.path().join("whole");
     pipeline::run(&cfg, &inp, &whole, false, &quiet).unwrap();
     let out = t.path().join("batch");
@@ -535,7 +459,7 @@ fn view_names_map_to_distinct_safe_folders() {
         }
     }
     let t = TempDir::new("pipeline-names");
-    let run = tiny_run(t.path());
+    let run = TinyRun::new().train(&t);
     let text = std::fs::read(lounge().join("candidates.json")).unwrap();
     let mut cam = serde_json::from_slice::<Vec<serde_json::Value>>(&text)
         .unwrap()
@@ -558,6 +482,7 @@ fn view_names_map_to_distinct_safe_folders() {
 /// A learned slot is keyed by the hashes of its card and weights, so editing either
 /// invalidates the steps that called it; classical slots by their name.
 #[test]
+#[cfg(feature = "onnx")]
 fn slot_fingerprints_follow_the_model_files() {
     use unseen::models::inpainter;
     assert_eq!(
@@ -586,7 +511,7 @@ fn slot_fingerprints_follow_the_model_files() {
 #[test]
 fn cli_extrapolate_bad_input_matrix() {
     let t = TempDir::new("pipeline-cli-bad");
-    let run = tiny_run(t.path());
+    let run = TinyRun::new().train(&t);
     let cands = lounge().join("candidates.json");
     let empty = t.path().join("empty.json");
     std::fs::write(&empty, "[]").unwrap();
@@ -697,12 +622,7 @@ fn cli_extrapolate_bad_input_matrix() {
 fn step_cache_shares_equal_steps_across_runs() {
     use unseen::pipeline::{MaskSource, RunOptions};
     let t = TempDir::new("pipeline-cache");
-    let run = tiny_run(t.path());
-    let inp = inputs(&run);
-    let cfg = PipelineConfig {
-        interpolation: false,
-        ..tiny_config()
-    };
+    let Tiny { inp, cfg, .. } = TinyRun::new().config(|c| c.interpolation = false).build(&t);
     let cache = t.path().join("cache");
     let opts = RunOptions {
         cache: Some(cache.clone()),
@@ -777,6 +697,7 @@ fn step_cache_shares_equal_steps_across_runs() {
 /// verdict for each claim on the variants run, and a second run verifies and reuses
 /// everything (the same results bit for bit).
 #[test]
+#[ignore = "slow tier (~15 s): cargo test -- --include-ignored"]
 fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
     use unseen::audit::{self, AuditConfig, GeneratorKind, Job, Variant};
     let t = TempDir::new("pipeline-audit");
@@ -1140,13 +1061,12 @@ fn audit_verdicts_pool_seeds_and_revisions_and_test_non_inferiority() {
 #[test]
 fn a_clip_the_video_slot_cannot_make_is_left_out() {
     let t = TempDir::new("pipeline-failed-clip");
-    let run = tiny_run(t.path());
-    let inp = inputs(&run);
-    let cfg = PipelineConfig {
-        slots: SlotNames::default(),
-        independent_detection: false,
-        ..tiny_config()
-    };
+    let Tiny { inp, cfg, .. } = TinyRun::new()
+        .config(|c| {
+            c.slots = SlotNames::default();
+            c.independent_detection = false;
+        })
+        .build(&t);
     let out = t.path().join("out");
     let o = pipeline::run(&cfg, &inp, &out, false, &quiet).unwrap();
     assert!(o.scene.is_some());
@@ -1372,8 +1292,7 @@ fn audit_samples_round_trip_and_damaged_files_are_clear_errors() {
 fn depth_supervision_reaches_the_generated_views_only_unless_the_non_paper_switch() {
     use unseen::pipeline::recon::original_views;
     let t = TempDir::new("pipeline-original-depth");
-    let run = tiny_run(t.path());
-    let inp = inputs(&run);
+    let Tiny { inp, .. } = TinyRun::new().build(&t);
     assert!(
         inp.data
             .train
@@ -1437,14 +1356,13 @@ fn relative_truth_depth_runs_the_alignments_and_still_extrapolates() {
     const RELATIVE_GAIN_DB: f64 = 5.0;
     const RELATIVE_COST_DB: f64 = 1.0;
     let t = TempDir::new("pipeline-relative-depth");
-    let run = tiny_run(t.path());
-    let inp = inputs(&run);
-    let cfg = PipelineConfig {
-        interpolation: false,
-        inconsistency: unseen::pipeline::Inconsistency::LOW,
-        truth_depth: unseen::pipeline::TruthDepth::Relative,
-        ..tiny_config()
-    };
+    let Tiny { inp, cfg, .. } = TinyRun::new()
+        .config(|c| {
+            c.interpolation = false;
+            c.inconsistency = unseen::pipeline::Inconsistency::LOW;
+            c.truth_depth = unseen::pipeline::TruthDepth::Relative;
+        })
+        .build(&t);
     let out = t.path().join("out");
     let o = pipeline::run(&cfg, &inp, &out, false, &quiet).unwrap();
     let mut scales = Vec::new();
@@ -1506,12 +1424,9 @@ fn hallucinating_truth_conflicts_between_calls_on_unseen_content_only() {
     use unseen::pipeline::{Hallucination, Inconsistency, candidate_truth};
     const CONFLICT_DB: f64 = 15.0;
     let t = TempDir::new("pipeline-hallucination");
-    let run = tiny_run(t.path());
-    let inp = inputs(&run);
-    let cfg = PipelineConfig {
-        hallucination: Hallucination::High,
-        ..tiny_config()
-    };
+    let Tiny { inp, cfg, .. } = TinyRun::new()
+        .config(|c| c.hallucination = Hallucination::High)
+        .build(&t);
     let seen = pipeline::training_truth(&inp, &cfg).unwrap();
     let store = |level| {
         GroundTruth::new(candidate_truth(&inp).unwrap(), Inconsistency::NONE, 3)
@@ -1565,8 +1480,7 @@ fn hallucinating_truth_conflicts_between_calls_on_unseen_content_only() {
 fn hallucinating_relative_truth_runs_end_to_end_and_costs_unseen_fidelity() {
     use unseen::pipeline::{Hallucination, Inconsistency, TruthDepth};
     let t = TempDir::new("pipeline-hallucinating-run");
-    let run = tiny_run(t.path());
-    let inp = inputs(&run);
+    let Tiny { inp, .. } = TinyRun::new().build(&t);
     let gain = |h: Hallucination, name: &str| {
         let cfg = PipelineConfig {
             inconsistency: Inconsistency::LOW,
@@ -1627,14 +1541,13 @@ fn stage2_depth_by_video_alignment_recovers_the_relative_map_and_render_fit_is_t
     use unseen::pipeline::{RunOptions, Scope, Stage2Depth};
     const VIDEO_DEPTH_MEDIAN_REL: f64 = 0.05;
     let t = TempDir::new("pipeline-stage2-depth");
-    let run = tiny_run(t.path());
-    let inp = inputs(&run);
-    let cfg = PipelineConfig {
-        interpolation: false,
-        inconsistency: unseen::pipeline::Inconsistency::LOW,
-        truth_depth: unseen::pipeline::TruthDepth::Relative,
-        ..tiny_config()
-    };
+    let Tiny { inp, cfg, .. } = TinyRun::new()
+        .config(|c| {
+            c.interpolation = false;
+            c.inconsistency = unseen::pipeline::Inconsistency::LOW;
+            c.truth_depth = unseen::pipeline::TruthDepth::Relative;
+        })
+        .build(&t);
     assert_eq!(
         cfg.stage2_depth,
         Stage2Depth::Video,
@@ -1736,8 +1649,8 @@ fn candidate_sets_as_users_give_them_are_extrapolated_or_set_aside_never_stop_th
     use unseen::camera::inria::cameras_json_string;
     use unseen::raster::{Outputs, RenderOptions, render};
     let t = TempDir::new("pipeline-user-candidates");
-    let run = tiny_run(t.path());
-    let base = inputs(&run);
+    let run = TinyRun::new().train(&t);
+    let base = TinyRun::new().inputs(&run);
     let data = &base.data;
     // Full size: candidates are given at the dataset's resolution and scaled like the run.
     let full = unseen::camera::inria::read_cameras_json(&lounge().join("cameras.json")).unwrap();
@@ -1802,13 +1715,7 @@ fn candidate_sets_as_users_give_them_are_extrapolated_or_set_aside_never_stop_th
     common.push(in_wall);
     let classical_list = write("classical.json", &common);
     for (family, list) in [("classical", &classical_list), ("truth", &truth_list)] {
-        let inp = load_inputs(
-            &run,
-            list,
-            Some(&lounge().join("evaluation.json")),
-            Some(&lounge()),
-        )
-        .unwrap();
+        let inp = TinyRun::new().candidates(list).inputs(&run);
         let cfg = PipelineConfig {
             slots: if family == "truth" {
                 SlotNames::truth()
@@ -1881,7 +1788,7 @@ fn candidate_sets_as_users_give_them_are_extrapolated_or_set_aside_never_stop_th
 #[test]
 fn cli_extrapolate_on_the_unseen_half_sets_blind_views_aside_and_finishes() {
     let t = TempDir::new("pipeline-cli-unseen-half");
-    let run = tiny_run(t.path());
+    let (run, cfg) = TinyRun::new().files(&t);
     let full = unseen::camera::inria::read_cameras_json(&lounge().join("cameras.json")).unwrap();
     let held: Vec<unseen::camera::Camera> = full
         .iter()
@@ -1898,7 +1805,7 @@ fn cli_extrapolate_on_the_unseen_half_sets_blind_views_aside_and_finishes() {
         .arg("--views")
         .arg(&list)
         .arg("--config")
-        .arg(tiny_config_file(t.path()))
+        .arg(&cfg)
         .args([
             "--generator",
             "classical",
@@ -1946,7 +1853,6 @@ fn cli_extrapolate_on_the_unseen_half_sets_blind_views_aside_and_finishes() {
 #[test]
 fn independent_views_of_different_sizes_get_a_gap_camera_and_finish() {
     let t = TempDir::new("pipeline-two-sizes");
-    let run = tiny_run(t.path());
     let full = unseen::camera::inria::read_cameras_json(&lounge().join("candidates.json")).unwrap();
     let mut two: Vec<unseen::camera::Camera> = full
         .into_iter()
@@ -1956,12 +1862,14 @@ fn independent_views_of_different_sizes_get_a_gap_camera_and_finish() {
     (o.width, o.height, o.fx, o.fy, o.cx, o.cy) = (120, 96, 1.4 * o.fx, 1.4 * o.fy, 60.0, 48.0);
     let list = t.path().join("two.json");
     std::fs::write(&list, unseen::camera::inria::cameras_json_string(&two)).unwrap();
-    let inp = load_inputs(&run, &list, None, Some(&lounge())).unwrap();
-    let cfg = PipelineConfig {
-        slots: SlotNames::default(),
-        interpolation: false,
-        ..tiny_config()
-    };
+    let Tiny { inp, cfg, .. } = TinyRun::new()
+        .candidates(&list)
+        .without_evaluation()
+        .config(|c| {
+            c.slots = SlotNames::default();
+            c.interpolation = false;
+        })
+        .build(&t);
     let out = t.path().join("out");
     pipeline::run(&cfg, &inp, &out, false, &quiet).unwrap();
     let plan: unseen::pipeline::views::Plan =
@@ -1986,7 +1894,6 @@ fn independent_views_of_different_sizes_get_a_gap_camera_and_finish() {
 #[test]
 fn a_single_candidate_view_runs_in_both_families() {
     let t = TempDir::new("pipeline-single-view");
-    let run = tiny_run(t.path());
     let full = unseen::camera::inria::read_cameras_json(&lounge().join("candidates.json")).unwrap();
     let one: Vec<unseen::camera::Camera> = full
         .into_iter()
@@ -1994,13 +1901,7 @@ fn a_single_candidate_view_runs_in_both_families() {
         .collect();
     let list = t.path().join("one.json");
     std::fs::write(&list, unseen::camera::inria::cameras_json_string(&one)).unwrap();
-    let inp = load_inputs(
-        &run,
-        &list,
-        Some(&lounge().join("evaluation.json")),
-        Some(&lounge()),
-    )
-    .unwrap();
+    let Tiny { inp, .. } = TinyRun::new().candidates(&list).build(&t);
     for slots in [SlotNames::default(), SlotNames::truth()] {
         let cfg = PipelineConfig {
             slots,
@@ -2092,12 +1993,7 @@ fn psnr_of_identical_images_is_infinity_in_json_and_reports() {
 #[test]
 fn damaged_steps_and_cache_entries_are_named_recomputed_and_end_in_the_same_bits() {
     let t = TempDir::new("pipeline-damage");
-    let run = tiny_run(t.path());
-    let inp = inputs(&run);
-    let cfg = PipelineConfig {
-        interpolation: false,
-        ..tiny_config()
-    };
+    let Tiny { inp, cfg, .. } = TinyRun::new().config(|c| c.interpolation = false).build(&t);
     let reference = t.path().join("reference");
     pipeline::run(&cfg, &inp, &reference, false, &quiet).unwrap();
     let a = t.path().join("a");

@@ -2,7 +2,7 @@
 //! points and continued with `--resume` ends with the same bits as a run that was never
 //! interrupted; checkpoint files are checked before use; SIGINT / SIGTERM remove the
 //! temporaries in flight and keep finished outputs.
-use super::common::{TempDir, reference, short_train_config};
+use crate::support::{TempDir, reference, short_train_config};
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};

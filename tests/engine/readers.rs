@@ -1,6 +1,6 @@
 //! Readers and writers: COLMAP (against files COLMAP wrote), cameras.json, transforms.json,
 //! INRIA PLY (round trip, ASCII, big-endian, malformed input).
-use super::common::{TempDir, reference};
+use crate::support::{TempDir, reference};
 use glam::{DMat3, DVec3};
 use std::path::Path;
 use unseen::camera::colmap::read_colmap_model;

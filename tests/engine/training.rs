@@ -1,7 +1,7 @@
 //! Training: SSIM vs OpenCV/NumPy, Adam by hand, densification counts, datasets, the
 //! thread-count determinism of a whole run, and a regression floor on a bundled scene.
 
-use super::common::{case_dirs, reference, short_train_config, with_threads};
+use crate::support::{case_dirs, reference, short_train_config, with_threads};
 use unseen::dataset::{self, LoadOptions, Split};
 use unseen::gaussian::{Gaussians, Param};
 use unseen::io::npy::read_npy_f32;
@@ -433,8 +433,8 @@ fn short_training_beats_the_psnr_floor() {
 }
 
 /// A fresh folder, removed when the guard drops.
-fn temp_dir(name: &str) -> super::common::TempDir {
-    super::common::TempDir::new(&format!("ds-{name}"))
+fn temp_dir(name: &str) -> crate::support::TempDir {
+    crate::support::TempDir::new(&format!("ds-{name}"))
 }
 
 /// A COLMAP directory (the pycolmap model + images we write) loads with its points, sorted

@@ -3,7 +3,7 @@
 //! (ground truth by Mitsuba ray tests, `reference_data/mitsuba/dibr/`); plus exact
 //! properties on constructed cases.
 
-use super::common::{bits, case_dirs, reference, with_threads};
+use crate::support::{bits, case_dirs, reference, with_threads};
 use unseen::camera::Camera;
 use unseen::camera::inria::read_cameras_json;
 use unseen::io::image::{ImageF32, read_exr, read_png};

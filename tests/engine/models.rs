@@ -2,7 +2,7 @@
 //! registry by name, and the `morph` video generator against Mitsuba renders at the
 //! interpolated poses (`reference_data/mitsuba/morph/`, `make_morph_goldens.py`).
 
-use super::common::{bits, reference, with_threads};
+use crate::support::{bits, reference, with_threads};
 use unseen::camera::inria::read_cameras_json;
 use unseen::io::image::{ImageF32, read_exr, read_png};
 use unseen::models::morph::{Morph, interpolate_camera};

@@ -1,6 +1,6 @@
 //! Gradients against Dr.Jit's reverse-mode AD of an independent float64 renderer
 //! (`reference_data/generate/make_grad_goldens.py`): 5 scenes, SH degrees 0, 1, 3, 5.
-use super::common::case_dirs;
+use crate::support::case_dirs;
 use unseen::camera::inria::read_cameras_json;
 use unseen::gaussian::ply::read_ply;
 use unseen::raster::backward::{GradGroups, ImageGrads, backward, render_for_backward};

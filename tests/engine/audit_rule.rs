@@ -7,7 +7,7 @@
 //! fail: Student's t with BCa agreement (the mean; liberal under skew and when every look
 //! at a growing pool is a verdict), the `m > 2·sd` rule and the inverted "does not hurt".
 
-use crate::suite::common::{TempDir, reference};
+use crate::support::{TempDir, reference};
 use unseen::audit::stats::{
     ClaimData, Outcome, Rule, normal_cdf, normal_quantile, sign_min_detectable, student_t_cdf,
 };

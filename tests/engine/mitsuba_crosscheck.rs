@@ -5,7 +5,7 @@
 //! densities down to its extent-4 shell while we drop α < 1/255, and it colours by the ray
 //! direction instead of the direction to the mean. On small Gaussians near the axis these
 //! differ by a few 1e-3 at the splat edges (tolerances below).
-use super::common::case_dirs;
+use crate::support::case_dirs;
 use unseen::camera::inria::read_cameras_json;
 use unseen::gaussian::ply::read_ply;
 use unseen::io::image::read_exr;

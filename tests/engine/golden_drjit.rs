@@ -1,6 +1,6 @@
 //! Renders against the independent Dr.Jit float64 reference
 //! (`reference_data/generate/make_raster_goldens.py`).
-use super::common::{case_dirs, reference};
+use crate::support::{case_dirs, reference};
 use unseen::camera::inria::read_cameras_json;
 use unseen::gaussian::ply::read_ply;
 use unseen::io::image::read_exr;

@@ -1,6 +1,6 @@
 //! Tile binning (`raster::tile::bin`, `bin_into`) against the obvious sort + scatter, on
 //! seeded random projections, for 1, 2 and 3 rayon threads.
-use super::common::with_threads;
+use crate::support::with_threads;
 use unseen::raster::Kernel;
 use unseen::raster::project::{Projected, Splat};
 use unseen::raster::tile::{BinScratch, TILE_SIZE, TileBins, bin, bin_into, tile_rect};

@@ -2,7 +2,7 @@
 //! (`reference_data/onnx/`, made by `make_onnx_goldens.py`): raw tensors, the adapter's
 //! whole image path, determinism, and clear errors for malformed or mismatched models.
 
-use super::common::{bits, reference, with_threads};
+use crate::support::{bits, reference, with_threads};
 use unseen::io::image::ImageF32;
 use unseen::io::npy::read_npy_f32;
 use unseen::models::onnx::{OnnxDepth, OnnxFixer, OnnxInpainter, OnnxModel};
@@ -100,7 +100,7 @@ fn onnx_depth_adapter_matches_opencv_and_the_evaluator() {
 
 #[test]
 fn onnx_errors_name_the_file_and_the_mismatch() {
-    let dir = super::common::TempDir::new("onnx");
+    let dir = crate::support::TempDir::new("onnx");
     let err = |card: &std::path::Path| OnnxModel::load(card).err().unwrap().to_string();
     // Rank-3 image input.
     let e = err(&reference("onnx/bad_rank/card.json"));
@@ -179,7 +179,7 @@ fn onnx_resize_half_pixel_agrees_off_the_low_edge() {
 #[test]
 fn resize_matches_opencv() {
     const RESIZE_TOL: f32 = 1e-5;
-    for dir in super::common::case_dirs("opencv/resize") {
+    for dir in crate::support::case_dirs("opencv/resize") {
         #[derive(serde::Deserialize)]
         struct Case {
             filter: unseen::io::image::Filter,

@@ -1,7 +1,7 @@
 //! Telea inpainting against OpenCV's `cv2.inpaint(..., INPAINT_TELEA)`
 //! (`reference_data/opencv/telea/`, made by `make_telea_goldens.py`).
 
-use super::common::case_dirs;
+use crate::support::case_dirs;
 use unseen::io::npy::read_npy_f32;
 use unseen::models::telea::inpaint;
 

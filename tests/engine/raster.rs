@@ -1,5 +1,5 @@
 //! Exact answers, hard cases, render-plan skips and determinism of the forward rasterizer.
-use super::common::{bits, with_threads};
+use crate::support::{bits, with_threads};
 use unseen::camera::Camera;
 use unseen::gaussian::Gaussians;
 use unseen::raster::{

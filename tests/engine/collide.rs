@@ -291,7 +291,7 @@ fn independent_views_are_maximal_conflict_free_and_toured() {
 }
 
 mod frustums {
-    use super::super::common::reference;
+    use crate::support::reference;
     use glam::DVec3;
     use unseen::camera::inria::read_cameras_json;
     use unseen::collide::frustum::{

@@ -1,7 +1,7 @@
 //! Backward pass: central finite differences of an f64 twin of the forward (used only by
 //! these tests), determinism, frozen groups and hard cases.
-use super::common::{bits, with_threads};
 use super::twin::{flatten, forward64, smooth_scene};
+use crate::support::{bits, with_threads};
 use unseen::camera::Camera;
 use unseen::gaussian::Gaussians;
 use unseen::raster::backward::{GradGroups, Gradients, ImageGrads, backward, render_for_backward};

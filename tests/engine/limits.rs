@@ -2,7 +2,7 @@
 //! error naming the file before anything of the declared size is allocated. Each case
 //! declares ≥ 10¹² elements in a file of a few hundred bytes; an attempt to allocate them
 //! would abort the test process, so passing at all is half the check.
-use super::common::TempDir;
+use crate::support::TempDir;
 use std::path::{Path, PathBuf};
 
 fn write(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {

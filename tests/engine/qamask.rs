@@ -1,7 +1,7 @@
 //! QA-Mask: what the fine-tune may change, determinism, holes, and a short-preset check of
 //! the paper's claim (the mask finds badly reconstructed pixels of the unseen half).
 
-use super::common::{reference, short_train_config, with_threads};
+use crate::support::{reference, short_train_config, with_threads};
 use unseen::camera::Camera;
 use unseen::dataset::{self, Dataset, LoadOptions, Split};
 use unseen::gaussian::{Gaussians, Param};
@@ -60,6 +60,7 @@ fn short_cfg(iterations: u32, degree: u32) -> QaMaskConfig {
 /// Everything but SH rest is bit-identical after the fine-tune; the masks are the same bits
 /// on 1 and 2 threads; a camera that sees no Gaussian renders the base colour exactly.
 #[test]
+#[ignore = "slow tier (~20 s): cargo test -- --include-ignored"]
 fn qa_mask_fine_tune_changes_only_sh_rest_and_is_deterministic() {
     let (d, g) = fixture();
     let cfg = short_cfg(300, 3);
@@ -241,6 +242,7 @@ fn qa_mask_fine_tune_skips_unseen_gaussians_exactly() {
 /// own rounding: the loss, the gradients and the updates are those of red/black with the
 /// channels permuted, so the masks agree to f32 rounding.
 #[test]
+#[ignore = "slow tier (~15 s): cargo test -- --include-ignored"]
 fn qa_mask_colour_pair_does_not_matter() {
     let (d, g) = fixture();
     let train = cams(d, Split::Train);
@@ -273,6 +275,7 @@ fn qa_mask_colour_pair_does_not_matter() {
 /// AUROC 0.975 (opacity) and 0.944 (scale) here, because 92 % of held-out pixels are bad
 /// and most of them are holes. Full-scale figures: `reference_data/audit/`.
 #[test]
+#[ignore = "slow tier (~25 s): cargo test -- --include-ignored"]
 fn qa_mask_detects_badly_reconstructed_pixels() {
     let (d, g) = fixture();
     let report = audit(g, d, &[short_cfg(1500, 3)], &mut |_, _| {}).unwrap();
@@ -296,6 +299,7 @@ fn qa_mask_detects_badly_reconstructed_pixels() {
 /// fine-tune's, bit for bit (nothing in a step depends on the budget): the accuracy bench
 /// reads shorter budgets off one long run.
 #[test]
+#[ignore = "slow tier (~15 s): cargo test -- --include-ignored"]
 fn qa_mask_fine_tune_checkpoints_are_shorter_fine_tunes() {
     let (d, g) = fixture();
     let train = cams(d, Split::Train);

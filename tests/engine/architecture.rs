@@ -11,7 +11,7 @@
 //! raw strings with unbalanced quotes, nested block comments, paths built by macros (none
 //! in `src/` today).
 
-use super::common::repo_root;
+use crate::support::repo_root;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 

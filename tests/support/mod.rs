@@ -1,5 +1,9 @@
-//! Helpers shared by the suites.
-use std::path::PathBuf;
+//! Helpers shared by the engine's suites (`tests/engine/`) and the program's (`tests/suite/`);
+//! each test binary uses part of them.
+#![allow(dead_code)]
+use std::path::{Path, PathBuf};
+
+pub mod tiny_run;
 
 /// The repository's root: the folder holding `reference_data/`, at or above the manifest
 /// of the package these tests belong to.
@@ -41,6 +45,20 @@ pub fn case_dirs(rel: &str) -> Vec<PathBuf> {
         .collect();
     cases.sort();
     cases
+}
+
+/// Every file under `d`, in the order the file system lists them.
+pub fn walk(d: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(d).unwrap().flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            out.extend(walk(&p));
+        } else {
+            out.push(p);
+        }
+    }
+    out
 }
 
 /// The short training preset of the training and QA-Mask tests: INRIA's recipe with
