@@ -73,11 +73,9 @@ pub fn waves(config: &PipelineConfig, bound: &Shape, pixels: f64) -> Vec<BatchWa
         while k < bound.len() && bound[k].steps.len() <= 1 {
             k += 1;
         }
-        let seconds = (first..k).flat_map(cost).map(|c| c.seconds).sum();
-        let peak = (first..k)
-            .flat_map(cost)
-            .map(|c| c.peak_rss_bytes)
-            .fold(0.0, f64::max);
+        let costs: Vec<Cost> = (first..k).flat_map(cost).collect();
+        let seconds = costs.iter().map(|c| c.seconds).sum();
+        let peak = costs.iter().map(|c| c.peak_rss_bytes).fold(0.0, f64::max);
         out.push(BatchWave {
             name: if first == k - 1 {
                 stage(first, false).into()

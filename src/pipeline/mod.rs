@@ -158,19 +158,22 @@ pub struct RunOptions {
 /// detection found when `out`'s views step is done (its `views/plan.json`), else the
 /// largest plan, every candidate independent.
 pub fn plan_of(config: &PipelineConfig, inputs: &Inputs, out: &Path) -> Result<Vec<Wave>> {
-    let evaluation = !inputs.evaluation.is_empty();
     let path = Step::Views.dir(out).join("plan.json");
     let shape = if path.is_file() {
-        let plan: views::Plan = artifacts::read_json(&path)?;
-        Shape {
-            independent: plan.independent.iter().map(|n| stem(n)).collect(),
-            dependent: !plan.dependent.is_empty(),
-            evaluation,
-        }
+        detected_shape(&artifacts::read_json(&path)?, inputs)
     } else {
         bound_shape(inputs)
     };
     Ok(steps::plan(config, &shape))
+}
+
+/// The shape of a run of `inputs` whose detection found `plan`.
+fn detected_shape(plan: &views::Plan, inputs: &Inputs) -> Shape {
+    Shape {
+        independent: plan.independent.iter().map(|n| stem(n)).collect(),
+        dependent: !plan.dependent.is_empty(),
+        evaluation: !inputs.evaluation.is_empty(),
+    }
 }
 
 /// The largest shape of a run of `inputs` ([`Shape::bound`]): every candidate independent.
@@ -290,12 +293,7 @@ fn run_in(
             gt.add_between(&g.camera, &g.between[0], &g.between[1])?;
         }
     }
-    let shape = Shape {
-        independent: views.plan.independent.iter().map(|n| stem(n)).collect(),
-        dependent: !views.plan.dependent.is_empty(),
-        evaluation: !inputs.evaluation.is_empty(),
-    };
-    let waves = steps::plan(config, &shape);
+    let waves = steps::plan(config, &detected_shape(&views.plan, inputs));
     let selection = Selection::new(scope, &waves).map_err(|e| e.at(out))?;
     let run = Run {
         config,

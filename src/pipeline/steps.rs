@@ -280,11 +280,12 @@ pub fn plan(config: &PipelineConfig, shape: &Shape) -> Vec<Wave> {
     let steps = graph(config, shape);
     // Steps that read nothing of detection are the same in every plan of the run: first in
     // their wave, so a batch task's index names the same step before and after detection.
-    let mut detected = BTreeSet::from([Step::Views]);
     let mut after_detection = BTreeSet::new();
     for p in &steps {
-        if p.after.iter().any(|a| detected.contains(a)) {
-            detected.insert(p.step.clone());
+        if p.after
+            .iter()
+            .any(|a| *a == Step::Views || after_detection.contains(a))
+        {
             after_detection.insert(p.step.clone());
         }
     }
@@ -388,7 +389,7 @@ fn graph(config: &PipelineConfig, shape: &Shape) -> Vec<Planned> {
 
 /// The scenes a run makes, in order, with the step that makes each (none for the
 /// original): what the evaluation compares.
-pub fn scenes(config: &PipelineConfig) -> Vec<(Scene, Option<Step>)> {
+fn scenes(config: &PipelineConfig) -> Vec<(Scene, Option<Step>)> {
     let mut s = vec![
         (Scene::Original, None),
         (Scene::Stage1, Some(Step::Stage1Recon)),
