@@ -5,9 +5,11 @@ use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+use unseen::collide::frustum::Outline;
 use unseen::error::{Error, Result};
 use unseen::pipeline::Level;
 use unseen::pipeline::compare::compare;
+use unseen::pipeline::selection::SelectionRule;
 use unseen::pipeline::steps::Step;
 use unseen::pipeline::{
     self, Hallucination, Inconsistency, Inputs, MaskSource, PipelineConfig, Preset, RunOptions,
@@ -126,6 +128,17 @@ pub struct Knobs {
     /// slot to the stage-1 render instead of video depth alignment.
     #[arg(long)]
     stage2_render_fit: bool,
+    /// Which independent set detection keeps (the paper leaves it open): greedy in
+    /// candidate order (default), maximum cardinality, or maximum coverage.
+    #[arg(long, value_parser = crate::one_of(&SelectionRule::ALL, SelectionRule::name))]
+    selection: Option<SelectionRule>,
+    /// Outline of an inpainted region's frustum: its bounding box (the paper) or hull.
+    #[arg(long, value_parser = crate::one_of(&Outline::ALL, Outline::name))]
+    frustum_outline: Option<Outline>,
+    /// Not the paper's method (an audit comparison): stage 1 generates a colliding set of
+    /// the independent set's size with matched coverage.
+    #[arg(long)]
+    conflicting_views: bool,
 }
 
 impl Knobs {
@@ -159,6 +172,13 @@ impl Knobs {
         if self.stage2_render_fit {
             c.stage2_depth = Stage2Depth::RenderFit;
         }
+        if let Some(r) = self.selection {
+            c.selection = r;
+        }
+        if let Some(o) = self.frustum_outline {
+            c.frustum_outline = o;
+        }
+        c.conflicting_views |= self.conflicting_views;
         Ok(())
     }
 }
@@ -454,7 +474,8 @@ pub struct AuditArgs {
     #[arg(long, value_parser = crate::one_of(&Preset::ALL, Preset::name), default_value = "quick")]
     preset: Preset,
     /// Variants, comma-separated (default: all): full, no_qa_mask, opacity_mask,
-    /// even_views, no_depth_supervision, no_propagation, qa_sh3, qa_sh4, no_interpolation, stage2_render_fit.
+    /// even_views, conflicting_views, no_depth_supervision, no_propagation, qa_sh3, qa_sh4,
+    /// no_interpolation, stage2_render_fit.
     #[arg(long, value_delimiter = ',')]
     variants: Vec<String>,
     /// Generators, comma-separated: classical, truth-none, truth-low, truth-high,
@@ -462,6 +483,12 @@ pub struct AuditArgs {
     /// classical,truth-low; paper classical and the three truth levels).
     #[arg(long, value_delimiter = ',')]
     generators: Vec<String>,
+    /// A dose–response sweep, `PARAM=v1,v2,…` with PARAM hallucination, photometric or
+    /// depth_distortion and levels in [0, 1] (e.g. `hallucination=0,0.25,0.5,0.75,1`): one
+    /// generator per level (`dose-<param>-<percent>`), added to `--generators` (alone when
+    /// none is given). Repeatable.
+    #[arg(long)]
+    sweep: Vec<String>,
     /// The seeds of this batch: `K` (seeds 0 to K−1) or `A..B` (seeds A to B−1; default:
     /// quick 1, paper 3). The report pools them with the samples already in the folder
     /// (`samples.json`) and in `--merge` files: seeds accumulate.
@@ -584,6 +611,18 @@ pub fn run_audit(a: &AuditArgs) -> Result<()> {
             .iter()
             .map(|g| GeneratorKind::by_name(g))
             .collect::<Result<_>>()?;
+    }
+    if !a.sweep.is_empty() {
+        if a.generators.is_empty() {
+            cfg.generators.clear();
+        }
+        for s in &a.sweep {
+            for g in unseen::audit::dose::parse_sweep(s)? {
+                if !cfg.generators.contains(&g) {
+                    cfg.generators.push(g);
+                }
+            }
+        }
     }
     if let Some(k) = &a.seeds {
         cfg.seeds = parse_seeds(k).map_err(Error::invalid)?;

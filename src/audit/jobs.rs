@@ -118,6 +118,14 @@ pub struct JobResult {
     /// job files written before it was recorded, and in pooled samples.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub steps: Vec<StepCost>,
+    /// SHA-256 of the final scene's PLY: two runs with equal digests evaluated the same
+    /// scene, so their pair is the *same computation* (SPEC.md §21.5). Empty in samples
+    /// written before it was recorded.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub scene_sha256: String,
+    /// What the run did ([`super::diagnostics`]); absent in samples written before.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub diagnostics: Option<super::diagnostics::Diagnostics>,
 }
 
 /// One step of a job: what [`sharing`] counts.
@@ -216,7 +224,7 @@ impl Audit<'_> {
                 variant,
                 seed,
             } => {
-                let (pc, outcome) =
+                let (pc, inputs, outcome) =
                     self.pipeline_job(job, (generator, variant, seed), Scope::All)?;
                 let out = dir.join(job.folder());
                 let summary: Summary = outcome.metrics.ok_or_else(|| {
@@ -242,6 +250,13 @@ impl Audit<'_> {
                         seconds,
                     });
                 }
+                let scene = outcome
+                    .scene
+                    .as_ref()
+                    .ok_or_else(|| Error::invalid("the run made no final scene").at(&out))?;
+                let scene_sha256 =
+                    crate::io::sha256_hex(&std::fs::read(scene).map_err(|e| Error::io(scene, e))?);
+                let diagnostics = super::diagnostics::diagnose(&inputs, &outcome.steps)?;
                 let result = JobResult {
                     generator: generator.name(),
                     variant: variant.name().into(),
@@ -253,6 +268,8 @@ impl Audit<'_> {
                     last,
                     stage_seconds,
                     steps,
+                    scene_sha256,
+                    diagnostics: Some(diagnostics),
                 };
                 let text = serde_json::to_string_pretty(&result).expect("serializes") + "\n";
                 crate::io::write_text(&out.join("audit_job.json"), &text)?;
@@ -263,13 +280,17 @@ impl Audit<'_> {
 
     /// Run the pipeline of (`generator`, `variant`, `seed`) in `job`'s folder within `scope`,
     /// continuing what is there and sharing `DIR/cache`; the seed's original scene must be
-    /// done. Returns the job's configuration and the run's outcome.
+    /// done. Returns the job's configuration, inputs and the run's outcome.
     fn pipeline_job(
         &self,
         job: &Job,
         (generator, variant, seed): (GeneratorKind, Variant, u32),
         scope: Scope,
-    ) -> Result<(PipelineConfig, crate::pipeline::Outcome)> {
+    ) -> Result<(
+        PipelineConfig,
+        crate::pipeline::Inputs,
+        crate::pipeline::Outcome,
+    )> {
         let Audit {
             cfg,
             dataset,
@@ -292,7 +313,7 @@ impl Audit<'_> {
             scope,
         };
         let outcome = crate::pipeline::run_with(&pc, &inputs, &out, &opts, on_event)?;
-        Ok((pc, outcome))
+        Ok((pc, inputs, outcome))
     }
 
     /// The folder of `seed`'s original scene, which `job` needs: an error naming the job to

@@ -32,6 +32,8 @@ use crate::train::trainer::TrainConfig;
 use std::path::Path;
 
 pub mod cluster;
+pub mod diagnostics;
+pub mod dose;
 pub mod jobs;
 pub mod report;
 pub mod samples;
@@ -54,6 +56,9 @@ pub enum Variant {
     /// The same number of views, evenly spaced along the candidate list ("w/o Idpdt Cam
     /// Detection").
     EvenViews,
+    /// A colliding set of the independent set's size with matched coverage (not a paper
+    /// ablation: it isolates the price of conflicts from coverage, SPEC.md §20.2).
+    ConflictingViews,
     NoDepthSupervision,
     NoPropagation,
     QaSh3,
@@ -65,11 +70,12 @@ pub enum Variant {
 }
 
 impl Variant {
-    pub const ALL: [Variant; 10] = [
+    pub const ALL: [Variant; 11] = [
         Variant::Full,
         Variant::NoQaMask,
         Variant::OpacityMask,
         Variant::EvenViews,
+        Variant::ConflictingViews,
         Variant::NoDepthSupervision,
         Variant::NoPropagation,
         Variant::QaSh3,
@@ -84,6 +90,7 @@ impl Variant {
             Variant::NoQaMask => "no_qa_mask",
             Variant::OpacityMask => "opacity_mask",
             Variant::EvenViews => "even_views",
+            Variant::ConflictingViews => "conflicting_views",
             Variant::NoDepthSupervision => "no_depth_supervision",
             Variant::NoPropagation => "no_propagation",
             Variant::QaSh3 => "qa_sh3",
@@ -112,6 +119,7 @@ impl Variant {
             Variant::NoQaMask => c.mask_source = MaskSource::None,
             Variant::OpacityMask => c.mask_source = MaskSource::Opacity,
             Variant::EvenViews => c.independent_detection = false,
+            Variant::ConflictingViews => c.conflicting_views = true,
             Variant::NoDepthSupervision => c.depth_supervision = false,
             Variant::NoPropagation => c.propagation = false,
             Variant::QaSh3 => c.qa_sh_degree = 3,
@@ -134,6 +142,9 @@ pub enum GeneratorKind {
     /// generator under which the paper's mechanisms (independent views against conflicting
     /// content, Eq. 5's alignment) have something to do.
     Mechanisms(Level),
+    /// The mechanisms generator at the low level with one parameter set to a swept level
+    /// (a whole percentage; SPEC.md §21.6): `dose-<param>-<percent>`.
+    Dose { param: dose::DoseParam, percent: u8 },
 }
 
 impl GeneratorKind {
@@ -144,6 +155,7 @@ impl GeneratorKind {
             GeneratorKind::Mechanisms(level) => {
                 format!("truth-{}+hallucinating+relative", level.name())
             }
+            GeneratorKind::Dose { param, percent } => format!("dose-{}-{percent}", param.name()),
         }
     }
 
@@ -157,9 +169,24 @@ impl GeneratorKind {
             "truth-high" => Ok(GeneratorKind::Truth(Level::High)),
             "truth-low+hallucinating+relative" => Ok(GeneratorKind::Mechanisms(Level::Low)),
             "truth-high+hallucinating+relative" => Ok(GeneratorKind::Mechanisms(Level::High)),
-            _ => Err(Error::invalid(format!(
-                "unknown generator '{name}' (classical, truth-none, truth-low, truth-high, truth-low+hallucinating+relative, truth-high+hallucinating+relative)"
-            ))),
+            _ => {
+                // `dose-<param>-<percent>`, written as `name` writes it.
+                let dose = name
+                    .strip_prefix("dose-")
+                    .and_then(|rest| rest.rsplit_once('-'))
+                    .and_then(|(param, percent)| {
+                        Some(GeneratorKind::Dose {
+                            param: param.parse().ok()?,
+                            percent: percent.parse().ok().filter(|&p| p <= 100)?,
+                        })
+                    })
+                    .filter(|g| g.name() == name);
+                dose.ok_or_else(|| {
+                    Error::invalid(format!(
+                        "unknown generator '{name}' (classical, truth-none, truth-low, truth-high, truth-low+hallucinating+relative, truth-high+hallucinating+relative, dose-<hallucination|photometric|depth_distortion>-<0..100>)"
+                    ))
+                })
+            }
         }
     }
 
@@ -179,6 +206,30 @@ impl GeneratorKind {
                 c.hallucination = Hallucination::at(level);
                 c.truth_depth = TruthDepth::Relative;
             }
+            GeneratorKind::Dose { param, percent } => {
+                GeneratorKind::Mechanisms(Level::Low).apply(c);
+                let t = f32::from(percent) / 100.0;
+                let high = Inconsistency::HIGH;
+                match param {
+                    dose::DoseParam::Hallucination => {
+                        c.hallucination = Hallucination::from_percent(percent);
+                    }
+                    dose::DoseParam::Photometric => {
+                        let i = &mut c.inconsistency;
+                        i.gain = t * high.gain;
+                        i.offset = t * high.offset;
+                        i.blur_sigma_px = t * high.blur_sigma_px;
+                        i.shift_px = t * high.shift_px;
+                        // Whole patches: the nearest to t × high's.
+                        i.patches = (u32::from(percent) * high.patches + 50) / 100;
+                        i.patch_size = high.patch_size;
+                    }
+                    dose::DoseParam::DepthDistortion => {
+                        c.inconsistency.depth_flicker = t * high.depth_flicker;
+                        c.inconsistency.depth_distortion = t * high.depth_distortion;
+                    }
+                }
+            }
         }
     }
 
@@ -187,13 +238,16 @@ impl GeneratorKind {
         match self {
             GeneratorKind::Classical => "classical",
             GeneratorKind::Truth(_) | GeneratorKind::Mechanisms(_) => "truth",
+            GeneratorKind::Dose { param, .. } => param.family(),
         }
     }
 
     /// Position on the inconsistency axis (classical: none).
     fn level(self) -> Option<usize> {
         match self {
-            GeneratorKind::Classical | GeneratorKind::Mechanisms(_) => None,
+            GeneratorKind::Classical
+            | GeneratorKind::Mechanisms(_)
+            | GeneratorKind::Dose { .. } => None,
             GeneratorKind::Truth(l) => Some(l as usize),
         }
     }

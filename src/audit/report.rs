@@ -31,6 +31,9 @@ pub struct Report {
     /// The verdict rule's parameters.
     pub rule: stats::Rule,
     pub verdicts: Vec<Verdict>,
+    /// Each claim's Δ along each generator sweep (SPEC.md §21.6; absent without one).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub responses: Vec<super::dose::Response>,
     /// This batch's job results (with their steps): what the step cache saved.
     #[serde(skip)]
     pub results: Vec<JobResult>,
@@ -129,6 +132,8 @@ impl Audit<'_> {
         };
         let total = pool.samples.len();
         let usable: Vec<JobResult> = pool.samples.into_iter().filter(|r| !other(r)).collect();
+        let verdicts = verdicts(cfg, &usable, &rule);
+        let responses = super::dose::responses(&verdicts);
         let report = Report {
             crate_version: env!("CARGO_PKG_VERSION").into(),
             numerics_revision: crate::version::NUMERICS_REVISION,
@@ -139,7 +144,8 @@ impl Audit<'_> {
             other_config: total - usable.len(),
             generators: names(cfg.generators.iter().map(|g| g.name()).collect()),
             variants: names(cfg.variants.iter().map(|v| v.name().to_string()).collect()),
-            verdicts: verdicts(cfg, &usable, &rule),
+            verdicts,
+            responses,
             rule,
             results,
             pool: usable,
@@ -147,6 +153,9 @@ impl Audit<'_> {
         let json = serde_json::to_string_pretty(&report).expect("serializes") + "\n";
         crate::io::write_text(&dir.join("audit.json"), &json)?;
         crate::io::write_text(&dir.join("inconsistency.svg"), &plot(cfg, &report.pool))?;
+        for r in &report.responses {
+            crate::io::write_text(&dir.join(super::dose::plot_name(r)), &super::dose::plot(r))?;
+        }
         crate::io::write_text(&dir.join("audit.md"), &markdown(cfg, &report))?;
         Ok(report)
     }
@@ -213,6 +222,175 @@ fn metric_cells(rows: &[&JobResult], pick: impl Fn(&JobResult) -> &Row) -> Strin
     .join(" | ")
 }
 
+/// Diagnostics of one (generator, variant), mean over the seeds that recorded them.
+struct DiagnosticsMean {
+    seeds: usize,
+    candidates: f64,
+    covered: f64,
+    set_aside: f64,
+    collisions: f64,
+    pairs: f64,
+    stage1_views: f64,
+    stage1_collisions: f64,
+    dependent_per_gap: f64,
+    degenerate_gaps: f64,
+    coverage: f64,
+    overlap: f64,
+    conflict: f64,
+    stage2_filled: f64,
+}
+
+fn diagnostics_mean(rows: &[&JobResult]) -> Option<DiagnosticsMean> {
+    let d: Vec<&super::diagnostics::Diagnostics> =
+        rows.iter().filter_map(|r| r.diagnostics.as_ref()).collect();
+    if d.is_empty() {
+        return None;
+    }
+    // The mean of the finite values (NaN when none is).
+    let mean = |f: &dyn Fn(&super::diagnostics::Diagnostics) -> f64| {
+        let v: Vec<f64> = d.iter().map(|x| f(x)).filter(|x| x.is_finite()).collect();
+        if v.is_empty() {
+            f64::NAN
+        } else {
+            v.iter().sum::<f64>() / v.len() as f64
+        }
+    };
+    let generated = |f: fn(&super::diagnostics::Generation) -> f64| {
+        mean(&|x| x.stage1.as_ref().map_or(f64::NAN, f))
+    };
+    Some(DiagnosticsMean {
+        seeds: d.len(),
+        candidates: mean(&|x| x.candidates as f64),
+        covered: mean(&|x| x.covered as f64),
+        set_aside: mean(&|x| x.set_aside.len() as f64),
+        collisions: mean(&|x| x.collisions as f64),
+        pairs: mean(&|x| x.pairs as f64),
+        stage1_views: mean(&|x| x.stage1_views.len() as f64),
+        stage1_collisions: mean(&|x| x.stage1_collisions as f64),
+        dependent_per_gap: mean(&|x| {
+            let g = &x.dependent_per_gap;
+            g.iter().sum::<usize>() as f64 / g.len().max(1) as f64
+        }),
+        degenerate_gaps: mean(&|x| x.degenerate_gaps as f64),
+        coverage: generated(|g| g.coverage),
+        overlap: generated(|g| g.overlap),
+        conflict: generated(|g| g.conflict),
+        stage2_filled: mean(&|x| x.stage2_filled),
+    })
+}
+
+/// A number with `digits` decimals, `∞`, or `–` (NaN, −∞: nothing to show).
+fn num(x: f64, digits: usize) -> String {
+    if x.is_finite() {
+        format!("{x:.digits$}")
+    } else if x == f64::INFINITY {
+        "∞".into()
+    } else {
+        "–".into()
+    }
+}
+
+/// A share as a percentage, or `–`.
+fn percent(x: f64) -> String {
+    if x.is_finite() {
+        format!("{:.0} %", 100.0 * x)
+    } else {
+        "–".into()
+    }
+}
+
+/// The claims table's *rests on* cell: the stage-1 views, their coverage, overlap and
+/// conflict under full → under the variant, and the seeds on which both runs are the same
+/// computation.
+fn rests_on(pool: &[JobResult], generator: &str, claim: &super::verdicts::Claim) -> String {
+    let variant = claim.variant;
+    if claim.baseline == super::verdicts::Baseline::Original {
+        return "full's final scene against its original scene".into();
+    }
+    let (full, var) = (
+        group(pool, generator, Variant::Full),
+        group(pool, generator, variant),
+    );
+    let (Some(a), Some(b)) = (diagnostics_mean(&full), diagnostics_mean(&var)) else {
+        return "(not recorded)".into();
+    };
+    let same = full
+        .iter()
+        .filter(|f| {
+            !f.scene_sha256.is_empty()
+                && var
+                    .iter()
+                    .any(|v| v.seed == f.seed && v.scene_sha256 == f.scene_sha256)
+        })
+        .count();
+    let paired = full
+        .iter()
+        .filter(|f| var.iter().any(|v| v.seed == f.seed))
+        .count();
+    format!(
+        "views {} → {}; coverage {} → {}; overlap {} → {}; conflict {} → {}; same computation {same} of {paired}",
+        num(a.stage1_views, 1),
+        num(b.stage1_views, 1),
+        percent(a.coverage),
+        percent(b.coverage),
+        percent(a.overlap),
+        percent(b.overlap),
+        num(a.conflict, 4),
+        num(b.conflict, 4),
+    )
+}
+
+/// `audit.md`'s table of what each (generator, variant) did, mean over its seeds
+/// (SPEC.md §21.5), and the reasons candidates were set aside.
+fn diagnostics_table(cfg: &AuditConfig, pool: &[JobResult]) -> String {
+    let mut s = "\n## What each run did (diagnostics, mean over seeds)\n\n*Candidates*: given (covered by the scene / set aside). *Collisions*: colliding pairs of the candidates left, of all their pairs. *Stage-1 views*: the set stage 1 generates (its colliding pairs). *Coverage* / *overlap*: share of the evaluation views' extrapolated pixels (truth depth: the unseen surface) whose surface point ≥ 1 / ≥ 2 stage-1 views generated; *conflict*: mean squared colour difference of two stage-1 generations of one point. *Stage 2 filled*: share of the dependent views' pixels stage 2 inpainted. Degenerate gaps run from a view to itself (a one-view tour).\n\n| generator | variant | seeds | candidates (covered / set aside) | collisions / pairs | stage-1 views (colliding pairs) | dependent per gap | degenerate gaps | coverage | overlap | conflict | stage 2 filled |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n".to_string();
+    let mut reasons: Vec<(String, usize)> = Vec::new();
+    for g in &cfg.generators {
+        let g = g.name();
+        for v in &cfg.variants {
+            let rows = group(pool, &g, *v);
+            for a in rows
+                .iter()
+                .filter_map(|r| r.diagnostics.as_ref())
+                .flat_map(|d| &d.set_aside)
+            {
+                match reasons.iter_mut().find(|(r, _)| *r == a.reason) {
+                    Some((_, n)) => *n += 1,
+                    None => reasons.push((a.reason.clone(), 1)),
+                }
+            }
+            let Some(d) = diagnostics_mean(&rows) else {
+                continue;
+            };
+            s += &format!(
+                "| {g} | {} | {} | {} ({} / {}) | {} / {} | {} ({}) | {} | {} | {} | {} | {} | {} |\n",
+                v.name(),
+                d.seeds,
+                num(d.candidates, 1),
+                num(d.covered, 1),
+                num(d.set_aside, 1),
+                num(d.collisions, 1),
+                num(d.pairs, 1),
+                num(d.stage1_views, 1),
+                num(d.stage1_collisions, 1),
+                num(d.dependent_per_gap, 1),
+                num(d.degenerate_gaps, 1),
+                percent(d.coverage),
+                percent(d.overlap),
+                num(d.conflict, 4),
+                percent(d.stage2_filled),
+            );
+        }
+    }
+    if !reasons.is_empty() {
+        s += "\nSet aside (runs × candidates): ";
+        let list: Vec<String> = reasons.iter().map(|(r, n)| format!("{n} × {r}")).collect();
+        s += &list.join("; ");
+        s += ".\n";
+    }
+    s
+}
+
 /// `audit.md`.
 pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
     let revisions: Vec<String> = report.revisions.iter().map(|r| r.to_string()).collect();
@@ -238,7 +416,7 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
     }
     let r = &report.rule;
     s += &format!(
-        "## Claims\n\n**How to read this.** Δ = full − variant (dB), one value per seed: both runs of a seed start from the same original scene with the same random numbers, so Δ is paired; the same seed at another numerics revision is another draw when both of its runs changed (a pair sharing a run's bits with one already counted counts once), and a seed's Δ is the mean of its draws (draws of one seed are correlated: the seed is the unit). **The plan**: each claim is judged on seeds 0 to {} − 1; with fewer it is **interim** — a look at a growing pool, not a verdict, and without a p-value here (stopping at the first decisive look would make false verdicts several times as likely) — and seeds beyond the plan are judged nowhere. **The test** is the sign test of the *median* Δ: the count of seeds above (+) and below (−) the null value against a fair coin, exact for every distribution of Δ (skewed ones too, where no test of the mean keeps its error rate at these sizes; SPEC.md §21.2). So a verdict is about the *typical seed*, not the average: where the mean lies on the other side of the null value the claim stays inconclusive. A claim that the full method is better **holds** when the median Δ is significantly above 0 and is **contradicted** when significantly below; a claim that the full method *does not hurt* (non-inferiority) holds when the median Δ is significantly above −{} dB (the margin) and is contradicted when significantly below it. *Significantly*: the two-sided p-value, after Holm's correction over the claims of the same generator family (classical; truth: every truth-* generator together) on this dataset, is below α = {}. Otherwise **inconclusive**: the *MDE* column is the smallest shift of the median from the null value that this many seeds find with {:.0} % power at the family's strictest Holm level, were Δ normal with the measured spread (∞: too few seeds to reach that level) — an effect smaller than that could be there. **No verdict** where every seed gave the same Δ: the seeds do not vary the comparison (Δ = 0: the variant computes what the full method computes). *95 % CI*: the median's distribution-free interval (order statistics, from 6 seeds). *Hierarchical*: a 95 % percentile interval of the mean from resampling seeds, then each seed's evaluation views (pooled PSNR), from {} seeds with per-view records. The paper's numbers are from ScanNet++ / Mip-NeRF 360 with diffusion generators: compare directions, not values.\n\n| claim | metric | paper | generator | n | median Δ (dB) | + / − | 95 % CI | mean ± sd | hierarchical | p (Holm) | MDE (dB) | verdict |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "## Claims\n\n**How to read this.** Δ = full − variant (dB), one value per seed: both runs of a seed start from the same original scene with the same random numbers, so Δ is paired; the same seed at another numerics revision is another draw when both of its runs changed (a pair sharing a run's bits with one already counted counts once), and a seed's Δ is the mean of its draws (draws of one seed are correlated: the seed is the unit). **The plan**: each claim is judged on seeds 0 to {} − 1; with fewer it is **interim** — a look at a growing pool, not a verdict, and without a p-value here (stopping at the first decisive look would make false verdicts several times as likely) — and seeds beyond the plan are judged nowhere. **The test** is the sign test of the *median* Δ: the count of seeds above (+) and below (−) the null value against a fair coin, exact for every distribution of Δ (skewed ones too, where no test of the mean keeps its error rate at these sizes; SPEC.md §21.2). So a verdict is about the *typical seed*, not the average: where the mean lies on the other side of the null value the claim stays inconclusive. A claim that the full method is better **holds** when the median Δ is significantly above 0 and is **contradicted** when significantly below; a claim that the full method *does not hurt* (non-inferiority) holds when the median Δ is significantly above −{} dB (the margin) and is contradicted when significantly below it. *Significantly*: the two-sided p-value, after Holm's correction over the claims of the same generator family (classical; truth: every truth-* generator together) on this dataset, is below α = {}. Otherwise **inconclusive**: the *MDE* column is the smallest shift of the median from the null value that this many seeds find with {:.0} % power at the family's strictest Holm level, were Δ normal with the measured spread (∞: too few seeds to reach that level) — an effect smaller than that could be there. **No verdict** where every seed gave the same Δ: the seeds do not vary the comparison. **Not tested here** where both runs of a seed evaluated the same scene (equal final-scene digests: the variant changed nothing on that seed, e.g. both picked the same views): such a seed counts towards the plan but is no unit, and a claim with only such seeds gets no test and no MDE. *Rests on*: what the two runs did, mean over the seeds (section *What each run did*). *95 % CI*: the median's distribution-free interval (order statistics, from 6 seeds). *Hierarchical*: a 95 % percentile interval of the mean from resampling seeds, then each seed's evaluation views (pooled PSNR), from {} seeds with per-view records. The paper's numbers are from ScanNet++ / Mip-NeRF 360 with diffusion generators: compare directions, not values.\n\n| claim | metric | paper | generator | n | median Δ (dB) | + / − | 95 % CI | mean ± sd | hierarchical | p (Holm) | MDE (dB) | verdict | rests on (full → variant) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
         r.planned,
         r.margin,
         r.alpha,
@@ -250,15 +428,6 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
             || "–".to_string(),
             |[lo, hi]| format!("[{lo:+.2}, {hi:+.2}]"),
         )
-    };
-    let num = |x: f64, digits: usize| {
-        if x.is_finite() {
-            format!("{x:.digits$}")
-        } else if x == f64::INFINITY {
-            "∞".into()
-        } else {
-            "–".into()
-        }
     };
     for v in &report.verdicts {
         let null = if v.null != 0.0 {
@@ -272,7 +441,7 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
             v.judged.to_string()
         };
         s += &format!(
-            "| {} | {} | {} | {} | {n} | {:+.2}{null} | {} / {} | {} | {:+.2} ± {} | {} | {} | {} | **{}** |\n",
+            "| {} | {} | {} | {} | {n} | {:+.2}{null} | {} / {} | {} | {:+.2} ± {} | {} | {} | {} | **{}** | {} |\n",
             v.claim.id,
             v.claim.metric.label(),
             v.claim.paper,
@@ -291,7 +460,8 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
                 "–".into()
             },
             num(v.min_detectable, 2),
-            v.verdict
+            v.verdict,
+            rests_on(&report.pool, &v.generator, &v.claim)
         );
     }
     s += "\n## Every variant\n\n| generator | variant | PSNR existing | PSNR extrapolated | PSNR all | SSIM existing | SSIM extrapolated | train-half PSNR | compute (s) |\n|---|---|---|---|---|---|---|---|---|\n";
@@ -317,6 +487,7 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
             );
         }
     }
+    s += &diagnostics_table(cfg, &report.pool);
     s += "\n*compute*: the seconds each step took where it was computed; steps shared through the cache are counted in every variant that uses them.\n\n## Compute per stage (s, mean over seeds)\n\n";
     let stages = crate::pipeline::steps::Stage::ALL.map(|s| s.name());
     s += &format!(
@@ -363,6 +534,7 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
             );
         }
     }
+    s += &super::dose::markdown(&report.responses);
     s += "\n![PSNR against the generator's inconsistency](inconsistency.svg)\n";
     s
 }

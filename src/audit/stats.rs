@@ -306,6 +306,9 @@ pub enum Outcome {
     /// Every unit gave the same difference (0: the variant computes what the full method
     /// computes): the seeds do not vary the comparison, so there is one draw, not n.
     NoVerdict,
+    /// Every planned seed's pair is the same computation (both runs evaluated the same
+    /// scene, SPEC.md §21.5): the comparison did not happen, so no test and no MDE.
+    NotTested,
 }
 
 impl Outcome {
@@ -316,16 +319,20 @@ impl Outcome {
             Outcome::Inconclusive => "inconclusive",
             Outcome::Interim => "interim",
             Outcome::NoVerdict => "no verdict",
+            Outcome::NotTested => "not tested here",
         }
     }
 }
 
-/// One claim of a family: its paired differences in unit (seed) order and the null value
-/// of its test (0 for "the full method is better", `−margin` for "does not hurt").
+/// One claim of a family: its paired differences in unit (seed) order, the null value
+/// of its test (0 for "the full method is better", `−margin` for "does not hurt") and the
+/// planned seeds on which the comparison did not happen (same computation, SPEC.md §21.5):
+/// they count towards the plan, not as units.
 #[derive(Clone, Debug)]
 pub struct ClaimData<'a> {
     pub diffs: &'a [f64],
     pub null: f64,
+    pub untested: usize,
 }
 
 /// A claim's judgement within its family.
@@ -393,7 +400,7 @@ impl Rule {
     pub fn judge(&self, family: &[ClaimData]) -> Vec<Judgement> {
         let judged: Vec<&[f64]> = family
             .iter()
-            .map(|c| &c.diffs[..c.diffs.len().min(self.planned)])
+            .map(|c| &c.diffs[..c.diffs.len().min(self.planned.saturating_sub(c.untested))])
             .collect();
         let tests: Vec<Option<Test>> = family
             .iter()
@@ -402,12 +409,12 @@ impl Rule {
             .collect();
         // (`==`: +0.0 and −0.0 are the same difference.)
         let spread = |d: &[f64]| d.iter().any(|&x| x != d[0]);
-        let complete = |d: &[f64]| d.len() >= self.planned;
+        let complete = |c: &ClaimData, d: &[f64]| d.len() + c.untested >= self.planned;
         let raw: Vec<f64> = tests
             .iter()
-            .zip(&judged)
-            .map(|(t, d)| match t {
-                Some(t) if spread(d) && complete(d) => t.p_two_sided(),
+            .zip(family.iter().zip(&judged))
+            .map(|(t, (c, d))| match t {
+                Some(t) if spread(d) && complete(c, d) => t.p_two_sided(),
                 Some(_) if spread(d) => 1.0,
                 _ => f64::NAN,
             })
@@ -422,7 +429,7 @@ impl Rule {
             .map(|(i, ((c, test), (d, p_holm)))| {
                 // An interim claim's adjusted p as if it were complete (for the report).
                 let p_holm = match test {
-                    Some(t) if spread(d) && !complete(d) => {
+                    Some(t) if spread(d) && !complete(c, d) => {
                         let mut look = raw.clone();
                         look[i] = t.p_two_sided();
                         holm(&look)[i]
@@ -441,8 +448,9 @@ impl Rule {
                 };
                 let mut disagree = false;
                 let outcome = match test {
+                    None if c.untested > 0 && complete(c, d) => Outcome::NotTested,
                     Some(_) if d.len() > 1 && !spread(d) => Outcome::NoVerdict,
-                    _ if !complete(d) => Outcome::Interim,
+                    _ if !complete(c, d) => Outcome::Interim,
                     Some(t) if significant => side(&t).unwrap_or_else(|| {
                         disagree = true;
                         Outcome::Inconclusive
@@ -589,6 +597,39 @@ mod tests {
         assert!((normal_quantile(1e-300) + 37.0470962993612).abs() < 1e-9);
     }
 
+    /// Seeds on which the variant computed what full computed count towards the plan but
+    /// are no units: all of them is *not tested* (no test, no MDE); some of them leaves the
+    /// others' test as it would be alone, and the claim complete.
+    #[test]
+    fn same_computation_seeds_count_towards_the_plan_not_as_units() {
+        let rule = Rule {
+            planned: 6,
+            ..Rule::default()
+        };
+        let none = rule.judge(&[ClaimData {
+            diffs: &[],
+            null: 0.0,
+            untested: 6,
+        }]);
+        assert_eq!(none[0].outcome, Outcome::NotTested);
+        assert!(none[0].test.is_none() && none[0].min_detectable(&rule).is_nan());
+        let d = [1.0, 2.0, 3.0, 4.0];
+        let some = rule.judge(&[ClaimData {
+            diffs: &d,
+            null: 0.0,
+            untested: 2,
+        }]);
+        assert_eq!(some[0].test.unwrap().n, 4);
+        assert_ne!(some[0].outcome, Outcome::Interim);
+        // Too few seeds either way: still interim.
+        let few = rule.judge(&[ClaimData {
+            diffs: &d,
+            null: 0.0,
+            untested: 1,
+        }]);
+        assert_eq!(few[0].outcome, Outcome::Interim);
+    }
+
     #[test]
     fn holm_steps_down() {
         let p = [0.01, 0.04, 0.03, f64::NAN, 0.005];
@@ -655,14 +696,17 @@ mod tests {
         let judge = |b: &[f64]| {
             let fam = [
                 ClaimData {
+                    untested: 0,
                     diffs: &a,
                     null: 0.0,
                 },
                 ClaimData {
+                    untested: 0,
                     diffs: b,
                     null: 0.0,
                 },
                 ClaimData {
+                    untested: 0,
                     diffs: b,
                     null: 0.0,
                 },
@@ -680,6 +724,7 @@ mod tests {
         let mut d = vec![0.1; 16];
         d[0] = -10.0;
         let j = &rule.judge(&[ClaimData {
+            untested: 0,
             diffs: &d,
             null: 0.0,
         }])[0];
@@ -692,6 +737,7 @@ mod tests {
             ..Rule::default()
         }
         .judge(&[ClaimData {
+            untested: 0,
             diffs: &z,
             null: 0.0,
         }])[0];

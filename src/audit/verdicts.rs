@@ -14,6 +14,8 @@ pub enum Metric {
     PsnrAll,
     PsnrExisting,
     PsnrExtrapolated,
+    /// Mean PSNR over the training half's test views (the original areas).
+    PsnrTrainHalf,
 }
 
 impl Metric {
@@ -22,15 +24,18 @@ impl Metric {
             Metric::PsnrAll => r.psnr_all,
             Metric::PsnrExisting => r.psnr_existing,
             Metric::PsnrExtrapolated => r.psnr_extrapolated,
+            Metric::PsnrTrainHalf => r.psnr_train_half,
         }
     }
 
-    /// The per-view sums of the metric's pixel class.
-    fn class(self, v: &ViewRecord) -> &ClassSums {
+    /// The per-view sums of the metric's pixel class (none for the training half, which
+    /// is a mean over its views).
+    fn class(self, v: &ViewRecord) -> Option<&ClassSums> {
         match self {
-            Metric::PsnrAll => &v.all,
-            Metric::PsnrExisting => &v.existing,
-            Metric::PsnrExtrapolated => &v.extrapolated,
+            Metric::PsnrAll => Some(&v.all),
+            Metric::PsnrExisting => Some(&v.existing),
+            Metric::PsnrExtrapolated => Some(&v.extrapolated),
+            Metric::PsnrTrainHalf => None,
         }
     }
 
@@ -39,6 +44,7 @@ impl Metric {
             Metric::PsnrAll => "PSNR all",
             Metric::PsnrExisting => "PSNR existing",
             Metric::PsnrExtrapolated => "PSNR extrapolated",
+            Metric::PsnrTrainHalf => "train-half PSNR",
         }
     }
 }
@@ -53,28 +59,66 @@ pub enum Direction {
     DoesNotHurt,
 }
 
-/// A claim of the paper: the full method against one variant on one metric.
+/// What a claim compares the full method's final scene with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Baseline {
+    /// The variant's final scene.
+    Variant,
+    /// The original scene the run started from (the claim's variant is `full` itself).
+    Original,
+}
+
+/// A claim of the paper: the full method against one variant (or its own original scene)
+/// on one metric.
 #[derive(Clone, Copy, Debug, serde::Serialize)]
 pub struct Claim {
     pub id: &'static str,
     pub variant: Variant,
+    pub baseline: Baseline,
     pub metric: Metric,
     pub direction: Direction,
     /// What the paper reports (and where).
     pub paper: &'static str,
 }
 
+impl Claim {
+    /// The two rows a pair compares: full's final scene and the baseline's.
+    fn rows<'a>(&self, p: &Pair<'a>) -> (&'a Row, &'a Row) {
+        match self.baseline {
+            Baseline::Variant => (&p.full.last, &p.variant.last),
+            Baseline::Original => (&p.full.last, &p.full.original),
+        }
+    }
+
+    /// The pair's difference `full − baseline` of the claim's metric.
+    fn diff(&self, p: &Pair) -> f64 {
+        let (a, b) = self.rows(p);
+        self.metric.of(a) - self.metric.of(b)
+    }
+}
+
 /// The claims the audit tests (SPEC.md §21.2).
-pub const CLAIMS: [Claim; 12] = [
+pub const CLAIMS: [Claim; 14] = [
     Claim {
         id: "independent views",
+        baseline: Baseline::Variant,
         variant: Variant::EvenViews,
         metric: Metric::PsnrAll,
         direction: Direction::Beats,
         paper: "Table 4, ScanNet++ PSNR: 23.79 vs 20.27 (−3.52 dB)",
     },
     Claim {
+        id: "conflicts cost at equal coverage",
+        baseline: Baseline::Variant,
+        variant: Variant::ConflictingViews,
+        metric: Metric::PsnrAll,
+        direction: Direction::Beats,
+        paper: "§3.2 \"conflict-free generation\"; §4 ablation: conflict-agnostic views are \"severely plagued by content conflicts\" (no number at equal coverage)",
+    },
+    Claim {
         id: "depth supervision",
+        baseline: Baseline::Variant,
         variant: Variant::NoDepthSupervision,
         metric: Metric::PsnrAll,
         direction: Direction::Beats,
@@ -82,6 +126,7 @@ pub const CLAIMS: [Claim; 12] = [
     },
     Claim {
         id: "QA-Mask SH 5 over SH 3",
+        baseline: Baseline::Variant,
         variant: Variant::QaSh3,
         metric: Metric::PsnrAll,
         direction: Direction::Beats,
@@ -89,6 +134,7 @@ pub const CLAIMS: [Claim; 12] = [
     },
     Claim {
         id: "QA-Mask SH 5 over SH 4",
+        baseline: Baseline::Variant,
         variant: Variant::QaSh4,
         metric: Metric::PsnrAll,
         direction: Direction::Beats,
@@ -96,6 +142,7 @@ pub const CLAIMS: [Claim; 12] = [
     },
     Claim {
         id: "QA-Mask (whole image)",
+        baseline: Baseline::Variant,
         variant: Variant::NoQaMask,
         metric: Metric::PsnrAll,
         direction: Direction::Beats,
@@ -103,6 +150,7 @@ pub const CLAIMS: [Claim; 12] = [
     },
     Claim {
         id: "DIBR propagation",
+        baseline: Baseline::Variant,
         variant: Variant::NoPropagation,
         metric: Metric::PsnrAll,
         direction: Direction::Beats,
@@ -110,6 +158,7 @@ pub const CLAIMS: [Claim; 12] = [
     },
     Claim {
         id: "QA-Mask protects existing regions",
+        baseline: Baseline::Variant,
         variant: Variant::NoQaMask,
         metric: Metric::PsnrExisting,
         direction: Direction::Beats,
@@ -117,6 +166,7 @@ pub const CLAIMS: [Claim; 12] = [
     },
     Claim {
         id: "QA-Mask does not hurt extrapolation",
+        baseline: Baseline::Variant,
         variant: Variant::NoQaMask,
         metric: Metric::PsnrExtrapolated,
         direction: Direction::DoesNotHurt,
@@ -124,6 +174,7 @@ pub const CLAIMS: [Claim; 12] = [
     },
     Claim {
         id: "QA-Mask over opacity maps, existing",
+        baseline: Baseline::Variant,
         variant: Variant::OpacityMask,
         metric: Metric::PsnrExisting,
         direction: Direction::Beats,
@@ -131,6 +182,7 @@ pub const CLAIMS: [Claim; 12] = [
     },
     Claim {
         id: "QA-Mask over opacity maps, extrapolated",
+        baseline: Baseline::Variant,
         variant: Variant::OpacityMask,
         metric: Metric::PsnrExtrapolated,
         direction: Direction::DoesNotHurt,
@@ -138,6 +190,7 @@ pub const CLAIMS: [Claim; 12] = [
     },
     Claim {
         id: "interpolation stage",
+        baseline: Baseline::Variant,
         variant: Variant::NoInterpolation,
         metric: Metric::PsnrAll,
         direction: Direction::Beats,
@@ -145,10 +198,19 @@ pub const CLAIMS: [Claim; 12] = [
     },
     Claim {
         id: "video depth for dependent views",
+        baseline: Baseline::Variant,
         variant: Variant::Stage2RenderFit,
         metric: Metric::PsnrAll,
         direction: Direction::Beats,
         paper: "§3.3 (design: DIBR-based video depth alignment 'throughout the process'; no ablation number)",
+    },
+    Claim {
+        id: "no deterioration within original areas",
+        baseline: Baseline::Original,
+        variant: Variant::Full,
+        metric: Metric::PsnrTrainHalf,
+        direction: Direction::DoesNotHurt,
+        paper: "§4: 'no sign of rendering deterioration can be observed within original areas' (Mip-NeRF 360, no number)",
     },
 ];
 
@@ -166,6 +228,9 @@ pub struct Verdict {
     pub seeds: usize,
     pub revisions: Vec<u32>,
     pub judged: usize,
+    /// Planned seeds whose pair is the same computation (both runs evaluated one scene,
+    /// [`Pair::same_computation`]): counted towards the plan, not judged.
+    pub same_computation: usize,
     pub planned: usize,
     /// Median, mean and sample standard deviation of `full − variant` over the judged
     /// units (std is NaN, `null` in JSON, with one).
@@ -233,15 +298,12 @@ pub const HIERARCHICAL_MIN_UNITS: usize = 10;
 /// (the same views for both runs of the pair), the metric recomputed as pooled PSNR of
 /// the resampled views. Units without per-view records (or with different view lists)
 /// are left out; `None` below two units.
-fn hierarchical(
-    pairs: &[Pair],
-    metric: Metric,
-    alpha: f64,
-    seed: u64,
-) -> (Option<[f64; 2]>, usize) {
+fn hierarchical(pairs: &[Pair], claim: &Claim, alpha: f64, seed: u64) -> (Option<[f64; 2]>, usize) {
+    let metric = claim.metric;
     let units: Vec<(&[ViewRecord], &[ViewRecord])> = pairs
         .iter()
-        .map(|p| (&p.full.last.views[..], &p.variant.last.views[..]))
+        .map(|p| claim.rows(p))
+        .map(|(a, b)| (&a.views[..], &b.views[..]))
         .filter(|(a, b)| {
             !a.is_empty()
                 && a.len() == b.len()
@@ -249,6 +311,12 @@ fn hierarchical(
         })
         .collect();
     let n = units.len();
+    let Some(first) = units.first().and_then(|(a, _)| a.first()) else {
+        return (None, 0);
+    };
+    if metric.class(first).is_none() {
+        return (None, 0);
+    }
     if n < HIERARCHICAL_MIN_UNITS {
         return (None, n);
     }
@@ -261,8 +329,8 @@ fn hierarchical(
             let (a, b) = units[u.below(n as u32) as usize];
             picks.clear();
             picks.extend((0..a.len()).map(|_| u.below(a.len() as u32) as usize));
-            let pa = ClassSums::psnr(picks.iter().map(|&i| metric.class(&a[i])));
-            let pb = ClassSums::psnr(picks.iter().map(|&i| metric.class(&b[i])));
+            let pa = ClassSums::psnr(picks.iter().map(|&i| class_of(metric, &a[i])));
+            let pb = ClassSums::psnr(picks.iter().map(|&i| class_of(metric, &b[i])));
             let d = pa - pb;
             if d.is_finite() {
                 sum += d;
@@ -281,6 +349,11 @@ fn hierarchical(
     (Some([at(alpha / 2.0), at(1.0 - alpha / 2.0)]), n)
 }
 
+/// The per-view sums of a metric with a pixel class (checked by the caller).
+fn class_of(metric: Metric, v: &ViewRecord) -> &ClassSums {
+    metric.class(v).expect("a metric with a pixel class")
+}
+
 /// One draw of a claim's pair: a seed at a numerics revision (SPEC.md §21.2; the unit of
 /// the test is the seed, [`seed_means`]).
 #[derive(Clone, Debug, PartialEq)]
@@ -289,6 +362,15 @@ pub struct Pair<'a> {
     pub revision: u32,
     pub full: &'a JobResult,
     pub variant: &'a JobResult,
+}
+
+impl Pair<'_> {
+    /// Both runs evaluated the same scene (equal final-scene digests): the variant changed
+    /// nothing the evaluation sees on this draw, so the pair compares nothing (SPEC.md §21.5).
+    /// False when either digest was not recorded.
+    pub fn same_computation(&self) -> bool {
+        !self.full.scene_sha256.is_empty() && self.full.scene_sha256 == self.variant.scene_sha256
+    }
 }
 
 /// The pairs (full, `variant`) of `generator` in `pool`: both runs of one seed at one
@@ -341,6 +423,13 @@ pub fn pairs<'a>(pool: &'a [JobResult], generator: &str, variant: Variant) -> Ve
 /// −0.08 [−0.28, 0.12] on lounge; SPEC.md §21.2), so a revision adds precision to its seed,
 /// not a unit.
 pub fn seed_means(pairs: &[Pair], metric: Metric) -> Vec<f64> {
+    seed_diffs(pairs, |p| {
+        metric.of(&p.full.last) - metric.of(&p.variant.last)
+    })
+}
+
+/// [`seed_means`] of any paired difference `diff`.
+fn seed_diffs(pairs: &[Pair], diff: impl Fn(&Pair) -> f64) -> Vec<f64> {
     let mut out = Vec::new();
     let mut k = 0;
     while k < pairs.len() {
@@ -348,7 +437,7 @@ pub fn seed_means(pairs: &[Pair], metric: Metric) -> Vec<f64> {
         let group: Vec<f64> = pairs[k..]
             .iter()
             .take_while(|p| p.seed == seed)
-            .map(|p| metric.of(&p.full.last) - metric.of(&p.variant.last))
+            .map(&diff)
             .collect();
         k += group.len();
         out.push(group.iter().sum::<f64>() / group.len() as f64);
@@ -386,6 +475,7 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
         pairs: Vec<Pair<'a>>,
         seeds: usize,
         diffs: Vec<f64>,
+        same: usize,
     }
     let mut cells = Vec::new();
     for claim in CLAIMS {
@@ -407,10 +497,7 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
             let pairs: Vec<Pair> = pairs(pool, &generator.name(), claim.variant)
                 .into_iter()
                 .filter(|p| same_config(p.full, &full_cfg) && same_config(p.variant, &variant_cfg))
-                .filter(|p| {
-                    let d = claim.metric.of(&p.full.last) - claim.metric.of(&p.variant.last);
-                    d.is_finite()
-                })
+                .filter(|p| claim.diff(p).is_finite())
                 .collect();
             if pairs.is_empty() {
                 continue;
@@ -418,16 +505,34 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
             // The plan is seeds 0 to `planned − 1`: later seeds are beyond it (counted in
             // `seeds`, judged nowhere); a planned seed without a finite Δ keeps the claim
             // interim.
-            let seeds = seed_means(&pairs, claim.metric).len();
+            let seeds = seed_diffs(&pairs, |p| claim.diff(p)).len();
             let planned = u32::try_from(rule.planned).unwrap_or(u32::MAX);
             let pairs: Vec<Pair> = pairs.into_iter().filter(|p| p.seed < planned).collect();
-            let diffs = seed_means(&pairs, claim.metric);
+            // A planned seed whose every pair is the same computation did not compare
+            // anything: it counts towards the plan, not as a unit (SPEC.md §21.5).
+            let mut same_seeds: Vec<u32> = pairs
+                .iter()
+                .filter(|_| claim.baseline == Baseline::Variant)
+                .filter(|p| {
+                    pairs
+                        .iter()
+                        .all(|q| q.seed != p.seed || q.same_computation())
+                })
+                .map(|p| p.seed)
+                .collect();
+            same_seeds.dedup();
+            let pairs: Vec<Pair> = pairs
+                .into_iter()
+                .filter(|p| !same_seeds.contains(&p.seed))
+                .collect();
+            let diffs = seed_diffs(&pairs, |p| claim.diff(p));
             cells.push(Cell {
                 claim,
                 generator,
                 pairs,
                 seeds,
                 diffs,
+                same: same_seeds.len(),
             });
         }
     }
@@ -436,7 +541,13 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
         Direction::DoesNotHurt => -rule.margin,
     };
     let mut out: Vec<Option<Verdict>> = cells.iter().map(|_| None).collect();
-    for family in ["classical", "truth"] {
+    let mut families: Vec<&'static str> = Vec::new();
+    for c in &cells {
+        if !families.contains(&c.generator.family()) {
+            families.push(c.generator.family());
+        }
+    }
+    for family in families {
         let members: Vec<usize> = (0..cells.len())
             .filter(|&i| cells[i].generator.family() == family)
             .collect();
@@ -447,6 +558,7 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
                 stats::ClaimData {
                     diffs: &c.diffs,
                     null: null(&c.claim),
+                    untested: c.same,
                 }
             })
             .collect();
@@ -459,15 +571,26 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
             revisions.dedup();
             let (hier, hier_units) = hierarchical(
                 &newest_per_seed(&c.pairs),
-                c.claim.metric,
+                &c.claim,
                 rule.alpha,
                 bootstrap_seed(&c.claim, &g, "hierarchical"),
             );
-            let verdict = match j.outcome {
+            let mut verdict = match j.outcome {
                 stats::Outcome::Interim => {
-                    format!("interim ({} of {} seeds)", c.diffs.len(), rule.planned)
+                    format!(
+                        "interim ({} of {} seeds)",
+                        c.diffs.len() + c.same,
+                        rule.planned
+                    )
                 }
-                stats::Outcome::NoVerdict if c.diffs.iter().all(|&d| d == 0.0) => {
+                stats::Outcome::NotTested => format!(
+                    "not tested here (same computation on all {} seeds: both runs evaluated the same scene)",
+                    c.same
+                ),
+                stats::Outcome::NoVerdict
+                    if c.diffs.iter().all(|&d| d == 0.0)
+                        && c.claim.baseline == Baseline::Variant =>
+                {
                     "no verdict (Δ = 0 on every seed: the variant computes what full computes)"
                         .to_string()
                 }
@@ -479,6 +602,13 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
                 }
                 o => o.word().to_string(),
             };
+            if c.same > 0 && j.outcome != stats::Outcome::NotTested {
+                verdict += &format!(
+                    "; not tested on {} of {} seeds (same computation)",
+                    c.same,
+                    c.same + c.diffs.len()
+                );
+            }
             let median = j.test.map_or(f64::NAN, |t| t.median);
             out[i] = Some(Verdict {
                 claim: c.claim,
@@ -487,6 +617,7 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
                 seeds: c.seeds,
                 revisions,
                 judged: c.diffs.len(),
+                same_computation: c.same,
                 planned: rule.planned,
                 median_diff: median,
                 mean_diff: mean,

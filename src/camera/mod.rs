@@ -172,6 +172,16 @@ impl Camera {
         self.camera_from_world_rotation() * (p_world - self.center)
     }
 
+    /// The world point of pixel `(x, y)` at camera depth `z`, through the pixel centre.
+    pub fn pixel_point(&self, x: usize, y: usize, z: f64) -> DVec3 {
+        let pc = DVec3::new(
+            ((x as f64 + 0.5) - self.cx) / self.fx * z,
+            ((y as f64 + 0.5) - self.cy) / self.fy * z,
+            z,
+        );
+        self.world_from_camera_rotation * pc + self.center
+    }
+
     /// Horizontal and vertical field of view in radians.
     pub fn fov_rad(&self) -> (f64, f64) {
         (

@@ -86,6 +86,61 @@ pub fn select(
     })
 }
 
+/// The most views the exact set searches ([`maximal_independent_sets`], [`colliding_sets`])
+/// take: they visit all `2ⁿ` subsets (a million at 20).
+pub const EXACT_MAX_VIEWS: usize = 20;
+
+/// Per view, the bitmask of the views it collides with (`n` ≤ [`EXACT_MAX_VIEWS`]).
+fn neighbour_masks(n: usize, edges: &[(usize, usize)]) -> Result<Vec<u32>> {
+    if n > EXACT_MAX_VIEWS {
+        return Err(Error::invalid(format!(
+            "an exact set search over {n} views (at most {EXACT_MAX_VIEWS}: it visits every subset)"
+        )));
+    }
+    let mut adj = vec![0u32; n];
+    for &(i, j) in edges {
+        if i >= n || j >= n || i == j {
+            return Err(Error::invalid(format!(
+                "no edge ({i}, {j}) among {n} views"
+            )));
+        }
+        adj[i] |= 1 << j;
+        adj[j] |= 1 << i;
+    }
+    Ok(adj)
+}
+
+/// The views of a bitmask, ascending.
+pub fn members(mask: u32) -> Vec<usize> {
+    (0..32).filter(|&i| mask & (1 << i) != 0).collect()
+}
+
+/// Every maximal independent set of the graph of `n` views (no two collide and no view can
+/// be added), as bitmasks in increasing order; `n` ≤ [`EXACT_MAX_VIEWS`].
+pub fn maximal_independent_sets(n: usize, edges: &[(usize, usize)]) -> Result<Vec<u32>> {
+    let adj = neighbour_masks(n, edges)?;
+    let all = (1u32 << n) - 1;
+    let mut out = Vec::new();
+    for set in 1..=all {
+        let independent = members(set).iter().all(|&i| adj[i] & set == 0);
+        let maximal = || (0..n).all(|i| set & (1 << i) != 0 || adj[i] & set != 0);
+        if independent && maximal() {
+            out.push(set);
+        }
+    }
+    Ok(out)
+}
+
+/// Every set of `k` of the `n` views in which at least one pair collides, as bitmasks in
+/// increasing order; `n` ≤ [`EXACT_MAX_VIEWS`].
+pub fn colliding_sets(n: usize, edges: &[(usize, usize)], k: usize) -> Result<Vec<u32>> {
+    let adj = neighbour_masks(n, edges)?;
+    let all = (1u32 << n) - 1;
+    Ok((1..=all)
+        .filter(|s| s.count_ones() as usize == k && members(*s).iter().any(|&i| adj[i] & s != 0))
+        .collect())
+}
+
 /// The closed nearest-neighbour tour through `views` (indices into `centers`), starting at
 /// `views[0]`, ties to the lower index, and its gaps: consecutive pairs including the
 /// closing one (none for fewer than 2 views).

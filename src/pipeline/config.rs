@@ -1,6 +1,8 @@
 //! Everything that decides an extrapolation run, in one serializable struct (SPEC.md §20.1).
 //! Each ablation of the paper is one independent switch.
 
+use super::selection::SelectionRule;
+use crate::collide::frustum::Outline;
 use crate::error::{Error, Result};
 use crate::models::{
     DepthDefault, DepthModel, FixerDefault, FixerModel, InpaintDefault, InpaintModel, Model,
@@ -186,8 +188,7 @@ pub struct Inconsistency {
 /// §20.6): **a labelled mode, not a model**. Generated content in such pixels differs from
 /// call to call (seeded per call) and is consistent within one call's output, so two
 /// overlapping independent generations conflict as diffusion outputs do.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Hallucination {
     /// The truth (default).
     #[default]
@@ -196,24 +197,87 @@ pub enum Hallucination {
     Low,
     /// The seeded texture alone; three painted objects.
     High,
+    /// A level between, as a whole percentage `p` of the texture (a dose–response sweep,
+    /// SPEC.md §21.6): mix `p/100`, `max(0, ⌊4p/100⌋ − 1)` painted objects, so that 50 and
+    /// 100 would be `Low` and `High` ([`Hallucination::from_percent`] makes them so).
+    Percent(u8),
 }
 
 impl Hallucination {
+    /// The level of `p` percent (at most 100): `None`, `Low` and `High` at 0, 50 and 100.
+    pub fn from_percent(p: u8) -> Hallucination {
+        match p.min(100) {
+            0 => Hallucination::None,
+            50 => Hallucination::Low,
+            100 => Hallucination::High,
+            p => Hallucination::Percent(p),
+        }
+    }
+
+    fn percent(self) -> u8 {
+        match self {
+            Hallucination::None => 0,
+            Hallucination::Low => 50,
+            Hallucination::High => 100,
+            Hallucination::Percent(p) => p,
+        }
+    }
+
     /// Weight of the hallucinated colour against the truth.
     pub fn mix(self) -> f32 {
-        match self {
-            Hallucination::None => 0.0,
-            Hallucination::Low => 0.5,
-            Hallucination::High => 1.0,
-        }
+        f32::from(self.percent()) / 100.0
     }
 
     /// Painted objects (spheres in world space) per call.
     pub fn objects(self) -> usize {
+        (4 * usize::from(self.percent()) / 100).saturating_sub(1)
+    }
+}
+
+/// `x` in [0, 1] as a whole percentage, if it is one (to 1e-9): a swept level.
+pub fn whole_percent(x: f64) -> Option<u8> {
+    let p = (x * 100.0).round();
+    ((0.0..=1.0).contains(&x) && (x * 100.0 - p).abs() < 1e-9).then_some(p as u8)
+}
+
+/// In a configuration: `"none"`, `"low"`, `"high"`, or a level in [0, 1] as a number
+/// (whole percentages).
+impl serde::Serialize for Hallucination {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
         match self {
-            Hallucination::None => 0,
-            Hallucination::Low => 1,
-            Hallucination::High => 3,
+            Hallucination::None => s.serialize_str("none"),
+            Hallucination::Low => s.serialize_str("low"),
+            Hallucination::High => s.serialize_str("high"),
+            Hallucination::Percent(p) => s.serialize_f64(f64::from(*p) / 100.0),
+        }
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for Hallucination {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        use serde::de::Error as _;
+        #[derive(serde::Deserialize)]
+        #[serde(untagged)]
+        enum Form {
+            Name(String),
+            Level(f64),
+        }
+        match Form::deserialize(d)? {
+            Form::Name(n) => match n.as_str() {
+                "none" => Ok(Hallucination::None),
+                "low" => Ok(Hallucination::Low),
+                "high" => Ok(Hallucination::High),
+                _ => Err(D::Error::custom(format!(
+                    "unknown hallucination '{n}' (none, low, high, or a level in [0, 1])"
+                ))),
+            },
+            Form::Level(x) => whole_percent(x)
+                .map(Hallucination::from_percent)
+                .ok_or_else(|| {
+                    D::Error::custom(format!(
+                        "hallucination level {x} is not in [0, 1] with at most two decimals"
+                    ))
+                }),
         }
     }
 }
@@ -402,6 +466,20 @@ pub struct PipelineConfig {
     pub inpaintings: u32,
     /// Off: the same number of views, evenly spaced along the candidate list (ablation).
     pub independent_detection: bool,
+    /// Which independent set detection keeps (the paper leaves it open; SPEC.md §20.2).
+    /// The three fields below are written only away from their defaults, so that
+    /// configurations written before them keep their bytes and digests.
+    #[serde(skip_serializing_if = "SelectionRule::is_default")]
+    pub selection: SelectionRule,
+    /// The image-plane outline of an inpainted region's frustum: its bounding box (the
+    /// paper's) or its convex hull.
+    #[serde(skip_serializing_if = "is_bounding_box")]
+    pub frustum_outline: Outline,
+    /// **An audit comparison, not the paper's method**: stage 1 generates a set of the
+    /// independent set's size in which some pair collides and whose coverage matches the
+    /// independent set's within [`super::selection::CONFLICT_COVERAGE_TOLERANCE`] (SPEC.md §20.2).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub conflicting_views: bool,
 
     // ---- stage 1 (§3.3.1)
     /// Training views per independent view that start a video (paper: 3).
@@ -451,6 +529,10 @@ pub struct PipelineConfig {
     pub fixer_every: u32,
 }
 
+fn is_bounding_box(o: &Outline) -> bool {
+    *o == Outline::BoundingBox
+}
+
 impl Default for PipelineConfig {
     fn default() -> Self {
         PipelineConfig::paper()
@@ -471,6 +553,9 @@ impl PipelineConfig {
             coverage_alpha: 0.5,
             inpaintings: 3,
             independent_detection: true,
+            selection: SelectionRule::Greedy,
+            frustum_outline: Outline::BoundingBox,
+            conflicting_views: false,
             video_sources: 3,
             video_frames: 16,
             align_space: None,
@@ -565,6 +650,12 @@ impl PipelineConfig {
                 "coverage_alpha must be in (0, 1], got {}",
                 self.coverage_alpha
             ));
+        }
+        if self.conflicting_views && !self.independent_detection {
+            return bad(
+                "conflicting_views replaces the independent set: it needs independent_detection"
+                    .into(),
+            );
         }
         if self.inpaintings == 0 || self.video_sources == 0 {
             return bad("inpaintings and video_sources must be at least 1".into());

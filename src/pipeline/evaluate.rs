@@ -123,12 +123,28 @@ impl Summary {
     }
 }
 
+/// The pixel (row-major index) of `cam` whose truth depth `depth` sees the world point
+/// `p`: `p` projects inside the image, in front of the camera, and the depth there agrees
+/// with `p`'s within [`VISIBILITY_DEPTH_TOLERANCE`].
+pub fn seen_at(cam: &Camera, depth: &[f32], p: DVec3) -> Option<usize> {
+    let q = cam.camera_from_world_point(p);
+    if q.z <= 0.0 {
+        return None;
+    }
+    let u = cam.fx * q.x / q.z + cam.cx;
+    let v = cam.fy * q.y / q.z + cam.cy;
+    if !(u >= 0.0 && v >= 0.0 && u < cam.width as f64 && v < cam.height as f64) {
+        return None;
+    }
+    let i = v as usize * cam.width as usize + u as usize;
+    let d = depth[i] as f64;
+    (d > 0.0 && (d - q.z).abs() <= VISIBILITY_DEPTH_TOLERANCE * q.z).then_some(i)
+}
+
 /// Pixels of `cam` (with truth depth `depth`) whose surface point some training camera
-/// sees: the point projects inside its image and its own depth there agrees within
-/// [`VISIBILITY_DEPTH_TOLERANCE`]. Pixels without truth depth are not existing.
+/// sees ([`seen_at`]). Pixels without truth depth are not existing.
 pub fn existing_pixels(cam: &Camera, depth: &[f32], train: &[(&Camera, &[f32])]) -> Vec<bool> {
     let (w, h) = (cam.width as usize, cam.height as usize);
-    let r = cam.world_from_camera_rotation;
     let mut out = vec![false; w * h];
     for y in 0..h {
         for x in 0..w {
@@ -136,25 +152,8 @@ pub fn existing_pixels(cam: &Camera, depth: &[f32], train: &[(&Camera, &[f32])])
             if !(z.is_finite() && z > 0.0) {
                 continue;
             }
-            let pc = DVec3::new(
-                ((x as f64 + 0.5) - cam.cx) / cam.fx * z,
-                ((y as f64 + 0.5) - cam.cy) / cam.fy * z,
-                z,
-            );
-            let pw = r * pc + cam.center;
-            out[y * w + x] = train.iter().any(|(t, td)| {
-                let q = t.camera_from_world_point(pw);
-                if q.z <= 0.0 {
-                    return false;
-                }
-                let u = t.fx * q.x / q.z + t.cx;
-                let v = t.fy * q.y / q.z + t.cy;
-                if !(u >= 0.0 && v >= 0.0 && u < t.width as f64 && v < t.height as f64) {
-                    return false;
-                }
-                let d = td[v as usize * t.width as usize + u as usize] as f64;
-                d > 0.0 && (d - q.z).abs() <= VISIBILITY_DEPTH_TOLERANCE * q.z
-            });
+            let pw = cam.pixel_point(x, y, z);
+            out[y * w + x] = train.iter().any(|(t, td)| seen_at(t, td, pw).is_some());
         }
     }
     out

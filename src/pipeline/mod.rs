@@ -27,6 +27,7 @@ pub mod poses;
 pub mod recon;
 pub mod report;
 pub mod rundir;
+pub mod selection;
 pub mod stage1;
 pub mod stage2;
 pub mod steps;

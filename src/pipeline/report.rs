@@ -43,6 +43,8 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
                         ", **hallucinating** (low): unseen content differs per call",
                     super::Hallucination::High =>
                         ", **hallucinating** (high): unseen content differs per call",
+                    super::Hallucination::Percent(_) =>
+                        ", **hallucinating** (a swept level): unseen content differs per call",
                 }
             )
         } else {

@@ -58,7 +58,6 @@ pub fn unproject(
     stride: usize,
 ) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
     let (w, h) = (cam.width as usize, cam.height as usize);
-    let r = cam.world_from_camera_rotation;
     let (mut xyz, mut rgb) = (Vec::new(), Vec::new());
     for y in (0..h).step_by(stride) {
         for x in (0..w).step_by(stride) {
@@ -67,9 +66,7 @@ pub fn unproject(
             if !(mask[p] && z.is_finite() && z > 0.0) {
                 continue;
             }
-            let xc = ((x as f64 + 0.5) - cam.cx) / cam.fx * z;
-            let yc = ((y as f64 + 0.5) - cam.cy) / cam.fy * z;
-            let pw = r * glam::DVec3::new(xc, yc, z) + cam.center;
+            let pw = cam.pixel_point(x, y, z);
             xyz.push([pw.x as f32, pw.y as f32, pw.z as f32]);
             let c = &image.data[p * 3..p * 3 + 3];
             rgb.push([c[0], c[1], c[2]]);

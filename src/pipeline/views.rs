@@ -23,6 +23,9 @@ use super::depth::{MIN_ALIGN_PIXELS, apply_alignment, render_rgba, training_dept
 use super::generators::{Generators, SlotKind};
 use super::poses::{nearest_training, same_pose};
 use super::rundir::{StepDone, StepWriter};
+use super::selection::{
+    CONFLICT_COVERAGE_TOLERANCE, Coverage, SelectionRule, conflicting_set, independent_set,
+};
 use super::steps::Step;
 use super::{Event, Inputs, Run};
 use crate::camera::Camera;
@@ -84,8 +87,93 @@ pub struct Plan {
     pub dependent: Vec<Dependent>,
     /// The closed trajectory through every independent and dependent view.
     pub trajectory: Vec<String>,
+    /// How the stage-1 set was chosen when not by the paper's default (greedy selection,
+    /// the independent set itself): absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub choice: Option<Choice>,
     #[serde(skip)]
     pub gap_cameras: Vec<GapCamera>,
+}
+
+/// The record of a non-default choice of the stage-1 set (SPEC.md §20.2).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Choice {
+    pub rule: SelectionRule,
+    /// The rule's independent set and its coverage ([`Coverage`]: voxels).
+    pub independent: Vec<String>,
+    pub coverage: usize,
+    /// With `conflicting_views`: the colliding set nearest in coverage, its coverage and
+    /// relative difference, and whether stage 1 uses it (within
+    /// [`CONFLICT_COVERAGE_TOLERANCE`]; else the independent set, and the run computes
+    /// what the independent set computes).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub conflicting: Option<ConflictingChoice>,
+}
+
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ConflictingChoice {
+    pub views: Vec<String>,
+    pub coverage: usize,
+    pub coverage_difference: f64,
+    pub used: bool,
+}
+
+/// [`Choice`] in candidate indices (into the active candidates).
+struct Chosen {
+    rule: SelectionRule,
+    independent: Vec<usize>,
+    coverage: usize,
+    conflicting: Option<(Vec<usize>, usize, f64, bool)>,
+}
+
+impl Chosen {
+    /// The set stage 1 generates.
+    fn stage1_indices(&self) -> &Vec<usize> {
+        match &self.conflicting {
+            Some((v, _, _, true)) => v,
+            _ => &self.independent,
+        }
+    }
+
+    fn record(self, name: &dyn Fn(usize) -> String) -> Choice {
+        let names = |v: &[usize]| v.iter().map(|&i| name(i)).collect();
+        Choice {
+            rule: self.rule,
+            independent: names(&self.independent),
+            coverage: self.coverage,
+            conflicting: self.conflicting.map(|(v, c, d, used)| ConflictingChoice {
+                views: names(&v),
+                coverage: c,
+                coverage_difference: d,
+                used,
+            }),
+        }
+    }
+}
+
+/// The independent set by `config.selection` and, with `conflicting_views`, the
+/// coverage-matched colliding set.
+fn choose(
+    config: &super::PipelineConfig,
+    n: usize,
+    sel: &crate::collide::independent::Selection,
+    coverage: &Coverage,
+) -> Result<Chosen> {
+    let independent = independent_set(config.selection, n, &sel.edges, &sel.independent, coverage)?;
+    let conflicting = if config.conflicting_views {
+        conflicting_set(n, &sel.edges, &independent, coverage)?.map(|(v, d)| {
+            let c = coverage.of(&v);
+            (v, c, d, d <= CONFLICT_COVERAGE_TOLERANCE)
+        })
+    } else {
+        None
+    };
+    Ok(Chosen {
+        rule: config.selection,
+        coverage: coverage.of(&independent),
+        independent,
+        conflicting,
+    })
 }
 
 /// A candidate left out of detection, and why (SPEC.md §20.2).
@@ -148,7 +236,7 @@ impl Run<'_> {
             gens,
             ..
         } = *self;
-        let key = serde_json::json!({
+        let mut key = serde_json::json!({
             "scene": inputs.scene_sha256,
             "candidates": inputs.candidates_sha256,
             "slots": gens.key(config, &[SlotKind::Inpaint, SlotKind::Depth]),
@@ -158,6 +246,21 @@ impl Run<'_> {
             "independent_detection": config.independent_detection,
 
         });
+        // The choices the paper leaves open, named only away from the defaults (so a
+        // default run's step keeps its digest).
+        if config.selection != SelectionRule::Greedy {
+            key["selection"] = config.selection.name().into();
+        }
+        if config.frustum_outline != Outline::BoundingBox {
+            key["frustum_outline"] = config.frustum_outline.name().into();
+        }
+        if config.conflicting_views {
+            key["conflicting_views"] = true.into();
+        }
+        if config.selection != SelectionRule::Greedy || config.conflicting_views {
+            // The coverage weight's points.
+            key["init_stride"] = config.init_stride.into();
+        }
         let step = self.step(&Step::Views, key, |w| {
             let mut found = Found::default();
             for index in 0..inputs.candidates.len() {
@@ -186,8 +289,13 @@ enum Verdict {
     Covered,
     /// Left out, for this reason (SPEC.md §20.2).
     SetAside(String),
-    /// To extrapolate: its inpainting mask and its depth range (Eq. 4).
-    Active { mask: Vec<bool>, range: [f64; 2] },
+    /// To extrapolate: its inpainting mask, its depth range (Eq. 4) and the aligned depth
+    /// of its first inpainting (what stage 1 unprojects).
+    Active {
+        mask: Vec<bool>,
+        range: [f64; 2],
+        depth: Vec<f32>,
+    },
 }
 
 /// The candidates as [`assess`] found them, in candidate order.
@@ -196,10 +304,11 @@ struct Found {
     records: Vec<Candidate>,
     covered: Vec<String>,
     set_aside: Vec<SetAside>,
-    /// Indices of the active candidates, with their masks and ranges.
+    /// Indices of the active candidates, with their masks, ranges and depths.
     active: Vec<usize>,
     masks: Vec<Vec<bool>>,
     ranges: Vec<[f64; 2]>,
+    depths: Vec<Vec<f32>>,
 }
 
 impl Found {
@@ -224,9 +333,10 @@ impl Found {
                     ..record
                 });
             }
-            Verdict::Active { mask, range } => {
+            Verdict::Active { mask, range, depth } => {
                 self.masks.push(mask);
                 self.ranges.push(range);
+                self.depths.push(depth);
                 self.active.push(index);
                 self.records.push(record);
             }
@@ -309,6 +419,7 @@ fn assess(run: &Run, index: usize, w: &mut StepWriter) -> Result<(Candidate, Ver
     } else {
         1
     };
+    let mut first = Vec::new();
     for j in 0..n {
         let inpainted = gens.inpaint(camera, &rgb, &mask, &format!("views:{}:{j}", camera.name))?;
         let hint = DepthHint {
@@ -358,10 +469,18 @@ fn assess(run: &Run, index: usize, w: &mut StepWriter) -> Result<(Candidate, Ver
         record.space = Some(space);
         record.alignments.push([alignment.scale, alignment.offset]);
         record.ranges.push(range);
+        if j == 0 {
+            first = depth;
+        }
     }
     let range = mean_range(&record.ranges)?;
     record.range = Some(range);
-    Ok((record, Verdict::Active { mask, range }))
+    let active = Verdict::Active {
+        mask,
+        range,
+        depth: first,
+    };
+    Ok((record, active))
 }
 
 /// Why candidate `index` has nothing of its own to extrapolate, if so: it has a training
@@ -431,18 +550,34 @@ fn write_plan(run: &Run, found: Found, w: &mut StepWriter) -> Result<()> {
         &cams,
         &found.masks,
         &found.ranges,
-        Outline::BoundingBox,
+        config.frustum_outline,
         None,
     )?;
     let centers: Vec<DVec3> = cams.iter().map(|c| c.center).collect();
-    let (independent, tour) = if config.independent_detection {
-        (sel.independent.clone(), sel.trajectory.clone())
+    // The paper's choice (greedy, stage 1 on the independent set) needs no coverage and
+    // records none, so its plan keeps its bytes.
+    let choice = (config.selection != SelectionRule::Greedy || config.conflicting_views)
+        .then(|| {
+            let coverage = Coverage::new(
+                &cams,
+                &found.masks,
+                &found.depths,
+                config.init_stride as usize,
+            );
+            choose(config, active.len(), &sel, &coverage)
+        })
+        .transpose()?;
+    let chosen = choice
+        .as_ref()
+        .map_or(&sel.independent, |c| c.stage1_indices());
+    let stage1: Vec<usize> = if config.independent_detection {
+        chosen.clone()
     } else {
-        let (k, m) = (sel.independent.len(), active.len());
-        let even: Vec<usize> = (0..k).map(|j| j * m / k).collect();
-        let (t, _) = closed_tour(&even, &centers);
-        (even, t)
+        let (k, m) = (chosen.len(), active.len());
+        (0..k).map(|j| j * m / k).collect()
     };
+    let (tour, _) = closed_tour(&stage1, &centers);
+    let independent = stage1;
     let (dependent, gap_cams) = assign_dependents(active, &independent, &tour, &centers, |i| {
         &inputs.candidates[active[i]]
     })?;
@@ -466,6 +601,7 @@ fn write_plan(run: &Run, found: Found, w: &mut StepWriter) -> Result<()> {
         tour: tour.iter().map(|&i| name(i)).collect(),
         dependent,
         trajectory,
+        choice: choice.map(|c| c.record(&name)),
         gap_cameras: Vec::new(),
     };
     w.json("plan.json", &plan)?;

@@ -120,7 +120,15 @@ fn rates(
     let (mut holds, mut contradicted) = (0usize, 0usize);
     for _ in 0..AUDITS {
         let d = draw(&mut u, shape, c.estimand, n, centre, sd);
-        match (c.judge)(&[ClaimData { diffs: &d, null }], n)[0] {
+        match (c.judge)(
+            &[ClaimData {
+                diffs: &d,
+                null,
+                untested: 0,
+            }],
+            n,
+        )[0]
+        {
             Outcome::Holds => holds += 1,
             Outcome::Contradicted => contradicted += 1,
             _ => {}
@@ -142,6 +150,7 @@ fn family(d: &[Vec<f64>]) -> Vec<ClaimData<'_>> {
         .map(|d| ClaimData {
             diffs: d,
             null: 0.0,
+            untested: 0,
         })
         .collect()
 }
@@ -228,6 +237,7 @@ fn calibrate(c: &Candidate, checks: Checks) -> Vec<String> {
                     &[ClaimData {
                         diffs: &d[..n],
                         null: 0.0,
+                        untested: 0,
                     }],
                     r.planned,
                 )[0]

@@ -466,3 +466,57 @@ fn mean_of_equal_ranges_is_exact_so_one_deterministic_inpainting_stands_for_n() 
         "the naive mean missed only {share}: the test lost its teeth"
     );
 }
+
+/// The exact set searches of the selection rules (SPEC.md §16.2, §20.2) against sets
+/// listed by hand, and against brute force on random graphs: every maximal independent
+/// set and nothing else; every `k`-set with a colliding pair.
+#[test]
+fn exact_set_searches_list_every_maximal_independent_and_every_colliding_set() {
+    use unseen::collide::independent::{colliding_sets, maximal_independent_sets, members};
+    // The path 0 – 1 – 2 – 3.
+    let path = [(0, 1), (1, 2), (2, 3)];
+    let sets: Vec<Vec<usize>> = maximal_independent_sets(4, &path)
+        .unwrap()
+        .into_iter()
+        .map(members)
+        .collect();
+    assert_eq!(sets, [vec![0, 2], vec![0, 3], vec![1, 3]]);
+    let pairs: Vec<Vec<usize>> = colliding_sets(4, &path, 2)
+        .unwrap()
+        .into_iter()
+        .map(members)
+        .collect();
+    assert_eq!(pairs, [vec![0, 1], vec![1, 2], vec![2, 3]]);
+    assert!(colliding_sets(4, &[], 2).unwrap().is_empty());
+    assert_eq!(maximal_independent_sets(3, &[]).unwrap(), [0b111]);
+    let e = maximal_independent_sets(21, &[]).unwrap_err().to_string();
+    assert!(e.contains("at most 20"), "{e}");
+    // Random graphs of 7 views: brute force over all subsets.
+    let mut u = Uniform::new(5);
+    for _ in 0..50 {
+        let n = 7;
+        let mut edges = Vec::new();
+        for i in 0..n {
+            for j in i + 1..n {
+                if u.unit_f64() < 0.4 {
+                    edges.push((i, j));
+                }
+            }
+        }
+        let collides = |s: u32| {
+            edges
+                .iter()
+                .any(|&(i, j)| s >> i & 1 == 1 && s >> j & 1 == 1)
+        };
+        let want: Vec<u32> = (1u32..1 << n)
+            .filter(|&s| !collides(s) && (0..n).all(|i| s >> i & 1 == 1 || collides(s | 1 << i)))
+            .collect();
+        assert_eq!(maximal_independent_sets(n, &edges).unwrap(), want);
+        for k in 1..=n {
+            let want: Vec<u32> = (1u32..1 << n)
+                .filter(|&s| s.count_ones() as usize == k && collides(s))
+                .collect();
+            assert_eq!(colliding_sets(n, &edges, k).unwrap(), want);
+        }
+    }
+}

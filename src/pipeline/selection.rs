@@ -1,0 +1,145 @@
+//! Which candidates stage 1 generates (SPEC.md §20.2): the independent set by the
+//! configured rule (the paper says "independent", not which maximal set), the coverage
+//! weight that rules and the audit's coverage-matched colliding set compare, and that set.
+
+use crate::camera::Camera;
+use crate::collide::independent::{colliding_sets, maximal_independent_sets, members};
+use crate::error::Result;
+
+/// Which independent set detection keeps (a choice the paper leaves open).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SelectionRule {
+    /// Greedy in candidate order: a maximal set, not a maximum one (the default).
+    #[default]
+    Greedy,
+    /// A maximum-cardinality independent set (ties: more coverage, then the first).
+    MaxCardinality,
+    /// The independent set of maximum [`Coverage`] (ties: more views, then the first).
+    MaxCoverage,
+}
+
+crate::error::text_enum!(SelectionRule, "selection rule", {
+    Greedy => "greedy",
+    MaxCardinality => "max_cardinality",
+    MaxCoverage => "max_coverage",
+});
+
+impl SelectionRule {
+    pub fn is_default(&self) -> bool {
+        *self == SelectionRule::Greedy
+    }
+}
+
+/// The largest relative difference between the coverage of the audit's colliding set and
+/// the independent set's for the two to count as matched: 10 %.
+pub const CONFLICT_COVERAGE_TOLERANCE: f64 = 0.10;
+
+/// The coverage weight of sets of candidate views: the distinct voxels that their
+/// inpainted regions' points occupy. A region's points are every `stride`-th pixel of its
+/// mask unprojected with its aligned depth (the points stage 1 would add); the voxel edge
+/// is the median over all points of the footprint of `stride` pixels at the point's depth
+/// (`z·stride/f_x`), so a voxel holds about one point of one view, and two views that
+/// generate the same surface share voxels.
+pub struct Coverage {
+    /// Per view, its voxels, sorted.
+    voxels: Vec<Vec<[i64; 3]>>,
+}
+
+impl Coverage {
+    pub fn new(cams: &[&Camera], masks: &[Vec<bool>], depths: &[Vec<f32>], stride: usize) -> Self {
+        let stride = stride.max(1);
+        let mut points: Vec<Vec<glam::DVec3>> = Vec::with_capacity(cams.len());
+        let mut footprints = Vec::new();
+        for ((cam, mask), depth) in cams.iter().zip(masks).zip(depths) {
+            let (w, h) = (cam.width as usize, cam.height as usize);
+            let mut pts = Vec::new();
+            for y in (0..h).step_by(stride) {
+                for x in (0..w).step_by(stride) {
+                    let p = y * w + x;
+                    let z = depth[p] as f64;
+                    if mask[p] && z.is_finite() && z > 0.0 {
+                        pts.push(cam.pixel_point(x, y, z));
+                        footprints.push(z * stride as f64 / cam.fx);
+                    }
+                }
+            }
+            points.push(pts);
+        }
+        footprints.sort_by(f64::total_cmp);
+        let edge = footprints.get(footprints.len() / 2).copied().unwrap_or(1.0);
+        let voxels = points
+            .iter()
+            .map(|pts| {
+                let mut v: Vec<[i64; 3]> = pts
+                    .iter()
+                    .map(|p| (*p / edge).floor().as_i64vec3().to_array())
+                    .collect();
+                v.sort_unstable();
+                v.dedup();
+                v
+            })
+            .collect();
+        Coverage { voxels }
+    }
+
+    /// The coverage of `views`: the distinct voxels of their regions together.
+    pub fn of(&self, views: &[usize]) -> usize {
+        let mut all: Vec<[i64; 3]> = views
+            .iter()
+            .flat_map(|&i| self.voxels[i].iter().copied())
+            .collect();
+        all.sort_unstable();
+        all.dedup();
+        all.len()
+    }
+}
+
+/// The independent set of the `n` candidates with collisions `edges` by `rule`
+/// (ascending indices); `greedy` is the greedy set, which [`SelectionRule::Greedy`] keeps.
+pub fn independent_set(
+    rule: SelectionRule,
+    n: usize,
+    edges: &[(usize, usize)],
+    greedy: &[usize],
+    coverage: &Coverage,
+) -> Result<Vec<usize>> {
+    if rule == SelectionRule::Greedy {
+        return Ok(greedy.to_vec());
+    }
+    let score = |set: &[usize]| match rule {
+        SelectionRule::Greedy | SelectionRule::MaxCardinality => (set.len(), coverage.of(set)),
+        SelectionRule::MaxCoverage => (coverage.of(set), set.len()),
+    };
+    let mut best: Option<((usize, usize), Vec<usize>)> = None;
+    for set in maximal_independent_sets(n, edges)? {
+        let v = members(set);
+        let s = score(&v);
+        if best.as_ref().is_none_or(|(b, _)| s > *b) {
+            best = Some((s, v));
+        }
+    }
+    Ok(best.map(|(_, v)| v).unwrap_or_default())
+}
+
+/// The audit's colliding set (SPEC.md §20.2): of the sets of `|independent|` candidates
+/// in which some pair collides, the one whose coverage is nearest the independent set's
+/// (ties: the first), with its relative coverage difference; `None` when no such set
+/// exists (fewer than two views, or no collision).
+pub fn conflicting_set(
+    n: usize,
+    edges: &[(usize, usize)],
+    independent: &[usize],
+    coverage: &Coverage,
+) -> Result<Option<(Vec<usize>, f64)>> {
+    let target = coverage.of(independent) as f64;
+    let mut best: Option<(f64, Vec<usize>)> = None;
+    for set in colliding_sets(n, edges, independent.len())? {
+        let v = members(set);
+        let gap = (coverage.of(&v) as f64 - target).abs() / target.max(1.0);
+        if best.as_ref().is_none_or(|(b, _)| gap < *b) {
+            best = Some((gap, v));
+        }
+    }
+    Ok(best.map(|(gap, v)| (v, gap)))
+}
