@@ -10,8 +10,8 @@ use unseen::pipeline::Level;
 use unseen::pipeline::compare::compare;
 use unseen::pipeline::steps::Step;
 use unseen::pipeline::{
-    self, Hallucination, Inconsistency, Inputs, MaskSource, PipelineConfig, Preset, RunOptions,
-    Scope, SlotNames, Stage2Depth, TruthDepth, load_inputs,
+    self, Hallucination, Inconsistency, Inputs, MaskSource, Paradigm, PipelineConfig, Preset,
+    RunOptions, Scope, SlotNames, Stage2Depth, TruthDepth, load_inputs,
 };
 use unseen::train::run::{Checkpointing, train_run};
 use unseen::train::trainer::TrainConfig;
@@ -126,6 +126,11 @@ pub struct Knobs {
     /// slot to the stage-1 render instead of video depth alignment.
     #[arg(long)]
     stage2_render_fit: bool,
+    /// Not the paper's method: the generate–reconstruct–shift cycle it replaces (paradigm
+    /// `cycle`: the trajectory's views one after another, each inpainted from the current
+    /// scene and reconstructed before the next), for comparison.
+    #[arg(long)]
+    cycle: bool,
 }
 
 impl Knobs {
@@ -158,6 +163,9 @@ impl Knobs {
         c.original_view_depth |= self.original_view_depth;
         if self.stage2_render_fit {
             c.stage2_depth = Stage2Depth::RenderFit;
+        }
+        if self.cycle {
+            c.paradigm = Paradigm::Cycle;
         }
         Ok(())
     }
@@ -454,7 +462,8 @@ pub struct AuditArgs {
     #[arg(long, value_parser = crate::one_of(&Preset::ALL, Preset::name), default_value = "quick")]
     preset: Preset,
     /// Variants, comma-separated (default: all): full, no_qa_mask, opacity_mask,
-    /// even_views, no_depth_supervision, no_propagation, qa_sh3, qa_sh4, no_interpolation, stage2_render_fit.
+    /// even_views, no_depth_supervision, no_propagation, qa_sh3, qa_sh4, no_interpolation, stage2_render_fit,
+    /// cycle.
     #[arg(long, value_delimiter = ',')]
     variants: Vec<String>,
     /// Generators, comma-separated: classical, truth-none, truth-low, truth-high,

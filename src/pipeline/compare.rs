@@ -77,13 +77,16 @@ impl Comparison {
     }
 }
 
-/// Rank of a step folder in pipeline order ([`Step::rank`]; a folder that is no step, e.g.
-/// an oracle dump's, after every step), then by name.
-fn rank(step: &str) -> (u32, String) {
-    let r = step
-        .parse::<super::steps::Step>()
-        .map_or(u32::MAX, |s| s.rank());
-    (r, step.to_string())
+/// Rank of a step folder in pipeline order ([`Step::rank`], ties by [`Step`]'s order: a
+/// cycle step's index as a number; a folder that is no step, e.g. an oracle dump's, after
+/// every step), then by name.
+fn rank(step: &str) -> (u32, Option<super::steps::Step>, String) {
+    let s = step.parse::<super::steps::Step>().ok();
+    (
+        s.as_ref().map_or(u32::MAX, |s| s.rank()),
+        s,
+        step.to_string(),
+    )
 }
 
 /// Every `manifest.json` under `root` (relative step names), in pipeline order.
