@@ -131,11 +131,11 @@ impl Step {
         }
     }
 
-    /// The step's place in pipeline order (ties broken by [`Step`]'s order: a cycle step's
-    /// index as a number): the order `compare` lists steps in, every step after the steps
-    /// it reads (test `every_plan_orders_its_steps_for_every_reader`). The QA-Mask of a
-    /// scene comes after the step that made the scene; the cycle's steps (never in a plan
-    /// with stages 1, 2 and the interpolation) after the original's.
+    /// The step's place in pipeline order (ties broken by [`Step::order`]): the order
+    /// `compare` lists steps in, every step after the steps it reads (test
+    /// `every_plan_orders_its_steps_for_every_reader`). The QA-Mask of a scene comes after
+    /// the step that made the scene; the cycle's steps (never in a plan with a stage's)
+    /// after the stages'.
     pub fn rank(&self) -> u32 {
         match self {
             Step::Views => 0,
@@ -150,10 +150,20 @@ impl Step {
             Step::Fixer => 9,
             Step::QaMask(Scene::Stage2 | Scene::Interpolate | Scene::Cycle) => 10,
             Step::Interpolation => 11,
-            Step::Cycle(_) => 11,
-            Step::EvalMasks => 12,
-            Step::Eval(_) => 13,
+            Step::Cycle(_) => 12,
+            Step::EvalMasks => 13,
+            Step::Eval(_) => 14,
         }
+    }
+
+    /// The step's place in `compare`'s order: its [`Step::rank`], then a cycle step's index
+    /// as a number (`cycle/10` after `cycle/9`), then its name.
+    pub fn order(&self) -> (u32, usize, String) {
+        let index = match self {
+            Step::Cycle(k) => *k,
+            _ => 0,
+        };
+        (self.rank(), index, self.to_string())
     }
 
     /// The step's folder under the run directory `root`.
@@ -652,16 +662,15 @@ mod tests {
             Step::Cycle(7),
             Step::Cycle(10),
             Step::EvalMasks,
-            Step::Eval(Scene::Stage2),
             Step::Eval(Scene::Cycle),
+            Step::Eval(Scene::Stage2),
         ];
         for s in &all {
             assert_eq!(s.to_string().parse::<Step>().unwrap(), *s);
         }
         // Pipeline order is the order above.
         assert!(
-            all.windows(2)
-                .all(|w| (w[0].rank(), &w[0]) < (w[1].rank(), &w[1])),
+            all.windows(2).all(|w| w[0].order() < w[1].order()),
             "{all:?}"
         );
         for bad in [
@@ -751,8 +760,7 @@ mod tests {
             for p in waves.iter().flat_map(|w| &w.steps) {
                 for a in &p.after {
                     assert!(at[a] < at[&p.step], "{a} not before {}", p.step);
-                    let order = |s: &Step| (s.rank(), s.clone());
-                    assert!(order(a) < order(&p.step), "compare lists {} first", p.step);
+                    assert!(a.order() < p.step.order(), "compare lists {} first", p.step);
                 }
             }
             let bound = Shape::bound(candidates_of(&shape), shape.evaluation);
