@@ -12,8 +12,8 @@ use unseen::pipeline::compare::compare;
 use unseen::pipeline::selection::SelectionRule;
 use unseen::pipeline::steps::Step;
 use unseen::pipeline::{
-    self, Hallucination, Inconsistency, Inputs, MaskSource, PipelineConfig, Preset, RunOptions,
-    Scope, SlotNames, Stage2Depth, TruthDepth, load_inputs,
+    self, Hallucination, Inconsistency, Inputs, MaskSource, Paradigm, PipelineConfig, Preset,
+    RunOptions, Scope, SlotNames, Stage2Depth, TruthDepth, load_inputs,
 };
 use unseen::train::run::{Checkpointing, train_run};
 use unseen::train::trainer::TrainConfig;
@@ -139,6 +139,11 @@ pub struct Knobs {
     /// the independent set's size with matched coverage.
     #[arg(long)]
     conflicting_views: bool,
+    /// Not the paper's method: the generate–reconstruct–shift cycle it replaces (paradigm
+    /// `cycle`: the trajectory's views one after another, each inpainted from the current
+    /// scene and reconstructed before the next), for comparison.
+    #[arg(long)]
+    cycle: bool,
 }
 
 impl Knobs {
@@ -179,6 +184,9 @@ impl Knobs {
             c.frustum_outline = o;
         }
         c.conflicting_views |= self.conflicting_views;
+        if self.cycle {
+            c.paradigm = Paradigm::Cycle;
+        }
         Ok(())
     }
 }
@@ -475,7 +483,7 @@ pub struct AuditArgs {
     preset: Preset,
     /// Variants, comma-separated (default: all): full, no_qa_mask, opacity_mask,
     /// even_views, conflicting_views, no_depth_supervision, no_propagation, qa_sh3, qa_sh4,
-    /// no_interpolation, stage2_render_fit.
+    /// no_interpolation, stage2_render_fit, cycle.
     #[arg(long, value_delimiter = ',')]
     variants: Vec<String>,
     /// Generators, comma-separated: classical, truth-none, truth-low, truth-high,

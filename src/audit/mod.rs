@@ -67,6 +67,8 @@ pub enum Variant {
     /// Stage-2 depth by a least-squares fit to the stage-1 render instead of the paper's
     /// video depth alignment (the labelled deviation `stage2_depth: render_fit`).
     Stage2RenderFit,
+    /// The generate–reconstruct–shift cycle the paper replaces (paradigm `cycle`).
+    Cycle,
 }
 
 impl Variant {
@@ -82,6 +84,7 @@ impl Variant {
         Variant::QaSh4,
         Variant::NoInterpolation,
         Variant::Stage2RenderFit,
+        Variant::Cycle,
     ];
 
     pub fn name(self) -> &'static str {
@@ -97,6 +100,7 @@ impl Variant {
             Variant::QaSh4 => "qa_sh4",
             Variant::NoInterpolation => "no_interpolation",
             Variant::Stage2RenderFit => "stage2_render_fit",
+            Variant::Cycle => "cycle",
         }
     }
 
@@ -126,6 +130,7 @@ impl Variant {
             Variant::QaSh4 => c.qa_sh_degree = 4,
             Variant::NoInterpolation => c.interpolation = false,
             Variant::Stage2RenderFit => c.stage2_depth = Stage2Depth::RenderFit,
+            Variant::Cycle => c.paradigm = crate::pipeline::Paradigm::Cycle,
         }
     }
 }

@@ -28,16 +28,22 @@ pub struct Cost {
 
 /// The training iteration-pixels of one step: a reconstruction's iterations, a QA-Mask's
 /// fine-tune; the other steps (detection, generation, warping, evaluation) are small
-/// beside them.
+/// beside them. A cycle step's share of the iterations depends on the trajectory detection
+/// finds: bounded by the whole total (and, after the first, the QA-Mask it fine-tunes).
 pub fn step_work(pc: &PipelineConfig, step: &Step, pixels: f64) -> f64 {
     let iterations = match step {
-        Step::Stage1Recon => pc.stage1.iterations,
-        Step::Stage2Recon => pc.stage2.iterations,
-        Step::Interpolation => pc.interpolate.iterations,
-        Step::QaMask(_) => pc.qa_iterations,
+        Step::Stage1Recon => u64::from(pc.stage1.iterations),
+        Step::Stage2Recon => u64::from(pc.stage2.iterations),
+        Step::Interpolation => u64::from(pc.interpolate.iterations),
+        Step::QaMask(_) => u64::from(pc.qa_iterations),
+        Step::Cycle(k) => {
+            let qa = *k > 0 && pc.mask_source == crate::pipeline::MaskSource::Qa;
+            crate::pipeline::cycle::total_iterations(pc)
+                + u64::from(pc.qa_iterations) * u64::from(qa)
+        }
         _ => 0,
     };
-    f64::from(iterations) * pixels
+    iterations as f64 * pixels
 }
 
 /// The training iteration-pixels of a whole pipeline run: the sum over its plan's steps

@@ -77,13 +77,11 @@ impl Comparison {
     }
 }
 
-/// Rank of a step folder in pipeline order ([`Step::rank`]; a folder that is no step, e.g.
-/// an oracle dump's, after every step), then by name.
-fn rank(step: &str) -> (u32, String) {
-    let r = step
-        .parse::<super::steps::Step>()
-        .map_or(u32::MAX, |s| s.rank());
-    (r, step.to_string())
+/// Rank of a step folder in pipeline order ([`Step::order`]; a folder that is no step, e.g.
+/// an oracle dump's, after every step, by name).
+fn rank(step: &str) -> (u32, usize, String) {
+    step.parse::<super::steps::Step>()
+        .map_or((u32::MAX, 0, step.to_string()), |s| s.order())
 }
 
 /// Every `manifest.json` under `root` (relative step names), in pipeline order.

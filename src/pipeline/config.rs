@@ -315,6 +315,30 @@ pub enum Stage2Depth {
     RenderFit,
 }
 
+/// How the pipeline extrapolates (SPEC.md §20.11).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Paradigm {
+    /// The paper's hierarchical two-stage pipeline (§3.3): independent views, stage 1,
+    /// dependent views, stage 2, interpolation.
+    #[default]
+    Hierarchical,
+    /// **Not the paper's method**: the generate–reconstruct–shift cycle the paper replaces
+    /// (§1) — the trajectory's views one after another, each inpainted from the current
+    /// scene's render and reconstructed before the next ([`super::cycle`]).
+    Cycle,
+}
+
+crate::error::text_enum!(Paradigm, "paradigm", { Hierarchical => "hierarchical", Cycle => "cycle" });
+
+impl Paradigm {
+    /// The default: left out of a written configuration, so adding the field changed no
+    /// existing `config.json` or configuration digest.
+    pub fn is_hierarchical(&self) -> bool {
+        *self == Paradigm::Hierarchical
+    }
+}
+
 /// A level of the ground-truth generator's labelled deviations from the truth: its
 /// inconsistency ([`Inconsistency::at`]) and its hallucination ([`Hallucination::at`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
@@ -451,6 +475,10 @@ pub struct PipelineConfig {
     pub preset: Preset,
     /// Seed of every random choice; each stage draws from `stage_seed(seed, name)`.
     pub seed: u64,
+    /// The paper's hierarchical pipeline (default; not written when default) or the
+    /// generate–reconstruct–shift cycle it replaces (comparison baseline).
+    #[serde(skip_serializing_if = "Paradigm::is_hierarchical")]
+    pub paradigm: Paradigm,
     pub slots: SlotNames,
     /// Degradation of the ground-truth generator (ignored by the other slots).
     pub inconsistency: Inconsistency,
@@ -546,6 +574,7 @@ impl PipelineConfig {
         PipelineConfig {
             preset: Preset::Paper,
             seed: 0,
+            paradigm: Paradigm::Hierarchical,
             slots: SlotNames::default(),
             inconsistency: Inconsistency::NONE,
             truth_depth: TruthDepth::Metric,
@@ -778,5 +807,35 @@ mod tests {
         .validate()
         .unwrap_err();
         assert!(e.message.contains("it needs video 'truth'"), "{e}");
+    }
+
+    /// The paradigm (SPEC.md §20.11): lower case in a configuration, the default left out
+    /// of a written one (no existing `config.json` or digest changed), an unknown value an
+    /// error naming the file.
+    #[test]
+    fn the_paradigm_is_read_lower_case_and_left_out_when_default() {
+        let file = std::path::Path::new("over.json");
+        let quick = PipelineConfig::quick();
+        assert_eq!(quick.paradigm, Paradigm::Hierarchical);
+        assert!(!serde_json::to_string(&quick).unwrap().contains("paradigm"));
+        let c = PipelineConfig::with_overrides(
+            Preset::Quick,
+            serde_json::json!({"paradigm": "cycle"}),
+            file,
+        )
+        .unwrap();
+        assert_eq!(c.paradigm, Paradigm::Cycle);
+        let text = serde_json::to_string(&c).unwrap();
+        assert!(text.contains(r#""paradigm":"cycle""#), "{text}");
+        assert_eq!(serde_json::from_str::<PipelineConfig>(&text).unwrap(), c);
+        let e = PipelineConfig::with_overrides(
+            Preset::Quick,
+            serde_json::json!({"paradigm": "spiral"}),
+            file,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("over.json") && e.contains("spiral"), "{e}");
+        assert_eq!("cycle".parse::<Paradigm>().unwrap(), Paradigm::Cycle);
     }
 }

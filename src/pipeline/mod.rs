@@ -7,6 +7,7 @@
 //! | parallel generation on independent views, DIBR propagation, reconstruction | [`stage1`] | §3.3.1 |
 //! | residual completion on dependent views | [`stage2`] | §3.3.2 |
 //! | interpolation by video reuse and the fixer | [`interpolate`] | §3.3.3 |
+//! | the generate–reconstruct–shift cycle (paradigm `cycle`: the baseline, not the method) | [`cycle`] | §1 |
 //!
 //! with [`recon`] (the QA-Mask-weighted reconstruction every stage ends with), [`evaluate`]
 //! (existing / extrapolated PSNR and SSIM on evaluation poses), [`generators`] (slots and
@@ -18,6 +19,7 @@ pub mod artifacts;
 pub mod clips;
 pub mod compare;
 pub mod config;
+pub mod cycle;
 pub mod depth;
 pub mod evaluate;
 pub mod generators;
@@ -34,8 +36,8 @@ pub mod steps;
 pub mod views;
 
 pub use config::{
-    Hallucination, Inconsistency, Level, MaskSource, PipelineConfig, Preset, ReconConfig, Slot,
-    SlotNames, Stage2Depth, TruthDepth,
+    Hallucination, Inconsistency, Level, MaskSource, Paradigm, PipelineConfig, Preset, ReconConfig,
+    Slot, SlotNames, Stage2Depth, TruthDepth,
 };
 
 use crate::error::{Error, Result};
@@ -174,6 +176,8 @@ fn detected_shape(plan: &views::Plan, inputs: &Inputs) -> Shape {
         independent: plan.independent.iter().map(|n| stem(n)).collect(),
         dependent: !plan.dependent.is_empty(),
         evaluation: !inputs.evaluation.is_empty(),
+        trajectory: plan.trajectory.len(),
+        most_trajectory: steps::most_trajectory(inputs.candidates.len()),
     }
 }
 
@@ -294,7 +298,17 @@ fn run_in(
             gt.add_between(&g.camera, &g.between[0], &g.between[1])?;
         }
     }
-    let waves = steps::plan(config, &detected_shape(&views.plan, inputs));
+    let shape = detected_shape(&views.plan, inputs);
+    if shape.trajectory > shape.most_trajectory {
+        return Err(Error::invalid(format!(
+            "internal: a trajectory of {} views over {} candidates (at most {})",
+            shape.trajectory,
+            inputs.candidates.len(),
+            shape.most_trajectory
+        ))
+        .at(out));
+    }
+    let waves = steps::plan(config, &shape);
     let selection = Selection::new(scope, &waves).map_err(|e| e.at(out))?;
     let run = Run {
         config,
@@ -304,6 +318,14 @@ fn run_in(
         gens: &gens,
         selection: &selection,
     };
+
+    if config.paradigm == Paradigm::Cycle {
+        run.begin(Stage::Cycle);
+        if let Some(last) = run.cycle(&views, &mut steps)? {
+            scenes.push((Scene::Cycle, Some(last)));
+        }
+        return run.finish(steps, &scenes, &waves);
+    }
 
     run.begin(Stage::Stage1);
     let Some(s1) = run.stage1(&views, &mut steps)? else {

@@ -74,40 +74,54 @@ impl Run<'_> {
         scene_digest: &str,
         name: Scene,
     ) -> Result<(Weights, Option<StepDone>)> {
-        let (config, on_event) = (self.config, self.on_event);
+        let config = self.config;
         match config.mask_source {
             MaskSource::None => Ok((Weights::None, None)),
             MaskSource::Opacity => Ok((Weights::Opacity(scene.clone()), None)),
             MaskSource::Qa => {
                 let qa = qa_config(config);
                 let qa_step = Step::QaMask(name);
-                let step_name = qa_step.to_string();
                 let key = serde_json::json!({"scene": scene_digest, "qa": qa});
-                let views: Vec<Camera> = self.inputs.data.train_cameras();
                 let step = self.step(&qa_step, key, |w| {
-                    let mut g = mask_scene(scene, &qa)?;
-                    fine_tune(&mut g, &views, &qa, &mut |p| {
-                        if p.iteration % 50 == 0 || p.iteration == p.iterations {
-                            on_event(Event::Iterations {
-                                step: step_name.clone(),
-                                done: p.iteration,
-                                total: p.iterations,
-                                loss: p.loss,
-                            });
-                        }
-                    })?;
-                    // The mask directory's files, through the step (whose manifest closes it).
-                    let (ply, text) = mask_files(&g, &qa)?;
-                    w.put("point_cloud.ply", |p| {
-                        crate::io::write_atomic(p, |f| std::io::Write::write_all(f, &ply))
-                    })?;
-                    w.put("qa_mask.json", |p| crate::io::write_text(p, &text))?;
-                    Ok(())
+                    self.write_qa_mask(scene, &qa_step.to_string(), "", w)
                 })?;
                 let (g, c) = read_mask_dir(&step.dir)?;
                 Ok((Weights::Qa(Box::new((g, c))), Some(step)))
             }
         }
+    }
+
+    /// Fine-tune the QA-Mask of `scene` on the training cameras and write its mask
+    /// directory's files (`point_cloud.ply`, `qa_mask.json`) under `prefix` of `w` (whose
+    /// manifest closes them; progress as `step_name`): what [`read_mask_dir`] reads.
+    pub fn write_qa_mask(
+        &self,
+        scene: &Gaussians,
+        step_name: &str,
+        prefix: &str,
+        w: &mut StepWriter,
+    ) -> Result<()> {
+        let (on_event, qa) = (self.on_event, qa_config(self.config));
+        let views: Vec<Camera> = self.inputs.data.train_cameras();
+        let mut g = mask_scene(scene, &qa)?;
+        fine_tune(&mut g, &views, &qa, &mut |p| {
+            if p.iteration % 50 == 0 || p.iteration == p.iterations {
+                on_event(Event::Iterations {
+                    step: step_name.to_string(),
+                    done: p.iteration,
+                    total: p.iterations,
+                    loss: p.loss,
+                });
+            }
+        })?;
+        let (ply, text) = mask_files(&g, &qa)?;
+        w.put(&format!("{prefix}point_cloud.ply"), |p| {
+            crate::io::write_atomic(p, |f| std::io::Write::write_all(f, &ply))
+        })?;
+        w.put(&format!("{prefix}qa_mask.json"), |p| {
+            crate::io::write_text(p, &text)
+        })?;
+        Ok(())
     }
 }
 
@@ -179,8 +193,24 @@ impl Run<'_> {
         stage: Scene,
         w: &mut StepWriter,
     ) -> Result<Gaussians> {
-        let (config, inputs, on_event) = (self.config, self.inputs, self.on_event);
         let stage = stage.name();
+        self.reconstruct_as(recon, init, generated, weights, refresh, stage, w)
+    }
+
+    /// [`Run::reconstruct`] with its random stream `stage_seed(seed, key)` and progress
+    /// named by `key` (the cycle paradigm's `cycle:<k>`).
+    #[allow(clippy::too_many_arguments)]
+    pub fn reconstruct_as(
+        &self,
+        recon: &ReconConfig,
+        init: Gaussians,
+        generated: &[Supervision],
+        weights: &Weights,
+        refresh: Option<&Refresh>,
+        stage: &str,
+        w: &mut StepWriter,
+    ) -> Result<Gaussians> {
+        let (config, inputs, on_event) = (self.config, self.inputs, self.on_event);
         let mut views = original_views(config, inputs);
         let n_orig = views.len();
         let mut masks: Vec<Option<Vec<f32>>> = vec![None; n_orig];

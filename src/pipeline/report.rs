@@ -17,7 +17,13 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
     let plan: Plan = read_json(&Step::Views.dir(run).join("plan.json"))?;
+    let cycle = config.paradigm == super::Paradigm::Cycle;
     let mut md = String::from("# unseen: scene extrapolation\n\n");
+    if cycle {
+        md += "**The cycle paradigm — not the paper's method**: the generate–reconstruct–shift \
+               cycle the paper's hierarchical pipeline replaces (§1), one trajectory view after \
+               another (SPEC.md §20.11); stages 1, 2 and the interpolation did not run.\n\n";
+    }
     md += &format!(
         "Preset `{}`, slots: inpaint `{}`, depth `{}`, video `{}`, video depth `{}`, fixer `{}`{}; \
          mask `{}`, depth supervision {}{}, DIBR propagation {}, stage-2 depth {}, independent \
@@ -124,6 +130,45 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
             views = Step::Views,
         );
     }
+    if cycle {
+        md += &cycle_table(&plan, run, &prefix);
+    } else {
+        md += &stages_table(config, &plan, run, &prefix);
+    }
+    md += &tail(run, out, wall, &prefix);
+    Ok(md)
+}
+
+/// The cycle paradigm's views in trajectory order: what each generated, its iterations,
+/// its image and weights.
+fn cycle_table(plan: &Plan, run: &Path, prefix: &str) -> String {
+    let mut md = String::from(
+        "\n## The cycle (not the paper's method)\n\n| k | view | masked pixels | new points | iterations | image | weights |\n|---|---|---|---|---|---|---|\n",
+    );
+    for (k, name) in plan.trajectory.iter().enumerate() {
+        let step = Step::Cycle(k);
+        let Ok(r) = read_json::<serde_json::Value>(&step.dir(run).join("cycle.json")) else {
+            continue;
+        };
+        let s = stem(name);
+        let img = if r["generated"].as_bool().unwrap_or(false) {
+            "inpaint"
+        } else {
+            "render"
+        };
+        md += &format!(
+            "| {k} | {name} | {} | {} | {} | ![]({prefix}/{step}/{img}.png) | ![]({prefix}/{step}/weights/{s}.png) |\n",
+            r["masked"],
+            r.get("new_points").unwrap_or(&serde_json::json!(0)),
+            r["iterations"],
+        );
+    }
+    md
+}
+
+/// The hierarchical pipeline's trajectory views, DIBR propagation and dependent depths.
+fn stages_table(config: &PipelineConfig, plan: &Plan, run: &Path, prefix: &str) -> String {
+    let mut md = String::new();
     md += "\n## Stage 1 and 2 (§3.3)\n\n| view | kind | image | weights (QA-Mask heat map) |\n|---|---|---|---|\n";
     for name in plan.trajectory.iter().take(8) {
         let s = stem(name);
@@ -220,6 +265,12 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
             md += "\n";
         }
     }
+    md
+}
+
+/// The evaluation's pictures, the cost of every step and this invocation's time.
+fn tail(run: &Path, out: &Outcome, wall: f64, prefix: &str) -> String {
+    let mut md = String::new();
     if let Some(m) = &out.metrics {
         md += "## Evaluation views (render | truth)\n\n";
         for r in &m.rows {
@@ -259,5 +310,5 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
         );
     }
     md += &format!("\nThis invocation: {wall:.1} s.\n");
-    Ok(md)
+    md
 }

@@ -85,10 +85,11 @@ pub fn neighbour_pairs(n: usize) -> Vec<(usize, usize)> {
     }
 }
 
-/// A dependent view's depth fitted to the stage-1 render, and how (`space`, `alignment`).
-struct RenderFit {
-    depth: Vec<f32>,
-    record: serde_json::Value,
+/// A view's depth fitted to the render of the scene it extends (a dependent view's: the
+/// stage-1 scene's), and how (`space`, `alignment`).
+pub(super) struct RenderFit {
+    pub depth: Vec<f32>,
+    pub record: serde_json::Value,
 }
 
 impl Run<'_> {
@@ -262,8 +263,9 @@ impl Run<'_> {
 
     /// The depth slot's estimate of an inpainted dependent view (at `camera`),
     /// least-squares fitted to the stage-1 render's expected depth `ed` where the render is
-    /// opaque (`alpha` > 0.5).
-    fn render_fit(
+    /// opaque (`alpha` > 0.5); the cycle paradigm's depth of every view, fitted to the
+    /// render of the current scene.
+    pub(super) fn render_fit(
         &self,
         camera: &Camera,
         inpainted: &ImageF32,
@@ -300,7 +302,7 @@ impl Run<'_> {
             )
             .map_err(|e| {
                 Error::invalid(format!(
-                    "dependent view '{}': cannot align its depth to the stage-1 scene ({})",
+                    "view '{}': cannot align its depth to the render of the scene it extends ({})",
                     camera.name, e.message
                 ))
             })?

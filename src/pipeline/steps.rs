@@ -8,20 +8,22 @@
 //! `compare`, the audit's step sharing and report and the batch fan-out read steps from
 //! here, never from string literals (test `step_names_live_in_steps_rs`).
 
-use super::config::{MaskSource, PipelineConfig};
+use super::config::{MaskSource, Paradigm, PipelineConfig};
 use crate::error::{Error, Result};
 use std::collections::BTreeSet;
 use std::fmt;
 use std::str::FromStr;
 
-/// A scene of a run: the original and the reconstruction each stage ends with. A QA-Mask
-/// is fine-tuned on a scene; every scene is evaluated.
+/// A scene of a run: the original and the reconstruction each stage ends with (under the
+/// cycle paradigm, the last cycle view's). A QA-Mask is fine-tuned on a scene; every scene
+/// is evaluated.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Scene {
     Original,
     Stage1,
     Stage2,
     Interpolate,
+    Cycle,
 }
 
 crate::error::text_enum!(Scene, "scene", {
@@ -29,6 +31,7 @@ crate::error::text_enum!(Scene, "scene", {
     Stage1 => "stage1",
     Stage2 => "stage2",
     Interpolate => "interpolate",
+    Cycle => "cycle",
 });
 
 /// One step of a run, named by its folder under the run directory.
@@ -54,6 +57,9 @@ pub enum Step {
     Fixer,
     /// `interpolate/recon`: the interpolation stage's reconstruction.
     Interpolation,
+    /// `cycle/<k>`: the cycle paradigm's `k`-th view of the trajectory (from 0): its
+    /// generation and the reconstruction after it (SPEC.md §20.11).
+    Cycle(usize),
     /// `eval/masks`: the evaluation masks.
     EvalMasks,
     /// `eval/<scene>`: one scene's evaluation.
@@ -68,16 +74,18 @@ pub enum Stage {
     Stage1,
     Stage2,
     Interpolate,
+    Cycle,
     Eval,
 }
 
 impl Stage {
-    pub const ALL: [Stage; 6] = [
+    pub const ALL: [Stage; 7] = [
         Stage::Views,
         Stage::QaMask,
         Stage::Stage1,
         Stage::Stage2,
         Stage::Interpolate,
+        Stage::Cycle,
         Stage::Eval,
     ];
 
@@ -88,6 +96,7 @@ impl Stage {
             Stage::Stage1 => "stage1",
             Stage::Stage2 => "stage2",
             Stage::Interpolate => "interpolate",
+            Stage::Cycle => "cycle",
             Stage::Eval => "eval",
         }
     }
@@ -117,14 +126,16 @@ impl Step {
             Step::Independent(_) | Step::Propagate | Step::Stage1Recon => Stage::Stage1,
             Step::Dependent | Step::Videos | Step::Stage2Recon => Stage::Stage2,
             Step::Fixer | Step::Interpolation => Stage::Interpolate,
+            Step::Cycle(_) => Stage::Cycle,
             Step::EvalMasks | Step::Eval(_) => Stage::Eval,
         }
     }
 
-    /// The step's place in pipeline order (ties broken by name): the order `compare`
-    /// lists steps in, every step after the steps it reads (test
+    /// The step's place in pipeline order (ties broken by [`Step::order`]): the order
+    /// `compare` lists steps in, every step after the steps it reads (test
     /// `every_plan_orders_its_steps_for_every_reader`). The QA-Mask of a scene comes after
-    /// the step that made the scene.
+    /// the step that made the scene; the cycle's steps (never in a plan with a stage's)
+    /// after the stages'.
     pub fn rank(&self) -> u32 {
         match self {
             Step::Views => 0,
@@ -137,11 +148,22 @@ impl Step {
             Step::QaMask(Scene::Stage1) => 7,
             Step::Stage2Recon => 8,
             Step::Fixer => 9,
-            Step::QaMask(Scene::Stage2 | Scene::Interpolate) => 10,
+            Step::QaMask(Scene::Stage2 | Scene::Interpolate | Scene::Cycle) => 10,
             Step::Interpolation => 11,
-            Step::EvalMasks => 12,
-            Step::Eval(_) => 13,
+            Step::Cycle(_) => 12,
+            Step::EvalMasks => 13,
+            Step::Eval(_) => 14,
         }
+    }
+
+    /// The step's place in `compare`'s order: its [`Step::rank`], then a cycle step's index
+    /// as a number (`cycle/10` after `cycle/9`), then its name.
+    pub fn order(&self) -> (u32, usize, String) {
+        let index = match self {
+            Step::Cycle(k) => *k,
+            _ => 0,
+        };
+        (self.rank(), index, self.to_string())
     }
 
     /// The step's folder under the run directory `root`.
@@ -163,6 +185,7 @@ impl fmt::Display for Step {
             Step::Stage2Recon => f.write_str("stage2/recon"),
             Step::Fixer => f.write_str("interpolate/fixer"),
             Step::Interpolation => f.write_str("interpolate/recon"),
+            Step::Cycle(k) => write!(f, "cycle/{k}"),
             Step::EvalMasks => f.write_str("eval/masks"),
             Step::Eval(s) => write!(f, "eval/{s}"),
         }
@@ -176,7 +199,7 @@ impl FromStr for Step {
     fn from_str(s: &str) -> Result<Step> {
         let bad = || {
             Error::invalid(format!(
-                "'{s}' is not a step of a run (views, stage1/<view>, stage1/propagate, qa/<scene>, stage1/recon, stage2/dependent, stage2/videos, stage2/recon, interpolate/fixer, interpolate/recon, eval/masks, eval/<scene>)"
+                "'{s}' is not a step of a run (views, stage1/<view>, stage1/propagate, qa/<scene>, stage1/recon, stage2/dependent, stage2/videos, stage2/recon, interpolate/fixer, interpolate/recon, cycle/<k>, eval/masks, eval/<scene>)"
             ))
         };
         let one = |rest: &str| {
@@ -185,6 +208,13 @@ impl FromStr for Step {
                 .ok_or_else(bad)
         };
         let scene = |rest: &str| rest.parse::<Scene>().map_err(|_| bad());
+        // A number as `Display` writes it (no sign, no leading zero).
+        let index = |rest: &str| {
+            rest.parse::<usize>()
+                .ok()
+                .filter(|k| k.to_string() == rest)
+                .ok_or_else(bad)
+        };
         Ok(match s {
             "views" => Step::Views,
             "stage1/propagate" => Step::Propagate,
@@ -201,6 +231,7 @@ impl FromStr for Step {
                     "stage1" => Step::Independent(one(rest)?),
                     "qa" => Step::QaMask(scene(rest)?),
                     "eval" => Step::Eval(scene(rest)?),
+                    "cycle" => Step::Cycle(index(rest)?),
                     _ => return Err(bad()),
                 }
             }
@@ -222,17 +253,37 @@ pub struct Shape {
     pub dependent: bool,
     /// Whether evaluation poses were given (the `eval/…` steps).
     pub evaluation: bool,
+    /// The closed trajectory's length: the cycle paradigm's steps `cycle/<k>`.
+    pub trajectory: usize,
+    /// The longest trajectory detection can leave for these candidates
+    /// ([`most_trajectory`]): the cycle's steps of the bound plan.
+    pub most_trajectory: usize,
 }
 
 impl Shape {
     /// The largest shape of a run over `candidates` (their file stems).
     pub fn bound(candidates: Vec<String>, evaluation: bool) -> Shape {
+        let most = most_trajectory(candidates.len());
         Shape {
             independent: candidates,
             dependent: true,
             evaluation,
+            trajectory: most,
+            most_trajectory: most,
         }
     }
+}
+
+/// The longest closed trajectory over `candidates` views: each active candidate once, plus
+/// at most one interpolated camera per gap of the tour of the independent views (none for
+/// one view, one for two, one per view from three: `pipeline::views`).
+pub fn most_trajectory(candidates: usize) -> usize {
+    candidates
+        + match candidates {
+            0 | 1 => 0,
+            2 => 1,
+            n => n,
+        }
 }
 
 /// A step of a plan and the steps whose output it reads.
@@ -260,6 +311,8 @@ pub fn plan(config: &PipelineConfig, shape: &Shape) -> Vec<Wave> {
         independent: vec![String::new()],
         dependent: true,
         evaluation: shape.evaluation,
+        trajectory: shape.most_trajectory,
+        most_trajectory: shape.most_trajectory,
     };
     // Waves of the bound graph, by step kind (every independent view alike).
     let kind = |s: &Step| match s {
@@ -307,6 +360,9 @@ pub fn plan(config: &PipelineConfig, shape: &Shape) -> Vec<Wave> {
 /// Every step of `shape` with the steps it reads, each after everything it reads: the
 /// run's data flow as one table.
 fn graph(config: &PipelineConfig, shape: &Shape) -> Vec<Planned> {
+    if config.paradigm == Paradigm::Cycle {
+        return cycle_graph(config, shape);
+    }
     let qa = config.mask_source == MaskSource::Qa;
     let propagate = config.propagation && shape.dependent;
     let independent: Vec<Step> = shape
@@ -375,21 +431,65 @@ fn graph(config: &PipelineConfig, shape: &Shape) -> Vec<Planned> {
             .collect();
         add(Step::Interpolation, ip);
     }
+    evaluation(config, shape, &mut g);
+    g
+}
+
+/// The cycle paradigm's steps (SPEC.md §20.11): detection, the original scene's QA-Mask
+/// (the first cycle view's weights), one step per trajectory view, each after the one
+/// before it, and the evaluation of the original and the last cycle view's scene.
+fn cycle_graph(config: &PipelineConfig, shape: &Shape) -> Vec<Planned> {
+    let qa = config.mask_source == MaskSource::Qa;
+    let mut g = vec![Planned {
+        step: Step::Views,
+        after: vec![],
+    }];
+    if qa {
+        g.push(Planned {
+            step: Step::QaMask(Scene::Original),
+            after: vec![],
+        });
+    }
+    for k in 0..shape.trajectory {
+        let after = match k {
+            0 => std::iter::once(Step::Views)
+                .chain(qa.then_some(Step::QaMask(Scene::Original)))
+                .collect(),
+            k => vec![Step::Views, Step::Cycle(k - 1)],
+        };
+        g.push(Planned {
+            step: Step::Cycle(k),
+            after,
+        });
+    }
+    evaluation(config, shape, &mut g);
+    g
+}
+
+/// The evaluation steps of `shape` (when it has evaluation poses), appended to `g`.
+fn evaluation(config: &PipelineConfig, shape: &Shape, g: &mut Vec<Planned>) {
     if shape.evaluation {
+        let mut add = |step: Step, after: Vec<Step>| g.push(Planned { step, after });
         add(Step::EvalMasks, vec![]);
-        for (scene, made_by) in scenes(config) {
+        for (scene, made_by) in scenes(config, shape) {
             add(
                 Step::Eval(scene),
                 std::iter::once(Step::EvalMasks).chain(made_by).collect(),
             );
         }
     }
-    g
 }
 
 /// The scenes a run makes, in order, with the step that makes each (none for the
 /// original): what the evaluation compares.
-fn scenes(config: &PipelineConfig) -> Vec<(Scene, Option<Step>)> {
+fn scenes(config: &PipelineConfig, shape: &Shape) -> Vec<(Scene, Option<Step>)> {
+    if config.paradigm == Paradigm::Cycle {
+        let last = shape.trajectory.checked_sub(1).map(Step::Cycle);
+        let cycle = last.map(|l| (Scene::Cycle, Some(l)));
+        return std::iter::once((Scene::Original, None))
+            .chain(cycle)
+            .collect();
+    }
     let mut s = vec![
         (Scene::Original, None),
         (Scene::Stage1, Some(Step::Stage1Recon)),
@@ -558,7 +658,11 @@ mod tests {
             Step::Fixer,
             Step::QaMask(Scene::Stage2),
             Step::Interpolation,
+            Step::Cycle(0),
+            Step::Cycle(7),
+            Step::Cycle(10),
             Step::EvalMasks,
+            Step::Eval(Scene::Cycle),
             Step::Eval(Scene::Stage2),
         ];
         for s in &all {
@@ -566,7 +670,7 @@ mod tests {
         }
         // Pipeline order is the order above.
         assert!(
-            all.windows(2).all(|w| w[0].rank() <= w[1].rank()),
+            all.windows(2).all(|w| w[0].order() < w[1].order()),
             "{all:?}"
         );
         for bad in [
@@ -579,35 +683,55 @@ mod tests {
             "eval/stage9",
             "eval",
             "view",
+            "cycle/",
+            "cycle/x",
+            "cycle/01",
+            "cycle/-1",
+            "cycle/1/2",
         ] {
             assert!(bad.parse::<Step>().is_err(), "{bad}");
         }
         assert_eq!(Step::Stage1Recon.stage().name(), "stage1");
         assert_eq!(Step::QaMask(Scene::Stage1).stage().name(), "qa-mask");
+        assert_eq!(Step::Cycle(3).stage().name(), "cycle");
     }
 
-    /// Every configuration switch that adds or removes steps, and both shapes detection
-    /// can leave.
+    /// The candidates of a shape of [`every_plan`]: its independent views and two more.
+    fn candidates_of(shape: &Shape) -> Vec<String> {
+        let mut c = shape.independent.clone();
+        c.extend(["view_x".to_string(), "view_y".to_string()]);
+        c
+    }
+
+    /// Every configuration switch that adds or removes steps (the paradigm among them),
+    /// and the shapes detection can leave (of `n` independent views among `n + 2`
+    /// candidates, with dependent views or without; the trajectory of the independent views
+    /// and, with dependent views, two more).
     fn every_plan() -> Vec<(PipelineConfig, Shape, Vec<Wave>)> {
         let mut out = Vec::new();
-        for mask_source in MaskSource::ALL {
-            for (propagation, interpolation, evaluation, dependent) in
-                (0..16).map(|b| (b & 1 != 0, b & 2 != 0, b & 4 != 0, b & 8 != 0))
-            {
-                for n in [1, 3] {
-                    let config = PipelineConfig {
-                        mask_source,
-                        propagation,
-                        interpolation,
-                        ..PipelineConfig::preset(super::super::Preset::Quick)
-                    };
-                    let shape = Shape {
-                        independent: (0..n).map(|k| format!("view_{k}")).collect(),
-                        dependent,
-                        evaluation,
-                    };
-                    let waves = plan(&config, &shape);
-                    out.push((config, shape, waves));
+        for paradigm in Paradigm::ALL {
+            for mask_source in MaskSource::ALL {
+                for (propagation, interpolation, evaluation, dependent) in
+                    (0..16).map(|b| (b & 1 != 0, b & 2 != 0, b & 4 != 0, b & 8 != 0))
+                {
+                    for n in [1, 3] {
+                        let config = PipelineConfig {
+                            paradigm,
+                            mask_source,
+                            propagation,
+                            interpolation,
+                            ..PipelineConfig::preset(super::super::Preset::Quick)
+                        };
+                        let shape = Shape {
+                            independent: (0..n).map(|k| format!("view_{k}")).collect(),
+                            dependent,
+                            evaluation,
+                            trajectory: n + if dependent { 2 } else { 0 },
+                            most_trajectory: most_trajectory(n + 2),
+                        };
+                        let waves = plan(&config, &shape);
+                        out.push((config, shape, waves));
+                    }
                 }
             }
         }
@@ -619,8 +743,10 @@ mod tests {
     /// after the steps it reads — in a later wave (a batch engine runs the waves in order)
     /// and later in `compare`'s order (the first divergent step is upstream of the rest);
     /// the waves numbered alike before and after detection; the audit's shared job
-    /// (`Before(stage1/recon)`) selects the steps that do not read the stage-1
-    /// reconstruction; `--until` every step that no other reads is the whole run.
+    /// (`Before(stage1/recon)`; `Before(cycle/0)` under the cycle paradigm) selects the
+    /// steps that do not read the first reconstruction; `--until` every step that no other
+    /// reads is the whole run. Under the cycle paradigm: no stage's step, a chain of one
+    /// step per trajectory view, and the original and the cycle evaluated.
     #[test]
     fn every_plan_orders_its_steps_for_every_reader() {
         for (config, shape, waves) in every_plan() {
@@ -634,13 +760,18 @@ mod tests {
             for p in waves.iter().flat_map(|w| &w.steps) {
                 for a in &p.after {
                     assert!(at[a] < at[&p.step], "{a} not before {}", p.step);
-                    let order = |s: &Step| (s.rank(), s.to_string());
-                    assert!(order(a) < order(&p.step), "compare lists {} first", p.step);
+                    assert!(a.order() < p.step.order(), "compare lists {} first", p.step);
                 }
             }
-            let bound = Shape::bound(shape.independent.clone(), shape.evaluation);
+            let bound = Shape::bound(candidates_of(&shape), shape.evaluation);
             assert_eq!(plan(&config, &bound).len(), waves.len(), "{shape:?}");
-            let shared = Selection::new(&Scope::Before(Step::Stage1Recon), &waves).unwrap();
+            let cycle = config.paradigm == Paradigm::Cycle;
+            let first_recon = if cycle {
+                Step::Cycle(0)
+            } else {
+                Step::Stage1Recon
+            };
+            let shared = Selection::new(&Scope::Before(first_recon.clone()), &waves).unwrap();
             let whole = Selection::new(&Scope::All, &waves).unwrap();
             for p in waves.iter().flat_map(|w| &w.steps) {
                 let reads_recon = {
@@ -650,7 +781,7 @@ mod tests {
                             up.extend(q.after.iter().cloned());
                         }
                     }
-                    up.contains(&Step::Stage1Recon)
+                    up.contains(&first_recon)
                 };
                 assert_eq!(shared.computes(&p.step), !reads_recon, "{}", p.step);
                 assert!(whole.computes(&p.step));
@@ -665,6 +796,38 @@ mod tests {
                 }
             }
             assert!(until.is_whole(&waves), "{shape:?}");
+            let has = |f: &dyn Fn(&Step) -> bool| steps.iter().any(|p| f(&p.step));
+            let cycles: Vec<&Planned> = steps
+                .iter()
+                .filter(|p| matches!(p.step, Step::Cycle(_)))
+                .copied()
+                .collect();
+            if cycle {
+                assert!(!has(&|s| matches!(
+                    s.stage(),
+                    Stage::Stage1 | Stage::Stage2 | Stage::Interpolate
+                )));
+                assert_eq!(cycles.len(), shape.trajectory);
+                for (k, p) in cycles.iter().enumerate() {
+                    assert_eq!(p.step, Step::Cycle(k));
+                    assert!(p.after.contains(&Step::Views));
+                    assert_eq!(k == 0, !p.after.contains(&Step::Cycle(k.wrapping_sub(1))));
+                }
+                let evaluated: Vec<&Step> = steps
+                    .iter()
+                    .filter(|p| matches!(p.step, Step::Eval(_)))
+                    .map(|p| &p.step)
+                    .collect();
+                let want = [Step::Eval(Scene::Original), Step::Eval(Scene::Cycle)];
+                assert_eq!(
+                    evaluated,
+                    want.iter()
+                        .take(2 * usize::from(shape.evaluation))
+                        .collect::<Vec<_>>()
+                );
+            } else {
+                assert!(cycles.is_empty() && !has(&|s| *s == Step::Eval(Scene::Cycle)));
+            }
         }
     }
 
@@ -675,9 +838,10 @@ mod tests {
     #[test]
     fn batch_tasks_compute_every_step_of_their_wave_once() {
         for (config, shape, waves) in every_plan() {
-            let mut candidates = shape.independent.clone();
-            candidates.extend(["view_x".to_string(), "view_y".to_string()]);
-            let bound = plan(&config, &Shape::bound(candidates, shape.evaluation));
+            let bound = plan(
+                &config,
+                &Shape::bound(candidates_of(&shape), shape.evaluation),
+            );
             for (k, wave) in waves.iter().enumerate() {
                 let mut done: Vec<Step> = Vec::new();
                 for task in 0..bound[k].steps.len() {
@@ -739,5 +903,38 @@ mod tests {
             let e = Selection::new(&bad, &waves).unwrap_err().to_string();
             assert!(e.contains("no step called") || e.contains("no wave"), "{e}");
         }
+        // The cycle paradigm: `--only cycle/1` verifies the chain before it and detection;
+        // before detection every candidate's longest trajectory is planned, and the
+        // evaluation of the cycle stays in its wave after detection.
+        let cycle = PipelineConfig {
+            paradigm: Paradigm::Cycle,
+            ..config
+        };
+        let bound = plan(&cycle, &shape);
+        let steps = |w: &[Wave]| -> Vec<Step> {
+            w.iter()
+                .flat_map(|w| &w.steps)
+                .map(|p| p.step.clone())
+                .collect()
+        };
+        assert_eq!(most_trajectory(2), 3);
+        assert!(steps(&bound).contains(&Step::Cycle(2)));
+        assert!(!steps(&bound).contains(&Step::Cycle(3)));
+        let detected = Shape {
+            trajectory: 2,
+            ..shape.clone()
+        };
+        let waves = plan(&cycle, &detected);
+        assert_eq!(waves.len(), bound.len());
+        assert!(!steps(&waves).contains(&Step::Cycle(2)));
+        let at = |w: &[Wave], s: &Step| w.iter().position(|w| w.steps.iter().any(|p| p.step == *s));
+        let eval = Step::Eval(Scene::Cycle);
+        assert_eq!(at(&waves, &eval), at(&bound, &eval));
+        let only = Selection::new(&Scope::Only(Step::Cycle(1)), &waves).unwrap();
+        assert_eq!(only.computed().collect::<Vec<_>>(), [&Step::Cycle(1)]);
+        for s in [Step::Cycle(0), Step::Views, Step::QaMask(Scene::Original)] {
+            assert!(only.wants(&s), "{s}");
+        }
+        assert!(!only.wants(&Step::EvalMasks));
     }
 }

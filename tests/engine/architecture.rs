@@ -520,7 +520,15 @@ fn string_literals(s: &str) -> Vec<(String, String)> {
 #[test]
 fn step_names_live_in_steps_rs() {
     let root = repo_root();
-    let folders = ["views", "stage1", "stage2", "interpolate", "eval", "qa"];
+    let folders = [
+        "views",
+        "stage1",
+        "stage2",
+        "interpolate",
+        "cycle",
+        "eval",
+        "qa",
+    ];
     let mut found = Vec::new();
     let mut stack = vec![root.join("src"), root.join("cli/src")];
     while let Some(dir) = stack.pop() {

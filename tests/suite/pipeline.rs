@@ -2378,3 +2378,111 @@ fn damaged_steps_and_cache_entries_are_named_recomputed_and_end_in_the_same_bits
     let c = compare(&reference, &d, 0.0).unwrap();
     assert!(c.steps.iter().all(|s| s.identical), "{}", c.table());
 }
+
+/// The cycle paradigm (SPEC.md §20.11; not the paper's method): after detection, one step
+/// per trajectory view in trajectory order (gap cameras too), together the full method's
+/// iterations; no stage runs; the original and the cycle are evaluated; the report says
+/// it is the cycle. A copy of the run whose middle step was removed resumes to the same
+/// bits (that step recomputed, the later ones verified as they were).
+#[test]
+fn the_cycle_paradigm_visits_the_trajectory_in_order_and_resumes_to_the_same_bits() {
+    use unseen::pipeline::Paradigm;
+    use unseen::pipeline::cycle::total_iterations;
+    use unseen::pipeline::steps::Step;
+    let t = TempDir::new("pipeline-cycle");
+    let Tiny { inp, cfg, .. } = TinyRun::new()
+        .config(|c| c.paradigm = Paradigm::Cycle)
+        .build(&t);
+    let (a, b) = (t.path().join("a"), t.path().join("b"));
+    let o = pipeline::run(&cfg, &inp, &a, false, &quiet).unwrap();
+    let plan: unseen::pipeline::views::Plan =
+        serde_json::from_slice(&std::fs::read(a.join("views/plan.json")).unwrap()).unwrap();
+    let k_views = plan.trajectory.len();
+    assert!(
+        k_views > plan.independent.len()
+            && plan.independent.iter().all(|v| plan.trajectory.contains(v)),
+        "the trajectory holds the independent and the dependent views: {plan:?}"
+    );
+    // The trajectory's views in order, together the full method's iterations.
+    let mut iterations = 0u64;
+    for (k, name) in plan.trajectory.iter().enumerate() {
+        let dir = Step::Cycle(k).dir(&a);
+        let read = |f: &str| -> serde_json::Value {
+            serde_json::from_slice(&std::fs::read(dir.join(f)).unwrap()).unwrap()
+        };
+        let r = read("cycle.json");
+        assert_eq!(
+            (r["view"].as_str(), r["index"].as_u64()),
+            (Some(name.as_str()), Some(k as u64))
+        );
+        iterations += read("supervision.json")["iterations"].as_u64().unwrap();
+        // Every view generated so far supervises, this one last.
+        let supervised = r["supervised"].as_array().unwrap();
+        if r["generated"].as_bool().unwrap() {
+            assert_eq!(supervised.last().unwrap(), name.as_str());
+        }
+    }
+    assert_eq!(iterations, total_iterations(&cfg));
+    assert_eq!(
+        total_iterations(&cfg),
+        160,
+        "stage 1 + stage 2 + interpolation"
+    );
+    assert!(!Step::Cycle(k_views).dir(&a).exists());
+    for stage in ["stage1", "stage2", "interpolate"] {
+        assert!(!a.join(stage).exists(), "{stage} ran under the cycle");
+    }
+    let m = o.metrics.as_ref().unwrap();
+    let scenes: Vec<&str> = m.rows.iter().map(|r| r.scene.as_str()).collect();
+    assert_eq!(scenes, ["original", "cycle"]);
+    assert!(
+        m.row("cycle").unwrap().psnr_extrapolated > m.row("original").unwrap().psnr_extrapolated,
+        "{}",
+        m.table()
+    );
+    let steps: Vec<String> =
+        serde_json::from_slice(&std::fs::read(a.join("steps.json")).unwrap()).unwrap();
+    // views, qa/original, the cycle's, eval/masks, eval/original, eval/cycle.
+    assert_eq!(steps.len(), k_views + 5, "{steps:?}");
+    let md = pipeline::report::markdown(&cfg, &a, &o, 0.0).unwrap();
+    assert!(md.contains("not the paper's method"), "{md}");
+    // A copy without a middle step, resumed: that step recomputed, the later ones verified.
+    for f in walk(&a) {
+        let to = b.join(f.strip_prefix(&a).unwrap());
+        std::fs::create_dir_all(to.parent().unwrap()).unwrap();
+        std::fs::copy(&f, &to).unwrap();
+    }
+    let middle = Step::Cycle(k_views / 2);
+    std::fs::remove_dir_all(middle.dir(&b)).unwrap();
+    let events = std::sync::Mutex::new(Vec::new());
+    let record = |e: Event| events.lock().unwrap().push(e);
+    pipeline::run(&cfg, &inp, &b, true, &record).unwrap();
+    let events = events.into_inner().unwrap();
+    let finished = |s: &Step| {
+        events
+            .iter()
+            .any(|e| matches!(e, Event::StepFinished { step, .. } if *step == s.to_string()))
+    };
+    assert!(finished(&middle));
+    assert!(!finished(&Step::Cycle(k_views / 2 + 1)) && !finished(&Step::Cycle(0)));
+    let c = compare(&a, &b, 0.0).unwrap();
+    assert!(c.steps.iter().all(|s| s.identical), "{}", c.table());
+    assert_eq!(c.steps.len(), k_views + 5);
+}
+
+/// The cycle paradigm gives the same bits on 1 and 2 threads.
+#[test]
+#[ignore = "slow tier (~16 s): cargo test -- --include-ignored"]
+fn the_cycle_paradigm_is_the_same_bits_on_1_and_2_threads() {
+    use unseen::pipeline::Paradigm;
+    let t = TempDir::new("pipeline-cycle-threads");
+    let Tiny { inp, cfg, .. } = TinyRun::new()
+        .config(|c| c.paradigm = Paradigm::Cycle)
+        .build(&t);
+    let (a, b) = (t.path().join("a"), t.path().join("b"));
+    with_threads(2, || pipeline::run(&cfg, &inp, &a, false, &quiet)).unwrap();
+    with_threads(1, || pipeline::run(&cfg, &inp, &b, false, &quiet)).unwrap();
+    let c = compare(&a, &b, 0.0).unwrap();
+    assert!(c.steps.iter().all(|s| s.identical), "{}", c.table());
+    assert!(c.steps.len() >= 8, "{} steps compared", c.steps.len());
+}
