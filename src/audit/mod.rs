@@ -72,7 +72,7 @@ pub enum Variant {
 }
 
 impl Variant {
-    pub const ALL: [Variant; 11] = [
+    pub const ALL: [Variant; 12] = [
         Variant::Full,
         Variant::NoQaMask,
         Variant::OpacityMask,

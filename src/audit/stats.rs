@@ -277,10 +277,11 @@ pub struct Rule {
 }
 
 /// The planned sample of an audit: seeds 0 to 15 of every claim. At 16 the sign test reaches
-/// the strictest Holm level of the presets' families — 12 claims per generator (`2·P(X ≥
-/// 15) = 2·17/2¹⁶ = 0.00052 < 0.05/12`; 14 of 16, 0.0042, does not), and the paper preset's
-/// 36 truth claims — and finds a shift of the median of 1.63 standard deviations with 80 %
-/// power at the 12-claim level (1.30 at 11 or fewer, where 14 of 16 suffice).
+/// the strictest Holm level of the presets' families — 15 claims per generator (`2·P(X ≥
+/// 15) = 2·17/2¹⁶ = 0.00052 < 0.05/15`; 14 of 16, 0.0042, does not), and the paper preset's
+/// 45 truth claims (`< 0.05/45`) — and finds a shift of the median of 1.63 standard
+/// deviations with 80 % power at 12 to 45 claims (1.30 at 11 or fewer, where 14 of 16
+/// suffice).
 pub const PLANNED_SEEDS: usize = 16;
 
 impl Default for Rule {

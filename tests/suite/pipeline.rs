@@ -1417,8 +1417,8 @@ fn cli_audit_bad_input_is_one_clear_error() {
         .unwrap();
     let jobs = String::from_utf8_lossy(&st.stdout);
     assert!(st.status.success());
-    // One original, 11 variants × 2 generators.
-    assert_eq!(jobs.lines().count(), 23, "{jobs}");
+    // One original, 12 variants × 2 generators.
+    assert_eq!(jobs.lines().count(), 25, "{jobs}");
     assert_eq!(jobs.lines().next(), Some("original/seed-0"));
     assert!(jobs.contains("runs/truth-low/even_views/seed-0"));
     assert!(!t.path().join("listed").exists());

@@ -1,0 +1,22 @@
+#!/usr/bin/env bash
+# The dose–response audit (issue #54; reference_data/audit/<room>-dose-<param>/): the
+# mechanisms generator with one parameter swept from none to full (SPEC.md §21.6), full
+# against even_views and conflicting_views at every level. Seeds accumulate.
+#
+# Usage: reference_data/audit/run_dose.sh ROOM PARAM A..B [UNSEEN_BINARY]
+#   PARAM: hallucination, photometric or depth_distortion
+#   e.g. reference_data/audit/run_dose.sh lounge hallucination 0..2
+# LEVELS overrides the levels (default 0,0.25,0.5,0.75,1).
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+room="$1"; param="$2"; seeds="$3"; bin="${4:-target/release/unseen}"
+levels="${LEVELS:-0,0.25,0.5,0.75,1}"
+out="reference_data/audit/$room-dose-$param"
+work="${WORK:-/tmp/unseen-dose-$room-$param}"
+mkdir -p "$work" "$out"
+cp "$out/samples.json" "$work/" 2>/dev/null || true
+nice -n 19 "$bin" audit "reference_data/scenes/$room" --preset quick \
+  --variants full,even_views,conflicting_views --sweep "$param=$levels" \
+  --seeds "$seeds" --threads 2 --out "$work"
+cp "$work"/{samples.json,audit.json,audit.md,inconsistency.svg} "$work"/dose-*.svg "$out/"
+rm -rf "$work/runs" "$work/cache" "$work/original"
