@@ -481,9 +481,11 @@ pub struct AuditArgs {
     out: PathBuf,
     #[arg(long, value_parser = crate::one_of(&Preset::ALL, Preset::name), default_value = "quick")]
     preset: Preset,
-    /// Variants, comma-separated (default: all): full, no_qa_mask, opacity_mask,
+    /// Variants, comma-separated (default: every variant but the sensitivity pairs): full, no_qa_mask, opacity_mask,
     /// even_views, conflicting_views, no_depth_supervision, no_propagation, qa_sh3, qa_sh4,
-    /// no_interpolation, stage2_render_fit, cycle.
+    /// no_interpolation, stage2_render_fit, cycle; opt-in sensitivity pairs: full_max_cardinality,
+    /// even_views_max_cardinality, full_max_coverage, even_views_max_coverage, full_hull,
+    /// even_views_hull.
     #[arg(long, value_delimiter = ',')]
     variants: Vec<String>,
     /// Generators, comma-separated: classical, truth-none, truth-low, truth-high,

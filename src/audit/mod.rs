@@ -22,8 +22,10 @@
 //! `audit.md`, the plot), [`samples`] (pooling batches), [`stats`] (the tests) and
 //! [`cluster`] (the same audit as batch jobs).
 
+use crate::collide::frustum::Outline;
 use crate::error::{Error, Result};
 use crate::pipeline::Event;
+use crate::pipeline::selection::SelectionRule;
 use crate::pipeline::{
     Hallucination, Inconsistency, Level, MaskSource, PipelineConfig, Preset, SlotNames,
     Stage2Depth, TruthDepth,
@@ -69,10 +71,21 @@ pub enum Variant {
     Stage2RenderFit,
     /// The generate–reconstruct–shift cycle the paper replaces (paradigm `cycle`).
     Cycle,
+    /// `full` and `even_views` under a choice the paper leaves open (SPEC.md §20.2): the
+    /// maximum-cardinality or maximum-coverage independent set, or hull frustums. Pairs of
+    /// them test the independent-views claim under that choice (its sensitivity rows).
+    FullMaxCardinality,
+    EvenViewsMaxCardinality,
+    FullMaxCoverage,
+    EvenViewsMaxCoverage,
+    FullHull,
+    EvenViewsHull,
 }
 
 impl Variant {
-    pub const ALL: [Variant; 12] = [
+    /// The variants the presets run: the paper's ablations and the comparisons that
+    /// isolate its mechanisms.
+    pub const PRESET: [Variant; 12] = [
         Variant::Full,
         Variant::NoQaMask,
         Variant::OpacityMask,
@@ -86,6 +99,21 @@ impl Variant {
         Variant::Stage2RenderFit,
         Variant::Cycle,
     ];
+
+    /// The sensitivity variants (opt-in: `--variants`).
+    pub const SENSITIVITY: [Variant; 6] = [
+        Variant::FullMaxCardinality,
+        Variant::EvenViewsMaxCardinality,
+        Variant::FullMaxCoverage,
+        Variant::EvenViewsMaxCoverage,
+        Variant::FullHull,
+        Variant::EvenViewsHull,
+    ];
+
+    /// Every variant.
+    pub fn all() -> impl Iterator<Item = Variant> {
+        Variant::PRESET.into_iter().chain(Variant::SENSITIVITY)
+    }
 
     pub fn name(self) -> &'static str {
         match self {
@@ -101,19 +129,25 @@ impl Variant {
             Variant::NoInterpolation => "no_interpolation",
             Variant::Stage2RenderFit => "stage2_render_fit",
             Variant::Cycle => "cycle",
+            Variant::FullMaxCardinality => "full_max_cardinality",
+            Variant::EvenViewsMaxCardinality => "even_views_max_cardinality",
+            Variant::FullMaxCoverage => "full_max_coverage",
+            Variant::EvenViewsMaxCoverage => "even_views_max_coverage",
+            Variant::FullHull => "full_hull",
+            Variant::EvenViewsHull => "even_views_hull",
         }
     }
 
     pub fn by_name(name: &str) -> Result<Variant> {
-        Variant::ALL
-            .into_iter()
-            .find(|v| v.name() == name)
-            .ok_or_else(|| {
-                Error::invalid(format!(
-                    "unknown variant '{name}' ({})",
-                    Variant::ALL.map(|v| v.name()).join(", ")
-                ))
-            })
+        Variant::all().find(|v| v.name() == name).ok_or_else(|| {
+            Error::invalid(format!(
+                "unknown variant '{name}' ({})",
+                Variant::all()
+                    .map(|v| v.name())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))
+        })
     }
 
     /// The variant's switch on top of the preset.
@@ -131,6 +165,21 @@ impl Variant {
             Variant::NoInterpolation => c.interpolation = false,
             Variant::Stage2RenderFit => c.stage2_depth = Stage2Depth::RenderFit,
             Variant::Cycle => c.paradigm = crate::pipeline::Paradigm::Cycle,
+            Variant::FullMaxCardinality => c.selection = SelectionRule::MaxCardinality,
+            Variant::EvenViewsMaxCardinality => {
+                c.selection = SelectionRule::MaxCardinality;
+                c.independent_detection = false;
+            }
+            Variant::FullMaxCoverage => c.selection = SelectionRule::MaxCoverage,
+            Variant::EvenViewsMaxCoverage => {
+                c.selection = SelectionRule::MaxCoverage;
+                c.independent_detection = false;
+            }
+            Variant::FullHull => c.frustum_outline = Outline::Hull,
+            Variant::EvenViewsHull => {
+                c.frustum_outline = Outline::Hull;
+                c.independent_detection = false;
+            }
         }
     }
 }
@@ -313,7 +362,7 @@ impl AuditConfig {
     pub fn quick() -> AuditConfig {
         AuditConfig {
             base: PipelineConfig::quick(),
-            variants: Variant::ALL.to_vec(),
+            variants: Variant::PRESET.to_vec(),
             generators: vec![GeneratorKind::Classical, GeneratorKind::Truth(Level::Low)],
             seeds: 0..1,
             train_iterations: 1500,
@@ -327,7 +376,7 @@ impl AuditConfig {
     pub fn paper() -> AuditConfig {
         AuditConfig {
             base: PipelineConfig::paper(),
-            variants: Variant::ALL.to_vec(),
+            variants: Variant::PRESET.to_vec(),
             generators: vec![
                 GeneratorKind::Classical,
                 GeneratorKind::Truth(Level::None),

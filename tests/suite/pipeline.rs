@@ -1076,6 +1076,63 @@ fn a_sweep_gives_each_claim_its_response_and_crossing() {
     assert!(svg.starts_with("<svg") && svg.matches("<circle").count() == 5);
 }
 
+/// The sensitivity rows (SPEC.md §21.2): the independent-views claim under a choice the
+/// paper leaves open compares `full` and `even_views` both under that choice, never with
+/// the default `full`; every variant's name round-trips and sets its switches.
+#[test]
+fn sensitivity_rows_compare_full_and_even_views_under_the_same_choice() {
+    use unseen::audit::{AuditConfig, GeneratorKind, Variant, stats::Rule, verdicts};
+    use unseen::collide::frustum::Outline;
+    use unseen::pipeline::selection::SelectionRule;
+    for v in Variant::all() {
+        assert_eq!(Variant::by_name(v.name()).unwrap(), v);
+    }
+    let g = GeneratorKind::Truth(unseen::pipeline::Level::Low);
+    let cfg = AuditConfig {
+        variants: vec![
+            Variant::Full,
+            Variant::EvenViews,
+            Variant::FullMaxCardinality,
+            Variant::EvenViewsMaxCardinality,
+            Variant::FullHull,
+        ],
+        generators: vec![g],
+        ..AuditConfig::quick()
+    };
+    let pc = |v| cfg.pipeline_config(g, v, 0).unwrap();
+    let even = pc(Variant::EvenViewsMaxCardinality);
+    assert!(!even.independent_detection && even.selection == SelectionRule::MaxCardinality);
+    assert_eq!(pc(Variant::FullHull).frustum_outline, Outline::Hull);
+    assert!(pc(Variant::FullHull).independent_detection);
+    // Default full 1 dB above its even views, max-cardinality full 1 dB below its own.
+    let mut pool = Vec::new();
+    for seed in 0..16u32 {
+        let jitter = 0.01 * f64::from(seed);
+        for (v, psnr) in [
+            (Variant::Full, 21.0 + jitter),
+            (Variant::EvenViews, 20.0),
+            (Variant::FullMaxCardinality, 19.0 + jitter),
+            (Variant::EvenViewsMaxCardinality, 20.0),
+            (Variant::FullHull, 20.0),
+        ] {
+            let mut r = sample(v.name(), seed, 7, psnr);
+            r.config = cfg.config_digest(g, v).unwrap();
+            pool.push(r);
+        }
+    }
+    let v = verdicts(&cfg, &pool, &Rule::default());
+    let of = |id: &str| v.iter().find(|x| x.claim.id == id).unwrap().clone();
+    assert_eq!(of("independent views").verdict, "holds");
+    let sensitive = of("independent views (maximum-cardinality set)");
+    assert_eq!(sensitive.verdict, "contradicted", "{sensitive:?}");
+    assert!(sensitive.median_diff < -0.9);
+    // The hull row needs its even views: not run, no row.
+    assert!(
+        !v.iter()
+            .any(|x| x.claim.id == "independent views (hull frustums)")
+    );
+}
+
 /// The verdicts of pooled samples (SPEC.md §21.2): a unit is a seed at a revision, a pair
 /// another revision reproduced bit for bit counts once, a claim below its planned sample is
 /// an interim look (the lounge case of the old rule, −0.68 ± 0.45 dB over 3 seeds, is no
