@@ -44,6 +44,11 @@ pub struct Diagnostics {
     /// Share of the dependent views' pixels stage 2 inpainted (NaN without stage 2).
     #[serde(with = "crate::io::json_float")]
     pub stage2_filled: f64,
+    /// How the stage-1 set was chosen when not by the paper's default (`plan.json`'s
+    /// `choice`: the rule's set, its coverage weight, the conflicting set's and their
+    /// relative difference).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub choice: Option<crate::pipeline::views::Choice>,
 }
 
 /// The stage-1 views' generation of the unseen surface.
@@ -143,6 +148,7 @@ pub fn diagnose(inputs: &Inputs, steps: &[StepDone]) -> Result<Diagnostics> {
         degenerate_gaps,
         stage1: generation,
         stage2_filled,
+        choice: plan.choice.clone(),
     })
 }
 

@@ -327,8 +327,32 @@ fn rests_on(pool: &[JobResult], generator: &str, claim: &super::verdicts::Claim)
         .iter()
         .filter(|f| var.iter().any(|v| v.seed == f.seed))
         .count();
+    // The conflicting set's match of the independent set's coverage weight (SPEC.md §20.2).
+    let weights: Vec<f64> = var
+        .iter()
+        .filter_map(|r| {
+            r.diagnostics
+                .as_ref()?
+                .choice
+                .as_ref()?
+                .conflicting
+                .as_ref()
+        })
+        .filter(|c| c.used)
+        .map(|c| c.coverage_difference)
+        .collect();
+    let matched = if weights.is_empty() {
+        String::new()
+    } else {
+        let worst = weights.iter().copied().fold(0.0, f64::max);
+        format!(
+            "; coverage weight matched on {} runs (worst {:.1} %)",
+            weights.len(),
+            100.0 * worst
+        )
+    };
     format!(
-        "views {} → {}; coverage {} → {}; overlap {} → {}; conflict {} → {}; same computation {same} of {paired}",
+        "views {} → {}; coverage {} → {}; overlap {} → {}; conflict {} → {}; same computation {same} of {paired}{matched}",
         num(a.stage1_views, 1),
         num(b.stage1_views, 1),
         percent(a.coverage),

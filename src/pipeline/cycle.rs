@@ -10,7 +10,7 @@
 //! render fit (`Run::render_fit`: the depth slot's estimate least-squares fitted to the
 //! render's expected depth where alpha exceeds 0.5) and new points from `M` as stage 1
 //! makes them ([`unproject`], every `init_stride`-th pixel); then the current scene plus
-//! the new points fine-tuned ([`Run::reconstruct_as`], random stream `cycle:<k>`) on the
+//! the new points fine-tuned ([`Run::reconstruct`], random stream `cycle:<k>`) on the
 //! original views and every view the cycle generated so far (with its depth prior),
 //! weighted by the mask of the current scene (`qa/original` for the first view; later, its
 //! QA-Mask fine-tuned inside the step, in `mask/`). The iterations are the full method's
@@ -223,7 +223,7 @@ impl Run<'_> {
                 .collect::<Vec<_>>()
                 .into();
             let seed_key = format!("cycle:{k}");
-            self.reconstruct_as(&recon_config, init, &generated, weights, None, &seed_key, w)?;
+            self.reconstruct(&recon_config, init, &generated, weights, None, &seed_key, w)?;
             w.json("cycle.json", &record)?;
             Ok(())
         })

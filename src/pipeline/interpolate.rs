@@ -170,7 +170,7 @@ impl Run<'_> {
                 &generated,
                 &weights,
                 Some(&refresh),
-                Scene::Interpolate,
+                Scene::Interpolate.name(),
                 w,
             )?;
             Ok(())

@@ -181,26 +181,11 @@ pub fn original_views(config: &PipelineConfig, inputs: &Inputs) -> Vec<View> {
 impl Run<'_> {
     /// Fine-tune `init` on the original training views and `generated` (with `refresh`, some
     /// of whose targets are remade on the fly), write `scene.ply` and the weight maps' heat
-    /// images into `w` (`stage` names its seed and progress); returns the scene.
+    /// images into `w`; returns the scene. `stage` names its random stream
+    /// `stage_seed(seed, stage)` and its progress: a scene's name (`stage1`, `stage2`,
+    /// `interpolate`) or the cycle paradigm's `cycle:<k>`.
     #[allow(clippy::too_many_arguments)]
     pub fn reconstruct(
-        &self,
-        recon: &ReconConfig,
-        init: Gaussians,
-        generated: &[Supervision],
-        weights: &Weights,
-        refresh: Option<&Refresh>,
-        stage: Scene,
-        w: &mut StepWriter,
-    ) -> Result<Gaussians> {
-        let stage = stage.name();
-        self.reconstruct_as(recon, init, generated, weights, refresh, stage, w)
-    }
-
-    /// [`Run::reconstruct`] with its random stream `stage_seed(seed, key)` and progress
-    /// named by `key` (the cycle paradigm's `cycle:<k>`).
-    #[allow(clippy::too_many_arguments)]
-    pub fn reconstruct_as(
         &self,
         recon: &ReconConfig,
         init: Gaussians,

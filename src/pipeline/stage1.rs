@@ -140,7 +140,7 @@ impl Run<'_> {
                 &generated,
                 &weights,
                 None,
-                Scene::Stage1,
+                Scene::Stage1.name(),
                 w,
             )?;
             Ok(())

@@ -162,7 +162,7 @@ impl Run<'_> {
                 &generated,
                 &weights,
                 None,
-                Scene::Stage2,
+                Scene::Stage2.name(),
                 w,
             )?;
             Ok(())
