@@ -265,7 +265,7 @@ pub fn markdown(responses: &[Response]) -> String {
     if responses.is_empty() {
         return String::new();
     }
-    let mut s = "\n## Dose–response\n\nEach level of a sweep is a generator of its own (the mechanisms generator with one parameter set to the level, 0 = none, 1 = full); its claims are judged as any generator's, Holm within the sweep. *Crossing*: where the median Δ meets the claim's null value (linear between the levels around the first sign change), and in brackets where the median's interval's lower and upper ends do (– : not within the levels).\n\n| claim | parameter | level: median Δ [95 % CI] (n) | crossing |\n|---|---|---|---|\n".to_string();
+    let mut s = "\n## Dose–response\n\nEach level of a sweep is a generator of its own (the mechanisms generator with one parameter set to the level, 0 = none, 1 = full); its claims are judged as any generator's, Holm within the sweep. *Crossing*: where the median Δ meets the claim's null value (linear between the levels around the first sign change), and in brackets where the median's interval's lower / upper ends do (–: not within the levels, or no interval below 6 seeds).\n\n| claim | parameter | level: median Δ [95 % CI] (n) | crossing |\n|---|---|---|---|\n".to_string();
     let at = |x: Option<f64>| x.map_or_else(|| "–".to_string(), |x| format!("{x:.2}"));
     for r in responses {
         let cells: Vec<String> = r
@@ -279,7 +279,7 @@ pub fn markdown(responses: &[Response]) -> String {
             .collect();
         let crossing = if r.crossing.is_finite() {
             format!(
-                "{:.2} ({} – {})",
+                "{:.2} (interval's ends: {} / {})",
                 r.crossing,
                 at(r.crossing_range[0]),
                 at(r.crossing_range[1])
