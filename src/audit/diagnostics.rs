@@ -39,7 +39,8 @@ pub struct Diagnostics {
     /// Gaps from a view to itself: a one-view tour, whose clips go nowhere.
     pub degenerate_gaps: usize,
     /// The stage-1 views' generation of the unseen surface (`None` when the run made no
-    /// stage-1 views, or the evaluation views have no extrapolated pixel with depth).
+    /// stage-1 views, the dataset has no truth at the candidate poses, or the evaluation
+    /// views have no extrapolated pixel with depth).
     pub stage1: Option<Generation>,
     /// Share of the dependent views' pixels stage 2 inpainted (NaN without stage 2).
     #[serde(with = "crate::io::json_float")]
@@ -97,13 +98,17 @@ pub fn diagnose(inputs: &Inputs, steps: &[StepDone]) -> Result<Diagnostics> {
         .collect();
     let degenerate_gaps = (0..tour.len()).filter(|&i| gap(i)[0] == gap(i)[1]).count();
 
-    // The stage-1 views' masks and generations, with their truth depths.
-    let truth = candidate_truth(inputs)?;
+    // The stage-1 views' masks and generations, with their truth depths (none to measure
+    // with when the dataset has no truth at the candidate poses).
+    let truth = candidate_truth(inputs).unwrap_or_default();
     let mut stage1 = Vec::new();
     for name in tour {
         let Some(dir) = dir_of(&Step::Independent(stem(name))) else {
             continue;
         };
+        if truth.is_empty() {
+            break;
+        }
         let t = truth
             .iter()
             .find(|t| &t.camera.name == name)
