@@ -4,7 +4,7 @@
 //! crosses 0 (and where its interval's ends do), and one plot per claim.
 
 use super::verdicts::Verdict;
-use super::{GeneratorKind, Variant};
+use super::GeneratorKind;
 use crate::error::{Error, Result};
 
 /// The generator parameter a sweep varies, from none (0) to full (1); every other setting
@@ -118,16 +118,16 @@ pub fn crossing(levels: &[f64], values: &[Option<f64>], null: f64) -> Option<f64
 /// The responses of every claim along every sweep present in `verdicts`.
 pub fn responses(verdicts: &[Verdict]) -> Vec<Response> {
     let mut out = Vec::new();
-    let mut keys: Vec<(DoseParam, &str, Variant)> = Vec::new();
+    let mut keys: Vec<(DoseParam, &str)> = Vec::new();
     for v in verdicts {
         if let Ok(GeneratorKind::Dose { param, .. }) = GeneratorKind::by_name(&v.generator) {
-            let k = (param, v.claim.id, v.claim.variant);
+            let k = (param, v.claim.id);
             if !keys.contains(&k) {
                 keys.push(k);
             }
         }
     }
-    for (param, id, _) in keys {
+    for (param, id) in keys {
         let mut rows: Vec<(u8, &Verdict)> = verdicts
             .iter()
             .filter(|v| v.claim.id == id)
@@ -303,6 +303,7 @@ pub fn markdown(responses: &[Response]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::audit::Variant;
 
     #[test]
     fn crossings_interpolate_between_the_levels_around_the_first_sign_change() {

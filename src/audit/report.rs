@@ -302,31 +302,20 @@ fn percent(x: f64) -> String {
 /// The claims table's *rests on* cell: the stage-1 views, their coverage, overlap and
 /// conflict under full → under the variant, and the seeds on which both runs are the same
 /// computation.
-fn rests_on(pool: &[JobResult], generator: &str, claim: &super::verdicts::Claim) -> String {
-    let variant = claim.variant;
+fn rests_on(pool: &[JobResult], v: &Verdict) -> String {
+    let claim = &v.claim;
     if claim.baseline == super::verdicts::Baseline::Original {
         return "full's final scene against its original scene".into();
     }
     let (full, var) = (
-        group(pool, generator, claim.reference),
-        group(pool, generator, variant),
+        group(pool, &v.generator, claim.reference),
+        group(pool, &v.generator, claim.variant),
     );
     let (Some(a), Some(b)) = (diagnostics_mean(&full), diagnostics_mean(&var)) else {
         return "(not recorded)".into();
     };
-    let same = full
-        .iter()
-        .filter(|f| {
-            !f.scene_sha256.is_empty()
-                && var
-                    .iter()
-                    .any(|v| v.seed == f.seed && v.scene_sha256 == f.scene_sha256)
-        })
-        .count();
-    let paired = full
-        .iter()
-        .filter(|f| var.iter().any(|v| v.seed == f.seed))
-        .count();
+    // The verdict's own count, over the seeds of its plan.
+    let (same, paired) = (v.same_computation, v.same_computation + v.judged);
     // The conflicting set's match of the independent set's coverage weight (SPEC.md §20.2).
     let weights: Vec<f64> = var
         .iter()
@@ -463,7 +452,7 @@ fn sensitivity(report: &Report) -> String {
             v.above,
             v.below,
             v.verdict,
-            rests_on(&report.pool, &v.generator, &v.claim)
+            rests_on(&report.pool, v)
         );
     }
     s
@@ -539,7 +528,7 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
             },
             num(v.min_detectable, 2),
             v.verdict,
-            rests_on(&report.pool, &v.generator, &v.claim)
+            rests_on(&report.pool, v)
         );
     }
     s += &sensitivity(report);

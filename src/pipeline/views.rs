@@ -128,7 +128,7 @@ struct Chosen {
 
 impl Chosen {
     /// The set stage 1 generates.
-    fn stage1_indices(&self) -> &Vec<usize> {
+    fn stage1_indices(&self) -> &[usize] {
         match &self.conflicting {
             Some((v, _, _, true)) => v,
             _ => &self.independent,
@@ -567,17 +567,17 @@ fn write_plan(run: &Run, found: Found, w: &mut StepWriter) -> Result<()> {
             choose(config, active.len(), &sel, &coverage)
         })
         .transpose()?;
+    // The set stage 1 generates: the chosen one, or as many views evenly spaced.
     let chosen = choice
         .as_ref()
-        .map_or(&sel.independent, |c| c.stage1_indices());
-    let stage1: Vec<usize> = if config.independent_detection {
-        chosen.clone()
+        .map_or(&sel.independent[..], |c| c.stage1_indices());
+    let independent: Vec<usize> = if config.independent_detection {
+        chosen.to_vec()
     } else {
         let (k, m) = (chosen.len(), active.len());
         (0..k).map(|j| j * m / k).collect()
     };
-    let (tour, _) = closed_tour(&stage1, &centers);
-    let independent = stage1;
+    let (tour, _) = closed_tour(&independent, &centers);
     let (dependent, gap_cams) = assign_dependents(active, &independent, &tour, &centers, |i| {
         &inputs.candidates[active[i]]
     })?;
