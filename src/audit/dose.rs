@@ -3,8 +3,8 @@
 //! ([`super::GeneratorKind::Dose`]); per claim Δ with its interval at each level, where Δ
 //! crosses 0 (and where its interval's ends do), and one plot per claim.
 
-use super::verdicts::Verdict;
 use super::GeneratorKind;
+use super::verdicts::Verdict;
 use crate::error::{Error, Result};
 
 /// The generator parameter a sweep varies, from none (0) to full (1); every other setting
