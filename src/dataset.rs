@@ -219,6 +219,19 @@ fn load_view(
     })
 }
 
+/// A view of an unseen-layout dataset (SPEC.md §14) that its `cameras.json` does not list,
+/// such as a candidate family's (SPEC.md §20.7): `images/<name>.png` under `cam` (full
+/// size), with `depth/<name>.exr` when present, loaded as [`load`] loads a listed view.
+/// `None` when the dataset is of another layout or has no image of that name.
+pub fn load_unlisted_view(root: &Path, cam: &Camera, opts: &LoadOptions) -> Result<Option<View>> {
+    let img = root.join("images").join(format!("{}.png", cam.name));
+    if detect(root)? != Layout::Unseen || !img.is_file() {
+        return Ok(None);
+    }
+    let depth = root.join("depth").join(format!("{}.exr", cam.name));
+    load_view(cam, &img, Some(&depth), opts).map(Some)
+}
+
 fn names_in(v: &serde_json::Value, key: &str, path: &Path) -> Result<Vec<String>> {
     let list = v
         .get(key)

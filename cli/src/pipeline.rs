@@ -499,6 +499,12 @@ pub struct AuditArgs {
     /// none is given). Repeatable.
     #[arg(long)]
     sweep: Vec<String>,
+    /// The candidate poses the pipeline is given: a family of the dataset
+    /// (`families/<FAMILY>.json`, e.g. ring-7, ring-13, walk-0, walk-1 in the bundled
+    /// rooms) instead of its bundled bridge views (`candidates.json`). Samples of one
+    /// family pool only with samples of the same family.
+    #[arg(long, value_name = "FAMILY")]
+    candidates: Option<String>,
     /// The seeds of this batch: `K` (seeds 0 to K−1) or `A..B` (seeds A to B−1; default:
     /// quick 1, paper 3). The report pools them with the samples already in the folder
     /// (`samples.json`) and in `--merge` files: seeds accumulate.
@@ -637,6 +643,7 @@ pub fn run_audit(a: &AuditArgs) -> Result<()> {
     if let Some(k) = &a.seeds {
         cfg.seeds = parse_seeds(k).map_err(Error::invalid)?;
     }
+    cfg.candidates = a.candidates.clone();
     if let Some(n) = a.train_iterations {
         cfg.train_iterations = n;
     }
@@ -794,6 +801,9 @@ fn emit_audit(
         "--train-resolution".into(),
         cfg.train_resolution.to_string(),
     ];
+    if let Some(f) = &cfg.candidates {
+        command.extend(["--candidates".into(), f.clone()]);
+    }
     for m in &a.merge {
         command.extend(["--merge".into(), show(abs(m)?)]);
     }

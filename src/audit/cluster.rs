@@ -373,10 +373,11 @@ fn work(cfg: &AuditConfig, job: &Job, pixels: f64) -> f64 {
 /// The training pixels of the dataset at the audit's training resolution (from its first
 /// candidate camera's size).
 fn training_pixels(cfg: &AuditConfig, dataset: &Path) -> Result<f64> {
-    let cams = crate::camera::inria::read_cameras_json(&dataset.join("candidates.json"))?;
+    let file = super::samples::candidates_file(dataset, cfg.candidates.as_deref());
+    let cams = crate::camera::inria::read_cameras_json(&file)?;
     let c = cams
         .first()
-        .ok_or_else(|| Error::invalid("candidates.json lists no camera").at(dataset))?;
+        .ok_or_else(|| Error::invalid("lists no camera").at(&file))?;
     let r = f64::from(cfg.train_resolution.max(1));
     Ok((f64::from(c.width) / r).round() * (f64::from(c.height) / r).round())
 }

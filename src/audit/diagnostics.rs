@@ -38,6 +38,10 @@ pub struct Diagnostics {
     pub interpolated: usize,
     /// Gaps from a view to itself: a one-view tour, whose clips go nowhere.
     pub degenerate_gaps: usize,
+    /// Empty gaps that got no camera: the truth half-way cannot be made (`plan.json`'s
+    /// `unmade_gaps`; written only when there are some).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub unmade_gaps: usize,
     /// The stage-1 views' generation of the unseen surface (`None` when the run made no
     /// stage-1 views, the dataset has no truth at the candidate poses, or the evaluation
     /// views have no extrapolated pixel with depth).
@@ -151,6 +155,7 @@ pub fn diagnose(inputs: &Inputs, steps: &[StepDone]) -> Result<Diagnostics> {
         dependent_per_gap,
         interpolated: plan.dependent.iter().filter(|d| d.interpolated).count(),
         degenerate_gaps,
+        unmade_gaps: plan.unmade_gaps.len(),
         stage1: generation,
         stage2_filled,
         choice: plan.choice.clone(),
@@ -223,4 +228,8 @@ fn generation(
             sq / pairs as f64
         },
     }))
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }

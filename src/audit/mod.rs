@@ -354,6 +354,9 @@ pub struct AuditConfig {
     /// `planned_seeds` seeds, interim looks before ([`stats::PLANNED_SEEDS`] in both
     /// presets).
     pub planned_seeds: usize,
+    /// The candidate family the pipeline is given (SPEC.md §20.7): `None` for the dataset's
+    /// bundled `candidates.json`, else `families/<name>.json` in the dataset.
+    pub candidates: Option<String>,
 }
 
 impl AuditConfig {
@@ -368,6 +371,7 @@ impl AuditConfig {
             train_iterations: 1500,
             train_resolution: 2,
             planned_seeds: stats::PLANNED_SEEDS,
+            candidates: None,
         }
     }
 
@@ -387,6 +391,7 @@ impl AuditConfig {
             train_iterations: 30_000,
             train_resolution: 1,
             planned_seeds: stats::PLANNED_SEEDS,
+            candidates: None,
         }
     }
 
@@ -422,6 +427,9 @@ impl AuditConfig {
             return Err(Error::invalid(
                 "every claim compares against the full method: include the variant 'full'",
             ));
+        }
+        if let Some(f) = &self.candidates {
+            samples::check_family_name(f)?;
         }
         Ok(())
     }

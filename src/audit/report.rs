@@ -57,6 +57,7 @@ impl Audit<'_> {
             preset: cfg.base.preset,
             train_iterations: cfg.train_iterations,
             train_resolution: cfg.train_resolution,
+            candidates: samples::family(dataset, cfg.candidates.as_deref())?,
         });
         let own = dir.join(samples::SAMPLES_FILE);
         let mut files: Vec<PathBuf> = merge.to_vec();
@@ -234,6 +235,7 @@ struct DiagnosticsMean {
     stage1_collisions: f64,
     dependent_per_gap: f64,
     degenerate_gaps: f64,
+    unmade_gaps: f64,
     coverage: f64,
     overlap: f64,
     conflict: f64,
@@ -272,6 +274,7 @@ fn diagnostics_mean(rows: &[&JobResult]) -> Option<DiagnosticsMean> {
             g.iter().sum::<usize>() as f64 / g.len().max(1) as f64
         }),
         degenerate_gaps: mean(&|x| x.degenerate_gaps as f64),
+        unmade_gaps: mean(&|x| x.unmade_gaps as f64),
         coverage: generated(|g| g.coverage),
         overlap: generated(|g| g.overlap),
         conflict: generated(|g| g.conflict),
@@ -356,7 +359,7 @@ fn rests_on(pool: &[JobResult], v: &Verdict) -> String {
 /// `audit.md`'s table of what each (generator, variant) did, mean over its seeds
 /// (SPEC.md §21.5), and the reasons candidates were set aside.
 fn diagnostics_table(cfg: &AuditConfig, pool: &[JobResult]) -> String {
-    let mut s = "\n## What each run did (diagnostics, mean over seeds)\n\n*Candidates*: given (covered by the scene / set aside). *Collisions*: colliding pairs of the candidates left, of all their pairs. *Stage-1 views*: the set stage 1 generates (its colliding pairs). *Coverage* / *overlap*: share of the evaluation views' extrapolated pixels (truth depth: the unseen surface) whose surface point ≥ 1 / ≥ 2 stage-1 views generated; *conflict*: mean squared colour difference of two stage-1 generations of one point. *Stage 2 filled*: share of the dependent views' pixels stage 2 inpainted. Degenerate gaps run from a view to itself (a one-view tour).\n\n| generator | variant | seeds | candidates (covered / set aside) | collisions / pairs | stage-1 views (colliding pairs) | dependent per gap | degenerate gaps | coverage | overlap | conflict | stage 2 filled |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n".to_string();
+    let mut s = "\n## What each run did (diagnostics, mean over seeds)\n\n*Candidates*: given (covered by the scene / set aside). *Collisions*: colliding pairs of the candidates left, of all their pairs. *Stage-1 views*: the set stage 1 generates (its colliding pairs). *Coverage* / *overlap*: share of the evaluation views' extrapolated pixels (truth depth: the unseen surface) whose surface point ≥ 1 / ≥ 2 stage-1 views generated; *conflict*: mean squared colour difference of two stage-1 generations of one point. *Stage 2 filled*: share of the dependent views' pixels stage 2 inpainted. Degenerate gaps run from a view to itself (a one-view tour); *unmade* gaps got no camera (the truth half-way cannot be made: its camera sees neither end).\n\n| generator | variant | seeds | candidates (covered / set aside) | collisions / pairs | stage-1 views (colliding pairs) | dependent per gap | degenerate / unmade gaps | coverage | overlap | conflict | stage 2 filled |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n".to_string();
     let mut reasons: Vec<(String, usize)> = Vec::new();
     for g in &cfg.generators {
         let g = g.name();
@@ -376,7 +379,7 @@ fn diagnostics_table(cfg: &AuditConfig, pool: &[JobResult]) -> String {
                 continue;
             };
             s += &format!(
-                "| {g} | {} | {} | {} ({} / {}) | {} / {} | {} ({}) | {} | {} | {} | {} | {} | {} |\n",
+                "| {g} | {} | {} | {} ({} / {}) | {} / {} | {} ({}) | {} | {} / {} | {} | {} | {} | {} |\n",
                 v.name(),
                 d.seeds,
                 num(d.candidates, 1),
@@ -388,6 +391,7 @@ fn diagnostics_table(cfg: &AuditConfig, pool: &[JobResult]) -> String {
                 num(d.stage1_collisions, 1),
                 num(d.dependent_per_gap, 1),
                 num(d.degenerate_gaps, 1),
+                num(d.unmade_gaps, 1),
                 percent(d.coverage),
                 percent(d.overlap),
                 num(d.conflict, 4),
@@ -462,8 +466,17 @@ fn sensitivity(report: &Report) -> String {
 pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
     let revisions: Vec<String> = report.revisions.iter().map(|r| r.to_string()).collect();
     let mut s = format!(
-        "# Audit of the paper's claims\n\nDataset `{}`; preset `{}`; {} seeds ({}) in {} samples at numerics revision{} {}; original scene: {} iterations at resolution 1/{} on the training half. Metrics on the evaluation poses, pixels split into *existing* (seen by the training half) and *extrapolated*. Made by `unseen audit` (SPEC.md §21), crate {} at numerics revision {}; the samples are in `samples.json` (a later batch of seeds adds to them).\n\n",
+        "# Audit of the paper's claims\n\nDataset `{}`; candidates: {}; preset `{}`; {} seeds ({}) in {} samples at numerics revision{} {}; original scene: {} iterations at resolution 1/{} on the training half. Metrics on the evaluation poses, pixels split into *existing* (seen by the training half) and *extrapolated*. Made by `unseen audit` (SPEC.md §21), crate {} at numerics revision {}; the samples are in `samples.json` (a later batch of seeds adds to them).\n\n",
         report.provenance.dataset,
+        report.provenance.candidates.as_ref().map_or_else(
+            || "the bundled bridge views (`candidates.json`)".to_string(),
+            |f| format!(
+                "the family `{}` (`families/{}.json`, SHA-256 {}…)",
+                f.name,
+                f.name,
+                &f.sha256[..12.min(f.sha256.len())]
+            )
+        ),
         report.provenance.preset,
         report.seeds.len(),
         seed_ranges(&report.seeds),

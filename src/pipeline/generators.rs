@@ -177,6 +177,17 @@ impl GroundTruth {
         Ok(())
     }
 
+    /// Whether [`Self::add_between`] can make the truth of a camera half-way between
+    /// candidates `a` and `b`: false when the morph cannot be made (the middle camera sees
+    /// neither end's surface), where the pipeline makes no camera for the gap.
+    pub fn can_make_between(&self, a: &str, b: &str) -> Result<bool> {
+        match self.morph(a, b, 3) {
+            Ok(_) => Ok(true),
+            Err(e) if crate::models::morph::cannot_make_clip(&e) => Ok(false),
+            Err(e) => Err(e),
+        }
+    }
+
     /// The `n` frames of the `morph` from the truth at `a` to the truth at `b` (both ends
     /// included), with their depths.
     fn morph(&self, a: &str, b: &str, n: usize) -> Result<Video> {

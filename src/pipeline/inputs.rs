@@ -9,7 +9,7 @@ use crate::error::{Error, Result};
 use crate::gaussian::Gaussians;
 use crate::gaussian::ply::read_ply;
 use crate::io::sha256_hex;
-use crate::train::run::{latest_ply, load_dataset, read_config, read_train_views};
+use crate::train::run::{latest_ply, load_dataset, load_options, read_config, read_train_views};
 use std::path::{Path, PathBuf};
 
 /// Names a candidate may not have: its stage-1 folder would be another step's.
@@ -154,7 +154,8 @@ pub fn load_inputs(
         .collect::<Result<_>>()?;
     data.train = train;
     let cand_bytes = std::fs::read(candidates).map_err(|e| Error::io(candidates, e))?;
-    let cands: Vec<Camera> = read_cameras_json(candidates)?
+    let full_size = read_cameras_json(candidates)?;
+    let cands: Vec<Camera> = full_size
         .iter()
         .map(|c| downscale_camera(c, cfg.resolution))
         .collect();
@@ -176,6 +177,16 @@ pub fn load_inputs(
             );
         }
         c.validate().map_err(|e| e.at(candidates))?;
+    }
+    // A candidate the dataset's cameras.json does not list (a candidate family's view,
+    // SPEC.md §20.7) brings its truth along when the dataset has its image: appended
+    // after the listed views, in no split, so listed candidates change nothing.
+    for c in &full_size {
+        if !data.views.iter().any(|v| v.camera.name == c.name)
+            && let Some(v) = crate::dataset::load_unlisted_view(&data_dir, c, &load_options(&cfg))?
+        {
+            data.views.push(v);
+        }
     }
     let mut eval_idx = Vec::new();
     if let Some(e) = evaluation {

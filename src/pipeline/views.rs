@@ -91,6 +91,11 @@ pub struct Plan {
     /// the independent set itself): absent otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub choice: Option<Choice>,
+    /// Gaps of the tour without a dependent view that got no camera either: the
+    /// ground-truth generator cannot make the truth half-way (its camera sees neither
+    /// end's surface, e.g. two views facing apart; SPEC.md §20.2).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub unmade_gaps: Vec<[String; 2]>,
     #[serde(skip)]
     pub gap_cameras: Vec<GapCamera>,
 }
@@ -578,9 +583,24 @@ fn write_plan(run: &Run, found: Found, w: &mut StepWriter) -> Result<()> {
         (0..k).map(|j| j * m / k).collect()
     };
     let (tour, _) = closed_tour(&independent, &centers);
-    let (dependent, gap_cams) = assign_dependents(active, &independent, &tour, &centers, |i| {
-        &inputs.candidates[active[i]]
-    })?;
+    // A gap camera needs a truth where the generator is the dataset's truth.
+    let makeable = |a: &Camera, b: &Camera| {
+        gens.truth
+            .as_ref()
+            .map_or(Ok(true), |gt| gt.can_make_between(&a.name, &b.name))
+    };
+    let Gaps {
+        dependent,
+        cameras: gap_cams,
+        unmade: unmade_gaps,
+    } = assign_dependents(
+        active,
+        &independent,
+        &tour,
+        &centers,
+        |i| &inputs.candidates[active[i]],
+        makeable,
+    )?;
     let mut trajectory = Vec::new();
     for &t in &tour {
         trajectory.push(name(t));
@@ -602,6 +622,7 @@ fn write_plan(run: &Run, found: Found, w: &mut StepWriter) -> Result<()> {
         dependent,
         trajectory,
         choice: choice.map(|c| c.record(&name)),
+        unmade_gaps,
         gap_cameras: Vec::new(),
     };
     w.json("plan.json", &plan)?;
@@ -706,15 +727,28 @@ pub fn load(step: StepDone) -> Result<Views> {
     })
 }
 
-/// Dependent views by gap, and the cameras made for empty gaps. Indices are into
-/// `active` (the candidates with something to inpaint).
+/// What [`assign_dependents`] makes of the tour's gaps.
+#[derive(Debug)]
+struct Gaps {
+    /// The dependent views, each with its gap.
+    dependent: Vec<Dependent>,
+    /// A camera half-way along each gap without a dependent view...
+    cameras: Vec<GapCamera>,
+    /// ...but for those gaps where `makeable` refuses one.
+    unmade: Vec<[String; 2]>,
+}
+
+/// Dependent views by gap, the cameras made for empty gaps and the empty gaps for which
+/// `makeable` refuses a camera. Indices are into `active` (the candidates with something
+/// to inpaint).
 fn assign_dependents<'c>(
     active: &[usize],
     independent: &[usize],
     tour: &[usize],
     centers: &[DVec3],
     cam: impl Fn(usize) -> &'c Camera,
-) -> Result<(Vec<Dependent>, Vec<GapCamera>)> {
+    makeable: impl Fn(&Camera, &Camera) -> Result<bool>,
+) -> Result<Gaps> {
     let m = tour.len();
     // Gaps: consecutive tour pairs, closed; two views have one gap, one view a
     // degenerate gap to itself.
@@ -756,9 +790,13 @@ fn assign_dependents<'c>(
             interpolated: false,
         });
     }
-    let mut gap_cams = Vec::new();
+    let (mut gap_cams, mut unmade) = (Vec::new(), Vec::new());
     for (g, &(a, b)) in gaps.iter().enumerate() {
         if used[g] || a == b {
+            continue;
+        }
+        if !makeable(cam(a), cam(b))? {
+            unmade.push([cam(a).name.clone(), cam(b).name.clone()]);
             continue;
         }
         let name = format!("gap_{}_{}", cam(a).name, cam(b).name);
@@ -786,7 +824,11 @@ fn assign_dependents<'c>(
             between: [cam(a).name.clone(), cam(b).name.clone()],
         });
     }
-    Ok((dependent, gap_cams))
+    Ok(Gaps {
+        dependent,
+        cameras: gap_cams,
+        unmade,
+    })
 }
 
 /// A top-down picture (world x to the right, z down the page; y is up in the bundled
@@ -880,4 +922,61 @@ fn hull2(pts: &[[f64; 2]]) -> Vec<[f64; 2]> {
         return p;
     }
     crate::math::hull::monotone_chain(&p)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Four views on a ring, two of them independent: the gaps without a dependent view
+    /// get a camera half-way unless `makeable` refuses it, which the plan then lists as
+    /// unmade (the ground-truth generator cannot make the truth of a camera that sees
+    /// neither end, e.g. between views facing apart).
+    #[test]
+    fn an_empty_gap_gets_a_camera_unless_its_truth_cannot_be_made() {
+        let cams: Vec<Camera> = (0..4)
+            .map(|k| {
+                let a = std::f64::consts::FRAC_PI_2 * k as f64;
+                let eye = DVec3::new(a.cos(), 1.0, a.sin());
+                let out = DVec3::new(2.0 * a.cos(), 1.0, 2.0 * a.sin());
+                Camera::look_at(format!("v{k}"), 16, 12, 1.2, eye, out, DVec3::Y).unwrap()
+            })
+            .collect();
+        let centers: Vec<DVec3> = cams.iter().map(|c| c.center).collect();
+        let active = [0, 1, 2, 3];
+        // v0 and v2 independent; v1 lies on both gaps (it takes the first), v3 too.
+        let run = |refuse: &str| {
+            assign_dependents(
+                &active,
+                &[0, 2],
+                &[0, 2],
+                &centers,
+                |i| &cams[i],
+                |a, b| Ok(!(a.name == refuse || b.name == refuse)),
+            )
+            .unwrap()
+        };
+        let g = run("none");
+        assert_eq!(g.dependent.len(), 2, "{g:?}");
+        assert!(g.cameras.is_empty() && g.unmade.is_empty());
+        // Only v0 and v2 active and independent: one gap (two views), empty.
+        let two = |refuse: &str| {
+            assign_dependents(
+                &[0, 2],
+                &[0, 1],
+                &[0, 1],
+                &centers,
+                |i| &cams[2 * i],
+                |a, b| Ok(!(a.name == refuse || b.name == refuse)),
+            )
+            .unwrap()
+        };
+        let g = two("none");
+        assert_eq!((g.dependent.len(), g.cameras.len()), (1, 1));
+        assert!(g.dependent[0].interpolated && g.unmade.is_empty());
+        assert_eq!(g.cameras[0].camera.name, "gap_v0_v2");
+        let g = two("v2");
+        assert!(g.dependent.is_empty() && g.cameras.is_empty(), "{g:?}");
+        assert_eq!(g.unmade, [["v0".to_string(), "v2".to_string()]]);
+    }
 }

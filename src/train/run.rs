@@ -84,14 +84,16 @@ pub fn require_default_conventions(run: &Path, what: &str) -> Result<()> {
 
 /// Load a dataset the way a run's config says.
 pub fn load_dataset(dir: &Path, config: &TrainConfig) -> Result<Dataset> {
-    dataset::load(
-        dir,
-        &LoadOptions {
-            resolution: config.resolution,
-            background: config.background,
-            test_every: config.test_every,
-        },
-    )
+    dataset::load(dir, &load_options(config))
+}
+
+/// How a run with `config` loads its dataset's views.
+pub fn load_options(config: &TrainConfig) -> LoadOptions {
+    LoadOptions {
+        resolution: config.resolution,
+        background: config.background,
+        test_every: config.test_every,
+    }
 }
 
 /// What a finished run reports.

@@ -712,6 +712,7 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
         train_iterations: 300,
         train_resolution: 4,
         planned_seeds: 2,
+        candidates: None,
     };
     let dir = t.path().join("audit");
     // A pipeline job before its original scene: a clear error naming the job to run.
@@ -869,23 +870,26 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
 fn a_one_candidate_room_is_the_same_computation_and_not_tested() {
     use unseen::audit::{self, AuditConfig, GeneratorKind, Variant};
     let t = TempDir::new("pipeline-audit-one");
-    // The lounge with its first candidate only (images and depths linked).
+    // The lounge (images and depths linked) with a candidate family of its first bridge
+    // view only, which the audit is given by name.
     let room = t.path().join("room");
-    std::fs::create_dir_all(&room).unwrap();
+    std::fs::create_dir_all(room.join("families")).unwrap();
     let lounge = lounge();
     for e in std::fs::read_dir(&lounge).unwrap() {
         let e = e.unwrap();
         let to = room.join(e.file_name());
-        if e.path().is_dir() {
+        if e.file_name() == "families" {
+            continue;
+        } else if e.path().is_dir() {
             std::os::unix::fs::symlink(e.path(), &to).unwrap();
-        } else if e.file_name() == "candidates.json" {
-            let all: Vec<serde_json::Value> =
-                serde_json::from_slice(&std::fs::read(e.path()).unwrap()).unwrap();
-            std::fs::write(&to, serde_json::to_string(&all[..1]).unwrap()).unwrap();
         } else {
             std::fs::copy(e.path(), &to).unwrap();
         }
     }
+    let all: Vec<serde_json::Value> =
+        serde_json::from_slice(&std::fs::read(lounge.join("candidates.json")).unwrap()).unwrap();
+    let first = serde_json::to_string(&all[..1]).unwrap();
+    std::fs::write(room.join("families/first.json"), &first).unwrap();
     let generator = GeneratorKind::Truth(unseen::pipeline::Level::Low);
     let cfg = AuditConfig {
         base: PipelineConfig {
@@ -898,9 +902,27 @@ fn a_one_candidate_room_is_the_same_computation_and_not_tested() {
         train_iterations: 300,
         train_resolution: 4,
         planned_seeds: 2,
+        candidates: Some("first".into()),
     };
     let dir = t.path().join("audit");
+    // A family the dataset does not have: refused before any job, naming those it has.
+    let missing = AuditConfig {
+        candidates: Some("ring-9".into()),
+        ..cfg.clone()
+    };
+    let e = audit::Audit::new(&missing, &room, &dir)
+        .run(&[])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("no candidate family 'ring-9'") && e.contains("has first"),
+        "{e}"
+    );
+    assert!(!dir.exists(), "nothing written: {e}");
     let report = audit::Audit::new(&cfg, &room, &dir).run(&[]).unwrap();
+    let family = report.provenance.candidates.as_ref().expect("recorded");
+    assert_eq!(family.name, "first");
+    assert_eq!(family.sha256, unseen::io::sha256_hex(first.as_bytes()));
     assert_eq!(report.results.len(), 4);
     for r in &report.results {
         let d = r.diagnostics.as_ref().expect("recorded");
@@ -936,6 +958,7 @@ fn a_one_candidate_room_is_the_same_computation_and_not_tested() {
     assert!(v.min_detectable.is_nan() && v.p_holm.is_nan(), "{v:?}");
     let md = std::fs::read_to_string(dir.join("audit.md")).unwrap();
     assert!(md.contains("same computation 2 of 2"), "{md}");
+    assert!(md.contains("candidates: the family `first`"), "{md}");
     assert!(md.contains("## What each run did"), "{md}");
     assert!(!md.contains("MDE 0.00"), "{md}");
 }
@@ -1495,6 +1518,7 @@ fn audit_samples_round_trip_and_damaged_files_are_clear_errors() {
         preset: unseen::pipeline::Preset::Quick,
         train_iterations: 1500,
         train_resolution: 2,
+        candidates: None,
     });
     for seed in 0..3 {
         s.insert(sample("full", seed, 4, 20.0 + seed as f64 * 0.1));
@@ -1503,6 +1527,35 @@ fn audit_samples_round_trip_and_damaged_files_are_clear_errors() {
     let path = t.path().join("samples.json");
     s.write(&path).unwrap();
     assert_eq!(Samples::read(&path).unwrap(), s);
+    // Pools of what another dataset, candidate family, preset or training measures are
+    // refused, naming what differs.
+    let other = |f: &dyn Fn(&mut Provenance)| {
+        let mut o = s.clone();
+        f(&mut o.provenance);
+        let e = s.clone().pool(o, &path).unwrap_err().to_string();
+        assert!(e.contains("samples.json"), "{e}");
+        e
+    };
+    let family = unseen::audit::samples::Family {
+        name: "ring-7".into(),
+        sha256: "cd".repeat(32),
+    };
+    let e = other(&|p| p.candidates = Some(family.clone()));
+    assert!(
+        e.contains("candidate family 'ring-7' (cdcdcdcdcdcd…), not the bundled candidates"),
+        "{e}"
+    );
+    assert!(other(&|p| p.dataset_digest = "ef".repeat(32)).contains("other content"));
+    assert!(other(&|p| p.preset = unseen::pipeline::Preset::Paper).contains("preset 'paper'"));
+    assert!(other(&|p| p.train_iterations = 30_000).contains("30000 iterations"));
+    let mut same = s.clone();
+    same.pool(s.clone(), &path).unwrap();
+    assert_eq!(same, s, "pooling a pool with itself changes nothing");
+    let mut fam = s.clone();
+    fam.provenance.candidates = Some(family);
+    fam.write(&path).unwrap();
+    assert_eq!(Samples::read(&path).unwrap(), fam, "the family round-trips");
+    s.write(&path).unwrap();
     let text = std::fs::read_to_string(&path).unwrap();
     assert_eq!(
         text.lines().filter(|l| l.contains("\"seed\"")).count(),
