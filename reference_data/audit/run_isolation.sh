@@ -9,16 +9,23 @@
 # Usage: reference_data/audit/run_isolation.sh ROOM A..B [UNSEEN_BINARY]
 #   e.g. reference_data/audit/run_isolation.sh lounge 0..2
 # VARIANTS overrides the variant list (e.g. VARIANTS=full,even_views,conflicting_views,cycle).
+# FAMILY names a candidate family of the room (SPEC.md §20.7, e.g. FAMILY=ring-13): the
+# pipeline is given it instead of the bridge views, into reference_data/audit/<room>-<family>/.
 # Low priority: see run_mechanisms.sh (nice 19; a setsid batch needs its autogroup niced).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 room="$1"; seeds="$2"; bin="${3:-target/release/unseen}"
 variants="${VARIANTS:-full,even_views,conflicting_views,no_depth_supervision}"
+family=()
 out="reference_data/audit/$room-isolation"
-work="${WORK:-/tmp/unseen-isolation-$room}"
+if [ -n "${FAMILY:-}" ]; then
+  family=(--candidates "$FAMILY")
+  out="reference_data/audit/$room-$FAMILY"
+fi
+work="${WORK:-/tmp/unseen-isolation-$room${FAMILY:+-$FAMILY}}"
 mkdir -p "$work" "$out"
 cp "$out/samples.json" "$work/" 2>/dev/null || true
-nice -n 19 "$bin" audit "reference_data/scenes/$room" --preset quick \
+nice -n 19 "$bin" audit "reference_data/scenes/$room" --preset quick "${family[@]}" \
   --variants "$variants" --generators truth-low+hallucinating+relative \
   --seeds "$seeds" --threads 2 --out "$work"
 cp "$work"/{samples.json,audit.json,audit.md,inconsistency.svg} "$out/"

@@ -359,7 +359,7 @@ fn rests_on(pool: &[JobResult], v: &Verdict) -> String {
 /// `audit.md`'s table of what each (generator, variant) did, mean over its seeds
 /// (SPEC.md §21.5), and the reasons candidates were set aside.
 fn diagnostics_table(cfg: &AuditConfig, pool: &[JobResult]) -> String {
-    let mut s = "\n## What each run did (diagnostics, mean over seeds)\n\n*Candidates*: given (covered by the scene / set aside). *Collisions*: colliding pairs of the candidates left, of all their pairs. *Stage-1 views*: the set stage 1 generates (its colliding pairs). *Coverage* / *overlap*: share of the evaluation views' extrapolated pixels (truth depth: the unseen surface) whose surface point ≥ 1 / ≥ 2 stage-1 views generated; *conflict*: mean squared colour difference of two stage-1 generations of one point. *Stage 2 filled*: share of the dependent views' pixels stage 2 inpainted. Degenerate gaps run from a view to itself (a one-view tour); *unmade* gaps got no camera (the truth half-way cannot be made: its camera sees neither end).\n\n| generator | variant | seeds | candidates (covered / set aside) | collisions / pairs | stage-1 views (colliding pairs) | dependent per gap | degenerate / unmade gaps | coverage | overlap | conflict | stage 2 filled |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n".to_string();
+    let mut s = "\n## What each run did (diagnostics, mean over seeds)\n\n*Candidates*: given (covered by the scene / set aside). *Collisions*: colliding pairs of the candidates left, of all their pairs. *Stage-1 views*: the set stage 1 generates (its colliding pairs). *Coverage* / *overlap*: share of the evaluation views' extrapolated pixels (truth depth: the unseen surface) whose surface point ≥ 1 / ≥ 2 stage-1 views generated; *conflict*: mean squared colour difference of two stage-1 generations of one point. *Stage 2 filled*: share of the dependent views' pixels stage 2 inpainted. †: the cycle has no stage 1; the views detection picked, which its trajectory runs through (it generates every trajectory view in turn, so no stage-1 coverage is measured). Degenerate gaps run from a view to itself (a one-view tour); *unmade* gaps got no camera (the truth half-way cannot be made: its camera sees neither end).\n\n| generator | variant | seeds | candidates (covered / set aside) | collisions / pairs | stage-1 views (colliding pairs) | dependent per gap | degenerate / unmade gaps | coverage | overlap | conflict | stage 2 filled |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n".to_string();
     let mut reasons: Vec<(String, usize)> = Vec::new();
     for g in &cfg.generators {
         let g = g.name();
@@ -379,7 +379,7 @@ fn diagnostics_table(cfg: &AuditConfig, pool: &[JobResult]) -> String {
                 continue;
             };
             s += &format!(
-                "| {g} | {} | {} | {} ({} / {}) | {} / {} | {} ({}) | {} | {} / {} | {} | {} | {} | {} |\n",
+                "| {g} | {} | {} | {} ({} / {}) | {} / {} | {} ({}){} | {} | {} / {} | {} | {} | {} | {} |\n",
                 v.name(),
                 d.seeds,
                 num(d.candidates, 1),
@@ -389,6 +389,7 @@ fn diagnostics_table(cfg: &AuditConfig, pool: &[JobResult]) -> String {
                 num(d.pairs, 1),
                 num(d.stage1_views, 1),
                 num(d.stage1_collisions, 1),
+                if *v == Variant::Cycle { " †" } else { "" },
                 num(d.dependent_per_gap, 1),
                 num(d.degenerate_gaps, 1),
                 num(d.unmade_gaps, 1),
