@@ -1405,6 +1405,24 @@ fn cli_audit_bad_input_is_one_clear_error() {
             "include the variant 'full'",
         ),
         (
+            "unknown candidate family",
+            vec![
+                lounge.clone().into(),
+                "--candidates".into(),
+                "ring-99".into(),
+            ],
+            "no candidate family 'ring-99' (families/ring-99.json); this dataset has ring-13, ring-7, walk-0, walk-1",
+        ),
+        (
+            "bad family name",
+            vec![
+                lounge.clone().into(),
+                "--candidates".into(),
+                "../candidates".into(),
+            ],
+            "'../candidates' is not a candidate family name",
+        ),
+        (
             "job before its original",
             vec![
                 lounge.clone().into(),
