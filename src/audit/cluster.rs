@@ -20,7 +20,7 @@ use crate::batch::{
 };
 use crate::error::{Error, Result};
 use crate::io::{sha256_hex, write_text};
-use crate::pipeline::Scope;
+use crate::pipeline::{MaskSource, Paradigm, Scope};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -347,8 +347,11 @@ impl Audit<'_> {
 
 // ------------------------------------------------------------------------ estimates
 
-/// The work of a job in training iteration-pixels: the model behind [`estimate`].
-fn work(cfg: &AuditConfig, job: &Job, pixels: f64) -> f64 {
+/// The work of a job in training iteration-pixels: the model behind [`estimate`]. A cycle
+/// run (SPEC.md §20.11) fine-tunes a QA-Mask at every trajectory view after the first,
+/// which the bound plan of one candidate does not hold: its trajectory is priced at the
+/// dataset's `candidates` views.
+fn work(cfg: &AuditConfig, job: &Job, (pixels, candidates): (f64, usize)) -> f64 {
     let config = |generator, variant, seed| {
         cfg.pipeline_config(generator, variant, seed)
             .unwrap_or_else(|_| cfg.base.clone())
@@ -366,20 +369,28 @@ fn work(cfg: &AuditConfig, job: &Job, pixels: f64) -> f64 {
             generator,
             variant,
             seed,
-        } => pipeline_work(&config(generator, variant, seed), pixels),
+        } => {
+            let pc = config(generator, variant, seed);
+            let cycle_qa = match (pc.paradigm, pc.mask_source) {
+                (Paradigm::Cycle, MaskSource::Qa) => candidates.saturating_sub(1) as f64,
+                _ => 0.0,
+            };
+            pipeline_work(&pc, pixels) + cycle_qa * f64::from(pc.qa_iterations) * pixels
+        }
     }
 }
 
 /// The training pixels of the dataset at the audit's training resolution (from its first
-/// candidate camera's size).
-fn training_pixels(cfg: &AuditConfig, dataset: &Path) -> Result<f64> {
+/// candidate camera's size), and its number of candidate views.
+fn training_pixels(cfg: &AuditConfig, dataset: &Path) -> Result<(f64, usize)> {
     let file = super::samples::candidates_file(dataset, cfg.candidates.as_deref());
     let cams = crate::camera::inria::read_cameras_json(&file)?;
     let c = cams
         .first()
         .ok_or_else(|| Error::invalid("lists no camera").at(&file))?;
     let r = f64::from(cfg.train_resolution.max(1));
-    Ok((f64::from(c.width) / r).round() * (f64::from(c.height) / r).round())
+    let pixels = (f64::from(c.width) / r).round() * (f64::from(c.height) / r).round();
+    Ok((pixels, cams.len()))
 }
 
 impl Audit<'_> {
@@ -389,7 +400,8 @@ impl Audit<'_> {
     /// seconds per iteration-pixel averaged over them, memory their maximum.
     pub fn estimate(&self) -> Result<Vec<(Wave, Vec<Cost>)>> {
         let (cfg, dir) = (self.cfg, self.dir);
-        let pixels = training_pixels(cfg, self.dataset)?;
+        let shape = training_pixels(cfg, self.dataset)?;
+        let pixels = shape.0;
         let kind = |j: &Job| match j {
             Job::Original { .. } => 0,
             Job::Shared { .. } => 1,
@@ -403,7 +415,7 @@ impl Audit<'_> {
             };
             let m = &mut measured[kind(job)];
             m.0 += seconds;
-            m.1 += work(cfg, job, pixels);
+            m.1 += work(cfg, job, shape);
             m.2 = m.2.max(peak);
         }
         Ok(waves(cfg)
@@ -414,7 +426,7 @@ impl Audit<'_> {
                     .iter()
                     .map(|j| {
                         let k = kind(j);
-                        let units = work(cfg, j, pixels);
+                        let units = work(cfg, j, shape);
                         let (rate, bytes_per_pixel) = match j {
                             Job::Original { .. } => (
                                 ORIGINAL_SECONDS_PER_ITERATION_PIXEL,
@@ -555,7 +567,7 @@ pub fn log_in_submission(cfg: &AuditConfig, submission: &Path, job: &Job) -> Opt
 
 #[cfg(test)]
 mod tests {
-    use super::super::Variant;
+    use super::super::{GeneratorKind, Variant};
     use super::*;
 
     #[test]
@@ -564,6 +576,33 @@ mod tests {
         assert_eq!(at(0), "1970-01-01T00:00:00Z");
         assert_eq!(at(951_782_400), "2000-02-29T00:00:00Z");
         assert_eq!(at(1_795_675_953), "2026-11-26T06:52:33Z");
+    }
+
+    /// A cycle run fine-tunes a QA-Mask at every trajectory view after the first: priced
+    /// at the dataset's candidate count, which the bound plan of one candidate misses.
+    #[test]
+    fn a_cycle_run_is_priced_with_a_qa_mask_per_trajectory_view() {
+        let cfg = AuditConfig::quick();
+        let run = |variant| Job::Run {
+            generator: GeneratorKind::Truth(crate::pipeline::Level::Low),
+            variant,
+            seed: 0,
+        };
+        let pc = cfg
+            .pipeline_config(
+                GeneratorKind::Truth(crate::pipeline::Level::Low),
+                Variant::Cycle,
+                0,
+            )
+            .unwrap();
+        let base = pipeline_work(&pc, 100.0);
+        assert_eq!(work(&cfg, &run(Variant::Cycle), (100.0, 1)), base);
+        let twelve = work(&cfg, &run(Variant::Cycle), (100.0, 12));
+        assert_eq!(twelve, base + 11.0 * f64::from(pc.qa_iterations) * 100.0);
+        // The full run's work does not depend on the candidate count.
+        let full = work(&cfg, &run(Variant::Full), (100.0, 12));
+        assert_eq!(full, work(&cfg, &run(Variant::Full), (100.0, 1)));
+        assert!(twelve > full, "{twelve} vs {full}");
     }
 
     #[test]
