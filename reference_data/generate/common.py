@@ -36,25 +36,28 @@ def write_inria_ply(path, means, log_scales, quats_wxyz, opacity_logits, sh_dc, 
         f.write(data.tobytes())
 
 
+def camera_entry(i, c):
+    """The INRIA cameras.json entry of camera dict `c` (as write_cameras_json takes) with id `i`."""
+    e = {
+        "id": i,
+        "img_name": c["name"],
+        "width": int(c["width"]),
+        "height": int(c["height"]),
+        "position": [float(v) for v in c["center"]],
+        "rotation": [[float(v) for v in row] for row in np.asarray(c["R_wc"])],
+        "fy": float(c["fy"]),
+        "fx": float(c["fx"]),
+    }
+    if "cx" in c:
+        e["cx"] = float(c["cx"])
+        e["cy"] = float(c["cy"])
+    return e
+
+
 def write_cameras_json(path, cams):
     """cams: list of dicts with name, width, height, fx, fy, R_wc (3x3 world_from_camera,
     OpenCV frame), center (3,), optional cx, cy."""
-    out = []
-    for i, c in enumerate(cams):
-        e = {
-            "id": i,
-            "img_name": c["name"],
-            "width": int(c["width"]),
-            "height": int(c["height"]),
-            "position": [float(v) for v in c["center"]],
-            "rotation": [[float(v) for v in row] for row in np.asarray(c["R_wc"])],
-            "fy": float(c["fy"]),
-            "fx": float(c["fx"]),
-        }
-        if "cx" in c:
-            e["cx"] = float(c["cx"])
-            e["cy"] = float(c["cy"])
-        out.append(e)
+    out = [camera_entry(i, c) for i, c in enumerate(cams)]
     with open(path, "w") as f:
         json.dump(out, f, indent=1)
 

@@ -39,7 +39,7 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(__file__))
-from common import ensure_dir, look_at  # noqa: E402
+from common import camera_entry, ensure_dir, look_at  # noqa: E402
 from make_bridge_views import cam_from_json, covisible_fraction, load_checked, read_depth, render_depth  # noqa: E402
 from make_scenes import FOV_X_DEG, H, OUT, SEEDS, SPP, W, build_scene, inside_any, sensor  # noqa: E402
 
@@ -114,22 +114,6 @@ def walk(room, k, boxes, fx, train_eyes):
     return cams
 
 
-def entry(i, c):
-    """An INRIA cameras.json entry (common.write_cameras_json's keys and order)."""
-    return {
-        "id": i,
-        "img_name": c["name"],
-        "width": int(c["width"]),
-        "height": int(c["height"]),
-        "position": [float(v) for v in c["center"]],
-        "rotation": [[float(v) for v in row] for row in np.asarray(c["R_wc"])],
-        "fy": float(c["fy"]),
-        "fx": float(c["fx"]),
-        "cx": float(c["cx"]),
-        "cy": float(c["cy"]),
-    }
-
-
 def write_json(path, obj):
     with open(path, "w") as f:
         json.dump(obj, f, indent=1)
@@ -172,7 +156,7 @@ def make_families(room):
               flush=True)
 
     for name, cams in families.items():
-        write_json(os.path.join(out, "families", name + ".json"), [entry(ids[c["name"]], c) for c in cams])
+        write_json(os.path.join(out, "families", name + ".json"), [camera_entry(ids[c["name"]], c) for c in cams])
     meta = {
         "generator": "reference_data/generate/make_candidate_families.py",
         "tool": f"mitsuba {mi.__version__} {mi.variant()}, path (max_depth 5), box filter, {SPP} spp; "
