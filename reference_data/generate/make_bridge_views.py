@@ -34,7 +34,7 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(__file__))
-from common import ensure_dir, look_at  # noqa: E402
+from common import camera_entry, ensure_dir, look_at  # noqa: E402
 from make_scenes import (FOV_X_DEG, H, NEAR_CLIP, OUT, SEEDS, SPP, W, build_scene,  # noqa: E402
                          inside_any, ray_to_z, sensor)
 
@@ -182,18 +182,7 @@ def make_bridges(name):
     # cameras.json: same keys, order and formatting as common.write_cameras_json.
     next_id = max(e["id"] for e in entries) + 1
     for k, c in enumerate(kept):
-        entries.append({
-            "id": next_id + k,
-            "img_name": c["name"],
-            "width": int(c["width"]),
-            "height": int(c["height"]),
-            "position": [float(v) for v in c["center"]],
-            "rotation": [[float(v) for v in row] for row in np.asarray(c["R_wc"])],
-            "fy": float(c["fy"]),
-            "fx": float(c["fx"]),
-            "cx": float(c["cx"]),
-            "cy": float(c["cy"]),
-        })
+        entries.append(camera_entry(next_id + k, c))
     new_text = dump_like(cams_path, entries)
     assert base_text.endswith("\n]") and new_text.startswith(base_text[:-2] + ",\n"), "existing entries changed"
 
