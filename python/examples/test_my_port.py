@@ -1,6 +1,7 @@
 """A test a GPU port copies: let `unseen.testing.check_port` render and differentiate seeded
 scenes of every family with unseen (the oracle) and with the port under test, and judge
-them (SPEC.md §8.1).
+them (SPEC.md §8.1); and `unseen.testing.compare_adam` judge its optimizer (SPEC.md §14.2;
+replace `port_adam`, set ADAM_CONVENTIONS).
 
 To test your port, replace `port_render` / `port_backward` with calls into it (gsplat's
 conventions: wxyz quaternions, log scales, logit opacities, (N, K, 3) SH, K and a
@@ -56,3 +57,22 @@ def test_port_matches_the_oracle(seed):
     report = testing.check_port(port_render, port_backward, conventions=CONVENTIONS,
                                 seed=seed)
     print(report.message())
+
+
+# -- Adam (SPEC.md §14.2) ---------------------------------------------------------------
+#: The constants your optimizer follows: "pytorch" (torch.optim.Adam's Python-float β, as
+#: INRIA's code trains; 1 − β2 = 0.001) or "unseen" (float32 β; 1 − β2 = 0.00099998713).
+ADAM_CONVENTIONS = "pytorch"
+
+
+def port_adam(params, grads, *, lr, betas, eps):
+    """The port under test: Adam from zero moments over `grads` (one row per step) on the
+    float32 `params`; params, exp_avg and exp_avg_sq after the last step (or every step)."""
+    return unseen.adam(params, grads, lr=lr, betas=betas, eps=eps, conventions=ADAM_CONVENTIONS)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_adam_matches_the_oracle(seed):
+    report = testing.compare_adam(port_adam, seed=seed, conventions=ADAM_CONVENTIONS)
+    print(report.message())
+    assert report.ok, report.message()

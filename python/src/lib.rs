@@ -704,6 +704,44 @@ fn extrapolate(
     Ok((outcome.scene, steps))
 }
 
+/// Adam from zero moments on one float32 tensor (SPEC.md §14.2): `grads` holds one row per
+/// step. `conventions` picks the constants: `"pytorch"` (`torch.optim.Adam`'s, with the
+/// Python-float β; the default) or `"unseen"` (the trainer's update, the same bits).
+/// Returns the parameters, `exp_avg` and `exp_avg_sq` after every step, each `(S, N)`.
+#[pyfunction]
+#[pyo3(signature = (params, grads, *, lr, betas = (0.9, 0.999), eps = 1e-15, conventions = "pytorch"))]
+fn adam<'py>(
+    py: Python<'py>,
+    params: &Bound<'py, PyAny>,
+    grads: &Bound<'py, PyAny>,
+    lr: f64,
+    betas: (f64, f64),
+    eps: f32,
+    conventions: &str,
+) -> PyResult<Bound<'py, PyDict>> {
+    use unseen::train::adam::{Constants, adam_trace};
+    let mut bound = Vec::new();
+    let (_, x0) = array::<f32>("params", params, &[(None, "N")], &mut bound)?;
+    let (shape, g) = array::<f32>("grads", grads, &[(None, "S"), (None, "N")], &mut bound)?;
+    let constants = match conventions {
+        "pytorch" => Constants::PyTorch,
+        "unseen" => Constants::Unseen,
+        other => {
+            return Err(PyValueError::new_err(format!(
+                "conventions: expected 'pytorch' or 'unseen', got {other:?}"
+            )));
+        }
+    };
+    let trace = py
+        .detach(|| adam_trace([betas.0, betas.1], eps, lr, constants, &x0, &g))
+        .map_err(py_err)?;
+    let out = PyDict::new(py);
+    out.set_item("params", to_numpy(py, trace.x, &shape)?)?;
+    out.set_item("exp_avg", to_numpy(py, trace.m, &shape)?)?;
+    out.set_item("exp_avg_sq", to_numpy(py, trace.v, &shape)?)?;
+    Ok(out)
+}
+
 /// The crate version, SPEC.md's conventions version and the numerics revision (a port
 /// records them beside its goldens).
 #[pyfunction]
@@ -726,5 +764,6 @@ fn _unseen(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(compare_json, m)?)?;
     m.add_function(wrap_pyfunction!(extrapolate, m)?)?;
     m.add_function(wrap_pyfunction!(versions, m)?)?;
+    m.add_function(wrap_pyfunction!(adam, m)?)?;
     Ok(())
 }

@@ -258,6 +258,107 @@ pub struct GroupStep {
     pub(crate) beta2_pow: f64,
 }
 
+impl GroupStep {
+    /// A group before its first step.
+    pub const START: GroupStep = GroupStep {
+        t: 0,
+        beta1_pow: 1.0,
+        beta2_pow: 1.0,
+    };
+
+    /// Advance the step counter and the bias-correction products; the scalars of this
+    /// step's update with learning rate `lr`.
+    fn advance(&mut self, c: AdamConfig, lr: f32) -> StepScalars {
+        self.t += 1;
+        self.beta1_pow *= c.beta1 as f64;
+        self.beta2_pow *= c.beta2 as f64;
+        let step_size = (lr as f64 / (1.0 - self.beta1_pow)) as f32;
+        let bc2_sqrt = (1.0 - self.beta2_pow).sqrt() as f32;
+        StepScalars::new(c.beta1, c.beta2, c.eps, bc2_sqrt, step_size)
+    }
+}
+
+/// One parameter tensor's Adam steps, each state after each step (what a port of the
+/// optimizer is compared against, SPEC.md §14.2): rows of `n` values, one per step.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AdamTrace {
+    pub x: Vec<f32>,
+    pub m: Vec<f32>,
+    pub v: Vec<f32>,
+}
+
+/// Where the update's constants come from (SPEC.md §14.2). The element update is the same.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Constants {
+    /// The trainer's: β rounded to f32 first; `1 − β` in f32 (exact) and the bias
+    /// corrections' powers of that f32 β in f64.
+    Unseen,
+    /// `torch.optim.Adam`'s, whose β are Python floats: the decay multiplies by f32(β),
+    /// the gradient term by f32(1 − β) with `1 − β` in f64 (0.001 for β2 = 0.999, not the
+    /// f32 `1 − 0.999f32` = 0.00099998713), the bias corrections are powers of the f64 β,
+    /// and the step size is f32(lr / (1 − β1ᵗ)) with lr in f64.
+    PyTorch,
+}
+
+/// Adam from zero moments (a fresh optimizer, as `torch.optim.Adam` starts) on `x0` with
+/// the gradients `grads` (`steps` rows of `x0.len()` values) at learning rate `lr` under
+/// `constants`: with [`Constants::Unseen`] the very update [`Adam::step`] makes on one
+/// group (β and lr rounded to f32 as the trainer holds them), the same bits.
+pub fn adam_trace(
+    betas: [f64; 2],
+    eps: f32,
+    lr: f64,
+    constants: Constants,
+    x0: &[f32],
+    grads: &[f32],
+) -> Result<AdamTrace> {
+    let config = AdamConfig {
+        beta1: betas[0] as f32,
+        beta2: betas[1] as f32,
+        eps,
+        sparse: false,
+    };
+    config.validate()?;
+    if !lr.is_finite() {
+        return Err(Error::invalid(format!("Adam: lr must be finite, got {lr}")));
+    }
+    let n = x0.len();
+    if n == 0 || !grads.len().is_multiple_of(n) {
+        return Err(Error::invalid(format!(
+            "Adam: {} gradient values are not whole steps of {n} parameters",
+            grads.len()
+        )));
+    }
+    let (mut x, mut m, mut v) = (x0.to_vec(), vec![0f32; n], vec![0f32; n]);
+    let mut trace = AdamTrace {
+        x: Vec::with_capacity(grads.len()),
+        m: Vec::with_capacity(grads.len()),
+        v: Vec::with_capacity(grads.len()),
+    };
+    let (isa, mut step) = (Isa::detect(), GroupStep::START);
+    let mut powers = [1f64; 2];
+    for g in grads.chunks_exact(n) {
+        let k = match constants {
+            Constants::Unseen => step.advance(config, lr as f32),
+            Constants::PyTorch => {
+                powers = [powers[0] * betas[0], powers[1] * betas[1]];
+                let step_size = (lr / (1.0 - powers[0])) as f32;
+                let bc2_sqrt = (1.0 - powers[1]).sqrt() as f32;
+                StepScalars {
+                    ob1: (1.0 - betas[0]) as f32,
+                    ob2: (1.0 - betas[1]) as f32,
+                    ..StepScalars::new(config.beta1, config.beta2, eps, bc2_sqrt, step_size)
+                }
+            }
+        };
+        update_dispatch(isa, &mut x, &mut m, &mut v, g, k);
+        trace.x.extend_from_slice(&x);
+        trace.m.extend_from_slice(&m);
+        trace.v.extend_from_slice(&v);
+    }
+    Ok(trace)
+}
+
 /// The optimizer state for a set of Gaussians.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Adam {
@@ -287,11 +388,7 @@ impl Adam {
             config,
             m: z.clone(),
             v: z,
-            steps: [GroupStep {
-                t: 0,
-                beta1_pow: 1.0,
-                beta2_pow: 1.0,
-            }; 6],
+            steps: [GroupStep::START; 6],
         })
     }
 
@@ -347,13 +444,7 @@ impl Adam {
     /// by [`Adam::step`] and the fused chunks of [`Adam::fused_chunks`].
     pub(crate) fn begin(&mut self, p: Param, lr: f32) -> StepScalars {
         let c = self.config;
-        let s = &mut self.steps[group_index(p)];
-        s.t += 1;
-        s.beta1_pow *= c.beta1 as f64;
-        s.beta2_pow *= c.beta2 as f64;
-        let step_size = (lr as f64 / (1.0 - s.beta1_pow)) as f32;
-        let bc2_sqrt = (1.0 - s.beta2_pow).sqrt() as f32;
-        StepScalars::new(c.beta1, c.beta2, c.eps, bc2_sqrt, step_size)
+        self.steps[group_index(p)].advance(c, lr)
     }
 
     /// The scene and its moments in chunks of [`CHUNK`] Gaussians that take their

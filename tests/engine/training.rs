@@ -144,6 +144,49 @@ fn adam_follows_the_hand_computed_sequence() {
             );
         }
     }
+    // The standalone trace of one tensor (what ports are compared against) is the same
+    // update: the same bits after every step.
+    use unseen::train::adam::{Constants, adam_trace};
+    let betas = [f64::from(cfg.beta1), f64::from(cfg.beta2)];
+    let trace = adam_trace(
+        betas,
+        cfg.eps,
+        lr,
+        Constants::Unseen,
+        &[1.0, -2.0, 0.5],
+        grads.as_flattened(),
+    )
+    .unwrap();
+    assert_eq!(
+        trace.x[6..].iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+        g.means[0].iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+    );
+    assert_eq!(trace.m[6..], adam.m.means[0]);
+    assert_eq!(trace.v[6..], adam.v.means[0]);
+    assert!(
+        adam_trace(
+            betas,
+            cfg.eps,
+            0.01,
+            Constants::Unseen,
+            &[1.0, 2.0],
+            &[0.5; 3]
+        )
+        .is_err()
+    );
+    // PyTorch's constants (Python-float β): 1 − β2 = 0.001 in f64 against the trainer's
+    // f32 1 − 0.999f32; the first step's second moment shows it.
+    let torch = adam_trace(
+        [0.9, 0.999],
+        cfg.eps,
+        lr,
+        Constants::PyTorch,
+        &[1.0],
+        &[2.0],
+    )
+    .unwrap();
+    assert_eq!(torch.v[0], 0.001f32 * 4.0);
+    assert_eq!(trace.v[0], (1.0 - 0.999f32) * (0.5 * 0.5));
     // First step moves every coordinate with a non-zero gradient by exactly lr.
     assert_eq!(adam.step_count(Param::Means), 3);
     assert_eq!(adam.step_count(Param::ShDc), 0);

@@ -33,6 +33,7 @@ import json as _json
 
 from ._unseen import (
     Camera,
+    adam,
     backward,
     extrapolate as _extrapolate,
     load_cameras,
@@ -45,6 +46,7 @@ from ._unseen import compare_json as _compare_json
 
 __all__ = [
     "Camera",
+    "adam",
     "backward",
     "compare",
     "extrapolate",

@@ -49,6 +49,8 @@ import time
 import numpy as np
 
 from . import Camera, backward, render
+from . import adam as _adam_oracle
+from ._adam import ADAM_MISTAKES, adam_bounds, adam_case, adam_reference  # noqa: F401
 
 # -- Tolerances (SPEC.md §8.1) ----------------------------------------------------------
 
@@ -1296,3 +1298,83 @@ def scene(n=10_000, degree=3, seed=0, *, width=256, height=256, family="random",
 
 #: The scene families ``scene`` generates.
 FAMILIES = ("random", "near_plane", "rolled", "clamp", "hard")
+
+
+# -- Adam (SPEC.md §14.2) ------------------------------------------------------------------
+
+_ADAM_KEYS = ("params", "exp_avg", "exp_avg_sq")
+
+
+def _adam_failing(got, want, bounds):
+    """How many of the port's values (every quantity it returned) lie beyond twice the
+    bound of `want`'s."""
+    n = 0
+    for key, arr in got.items():
+        w, b = want[key], bounds[key]
+        if arr.shape == w.shape[1:]:
+            w, b = w[-1], b[-1]
+        diff = np.abs(arr.astype(np.float64) - w)
+        n += int(np.sum(np.where(np.isnan(diff), True, diff > 2 * b)))
+    return n
+
+
+def compare_adam(port, case=None, *, seed=0, conventions="pytorch"):
+    """Compare a port of Adam with unseen's on ``case`` (``adam_case(seed)`` by default).
+
+    ``conventions`` is the profile of the constants (SPEC.md §14.2): ``"pytorch"``
+    (``torch.optim.Adam``'s, with Python-float β, e.g. ``1 − β2 = 0.001``; what INRIA's
+    code trains with; the default) or ``"unseen"`` (the trainer's float32 β, ``1 − β2 =
+    0.00099998713``): the two differ by 1.3e-5 relative in the second moment, far beyond
+    the rounding a faithful port makes, so a port is judged under the one it follows.
+
+    ``port(params, grads, *, lr, betas, eps)`` takes float32 ``params`` (N,) and ``grads``
+    (S, N), one row per step from zero moments, and returns a dict of ``params``,
+    ``exp_avg`` and ``exp_avg_sq`` after the last step (N,) or after every step (S, N).
+    Each value may differ from unseen's by twice ``adam_bounds`` (a float32
+    implementation's first-order distance from the exact update); on a failure every one
+    of ``ADAM_MISTAKES`` is tried and one is named when it explains the port clearly better
+    than the others. Returns a ``Report``.
+    """
+    case = adam_case(seed) if case is None else case
+    params, grads = case["params"], case["grads"]
+    lr, betas, eps = case["lr"], tuple(case["betas"]), case["eps"]
+    steps, n = grads.shape
+    want32 = _adam_oracle(params, grads, lr=lr, betas=betas, eps=eps, conventions=conventions)
+    want = {k: np.asarray(v, np.float64) for k, v in want32.items()}
+    bounds = adam_bounds(params, grads, want32, lr=lr, betas=betas, eps=eps)
+    report = Report(f"Adam, {steps} step{'s' if steps != 1 else ''} of {n} parameters "
+                    f"(lr {lr:.3g}, betas {betas}, eps {eps:g})", conventions)
+    out = port(params.copy(), grads.copy(), lr=lr, betas=betas, eps=eps)
+    got = {}
+    for key in _ADAM_KEYS:
+        if key not in out:
+            report.failures.append(Failure(key, 1, 1, "", (), math.nan, math.nan,
+                                           note=f"the port returned no {key!r}"))
+            continue
+        arr = np.asarray(out[key])
+        w, b = want[key], bounds[key]
+        if arr.shape == (n,):
+            w, b = w[-1], b[-1]
+        elif arr.shape != (steps, n):
+            report.failures.append(Failure(key, 1, 1, "", (), math.nan, math.nan, note=(
+                f"the port returned shape {arr.shape}, expected ({n},) or ({steps}, {n})")))
+            continue
+        got[key] = arr
+        f = _check(key, arr, w, 0.0, 0.0, None, None, (), extra=2 * b)
+        if f is not None:
+            f.tolerance = "2 × adam_bounds"
+            report.failures.append(f)
+    if report.failures and got:
+        base = _adam_failing(got, want, bounds)
+        results = []
+        for mk in ADAM_MISTAKES:
+            ref = adam_reference(params, grads, lr=lr, betas=betas, eps=eps, mistake=mk.name,
+                                 conventions=conventions)
+            # The rounding a float32 port of the mistake makes along its own trajectory.
+            b = betas[::-1] if mk.name == "betas_swapped" else betas
+            own = adam_bounds(params, grads, ref, lr=lr, betas=b, eps=eps)
+            own = {k: np.maximum(v, bounds[k]) for k, v in own.items()}
+            results.append((_adam_failing(got, ref, own), mk.text))
+        _diagnosis(report, results, base)
+    return report
+
