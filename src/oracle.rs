@@ -186,3 +186,43 @@ pub fn dump(
     manifest.write(dir)?;
     Ok(())
 }
+
+/// `unseen oracle adam`: Adam from zero moments on `x0` over `grads` (`steps` rows of
+/// `x0.len()` values) under `constants` ([`crate::train::adam::adam_trace`]), every step's
+/// `params`, `exp_avg` and `exp_avg_sq` as `(S, N)` arrays in `dir` (SPEC.md §12, §14.2).
+pub fn dump_adam(
+    x0: &[f32],
+    grads: &[f32],
+    (betas, eps, lr): ([f64; 2], f32, f64),
+    constants: crate::train::adam::Constants,
+    dir: &Path,
+) -> Result<()> {
+    let trace = crate::train::adam::adam_trace(betas, eps, lr, constants, x0, grads)?;
+    crate::io::create_dir_all(dir)?;
+    let (n, steps) = (x0.len(), grads.len() / x0.len());
+    let mut wr = Writer {
+        dir,
+        entries: Vec::new(),
+    };
+    wr.put("params", &trace.x, &[steps, n])?;
+    wr.put("exp_avg", &trace.m, &[steps, n])?;
+    wr.put("exp_avg_sq", &trace.v, &[steps, n])?;
+    let conventions = match constants {
+        crate::train::adam::Constants::PyTorch => "pytorch",
+        crate::train::adam::Constants::Unseen => "unseen",
+    };
+    let inputs = serde_json::json!({
+        "parameters": n,
+        "steps": steps,
+        "lr": lr,
+        "betas": betas,
+        "eps": eps,
+        "constants": conventions,
+    });
+    let manifest = Manifest {
+        conventions: Some(conventions.to_string()),
+        ..Manifest::new("oracle adam", "", inputs, wr.entries)
+    };
+    manifest.write(dir)?;
+    Ok(())
+}

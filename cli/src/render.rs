@@ -130,6 +130,31 @@ pub enum OraclePass {
         #[arg(long)]
         depth_target: Option<PathBuf>,
     },
+    /// Adam from zero moments over a sequence of gradients: every step's parameters and
+    /// moments (SPEC.md §14.2), what a port of the optimizer is diffed against.
+    Adam {
+        /// The parameters, float32 .npy of shape (N,).
+        #[arg(long)]
+        params: PathBuf,
+        /// The gradients, float32 .npy of shape (S, N): one row per step.
+        #[arg(long)]
+        grads: PathBuf,
+        #[arg(long)]
+        lr: f64,
+        #[arg(long, default_value_t = 0.9)]
+        beta1: f64,
+        #[arg(long, default_value_t = 0.999)]
+        beta2: f64,
+        #[arg(long, default_value_t = 1e-15)]
+        eps: f32,
+        /// The constants: `pytorch` (torch.optim.Adam's, Python-float β) or `unseen` (the
+        /// trainer's float32 β).
+        #[arg(long, default_value = "pytorch")]
+        conventions: String,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+    },
 }
 
 pub fn parse_rgb(s: &str) -> std::result::Result<[f32; 3], String> {
@@ -424,5 +449,47 @@ pub fn run_oracle_command(a: OracleArgs) -> Result<()> {
             loss,
             depth_target,
         } => run_oracle(&common, Some((&target, &loss, depth_target.as_deref()))),
+        OraclePass::Adam {
+            params,
+            grads,
+            lr,
+            beta1,
+            beta2,
+            eps,
+            conventions,
+            out,
+        } => {
+            use unseen::train::adam::Constants;
+            let constants = match conventions.as_str() {
+                "pytorch" => Constants::PyTorch,
+                "unseen" => Constants::Unseen,
+                other => {
+                    return Err(Error::invalid(format!(
+                        "unknown conventions '{other}' (pytorch or unseen)"
+                    )));
+                }
+            };
+            let (xs, x0) = unseen::io::npy::read_npy_f32(&params)?;
+            let [n] = xs[..] else {
+                return Err(Error::invalid(format!(
+                    "the parameters must have shape (N,), got {xs:?}"
+                ))
+                .at(&params));
+            };
+            let (gs, g) = unseen::io::npy::read_npy_f32(&grads)?;
+            if gs.len() != 2 || gs[1] != n {
+                return Err(Error::invalid(format!(
+                    "the gradients must have shape (S, {n}) (one row per step), got {gs:?}"
+                ))
+                .at(&grads));
+            }
+            unseen::oracle::dump_adam(&x0, &g, ([beta1, beta2], eps, lr), constants, &out)?;
+            println!(
+                "wrote {} Adam steps of {n} parameters into {}",
+                gs[0],
+                out.display()
+            );
+            Ok(())
+        }
     }
 }

@@ -176,3 +176,69 @@ fn compare_names_oracle_dumps_by_their_folder() {
             .is_none()
     );
 }
+
+/// `unseen oracle adam`: every step's parameters and moments as .npy, the bits of
+/// `adam_trace` under the chosen constants, with a manifest; gradients of the wrong width
+/// are one clear error naming the file.
+#[test]
+fn oracle_adam_dumps_every_step_and_refuses_wrong_shapes() {
+    use unseen::io::npy::write_npy;
+    use unseen::train::adam::{Constants, adam_trace};
+    let t = crate::support::TempDir::new("oracle-adam");
+    let x0 = [0.5f32, -1.0, 2.0e-3];
+    let grads = [0.1f32, -0.2, 1e-16, 0.05, 0.0, -3e-15, 1.0, 0.5, 0.0];
+    write_npy(&t.path().join("x.npy"), &x0, &[3]).unwrap();
+    write_npy(&t.path().join("g.npy"), &grads, &[3, 3]).unwrap();
+    write_npy(&t.path().join("bad.npy"), &grads, &[9]).unwrap();
+    let run = |grads: &str, conventions: &str, out: &str| {
+        Command::new(env!("CARGO_BIN_EXE_unseen"))
+            .args([
+                "oracle",
+                "adam",
+                "--lr",
+                "0.01",
+                "--conventions",
+                conventions,
+            ])
+            .arg("--params")
+            .arg(t.path().join("x.npy"))
+            .arg("--grads")
+            .arg(t.path().join(grads))
+            .arg("--out")
+            .arg(t.path().join(out))
+            .output()
+            .unwrap()
+    };
+    for (conventions, constants) in [
+        ("pytorch", Constants::PyTorch),
+        ("unseen", Constants::Unseen),
+    ] {
+        let o = run("g.npy", conventions, conventions);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let want = adam_trace([0.9, 0.999], 1e-15, 0.01, constants, &x0, &grads).unwrap();
+        let dir = t.path().join(conventions);
+        for (name, w) in [
+            ("params", &want.x),
+            ("exp_avg", &want.m),
+            ("exp_avg_sq", &want.v),
+        ] {
+            let (shape, got) = read_npy_f32(&dir.join(format!("{name}.npy"))).unwrap();
+            assert_eq!(shape, [3, 3], "{name}");
+            assert_eq!(
+                got.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                w.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                "{conventions}: {name}"
+            );
+        }
+        let m: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.join("manifest.json")).unwrap()).unwrap();
+        assert_eq!(m["inputs"]["constants"], conventions, "{m}");
+    }
+    let o = run("bad.npy", "pytorch", "bad");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(err.contains("bad.npy") && err.contains("(S, 3)"), "{err}");
+    assert!(!t.path().join("bad").exists());
+    let o = run("g.npy", "keras", "keras");
+    assert!(String::from_utf8_lossy(&o.stderr).contains("unknown conventions 'keras'"));
+}
