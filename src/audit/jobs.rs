@@ -1,7 +1,7 @@
 //! The audit's jobs: which (generator, variant, seed) runs exist, the original scene they
 //! share, one job's pipeline run and its result record, and which steps jobs share.
 
-use super::{Audit, AuditConfig, GeneratorKind, Variant, config_digest, samples};
+use super::{Audit, AuditConfig, GeneratorKind, Variant, config_digest, family};
 use crate::error::{Error, Result};
 use crate::pipeline::evaluate::{Row, Summary};
 use crate::pipeline::steps::Step;
@@ -301,7 +301,7 @@ impl Audit<'_> {
         on_event(Event::Stage { name: job.name() });
         let inputs = crate::pipeline::load_inputs(
             &run,
-            &samples::candidates_file(dataset, cfg.candidates.as_deref()),
+            &family::candidates_file(dataset, cfg.candidates.as_deref()),
             Some(&dataset.join("evaluation.json")),
             Some(dataset),
         )?;
@@ -365,8 +365,8 @@ impl Audit<'_> {
         if dir.is_file() {
             return Err(Error::invalid("the output path is a file").at(dir));
         }
-        samples::family(dataset, self.cfg.candidates.as_deref())?;
-        let candidates = samples::candidates_file(dataset, self.cfg.candidates.as_deref());
+        family::family(dataset, self.cfg.candidates.as_deref())?;
+        let candidates = family::candidates_file(dataset, self.cfg.candidates.as_deref());
         for p in [candidates, dataset.join("evaluation.json")] {
             let f = p
                 .file_name()

@@ -36,6 +36,7 @@ use std::path::Path;
 pub mod cluster;
 pub mod diagnostics;
 pub mod dose;
+pub mod family;
 pub mod jobs;
 pub mod report;
 pub mod samples;
@@ -429,7 +430,7 @@ impl AuditConfig {
             ));
         }
         if let Some(f) = &self.candidates {
-            samples::check_family_name(f)?;
+            family::check_family_name(f)?;
         }
         Ok(())
     }

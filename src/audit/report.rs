@@ -57,7 +57,7 @@ impl Audit<'_> {
             preset: cfg.base.preset,
             train_iterations: cfg.train_iterations,
             train_resolution: cfg.train_resolution,
-            candidates: samples::family(dataset, cfg.candidates.as_deref())?,
+            candidates: super::family::family(dataset, cfg.candidates.as_deref())?,
         });
         let own = dir.join(samples::SAMPLES_FILE);
         let mut files: Vec<PathBuf> = merge.to_vec();

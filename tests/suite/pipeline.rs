@@ -1554,7 +1554,7 @@ fn audit_samples_round_trip_and_damaged_files_are_clear_errors() {
         assert!(e.contains("samples.json"), "{e}");
         e
     };
-    let family = unseen::audit::samples::Family {
+    let family = unseen::audit::family::Family {
         name: "ring-7".into(),
         sha256: "cd".repeat(32),
     };
