@@ -343,8 +343,15 @@ fn rests_on(pool: &[JobResult], v: &Verdict) -> String {
             100.0 * worst
         )
     };
+    // Seeds where the conflicting set was not used count as not tested too (verdicts'
+    // `Pair::not_applied`).
+    let untested = if claim.variant == Variant::ConflictingViews {
+        format!("not tested {same} of {paired} (same scene, or no colliding set matched)")
+    } else {
+        format!("same computation {same} of {paired}")
+    };
     format!(
-        "views {} → {}; coverage {} → {}; overlap {} → {}; conflict {} → {}; same computation {same} of {paired}{matched}",
+        "views {} → {}; coverage {} → {}; overlap {} → {}; conflict {} → {}; {untested}{matched}",
         num(a.stage1_views, 1),
         num(b.stage1_views, 1),
         percent(a.coverage),

@@ -429,6 +429,20 @@ impl Pair<'_> {
     pub fn same_computation(&self) -> bool {
         !self.full.scene_sha256.is_empty() && self.full.scene_sha256 == self.variant.scene_sha256
     }
+
+    /// The variant's mechanism did not apply on this draw: `conflicting_views` found no
+    /// colliding set within the coverage tolerance and generated the independent set, as
+    /// `full` does (SPEC.md §20.2). Its Δ is then noise between two runs of one method
+    /// (their random streams differ with the plan's record), so, like a same computation,
+    /// the draw is no unit (SPEC.md §21.5).
+    pub fn not_applied(&self) -> bool {
+        self.variant
+            .diagnostics
+            .as_ref()
+            .and_then(|d| d.choice.as_ref())
+            .and_then(|c| c.conflicting.as_ref())
+            .is_some_and(|c| !c.used)
+    }
 }
 
 /// The pairs (full, `variant`) of `generator` in `pool`: both runs of one seed at one
@@ -579,15 +593,16 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
             let seeds = seed_diffs(&pairs, |p| claim.diff(p)).len();
             let planned = u32::try_from(rule.planned).unwrap_or(u32::MAX);
             let pairs: Vec<Pair> = pairs.into_iter().filter(|p| p.seed < planned).collect();
-            // A planned seed whose every pair is the same computation did not compare
-            // anything: it counts towards the plan, not as a unit (SPEC.md §21.5).
+            // A planned seed whose every pair is the same computation (or one where the
+            // variant's mechanism did not apply) did not compare anything: it counts towards
+            // the plan, not as a unit (SPEC.md §21.5).
             let mut same_seeds: Vec<u32> = pairs
                 .iter()
                 .filter(|_| claim.baseline == Baseline::Variant)
                 .filter(|p| {
                     pairs
                         .iter()
-                        .all(|q| q.seed != p.seed || q.same_computation())
+                        .all(|q| q.seed != p.seed || q.same_computation() || q.not_applied())
                 })
                 .map(|p| p.seed)
                 .collect();

@@ -1040,6 +1040,52 @@ fn the_original_areas_claim_is_non_inferiority_of_the_final_scene_against_the_or
     assert_eq!(large.verdict, "contradicted", "{large:?}");
 }
 
+/// `conflicting_views` where no colliding set matched the independent set's coverage
+/// generates the independent set, as `full` does, with other random streams: such a seed is
+/// not a unit of "conflicts cost at equal coverage" (its Δ would be noise between two runs
+/// of one method), and the verdict says on how many seeds the claim was not tested.
+#[test]
+fn a_conflicting_set_that_was_not_used_is_not_a_unit() {
+    use unseen::audit::{AuditConfig, GeneratorKind, Variant, stats::Rule, verdicts};
+    let cfg = AuditConfig {
+        variants: vec![Variant::Full, Variant::ConflictingViews],
+        generators: vec![GeneratorKind::Truth(unseen::pipeline::Level::Low)],
+        ..AuditConfig::quick()
+    };
+    let diagnostics = |used: bool| {
+        serde_json::from_value(serde_json::json!({
+            "candidates": 12, "covered": 0, "set_aside": [], "collisions": 40, "pairs": 66,
+            "stage1_views": ["a", "b"], "stage1_collisions": u32::from(used),
+            "dependent_per_gap": [10], "interpolated": 0, "degenerate_gaps": 0,
+            "stage1": null, "stage2_filled": 0.1,
+            "choice": {"rule": "greedy", "independent": ["a", "b"], "coverage": 100,
+                       "conflicting": {"views": ["a", "c"], "coverage": if used { 98 } else { 60 },
+                                       "coverage_difference": if used { 0.02 } else { 0.4 },
+                                       "used": used}}
+        }))
+        .unwrap()
+    };
+    let mut pool = Vec::new();
+    for seed in 0..16 {
+        let used = seed % 4 != 3; // 12 seeds with a matched set, 4 without
+        let mut full = sample("full", seed, 7, 20.0 + 0.1 * seed as f64);
+        full.scene_sha256 = format!("{seed:064}");
+        let shift = if used { 1.0 } else { -0.5 }; // the unused seeds would pull Δ below 0
+        let mut c = sample("conflicting_views", seed, 7, full.last.psnr_all - shift);
+        c.scene_sha256 = format!("{:064}", seed + 100);
+        c.diagnostics = Some(diagnostics(used));
+        pool.extend([full, c]);
+    }
+    let v = verdicts(&cfg, &pool, &Rule::default());
+    let v = v
+        .iter()
+        .find(|v| v.claim.id == "conflicts cost at equal coverage")
+        .unwrap();
+    assert_eq!((v.judged, v.same_computation), (12, 4), "{v:?}");
+    assert_eq!((v.above, v.below), (12, 0), "{v:?}");
+    assert!(v.verdict.contains("not tested on 4 of 16 seeds"), "{v:?}");
+}
+
 /// A dose–response sweep (SPEC.md §21.6): each level is a generator judged as any other
 /// (Holm within the sweep), and the response of a claim whose Δ falls with the level
 /// crosses 0 between the levels around the sign change, with a plot.
