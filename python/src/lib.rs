@@ -742,6 +742,34 @@ fn adam<'py>(
     Ok(out)
 }
 
+/// GJK proximity of the convex hulls of two point sets (SPEC.md §16.1), each float64
+/// `(N, 3)`: `distance` (an upper bound), `lower_bound`, `intersect` (the verdict, on the
+/// lower bound: touching within `touch_eps` collides) and `touch_eps`.
+#[pyfunction]
+fn proximity<'py>(
+    py: Python<'py>,
+    a: &Bound<'py, PyAny>,
+    b: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyDict>> {
+    use unseen::collide::gjk::{ConvexHull, proximity as gjk};
+    let hull = |name: &str, obj: &Bound<'py, PyAny>| -> PyResult<ConvexHull> {
+        let (_, v) = array::<f64>(name, obj, &[(None, "N"), (Some(3), "3")], &mut Vec::new())?;
+        let points = v
+            .chunks_exact(3)
+            .map(|p| glam::DVec3::new(p[0], p[1], p[2]))
+            .collect();
+        ConvexHull::new(points).map_err(|e| PyValueError::new_err(format!("{name}: {e}")))
+    };
+    let (ha, hb) = (hull("a", a)?, hull("b", b)?);
+    let p = py.detach(|| gjk(&ha, &hb)).map_err(py_err)?;
+    let out = PyDict::new(py);
+    out.set_item("distance", p.distance)?;
+    out.set_item("lower_bound", p.lower_bound)?;
+    out.set_item("intersect", p.intersect)?;
+    out.set_item("touch_eps", p.touch_eps)?;
+    Ok(out)
+}
+
 /// The crate version, SPEC.md's conventions version and the numerics revision (a port
 /// records them beside its goldens).
 #[pyfunction]
@@ -765,5 +793,6 @@ fn _unseen(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(extrapolate, m)?)?;
     m.add_function(wrap_pyfunction!(versions, m)?)?;
     m.add_function(wrap_pyfunction!(adam, m)?)?;
+    m.add_function(wrap_pyfunction!(proximity, m)?)?;
     Ok(())
 }

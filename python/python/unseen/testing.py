@@ -50,6 +50,10 @@ import numpy as np
 
 from . import Camera, backward, render
 from . import adam as _adam_oracle
+from . import proximity as _proximity
+from ._collide import (  # noqa: F401
+    COLLIDE_MISTAKES, CONTACT_REL, DISTANCE_REL, FRUSTUM_FACES, MAX_SET_ASIDE, collide_case,
+    frustum, mistaken_verdict)
 from ._adam import ADAM_MISTAKES, adam_bounds, adam_case, adam_reference  # noqa: F401
 
 # -- Tolerances (SPEC.md §8.1) ----------------------------------------------------------
@@ -238,6 +242,9 @@ class Report:
     background: tuple = ()
     #: Findings that are not failures (e.g. footprints one side reaches the image with).
     notes: list = field(default_factory=list)
+    #: What the comparison sets aside near a decision: "pixels" (and Gaussians; the
+    #: rasterizer), "pairs" (collisions), or "" (nothing can be: Adam).
+    units: str = "pixels"
 
     @property
     def ok(self):
@@ -249,10 +256,14 @@ class Report:
         lines = [f"{self.what}{bg} (conventions {self.conventions!r}):"]
         lines += ["  " + f.line() for f in self.failures]
         kinds = ", ".join(f"{k} {v}" for k, v in self.excluded.items() if v) or "none"
-        lines.append(
-            f"  set aside: {self.excluded_fraction:.3%} of pixels near a decision ({kinds}), "
-            f"{self.excluded_gaussian_fraction:.3%} of Gaussians; bound {self.bound:.0%}"
-        )
+        if self.units == "pixels":
+            lines.append(
+                f"  set aside: {self.excluded_fraction:.3%} of pixels near a decision ({kinds}), "
+                f"{self.excluded_gaussian_fraction:.3%} of Gaussians; bound {self.bound:.0%}"
+            )
+        elif self.units:
+            lines.append(f"  set aside: {self.excluded_fraction:.3%} of {self.units} near a "
+                         f"decision ({kinds}); bound {self.bound:.0%}")
         lines += [f"  note: {n}" for n in self.notes]
         if self.likely_cause:
             lines.append(f"  likely cause: {self.likely_cause}")
@@ -1343,7 +1354,7 @@ def compare_adam(port, case=None, *, seed=0, conventions="pytorch"):
     want = {k: np.asarray(v, np.float64) for k, v in want32.items()}
     bounds = adam_bounds(params, grads, want32, lr=lr, betas=betas, eps=eps)
     report = Report(f"Adam, {steps} step{'s' if steps != 1 else ''} of {n} parameters "
-                    f"(lr {lr:.3g}, betas {betas}, eps {eps:g})", conventions)
+                    f"(lr {lr:.3g}, betas {betas}, eps {eps:g})", conventions, units="")
     out = port(params.copy(), grads.copy(), lr=lr, betas=betas, eps=eps)
     got = {}
     for key in _ADAM_KEYS:
@@ -1376,5 +1387,88 @@ def compare_adam(port, case=None, *, seed=0, conventions="pytorch"):
             own = {k: np.maximum(v, bounds[k]) for k, v in own.items()}
             results.append((_adam_failing(got, ref, own), mk.text))
         _diagnosis(report, results, base)
+    return report
+
+
+# -- Frustum collisions (SPEC.md §16) ------------------------------------------------------
+
+
+def _near_contact(a, b, p):
+    """Whether the pair lies within CONTACT_REL of contact: separated by less (the oracle's
+    lower bound), or overlapping by less (shrunk by that share about their centroids, the
+    two frustums no longer overlap)."""
+    scale = max(np.abs(a).max(), np.abs(b).max())
+    if not p["intersect"]:
+        return p["lower_bound"] <= CONTACT_REL * scale
+    shrink = lambda v: v.mean(0) + (v - v.mean(0)) * (1 - CONTACT_REL)  # noqa: E731
+    return not _proximity(shrink(a), shrink(b))["intersect"]
+
+
+def compare_collide(port, case=None, *, seed=0):
+    """Compare a port of the frustum collision test with unseen's GJK (SPEC.md §16.1) on
+    ``case`` (``collide_case(seed)`` by default).
+
+    ``port(a, b, faces)`` takes two frustums' float64 (8, 3) vertices and their faces
+    (``FRUSTUM_FACES``, vertex indices, outward counter-clockwise) and returns whether they
+    intersect (touching counts), or a dict with ``intersect`` and optionally ``distance``
+    (0 when they intersect). Pairs within ``CONTACT_REL`` of contact are set aside (at most
+    ``MAX_SET_ASIDE`` of the case); every other verdict must agree, and a distance must lie
+    within ``DISTANCE_REL`` of the scale of the oracle's interval. On a failure each of
+    ``COLLIDE_MISTAKES`` is tried and one named when it explains the port clearly better
+    than the others. Returns a ``Report``.
+    """
+    case = collide_case(seed) if case is None else case
+    pairs, faces = case["pairs"], case["faces"]
+    report = Report(f"frustum collisions, {len(pairs)} pairs", "unseen", units="pairs")
+    report.bound = MAX_SET_ASIDE
+    verdicts, wrong, aside, dist_bad = [], [], [], []
+    for i, (a, b) in enumerate(pairs):
+        want = _proximity(a, b)
+        got = port(a.copy(), b.copy(), faces)
+        d = None
+        if isinstance(got, dict):
+            d = got.get("distance")
+            got = got["intersect"]
+        near = _near_contact(a, b, want)
+        aside.append(near)
+        verdicts.append(bool(got))
+        if near:
+            continue
+        if bool(got) != want["intersect"]:
+            wrong.append(i)
+        elif d is not None:
+            scale = max(np.abs(a).max(), np.abs(b).max())
+            lo = (0.0 if want["intersect"] else want["lower_bound"]) - DISTANCE_REL * scale
+            hi = (0.0 if want["intersect"] else want["distance"]) + DISTANCE_REL * scale
+            if not lo <= d <= hi:
+                dist_bad.append((i, d, want["distance"]))
+    n_aside = sum(aside)
+    report.excluded = {"near contact": n_aside}
+    report.excluded_fraction = n_aside / max(len(pairs), 1)
+    if report.excluded_fraction > MAX_SET_ASIDE:
+        report.failures.append(Failure("pairs", n_aside, len(pairs), "", (), math.nan, math.nan,
+                                       note=f"{n_aside} of {len(pairs)} pairs lie within "
+                                       f"{CONTACT_REL:g} of contact: the case cannot judge"))
+    if wrong:
+        i = wrong[0]
+        want = _proximity(*pairs[i])
+        report.failures.append(Failure(
+            "intersect", len(wrong), len(pairs) - n_aside, "the same verdict", (i,),
+            float(verdicts[i]), float(want["intersect"]),
+            note=(f"{len(wrong)} of {len(pairs) - n_aside} pairs decided otherwise; first: "
+                  f"pair {i}, port {verdicts[i]}, oracle {want['intersect']} (distance "
+                  f"{want['distance']:.3g})")))
+    if dist_bad:
+        i, d, w = dist_bad[0]
+        report.failures.append(Failure(
+            "distance", len(dist_bad), len(pairs) - n_aside, f"{DISTANCE_REL:g}·scale", (i,),
+            d, w))
+    if wrong:
+        results = []
+        for mk in COLLIDE_MISTAKES:
+            left = sum(1 for i, (a, b) in enumerate(pairs)
+                       if not aside[i] and mistaken_verdict(mk.name, a, b, faces) != verdicts[i])
+            results.append((left, mk.text))
+        _diagnosis(report, results, len(wrong))
     return report
 
