@@ -770,6 +770,68 @@ fn proximity<'py>(
     Ok(out)
 }
 
+/// Scale-and-offset alignment `s·r + t ≈ m` of `estimate` (r) to the metric `depth` (m is
+/// the depth or its inverse, `space`; SPEC.md §17), float32 `(N,)` each: `method`
+/// `"ransac"` (relative `threshold`, at most `iterations`, adaptive stop at `confidence`,
+/// `seed`) or `"least_squares"`. Returns scale, offset, inliers, valid, residual_mean and
+/// residual_max.
+#[pyfunction]
+#[pyo3(signature = (estimate, depth, *, space = "disparity", method = "ransac", threshold = 0.05, iterations = 1000, confidence = Some(0.999), seed = 0))]
+#[allow(clippy::too_many_arguments)]
+fn align<'py>(
+    py: Python<'py>,
+    estimate: &Bound<'py, PyAny>,
+    depth: &Bound<'py, PyAny>,
+    space: &str,
+    method: &str,
+    threshold: f64,
+    iterations: u32,
+    confidence: Option<f64>,
+    seed: u64,
+) -> PyResult<Bound<'py, PyDict>> {
+    use unseen::warp::align::{Frame, RansacConfig, Space, least_squares, ransac};
+    let mut bound = Vec::new();
+    let (_, r) = array::<f32>("estimate", estimate, &[(None, "N")], &mut bound)?;
+    let (_, d) = array::<f32>("depth", depth, &[(None, "N")], &mut bound)?;
+    let space = match space {
+        "depth" => Space::Depth,
+        "disparity" => Space::Disparity,
+        other => {
+            return Err(PyValueError::new_err(format!(
+                "space: expected 'depth' or 'disparity', got {other:?}"
+            )));
+        }
+    };
+    let frames = [Frame {
+        estimate: &r,
+        depth: &d,
+    }];
+    let cfg = RansacConfig {
+        threshold,
+        iterations,
+        confidence,
+        seed,
+    };
+    let fit = match method {
+        "ransac" => py.detach(|| ransac(&frames, space, &cfg)),
+        "least_squares" => py.detach(|| least_squares(&frames, space)),
+        other => {
+            return Err(PyValueError::new_err(format!(
+                "method: expected 'ransac' or 'least_squares', got {other:?}"
+            )));
+        }
+    }
+    .map_err(py_err)?;
+    let out = PyDict::new(py);
+    out.set_item("scale", fit.scale)?;
+    out.set_item("offset", fit.offset)?;
+    out.set_item("inliers", fit.inliers)?;
+    out.set_item("valid", fit.valid)?;
+    out.set_item("residual_mean", fit.residual_mean)?;
+    out.set_item("residual_max", fit.residual_max)?;
+    Ok(out)
+}
+
 /// The crate version, SPEC.md's conventions version and the numerics revision (a port
 /// records them beside its goldens).
 #[pyfunction]
@@ -794,5 +856,6 @@ fn _unseen(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(versions, m)?)?;
     m.add_function(wrap_pyfunction!(adam, m)?)?;
     m.add_function(wrap_pyfunction!(proximity, m)?)?;
+    m.add_function(wrap_pyfunction!(align, m)?)?;
     Ok(())
 }

@@ -34,6 +34,7 @@ import json as _json
 from ._unseen import (
     Camera,
     adam,
+    align,
     backward,
     extrapolate as _extrapolate,
     load_cameras,
@@ -48,6 +49,7 @@ from ._unseen import compare_json as _compare_json
 __all__ = [
     "Camera",
     "adam",
+    "align",
     "backward",
     "compare",
     "extrapolate",

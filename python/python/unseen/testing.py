@@ -51,6 +51,10 @@ import numpy as np
 from . import Camera, backward, render
 from . import adam as _adam_oracle
 from . import proximity as _proximity
+from . import align as _align_oracle
+from ._align import (  # noqa: F401
+    ALIGN_MISTAKES, CONSENSUS_SLACK, LSQ_RTOL, RESIDUAL_SLACK, align_case, consensus,
+    mistaken_fit)
 from ._collide import (  # noqa: F401
     COLLIDE_MISTAKES, CONTACT_REL, DISTANCE_REL, FRUSTUM_FACES, MAX_SET_ASIDE, collide_case,
     frustum, mistaken_verdict)
@@ -1470,5 +1474,66 @@ def compare_collide(port, case=None, *, seed=0):
                        if not aside[i] and mistaken_verdict(mk.name, a, b, faces) != verdicts[i])
             results.append((left, mk.text))
         _diagnosis(report, results, len(wrong))
+    return report
+
+
+# -- Depth alignment (SPEC.md §17) ---------------------------------------------------------
+
+
+def compare_align(port, case=None, *, seed=0):
+    """Compare a port of the depth alignment with unseen's on ``case`` (``align_case(seed)``
+    by default).
+
+    ``port(estimate, depth, *, space, threshold, method)`` takes float32 ``(N,)`` arrays (a
+    pixel is valid when its depth is finite and positive and its estimate finite) and
+    returns ``(scale, offset)`` of ``scale·r + offset ≈ m`` (``m`` the depth, or its inverse
+    for ``space="disparity"``). ``method="least_squares"`` is compared number for number
+    (``LSQ_RTOL``); a RANSAC fit by its consensus under the oracle's rule (within
+    ``threshold·|m|``), which may fall ``CONSENSUS_SLACK`` short of the oracle's, and its
+    mean relative residual there (``RESIDUAL_SLACK`` above). On a failure each of
+    ``ALIGN_MISTAKES`` is tried and named when its fit predicts the port's clearly better
+    than the others. Returns a ``Report``.
+    """
+    case = align_case(seed) if case is None else case
+    r, d = case["estimate"], case["depth"]
+    space, thr, method = case["space"], case["threshold"], case["method"]
+    want = _align_oracle(r, d, space=space, method=method, threshold=thr)
+    got = port(r.copy(), d.copy(), space=space, threshold=thr, method=method)
+    s_p, t_p = (got["scale"], got["offset"]) if isinstance(got, dict) else got
+    s_p, t_p = float(s_p), float(t_p)
+    report = Report(f"depth alignment, {method} in {space} over {len(r)} pixels "
+                    f"({want['valid']} valid)", "unseen", units="")
+    if method == "least_squares":
+        for name, g, w in (("scale", s_p, want["scale"]), ("offset", t_p, want["offset"])):
+            tol = LSQ_RTOL * max(abs(want["scale"]), abs(want["offset"]))
+            if not abs(g - w) <= tol:
+                report.failures.append(Failure(name, 1, 1, f"rtol {LSQ_RTOL:g}", (), g, w))
+    else:
+        c_o, e_o = consensus(want["scale"], want["offset"], r, d, space=space, threshold=thr)
+        c_p, e_p = consensus(s_p, t_p, r, d, space=space, threshold=thr)
+        if not c_p >= c_o * (1 - CONSENSUS_SLACK):
+            report.failures.append(Failure(
+                "consensus", 1, 1, f"{CONSENSUS_SLACK:.0%} below the oracle's", (), c_p, c_o,
+                note=f"the port's fit holds {c_p} pixels within {thr:g}·|m|, the oracle's "
+                     f"{c_o} (scale {s_p:.6g} / {want['scale']:.6g}, offset {t_p:.6g} / "
+                     f"{want['offset']:.6g})"))
+        elif not e_p <= e_o * (1 + RESIDUAL_SLACK):
+            report.failures.append(Failure(
+                "residual", 1, 1, f"{RESIDUAL_SLACK:.0%} above the oracle's", (), e_p, e_o,
+                note=f"mean relative residual over the consensus {e_p:.4g}, the oracle's "
+                     f"{e_o:.4g}"))
+    if report.failures:
+        ok = np.isfinite(r) & np.isfinite(d) & (d > 0)
+        x = r[ok].astype(np.float64)
+        scale = float(np.mean(np.abs(s_p * x + t_p))) or 1.0
+        apart = lambda s, t: float(np.mean(np.abs((s - s_p) * x + (t - t_p)))) / scale  # noqa: E731
+        # How far each mistake's fit predicts from the port's, against how far the
+        # oracle's does: the naming rule on that ratio (in thousandths).
+        base, far = 1000, apart(want["scale"], want["offset"]) or 1.0
+        results = []
+        for mk in ALIGN_MISTAKES:
+            s_m, t_m = mistaken_fit(mk.name, r, d, space=space, threshold=thr, seed=seed)
+            results.append((min(10 * base, int(round(base * apart(s_m, t_m) / far))), mk.text))
+        _diagnosis(report, results, base)
     return report
 
