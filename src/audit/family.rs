@@ -14,6 +14,25 @@ pub struct Family {
     pub sha256: String,
 }
 
+impl Family {
+    /// The first 12 characters of the digest, for messages and reports.
+    pub fn short(&self) -> String {
+        self.sha256.chars().take(12).collect()
+    }
+
+    /// A record read from a file: a family name and a SHA-256 of 64 hex digits.
+    pub fn check(&self) -> Result<()> {
+        check_family_name(&self.name)?;
+        if self.sha256.len() != 64 || !self.sha256.chars().all(|c| c.is_ascii_hexdigit()) {
+            return Err(Error::invalid(format!(
+                "candidate family '{}': its SHA-256 is not 64 hex digits",
+                self.name
+            )));
+        }
+        Ok(())
+    }
+}
+
 /// The folder of a dataset that holds its candidate families.
 pub const FAMILIES_DIR: &str = "families";
 

@@ -153,6 +153,9 @@ impl Samples {
 
     /// Every sample names its revision; no two share (generator, variant, seed, revision).
     fn check(&self, path: &Path) -> Result<()> {
+        if let Some(f) = &self.provenance.candidates {
+            f.check().map_err(|e| e.at(path))?;
+        }
         for (i, a) in self.samples.iter().enumerate() {
             if a.numerics_revision == 0 {
                 return Err(Error::invalid(format!(
@@ -207,11 +210,7 @@ impl Samples {
             let name = |f: &Option<super::family::Family>| {
                 f.as_ref()
                     .map_or("the bundled candidates".to_string(), |f| {
-                        format!(
-                            "candidate family '{}' ({}…)",
-                            f.name,
-                            &f.sha256[..12.min(f.sha256.len())]
-                        )
+                        format!("candidate family '{}' ({}…)", f.name, f.short())
                     })
             };
             Some(format!(

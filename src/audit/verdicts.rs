@@ -287,7 +287,8 @@ pub struct Verdict {
     pub revisions: Vec<u32>,
     pub judged: usize,
     /// Planned seeds whose pair is the same computation (both runs evaluated one scene,
-    /// [`Pair::same_computation`]): counted towards the plan, not judged.
+    /// [`Pair::same_computation`]) or where the variant's mechanism did not apply
+    /// ([`Pair::not_applied`]): counted towards the plan, not judged.
     pub same_computation: usize,
     pub planned: usize,
     /// Median, mean and sample standard deviation of `full − variant` over the judged
@@ -661,6 +662,7 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
                 rule.alpha,
                 bootstrap_seed(&c.claim, &g, "hierarchical"),
             );
+            let conflicting = c.claim.variant == Variant::ConflictingViews;
             let mut verdict = match j.outcome {
                 stats::Outcome::Interim => {
                     format!(
@@ -669,6 +671,10 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
                         rule.planned
                     )
                 }
+                stats::Outcome::NotTested if conflicting => format!(
+                    "not tested here (on all {} seeds the same scene, or no colliding set matched the coverage)",
+                    c.same
+                ),
                 stats::Outcome::NotTested => format!(
                     "not tested here (same computation on all {} seeds: both runs evaluated the same scene)",
                     c.same
@@ -690,9 +696,14 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
             };
             if c.same > 0 && j.outcome != stats::Outcome::NotTested {
                 verdict += &format!(
-                    "; not tested on {} of {} seeds (same computation)",
+                    "; not tested on {} of {} seeds ({})",
                     c.same,
-                    c.same + c.diffs.len()
+                    c.same + c.diffs.len(),
+                    if conflicting {
+                        "the same scene, or no colliding set matched"
+                    } else {
+                        "same computation"
+                    }
                 );
             }
             let median = j.test.map_or(f64::NAN, |t| t.median);

@@ -545,7 +545,7 @@ impl Generators {
     }
 
     /// Whether slot `kind` is the ground-truth generator.
-    fn is_truth(&self, kind: SlotKind) -> bool {
+    pub(crate) fn is_truth(&self, kind: SlotKind) -> bool {
         match kind {
             SlotKind::Inpaint => self.inpaint.is_truth(),
             SlotKind::Depth => self.depth.is_truth(),

@@ -266,6 +266,15 @@ impl Run<'_> {
             // The coverage weight's points.
             key["init_stride"] = config.init_stride.into();
         }
+        // Gap cameras need the ground-truth generator's truth where it runs a slot
+        // (`makeable` in `write_plan`): named when neither slot above is the truth (a
+        // mixed configuration), so an all-truth or all-model run keeps its digest.
+        let truth_in_key = [SlotKind::Inpaint, SlotKind::Depth]
+            .iter()
+            .any(|&k| gens.is_truth(k));
+        if gens.truth.is_some() && !truth_in_key {
+            key["gap_truth"] = true.into();
+        }
         let step = self.step(&Step::Views, key, |w| {
             let mut found = Found::default();
             for index in 0..inputs.candidates.len() {

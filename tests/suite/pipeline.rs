@@ -1619,6 +1619,11 @@ fn audit_samples_round_trip_and_damaged_files_are_clear_errors() {
     fam.provenance.candidates = Some(family);
     fam.write(&path).unwrap();
     assert_eq!(Samples::read(&path).unwrap(), fam, "the family round-trips");
+    let damaged = t.path().join("family.json");
+    let text = std::fs::read_to_string(&path).unwrap();
+    std::fs::write(&damaged, text.replace(&"cd".repeat(32), "aéééé")).unwrap();
+    let e = Samples::read(&damaged).unwrap_err().to_string();
+    assert!(e.contains("family.json") && e.contains("64 hex digits"), "{e}");
     s.write(&path).unwrap();
     let text = std::fs::read_to_string(&path).unwrap();
     assert_eq!(
