@@ -219,17 +219,41 @@ fn load_view(
     })
 }
 
-/// A view of an unseen-layout dataset (SPEC.md §14) that its `cameras.json` does not list,
-/// such as a candidate family's (SPEC.md §20.7): `images/<name>.png` under `cam` (full
-/// size), with `depth/<name>.exr` when present, loaded as [`load`] loads a listed view.
-/// `None` when the dataset is of another layout or has no image of that name.
+/// A view of an unseen-layout dataset (SPEC.md §14) that its `cameras.json` does not list:
+/// a candidate family's (SPEC.md §20.7), `images/<name>.png` with `depth/<name>.exr` when
+/// present, loaded as [`load`] loads a listed view. Only a camera that one of the
+/// dataset's `families/*.json` lists under that name with that very pose has it (a user's
+/// camera of the same name elsewhere is not that image's truth); `None` otherwise, and for
+/// a name that is not a plain file stem.
 pub fn load_unlisted_view(root: &Path, cam: &Camera, opts: &LoadOptions) -> Result<Option<View>> {
+    let plain = !cam.name.is_empty()
+        && !cam.name.starts_with('.')
+        && !cam.name.contains(['/', '\\']);
     let img = root.join("images").join(format!("{}.png", cam.name));
-    if detect(root)? != Layout::Unseen || !img.is_file() {
+    if !plain || detect(root)? != Layout::Unseen || !img.is_file() || !in_a_family(root, cam)? {
         return Ok(None);
     }
     let depth = root.join("depth").join(format!("{}.exr", cam.name));
     load_view(cam, &img, Some(&depth), opts).map(Some)
+}
+
+/// Whether one of `root/families/*.json` lists `cam` (its name, size, intrinsics and pose).
+fn in_a_family(root: &Path, cam: &Camera) -> Result<bool> {
+    let Ok(entries) = std::fs::read_dir(root.join("families")) else {
+        return Ok(false);
+    };
+    let mut files: Vec<std::path::PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "json"))
+        .filter(|p| p.file_stem().is_some_and(|s| s != "meta"))
+        .collect();
+    files.sort();
+    for f in files {
+        if read_cameras_json(&f)?.iter().any(|c| c == cam) {
+            return Ok(true);
+        }
+    }
+    Ok(false)
 }
 
 fn names_in(v: &serde_json::Value, key: &str, path: &Path) -> Result<Vec<String>> {

@@ -897,6 +897,7 @@ pub fn candidate_truth(inputs: &Inputs) -> Result<Vec<Truth>> {
                     "the ground-truth generator needs the depth of candidate '{}'",
                     c.name
                 ))
+                .at(&inputs.data.root.join("depth").join(format!("{}.exr", c.name)))
             })?;
             Ok(Truth {
                 camera: c.clone(),

@@ -437,14 +437,23 @@ fn candidate_families_have_their_truth_by_name() {
                 "{room}/{name}: co-visible {ours:.4} here, {theirs} by the generator"
             );
         }
-        // A name with no image: none.
-        let mut ghost = d.views[0].camera.clone();
-        ghost.name = "no_such_view".into();
-        assert!(
-            dataset::load_unlisted_view(&root, &ghost, &LoadOptions::default())
+        // A name with no image, a family view's name at another pose (a user's camera is
+        // not that image's truth), a name that is not a plain stem: none.
+        let none = |cam: &unseen::camera::Camera| {
+            dataset::load_unlisted_view(&root, cam, &LoadOptions::default())
                 .unwrap()
                 .is_none()
-        );
+        };
+        let mut ghost = d.views[0].camera.clone();
+        ghost.name = "no_such_view".into();
+        assert!(none(&ghost));
+        ghost.name = "ring_000".into();
+        assert!(none(&ghost), "ring_000's image at another pose");
+        let mut moved = cams[0].clone();
+        moved.center.x += 1e-6;
+        assert!(none(&moved));
+        ghost.name = "../images/ring_000".into();
+        assert!(none(&ghost));
     }
 }
 
