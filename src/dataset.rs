@@ -226,9 +226,8 @@ fn load_view(
 /// camera of the same name elsewhere is not that image's truth); `None` otherwise, and for
 /// a name that is not a plain file stem.
 pub fn load_unlisted_view(root: &Path, cam: &Camera, opts: &LoadOptions) -> Result<Option<View>> {
-    let plain = !cam.name.is_empty()
-        && !cam.name.starts_with('.')
-        && !cam.name.contains(['/', '\\']);
+    let plain =
+        !cam.name.is_empty() && !cam.name.starts_with('.') && !cam.name.contains(['/', '\\']);
     let img = root.join("images").join(format!("{}.png", cam.name));
     if !plain || detect(root)? != Layout::Unseen || !img.is_file() || !in_a_family(root, cam)? {
         return Ok(None);

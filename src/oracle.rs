@@ -219,10 +219,7 @@ pub fn dump_adam(
         "eps": eps,
         "constants": conventions,
     });
-    let manifest = Manifest {
-        conventions: Some(conventions.to_string()),
-        ..Manifest::new("oracle adam", "", inputs, wr.entries)
-    };
+    let manifest = Manifest::new("oracle adam", "", inputs, wr.entries);
     manifest.write(dir)?;
     Ok(())
 }

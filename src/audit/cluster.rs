@@ -383,6 +383,7 @@ fn work(cfg: &AuditConfig, job: &Job, (pixels, candidates): (f64, usize)) -> f64
 /// The training pixels of the dataset at the audit's training resolution (from its first
 /// candidate camera's size), and its number of candidate views.
 fn training_pixels(cfg: &AuditConfig, dataset: &Path) -> Result<(f64, usize)> {
+    super::family::family(dataset, cfg.candidates.as_deref())?; // a clear error when unknown
     let file = super::family::candidates_file(dataset, cfg.candidates.as_deref());
     let cams = crate::camera::inria::read_cameras_json(&file)?;
     let c = cams

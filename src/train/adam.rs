@@ -293,8 +293,9 @@ pub enum Constants {
     /// The trainer's: β rounded to f32 first; `1 − β` in f32 (exact) and the bias
     /// corrections' powers of that f32 β in f64.
     Unseen,
-    /// `torch.optim.Adam`'s, whose β are Python floats: the decay multiplies by f32(β),
-    /// the gradient term by f32(1 − β) with `1 − β` in f64 (0.001 for β2 = 0.999, not the
+    /// `torch.optim.Adam`'s, whose β are Python floats: the decay multiplies by f32(β)
+    /// (PyTorch forms the first moment by `lerp` with weight f32(1 − β1), whose rounding
+    /// the port comparison allows), the gradient term by f32(1 − β) with `1 − β` in f64 (0.001 for β2 = 0.999, not the
     /// f32 `1 − 0.999f32` = 0.00099998713), the bias corrections are powers of the f64 β,
     /// and the step size is f32(lr / (1 − β1ᵗ)) with lr in f64.
     PyTorch,

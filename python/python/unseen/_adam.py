@@ -18,7 +18,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import adam as _oracle
 
 #: Unit roundoff of float32.
 U32 = 2.0 ** -24

@@ -1333,6 +1333,32 @@ def _adam_failing(got, want, bounds):
     return n
 
 
+def _adam_controls(got, want, bounds, params, grads, lr, betas, eps, conventions):
+    """Hypotheses the mistakes must beat to be named: the learning rate scaled (Adam's
+    update is linear in lr, so the parameters move by c times the oracle's; on one step a
+    missing first-moment correction is exactly that, and cannot be told from it) and the
+    other constants profile."""
+    out = []
+    if "params" in got:
+        x0 = params.astype(np.float64)
+        moved = want["params"][-1] - x0
+        port = got["params"].astype(np.float64)
+        port = port[-1] if port.ndim == 2 else port
+        ok = np.abs(moved) > 0
+        if ok.any():
+            c = float(np.median((port[ok] - x0[ok]) / moved[ok]))
+            scaled = dict(want)
+            scaled["params"] = np.vstack([want["params"][:-1], x0 + c * moved])
+            out.append((_adam_failing(got, scaled, bounds),
+                        f"the learning rate scaled by {c:.4g} (or a mistake that equals it "
+                        "on this case)"))
+    other = "unseen" if conventions == "pytorch" else "pytorch"
+    alt = _adam_oracle(params, grads, lr=lr, betas=betas, eps=eps, conventions=other)
+    alt = {k: np.asarray(v, np.float64) for k, v in alt.items()}
+    out.append((_adam_failing(got, alt, bounds), f"the other constants profile ({other!r})"))
+    return out
+
+
 def compare_adam(port, case=None, *, seed=0, conventions="pytorch"):
     """Compare a port of Adam with unseen's on ``case`` (``adam_case(seed)`` by default).
 
@@ -1381,7 +1407,7 @@ def compare_adam(port, case=None, *, seed=0, conventions="pytorch"):
             report.failures.append(f)
     if report.failures and got:
         base = _adam_failing(got, want, bounds)
-        results = []
+        results = _adam_controls(got, want, bounds, params, grads, lr, betas, eps, conventions)
         for mk in ADAM_MISTAKES:
             ref = adam_reference(params, grads, lr=lr, betas=betas, eps=eps, mistake=mk.name,
                                  conventions=conventions)
