@@ -1623,7 +1623,10 @@ fn audit_samples_round_trip_and_damaged_files_are_clear_errors() {
     let text = std::fs::read_to_string(&path).unwrap();
     std::fs::write(&damaged, text.replace(&"cd".repeat(32), "aéééé")).unwrap();
     let e = Samples::read(&damaged).unwrap_err().to_string();
-    assert!(e.contains("family.json") && e.contains("64 hex digits"), "{e}");
+    assert!(
+        e.contains("family.json") && e.contains("64 hex digits"),
+        "{e}"
+    );
     s.write(&path).unwrap();
     let text = std::fs::read_to_string(&path).unwrap();
     assert_eq!(
@@ -2664,4 +2667,22 @@ fn the_cycle_paradigm_is_the_same_bits_on_1_and_2_threads() {
     let c = compare(&a, &b, 0.0).unwrap();
     assert!(c.steps.iter().all(|s| s.identical), "{}", c.table());
     assert!(c.steps.len() >= 8, "{} steps compared", c.steps.len());
+}
+
+/// A candidate family's views are not in the dataset's cameras.json: their truth comes by
+/// name (SPEC.md §20.7). Two ring views facing apart (azimuths −90° and +90°) leave a gap
+/// whose half-way camera sees neither end, so the ground-truth generator cannot make its
+/// truth and the plan gets no camera there; two neighbours can (SPEC.md §20.2).
+#[test]
+fn a_ring_family_brings_its_truth_and_a_gap_facing_apart_cannot_be_made() {
+    use unseen::pipeline::generators::{GroundTruth, candidate_truth};
+    let t = TempDir::new("pipeline-ring");
+    let ring = lounge().join("families/ring-13.json");
+    let Tiny { inp, .. } = TinyRun::new().candidates(&ring).build(t.path());
+    let truth = candidate_truth(&inp).unwrap();
+    assert_eq!(truth.len(), 13);
+    assert!(truth.iter().all(|v| v.depth.iter().any(|&z| z > 0.0)));
+    let gt = GroundTruth::new(truth, unseen::pipeline::Inconsistency::NONE, 0);
+    assert!(!gt.can_make_between("ring_012", "ring_000").unwrap());
+    assert!(gt.can_make_between("ring_000", "ring_001").unwrap());
 }
