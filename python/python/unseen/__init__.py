@@ -42,6 +42,7 @@ from ._unseen import (
     proximity,
     render,
     save_ply,
+    ssim,
     versions as _versions,
 )
 from ._unseen import compare_json as _compare_json
@@ -58,6 +59,7 @@ __all__ = [
     "proximity",
     "render",
     "save_ply",
+    "ssim",
     "versions",
 ]
 

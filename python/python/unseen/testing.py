@@ -52,6 +52,10 @@ from . import Camera, backward, render
 from . import adam as _adam_oracle
 from . import proximity as _proximity
 from . import align as _align_oracle
+from . import ssim as _ssim_oracle
+from ._loss import (  # noqa: F401
+    CONVENTIONS as LOSS_CONVENTIONS, L1_RTOL, LAMBDA_DSSIM, LOSS_MISTAKES, SSIM_ATOL, loss_case,
+    ssim_reference)
 from ._align import (  # noqa: F401
     ALIGN_MISTAKES, CONSENSUS_SLACK, LSQ_RTOL, RESIDUAL_SLACK, align_case, consensus,
     mistaken_fit)
@@ -1560,6 +1564,69 @@ def compare_align(port, case=None, *, seed=0):
         for mk in ALIGN_MISTAKES:
             s_m, t_m = mistaken_fit(mk.name, r, d, space=space, threshold=thr, seed=seed)
             results.append((min(10 * base, int(round(base * apart(s_m, t_m) / far))), mk.text))
+        _diagnosis(report, results, base)
+    return report
+
+
+# -- The training loss: L1, SSIM, D-SSIM (SPEC.md §13, §14.1) ------------------------------
+
+
+def compare_loss(port, case=None, *, seed=0, conventions="inria"):
+    """Compare a port of the training loss with unseen's on ``case`` (``loss_case(seed)``
+    by default).
+
+    ``port(x, y)`` takes two float32 ``(H, W, 3)`` images in [0, 1] and returns a dict with
+    any of ``ssim`` (the mean SSIM), ``l1`` (the mean absolute difference) and ``loss``
+    (INRIA's ``0.8·L1 + 0.2·(1 − SSIM)``). ``conventions`` is the SSIM border
+    (``LOSS_CONVENTIONS``: "inria" zero padding, "valid" pytorch-msssim, "reflect"
+    torchmetrics). SSIM may differ by ``SSIM_ATOL``, L1 by ``L1_RTOL`` relative, the loss by
+    their weighted sum; on a failure the other conventions and ``LOSS_MISTAKES`` are tried
+    and one is named when it predicts the port's value clearly better than the others.
+    Returns a ``Report``.
+    """
+    case = loss_case(seed) if case is None else case
+    x, y = case["x"], case["y"]
+    want = _ssim_oracle(x, y, conventions=conventions)
+    oracle = {"ssim": want["ssim"], "l1": want["l1"]}
+    oracle["loss"] = (1 - LAMBDA_DSSIM) * oracle["l1"] + LAMBDA_DSSIM * (1 - oracle["ssim"])
+    tol = {"ssim": SSIM_ATOL, "l1": L1_RTOL * abs(oracle["l1"]) + 1e-7}
+    tol["loss"] = (1 - LAMBDA_DSSIM) * tol["l1"] + LAMBDA_DSSIM * SSIM_ATOL
+    h, w = x.shape[:2]
+    report = Report(f"loss on {h}×{w} images", conventions, units="")
+    got = {k: float(v) for k, v in port(x.copy(), y.copy()).items() if k in oracle}
+    if not got:
+        report.failures.append(Failure("loss", 1, 1, "", (), math.nan, math.nan,
+                                       note="the port returned none of ssim, l1, loss"))
+        return report
+    failed = []
+    for k, v in got.items():
+        if not abs(v - oracle[k]) <= tol[k]:
+            failed.append(k)
+            report.failures.append(Failure(k, 1, 1, f"atol {tol[k]:.2g}", (), v, oracle[k]))
+    key = next((k for k in ("ssim", "loss") if k in failed), None)
+    if key is not None:
+        # How far each hypothesis's value lies from the port's, against the oracle's (in
+        # thousandths), under the naming rule.
+        far = abs(got[key] - oracle[key]) or 1.0
+        l1 = oracle["l1"]
+
+        def value(ssim, dssim=True):
+            if key == "ssim":
+                return ssim
+            return (1 - LAMBDA_DSSIM) * l1 + LAMBDA_DSSIM * ((1 - ssim) if dssim else ssim)
+
+        hypotheses = [(f"the {c!r} SSIM convention", value(ssim_reference(x, y, conventions=c)))
+                      for c in LOSS_CONVENTIONS if c != conventions]
+        for mk in LOSS_MISTAKES:
+            if mk.name == "no_dssim":
+                if key == "loss":
+                    hypotheses.append((mk.text, value(oracle["ssim"], dssim=False)))
+                continue
+            hypotheses.append((mk.text, value(ssim_reference(x, y, conventions=conventions,
+                                                             mistake=mk.name))))
+        base = 1000
+        results = [(min(10 * base, int(round(base * abs(got[key] - v) / far))), text)
+                   for text, v in hypotheses]
         _diagnosis(report, results, base)
     return report
 

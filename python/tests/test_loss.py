@@ -1,0 +1,118 @@
+"""The training loss through unseen.testing (SPEC.md §13, §14.1): the oracle's binding, six
+seeded wrong ports (each must fail, and be named on nearly every seed) and real
+third-party SSIMs under their conventions — INRIA's formula in torch (zero padding),
+pytorch-msssim (valid) and torchmetrics (reflect) — on 20 seeds of ``loss_case``, each
+failing under another convention with that convention named. The torch-based ports are
+skipped, with the reason printed, where their package is not installed.
+"""
+
+import numpy as np
+import pytest
+
+import unseen
+from unseen import testing as ut
+
+SEEDS = range(20)
+
+
+def test_the_oracle_binding_and_its_conventions():
+    case = ut.loss_case(0)
+    x, y = case["x"], case["y"]
+    for conv in ut.LOSS_CONVENTIONS:
+        out = unseen.ssim(x, y, conventions=conv)
+        assert abs(out["ssim"] - ut.ssim_reference(x, y, conventions=conv)) < 1e-9, conv
+        assert abs(out["ssim"] - out["map"].mean()) < 1e-12, conv
+    assert unseen.ssim(x, y, conventions="valid")["map"].shape == (x.shape[0] - 10, x.shape[1] - 10)
+    assert unseen.ssim(x, x)["ssim"] == pytest.approx(1.0, abs=1e-12)
+    assert unseen.ssim(x, y)["l1"] == pytest.approx(float(np.abs(x - y).astype(np.float64).mean()))
+    with pytest.raises(ValueError, match="conventions"):
+        unseen.ssim(x, y, conventions="same")
+    with pytest.raises(ValueError, match="larger than 10x10"):
+        unseen.ssim(x[:8, :8].copy(), y[:8, :8].copy(), conventions="reflect")
+    with pytest.raises(ValueError, match="y: expected"):
+        unseen.ssim(x, y[:, :, :2].copy())
+
+
+@pytest.mark.parametrize("mistake", [m.name for m in ut.LOSS_MISTAKES])
+def test_wrong_ports_fail_with_their_mistake_named(mistake):
+    text = next(m.text for m in ut.LOSS_MISTAKES if m.name == mistake)
+
+    def port(x, y):
+        o = unseen.ssim(x, y)
+        if mistake == "no_dssim":
+            return {"loss": 0.8 * o["l1"] + 0.2 * o["ssim"]}
+        s = ut.ssim_reference(x, y, mistake=mistake)
+        return {"ssim": s, "loss": 0.8 * o["l1"] + 0.2 * (1 - s)}
+
+    named = 0
+    for seed in range(12):
+        r = ut.compare_loss(port, seed=seed)
+        assert not r.ok, f"seed {seed}: the mistake passed"
+        assert r.cause in ("", text), f"seed {seed}: another cause named: {r.message()}"
+        named += r.cause == text
+    assert named >= 11, f"named on {named} of 12"  # measured: 11–12 of 12
+
+
+def _torch():
+    return pytest.importorskip("torch", reason="torch is not installed "
+                               "(python/requirements-port.txt)")
+
+
+def _inria_port():
+    torch = _torch()
+    F = torch.nn.functional
+
+    def to(a):
+        return torch.from_numpy(a).permute(2, 0, 1)[None]
+
+    def port(x, y):
+        """INRIA's loss_utils formula in float32: 2D Gaussian window, zero padding 5."""
+        t = torch.arange(11, dtype=torch.float32) - 5
+        g = torch.exp(-t * t / (2 * 1.5 * 1.5))
+        g = g / g.sum()
+        w = (g[:, None] @ g[None, :]).expand(3, 1, 11, 11).contiguous()
+        a, b = to(x), to(y)
+        blur = lambda v: F.conv2d(v, w, padding=5, groups=3)  # noqa: E731
+        m1, m2 = blur(a), blur(b)
+        s11, s22, s12 = blur(a * a) - m1 ** 2, blur(b * b) - m2 ** 2, blur(a * b) - m1 * m2
+        ssim = (((2 * m1 * m2 + 1e-4) * (2 * s12 + 9e-4))
+                / ((m1 ** 2 + m2 ** 2 + 1e-4) * (s11 + s22 + 9e-4))).mean()
+        l1 = (a - b).abs().mean()
+        return {"ssim": ssim.item(), "l1": l1.item(), "loss": (0.8 * l1 + 0.2 * (1 - ssim)).item()}
+
+    return port
+
+
+def _msssim_port():
+    _torch()
+    ms = pytest.importorskip("pytorch_msssim", reason="pytorch-msssim is not installed "
+                             "(python/requirements-port.txt)")
+    import torch
+
+    to = lambda a: torch.from_numpy(a).permute(2, 0, 1)[None]  # noqa: E731
+    return lambda x, y: {"ssim": ms.ssim(to(x), to(y), data_range=1.0).item()}
+
+
+def _torchmetrics_port():
+    _torch()
+    tm = pytest.importorskip("torchmetrics.functional.image", reason="torchmetrics is not "
+                             "installed (python/requirements-port.txt)")
+    import torch
+
+    to = lambda a: torch.from_numpy(a).permute(2, 0, 1)[None]  # noqa: E731
+    return lambda x, y: {
+        "ssim": tm.structural_similarity_index_measure(to(x), to(y), data_range=1.0).item()}
+
+
+@pytest.mark.parametrize("make, conventions", [(_inria_port, "inria"),
+                                               (_msssim_port, "valid"),
+                                               (_torchmetrics_port, "reflect")],
+                         ids=["inria-torch", "pytorch-msssim", "torchmetrics"])
+def test_third_party_ssim_passes_under_its_convention(make, conventions):
+    port = make()
+    for seed in SEEDS:
+        r = ut.compare_loss(port, seed=seed, conventions=conventions)
+        assert r.ok, f"seed {seed}: {r.message()}"
+    other = "valid" if conventions == "inria" else "inria"
+    r = ut.compare_loss(port, seed=0, conventions=other)
+    assert not r.ok and r.cause == f"the {conventions!r} SSIM convention", r.message()
