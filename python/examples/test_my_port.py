@@ -1,7 +1,9 @@
 """A test a GPU port copies: let `unseen.testing.check_port` render and differentiate seeded
 scenes of every family with unseen (the oracle) and with the port under test, and judge
-them (SPEC.md §8.1); and `unseen.testing.compare_adam` judge its optimizer (SPEC.md §14.2;
-replace `port_adam`, set ADAM_CONVENTIONS).
+them (SPEC.md §8.1); and `unseen.testing.compare_adam`, `compare_collide`, `compare_align`
+and `compare_loss` judge its optimizer, frustum collision test, depth alignment and loss
+(replace `port_adam`, `port_collide`, `port_align`, `port_loss`; set ADAM_CONVENTIONS and
+LOSS_CONVENTIONS).
 
 To test your port, replace `port_render` / `port_backward` with calls into it (gsplat's
 conventions: wxyz quaternions, log scales, logit opacities, (N, K, 3) SH, K and a
@@ -76,3 +78,38 @@ def test_adam_matches_the_oracle(seed):
     report = testing.compare_adam(port_adam, seed=seed, conventions=ADAM_CONVENTIONS)
     print(report.message())
     assert report.ok, report.message()
+
+
+# -- Frustum collisions (SPEC.md §16.1), depth alignment (§17), the loss (§13, §14.1) -----
+#: The SSIM border your loss follows: "inria" (zero padding), "valid" (pytorch-msssim) or
+#: "reflect" (torchmetrics).
+LOSS_CONVENTIONS = "inria"
+
+
+def port_collide(a, b, faces):
+    """The port under test: whether two frustums ((8, 3) vertices, their faces) intersect,
+    touching included; or {"intersect": bool, "distance": float}."""
+    return unseen.proximity(a, b)["intersect"]
+
+
+def port_align(estimate, depth, *, space, threshold, method):
+    """The port under test: (scale, offset) of scale·estimate + offset ≈ depth (or 1/depth
+    for space="disparity"), by RANSAC with a relative threshold or by least squares."""
+    fit = unseen.align(estimate, depth, space=space, threshold=threshold, method=method)
+    return fit["scale"], fit["offset"]
+
+
+def port_loss(x, y):
+    """The port under test: any of ssim, l1 and INRIA's loss 0.8·L1 + 0.2·(1 − SSIM)."""
+    out = unseen.ssim(x, y, conventions=LOSS_CONVENTIONS)
+    return {"ssim": out["ssim"], "l1": out["l1"],
+            "loss": 0.8 * out["l1"] + 0.2 * (1 - out["ssim"])}
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_stages_match_the_oracle(seed):
+    for report in (testing.compare_collide(port_collide, seed=seed),
+                   testing.compare_align(port_align, seed=seed),
+                   testing.compare_loss(port_loss, seed=seed, conventions=LOSS_CONVENTIONS)):
+        print(report.message())
+        assert report.ok, report.message()
