@@ -14,9 +14,9 @@ then run on the same case; one is named when it explains the port's values clear
 than every other (``NAME_MAX_LEFT``, ``NAME_MIN_RATIO``, as for the rasterizer).
 """
 
-from dataclasses import dataclass
-
 import numpy as np
+
+from ._stage import StageMistake
 
 
 #: Unit roundoff of float32.
@@ -68,23 +68,15 @@ def adam_bounds(params, grads, trace, *, lr, betas=BETAS, eps=EPS):
     return out
 
 
-@dataclass(frozen=True)
-class AdamMistake:
-    """A known way to get Adam wrong, as the float64 update it makes."""
-
-    name: str
-    text: str
-
-
 ADAM_MISTAKES = (
-    AdamMistake("no_bias_correction", "no bias correction (step lr, denominator √v + ε)"),
-    AdamMistake("no_first_correction", "the first moment's bias correction missing (step lr)"),
-    AdamMistake("no_second_correction", "the second moment's bias correction missing (√v + ε)"),
-    AdamMistake("eps_inside_sqrt", "ε inside the square root (√(v̂ + ε))"),
-    AdamMistake("eps_hat", "ε added before the bias correction (Keras ε̂: lr·√(1−β2ᵗ)/(1−β1ᵗ) · m/(√v + ε))"),
-    AdamMistake("betas_swapped", "β1 and β2 swapped"),
-    AdamMistake("step_off_by_one", "the step count one ahead (bias corrections of t + 1)"),
-    AdamMistake("abs_not_square", "the second moment of |g| instead of g²"),
+    StageMistake("no_bias_correction", "no bias correction (step lr, denominator √v + ε)"),
+    StageMistake("no_first_correction", "the first moment's bias correction missing (step lr)"),
+    StageMistake("no_second_correction", "the second moment's bias correction missing (√v + ε)"),
+    StageMistake("eps_inside_sqrt", "ε inside the square root (√(v̂ + ε))"),
+    StageMistake("eps_hat", "ε added before the bias correction (Keras ε̂: lr·√(1−β2ᵗ)/(1−β1ᵗ) · m/(√v + ε))"),
+    StageMistake("betas_swapped", "β1 and β2 swapped"),
+    StageMistake("step_off_by_one", "the step count one ahead (bias corrections of t + 1)"),
+    StageMistake("abs_not_square", "the second moment of |g| instead of g²"),
 )
 
 

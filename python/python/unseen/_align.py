@@ -9,9 +9,9 @@ pixels may exceed the oracle's by ``RESIDUAL_SLACK``. Least squares is determini
 compared number for number (``LSQ_RTOL``).
 """
 
-from dataclasses import dataclass
-
 import numpy as np
+
+from ._stage import StageMistake
 
 #: A port's consensus may be this share below the oracle's: two RANSACs with a final
 #: least-squares refit on their inliers land on the same structure, and differ by the
@@ -68,19 +68,11 @@ def align_case(seed):
             "threshold": 0.05, "method": method}
 
 
-@dataclass(frozen=True)
-class AlignMistake:
-    """A known way to get the alignment wrong, as the fit it makes."""
-
-    name: str
-    text: str
-
-
 ALIGN_MISTAKES = (
-    AlignMistake("wrong_space", "the fit in the other space (depth for disparity or back)"),
-    AlignMistake("no_offset", "no offset (s·r ≈ m through the origin)"),
-    AlignMistake("no_ransac", "least squares over every pixel (outliers included)"),
-    AlignMistake("swapped", "estimate and target swapped (r fitted to m)"),
+    StageMistake("wrong_space", "the fit in the other space (depth for disparity or back)"),
+    StageMistake("no_offset", "no offset (s·r ≈ m through the origin)"),
+    StageMistake("no_ransac", "least squares over every pixel (outliers included)"),
+    StageMistake("swapped", "estimate and target swapped (r fitted to m)"),
 )
 
 

@@ -9,9 +9,9 @@ longer overlaps) — and judges every other pair's verdict exactly, and a port's
 where it gives one, within ``DISTANCE_REL`` of the scale beyond the oracle's own interval.
 """
 
-from dataclasses import dataclass
-
 import numpy as np
+
+from ._stage import StageMistake
 
 #: Pairs closer to contact than this share of the scale (the largest vertex coordinate
 #: magnitude of the two, as SPEC.md §16.1) are set aside: a float64 port's own contact
@@ -143,20 +143,12 @@ def _separated_on(axis, a, b):
     return pa.max() < pb.min() or pb.max() < pa.min()
 
 
-@dataclass(frozen=True)
-class CollideMistake:
-    """A known way to get the frustum test wrong, as the verdict it gives."""
-
-    name: str
-    text: str
-
-
 COLLIDE_MISTAKES = (
-    CollideMistake("aabb", "axis-aligned bounding boxes instead of the frustums"),
-    CollideMistake("spheres", "bounding spheres (about the centroids) instead of the frustums"),
-    CollideMistake("vertex_containment", "a vertex of one inside the other (misses edges "
+    StageMistake("aabb", "axis-aligned bounding boxes instead of the frustums"),
+    StageMistake("spheres", "bounding spheres (about the centroids) instead of the frustums"),
+    StageMistake("vertex_containment", "a vertex of one inside the other (misses edges "
                    "crossing faces and edge-edge overlaps)"),
-    CollideMistake("face_axes_only", "separating axes from face normals only (no edge × edge "
+    StageMistake("face_axes_only", "separating axes from face normals only (no edge × edge "
                    "axes: false collisions)"),
 )
 

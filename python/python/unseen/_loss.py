@@ -9,9 +9,9 @@ the window's radius and averages every pixel (``"reflect"``); the border shifts 
 about 1e-3, far beyond rounding, so a port is judged under the convention it follows.
 """
 
-from dataclasses import dataclass
-
 import numpy as np
+
+from ._stage import StageMistake
 
 #: |port − oracle| allowed on the mean SSIM. Float32 ports form σ² = E[x²] − μ² with
 #: cancellation (up to a few ulps of E[x²] per pixel, × 1/C2 ≈ 1.1e3 in SSIM where the
@@ -67,21 +67,13 @@ def _blur(img, k, padding):
     return sum(k[i] * rows[:, i:w - 2 * r + i] for i in range(11))
 
 
-@dataclass(frozen=True)
-class LossMistake:
-    """A known way to get the loss wrong, with the reference SSIM settings it amounts to."""
-
-    name: str
-    text: str
-
-
 LOSS_MISTAKES = (
-    LossMistake("data_range_255", "C1, C2 for a data range of 255 on [0, 1] images"),
-    LossMistake("box_window", "an 11×11 box window instead of the Gaussian"),
-    LossMistake("sigma_1", "a Gaussian window of σ = 1 instead of 1.5"),
-    LossMistake("sample_covariance", "sample (N/(N−1)) instead of population moments"),
-    LossMistake("grayscale", "SSIM of the channel mean instead of per channel"),
-    LossMistake("no_dssim", "SSIM added instead of 1 − SSIM (the loss only)"),
+    StageMistake("data_range_255", "C1, C2 for a data range of 255 on [0, 1] images"),
+    StageMistake("box_window", "an 11×11 box window instead of the Gaussian"),
+    StageMistake("sigma_1", "a Gaussian window of σ = 1 instead of 1.5"),
+    StageMistake("sample_covariance", "sample (N/(N−1)) instead of population moments"),
+    StageMistake("grayscale", "SSIM of the channel mean instead of per channel"),
+    StageMistake("no_dssim", "SSIM added instead of 1 − SSIM (the loss only)"),
 )
 
 
