@@ -342,6 +342,22 @@ fn bundled_scenes_load_with_split_depth_and_points() {
     assert_eq!(half.views[0].camera.fx * 2.0, full.views[0].camera.fx);
 }
 
+/// Whether world point `p` projects into `view` (camera z above `near`) onto a pixel whose
+/// depth agrees with its camera z within 2 % (the generator's co-visibility rule).
+fn seen_at_depth(view: &dataset::View, p: glam::DVec3, near: f64) -> bool {
+    let c = &view.camera;
+    let q = c.camera_from_world_point(p);
+    if q.z <= near {
+        return false;
+    }
+    let (u, r) = (c.fx * q.x / q.z + c.cx, c.fy * q.y / q.z + c.cy);
+    if u < 0.0 || r < 0.0 || u >= c.width as f64 || r >= c.height as f64 {
+        return false;
+    }
+    let zt = view.depth.as_ref().unwrap()[r as usize * c.width as usize + u as usize] as f64;
+    zt > 0.0 && (zt - q.z).abs() <= 0.02 * q.z
+}
+
 /// The candidate families of the bundled rooms (SPEC.md §20.7) bring their truth by name:
 /// every view of every family loads (`dataset::load_unlisted_view`) with its depth, and
 /// each view's co-visible fraction recomputed here — its pixels' surface points seen by
@@ -413,19 +429,7 @@ fn candidate_families_have_their_truth_by_name() {
                         continue;
                     }
                     let p = cam.pixel_point(x, y, z as f64);
-                    seen += usize::from(train.iter().any(|t| {
-                        let c = &t.camera;
-                        let q = c.camera_from_world_point(p);
-                        if q.z <= 0.01 {
-                            return false;
-                        }
-                        let (u, r) = (c.fx * q.x / q.z + c.cx, c.fy * q.y / q.z + c.cy);
-                        if u < 0.0 || r < 0.0 || u >= c.width as f64 || r >= c.height as f64 {
-                            return false;
-                        }
-                        let zt = t.depth.as_ref().unwrap()[r as usize * w + u as usize] as f64;
-                        zt > 0.0 && (zt - q.z).abs() <= 0.02 * q.z
-                    }));
+                    seen += usize::from(train.iter().any(|t| seen_at_depth(t, p, 0.01)));
                 }
             }
             let ours = seen as f64 / (w * h) as f64;
@@ -467,20 +471,11 @@ fn bundled_points_reproject_onto_the_depth_maps() {
     let mut ok = 0;
     for p in pts.xyz.iter().step_by(7) {
         let pw = glam::DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-        let hit = d.train.iter().chain(&d.test).any(|&i| {
-            let v = &d.views[i];
-            let c = &v.camera;
-            let q = c.camera_from_world_point(pw);
-            if q.z <= 0.0 {
-                return false;
-            }
-            let (u, w) = (c.fx * q.x / q.z + c.cx, c.fy * q.y / q.z + c.cy);
-            if u < 0.0 || w < 0.0 || u >= c.width as f64 || w >= c.height as f64 {
-                return false;
-            }
-            let z = v.depth.as_ref().unwrap()[w as usize * c.width as usize + u as usize] as f64;
-            (z - q.z).abs() < 0.02 * q.z
-        });
+        let hit = d
+            .train
+            .iter()
+            .chain(&d.test)
+            .any(|&i| seen_at_depth(&d.views[i], pw, 0.0));
         ok += hit as usize;
     }
     let n = pts.xyz.iter().step_by(7).count();
