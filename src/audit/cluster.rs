@@ -316,10 +316,13 @@ impl Audit<'_> {
                 let config = cfg
                     .config_digest(*generator, *variant)
                     .map_err(|e| fail(e.to_string()))?;
+                let family = super::family::family(self.dataset, cfg.candidates.as_deref())
+                    .map_err(|e| fail(e.to_string()))?;
                 let same = result.generator == generator.name()
                     && result.variant == variant.name()
                     && result.seed == *seed
-                    && result.config == config;
+                    && result.config == config
+                    && result.candidates == family;
                 if !same {
                     return Err(fail(format!(
                         "{} is of another job or configuration",

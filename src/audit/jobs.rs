@@ -126,6 +126,10 @@ pub struct JobResult {
     /// What the run did ([`super::diagnostics`]); absent in samples written before.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub diagnostics: Option<super::diagnostics::Diagnostics>,
+    /// The candidate family the run was given (SPEC.md §20.7); absent for the bundled
+    /// candidates. `--collect` takes a result only of the audit's own family.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub candidates: Option<super::family::Family>,
 }
 
 /// One step of a job: what [`sharing`] counts.
@@ -270,6 +274,7 @@ impl Audit<'_> {
                     steps,
                     scene_sha256,
                     diagnostics: Some(diagnostics),
+                    candidates: family::family(dataset, self.cfg.candidates.as_deref())?,
                 };
                 let text = serde_json::to_string_pretty(&result).expect("serializes") + "\n";
                 crate::io::write_text(&out.join("audit_job.json"), &text)?;

@@ -924,6 +924,13 @@ fn a_one_candidate_room_is_the_same_computation_and_not_tested() {
     assert_eq!(family.name, "first");
     assert_eq!(family.sha256, unseen::io::sha256_hex(first.as_bytes()));
     assert_eq!(report.results.len(), 4);
+    // Each result records the family (what `--collect` checks a receipt's result against).
+    assert!(
+        report
+            .results
+            .iter()
+            .all(|r| r.candidates.as_ref() == Some(family))
+    );
     for r in &report.results {
         let d = r.diagnostics.as_ref().expect("recorded");
         assert_eq!((d.candidates, d.pairs, d.collisions), (1, 0, 0), "{d:?}");
@@ -997,6 +1004,7 @@ fn sample(variant: &str, seed: u32, revision: u32, psnr: f64) -> unseen::audit::
         steps: vec![],
         scene_sha256: String::new(),
         diagnostics: None,
+        candidates: None,
     }
 }
 
