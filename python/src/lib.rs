@@ -832,32 +832,6 @@ fn align<'py>(
     Ok(out)
 }
 
-/// `img` `(h, w, c)` with `r` mirrored pixels around it (PyTorch's `"reflect"`: the edge
-/// pixel not repeated; `r < h, w`).
-fn reflect_pad(img: &[f32], h: usize, w: usize, c: usize, r: usize) -> Vec<f32> {
-    let mirror = |i: isize, n: usize| -> usize {
-        let n = n as isize;
-        let j = if i < 0 {
-            -i
-        } else if i >= n {
-            2 * (n - 1) - i
-        } else {
-            i
-        };
-        j as usize
-    };
-    let (ph, pw) = (h + 2 * r, w + 2 * r);
-    let mut out = Vec::with_capacity(ph * pw * c);
-    for i in 0..ph {
-        let si = mirror(i as isize - r as isize, h);
-        for j in 0..pw {
-            let sj = mirror(j as isize - r as isize, w);
-            out.extend_from_slice(&img[(si * w + sj) * c..(si * w + sj + 1) * c]);
-        }
-    }
-    out
-}
-
 /// SSIM of two float32 `(H, W, C)` images in [0, 1] (SPEC.md §13) under `conventions`:
 /// `"inria"` (zero padding, the mean over every pixel: what training uses), `"valid"` (the
 /// mean over the pixels whose window lies inside the image: pytorch-msssim) or `"reflect"`
@@ -872,61 +846,26 @@ fn ssim<'py>(
     y: &Bound<'py, PyAny>,
     conventions: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
-    use unseen::train::ssim::{SSIM_WINDOW, ssim as core_ssim, ssim_map};
+    use unseen::train::ssim::{Border, ssim_border};
     let mut bound = Vec::new();
     let dims = [(None, "H"), (None, "W"), (None, "C")];
     let (shape, a) = array::<f32>("x", x, &dims, &mut bound)?;
     let (_, b) = array::<f32>("y", y, &dims, &mut bound)?;
     let (h, w, c) = (shape[0], shape[1], shape[2]);
-    if h == 0 || w == 0 || c == 0 {
-        return Err(PyValueError::new_err("x: the images are empty"));
-    }
-    let r = SSIM_WINDOW / 2;
-    if conventions != "inria" && (h <= 2 * r || w <= 2 * r) {
-        return Err(PyValueError::new_err(format!(
-            "x: conventions {conventions:?} need images larger than {}x{}, got {h}x{w}",
-            2 * r,
-            2 * r
-        )));
-    }
-    // The map over the pixels [r0, r0 + n) of a (hh, ww) image, and its mean.
-    let inner = |map: &[f64], ww: usize, (r0, rows, cols): (usize, usize, usize)| {
-        let m: Vec<f64> = (r0..r0 + rows)
-            .flat_map(|i| map[i * ww + r0..i * ww + r0 + cols].to_vec())
-            .collect();
-        let mean = m.iter().sum::<f64>() / m.len() as f64;
-        (mean, m)
-    };
-    let (value, map, map_shape) = match conventions {
-        "inria" => py.detach(|| {
-            let map = ssim_map(&a, &b, w, h, c);
-            (core_ssim(&a, &b, w, h, c, false).0, map, [h, w])
-        }),
-        "valid" => py.detach(|| {
-            let (v, m) = inner(&ssim_map(&a, &b, w, h, c), w, (r, h - 2 * r, w - 2 * r));
-            (v, m, [h - 2 * r, w - 2 * r])
-        }),
-        "reflect" => py.detach(|| {
-            let (pa, pb) = (reflect_pad(&a, h, w, c, r), reflect_pad(&b, h, w, c, r));
-            let (v, m) = inner(
-                &ssim_map(&pa, &pb, w + 2 * r, h + 2 * r, c),
-                w + 2 * r,
-                (r, h, w),
-            );
-            (v, m, [h, w])
-        }),
+    let border = match conventions {
+        "inria" => Border::Zero,
+        "valid" => Border::Valid,
+        "reflect" => Border::Reflect,
         other => {
             return Err(PyValueError::new_err(format!(
                 "conventions: expected 'inria', 'valid' or 'reflect', got {other:?}"
             )));
         }
     };
-    let l1 = a
-        .iter()
-        .zip(&b)
-        .map(|(p, q)| f64::from((p - q).abs()))
-        .sum::<f64>()
-        / a.len() as f64;
+    let (value, map, map_shape) = py
+        .detach(|| ssim_border(&a, &b, (w, h, c), border))
+        .map_err(py_err)?;
+    let l1 = unseen::train::loss::mean_abs_diff(&a, &b);
     let out = PyDict::new(py);
     out.set_item("ssim", value)?;
     out.set_item("map", to_numpy(py, map, &map_shape)?)?;

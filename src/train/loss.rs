@@ -207,6 +207,13 @@ pub fn image_loss(inp: &LossInput, weights: &LossWeights) -> Result<LossOutput> 
     })
 }
 
+/// Mean absolute difference of two equally long slices, summed in f64 in order (what a
+/// port's L1 is compared against, SPEC.md §14.1).
+pub fn mean_abs_diff(x: &[f32], y: &[f32]) -> f64 {
+    let sum: f64 = x.iter().zip(y).map(|(a, b)| f64::from((a - b).abs())).sum();
+    sum / x.len().max(1) as f64
+}
+
 /// PSNR in dB of `x` against `y` (values in `[0, 1]`, both clamped to it first like INRIA's
 /// evaluation, which clamps the render); infinite for identical images.
 pub fn psnr(x: &[f32], y: &[f32]) -> f64 {

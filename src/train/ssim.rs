@@ -215,6 +215,95 @@ pub fn ssim_map(x: &[f32], y: &[f32], w: usize, h: usize, c: usize) -> Vec<f64> 
     map
 }
 
+/// How the mean SSIM treats the image border (a convention of the library computing it;
+/// SPEC.md §13). The values inside are the same; the border moves the mean by ≈ 1e-3.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Border {
+    /// Zero padding by the window's radius, the mean over every pixel: INRIA's, what
+    /// training uses ([`ssim`]).
+    Zero,
+    /// The mean over the pixels whose window lies inside the image (pytorch-msssim).
+    Valid,
+    /// The images mirrored by the window's radius (the edge pixel not repeated, PyTorch's
+    /// `"reflect"`), the mean over every pixel (torchmetrics 1.9).
+    Reflect,
+}
+
+/// The mean SSIM under `border` and the map it averages (per pixel, the mean over
+/// channels), with the map's (rows, columns): the image's, or 10 fewer each for
+/// [`Border::Valid`]. [`Border::Valid`] and [`Border::Reflect`] need images larger than
+/// 10×10 (an error otherwise).
+pub fn ssim_border(
+    x: &[f32],
+    y: &[f32],
+    (w, h, c): (usize, usize, usize),
+    border: Border,
+) -> crate::error::Result<(f64, Vec<f64>, [usize; 2])> {
+    let r = RADIUS;
+    if w * h * c == 0 || x.len() != w * h * c || y.len() != x.len() {
+        return Err(crate::error::Error::invalid(format!(
+            "SSIM: {} and {} values for {w}x{h}x{c} images",
+            x.len(),
+            y.len()
+        )));
+    }
+    if border != Border::Zero && (h <= 2 * r || w <= 2 * r) {
+        return Err(crate::error::Error::invalid(format!(
+            "SSIM: this border needs images larger than {0}x{0}, got {w}x{h}",
+            2 * r
+        )));
+    }
+    // The map over rows and columns [r0, r0 + n) of a map `ww` wide, and its mean.
+    let inner = |map: &[f64], ww: usize, r0: usize, (rows, cols): (usize, usize)| {
+        let m: Vec<f64> = (r0..r0 + rows)
+            .flat_map(|i| map[i * ww + r0..i * ww + r0 + cols].iter().copied())
+            .collect();
+        (m.iter().sum::<f64>() / m.len() as f64, m)
+    };
+    Ok(match border {
+        Border::Zero => (
+            ssim(x, y, w, h, c, false).0,
+            ssim_map(x, y, w, h, c),
+            [h, w],
+        ),
+        Border::Valid => {
+            let (v, m) = inner(&ssim_map(x, y, w, h, c), w, r, (h - 2 * r, w - 2 * r));
+            (v, m, [h - 2 * r, w - 2 * r])
+        }
+        Border::Reflect => {
+            let (px, py) = (reflect_pad(x, (w, h, c), r), reflect_pad(y, (w, h, c), r));
+            let map = ssim_map(&px, &py, w + 2 * r, h + 2 * r, c);
+            let (v, m) = inner(&map, w + 2 * r, r, (h, w));
+            (v, m, [h, w])
+        }
+    })
+}
+
+/// `img` with `r` mirrored pixels around it (the edge pixel not repeated; `r < w, h`).
+fn reflect_pad(img: &[f32], (w, h, c): (usize, usize, usize), r: usize) -> Vec<f32> {
+    let mirror = |i: usize, n: usize| -> usize {
+        // i indexes the padded axis: i − r, reflected into [0, n).
+        let j = i as isize - r as isize;
+        let n = n as isize;
+        (if j < 0 {
+            -j
+        } else if j >= n {
+            2 * (n - 1) - j
+        } else {
+            j
+        }) as usize
+    };
+    let mut out = Vec::with_capacity((w + 2 * r) * (h + 2 * r) * c);
+    for i in 0..h + 2 * r {
+        let si = mirror(i, h);
+        for j in 0..w + 2 * r {
+            let sj = mirror(j, w);
+            out.extend_from_slice(&img[(si * w + sj) * c..(si * w + sj + 1) * c]);
+        }
+    }
+    out
+}
+
 fn ssim_impl(
     x: &[f32],
     y: &[f32],
@@ -627,5 +716,49 @@ mod tests {
                 g[i]
             );
         }
+    }
+}
+
+#[cfg(test)]
+mod border_tests {
+    use super::*;
+
+    /// PyTorch's "reflect": the edge pixel is not repeated (`[a b c]` by 1 → `[b a b c b]`).
+    #[test]
+    fn reflect_padding_mirrors_without_repeating_the_edge() {
+        let img: Vec<f32> = (0..6).map(|v| v as f32).collect(); // 3 wide, 2 high, 1 channel
+        let p = reflect_pad(&img, (3, 2, 1), 1);
+        assert_eq!(
+            p,
+            [
+                4., 3., 4., 5., 4., 1., 0., 1., 2., 1., 4., 3., 4., 5., 4., 1., 0., 1., 2., 1.
+            ]
+        );
+    }
+
+    /// The three borders agree inside; `Valid` is the interior's mean of the zero-padded
+    /// map, and too small images are an error for the borders that need a margin.
+    #[test]
+    fn borders_differ_only_at_the_border() {
+        let (w, h, c) = (17, 13, 3);
+        let x: Vec<f32> = (0..w * h * c)
+            .map(|i| ((i * 37 % 101) as f32) / 100.0)
+            .collect();
+        let y: Vec<f32> = x.iter().map(|v| (v * 0.9 + 0.05).min(1.0)).collect();
+        let (zero, zmap, zs) = ssim_border(&x, &y, (w, h, c), Border::Zero).unwrap();
+        let (valid, vmap, vs) = ssim_border(&x, &y, (w, h, c), Border::Valid).unwrap();
+        let (_, rmap, rs) = ssim_border(&x, &y, (w, h, c), Border::Reflect).unwrap();
+        assert_eq!((zs, vs, rs), ([h, w], [h - 10, w - 10], [h, w]));
+        assert!((zero - ssim(&x, &y, w, h, c, false).0).abs() < 1e-15);
+        for i in 5..h - 5 {
+            for j in 5..w - 5 {
+                let z = zmap[i * w + j];
+                assert_eq!(vmap[(i - 5) * (w - 10) + j - 5], z);
+                assert!((rmap[i * w + j] - z).abs() < 1e-12, "({i}, {j})");
+            }
+        }
+        assert!((valid - vmap.iter().sum::<f64>() / vmap.len() as f64).abs() < 1e-15);
+        assert!(ssim_border(&x[..300], &y[..300], (10, 10, 3), Border::Reflect).is_err());
+        assert!(ssim_border(&x[..300], &y[..300], (10, 10, 3), Border::Zero).is_ok());
     }
 }
