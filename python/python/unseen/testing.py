@@ -198,7 +198,8 @@ class Failure:
     where: tuple
     port: float
     oracle: float
-    #: The decision flags at that place ("" when none).
+    #: The decision flags at that place ("" when none; None for a stage without
+    #: decisions, where the report says nothing of them).
     near: str = ""
     #: For a failure that is not a value beyond a tolerance (a missing output, a wrong
     #: shape, too much set aside, Gaussians drawn by one side only): what is wrong, in words.
@@ -208,7 +209,8 @@ class Failure:
         if self.note:
             return f"{self.quantity}: {self.note}"
         loc = ", ".join(str(int(i)) for i in self.where)
-        near = f"; near a decision: {self.near}" if self.near else "; not near a decision"
+        near = ("" if self.near is None else
+                f"; near a decision: {self.near}" if self.near else "; not near a decision")
         return (
             f"{self.quantity}: {self.count} of {self.total} beyond {self.tolerance}; "
             f"worst at [{loc}]: port {self.port:.7g}, oracle {self.oracle:.7g}, "
@@ -1407,7 +1409,7 @@ def compare_adam(port, case=None, *, seed=0, conventions="pytorch"):
         got[key] = arr
         f = _check(key, arr, w, 0.0, 0.0, None, None, (), extra=2 * b)
         if f is not None:
-            f.tolerance = "2 × adam_bounds"
+            f.tolerance, f.near = "2 × adam_bounds", None
             report.failures.append(f)
     if report.failures and got:
         base = _adam_failing(got, want, bounds)
@@ -1496,7 +1498,7 @@ def compare_collide(port, case=None, *, seed=0):
         i, d, w = dist_bad[0]
         report.failures.append(Failure(
             "distance", len(dist_bad), len(pairs) - n_aside, f"{DISTANCE_REL:g}·scale", (i,),
-            d, w))
+            d, w, near=None))
     if wrong:
         results = []
         for mk in COLLIDE_MISTAKES:
@@ -1537,7 +1539,8 @@ def compare_align(port, case=None, *, seed=0):
         for name, g, w in (("scale", s_p, want["scale"]), ("offset", t_p, want["offset"])):
             tol = LSQ_RTOL * max(abs(want["scale"]), abs(want["offset"]))
             if not abs(g - w) <= tol:
-                report.failures.append(Failure(name, 1, 1, f"rtol {LSQ_RTOL:g}", (), g, w))
+                report.failures.append(Failure(name, 1, 1, f"rtol {LSQ_RTOL:g}", (), g, w,
+                                               near=None))
     else:
         c_o, e_o = consensus(want["scale"], want["offset"], r, d, space=space, threshold=thr)
         c_p, e_p = consensus(s_p, t_p, r, d, space=space, threshold=thr)
@@ -1602,7 +1605,8 @@ def compare_loss(port, case=None, *, seed=0, conventions="inria"):
     for k, v in got.items():
         if not abs(v - oracle[k]) <= tol[k]:
             failed.append(k)
-            report.failures.append(Failure(k, 1, 1, f"atol {tol[k]:.2g}", (), v, oracle[k]))
+            report.failures.append(Failure(k, 1, 1, f"atol {tol[k]:.2g}", (), v, oracle[k],
+                                           near=None))
     key = next((k for k in ("ssim", "loss") if k in failed), None)
     if key is not None:
         # How far each hypothesis's value lies from the port's, against the oracle's (in
