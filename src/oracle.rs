@@ -207,17 +207,13 @@ pub fn dump_adam(
     wr.put("params", &trace.x, &[steps, n])?;
     wr.put("exp_avg", &trace.m, &[steps, n])?;
     wr.put("exp_avg_sq", &trace.v, &[steps, n])?;
-    let conventions = match constants {
-        crate::train::adam::Constants::PyTorch => "pytorch",
-        crate::train::adam::Constants::Unseen => "unseen",
-    };
     let inputs = serde_json::json!({
         "parameters": n,
         "steps": steps,
         "lr": lr,
         "betas": betas,
         "eps": eps,
-        "constants": conventions,
+        "constants": constants.name(),
     });
     let manifest = Manifest::new("oracle adam", "", inputs, wr.entries);
     manifest.write(dir)?;

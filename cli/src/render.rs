@@ -460,15 +460,7 @@ pub fn run_oracle_command(a: OracleArgs) -> Result<()> {
             out,
         } => {
             use unseen::train::adam::Constants;
-            let constants = match conventions.as_str() {
-                "pytorch" => Constants::PyTorch,
-                "unseen" => Constants::Unseen,
-                other => {
-                    return Err(Error::invalid(format!(
-                        "unknown conventions '{other}' (pytorch or unseen)"
-                    )));
-                }
-            };
+            let constants = Constants::by_name(&conventions)?;
             let (xs, x0) = unseen::io::npy::read_npy_f32(&params)?;
             let [n] = xs[..] else {
                 return Err(Error::invalid(format!(

@@ -723,15 +723,8 @@ fn adam<'py>(
     let mut bound = Vec::new();
     let (_, x0) = array::<f32>("params", params, &[(None, "N")], &mut bound)?;
     let (shape, g) = array::<f32>("grads", grads, &[(None, "S"), (None, "N")], &mut bound)?;
-    let constants = match conventions {
-        "pytorch" => Constants::PyTorch,
-        "unseen" => Constants::Unseen,
-        other => {
-            return Err(PyValueError::new_err(format!(
-                "conventions: expected 'pytorch' or 'unseen', got {other:?}"
-            )));
-        }
-    };
+    let constants = Constants::by_name(conventions)
+        .map_err(|e| PyValueError::new_err(format!("conventions: {e}")))?;
     let trace = py
         .detach(|| adam_trace([betas.0, betas.1], eps, lr, constants, &x0, &g))
         .map_err(py_err)?;

@@ -301,6 +301,26 @@ pub enum Constants {
     PyTorch,
 }
 
+impl Constants {
+    /// The profile named `pytorch` or `unseen` (what the CLI and the Python binding take).
+    pub fn by_name(name: &str) -> Result<Constants> {
+        match name {
+            "pytorch" => Ok(Constants::PyTorch),
+            "unseen" => Ok(Constants::Unseen),
+            other => Err(Error::invalid(format!(
+                "unknown conventions '{other}' (pytorch or unseen)"
+            ))),
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Constants::PyTorch => "pytorch",
+            Constants::Unseen => "unseen",
+        }
+    }
+}
+
 /// Adam from zero moments (a fresh optimizer, as `torch.optim.Adam` starts) on `x0` with
 /// the gradients `grads` (`steps` rows of `x0.len()` values) at learning rate `lr` under
 /// `constants`: with [`Constants::Unseen`] the very update [`Adam::step`] makes on one
