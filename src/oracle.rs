@@ -219,3 +219,43 @@ pub fn dump_adam(
     manifest.write(dir)?;
     Ok(())
 }
+
+/// `unseen oracle inpaint`: Telea inpainting of `image` (`width × height × channels`) where
+/// `mask` is true, traced ([`crate::models::telea::inpaint_traced`], with a port's output
+/// as `forced` when given): `image`, `time`, `order`, `mean`, `term`, `bound` and `aside`
+/// as .npy in `dir` (SPEC.md §12, §19.1).
+pub fn dump_inpaint<T: crate::models::telea::Sample + NpyElement>(
+    image: &[T],
+    (width, height, channels): (usize, usize, usize),
+    mask: &[bool],
+    radius: f64,
+    forced: Option<&[T]>,
+    dir: &Path,
+) -> Result<()> {
+    let trace =
+        crate::models::telea::inpaint_traced(image, width, height, channels, mask, radius, forced)?;
+    crate::io::create_dir_all(dir)?;
+    let mut wr = Writer {
+        dir,
+        entries: Vec::new(),
+    };
+    let (pixels, values) = ([height, width], [height, width, channels]);
+    wr.put("image", &trace.image, &values)?;
+    wr.put("time", &trace.time, &pixels)?;
+    wr.put("order", &trace.order, &pixels)?;
+    wr.put("mean", &trace.mean, &values)?;
+    wr.put("term", &trace.term, &values)?;
+    wr.put("bound", &trace.bound, &values)?;
+    wr.put("aside", &trace.aside, &values)?;
+    let inputs = serde_json::json!({
+        "width": width,
+        "height": height,
+        "channels": channels,
+        "dtype": T::DTYPE.descr(),
+        "radius": radius,
+        "fill": mask.iter().filter(|&&m| m).count(),
+        "forced": forced.is_some(),
+    });
+    Manifest::new("oracle inpaint", "", inputs, wr.entries).write(dir)?;
+    Ok(())
+}

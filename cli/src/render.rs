@@ -155,6 +155,24 @@ pub enum OraclePass {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Telea inpainting traced for a port's comparison (SPEC.md §19.1): the fill, each
+    /// pixel's arrival time and order, and per value its mean, gradient term, error bound
+    /// and decisions; with `--forced`, each value computed from the port's predecessors.
+    Inpaint {
+        /// The image: PNG (8-bit gray or RGB: uint8 arithmetic, as cv2.inpaint on uint8)
+        /// or float32 .npy of shape (H, W) or (H, W, C).
+        image: PathBuf,
+        /// The pixels to fill: PNG or .npy of the image's size, non-zero = fill.
+        mask: PathBuf,
+        #[arg(long, default_value_t = 3.0)]
+        radius: f64,
+        /// A port's output (the image's format and size): the fill is judged on it.
+        #[arg(long)]
+        forced: Option<PathBuf>,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+    },
 }
 
 pub fn parse_rgb(s: &str) -> std::result::Result<[f32; 3], String> {
@@ -483,5 +501,115 @@ pub fn run_oracle_command(a: OracleArgs) -> Result<()> {
             );
             Ok(())
         }
+        OraclePass::Inpaint {
+            image,
+            mask,
+            radius,
+            forced,
+            out,
+        } => run_oracle_inpaint(&image, &mask, radius, forced.as_deref(), &out),
     }
+}
+
+/// An inpainting input: 8-bit PNG values or float32 .npy values, with its size.
+enum Values {
+    U8(Vec<u8>),
+    F32(Vec<f32>),
+}
+
+fn read_values(path: &Path) -> Result<(Values, (usize, usize, usize))> {
+    let is_npy = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("npy"));
+    if is_npy {
+        let (shape, v) = unseen::io::npy::read_npy_f32(path)?;
+        let size = match shape[..] {
+            [h, w] => (w, h, 1),
+            [h, w, c] => (w, h, c),
+            _ => {
+                return Err(Error::invalid(format!(
+                    "expected shape (H, W) or (H, W, C), got {shape:?}"
+                ))
+                .at(path));
+            }
+        };
+        if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+            return Err(Error::invalid(format!("value {i} is not finite")).at(path));
+        }
+        Ok((Values::F32(v), size))
+    } else {
+        let img = unseen::io::image::read_png(path)?;
+        let bytes = img
+            .data
+            .iter()
+            .map(|&v| unseen::io::image::to_u8(v))
+            .collect();
+        Ok((Values::U8(bytes), (img.width, img.height, img.channels)))
+    }
+}
+
+fn run_oracle_inpaint(
+    image: &Path,
+    mask: &Path,
+    radius: f64,
+    forced: Option<&Path>,
+    out: &Path,
+) -> Result<()> {
+    use unseen::oracle::dump_inpaint;
+    let (values, size) = read_values(image)?;
+    let (w, h, c) = size;
+    let (m, msize) = read_values(mask)?;
+    if (msize.0, msize.1) != (w, h) {
+        return Err(Error::invalid(format!(
+            "the mask is {}x{}, the image {w}x{h}",
+            msize.0, msize.1
+        ))
+        .at(mask));
+    }
+    let fill: Vec<bool> = match m {
+        Values::U8(v) => v
+            .chunks(msize.2)
+            .map(|p| p.iter().any(|&x| x > 0))
+            .collect(),
+        Values::F32(v) => v
+            .chunks(msize.2)
+            .map(|p| p.iter().any(|&x| x != 0.0))
+            .collect(),
+    };
+    let forced = match forced {
+        Some(p) => {
+            let (v, s) = read_values(p)?;
+            if s != size {
+                return Err(Error::invalid(format!(
+                    "the forced image is {}x{}x{}, the image {w}x{h}x{c}",
+                    s.0, s.1, s.2
+                ))
+                .at(p));
+            }
+            Some((v, p))
+        }
+        None => None,
+    };
+    match (values, forced) {
+        (Values::U8(v), None) => dump_inpaint(&v, size, &fill, radius, None, out),
+        (Values::U8(v), Some((Values::U8(f), _))) => {
+            dump_inpaint(&v, size, &fill, radius, Some(&f), out)
+        }
+        (Values::F32(v), None) => dump_inpaint(&v, size, &fill, radius, None, out),
+        (Values::F32(v), Some((Values::F32(f), _))) => {
+            dump_inpaint(&v, size, &fill, radius, Some(&f), out)
+        }
+        (_, Some((_, p))) => Err(Error::invalid(
+            "the forced image must have the image's format (PNG with PNG, .npy with .npy)",
+        )
+        .at(p)),
+    }
+    .map_err(|e| e.at(image))?;
+    println!(
+        "wrote the Telea oracle of {} ({} pixels to fill) into {}",
+        image.display(),
+        fill.iter().filter(|&&f| f).count(),
+        out.display()
+    );
+    Ok(())
 }

@@ -1,9 +1,9 @@
 """A test a GPU port copies: let `unseen.testing.check_port` render and differentiate seeded
 scenes of every family with unseen (the oracle) and with the port under test, and judge
-them (SPEC.md §8.1); and `unseen.testing.compare_adam`, `compare_collide`, `compare_align`
-and `compare_loss` judge its optimizer, frustum collision test, depth alignment and loss
-(replace `port_adam`, `port_collide`, `port_align`, `port_loss`; set ADAM_CONVENTIONS and
-LOSS_CONVENTIONS).
+them (SPEC.md §8.1); and `unseen.testing.compare_adam`, `compare_collide`, `compare_align`,
+`compare_loss` and `compare_inpaint` judge its optimizer, frustum collision test, depth
+alignment, loss and Telea inpainting (replace `port_adam`, `port_collide`, `port_align`,
+`port_loss`, `port_inpaint`; set ADAM_CONVENTIONS and LOSS_CONVENTIONS).
 
 To test your port, replace `port_render` / `port_backward` with calls into it (gsplat's
 conventions: wxyz quaternions, log scales, logit opacities, (N, K, 3) SH, K and a
@@ -106,10 +106,17 @@ def port_loss(x, y):
             "loss": 0.8 * out["l1"] + 0.2 * (1 - out["ssim"])}
 
 
+def port_inpaint(image, mask, radius):
+    """The port under test: Telea inpainting (OpenCV's INPAINT_TELEA) of a uint8 or float32
+    (H, W, C) image where the bool (H, W) mask is True; the image's shape and dtype."""
+    return unseen.inpaint(image, mask, radius=radius)["image"]
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_stages_match_the_oracle(seed):
     for report in (testing.compare_collide(port_collide, seed=seed),
                    testing.compare_align(port_align, seed=seed),
-                   testing.compare_loss(port_loss, seed=seed, conventions=LOSS_CONVENTIONS)):
+                   testing.compare_loss(port_loss, seed=seed, conventions=LOSS_CONVENTIONS),
+                   testing.compare_inpaint(port_inpaint, seed=seed)):
         print(report.message())
         assert report.ok, report.message()

@@ -866,6 +866,66 @@ fn ssim<'py>(
     Ok(out)
 }
 
+/// Telea inpainting (SPEC.md §19.1, OpenCV's `INPAINT_TELEA` arithmetic) of `image`, uint8
+/// or float32 `(H, W, C)`, where the bool `(H, W)` `mask` is true, traced for a port's
+/// comparison. With `forced` (a port's output, the image's shape and dtype) every fill
+/// value is computed from the forced values of the pixels filled before it. Returns
+/// `image`, `time` and `order` `(H, W)` (fill order, −1 for known pixels), and per value
+/// `mean`, `term` (the value is `mean + term`, rounded for uint8), `bound` and `aside`.
+#[pyfunction]
+#[pyo3(signature = (image, mask, *, radius = 3.0, forced = None))]
+fn inpaint<'py>(
+    py: Python<'py>,
+    image: &Bound<'py, PyAny>,
+    mask: &Bound<'py, PyAny>,
+    radius: f64,
+    forced: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    use unseen::models::telea::{Sample, Trace, inpaint_traced};
+    fn run<'py, T: Sample + numpy::Element>(
+        py: Python<'py>,
+        image: &Bound<'py, PyAny>,
+        mask: &Bound<'py, PyAny>,
+        radius: f64,
+        forced: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<(Vec<usize>, Trace<T>)> {
+        let mut bound = Vec::new();
+        let dims = [(None, "H"), (None, "W"), (None, "C")];
+        let (shape, img) = array::<T>("image", image, &dims, &mut bound)?;
+        let (_, m) = array::<bool>("mask", mask, &[(None, "H"), (None, "W")], &mut bound)?;
+        let forced = match forced {
+            Some(f) => Some(array::<T>("forced", f, &dims, &mut bound)?.1),
+            None => None,
+        };
+        let (h, w, c) = (shape[0], shape[1], shape[2]);
+        let trace = py
+            .detach(|| inpaint_traced(&img, w, h, c, &m, radius, forced.as_deref()))
+            .map_err(py_err)?;
+        Ok((shape, trace))
+    }
+    let out = PyDict::new(py);
+    let is_u8 = image
+        .cast::<PyUntypedArray>()
+        .is_ok_and(|a| a.dtype().is_equiv_to(&numpy::dtype::<u8>(py)));
+    let (shape, rest) = if is_u8 {
+        let (shape, t) = run::<u8>(py, image, mask, radius, forced)?;
+        out.set_item("image", to_numpy(py, t.image, &shape)?)?;
+        (shape, (t.time, t.order, t.mean, t.term, t.bound, t.aside))
+    } else {
+        let (shape, t) = run::<f32>(py, image, mask, radius, forced)?;
+        out.set_item("image", to_numpy(py, t.image, &shape)?)?;
+        (shape, (t.time, t.order, t.mean, t.term, t.bound, t.aside))
+    };
+    let (time, order, mean, term, bound, aside) = rest;
+    out.set_item("time", to_numpy(py, time, &shape[..2])?)?;
+    out.set_item("order", to_numpy(py, order, &shape[..2])?)?;
+    out.set_item("mean", to_numpy(py, mean, &shape)?)?;
+    out.set_item("term", to_numpy(py, term, &shape)?)?;
+    out.set_item("bound", to_numpy(py, bound, &shape)?)?;
+    out.set_item("aside", to_numpy(py, aside, &shape)?)?;
+    Ok(out)
+}
+
 /// The crate version, SPEC.md's conventions version and the numerics revision (a port
 /// records them beside its goldens).
 #[pyfunction]
@@ -892,5 +952,6 @@ fn _unseen(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(proximity, m)?)?;
     m.add_function(wrap_pyfunction!(align, m)?)?;
     m.add_function(wrap_pyfunction!(ssim, m)?)?;
+    m.add_function(wrap_pyfunction!(inpaint, m)?)?;
     Ok(())
 }

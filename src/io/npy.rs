@@ -9,7 +9,9 @@ use std::path::Path;
 /// Element types we write.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Dtype {
+    U8,
     F32,
+    F64,
     U32,
     I32,
     U64,
@@ -18,7 +20,9 @@ pub enum Dtype {
 impl Dtype {
     pub fn descr(self) -> &'static str {
         match self {
+            Dtype::U8 => "|u1",
             Dtype::F32 => "<f4",
+            Dtype::F64 => "<f8",
             Dtype::U32 => "<u4",
             Dtype::I32 => "<i4",
             Dtype::U64 => "<u8",
@@ -42,7 +46,9 @@ macro_rules! element {
         }
     };
 }
+element!(u8, Dtype::U8);
 element!(f32, Dtype::F32);
+element!(f64, Dtype::F64);
 element!(u32, Dtype::U32);
 element!(i32, Dtype::I32);
 element!(u64, Dtype::U64);

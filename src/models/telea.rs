@@ -36,6 +36,8 @@ pub const MAX_RADIUS: i64 = 100;
 
 /// A pixel type the inpainting works on.
 pub trait Sample: Copy + Send + Sync {
+    /// Integer samples round the fill value (decision boundaries at whole values).
+    const INTEGER: bool;
     /// The value as f32 (OpenCV's `(float)` cast).
     fn value(self) -> f32;
     /// `(float)(a − b)`: integer difference for integer types.
@@ -45,6 +47,7 @@ pub trait Sample: Copy + Send + Sync {
 }
 
 impl Sample for u8 {
+    const INTEGER: bool = true;
     fn value(self) -> f32 {
         self as f32
     }
@@ -63,6 +66,7 @@ impl Sample for u8 {
 }
 
 impl Sample for f32 {
+    const INTEGER: bool = false;
     fn value(self) -> f32 {
         self
     }
@@ -86,13 +90,163 @@ pub fn inpaint<T: Sample>(
     mask: &[bool],
     radius: f64,
 ) -> Result<Vec<T>> {
+    let range = check(image.len(), width, height, channels, mask, radius)?;
+    let mut out = image.to_vec();
+    let mut g = Grid::new(width, height, mask);
+    if g.band.is_empty() {
+        return Ok(out);
+    }
+    g.march_outwards(range);
+    g.fill(&mut out, channels, range, None);
+    Ok(out)
+}
+
+/// What [`inpaint_traced`] records: each pixel's arrival and, per value (pixel × channel),
+/// what a port's value is judged by (SPEC.md §19.1).
+#[derive(Debug, Clone)]
+pub struct Trace<T> {
+    /// The inpainting; with `forced`, every fill value computed from the forced values of
+    /// the pixels filled before it.
+    pub image: Vec<T>,
+    /// `T` per pixel: the fill's arrival times (≥ 0), the band's 0, the known ring's
+    /// negated outward distances, and [`FAR`] elsewhere (also on the one-pixel frame
+    /// around the image the stencils read).
+    pub time: Vec<f32>,
+    /// Fill order per pixel (0, 1, …), −1 for a known pixel.
+    pub order: Vec<i32>,
+    /// Per value: the weighted mean `Σw·I / Σw` of the known disc.
+    pub mean: Vec<f32>,
+    /// Per value: the gradient term `(Jx + Jy) / |J|`; the value is `mean + term`
+    /// (float32), rounded for integer images.
+    pub term: Vec<f32>,
+    /// Per value: a first-order bound on how far another float arithmetic (summation
+    /// order, f32 for f64, fused products, `T` marched in f32) moves `mean + term`.
+    pub bound: Vec<f32>,
+    /// Per value: the decisions it lies within noise of, so that the algorithm does not
+    /// determine it (0: none; else a sum of [`ASIDE_SWITCH`], [`ASIDE_DIRECTION`],
+    /// [`ASIDE_ROUNDING`]).
+    pub aside: Vec<u8>,
+}
+
+/// A neighbour's `|r·∇T|` lies within its noise of the 0.01 switch to the constant 1e-6.
+pub const ASIDE_SWITCH: u8 = 1;
+/// `|J|` is at most twice its error: the gradient term's direction is undetermined.
+pub const ASIDE_DIRECTION: u8 = 2;
+/// An integer image's value lies within its bound of a rounding boundary.
+pub const ASIDE_ROUNDING: u8 = 4;
+
+/// `T` outside the fill's neighbourhood and on the image's frame (OpenCV's 1e6): a
+/// constant every port uses, so it carries no error.
+pub const FAR: f32 = 1.0e6;
+
+/// [`inpaint`], recording the [`Trace`] a port is compared with. With `forced` (a port's
+/// output, the image's shape), the march is the oracle's but every filled pixel then
+/// takes the forced value, so each fill value is judged on the port's own predecessors
+/// and an early difference does not propagate. Without it, `image` equals [`inpaint`]'s.
+pub fn inpaint_traced<T: Sample>(
+    image: &[T],
+    width: usize,
+    height: usize,
+    channels: usize,
+    mask: &[bool],
+    radius: f64,
+    forced: Option<&[T]>,
+) -> Result<Trace<T>> {
+    let range = check(image.len(), width, height, channels, mask, radius)?;
+    if let Some(f) = forced
+        && f.len() != image.len()
+    {
+        return Err(Error::invalid(format!(
+            "the forced image has {} values, the image {}",
+            f.len(),
+            image.len()
+        )));
+    }
+    let n = image.len();
+    let mut rec = Record {
+        forced,
+        order: vec![-1; width * height],
+        mean: vec![f32::NAN; n],
+        term: vec![f32::NAN; n],
+        bound: vec![0.0; n],
+        aside: vec![0; n],
+    };
+    let mut out = image.to_vec();
+    let mut g = Grid::new(width, height, mask);
+    if !g.band.is_empty() {
+        g.march_outwards(range);
+        g.fill(&mut out, channels, range, Some(&mut rec));
+    }
+    if forced.is_some() {
+        // `out` ends with the forced values; the trace's image is ours.
+        let values = out.chunks_exact_mut(channels).zip(
+            rec.mean
+                .chunks_exact(channels)
+                .zip(rec.term.chunks_exact(channels)),
+        );
+        for ((px, (mean, term)), &o) in values.zip(&rec.order) {
+            if o >= 0 {
+                for ((v, m), t) in px.iter_mut().zip(mean).zip(term) {
+                    *v = T::round_cast(m + t);
+                }
+            }
+        }
+    }
+    let cols = width + 2;
+    let time = (0..width * height)
+        .map(|p| g.t[(p / width + 1) * cols + p % width + 1])
+        .collect();
+    Ok(Trace {
+        image: out,
+        time,
+        order: rec.order,
+        mean: rec.mean,
+        term: rec.term,
+        bound: rec.bound,
+        aside: rec.aside,
+    })
+}
+
+/// The fill's record for [`inpaint_traced`].
+struct Record<'a, T> {
+    forced: Option<&'a [T]>,
+    order: Vec<i32>,
+    mean: Vec<f32>,
+    term: Vec<f32>,
+    bound: Vec<f32>,
+    aside: Vec<u8>,
+}
+
+/// Unit roundoff of f32.
+const U: f32 = f32::EPSILON / 2.0;
+
+/// How far another port's `T` may lie from ours: the march adds a rounding of relative
+/// size ≤ 2u per unit of distance, so ≤ 2u·|T| per step over ≤ max(1, |T|) steps, ×2.
+/// [`FAR`] is a constant and exact.
+fn time_noise(t: f32) -> f32 {
+    if t.abs() >= FAR {
+        0.0
+    } else {
+        4.0 * U * t.abs().max(1.0) * t.abs()
+    }
+}
+
+/// The arguments' checks; the radius as OpenCV uses it (rounded half to even, clamped to
+/// `[1, 100]`).
+fn check(
+    values: usize,
+    width: usize,
+    height: usize,
+    channels: usize,
+    mask: &[bool],
+    radius: f64,
+) -> Result<i64> {
     if width == 0 || height == 0 || channels == 0 {
         return Err(Error::invalid("inpainting needs a non-empty image"));
     }
-    if image.len() != width * height * channels {
+    if values != width * height * channels {
         return Err(Error::invalid(format!(
-            "the image has {} values, not {width}x{height}x{channels}",
-            image.len()
+            "the image has {values} values, not {width}x{height}x{channels}"
         )));
     }
     if mask.len() != width * height {
@@ -106,15 +260,7 @@ pub fn inpaint<T: Sample>(
             "inpainting radius {radius} is not finite"
         )));
     }
-    let range = (radius.round_ties_even() as i64).clamp(1, MAX_RADIUS);
-    let mut out = image.to_vec();
-    let mut g = Grid::new(width, height, mask);
-    if g.band.is_empty() {
-        return Ok(out);
-    }
-    g.march_outwards(range);
-    g.fill(&mut out, channels, range);
-    Ok(out)
+    Ok((radius.round_ties_even() as i64).clamp(1, MAX_RADIUS))
 }
 
 /// A queued pixel: smallest `T` first, then first inserted.
@@ -149,7 +295,7 @@ impl Grid {
             }
         }
         let mut f = vec![KNOWN; rows * cols];
-        let mut t = vec![1.0e6f32; rows * cols];
+        let mut t = vec![FAR; rows * cols];
         let mut band = Vec::new();
         for i in 0..rows {
             for j in 0..cols {
@@ -268,8 +414,15 @@ impl Grid {
         }
     }
 
-    /// March 2: fill the pixels in order of arrival.
-    fn fill<T: Sample>(&mut self, out: &mut [T], ch: usize, range: i64) {
+    /// March 2: fill the pixels in order of arrival; with `rec`, record each value's
+    /// quantities and error bound (and write the forced values, if any, once computed).
+    fn fill<T: Sample>(
+        &mut self,
+        out: &mut [T],
+        ch: usize,
+        range: i64,
+        mut rec: Option<&mut Record<'_, T>>,
+    ) {
         let (rows, cols) = (self.rows, self.cols);
         let w = cols - 2;
         let mut heap: BinaryHeap<Entry> = BinaryHeap::new();
@@ -278,8 +431,13 @@ impl Grid {
             heap.push(Reverse((key(0.0), order, p)));
             order += 1;
         }
+        let mut filled = 0i32;
         let mut f = std::mem::take(&mut self.f);
         let mut acc = vec![[0f32; 4]; ch]; // Ia, Jx, Jy, s per channel
+        // With `rec`, per channel: Σw|I|, Σw(|gx·rx| + |gy·ry|), Σδw(|gx·rx| + |gy·ry|);
+        // and per known neighbour δw and its values (for Σδw|I − mean|).
+        let mut err = vec![[0f32; 3]; ch];
+        let mut neighbour_err: Vec<f32> = Vec::new();
         let at = |out: &[T], y: i64, x: i64, c: usize| -> T {
             // Image coordinates; OpenCV's shifted stencils stay inside for images of at
             // least 2×2 — clamped for the degenerate 1-pixel-wide case.
@@ -303,19 +461,28 @@ impl Grid {
                 self.t[q] = dist;
                 let t = &self.t;
                 let known = |p: usize| f[p] != INSIDE;
-                let grad_t = |a: usize, b: usize| -> f32 {
+                // ∇T and its noise (a port's `T` may differ by `time_noise`).
+                let grad_t = |a: usize, b: usize| -> (f32, f32) {
                     // a = the +1 neighbour, b = the −1 neighbour.
+                    let (na, nb, nq) = (time_noise(t[a]), time_noise(t[b]), time_noise(t[q]));
                     match (known(a), known(b)) {
-                        (true, true) => (t[a] - t[b]) * 0.5,
-                        (true, false) => t[a] - t[q],
-                        (false, true) => t[q] - t[b],
-                        (false, false) => 0.0,
+                        (true, true) => ((t[a] - t[b]) * 0.5, (na + nb) * 0.5),
+                        (true, false) => (t[a] - t[q], na + nq),
+                        (false, true) => (t[q] - t[b], nq + nb),
+                        (false, false) => (0.0, 0.0),
                     }
                 };
-                let gtx = grad_t(q + 1, q - 1);
-                let gty = grad_t(q + cols, q - cols);
+                let (gtx, ntx) = grad_t(q + 1, q - 1);
+                let (gty, nty) = grad_t(q + cols, q - cols);
                 for a in acc.iter_mut() {
                     *a = [0.0, 0.0, 0.0, 1.0e-20];
+                }
+                let tracing = rec.is_some();
+                // Terms summed, a weight at the dir switch.
+                let (mut terms, mut at_switch) = (0u32, false);
+                if tracing {
+                    err.iter_mut().for_each(|e| *e = [0.0; 3]);
+                    neighbour_err.clear();
                 }
                 let (i, j) = (i as i64, j as i64);
                 for k in i - range..=i + range {
@@ -346,11 +513,26 @@ impl Grid {
                         // combination that reproduces OpenCV 5.0.0 bit for bit on every
                         // golden case (each other choice changes float results).
                         let lev = (1.0 / (1.0 + (t[pk] - t[q]).abs() as f64)) as f32;
-                        let mut dir = rx * gtx + ry * gty;
-                        if (dir.abs() as f64) <= 0.01 {
-                            dir = 0.000001;
-                        }
+                        let raw_dir = rx * gtx + ry * gty;
+                        let switched = (raw_dir.abs() as f64) <= 0.01;
+                        let dir = if switched { 0.000001 } else { raw_dir };
                         let wgt = (dst * lev * dir).abs();
+                        // The weight's relative error: its roundings, `T`'s noise in `lev`,
+                        // and in `dir` (which a switch to the constant removes).
+                        let rel_w = if tracing {
+                            let n_dir = 4.0 * U * (rx * gtx).abs().max((ry * gty).abs())
+                                + rx.abs() * ntx
+                                + ry.abs() * nty;
+                            at_switch |= (raw_dir.abs() - 0.01).abs() <= n_dir;
+                            let lev_noise = time_noise(t[pk]) + time_noise(t[q]);
+                            12.0 * U + lev_noise + if switched { 0.0 } else { n_dir / dir.abs() }
+                        } else {
+                            0.0
+                        };
+                        terms += 1;
+                        if tracing {
+                            neighbour_err.push(wgt * rel_w);
+                        }
                         let kl_r = known(pk + 1);
                         let kl_l = known(pk - 1);
                         let kd = known(pk + cols);
@@ -370,19 +552,74 @@ impl Grid {
                                 (false, true) => T::diff(v(kp, lm), v(km - 1, lm)),
                                 (false, false) => 0.0,
                             };
-                            a[0] += wgt * v(k - 1, l - 1).value();
+                            let value = v(k - 1, l - 1).value();
+                            a[0] += wgt * value;
                             a[1] -= wgt * (gix * rx);
                             a[2] -= wgt * (giy * ry);
                             a[3] += wgt;
+                            if tracing {
+                                let e = &mut err[c];
+                                let gr = (gix * rx).abs() + (giy * ry).abs();
+                                e[0] += wgt * value.abs();
+                                e[1] += wgt * gr;
+                                e[2] += wgt * rel_w * gr;
+                                neighbour_err.push(value);
+                            }
                         }
                     }
                 }
-                let o = ((i - 1) as usize * w + (j - 1) as usize) * ch;
+                let (y, x) = ((i - 1) as usize, (j - 1) as usize);
+                let o = (y * w + x) * ch;
                 for (c, a) in acc.iter().enumerate() {
                     let [ia, jx, jy, s] = *a;
-                    let sat = ia / s + (jx + jy) / ((jx * jx + jy * jy).sqrt() + 1.0e-20);
+                    let mean = ia / s;
+                    let term = (jx + jy) / ((jx * jx + jy * jy).sqrt() + 1.0e-20);
+                    let sat = mean + term;
                     out[o + c] = T::round_cast(sat);
+                    if let Some(r) = rec.as_deref_mut() {
+                        let e = err[c];
+                        // Σ over `terms` products (+ a few roundings each): γ = (n + 4)u.
+                        let gamma = (terms + 4) as f32 * U;
+                        // Weighted mean: its sums' rounding and its weights' error
+                        // (∂(Ia/s)/∂w_k = (I_k − mean)/s).
+                        let weights_err: f32 = neighbour_err
+                            .chunks_exact(ch + 1)
+                            .map(|n| n[0] * (n[1 + c] - mean).abs())
+                            .sum();
+                        let d_mean = (gamma * e[0] + weights_err) / s;
+                        // The unit-vector term moves by ≤ √2·|δJ|/|J|.
+                        let d_j = gamma * e[1] + e[2];
+                        let j_len = (jx * jx + jy * jy).sqrt();
+                        let d_term = if d_j > 0.0 {
+                            std::f32::consts::SQRT_2 * d_j / j_len
+                        } else {
+                            0.0
+                        };
+                        let bound = 2.0 * (d_mean + d_term + 2.0 * U * sat.abs());
+                        let k = o + c;
+                        r.mean[k] = mean;
+                        r.term[k] = term;
+                        r.bound[k] = bound;
+                        r.aside[k] = if at_switch { ASIDE_SWITCH } else { 0 }
+                            | if d_j > 0.0 && j_len <= 2.0 * d_j {
+                                ASIDE_DIRECTION
+                            } else {
+                                0
+                            }
+                            | if T::INTEGER && (sat - sat.round()).abs() <= bound {
+                                ASIDE_ROUNDING
+                            } else {
+                                0
+                            };
+                        if let Some(forced) = r.forced {
+                            out[k] = forced[k];
+                        }
+                    }
                 }
+                if let Some(r) = rec.as_deref_mut() {
+                    r.order[y * w + x] = filled;
+                }
+                filled += 1;
                 f[q] = BAND;
                 heap.push(Reverse((key(dist), order, q as u32)));
                 order += 1;

@@ -242,3 +242,92 @@ fn oracle_adam_dumps_every_step_and_refuses_wrong_shapes() {
     let o = run("g.npy", "keras", "keras");
     assert!(String::from_utf8_lossy(&o.stderr).contains("unknown conventions 'keras'"));
 }
+
+/// `unseen oracle inpaint`: the traced Telea fill of an 8-bit PNG (OpenCV's values, bit
+/// for bit) and of a float .npy as .npy files with a manifest; a forced port of another
+/// size is one clear error naming its file, and nothing is written.
+#[test]
+fn oracle_inpaint_dumps_the_trace_and_refuses_a_forced_image_of_another_size() {
+    use unseen::io::npy::write_npy;
+    let t = crate::support::TempDir::new("oracle-inpaint");
+    let case = reference("opencv/telea/rgb_blobs_r3");
+    let run = |args: &[&std::ffi::OsStr]| {
+        Command::new(env!("CARGO_BIN_EXE_unseen"))
+            .args(["oracle", "inpaint"])
+            .args(args)
+            .output()
+            .unwrap()
+    };
+    let out = t.path().join("png");
+    let o = run(&[
+        case.join("input.png").as_os_str(),
+        case.join("mask.png").as_os_str(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let m: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!(m["inputs"]["dtype"], "|u1", "{m}");
+    let image = std::fs::read(out.join("image.npy")).unwrap();
+    let want = image::open(case.join("expected.png"))
+        .unwrap()
+        .into_rgb8()
+        .into_raw();
+    assert_eq!(
+        &image[image.len() - want.len()..],
+        &want[..],
+        "OpenCV's bits"
+    );
+    let (shape, bound) = read_npy_f32(&out.join("bound.npy")).unwrap();
+    assert_eq!(shape[2], 3);
+    assert!(bound.iter().all(|b| b.is_finite() && *b >= 0.0));
+    // Float32 gray .npy.
+    let (w, h) = (20usize, 12usize);
+    let img: Vec<f32> = (0..w * h).map(|i| ((i * 7) % 13) as f32 / 13.0).collect();
+    let mask: Vec<f32> = (0..w * h)
+        .map(|i| ((4..9).contains(&(i % w)) && (3..8).contains(&(i / w))) as u8 as f32)
+        .collect();
+    write_npy(&t.path().join("img.npy"), &img, &[h, w]).unwrap();
+    write_npy(&t.path().join("mask.npy"), &mask, &[h, w]).unwrap();
+    write_npy(
+        &t.path().join("small.npy"),
+        &img[..w * (h - 1)],
+        &[h - 1, w],
+    )
+    .unwrap();
+    let out = t.path().join("npy");
+    let o = run(&[
+        t.path().join("img.npy").as_os_str(),
+        t.path().join("mask.npy").as_os_str(),
+        "--radius".as_ref(),
+        "2".as_ref(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (shape, got) = read_npy_f32(&out.join("image.npy")).unwrap();
+    assert_eq!(shape, [h, w, 1]);
+    let fill: Vec<bool> = mask.iter().map(|&m| m != 0.0).collect();
+    let want = unseen::models::telea::inpaint(&img, w, h, 1, &fill, 2.0).unwrap();
+    assert_eq!(
+        got.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+        want.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+    );
+    let bad = t.path().join("bad");
+    let o = run(&[
+        t.path().join("img.npy").as_os_str(),
+        t.path().join("mask.npy").as_os_str(),
+        "--forced".as_ref(),
+        t.path().join("small.npy").as_os_str(),
+        "--out".as_ref(),
+        bad.as_os_str(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("small.npy") && err.contains("20x11x1"),
+        "{err}"
+    );
+    assert!(!bad.exists());
+}

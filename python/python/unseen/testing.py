@@ -53,6 +53,7 @@ from . import adam as _adam_oracle
 from . import proximity as _proximity
 from . import align as _align_oracle
 from . import ssim as _ssim_oracle
+from . import inpaint as _inpaint_oracle
 from ._loss import (  # noqa: F401
     CONVENTIONS as LOSS_CONVENTIONS, L1_RTOL, LAMBDA_DSSIM, LOSS_MISTAKES, SSIM_ATOL, loss_case,
     ssim_reference)
@@ -63,6 +64,10 @@ from ._collide import (  # noqa: F401
     COLLIDE_MISTAKES, CONTACT_REL, DISTANCE_REL, FRUSTUM_FACES, MAX_SET_ASIDE, collide_case,
     frustum, mistaken_verdict)
 from ._adam import ADAM_MISTAKES, adam_bounds, adam_case, adam_reference  # noqa: F401
+from ._inpaint import (  # noqa: F401
+    INPAINT_MISTAKES, MAX_SET_ASIDE as INPAINT_MAX_SET_ASIDE, inpaint_case, mistaken_values,
+    round_cast, telea_local,
+)
 
 # -- Tolerances (SPEC.md §8.1) ----------------------------------------------------------
 
@@ -1634,3 +1639,98 @@ def compare_loss(port, case=None, *, seed=0, conventions="inria"):
         _diagnosis(report, results, base)
     return report
 
+
+
+# -- Telea inpainting (SPEC.md §19.1) ------------------------------------------------------
+
+
+def compare_inpaint(port, case=None, *, seed=0):
+    """Compare a port of Telea inpainting (OpenCV's ``INPAINT_TELEA``) with unseen's on
+    ``case`` (``inpaint_case(seed)`` by default).
+
+    ``port(image, mask, radius)`` takes a uint8 or float32 ``(H, W, C)`` image, a bool
+    ``(H, W)`` mask (True: fill) and the radius, and returns the inpainted image (its shape,
+    or ``(H, W)`` for one channel, and dtype). Pixels outside the mask must keep their
+    bits. Each fill value is judged on the port's own predecessors (the oracle's march,
+    forced to the port's values): uint8 exactly, float32 within the oracle's per-value
+    bound; values within that bound of a decision are set aside (at most
+    ``INPAINT_MAX_SET_ASIDE``). On a failure each of ``INPAINT_MISTAKES`` is computed the
+    same way and named when it explains the port's values clearly better than the others.
+    Returns a ``Report``.
+    """
+    case = inpaint_case(seed) if case is None else case
+    image, mask, radius = case["image"], case["mask"], case["radius"]
+    h, w, ch = image.shape
+    kind = f"{image.dtype}{'' if ch == 1 else f' ×{ch}'}"
+    report = Report(f"Telea inpainting, {h}×{w} {kind}, radius {radius:g}, "
+                    f"{int(mask.sum())} pixels to fill", "opencv", units="values")
+    report.bound = INPAINT_MAX_SET_ASIDE
+    got = np.asarray(port(image.copy(), mask.copy(), radius))
+    if got.shape == (h, w) and ch == 1:
+        got = got[..., None]
+    if got.shape != image.shape or got.dtype != image.dtype:
+        report.failures.append(Failure("image", 1, 1, "", (), math.nan, math.nan,
+                                       note=f"expected {image.dtype} {image.shape}, got "
+                                       f"{got.dtype} {got.shape}"))
+        return report
+    got = np.ascontiguousarray(got)
+    trace = _inpaint_oracle(image, mask, radius=radius, forced=got)
+    # Outside the mask: the input's bits.
+    outside = ~mask[..., None] & (got.view(_bits(got)) != image.view(_bits(image)))
+    if outside.any():
+        where = np.argwhere(outside)[0]
+        report.failures.append(Failure(
+            "known pixels", int(outside.sum()), int((~mask).sum() * ch), "unchanged",
+            tuple(where), float(got[tuple(where)]), float(image[tuple(where)]), near=None))
+    fill = np.broadcast_to(mask[..., None], got.shape)
+    aside = fill & (trace["aside"] != 0)
+    judged = fill & ~aside
+    n_fill = int(fill.sum())
+    report.excluded = {
+        "|r·∇T| at the 0.01 switch": int((aside & (trace["aside"] & 1 > 0)).sum()),
+        "gradient term's direction": int((aside & (trace["aside"] & 2 > 0)).sum()),
+        "rounding boundary": int((aside & (trace["aside"] & 4 > 0)).sum()),
+    }
+    report.excluded_fraction = int(aside.sum()) / max(n_fill, 1)
+    if report.excluded_fraction > INPAINT_MAX_SET_ASIDE:
+        report.failures.append(Failure(
+            "values", int(aside.sum()), n_fill, "", (), math.nan, math.nan,
+            note=f"{int(aside.sum())} of {n_fill} fill values lie near a decision: the case "
+                 "cannot judge"))
+    value = trace["mean"].astype(np.float64) + trace["term"]
+    if image.dtype == np.uint8:
+        wrong = judged & (got != trace["image"])
+        tolerance = "exact (8-bit)"
+    else:
+        wrong = judged & ~(np.abs(got - value) <= trace["bound"])
+        tolerance = "the oracle's per-value bound"
+    if wrong.any():
+        excess = np.where(wrong, np.abs(got.astype(np.float64) - value), -1.0)
+        where = np.unravel_index(int(np.argmax(excess)), got.shape)
+        report.failures.append(Failure(
+            "fill values", int(wrong.sum()), int(judged.sum()), tolerance, where,
+            float(got[where]), float(trace["image"][where]),
+            note="" if image.dtype != np.uint8 else
+            f"{int(wrong.sum())} of {int(judged.sum())} judged fill values differ from the "
+            f"oracle's on the port's own predecessors; worst at [{', '.join(map(str, where))}]: "
+            f"port {got[where]}, oracle {trace['image'][where]} (unrounded "
+            f"{value[where]:.4f})"))
+        results = []
+        for mk in INPAINT_MISTAKES:
+            if mk.name == "round_nearest" and image.dtype != np.uint8:
+                continue
+            v = mistaken_values(mk.name, image, mask, radius, got, trace)
+            if image.dtype == np.uint8:
+                # A mistake explains a value it rounds to, or one within float noise of
+                # its rounding boundary.
+                left = judged & (round_cast(v, np.uint8) != got) & ~(
+                    np.abs(v - np.round(v)) <= 1e-3)
+            else:
+                left = judged & ~(np.abs(got - v) <= trace["bound"] + 1e-5 * np.abs(v))
+            results.append((int(left.sum()), mk.text))
+        _diagnosis(report, results, int(wrong.sum()))
+    return report
+
+
+def _bits(a):
+    return {1: np.uint8, 4: np.uint32}[a.dtype.itemsize]
