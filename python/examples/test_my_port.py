@@ -1,9 +1,10 @@
 """A test a GPU port copies: let `unseen.testing.check_port` render and differentiate seeded
 scenes of every family with unseen (the oracle) and with the port under test, and judge
 them (SPEC.md §8.1); and `unseen.testing.compare_adam`, `compare_collide`, `compare_align`,
-`compare_loss` and `compare_inpaint` judge its optimizer, frustum collision test, depth
-alignment, loss and Telea inpainting (replace `port_adam`, `port_collide`, `port_align`,
-`port_loss`, `port_inpaint`; set ADAM_CONVENTIONS and LOSS_CONVENTIONS).
+`compare_loss`, `compare_inpaint`, `compare_frustum` and `compare_views` judge its optimizer,
+frustum collision test, depth alignment, loss, Telea inpainting, region frustums and
+independent-view selection (replace the `port_*` functions; set ADAM_CONVENTIONS and
+LOSS_CONVENTIONS).
 
 To test your port, replace `port_render` / `port_backward` with calls into it (gsplat's
 conventions: wxyz quaternions, log scales, logit opacities, (N, K, 3) SH, K and a
@@ -112,11 +113,25 @@ def port_inpaint(image, mask, radius):
     return unseen.inpaint(image, mask, radius=radius)["image"]
 
 
+def port_frustum(mask, depth, k, viewmat, outline):
+    """The port under test: the (V, 3) vertices of the region's frustum (any order)."""
+    cam = unseen.Camera(k, viewmat, mask.shape[1], mask.shape[0])
+    return unseen.frustum(cam, mask, depth=depth, outline=outline)["vertices"]
+
+
+def port_views(frustums, centers):
+    """The port under test: the independent views, greedy in candidate order, and their
+    closed nearest-neighbour tour (optionally the colliding pairs and the gaps)."""
+    return unseen.views(frustums, centers)
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_stages_match_the_oracle(seed):
     for report in (testing.compare_collide(port_collide, seed=seed),
                    testing.compare_align(port_align, seed=seed),
                    testing.compare_loss(port_loss, seed=seed, conventions=LOSS_CONVENTIONS),
-                   testing.compare_inpaint(port_inpaint, seed=seed)):
+                   testing.compare_inpaint(port_inpaint, seed=seed),
+                   testing.compare_frustum(port_frustum, seed=seed),
+                   testing.compare_views(port_views, seed=seed)):
         print(report.message())
         assert report.ok, report.message()

@@ -926,6 +926,113 @@ fn inpaint<'py>(
     Ok(out)
 }
 
+/// The frustum of `camera`'s region `mask` (bool `(H, W)`, the camera's size; SPEC.md
+/// §16.3) between camera depths `near` and `far`, or the valid depths' `[min, max]` under
+/// the mask of `depth` (float32 `(H, W)`); `outline` `"bounding_box"` (the paper's) or
+/// `"hull"`. Returns `vertices` (float64 `(V, 3)`: the near outline, then the far one),
+/// `faces` (outward, counter-clockwise vertex lists), `near` and `far`.
+#[pyfunction]
+#[pyo3(signature = (camera, mask, *, depth = None, near = None, far = None, outline = "bounding_box"))]
+fn frustum<'py>(
+    py: Python<'py>,
+    camera: &PyCamera,
+    mask: &Bound<'py, PyAny>,
+    depth: Option<&Bound<'py, PyAny>>,
+    near: Option<f64>,
+    far: Option<f64>,
+    outline: &str,
+) -> PyResult<Bound<'py, PyDict>> {
+    use unseen::collide::frustum::{Outline, depth_range, region_frustum};
+    let cam = &camera.inner;
+    let dims = [
+        (Some(cam.height as usize), "H"),
+        (Some(cam.width as usize), "W"),
+    ];
+    let mut bound = Vec::new();
+    let (_, m) = array::<bool>("mask", mask, &dims, &mut bound)?;
+    let outline: Outline = outline
+        .parse()
+        .map_err(|e: Error| PyValueError::new_err(format!("outline: {}", e.message)))?;
+    let range = match (depth, near, far) {
+        (Some(d), None, None) => {
+            let (_, d) = array::<f32>("depth", d, &dims, &mut bound)?;
+            depth_range(&d, &m).map_err(py_err)?
+        }
+        (None, Some(n), Some(f)) => [n, f],
+        _ => {
+            return Err(PyValueError::new_err(
+                "give either depth or both near and far",
+            ));
+        }
+    };
+    let p = py
+        .detach(|| region_frustum(cam, &m, range, outline))
+        .map_err(py_err)?;
+    let out = PyDict::new(py);
+    let flat: Vec<f64> = p.vertices.iter().flat_map(|v| [v.x, v.y, v.z]).collect();
+    out.set_item("vertices", to_numpy(py, flat, &[p.vertices.len(), 3])?)?;
+    out.set_item("faces", p.faces)?;
+    out.set_item("near", range[0])?;
+    out.set_item("far", range[1])?;
+    Ok(out)
+}
+
+/// Independent views (SPEC.md §16.2) of candidate frustums (a list of float64 `(V, 3)`
+/// vertex arrays) with camera `centers` (float64 `(n, 3)`): the collision graph (or the
+/// given `edges`, pairs `i < j`), the independent set greedy in `order` (default the given
+/// order) and the closed nearest-neighbour tour. Returns `edges`, `independent`,
+/// `trajectory` and `gaps`.
+#[pyfunction]
+#[pyo3(signature = (frustums, centers, *, order = None, edges = None))]
+fn views<'py>(
+    py: Python<'py>,
+    frustums: Vec<Bound<'py, PyAny>>,
+    centers: &Bound<'py, PyAny>,
+    order: Option<Vec<usize>>,
+    edges: Option<Vec<(usize, usize)>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    use unseen::collide::gjk::ConvexHull;
+    use unseen::collide::independent::{select, select_in_graph};
+    let n = frustums.len();
+    let (_, c) = array::<f64>(
+        "centers",
+        centers,
+        &[(Some(n), "n"), (Some(3), "3")],
+        &mut Vec::new(),
+    )?;
+    let centers: Vec<glam::DVec3> = c
+        .chunks_exact(3)
+        .map(|p| glam::DVec3::new(p[0], p[1], p[2]))
+        .collect();
+    let sel = match edges {
+        Some(e) => py.detach(|| select_in_graph(n, e, &centers, order.as_deref())),
+        None => {
+            let mut hulls = Vec::with_capacity(n);
+            for (k, f) in frustums.iter().enumerate() {
+                let name = format!("frustums[{k}]");
+                let (_, v) =
+                    array::<f64>(&name, f, &[(None, "V"), (Some(3), "3")], &mut Vec::new())?;
+                let points = v
+                    .chunks_exact(3)
+                    .map(|p| glam::DVec3::new(p[0], p[1], p[2]))
+                    .collect();
+                hulls.push(
+                    ConvexHull::new(points)
+                        .map_err(|e| PyValueError::new_err(format!("{name}: {e}")))?,
+                );
+            }
+            py.detach(|| select(&hulls, &centers, order.as_deref()))
+        }
+    }
+    .map_err(py_err)?;
+    let out = PyDict::new(py);
+    out.set_item("edges", sel.edges)?;
+    out.set_item("independent", sel.independent)?;
+    out.set_item("trajectory", sel.trajectory)?;
+    out.set_item("gaps", sel.gaps)?;
+    Ok(out)
+}
+
 /// The crate version, SPEC.md's conventions version and the numerics revision (a port
 /// records them beside its goldens).
 #[pyfunction]
@@ -953,5 +1060,7 @@ fn _unseen(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(align, m)?)?;
     m.add_function(wrap_pyfunction!(ssim, m)?)?;
     m.add_function(wrap_pyfunction!(inpaint, m)?)?;
+    m.add_function(wrap_pyfunction!(frustum, m)?)?;
+    m.add_function(wrap_pyfunction!(views, m)?)?;
     Ok(())
 }

@@ -46,26 +46,29 @@ pub fn select(
     centers: &[DVec3],
     order: Option<&[usize]>,
 ) -> Result<Selection> {
-    let n = frustums.len();
-    if centers.len() != n {
-        return Err(Error::invalid(format!(
-            "{n} frustums but {} camera centres",
-            centers.len()
-        )));
-    }
+    check_order(frustums.len(), centers, order)?;
+    let edges = collision_graph(frustums)?;
+    select_in_graph(frustums.len(), edges, centers, order)
+}
+
+/// [`select`] on a given collision graph of `n` views (pairs `i < j`): what a port's
+/// selection is compared with when a pair's verdict lies within noise of contact.
+pub fn select_in_graph(
+    n: usize,
+    edges: Vec<(usize, usize)>,
+    centers: &[DVec3],
+    order: Option<&[usize]>,
+) -> Result<Selection> {
+    check_order(n, centers, order)?;
     let default: Vec<usize> = (0..n).collect();
     let order = order.unwrap_or(&default);
-    let mut seen = vec![false; n];
-    for &i in order {
-        if i >= n || std::mem::replace(&mut seen[i], true) {
-            return Err(Error::invalid(format!(
-                "the order lists view {i} twice or out of range"
-            )));
-        }
-    }
-    let edges = collision_graph(frustums)?;
     let mut adj = vec![Vec::new(); n];
     for &(i, j) in &edges {
+        if i >= j || j >= n {
+            return Err(Error::invalid(format!(
+                "no edge ({i}, {j}) among {n} views (pairs i < j)"
+            )));
+        }
         adj[i].push(j);
         adj[j].push(i);
     }
@@ -84,6 +87,24 @@ pub fn select(
         trajectory,
         gaps,
     })
+}
+
+fn check_order(n: usize, centers: &[DVec3], order: Option<&[usize]>) -> Result<()> {
+    if centers.len() != n {
+        return Err(Error::invalid(format!(
+            "{n} frustums but {} camera centres",
+            centers.len()
+        )));
+    }
+    let mut seen = vec![false; n];
+    for &i in order.unwrap_or(&[]) {
+        if i >= n || std::mem::replace(&mut seen[i], true) {
+            return Err(Error::invalid(format!(
+                "the order lists view {i} twice or out of range"
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// The most views the exact set searches ([`maximal_independent_sets`], [`colliding_sets`])

@@ -37,6 +37,7 @@ from ._unseen import (
     align,
     backward,
     extrapolate as _extrapolate,
+    frustum,
     inpaint,
     load_cameras,
     load_ply,
@@ -45,6 +46,7 @@ from ._unseen import (
     save_ply,
     ssim,
     versions as _versions,
+    views,
 )
 from ._unseen import compare_json as _compare_json
 
@@ -55,6 +57,7 @@ __all__ = [
     "backward",
     "compare",
     "extrapolate",
+    "frustum",
     "inpaint",
     "load_cameras",
     "load_ply",
@@ -63,6 +66,7 @@ __all__ = [
     "save_ply",
     "ssim",
     "versions",
+    "views",
 ]
 
 

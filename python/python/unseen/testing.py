@@ -43,6 +43,7 @@ conventions), ``camera`` a ``unseen.Camera`` (K, world-to-camera viewmat, width,
 
 from dataclasses import dataclass, field
 import inspect
+import itertools
 import math
 import time
 
@@ -54,6 +55,8 @@ from . import proximity as _proximity
 from . import align as _align_oracle
 from . import ssim as _ssim_oracle
 from . import inpaint as _inpaint_oracle
+from . import frustum as _frustum_oracle
+from . import views as _views_oracle
 from ._loss import (  # noqa: F401
     CONVENTIONS as LOSS_CONVENTIONS, L1_RTOL, LAMBDA_DSSIM, LOSS_MISTAKES, SSIM_ATOL, loss_case,
     ssim_reference)
@@ -64,6 +67,10 @@ from ._collide import (  # noqa: F401
     COLLIDE_MISTAKES, CONTACT_REL, DISTANCE_REL, FRUSTUM_FACES, MAX_SET_ASIDE, collide_case,
     frustum, mistaken_verdict)
 from ._adam import ADAM_MISTAKES, adam_bounds, adam_case, adam_reference  # noqa: F401
+from ._views import (  # noqa: F401
+    FRUSTUM_MISTAKES, FRUSTUM_REL, MAX_FLIPS, TOUR_REL, VIEWS_MISTAKES, frustum_case,
+    _closing, mistaken_frustum, mistaken_views, tour_follows_the_rule, unmatched, views_case,
+)
 from ._inpaint import (  # noqa: F401
     INPAINT_MISTAKES, MAX_SET_ASIDE as INPAINT_MAX_SET_ASIDE, inpaint_case, mistaken_values,
     round_cast, telea_local,
@@ -1734,3 +1741,138 @@ def compare_inpaint(port, case=None, *, seed=0):
 
 def _bits(a):
     return {1: np.uint8, 4: np.uint32}[a.dtype.itemsize]
+
+
+# -- Frustums of inpainted regions and independent views (SPEC.md §16.2, §16.3) ------------
+
+
+def compare_frustum(port, case=None, *, seed=0):
+    """Compare a port of the inpainted region's frustum with unseen's on ``case``
+    (``frustum_case(seed)`` by default).
+
+    ``port(mask, depth, k, viewmat, outline)`` takes the region (bool ``(H, W)``), its
+    depth (float32 ``(H, W)``; valid: finite and > 0), the camera (``k`` 3×3 and the
+    world-to-camera ``viewmat`` 4×4, float64) and ``outline`` (``"bounding_box"`` or
+    ``"hull"``) and returns the frustum's vertices (``(V, 3)``, any order). Each vertex
+    must lie within ``FRUSTUM_REL`` of the scale of one of the oracle's, and the other way
+    round. On a failure each of ``FRUSTUM_MISTAKES`` is tried and named when its vertices
+    explain the port's clearly better than the others. Returns a ``Report``.
+    """
+    case = frustum_case(seed) if case is None else case
+    cam = Camera(case["k"], case["viewmat"], case["width"], case["height"])
+    want = _frustum_oracle(cam, case["mask"], depth=case["depth"], outline=case["outline"])
+    w = want["vertices"]
+    got = np.asarray(port(case["mask"].copy(), case["depth"].copy(), case["k"].copy(),
+                          case["viewmat"].copy(), case["outline"]), np.float64)
+    report = Report(f"region frustum, {case['outline']}, {int(case['mask'].sum())} pixels",
+                    "unseen", units="")
+    if got.ndim != 2 or got.shape[1] != 3:
+        report.failures.append(Failure("vertices", 1, 1, "", (), math.nan, math.nan,
+                                       note=f"expected (V, 3) vertices, got {got.shape}"))
+        return report
+    scale = float(np.abs(w).max())
+    tol = FRUSTUM_REL * scale
+    off = unmatched(w, got, tol)
+    if off or len(got) != len(w):
+        dist = np.linalg.norm(w[:, None, :] - got[None, :, :], axis=2).min(1)
+        i = int(np.argmax(dist))
+        report.failures.append(Failure(
+            "vertices", off, len(w) + len(got), f"{FRUSTUM_REL:g}·scale", (i,),
+            float(dist[i]), 0.0,
+            note=f"{len(got)} vertices against the oracle's {len(w)}; {off} without a "
+                 f"counterpart within {tol:.3g}; farthest: oracle vertex {i} "
+                 f"{np.array2string(w[i], precision=5)}, {dist[i]:.3g} from the nearest"))
+        results = [(unmatched(mistaken_frustum(mk.name, case), got, tol), mk.text)
+                   for mk in FRUSTUM_MISTAKES]
+        _diagnosis(report, results, max(off, 1))
+    return report
+
+
+def compare_views(port, case=None, *, seed=0):
+    """Compare a port of independent-view selection with unseen's on ``case``
+    (``views_case(seed)`` by default).
+
+    ``port(frustums, centers)`` takes the candidates' frustums (a list of float64 (8, 3)
+    vertex arrays; faces ``FRUSTUM_FACES``) and camera centres (float64 (n, 3)) and returns
+    a dict with ``independent`` (the views chosen) and ``trajectory`` (the closed tour), and
+    optionally ``edges`` (colliding pairs ``i < j``) and ``gaps``. Pairs within the
+    collision test's contact band (``CONTACT_REL``) may be decided either way: the port's
+    set must be the greedy selection of one of the graphs they allow (at most
+    ``MAX_FLIPS`` such pairs), its tour must start at its first view and always step to a
+    nearest remaining centre (``TOUR_REL``), and its gaps, if given, must close the tour.
+    On a failure each of ``VIEWS_MISTAKES`` is tried. Returns a ``Report``.
+    """
+    case = views_case(seed) if case is None else case
+    frustums, centers = case["frustums"], case["centers"]
+    n = len(frustums)
+    want = _views_oracle(frustums, centers)
+    report = Report(f"independent views of {n} candidates", "unseen", units="pairs")
+    report.bound = 1.0
+    near = []
+    for i in range(n):
+        for j in range(i + 1, n):
+            p = _proximity(frustums[i], frustums[j])
+            if _near_contact(frustums[i], frustums[j], p):
+                near.append((i, j))
+    report.excluded = {"near contact": len(near)}
+    report.excluded_fraction = len(near) / max(n * (n - 1) // 2, 1)
+    if len(near) > MAX_FLIPS:
+        report.failures.append(Failure("pairs", len(near), n * (n - 1) // 2, "", (), math.nan,
+                                       math.nan, note=f"{len(near)} pairs lie within contact "
+                                       f"noise (at most {MAX_FLIPS}): the case cannot judge"))
+        return report
+    firm = [e for e in map(tuple, want["edges"]) if e not in near]
+    allowed = []
+    for flips in itertools.product((False, True), repeat=len(near)):
+        edges = sorted(firm + [e for e, on in zip(near, flips) if on])
+        allowed.append(sorted(_views_oracle(frustums, centers, edges=edges)["independent"]))
+    got = port([f.copy() for f in frustums], centers.copy())
+    independent = [int(v) for v in got["independent"]]
+    trajectory = [int(v) for v in got["trajectory"]]
+    wrong = 0
+    if "edges" in got:
+        port_edges = {tuple(sorted(map(int, e))) for e in got["edges"]}
+        differ = sorted((port_edges ^ set(map(tuple, want["edges"]))) - set(near))
+        if differ:
+            wrong += len(differ)
+            report.failures.append(Failure(
+                "edges", len(differ), n * (n - 1) // 2 - len(near), "the same verdict", (),
+                math.nan, math.nan, note=f"{len(differ)} pairs decided otherwise beyond contact "
+                f"noise; first: {differ[0]}"))
+    if sorted(independent) not in allowed:
+        best = min(allowed, key=lambda a: len(set(a) ^ set(independent)))
+        wrong += len(set(best) ^ set(independent))
+        report.failures.append(Failure(
+            "independent", 1, 1, "one of the allowed selections", (), math.nan, math.nan,
+            note=f"the port chose {sorted(independent)}, the oracle {sorted(want['independent'])}"
+                 + (f" (or one of {len(allowed)} allowed by {len(near)} near-contact pairs)"
+                    if near else "")))
+    else:
+        step = tour_follows_the_rule(trajectory, independent, centers)
+        if step is not None:
+            wrong += 1
+            report.failures.append(Failure(
+                "trajectory", 1, 1, "nearest-neighbour tour", (step,), math.nan, math.nan,
+                note=f"the port's tour {trajectory} breaks the rule at step {step} (the "
+                     f"oracle's: {want['trajectory']})"))
+        elif "gaps" in got:
+            closed = _closing(trajectory)
+            if [tuple(map(int, g)) for g in got["gaps"]] != closed:
+                wrong += 1
+                report.failures.append(Failure(
+                    "gaps", 1, 1, "consecutive pairs, closing", (), math.nan, math.nan,
+                    note=f"the port's gaps {[tuple(g) for g in got['gaps']]}, its tour's "
+                         f"{closed}"))
+    if wrong:
+        results = []
+        oracle_edges = [tuple(e) for e in want["edges"]]
+        for mk in VIEWS_MISTAKES:
+            ind, tour, gaps = mistaken_views(mk.name, n, oracle_edges, centers)
+            left = len(set(ind) ^ set(independent))
+            if not left:
+                left += sum(a != b for a, b in zip(tour, trajectory)) > 0
+                if "gaps" in got:
+                    left += [tuple(map(int, g)) for g in got["gaps"]] != gaps
+            results.append((left, mk.text))
+        _diagnosis(report, results, wrong)
+    return report
