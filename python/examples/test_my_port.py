@@ -1,9 +1,9 @@
 """A test a GPU port copies: let `unseen.testing.check_port` render and differentiate seeded
 scenes of every family with unseen (the oracle) and with the port under test, and judge
 them (SPEC.md §8.1); and `unseen.testing.compare_adam`, `compare_collide`, `compare_align`,
-`compare_loss`, `compare_inpaint`, `compare_frustum` and `compare_views` judge its optimizer,
-frustum collision test, depth alignment, loss, Telea inpainting, region frustums and
-independent-view selection (replace the `port_*` functions; set ADAM_CONVENTIONS and
+`compare_loss`, `compare_inpaint`, `compare_frustum`, `compare_views` and `compare_warp`
+judge its optimizer, frustum collision test, depth alignment, loss, Telea inpainting,
+region frustums, independent-view selection and DIBR warp (replace the `port_*` functions; set ADAM_CONVENTIONS and
 LOSS_CONVENTIONS).
 
 To test your port, replace `port_render` / `port_backward` with calls into it (gsplat's
@@ -125,6 +125,17 @@ def port_views(frustums, centers):
     return unseen.views(frustums, centers)
 
 
+def port_warp(image, depth, source, target, *, footprint, depth_tolerance, close_cracks,
+              grow_holes):
+    """The port under test: the DIBR forward warp into the target camera (cameras as dicts
+    of k, viewmat, width, height): a dict of image, depth (0 in holes) and holes."""
+    cams = [unseen.Camera(c["k"], c["viewmat"], c["width"], c["height"])
+            for c in (source, target)]
+    return unseen.warp(image, depth, *cams, footprint=footprint,
+                       depth_tolerance=depth_tolerance, close_cracks=close_cracks,
+                       grow_holes=grow_holes)
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_stages_match_the_oracle(seed):
     for report in (testing.compare_collide(port_collide, seed=seed),
@@ -132,6 +143,7 @@ def test_stages_match_the_oracle(seed):
                    testing.compare_loss(port_loss, seed=seed, conventions=LOSS_CONVENTIONS),
                    testing.compare_inpaint(port_inpaint, seed=seed),
                    testing.compare_frustum(port_frustum, seed=seed),
-                   testing.compare_views(port_views, seed=seed)):
+                   testing.compare_views(port_views, seed=seed),
+                   testing.compare_warp(port_warp, seed=seed)):
         print(report.message())
         assert report.ok, report.message()

@@ -1033,6 +1033,75 @@ fn views<'py>(
     Ok(out)
 }
 
+/// DIBR forward warp (SPEC.md §18) of `image` (float32 `(H, W, C)`) with its camera-z
+/// `depth` (float32 `(H, W)`) from camera `source` to camera `target`, traced for a
+/// port's comparison. Returns `image`, `depth` and `holes` (the target's size), the source
+/// pixels' projections `u`, `v` (float64) and `z` (float32; NaN when invalid or behind),
+/// per target pixel `aside` (the decisions within a port's float noise) and `stats`.
+#[pyfunction]
+#[pyo3(signature = (image, depth, source, target, *, footprint = "nearest", depth_tolerance = 0.01, close_cracks = 0, grow_holes = 0))]
+#[allow(clippy::too_many_arguments)]
+fn warp<'py>(
+    py: Python<'py>,
+    image: &Bound<'py, PyAny>,
+    depth: &Bound<'py, PyAny>,
+    source: &PyCamera,
+    target: &PyCamera,
+    footprint: &str,
+    depth_tolerance: f32,
+    close_cracks: u32,
+    grow_holes: u32,
+) -> PyResult<Bound<'py, PyDict>> {
+    use unseen::io::image::ImageF32;
+    use unseen::warp::dibr::{Footprint, WarpOptions, warp_traced};
+    let (from, to) = (&source.inner, &target.inner);
+    let (h, w) = (from.height as usize, from.width as usize);
+    let mut bound = vec![("H".to_string(), h), ("W".to_string(), w)];
+    let (shape, img) = array::<f32>(
+        "image",
+        image,
+        &[(None, "H"), (None, "W"), (None, "C")],
+        &mut bound,
+    )?;
+    let (_, d) = array::<f32>("depth", depth, &[(None, "H"), (None, "W")], &mut bound)?;
+    let footprint: Footprint = footprint
+        .parse()
+        .map_err(|e: Error| PyValueError::new_err(format!("footprint: {}", e.message)))?;
+    let opts = WarpOptions {
+        footprint,
+        depth_tolerance,
+        close_cracks,
+        grow_holes,
+    };
+    let img = ImageF32::new(w, h, shape[2], img).map_err(py_err)?;
+    let t = py
+        .detach(|| warp_traced(&img, &d, from, to, &opts))
+        .map_err(py_err)?;
+    let (tw, th, ch) = (to.width as usize, to.height as usize, shape[2]);
+    let out = PyDict::new(py);
+    out.set_item("image", to_numpy(py, t.warped.image.data, &[th, tw, ch])?)?;
+    out.set_item("depth", to_numpy(py, t.warped.depth, &[th, tw])?)?;
+    out.set_item("holes", to_numpy(py, t.warped.holes, &[th, tw])?)?;
+    out.set_item("u", to_numpy(py, t.u, &[h, w])?)?;
+    out.set_item("v", to_numpy(py, t.v, &[h, w])?)?;
+    out.set_item("z", to_numpy(py, t.z, &[h, w])?)?;
+    out.set_item("aside", to_numpy(py, t.aside, &[th, tw])?)?;
+    let stats = PyDict::new(py);
+    let st = t.warped.stats;
+    for (k, v) in [
+        ("invalid_depth", st.invalid_depth),
+        ("behind_target", st.behind_target),
+        ("outside_target", st.outside_target),
+        ("raw_holes", st.raw_holes),
+        ("cracks_filled", st.cracks_filled),
+        ("grown", st.grown),
+    ] {
+        stats.set_item(k, v)?;
+    }
+    out.set_item("stats", stats)?;
+    Ok(out)
+}
+
 /// The crate version, SPEC.md's conventions version and the numerics revision (a port
 /// records them beside its goldens).
 #[pyfunction]
@@ -1062,5 +1131,6 @@ fn _unseen(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(inpaint, m)?)?;
     m.add_function(wrap_pyfunction!(frustum, m)?)?;
     m.add_function(wrap_pyfunction!(views, m)?)?;
+    m.add_function(wrap_pyfunction!(warp, m)?)?;
     Ok(())
 }

@@ -128,6 +128,75 @@ pub fn warp(
     to: &Camera,
     opts: &WarpOptions,
 ) -> Result<Warped> {
+    warp_impl(image, depth, from, to, opts, None)
+}
+
+/// A projection or a resolved pixel this far (target pixels) from a footprint boundary
+/// may land on either side of it in a port's arithmetic (float32 pose and projection at
+/// room scale and up to a few thousand pixels: ≈ 1e-4 px, ×20).
+pub const DECISION_PX: f64 = 2e-3;
+/// Depths within this share of each other are a z-buffer tie, and a contribution this
+/// close to the depth band's limit may fall either side (a float32 `z` is within a few
+/// ulps, ≈ 1e-6 relative, ×10).
+pub const DECISION_Z_REL: f32 = 1e-5;
+
+/// [`WarpTrace::aside`] bit: a source point within [`DECISION_PX`] of a footprint boundary
+/// (a pixel edge, a bilinear cell or the image border) lands here or in a neighbour.
+pub const ASIDE_EDGE: u8 = 1;
+/// Bit: the nearest two depths here tie within [`DECISION_Z_REL`] with other colours.
+pub const ASIDE_Z_TIE: u8 = 2;
+/// Bit: a bilinear contribution lies within [`DECISION_Z_REL`] of the depth band's limit.
+pub const ASIDE_BAND: u8 = 4;
+/// Bit: within the cleaning's reach of an uncertain pixel: `3·close_cracks + grow_holes`
+/// of an uncertain hole status, or a crack within `close_cracks` of an uncertain value.
+pub const ASIDE_CLEANING: u8 = 8;
+
+/// [`warp`] with what a port's warp is judged by (SPEC.md §18).
+#[derive(Clone, Debug)]
+pub struct WarpTrace {
+    pub warped: Warped,
+    /// Per source pixel, where it projects in the target (pixels, f64) and its target
+    /// depth; NaN for invalid depths and points behind the target.
+    pub u: Vec<f64>,
+    pub v: Vec<f64>,
+    pub z: Vec<f32>,
+    /// Per target pixel, the decisions it lies near (0: none; `ASIDE_*` bits).
+    pub aside: Vec<u8>,
+}
+
+/// [`warp`], traced: the same [`Warped`] bit for bit, each source pixel's projection, and
+/// per target pixel the decisions within a port's float noise.
+pub fn warp_traced(
+    image: &ImageF32,
+    depth: &[f32],
+    from: &Camera,
+    to: &Camera,
+    opts: &WarpOptions,
+) -> Result<WarpTrace> {
+    let mut trace = WarpTrace {
+        warped: Warped {
+            image: ImageF32::new(1, 1, 1, vec![0.0])?,
+            depth: Vec::new(),
+            holes: Vec::new(),
+            stats: WarpStats::default(),
+        },
+        u: Vec::new(),
+        v: Vec::new(),
+        z: Vec::new(),
+        aside: Vec::new(),
+    };
+    trace.warped = warp_impl(image, depth, from, to, opts, Some(&mut trace))?;
+    Ok(trace)
+}
+
+fn warp_impl(
+    image: &ImageF32,
+    depth: &[f32],
+    from: &Camera,
+    to: &Camera,
+    opts: &WarpOptions,
+    mut trace: Option<&mut WarpTrace>,
+) -> Result<Warped> {
     opts.validate()?;
     from.validate()?;
     to.validate()?;
@@ -248,6 +317,35 @@ pub fn warp(
             });
         }
     }
+    let (mut aside, mut certain) = (Vec::new(), Vec::new());
+    if let Some(tr) = trace.as_deref_mut() {
+        aside = vec![0u8; tw * th];
+        let n = proj.len();
+        (tr.u, tr.v, tr.z) = (vec![f64::NAN; n], vec![f64::NAN; n], vec![f32::NAN; n]);
+        let d = DECISION_PX;
+        // Per target pixel, how many points land in it however their noise falls: a
+        // pixel some point may miss is a hole only if none is certain.
+        certain = vec![0u32; tw * th];
+        let mut cells = Vec::new();
+        for (i, p) in proj.iter().enumerate() {
+            let Proj::At { u, v, z } = *p else { continue };
+            (tr.u[i], tr.v[i], tr.z[i]) = (u, v, z);
+            // The footprint's pixels at the projection and at its four perturbed corners:
+            // those not in all five may or may not receive the point.
+            cells.clear();
+            for (du, dv) in [(0.0, 0.0), (-d, -d), (-d, d), (d, -d), (d, d)] {
+                footprint(u + du, v + dv, &mut |t, _| cells.push(t));
+            }
+            cells.sort_unstable();
+            for run in cells.chunk_by(|a, b| a == b) {
+                if run.len() == 5 {
+                    certain[run[0]] += 1;
+                } else {
+                    aside[run[0]] |= ASIDE_EDGE;
+                }
+            }
+        }
+    }
     drop(proj);
 
     // 4. Resolve every target pixel on its own.
@@ -293,6 +391,12 @@ pub fn warp(
                 }
             }
         });
+    if trace.is_some() {
+        for (t, a) in aside.iter_mut().enumerate() {
+            let hs = &hits[start[t] as usize..start[t + 1] as usize];
+            *a |= decisions_at(hs, &image.data, ch, opts);
+        }
+    }
     let mut holes: Vec<bool> = (0..tw * th).map(|t| start[t] == start[t + 1]).collect();
     stats.raw_holes = holes.iter().filter(|&&h| h).count();
 
@@ -325,12 +429,64 @@ pub fn warp(
         }
         holes = grown;
     }
+    if let Some(tr) = trace {
+        // Cleaning reads the hole mask (opening, crack windows, growth: within
+        // `3r + g` of a pixel whose hole status is uncertain) and, to fill a crack, the
+        // values of its window (within `r` of an uncertain value).
+        let (r, g) = (opts.close_cracks as usize, opts.grow_holes as usize);
+        if r + g > 0 {
+            let hole_unsure: Vec<bool> = (0..tw * th)
+                .map(|t| aside[t] & ASIDE_EDGE != 0 && certain[t] == 0)
+                .collect();
+            let value_unsure: Vec<bool> = aside.iter().map(|&a| a != 0).collect();
+            let by_holes = dilate(&hole_unsure, tw, th, 3 * r + g);
+            let by_values = dilate(&value_unsure, tw, th, r);
+            for t in 0..tw * th {
+                let cleaned = start[t] == start[t + 1] && r > 0;
+                if aside[t] == 0 && (by_holes[t] || (cleaned && by_values[t])) {
+                    aside[t] = ASIDE_CLEANING;
+                }
+            }
+        }
+        tr.aside = aside;
+    }
     Ok(Warped {
         image: ImageF32::new(tw, th, ch, out)?,
         depth: out_z,
         holes,
         stats,
     })
+}
+
+/// The z-buffer decisions among one target pixel's contributions: nearest, the two
+/// nearest tie within [`DECISION_Z_REL`] with other colours; bilinear, a contribution lies
+/// within it of the depth band's limit.
+fn decisions_at(hs: &[Hit], image: &[f32], ch: usize, opts: &WarpOptions) -> u8 {
+    let colour = |h: &Hit| &image[h.src as usize * ch..(h.src as usize + 1) * ch];
+    let Some(z_min) = hs.iter().map(|h| h.z).min_by(f32::total_cmp) else {
+        return 0;
+    };
+    match opts.footprint {
+        Footprint::Nearest => {
+            let best = hs
+                .iter()
+                .min_by(|a, b| a.z.total_cmp(&b.z).then(a.src.cmp(&b.src)))
+                .expect("non-empty");
+            let tie = hs.iter().any(|h| {
+                h.src != best.src
+                    && h.z <= z_min * (1.0 + DECISION_Z_REL)
+                    && colour(h) != colour(best)
+            });
+            if tie { ASIDE_Z_TIE } else { 0 }
+        }
+        Footprint::Bilinear => {
+            let limit = z_min * (1.0 + opts.depth_tolerance);
+            let near = hs
+                .iter()
+                .any(|h| (h.z - limit).abs() <= DECISION_Z_REL * limit);
+            if near { ASIDE_BAND } else { 0 }
+        }
+    }
 }
 
 /// Mean colour and depth of the valid pixels of `t`'s `(2r+1)²` window within the depth

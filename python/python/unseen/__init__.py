@@ -47,6 +47,7 @@ from ._unseen import (
     ssim,
     versions as _versions,
     views,
+    warp,
 )
 from ._unseen import compare_json as _compare_json
 
@@ -67,6 +68,7 @@ __all__ = [
     "ssim",
     "versions",
     "views",
+    "warp",
 ]
 
 

@@ -57,6 +57,7 @@ from . import ssim as _ssim_oracle
 from . import inpaint as _inpaint_oracle
 from . import frustum as _frustum_oracle
 from . import views as _views_oracle
+from . import warp as _warp_oracle
 from ._loss import (  # noqa: F401
     CONVENTIONS as LOSS_CONVENTIONS, L1_RTOL, LAMBDA_DSSIM, LOSS_MISTAKES, SSIM_ATOL, loss_case,
     ssim_reference)
@@ -70,6 +71,10 @@ from ._adam import ADAM_MISTAKES, adam_bounds, adam_case, adam_reference  # noqa
 from ._views import (  # noqa: F401
     FRUSTUM_MISTAKES, FRUSTUM_REL, MAX_FLIPS, TOUR_REL, VIEWS_MISTAKES, frustum_case,
     _closing, mistaken_frustum, mistaken_views, tour_follows_the_rule, unmatched, views_case,
+)
+from ._warp import (  # noqa: F401
+    COLOR_ATOL_BILINEAR, COLOR_ATOL_NEAREST, DEPTH_RTOL, MAX_SET_ASIDE as WARP_MAX_SET_ASIDE,
+    WARP_MISTAKES, warp_case, warp_failures, warp_reference,
 )
 from ._inpaint import (  # noqa: F401
     INPAINT_MISTAKES, MAX_SET_ASIDE as INPAINT_MAX_SET_ASIDE, inpaint_case, mistaken_values,
@@ -1875,4 +1880,76 @@ def compare_views(port, case=None, *, seed=0):
                     left += [tuple(map(int, g)) for g in got["gaps"]] != gaps
             results.append((left, mk.text))
         _diagnosis(report, results, wrong)
+    return report
+
+
+# -- DIBR forward warp (SPEC.md §18) -----------------------------------------------------
+
+
+def compare_warp(port, case=None, *, seed=0):
+    """Compare a port of the DIBR forward warp with unseen's on ``case`` (``warp_case(seed)``
+    by default).
+
+    ``port(image, depth, source, target, *, footprint, depth_tolerance, close_cracks,
+    grow_holes)`` takes a float32 ``(H, W, C)`` image, its camera-z depth (float32 ``(H,
+    W)``; valid: finite and > 0) and two cameras (dicts of ``k`` 3×3, world-to-camera
+    ``viewmat`` 4×4, ``width``, ``height``; pixel centres at ``j + 0.5``) and returns a dict
+    of the target's ``image`` ``(h, w, C)``, ``depth`` ``(h, w)`` (0 in holes) and
+    ``holes`` (bool ``(h, w)``). Target pixels near a decision are set aside (at most
+    ``WARP_MAX_SET_ASIDE``); on every other the hole status must agree, the depth within
+    ``DEPTH_RTOL`` and the colour within ``COLOR_ATOL_NEAREST`` or ``COLOR_ATOL_BILINEAR``
+    of the image's largest value. On a failure of a case without cleaning each of
+    ``WARP_MISTAKES`` is tried and named when it explains the port clearly better than the
+    others. Returns a ``Report``.
+    """
+    case = warp_case(seed) if case is None else case
+    src, tgt = case["source"], case["target"]
+    cams = [Camera(c["k"], c["viewmat"], c["width"], c["height"]) for c in (src, tgt)]
+    opts = {k: case[k] for k in ("footprint", "depth_tolerance", "close_cracks", "grow_holes")}
+    want = _warp_oracle(case["image"], case["depth"], *cams, **opts)
+    th, tw = want["holes"].shape
+    report = Report(f"DIBR warp, {case['footprint']}, {src['width']}×{src['height']} → "
+                    f"{tw}×{th}" + (", cleaned" if case["close_cracks"] else ""), "unseen")
+    report.bound = WARP_MAX_SET_ASIDE
+    got = port(case["image"].copy(), case["depth"].copy(), dict(src), dict(tgt), **opts)
+    for key, shape in (("image", want["image"].shape), ("depth", (th, tw)),
+                       ("holes", (th, tw))):
+        if np.shape(got.get(key)) != shape:
+            report.failures.append(Failure(key, 1, 1, "", (), math.nan, math.nan,
+                                           note=f"expected shape {shape}, got "
+                                           f"{np.shape(got.get(key))}"))
+    if report.failures:
+        return report
+    aside = want["aside"]
+    kinds = (("a footprint edge", 1), ("a z-buffer tie", 2), ("the depth band's limit", 4),
+             ("the cleaning's reach", 8))
+    report.excluded = {k: int(((aside & b) > 0).sum()) for k, b in kinds}
+    report.excluded_fraction = float((aside != 0).mean())
+    if report.excluded_fraction > WARP_MAX_SET_ASIDE:
+        report.failures.append(Failure(
+            "pixels", int((aside != 0).sum()), aside.size, "", (), math.nan, math.nan,
+            note="too many target pixels lie near a decision: the case cannot judge"))
+    scale = float(np.abs(case["image"]).max()) or 1.0
+    holes, depth, image = warp_failures(got, want, aside, case["footprint"], scale)
+    for name, bad, tol, g, w in (
+            ("holes", holes, "the same", got["holes"], want["holes"]),
+            ("depth", depth, f"rtol {DEPTH_RTOL:g}", got["depth"], want["depth"]),
+            ("image", image, "atol", np.asarray(got["image"]).max(-1),
+             want["image"].max(-1))):
+        if bad.any():
+            where = tuple(int(i) for i in np.argwhere(bad)[0])
+            report.failures.append(Failure(name, int(bad.sum()), int((aside == 0).sum()), tol,
+                                           where, float(g[where]), float(w[where])))
+    base = int(holes.sum() + depth.sum() + image.sum())
+    if base:
+        if case["close_cracks"] or case["grow_holes"]:
+            report.untried = "the mistakes are emulated without cleaning"
+        else:
+            results = []
+            for mk in WARP_MISTAKES:
+                emulated = warp_reference(case, mk.name)
+                left = sum(int(m.sum()) for m in warp_failures(
+                    got, emulated, aside, case["footprint"], scale))
+                results.append((left, mk.text))
+            _diagnosis(report, results, base)
     return report
