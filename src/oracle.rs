@@ -259,3 +259,40 @@ pub fn dump_inpaint<T: crate::models::telea::Sample + NpyElement>(
     Manifest::new("oracle inpaint", "", inputs, wr.entries).write(dir)?;
     Ok(())
 }
+
+/// `unseen oracle warp`: the traced DIBR warp ([`crate::warp::dibr::warp_traced`]):
+/// `image` (h, w, C), `depth` (h, w), `holes` and `aside` (u1, (h, w)), and per source
+/// pixel `u`, `v` (f8) and `z` (f4), as .npy in `dir` (SPEC.md §12, §18).
+pub fn dump_warp(
+    image: &crate::io::image::ImageF32,
+    depth: &[f32],
+    from: &Camera,
+    to: &Camera,
+    opts: &crate::warp::dibr::WarpOptions,
+    dir: &Path,
+) -> Result<()> {
+    let t = crate::warp::dibr::warp_traced(image, depth, from, to, opts)?;
+    crate::io::create_dir_all(dir)?;
+    let mut wr = Writer {
+        dir,
+        entries: Vec::new(),
+    };
+    let (tw, th) = (to.width as usize, to.height as usize);
+    let (sw, sh) = (from.width as usize, from.height as usize);
+    wr.put("image", &t.warped.image.data, &[th, tw, image.channels])?;
+    wr.put("depth", &t.warped.depth, &[th, tw])?;
+    let holes: Vec<u8> = t.warped.holes.iter().map(|&h| h as u8).collect();
+    wr.put("holes", &holes, &[th, tw])?;
+    wr.put("aside", &t.aside, &[th, tw])?;
+    wr.put("u", &t.u, &[sh, sw])?;
+    wr.put("v", &t.v, &[sh, sw])?;
+    wr.put("z", &t.z, &[sh, sw])?;
+    let inputs = serde_json::json!({
+        "from": from.name,
+        "to": to.name,
+        "options": opts,
+        "stats": t.warped.stats,
+    });
+    Manifest::new("oracle warp", "", inputs, wr.entries).write(dir)?;
+    Ok(())
+}

@@ -80,34 +80,71 @@ pub struct ViewsArgs {
     out: PathBuf,
 }
 
-pub fn run_warp(a: &WarpArgs) -> Result<()> {
-    let cams = inria::read_cameras_json(&a.cameras)?;
-    let (from, to) = (
-        find(&cams, &a.from, &a.cameras)?,
-        find(&cams, &a.to, &a.cameras)?,
-    );
-    let image = read_png(&a.image)?;
-    if (image.width, image.height) != (from.width as usize, from.height as usize) {
-        return Err(Error::invalid(format!(
-            "image is {}x{} but camera '{}' is {}x{}",
-            image.width, image.height, from.name, from.width, from.height
-        ))
-        .at(&a.image));
+/// The inputs `unseen warp` and `unseen oracle warp` read: image, depth, the two cameras
+/// and the options.
+pub struct WarpInputs {
+    pub image: ImageF32,
+    pub depth: Vec<f32>,
+    pub from: unseen::camera::Camera,
+    pub to: unseen::camera::Camera,
+    pub opts: WarpOptions,
+}
+
+impl WarpArgs {
+    /// The output folder.
+    pub fn out(&self) -> &Path {
+        &self.out
     }
-    let depth = read_exr(&a.depth, &["Y"])?;
-    check_same_size(
-        &a.depth,
-        (depth.width, depth.height),
-        &a.image,
-        (image.width, image.height),
-    )?;
-    let depth = depth.data;
-    let opts = WarpOptions {
-        footprint: a.footprint,
-        depth_tolerance: a.depth_tolerance,
-        close_cracks: a.close_cracks,
-        grow_holes: a.grow_holes,
-    };
+
+    /// Read and check the inputs.
+    pub fn inputs(&self) -> Result<WarpInputs> {
+        let a = self;
+        let cams = inria::read_cameras_json(&a.cameras)?;
+        let (from, to) = (
+            find(&cams, &a.from, &a.cameras)?.clone(),
+            find(&cams, &a.to, &a.cameras)?.clone(),
+        );
+        let image = read_png(&a.image)?;
+        if (image.width, image.height) != (from.width as usize, from.height as usize) {
+            return Err(Error::invalid(format!(
+                "image is {}x{} but camera '{}' is {}x{}",
+                image.width, image.height, from.name, from.width, from.height
+            ))
+            .at(&a.image));
+        }
+        let depth = read_exr(&a.depth, &["Y"])?;
+        check_same_size(
+            &a.depth,
+            (depth.width, depth.height),
+            &a.image,
+            (image.width, image.height),
+        )?;
+        let opts = WarpOptions {
+            footprint: a.footprint,
+            depth_tolerance: a.depth_tolerance,
+            close_cracks: a.close_cracks,
+            grow_holes: a.grow_holes,
+        };
+        opts.validate()?;
+        Ok(WarpInputs {
+            image,
+            depth: depth.data,
+            from,
+            to,
+            opts,
+        })
+    }
+}
+
+pub fn run_warp(a: &WarpArgs) -> Result<()> {
+    let WarpInputs {
+        image,
+        depth,
+        from,
+        to,
+        opts,
+    } = a.inputs()?;
+    let (from, to) = (&from, &to);
     let w = warp(&image, &depth, from, to, &opts).map_err(|e| e.at(&a.image))?;
     let (tw, th) = (to.width as usize, to.height as usize);
     create_dir_all(&a.out)?;

@@ -155,6 +155,13 @@ pub enum OraclePass {
         #[arg(long)]
         out: PathBuf,
     },
+    /// The DIBR forward warp traced for a port's comparison (SPEC.md §18): the warp, each
+    /// source pixel's projection and the target pixels near a decision (`unseen warp`'s
+    /// arguments; `--out` receives .npy files and a manifest).
+    Warp {
+        #[command(flatten)]
+        args: crate::geometry::WarpArgs,
+    },
     /// Telea inpainting traced for a port's comparison (SPEC.md §19.1): the fill, each
     /// pixel's arrival time and order, and per value its mean, gradient term, error bound
     /// and decisions; with `--forced`, each value computed from the port's predecessors.
@@ -508,6 +515,17 @@ pub fn run_oracle_command(a: OracleArgs) -> Result<()> {
             forced,
             out,
         } => run_oracle_inpaint(&image, &mask, radius, forced.as_deref(), &out),
+        OraclePass::Warp { args } => {
+            let i = args.inputs()?;
+            unseen::oracle::dump_warp(&i.image, &i.depth, &i.from, &i.to, &i.opts, args.out())?;
+            println!(
+                "wrote the warp oracle {} -> {} into {}",
+                i.from.name,
+                i.to.name,
+                args.out().display()
+            );
+            Ok(())
+        }
     }
 }
 

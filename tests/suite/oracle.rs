@@ -331,3 +331,76 @@ fn oracle_inpaint_dumps_the_trace_and_refuses_a_forced_image_of_another_size() {
     );
     assert!(!bad.exists());
 }
+
+/// `unseen oracle warp`: the traced warp of a bundled pair as .npy, the library's warp bit
+/// for bit, with the projections and the set-aside pixels; a missing depth file is one
+/// clear error naming it, and nothing is written.
+#[test]
+fn oracle_warp_dumps_the_traced_warp() {
+    use unseen::camera::{find, inria::read_cameras_json};
+    use unseen::io::image::{read_exr, read_png};
+    use unseen::warp::dibr::{Footprint, WarpOptions, warp};
+    let t = crate::support::TempDir::new("oracle-warp");
+    let root = reference("scenes/lounge");
+    let (a, b) = ("train_013", "train_035");
+    let run = |depth: &std::path::Path, out: &std::path::Path| {
+        Command::new(env!("CARGO_BIN_EXE_unseen"))
+            .args([
+                "oracle",
+                "warp",
+                "--from",
+                a,
+                "--to",
+                b,
+                "--footprint",
+                "bilinear",
+            ])
+            .arg("--image")
+            .arg(root.join(format!("images/{a}.png")))
+            .arg("--depth")
+            .arg(depth)
+            .arg("--cameras")
+            .arg(root.join("cameras.json"))
+            .arg("--out")
+            .arg(out)
+            .output()
+            .unwrap()
+    };
+    let out = t.path().join("dump");
+    let o = run(&root.join(format!("depth/{a}.exr")), &out);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let cams = read_cameras_json(&root.join("cameras.json")).unwrap();
+    let p = root.join("cameras.json");
+    let (from, to) = (find(&cams, a, &p).unwrap(), find(&cams, b, &p).unwrap());
+    let image = read_png(&root.join(format!("images/{a}.png"))).unwrap();
+    let depth = read_exr(&root.join(format!("depth/{a}.exr")), &["Y"])
+        .unwrap()
+        .data;
+    let opts = WarpOptions {
+        footprint: Footprint::Bilinear,
+        ..WarpOptions::default()
+    };
+    let want = warp(&image, &depth, from, to, &opts).unwrap();
+    let (shape, got) = read_npy_f32(&out.join("image.npy")).unwrap();
+    assert_eq!(
+        shape,
+        [to.height as usize, to.width as usize, image.channels]
+    );
+    assert_eq!(
+        crate::support::bits(&got),
+        crate::support::bits(&want.image.data)
+    );
+    let (_, z) = read_npy_f32(&out.join("depth.npy")).unwrap();
+    assert_eq!(crate::support::bits(&z), crate::support::bits(&want.depth));
+    let m: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!(m["inputs"]["options"]["footprint"], "bilinear", "{m}");
+    for f in ["holes", "aside", "u", "v", "z"] {
+        assert!(out.join(format!("{f}.npy")).is_file(), "{f}");
+    }
+    let bad = t.path().join("bad");
+    let o = run(&t.path().join("missing.exr"), &bad);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("missing.exr"), "{err}");
+    assert!(!bad.exists());
+}
