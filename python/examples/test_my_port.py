@@ -1,9 +1,9 @@
 """A test a GPU port copies: let `unseen.testing.check_port` render and differentiate seeded
 scenes of every family with unseen (the oracle) and with the port under test, and judge
 them (SPEC.md §8.1); and `unseen.testing.compare_adam`, `compare_collide`, `compare_align`,
-`compare_loss`, `compare_inpaint`, `compare_frustum`, `compare_views` and `compare_warp`
-judge its optimizer, frustum collision test, depth alignment, loss, Telea inpainting,
-region frustums, independent-view selection and DIBR warp (replace the `port_*` functions; set ADAM_CONVENTIONS and
+`compare_loss`, `compare_inpaint`, `compare_frustum`, `compare_views`, `compare_warp` and
+`compare_densify` judge its optimizer, frustum collision test, depth alignment, loss, Telea
+inpainting, region frustums, independent-view selection, DIBR warp and densification (replace the `port_*` functions; set ADAM_CONVENTIONS and
 LOSS_CONVENTIONS).
 
 To test your port, replace `port_render` / `port_backward` with calls into it (gsplat's
@@ -136,6 +136,14 @@ def port_warp(image, depth, source, target, *, footprint, depth_tolerance, close
                        grow_holes=grow_holes)
 
 
+def port_densify(scene, grad_accum, count, *, extent, world_prune, normals):
+    """The port under test: one densify-and-prune step (INRIA's thresholds) of a scene of
+    gsplat-convention arrays; split children at mean + R·(s⊙normals[c, i])."""
+    keys = ("means", "quats", "scales", "opacities", "sh")
+    return unseen.densify(*(scene[k] for k in keys), grad_accum, count, extent=extent,
+                          world_prune=world_prune, normals=normals)
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_stages_match_the_oracle(seed):
     for report in (testing.compare_collide(port_collide, seed=seed),
@@ -144,6 +152,7 @@ def test_stages_match_the_oracle(seed):
                    testing.compare_inpaint(port_inpaint, seed=seed),
                    testing.compare_frustum(port_frustum, seed=seed),
                    testing.compare_views(port_views, seed=seed),
-                   testing.compare_warp(port_warp, seed=seed)):
+                   testing.compare_warp(port_warp, seed=seed),
+                   testing.compare_densify(port_densify, seed=seed)):
         print(report.message())
         assert report.ok, report.message()

@@ -604,6 +604,12 @@ fn load_ply(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyDict>> {
     let (g, _) = py
         .detach(|| unseen::gaussian::ply::read_ply(&path))
         .map_err(py_err)?;
+    scene_dict(py, g)
+}
+
+/// A scene as gsplat-convention arrays (`means`, `quats`, `scales`, `opacities`, `sh`) and
+/// its `sh_degree`.
+fn scene_dict(py: Python<'_>, g: Gaussians) -> PyResult<Bound<'_, PyDict>> {
     let n = g.len();
     let k = g.rest_per_channel() + 1;
     let mut sh = Vec::with_capacity(n * k * 3);
@@ -1102,6 +1108,84 @@ fn warp<'py>(
     Ok(out)
 }
 
+/// One densify-and-prune step (SPEC.md §14.3) on a scene of gsplat-convention arrays with
+/// its gradient statistics (`grad_accum`: the sum over visible views of `|dL/d mean2d|` in
+/// NDC units, float32 `(N,)`; `count`: those views, uint32 `(N,)`), the scene `extent`,
+/// `world_prune` (the large-Gaussian test, on after the first opacity reset) and the split
+/// children's `normals` (float32 `(2, N, 3)`: copy `c` of Gaussian `i` takes
+/// `normals[c, i]`). Returns the new scene's arrays and `cloned`, `split`, `pruned`.
+#[pyfunction]
+#[pyo3(signature = (means, quats, scales, opacities, sh, grad_accum, count, *, extent, world_prune, normals, grad_threshold = 2e-4, percent_dense = 0.01, min_opacity = 0.005, world_prune_fraction = 0.1))]
+#[allow(clippy::too_many_arguments)]
+fn densify<'py>(
+    py: Python<'py>,
+    means: &Bound<'py, PyAny>,
+    quats: &Bound<'py, PyAny>,
+    scales: &Bound<'py, PyAny>,
+    opacities: &Bound<'py, PyAny>,
+    sh: &Bound<'py, PyAny>,
+    grad_accum: &Bound<'py, PyAny>,
+    count: &Bound<'py, PyAny>,
+    extent: f32,
+    world_prune: bool,
+    normals: &Bound<'py, PyAny>,
+    grad_threshold: f32,
+    percent_dense: f32,
+    min_opacity: f32,
+    world_prune_fraction: f32,
+) -> PyResult<Bound<'py, PyDict>> {
+    use unseen::train::adam::{Adam, AdamConfig};
+    use unseen::train::densify::{DensifyConfig, DensifyStats, Normals, densify_and_prune};
+    let mut g = scene(means, quats, scales, opacities, sh)?;
+    let n = g.len();
+    let mut b = vec![("N".to_string(), n)];
+    let (_, acc) = array::<f32>("grad_accum", grad_accum, &[(None, "N")], &mut b)?;
+    let (_, cnt) = array::<u32>("count", count, &[(None, "N")], &mut b)?;
+    let (_, z) = array::<f32>(
+        "normals",
+        normals,
+        &[(Some(2), "2"), (None, "N"), (Some(3), "3")],
+        &mut b,
+    )?;
+    if !(extent.is_finite() && extent > 0.0) {
+        return Err(PyValueError::new_err(format!(
+            "extent: expected a finite positive number, got {extent}"
+        )));
+    }
+    let cfg = DensifyConfig {
+        grad_threshold,
+        percent_dense,
+        min_opacity,
+        world_prune_fraction,
+        ..DensifyConfig::default()
+    };
+    let mut stats = DensifyStats {
+        grad_accum: acc,
+        count: cnt,
+        max_radius: vec![0.0; n],
+    };
+    let z = triples(&z);
+    let report = py
+        .detach(|| {
+            let mut adam = Adam::new(AdamConfig::default(), &g)?;
+            densify_and_prune(
+                &mut g,
+                &mut adam,
+                &mut stats,
+                &cfg,
+                extent,
+                world_prune,
+                Normals::Given(&z),
+            )
+        })
+        .map_err(py_err)?;
+    let out = scene_dict(py, g)?;
+    out.set_item("cloned", report.cloned)?;
+    out.set_item("split", report.split)?;
+    out.set_item("pruned", report.pruned)?;
+    Ok(out)
+}
+
 /// The crate version, SPEC.md's conventions version and the numerics revision (a port
 /// records them beside its goldens).
 #[pyfunction]
@@ -1132,5 +1216,6 @@ fn _unseen(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(frustum, m)?)?;
     m.add_function(wrap_pyfunction!(views, m)?)?;
     m.add_function(wrap_pyfunction!(warp, m)?)?;
+    m.add_function(wrap_pyfunction!(densify, m)?)?;
     Ok(())
 }

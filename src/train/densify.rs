@@ -7,7 +7,7 @@
 //!    extent` (copies appended in index order);
 //! 3. **split** every original Gaussian with `g ≥ grad_threshold` and `max scale >
 //!    percent_dense · extent` into 2: for copy `k` of the selected block (block-major like
-//!    `repeat(N, 1)`), `mean = R·(s ⊙ z) + mean` with `z ~ N(0, I)`, `scale = s / 1.6`,
+//!    `repeat(N, 1)`, copy by copy), `mean = R·(s ⊙ z) + mean` with `z ~ N(0, I)`, `scale = s / 1.6`,
 //!    other parameters copied; the originals are removed;
 //! 4. **prune** `opacity < min_opacity`, and when the world-space test is on (after the
 //!    first opacity reset) `max scale > 0.1 · extent`; a screen-space test (`max radius >
@@ -16,7 +16,8 @@
 //!    results were made without it.
 //!
 //! New Gaussians get zero Adam moments; survivors keep theirs. The random draws come from
-//! the trainer's seeded generator in a fixed order (Gaussian index, copy, axis).
+//! the trainer's seeded generator in the children's order — copy, then Gaussian, then
+//! axis — or, to compare a port, are given ([`Normals`]).
 
 use crate::error::Result;
 use crate::gaussian::Gaussians;
@@ -119,6 +120,15 @@ pub struct DensifyReport {
     pub after: usize,
 }
 
+/// Where the split children's normal draws `z` come from.
+pub enum Normals<'a> {
+    /// The trainer's generator, drawn in the children's order (copy, Gaussian, axis).
+    Rng(&'a mut Uniform),
+    /// Given for every copy and Gaussian of the scene before the step: copy `c` of
+    /// Gaussian `i` takes `given[c·n + i]` (`n` Gaussians), whether or not it splits.
+    Given(&'a [[f32; 3]]),
+}
+
 fn max_scale(ls: [f32; 3]) -> f32 {
     exp(ls[0].max(ls[1]).max(ls[2]))
 }
@@ -131,9 +141,17 @@ pub fn densify_and_prune(
     cfg: &DensifyConfig,
     extent: f32,
     world_prune: bool,
-    rng: &mut Uniform,
+    mut normals: Normals<'_>,
 ) -> Result<DensifyReport> {
     let n0 = g.len();
+    if let Normals::Given(z) = &normals
+        && z.len() != 2 * n0
+    {
+        return Err(crate::error::Error::invalid(format!(
+            "{} normal draws given for {n0} Gaussians (2 per Gaussian)",
+            z.len()
+        )));
+    }
     let mut report = DensifyReport {
         before: n0,
         ..Default::default()
@@ -178,7 +196,10 @@ pub fn densify_and_prune(
         let q = g.quats[src];
         let qn = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
         let r = quat_to_rotmat(q.map(|v| v / qn));
-        let z = [0; 3].map(|_| rng.normal());
+        let z = match &mut normals {
+            Normals::Rng(rng) => [0; 3].map(|_| rng.normal()),
+            Normals::Given(z) => z[(c / k) * n0 + src],
+        };
         let local = [s[0] * z[0], s[1] * z[1], s[2] * z[2]];
         let m = g.means[src];
         for a in 0..3 {

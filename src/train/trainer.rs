@@ -21,7 +21,7 @@ use crate::raster::{Conventions, Outputs, RenderOptions};
 use crate::rng::{Uniform, stage_seed};
 use crate::train::adam::{Adam, AdamConfig, ExpSchedule};
 use crate::train::densify::{
-    DensifyConfig, DensifyReport, DensifyStats, densify_and_prune, reset_opacity,
+    DensifyConfig, DensifyReport, DensifyStats, Normals, densify_and_prune, reset_opacity,
 };
 use crate::train::knn::mean_sq_dist_3nn;
 use crate::train::loss::{LossInput, LossWeights, image_loss, psnr};
@@ -505,7 +505,7 @@ impl<'a> Trainer<'a> {
                     &d,
                     self.extent,
                     world_prune,
-                    &mut self.rng,
+                    Normals::Rng(&mut self.rng),
                 )?);
             }
             if plan.reset {

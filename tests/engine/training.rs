@@ -8,7 +8,9 @@ use unseen::io::npy::read_npy_f32;
 use unseen::rng::Uniform;
 use unseen::scene::random_scene;
 use unseen::train::adam::{Adam, AdamConfig, ExpSchedule};
-use unseen::train::densify::{DensifyConfig, DensifyStats, densify_and_prune, reset_opacity};
+use unseen::train::densify::{
+    DensifyConfig, DensifyStats, Normals, densify_and_prune, reset_opacity,
+};
 use unseen::train::ssim::ssim;
 use unseen::train::trainer::{TrainConfig, Trainer};
 
@@ -259,7 +261,16 @@ fn densification_clones_splits_and_prunes_as_inria() {
     }
     let mut rng = Uniform::new(3);
     let cfg = DensifyConfig::default();
-    let r = densify_and_prune(&mut g, &mut adam, &mut stats, &cfg, extent, true, &mut rng).unwrap();
+    let r = densify_and_prune(
+        &mut g,
+        &mut adam,
+        &mut stats,
+        &cfg,
+        extent,
+        true,
+        Normals::Rng(&mut rng),
+    )
+    .unwrap();
     assert_eq!((r.cloned, r.split, r.pruned), (2, 3, 2), "{r:?}");
     assert_eq!((r.before, r.after), (8, 8 - 3 - 2 + 2 + 6));
     // Survivors in order: 0, 1, 5 (originals), clones of 0, 1, then 2×3 split samples.
@@ -757,4 +768,56 @@ fn select_joined_is_append_then_select() {
         assert_eq!(got, want);
     }
     assert_eq!(a.select(&[]).len(), 0);
+}
+
+/// With the normal draws given (a port's comparison), copy `c` of Gaussian `i` takes
+/// `given[c·n + i]`, the children laid out copy by copy; a wrong number of draws is an
+/// error, not a panic.
+#[test]
+fn densification_takes_given_normals_copy_by_copy() {
+    let mut g = Gaussians::new(0).unwrap();
+    for i in 0..3 {
+        let ls = (0.2f32 + 0.1 * i as f32).ln();
+        g.push(
+            [i as f32, 1.0, 2.0],
+            [ls, ls - 1.0, ls - 2.0],
+            [1.0, 0.0, 0.0, 0.0],
+            0.0,
+            [0.1; 3],
+            &[],
+        );
+    }
+    let given: Vec<[f32; 3]> = (0..6).map(|k| [k as f32, -(k as f32), 0.5]).collect();
+    let run = |z: &[[f32; 3]]| {
+        let (mut g, mut adam) = (g.clone(), Adam::new(AdamConfig::default(), &g).unwrap());
+        let mut stats = DensifyStats::new(3);
+        stats.grad_accum = vec![1e-3, 0.0, 1e-3]; // Gaussians 0 and 2 split
+        stats.count = vec![1; 3];
+        let cfg = DensifyConfig::default();
+        densify_and_prune(
+            &mut g,
+            &mut adam,
+            &mut stats,
+            &cfg,
+            1.0,
+            false,
+            Normals::Given(z),
+        )
+        .map(|r| (g, r))
+    };
+    let (out, r) = run(&given).unwrap();
+    assert_eq!((r.split, r.cloned, out.len()), (2, 0, 5));
+    // Kept: Gaussian 1; then copy 0 of 0 and 2, copy 1 of 0 and 2.
+    for (row, (src, c)) in [(1, (0usize, 0usize)), (2, (2, 0)), (3, (0, 1)), (4, (2, 1))] {
+        let s = g.log_scales[src].map(unseen::math::fastexp::exp);
+        let z = given[c * 3 + src];
+        for a in 0..3 {
+            assert_eq!(
+                out.means[row][a],
+                s[a] * z[a] + g.means[src][a],
+                "row {row} axis {a}"
+            );
+        }
+    }
+    assert!(run(&given[..5]).is_err());
 }

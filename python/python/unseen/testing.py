@@ -58,6 +58,7 @@ from . import inpaint as _inpaint_oracle
 from . import frustum as _frustum_oracle
 from . import views as _views_oracle
 from . import warp as _warp_oracle
+from . import densify as _densify_oracle
 from ._loss import (  # noqa: F401
     CONVENTIONS as LOSS_CONVENTIONS, L1_RTOL, LAMBDA_DSSIM, LOSS_MISTAKES, SSIM_ATOL, loss_case,
     ssim_reference)
@@ -71,6 +72,10 @@ from ._adam import ADAM_MISTAKES, adam_bounds, adam_case, adam_reference  # noqa
 from ._views import (  # noqa: F401
     FRUSTUM_MISTAKES, FRUSTUM_REL, MAX_FLIPS, TOUR_REL, VIEWS_MISTAKES, frustum_case,
     _closing, mistaken_frustum, mistaken_views, tour_follows_the_rule, unmatched, views_case,
+)
+from ._densify import (  # noqa: F401
+    CHILD_MEAN_REL, CHILD_SCALE_ATOL, DENSIFY_MISTAKES, MAX_SET_ASIDE as DENSIFY_MAX_SET_ASIDE,
+    densify_case, densify_reference, near_decisions, parse_rows, row_differences,
 )
 from ._warp import (  # noqa: F401
     COLOR_ATOL_BILINEAR, COLOR_ATOL_NEAREST, DEPTH_RTOL, MAX_SET_ASIDE as WARP_MAX_SET_ASIDE,
@@ -1953,3 +1958,127 @@ def compare_warp(port, case=None, *, seed=0):
                 results.append((left, mk.text))
             _diagnosis(report, results, base)
     return report
+
+
+# -- Densification (SPEC.md §14.3) --------------------------------------------------------
+
+
+_SCENE_KEYS = ("means", "quats", "scales", "opacities", "sh")
+
+
+def compare_densify(port, case=None, *, seed=0):
+    """Compare a port of one densify-and-prune step with unseen's on ``case``
+    (``densify_case(seed)`` by default).
+
+    ``port(scene, grad_accum, count, *, extent, world_prune, normals)`` takes the scene (a
+    dict of gsplat-convention float32 arrays ``means``, ``quats`` (wxyz), ``scales`` (log),
+    ``opacities`` (logits), ``sh`` (N, K, 3)), the gradient statistics (the sum over
+    visible views of the NDC mean-gradient norm, float32, and the view count, uint32), the
+    scene extent, whether the large-Gaussian prune is on, and the normal draws of the split
+    children (``normals[c, i]`` for copy ``c`` of Gaussian ``i``), and returns the new
+    scene's arrays. Gaussians within ``DECISION_REL`` of a threshold are set aside with
+    what they become (at most ``DENSIFY_MAX_SET_ASIDE``); for every other one the port must
+    clone, split and prune as the oracle, lay the rows out in its order, copy parameters
+    bit for bit and place children within ``CHILD_MEAN_REL`` and ``CHILD_SCALE_ATOL``. On a
+    failure each of ``DENSIFY_MISTAKES`` is emulated and named when it explains the port
+    clearly better than the others. Returns a ``Report``.
+    """
+    case = densify_case(seed) if case is None else case
+    n = len(case["means"])
+    scene = {k: case[k] for k in _SCENE_KEYS}
+    want = _densify_oracle(*(scene[k] for k in _SCENE_KEYS), case["grad_accum"],
+                           case["count"], extent=case["extent"],
+                           world_prune=case["world_prune"], normals=case["normals"])
+    report = Report(f"densification of {n} Gaussians ({want['cloned']} cloned, "
+                    f"{want['split']} split, {want['pruned']} pruned by the oracle)",
+                    "inria", units="Gaussians")
+    report.bound = DENSIFY_MAX_SET_ASIDE
+    got = port({k: v.copy() for k, v in scene.items()}, case["grad_accum"].copy(),
+               case["count"].copy(), extent=case["extent"], world_prune=case["world_prune"],
+               normals=case["normals"].copy())
+    got = {k: np.asarray(got[k]) for k in _SCENE_KEYS}
+    flags = near_decisions(case)
+    report.excluded = {"near a threshold": int(flags.sum())}
+    report.excluded_fraction = float(flags.mean())
+    if report.excluded_fraction > DENSIFY_MAX_SET_ASIDE:
+        report.failures.append(Failure("Gaussians", int(flags.sum()), n, "", (), math.nan,
+                                       math.nan, note="too many Gaussians lie near a threshold: "
+                                       "the case cannot judge"))
+    rows_w, rows_g = parse_rows(want, case), parse_rows(got, case)
+    unknown = [r for r, (i, kind) in enumerate(rows_g) if kind == "unknown" and
+               (i < 0 or not flags[i])]
+    if unknown:
+        r = unknown[0]
+        report.failures.append(Failure(
+            "rows", len(unknown), len(rows_g), "a copy or a child", (r,), math.nan, math.nan,
+            note=f"{len(unknown)} of the port's {len(rows_g)} rows are neither a copy of a "
+                 f"Gaussian nor a child of one (tag {got['sh'][r, -1, 2]:g}, scales "
+                 f"{np.array2string(got['scales'][r], precision=6)})"))
+    decisions, moved, first = row_differences(rows_g, rows_w, flags)
+    if decisions:
+        report.failures.append(Failure(
+            "decisions", decisions, n - int(flags.sum()), "clone / split / prune as the oracle",
+            (first,), math.nan, math.nan,
+            note=f"{decisions} Gaussians became otherwise; first: Gaussian {first}, port "
+                 f"{_became(rows_g, first)}, oracle {_became(rows_w, first)}"))
+    if moved:
+        report.failures.append(Failure(
+            "order", moved, len(rows_w), "the oracle's layout", (first,), math.nan, math.nan,
+            note=f"{moved} rows out of place (kept originals, clones, first children, second "
+                 f"children, each in index order)"))
+    if not (decisions or moved):
+        bad = _child_and_copy_values(got, rows_g, want, rows_w, case, flags)
+        if bad:
+            r, what = bad[0]
+            report.failures.append(Failure(
+                "values", len(bad), len(rows_g), "copies exact, children within bounds", (r,),
+                math.nan, math.nan, note=f"{len(bad)} rows with other values; first: row {r} "
+                f"({what})"))
+    if decisions or moved or unknown:
+        base = decisions + moved + len(unknown)
+        results = []
+        for mk in DENSIFY_MISTAKES:
+            emulated = parse_rows(densify_reference(case, mk.name), case)
+            d, m, _ = row_differences(rows_g, emulated, flags)
+            results.append((d + m + sum(1 for i, k in rows_g if k == "unknown"), mk.text))
+        _diagnosis(report, results, base)
+    return report
+
+
+def _became(rows, i):
+    kinds = [k for j, k in rows if j == i]
+    if not kinds:
+        return "removed"
+    return " + ".join(f"{kinds.count(k)} {k}" + ("ren" if k == "child" and kinds.count(k) > 1
+                                                 else "s" if kinds.count(k) > 1 else "")
+                      for k in ("copy", "child") if k in kinds)
+
+
+def _child_and_copy_values(got, rows_g, want, rows_w, case, flags):
+    """The port's rows whose values differ: copies from the input's bits, children from the
+    oracle's child of the same Gaussian and copy (means within ``CHILD_MEAN_REL``)."""
+    bad = []
+    children_w = {}
+    for r, (i, kind) in enumerate(rows_w):
+        if kind == "child":
+            children_w.setdefault(i, []).append(r)
+    for r, (i, kind) in enumerate(rows_g):
+        if i < 0 or flags[i] or kind == "unknown":
+            continue
+        for k in ("quats", "opacities", "sh"):
+            if got[k][r].tobytes() != case[k][i].tobytes():
+                bad.append((r, f"{k} not copied from Gaussian {i}"))
+                break
+        else:
+            if kind == "copy" and got["means"][r].tobytes() != case["means"][i].tobytes():
+                bad.append((r, f"means not copied from Gaussian {i}"))
+            elif kind == "child":
+                m = got["means"][r].astype(np.float64)
+                cand = [want["means"][w].astype(np.float64) for w in children_w.get(i, [])]
+                s = np.exp(case["scales"][i].astype(np.float64))
+                scale = np.abs(case["means"][i]).max() + 3 * s.max() * np.abs(
+                    case["normals"][:, i]).max()
+                if not cand or min(np.abs(m - c).max() for c in cand) > CHILD_MEAN_REL * scale:
+                    bad.append((r, f"a child of Gaussian {i} placed at "
+                                   f"{np.array2string(m, precision=6)}"))
+    return bad

@@ -1,0 +1,212 @@
+"""Densification for ports: ``compare_densify``'s cases and known mistakes (SPEC.md §14.3).
+
+One densify-and-prune step decides, per Gaussian, clone / split / keep and, per Gaussian
+after the growth, prune; then it lays the new scene out in a fixed order (kept originals,
+clones, the first children, the second children, each in index order). A Gaussian within
+float noise of a threshold (its mean gradient, its largest scale, its opacity, the
+large-Gaussian test) may be decided either way by a port and is set aside with
+everything it becomes. To know what each of a port's rows became, every case tags each
+Gaussian in its last SH coefficient (every port copies SH unchanged); split children get
+the case's normal draws (``normals[c, i]`` for copy ``c`` of Gaussian ``i``), so their
+means are comparable number for number.
+"""
+
+import numpy as np
+
+from ._stage import StageMistake
+
+#: Values within this share of a threshold are within a port's float noise of it: the
+#: mean gradient is one float32 division (≤ 1 ulp), a scale one ``exp`` (the oracle's own,
+#: ≤ 2 ulps from a correctly rounded one), the opacity one sigmoid; ×4 for the other side.
+DECISION_REL = 1e-6
+#: A child's log scale may differ by this much: ``ln(s / 1.6)`` against ``ln s − ln 1.6``
+#: (a few ulps of values up to ≈ 10, the constant rounded either way).
+CHILD_SCALE_ATOL = 4e-6
+#: A child's mean may differ by this share of ``|mean| + Σ|R|·s·|z|`` (its float32
+#: product and sum in any order: ≈ 4 roundings, ×4).
+CHILD_MEAN_REL = 1e-6
+#: At most this share of a case's Gaussians may be set aside.
+MAX_SET_ASIDE = 0.05
+
+
+def densify_case(seed):
+    """A seeded case: a scene of 150–300 Gaussians (``means``, ``quats`` (wxyz, not
+    normalised), ``scales`` (log), ``opacities`` (logits), ``sh`` (N, K, 3), K = 4, 9 or
+    16, the last coefficient's blue channel the Gaussian's index) around a scene of
+    ``extent`` 2–6, its gradient statistics (``grad_accum`` float32 and ``count`` uint32:
+    0–6 views, mean gradients log-uniform over 0.1–10× the threshold), ``world_prune`` (odd
+    seeds) and ``normals`` (float32 (2, N, 3)). Largest scales span 0.1–15× the clone
+    limit, beyond the large-Gaussian limit; opacities 0.0005–0.99; Gaussians 0, 1 and 2
+    lie on the gradient threshold, the clone limit and the prune opacity (set aside)."""
+    rng = np.random.default_rng(np.random.PCG64(70_000 + seed))
+    n = int(rng.integers(150, 301))
+    extent = float(rng.uniform(2, 6))
+    dense = 0.01 * extent
+    means = rng.uniform(-extent / 2, extent / 2, (n, 3))
+    largest = dense * 10 ** rng.uniform(-1, np.log10(15), n)
+    scales = np.log(largest[:, None] * rng.uniform(0.2, 1.0, (n, 3)))
+    scales[np.arange(n), rng.integers(0, 3, n)] = np.log(largest)
+    quats = rng.normal(size=(n, 4)) * rng.uniform(0.5, 2.0, (n, 1))
+    opacity = rng.uniform(0.001, 0.99, n)
+    low = rng.random(n) < 0.15
+    opacity[low] = rng.uniform(0.0005, 0.01, int(low.sum()))
+    k = (4, 9, 16)[seed % 3]
+    sh = rng.normal(0, 0.3, (n, k, 3))
+    sh[:, -1, 2] = np.arange(n)
+    count = rng.integers(0, 7, n).astype(np.uint32)
+    mean_grad = 2e-4 * 10 ** rng.uniform(-1, 1, n)
+    grad_accum = (mean_grad * count).astype(np.float32)
+    # Three Gaussians on a threshold: the mean gradient (INRIA clones at ≥, gsplat at >),
+    # the clone limit and the prune opacity.
+    count[0], grad_accum[0] = 1, np.float32(2e-4)
+    scales[1] = np.log(dense)
+    opacity[2] = 0.005
+    return {
+        "means": means.astype(np.float32), "quats": quats.astype(np.float32),
+        "scales": scales.astype(np.float32),
+        "opacities": np.log(opacity / (1 - opacity)).astype(np.float32),
+        "sh": sh.astype(np.float32), "grad_accum": grad_accum, "count": count,
+        "extent": extent, "world_prune": bool(seed % 2),
+        "normals": rng.standard_normal((2, n, 3)).astype(np.float32),
+    }
+
+
+def _sigmoid(x):
+    return 1.0 / (1.0 + np.exp(-np.asarray(x, np.float64)))
+
+
+def near_decisions(case, thresholds=None):
+    """Per Gaussian of the case, whether a threshold decision about it or what it becomes
+    lies within ``DECISION_REL`` of the threshold (bool ``(N,)``)."""
+    t = {"grad_threshold": 2e-4, "percent_dense": 0.01, "min_opacity": 0.005,
+         "world_prune_fraction": 0.1, **(thresholds or {})}
+    count = case["count"].astype(np.float32)
+    grad = np.where(count > 0, case["grad_accum"] / np.maximum(count, 1), 0).astype(np.float64)
+    largest = np.exp(case["scales"].astype(np.float64).max(1))
+    extent = case["extent"]
+
+    def near(x, limit):
+        return np.abs(x - limit) <= DECISION_REL * abs(limit)
+
+    flags = near(grad, t["grad_threshold"]) | near(largest, t["percent_dense"] * extent)
+    flags |= near(_sigmoid(case["opacities"]), t["min_opacity"])
+    if case["world_prune"]:
+        big = t["world_prune_fraction"] * extent
+        flags |= near(largest, big) | near(largest / 1.6, big)
+    return flags
+
+
+def parse_rows(out, case):
+    """What each row of a densified scene is: ``(origin, kind)`` with kind ``"copy"`` (the
+    original's parameters, bit for bit) or ``"child"`` (its log scales shrunk by ln 1.6,
+    within ``CHILD_SCALE_ATOL``), or ``(origin, "unknown")``; origin −1 for a row whose tag
+    names no Gaussian."""
+    n = len(case["means"])
+    tags = np.asarray(out["sh"])[:, -1, 2]
+    rows = []
+    for r, tag in enumerate(tags):
+        i = int(tag) if float(tag).is_integer() and 0 <= tag < n else -1
+        if i < 0:
+            rows.append((-1, "unknown"))
+            continue
+        s = np.asarray(out["scales"][r])
+        if s.tobytes() == case["scales"][i].tobytes():
+            rows.append((i, "copy"))
+        elif np.all(np.abs(s.astype(np.float64) - (case["scales"][i] - np.log(1.6)))
+                    <= CHILD_SCALE_ATOL):
+            rows.append((i, "child"))
+        else:
+            rows.append((i, "unknown"))
+    return rows
+
+
+DENSIFY_MISTAKES = (
+    StageMistake("sum_not_mean", "the summed gradient, not its mean over the views"),
+    StageMistake("keep_split_originals", "split Gaussians kept beside their children"),
+    StageMistake("no_shrink", "children at their parent's scale (not divided by 1.6)"),
+    StageMistake("prune_originals_only", "the prune tested on the original Gaussians only, "
+                 "not on the clones and children"),
+    StageMistake("interleaved_children", "children interleaved per Gaussian (i₀ c₀, i₀ c₁, …), "
+                 "not block by block"),
+    StageMistake("no_size_test", "every hot Gaussian split, none cloned (no size test)"),
+)
+
+
+def densify_reference(case, mistake=None):
+    """A NumPy densify-and-prune step of ``case`` (float32 values, float64 decisions)
+    under ``mistake`` (one of ``DENSIFY_MISTAKES``' names, or None): the new scene's
+    arrays."""
+    n = len(case["means"])
+    count = case["count"].astype(np.float32)
+    grad = np.where(count > 0, case["grad_accum"] / np.maximum(count, np.float32(1)),
+                    np.float32(0))
+    if mistake == "sum_not_mean":
+        grad = case["grad_accum"]
+    extent = np.float32(case["extent"])
+    hot = grad >= np.float32(2e-4)
+    largest = np.exp(case["scales"].max(1))
+    small = largest <= np.float32(0.01) * extent
+    clone = np.nonzero(hot & small)[0]
+    split = np.nonzero(hot & ~small)[0]
+    if mistake == "no_size_test":
+        clone, split = clone[:0], np.nonzero(hot)[0]
+    keys = ("means", "quats", "scales", "opacities", "sh")
+    orig = {k: case[k] for k in keys}
+    q = case["quats"][split].astype(np.float64)
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    w, x, y, z = q.T
+    rot = np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+                    2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+                    2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+                   1).reshape(-1, 3, 3)
+    s = np.exp(case["scales"][split].astype(np.float64))
+    blocks = []
+    for c in range(2):
+        zc = case["normals"][c, split].astype(np.float64)
+        means = (np.einsum("nij,nj->ni", rot, s * zc) + case["means"][split]).astype(np.float32)
+        shrink = 0.0 if mistake == "no_shrink" else np.log(1.6)
+        block = {k: orig[k][split] for k in keys}
+        block["means"] = means
+        block["scales"] = (case["scales"][split] - shrink).astype(np.float32)
+        blocks.append(block)
+    if mistake == "interleaved_children":
+        children = {k: np.stack([blocks[0][k], blocks[1][k]], 1).reshape(
+            -1, *orig[k].shape[1:]) for k in keys}
+    else:
+        children = {k: np.concatenate([blocks[0][k], blocks[1][k]]) for k in keys}
+    grown = {k: np.concatenate([orig[k], orig[k][clone], children[k]]) for k in keys}
+    m = len(grown["means"])
+    remove = np.zeros(m, bool)
+    if mistake != "keep_split_originals":
+        remove[split] = True
+    tested = np.arange(m) < (n if mistake == "prune_originals_only" else m)
+    transparent = _sigmoid(grown["opacities"]) < 0.005
+    big = np.exp(grown["scales"].max(1)) > 0.1 * extent if case["world_prune"] else False
+    remove |= tested & (transparent | big)
+    return {k: v[~remove] for k, v in grown.items()}
+
+
+def row_differences(rows_a, rows_b, flags):
+    """How two densified scenes' rows differ, set-aside Gaussians dropped: the Gaussians
+    whose copies and children differ in number, and the positions at which the two row
+    sequences of the other Gaussians differ: ``(decisions, order, first)``, ``first`` a
+    Gaussian that differs (or None)."""
+    n = len(flags)
+
+    def counts(rows):
+        c = np.zeros((n, 2), np.int64)
+        for i, kind in rows:
+            if i >= 0 and kind != "unknown":
+                c[i, int(kind == "child")] += 1
+        return c
+
+    ca, cb = counts(rows_a), counts(rows_b)
+    mismatch = np.any(ca != cb, axis=1)
+    differ = np.nonzero(mismatch & ~flags)[0]
+    skip = flags | mismatch
+    seq_a = [r for r in rows_a if r[0] >= 0 and not skip[r[0]]]
+    seq_b = [r for r in rows_b if r[0] >= 0 and not skip[r[0]]]
+    moved = sum(a != b for a, b in zip(seq_a, seq_b))
+    first = int(differ[0]) if len(differ) else next(
+        (a[0] for a, b in zip(seq_a, seq_b) if a != b), None)
+    return len(differ), moved, first
