@@ -741,6 +741,28 @@ fn adam<'py>(
     Ok(out)
 }
 
+/// The convex hull of a float64 `(N, 3)` point array, its errors naming the argument.
+fn hull(name: &str, obj: &Bound<'_, PyAny>) -> PyResult<unseen::collide::gjk::ConvexHull> {
+    let (_, v) = array::<f64>(name, obj, &[(None, "N"), (Some(3), "3")], &mut Vec::new())?;
+    let points = v
+        .chunks_exact(3)
+        .map(|p| glam::DVec3::new(p[0], p[1], p[2]))
+        .collect();
+    unseen::collide::gjk::ConvexHull::new(points)
+        .map_err(|e| PyValueError::new_err(format!("{name}: {e}")))
+}
+
+/// A list of non-negative indices (`name` in errors).
+fn indices<T: TryFrom<i64>>(name: &str, v: &[i64]) -> PyResult<Vec<T>> {
+    v.iter()
+        .map(|&i| {
+            T::try_from(i).map_err(|_| {
+                PyValueError::new_err(format!("{name}: expected non-negative indices, got {i}"))
+            })
+        })
+        .collect()
+}
+
 /// GJK proximity of the convex hulls of two point sets (SPEC.md §16.1), each float64
 /// `(N, 3)`: `distance` (an upper bound), `lower_bound`, `intersect` (the verdict, on the
 /// lower bound: touching within `touch_eps` collides) and `touch_eps`.
@@ -750,15 +772,7 @@ fn proximity<'py>(
     a: &Bound<'py, PyAny>,
     b: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    use unseen::collide::gjk::{ConvexHull, proximity as gjk};
-    let hull = |name: &str, obj: &Bound<'py, PyAny>| -> PyResult<ConvexHull> {
-        let (_, v) = array::<f64>(name, obj, &[(None, "N"), (Some(3), "3")], &mut Vec::new())?;
-        let points = v
-            .chunks_exact(3)
-            .map(|p| glam::DVec3::new(p[0], p[1], p[2]))
-            .collect();
-        ConvexHull::new(points).map_err(|e| PyValueError::new_err(format!("{name}: {e}")))
-    };
+    use unseen::collide::gjk::proximity as gjk;
     let (ha, hb) = (hull("a", a)?, hull("b", b)?);
     let p = py.detach(|| gjk(&ha, &hb)).map_err(py_err)?;
     let out = PyDict::new(py);
@@ -910,9 +924,17 @@ fn inpaint<'py>(
         Ok((shape, trace))
     }
     let out = PyDict::new(py);
-    let is_u8 = image
-        .cast::<PyUntypedArray>()
-        .is_ok_and(|a| a.dtype().is_equiv_to(&numpy::dtype::<u8>(py)));
+    let dtype_is = |d: Bound<'py, numpy::PyArrayDescr>| {
+        image
+            .cast::<PyUntypedArray>()
+            .is_ok_and(|a| a.dtype().is_equiv_to(&d))
+    };
+    let is_u8 = dtype_is(numpy::dtype::<u8>(py));
+    if !is_u8 && !dtype_is(numpy::dtype::<f32>(py)) {
+        return Err(PyValueError::new_err(
+            "image: expected a C-contiguous uint8 or float32 array of shape (H, W, C)",
+        ));
+    }
     let (shape, rest) = if is_u8 {
         let (shape, t) = run::<u8>(py, image, mask, radius, forced)?;
         out.set_item("image", to_numpy(py, t.image, &shape)?)?;
@@ -994,10 +1016,9 @@ fn views<'py>(
     py: Python<'py>,
     frustums: Vec<Bound<'py, PyAny>>,
     centers: &Bound<'py, PyAny>,
-    order: Option<Vec<usize>>,
-    edges: Option<Vec<(usize, usize)>>,
+    order: Option<Vec<i64>>,
+    edges: Option<Vec<(i64, i64)>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    use unseen::collide::gjk::ConvexHull;
     use unseen::collide::independent::{select, select_in_graph};
     let n = frustums.len();
     let (_, c) = array::<f64>(
@@ -1006,29 +1027,29 @@ fn views<'py>(
         &[(Some(n), "n"), (Some(3), "3")],
         &mut Vec::new(),
     )?;
+    if c.iter().any(|v| !v.is_finite()) {
+        return Err(PyValueError::new_err(
+            "centers: every coordinate must be finite",
+        ));
+    }
     let centers: Vec<glam::DVec3> = c
         .chunks_exact(3)
         .map(|p| glam::DVec3::new(p[0], p[1], p[2]))
         .collect();
+    let order: Option<Vec<usize>> = order.map(|o| indices("order", &o)).transpose()?;
+    let hulls = frustums
+        .iter()
+        .enumerate()
+        .map(|(k, f)| hull(&format!("frustums[{k}]"), f))
+        .collect::<PyResult<Vec<_>>>()?;
     let sel = match edges {
-        Some(e) => py.detach(|| select_in_graph(n, e, &centers, order.as_deref())),
-        None => {
-            let mut hulls = Vec::with_capacity(n);
-            for (k, f) in frustums.iter().enumerate() {
-                let name = format!("frustums[{k}]");
-                let (_, v) =
-                    array::<f64>(&name, f, &[(None, "V"), (Some(3), "3")], &mut Vec::new())?;
-                let points = v
-                    .chunks_exact(3)
-                    .map(|p| glam::DVec3::new(p[0], p[1], p[2]))
-                    .collect();
-                hulls.push(
-                    ConvexHull::new(points)
-                        .map_err(|e| PyValueError::new_err(format!("{name}: {e}")))?,
-                );
-            }
-            py.detach(|| select(&hulls, &centers, order.as_deref()))
+        Some(e) => {
+            let flat: Vec<i64> = e.iter().flat_map(|&(i, j)| [i, j]).collect();
+            let pairs: Vec<usize> = indices("edges", &flat)?;
+            let pairs = pairs.chunks_exact(2).map(|p| (p[0], p[1])).collect();
+            py.detach(|| select_in_graph(n, pairs, &centers, order.as_deref()))
         }
+        None => py.detach(|| select(&hulls, &centers, order.as_deref())),
     }
     .map_err(py_err)?;
     let out = PyDict::new(py);
@@ -1055,10 +1076,19 @@ fn warp<'py>(
     target: &PyCamera,
     footprint: &str,
     depth_tolerance: f32,
-    close_cracks: u32,
-    grow_holes: u32,
+    close_cracks: i64,
+    grow_holes: i64,
 ) -> PyResult<Bound<'py, PyDict>> {
     use unseen::io::image::ImageF32;
+    let radius = |name: &str, r: i64| {
+        u32::try_from(r).map_err(|_| {
+            PyValueError::new_err(format!("{name}: expected a non-negative radius, got {r}"))
+        })
+    };
+    let (close_cracks, grow_holes) = (
+        radius("close_cracks", close_cracks)?,
+        radius("grow_holes", grow_holes)?,
+    );
     use unseen::warp::dibr::{Footprint, WarpOptions, warp_traced};
     let (from, to) = (&source.inner, &target.inner);
     let (h, w) = (from.height as usize, from.width as usize);
@@ -1070,6 +1100,11 @@ fn warp<'py>(
         &mut bound,
     )?;
     let (_, d) = array::<f32>("depth", depth, &[(None, "H"), (None, "W")], &mut bound)?;
+    if shape[2] == 0 {
+        return Err(PyValueError::new_err(
+            "image: expected at least one channel",
+        ));
+    }
     let footprint: Footprint = footprint
         .parse()
         .map_err(|e: Error| PyValueError::new_err(format!("footprint: {}", e.message)))?;

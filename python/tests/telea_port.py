@@ -3,9 +3,10 @@ as a port would be: float64 arithmetic, Python's heapq, no code from the oracle.
 what ``compare_inpaint`` judges (its bound must hold float64 against the oracle's float32),
 and, with ``mistake``, a seeded wrong port.
 
-Mistakes: ``round_nearest``, ``no_gradient_term``, ``no_direction``, ``square_window`` (as
-``unseen.testing.INPAINT_MISTAKES``) and ``raster_order`` (the fill in raster order, not by
-arrival time: no local mistake explains it).
+Mistakes: the six of ``unseen.testing.INPAINT_MISTAKES``, ``raster_order`` (the fill in
+raster order, not by arrival time: no local mistake explains it) and ``t_float64`` (``T``
+kept in float64, not stored as float32 as OpenCV does: ties of ``T`` break otherwise, so
+the fill order differs).
 """
 
 import heapq
@@ -22,19 +23,20 @@ def _solve(t, f, p1, p2):
     k1, k2 = f[p1] != INSIDE, f[p2] != INSIDE
     if k1 and k2:
         if abs(a11 - a22) >= 1.0:
-            return np.float32(1.0 + m12)
-        return np.float32((a11 + a22 + np.sqrt(2.0 - (a11 - a22) ** 2)) * 0.5)
+            return 1.0 + m12
+        return (a11 + a22 + np.sqrt(2.0 - (a11 - a22) ** 2)) * 0.5
     if k1:
-        return np.float32(1.0 + a11)
+        return 1.0 + a11
     if k2:
-        return np.float32(1.0 + a22)
-    return np.float32(1.0 + m12)
+        return 1.0 + a22
+    return 1.0 + m12
 
 
 def _distance(t, f, i, j):
     up, down, left, right = (i - 1, j), (i + 1, j), (i, j - 1), (i, j + 1)
-    return min(_solve(t, f, up, left), _solve(t, f, down, left), _solve(t, f, up, right),
-               _solve(t, f, down, right))
+    d = min(_solve(t, f, up, left), _solve(t, f, down, left), _solve(t, f, up, right),
+            _solve(t, f, down, right))
+    return t.dtype.type(d)  # OpenCV stores T as float32
 
 
 def _neighbours(i, j):
@@ -48,7 +50,7 @@ def telea(image, mask, radius, mistake=None):
     rows, cols = h + 2, w + 2
     inside = np.zeros((rows, cols), bool)
     inside[1:-1, 1:-1] = mask
-    t = np.full((rows, cols), FAR, np.float32)
+    t = np.full((rows, cols), FAR, np.float64 if mistake == "t_float64" else np.float32)
     band = []
     for i in range(1, rows - 1):
         for j in range(1, cols - 1):
@@ -141,6 +143,8 @@ def _fill(out, result, t, f, q, ky, kx, rows, cols, mistake):
     d = np.where(np.abs(d) <= 0.01, 1e-6, d)
     if mistake == "no_direction":
         d = np.ones_like(d)
+    if mistake == "no_level":
+        lev = np.ones_like(lev)
     wgt = np.abs(dst * lev * d)
 
     def at(y, x):
@@ -150,15 +154,18 @@ def _fill(out, result, t, f, q, ky, kx, rows, cols, mistake):
     km, kp = k - 1 + (k == 1), k - 1 - (k == rows - 2)
     lm, lp = l - 1 + (l == 1), l - 1 - (l == cols - 2)
     right, left, down, up = known[k, l + 1], known[k, l - 1], known[k + 1, l], known[k - 1, l]
+    central = 0.5 if mistake == "paper_gradient" else 2.0
     gx = np.select([right & left, right, left],
-                   [2.0 * (at(km, lp + 1) - at(km, lm - 1)).T, (at(km, lp + 1) - at(km, lm)).T,
-                    (at(km, lp) - at(km, lm - 1)).T], 0.0).T
+                   [central * (at(km, lp + 1) - at(km, lm - 1)).T,
+                    (at(km, lp + 1) - at(km, lm)).T, (at(km, lp) - at(km, lm - 1)).T], 0.0).T
     gy = np.select([down & up, down, up],
-                   [2.0 * (at(kp + 1, lm) - at(km - 1, lm)).T, (at(kp + 1, lm) - at(km, lm)).T,
-                    (at(kp, lm) - at(km - 1, lm)).T], 0.0).T
+                   [central * (at(kp + 1, lm) - at(km - 1, lm)).T,
+                    (at(kp + 1, lm) - at(km, lm)).T, (at(kp, lm) - at(km - 1, lm)).T], 0.0).T
     s = wgt.sum() + 1e-20
     v = (wgt[:, None] * out[k - 1, l - 1]).sum(0) / s
-    if mistake != "no_gradient_term":
+    if mistake == "paper_gradient":  # Telea's Σw·∇I·r / Σw
+        v = v + (wgt[:, None] * (gx * rx[:, None] + gy * ry[:, None])).sum(0) / s
+    elif mistake != "no_gradient_term":
         jx = -(wgt[:, None] * gx * rx[:, None]).sum(0)
         jy = -(wgt[:, None] * gy * ry[:, None]).sum(0)
         v = v + (jx + jy) / (np.sqrt(jx * jx + jy * jy) + 1e-20)

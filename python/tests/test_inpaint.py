@@ -1,6 +1,8 @@
 """Telea inpainting through unseen.testing (SPEC.md §19.1): the oracle's binding, an
-independent NumPy port written from the conventions (float64: the per-value bound must
-hold it), five seeded wrong ports (four named, one that no local mistake explains) and the
+independent NumPy port written from the conventions (float64 arithmetic, ``T`` stored as
+float32 as OpenCV stores it: the per-value bound must hold it), eight seeded wrong ports
+(six named, two — a raster-order fill and ``T`` kept in float64 — that change the fill
+order, which no local mistake explains) and the
 real third-party implementation, OpenCV's ``cv2.inpaint(..., INPAINT_TELEA)``, on 24 seeds
 of ``inpaint_case``: equal to the oracle bit for bit, and passed by the comparison.
 OpenCV's tests are skipped, with the reason printed, where it is not installed
@@ -53,6 +55,8 @@ def test_the_oracle_binding_traces_and_refuses_bad_input():
         unseen.inpaint(image, mask, forced=image[:, 1:].copy())
     with pytest.raises(ValueError, match="not finite"):
         unseen.inpaint(image, mask, radius=float("nan"))
+    with pytest.raises(ValueError, match="uint8 or float32"):
+        unseen.inpaint(image.astype(np.uint16), mask)
 
 
 def test_the_comparisons_own_emulation_is_the_oracles_formula():
@@ -74,8 +78,7 @@ def test_an_independent_numpy_port_passes():
         assert r.ok, f"seed {seed}: {r.message()}"
 
 
-@pytest.mark.parametrize("mistake", ["round_nearest", "no_gradient_term", "no_direction",
-                                     "square_window"])
+@pytest.mark.parametrize("mistake", [m.name for m in ut.INPAINT_MISTAKES])
 def test_wrong_ports_fail_with_their_mistake_named(mistake):
     text = next(m.text for m in ut.INPAINT_MISTAKES if m.name == mistake)
     judged, named = 0, 0
@@ -90,7 +93,7 @@ def test_wrong_ports_fail_with_their_mistake_named(mistake):
         named += r.cause == text
         assert r.cause in ("", text), f"seed {seed}: another mistake named: {r.message()}"
     # Measured: named on every judged seed.
-    assert named >= judged - 1, f"named on {named} of {judged}"
+    assert named == judged, f"named on {named} of {judged}"
 
 
 def test_a_port_filling_in_raster_order_fails():
@@ -98,6 +101,15 @@ def test_a_port_filling_in_raster_order_fails():
         r = ut.compare_inpaint(lambda i, m, rad: telea_port.telea(i, m, rad, "raster_order"),
                                seed=seed)
         assert not r.ok and "fill values" in r.message(), r.message()
+
+
+def test_t_kept_in_float64_changes_the_fill_order_and_fails():
+    """``T`` is a convention (OpenCV stores it as float32): kept in float64, ties such as
+    1.99999999992 against 2.0 break the other way, the fill order differs and later values
+    follow other predecessors. Measured: 25 of 60 seeds fail (seeds 3 and 11 among them)."""
+    failed = [seed for seed in (3, 11) if not ut.compare_inpaint(
+        lambda i, m, rad: telea_port.telea(i, m, rad, "t_float64"), seed=seed).ok]
+    assert failed == [3, 11]
 
 
 def test_a_port_that_changes_known_pixels_or_the_dtype_fails():

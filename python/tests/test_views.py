@@ -49,6 +49,29 @@ def test_the_views_binding_selects_and_refuses_bad_input():
         unseen.views(case["frustums"], case["centers"], edges=[(3, 1)])
     with pytest.raises(ValueError, match="twice or out of range"):
         unseen.views(case["frustums"], case["centers"], order=[0, 0])
+    with pytest.raises(ValueError, match="order: expected non-negative indices"):
+        unseen.views(case["frustums"], case["centers"], order=[-1])
+    with pytest.raises(ValueError, match="listed twice"):
+        unseen.views(case["frustums"], case["centers"], edges=[(0, 1), (0, 1)])
+    bad = case["centers"].copy()
+    bad[0, 0] = np.nan
+    with pytest.raises(ValueError, match="finite"):
+        unseen.views(case["frustums"], bad)
+
+
+def test_a_tour_starting_elsewhere_fails():
+    for seed in SEEDS:
+        case = ut.views_case(seed)
+        want = unseen.views(case["frustums"], case["centers"])
+        if len(want["independent"]) < 2:
+            continue
+        ind = want["independent"]
+        start = ind[-1]
+        rest = sorted(set(ind) - {start})
+        r = ut.compare_views(lambda f, c: {"independent": [start] + rest,
+                                           "trajectory": [start] + rest}, case)
+        assert not r.ok and "trajectory" in r.message(), r.message()
+        return
 
 
 def _frustum_port(mistake="none"):
@@ -63,8 +86,10 @@ def test_a_numpy_frustum_port_passes_in_float64_and_float32():
         r = ut.compare_frustum(_frustum_port(), seed=seed)
         assert r.ok, f"seed {seed}: {r.message()}"
         as_f32 = ut.compare_frustum(
-            lambda *a: _frustum_port()(*a).astype(np.float32), seed=seed)
-        assert as_f32.ok, f"seed {seed}, float32: {as_f32.message()}"
+            lambda m, d, k, v, o: ut.mistaken_frustum(
+                "none", {"mask": m, "depth": d, "k": k, "viewmat": v, "outline": o},
+                dtype=np.float32), seed=seed)
+        assert as_f32.ok, f"seed {seed}, float32 arithmetic: {as_f32.message()}"
 
 
 @pytest.mark.parametrize("mistake", [m.name for m in ut.FRUSTUM_MISTAKES])

@@ -46,6 +46,33 @@ def test_the_oracle_binding_traces_and_refuses_bad_input():
         unseen.warp(case["image"], case["depth"], src, tgt, footprint="splat")
     with pytest.raises(ValueError, match="depth_tolerance"):
         unseen.warp(case["image"], case["depth"], src, tgt, depth_tolerance=-1.0)
+    with pytest.raises(ValueError, match="close_cracks: expected a non-negative radius"):
+        unseen.warp(case["image"], case["depth"], src, tgt, close_cracks=-1)
+    with pytest.raises(ValueError, match="at least one channel"):
+        unseen.warp(case["image"][..., :0].copy(), case["depth"], src, tgt)
+
+
+def test_a_slightly_perturbed_oracle_passes_with_and_without_cleaning():
+    """A correct port in other arithmetic: the oracle with the target's intrinsics and
+    pose moved by 1e-7 relative (about what float32 pose math does). Its decisions near an
+    edge or a tie may go the other way; everything else must still agree, cleaning
+    included."""
+    rng = np.random.default_rng(5)
+    for seed in SEEDS:
+        case = ut.warp_case(seed)
+
+        def port(image, depth, source, target, **opts):
+            noisy = dict(target)
+            noisy["k"] = target["k"] * (1 + 1e-7 * rng.uniform(-1, 1, (3, 3)))
+            noisy["k"][2] = [0, 0, 1]
+            noisy["k"][0, 1] = noisy["k"][1, 0] = 0
+            v = target["viewmat"].copy()
+            v[:3, 3] *= 1 + 1e-7 * rng.uniform(-1, 1, 3)
+            noisy["viewmat"] = v
+            return _oracle_port(image, depth, source, noisy, **opts)
+
+        r = ut.compare_warp(port, case)
+        assert r.ok, f"seed {seed}: {r.message()}"
 
 
 def test_the_oracle_passes_itself():

@@ -69,6 +69,11 @@ pub fn select_in_graph(
                 "no edge ({i}, {j}) among {n} views (pairs i < j)"
             )));
         }
+        if adj[i].contains(&j) {
+            return Err(Error::invalid(format!(
+                "the edge ({i}, {j}) is listed twice"
+            )));
+        }
         adj[i].push(j);
         adj[j].push(i);
     }

@@ -145,7 +145,8 @@ pub const DECISION_Z_REL: f32 = 1e-5;
 pub const ASIDE_EDGE: u8 = 1;
 /// Bit: the nearest two depths here tie within [`DECISION_Z_REL`] with other colours.
 pub const ASIDE_Z_TIE: u8 = 2;
-/// Bit: a bilinear contribution lies within [`DECISION_Z_REL`] of the depth band's limit.
+/// Bit: a bilinear contribution lies within [`DECISION_Z_REL`] of the depth band's limit,
+/// or a crack's window holds a depth within [`CRACK_Z_REL`] of its fill's band limit.
 pub const ASIDE_BAND: u8 = 4;
 /// Bit: within the cleaning's reach of an uncertain pixel: `3·close_cracks + grow_holes`
 /// of an uncertain hole status, or a crack within `close_cracks` of an uncertain value.
@@ -364,10 +365,7 @@ fn warp_impl(
             }
             match opts.footprint {
                 Footprint::Nearest => {
-                    let best = hs
-                        .iter()
-                        .min_by(|a, b| a.z.total_cmp(&b.z).then(a.src.cmp(&b.src)))
-                        .expect("non-empty");
+                    let best = nearest(hs).expect("non-empty");
                     let s = best.src as usize;
                     c.copy_from_slice(&image.data[s * ch..(s + 1) * ch]);
                     *z_out = best.z;
@@ -409,6 +407,13 @@ fn warp_impl(
             .par_iter()
             .map(|&t| fill_crack(t, &out, &out_z, &holes, tw, th, ch, r, tol))
             .collect();
+        if trace.is_some() {
+            for &t in &cracks {
+                if crack_at_band_limit(t, &out_z, &holes, (tw, th), r, tol) {
+                    aside[t] |= ASIDE_BAND;
+                }
+            }
+        }
         for (&t, f) in cracks.iter().zip(filled) {
             if let Some((c, z)) = f {
                 out[t * ch..(t + 1) * ch].copy_from_slice(&c);
@@ -458,6 +463,12 @@ fn warp_impl(
     })
 }
 
+/// The z-buffer's winner: the smallest `(z, source index)`, a total order.
+fn nearest(hs: &[Hit]) -> Option<&Hit> {
+    hs.iter()
+        .min_by(|a, b| a.z.total_cmp(&b.z).then(a.src.cmp(&b.src)))
+}
+
 /// The z-buffer decisions among one target pixel's contributions: nearest, the two
 /// nearest tie within [`DECISION_Z_REL`] with other colours; bilinear, a contribution lies
 /// within it of the depth band's limit.
@@ -468,10 +479,7 @@ fn decisions_at(hs: &[Hit], image: &[f32], ch: usize, opts: &WarpOptions) -> u8 
     };
     match opts.footprint {
         Footprint::Nearest => {
-            let best = hs
-                .iter()
-                .min_by(|a, b| a.z.total_cmp(&b.z).then(a.src.cmp(&b.src)))
-                .expect("non-empty");
+            let best = nearest(hs).expect("non-empty");
             let tie = hs.iter().any(|h| {
                 h.src != best.src
                     && h.z <= z_min * (1.0 + DECISION_Z_REL)
@@ -489,6 +497,35 @@ fn decisions_at(hs: &[Hit], image: &[f32], ch: usize, opts: &WarpOptions) -> u8 
     }
 }
 
+/// The pixels of `t`'s `(2r+1)²` window (clipped to the image), in raster order.
+fn window(t: usize, w: usize, h: usize, r: usize) -> impl Iterator<Item = usize> {
+    let (x, y) = (t % w, t / w);
+    let (x0, x1) = (x.saturating_sub(r), (x + r).min(w - 1));
+    let (y0, y1) = (y.saturating_sub(r), (y + r).min(h - 1));
+    (y0..=y1).flat_map(move |yy| (x0..=x1).map(move |xx| yy * w + xx))
+}
+
+/// A crack's fill keeps the window's depths within the band `z ≤ z_min·tol`; a port's
+/// depths may differ by [`CRACK_Z_REL`], so a depth that close to the limit may fall
+/// either side.
+fn crack_at_band_limit(
+    t: usize,
+    z: &[f32],
+    holes: &[bool],
+    (w, h): (usize, usize),
+    r: usize,
+    tol: f32,
+) -> bool {
+    let valid = || window(t, w, h, r).filter(|&k| !holes[k]).map(|k| z[k]);
+    let z_min = valid().fold(f32::INFINITY, f32::min);
+    let limit = z_min * tol;
+    z_min.is_finite() && valid().any(|v| (v - limit).abs() <= CRACK_Z_REL * limit)
+}
+
+/// How far a port's depth of a warped pixel may lie from ours relatively (a bilinear mean
+/// of depths whose weights move with the projection): `DEPTH_RTOL` of the comparison.
+pub const CRACK_Z_REL: f32 = 1e-4;
+
 /// Mean colour and depth of the valid pixels of `t`'s `(2r+1)²` window within the depth
 /// band of the window's nearest valid depth (raster order; `None` if none is valid).
 #[allow(clippy::too_many_arguments)]
@@ -503,10 +540,7 @@ fn fill_crack(
     r: usize,
     tol: f32,
 ) -> Option<(Vec<f32>, f32)> {
-    let (x, y) = (t % w, t / w);
-    let (x0, x1) = (x.saturating_sub(r), (x + r).min(w - 1));
-    let (y0, y1) = (y.saturating_sub(r), (y + r).min(h - 1));
-    let window = || (y0..=y1).flat_map(move |yy| (x0..=x1).map(move |xx| yy * w + xx));
+    let window = || window(t, w, h, r);
     let z_min = window()
         .filter(|&k| !holes[k])
         .map(|k| z[k])

@@ -395,9 +395,24 @@ fn oracle_warp_dumps_the_traced_warp() {
     let m: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("manifest.json")).unwrap()).unwrap();
     assert_eq!(m["inputs"]["options"]["footprint"], "bilinear", "{m}");
-    for f in ["holes", "aside", "u", "v", "z"] {
-        assert!(out.join(format!("{f}.npy")).is_file(), "{f}");
-    }
+    // The rest as the library traces it: raw little-endian payloads at each file's end.
+    let traced = unseen::warp::dibr::warp_traced(&image, &depth, from, to, &opts).unwrap();
+    let payload = |name: &str, want: Vec<u8>| {
+        let bytes = std::fs::read(out.join(format!("{name}.npy"))).unwrap();
+        assert_eq!(&bytes[bytes.len() - want.len()..], &want[..], "{name}");
+    };
+    payload(
+        "holes",
+        traced.warped.holes.iter().map(|&h| h as u8).collect(),
+    );
+    payload("aside", traced.aside.clone());
+    payload("u", traced.u.iter().flat_map(|v| v.to_le_bytes()).collect());
+    payload("v", traced.v.iter().flat_map(|v| v.to_le_bytes()).collect());
+    payload("z", traced.z.iter().flat_map(|v| v.to_le_bytes()).collect());
+    assert!(
+        traced.aside.iter().any(|&a| a != 0),
+        "a real pair has pixels near a decision"
+    );
     let bad = t.path().join("bad");
     let o = run(&t.path().join("missing.exr"), &bad);
     let err = String::from_utf8_lossy(&o.stderr);

@@ -106,6 +106,15 @@ def _edge_across_edge(a, rng):
     return b + n * rng.choice([-1, 1]) * scale * 10 ** exponent
 
 
+def viewmat(r_cw, center):
+    """The 4×4 world-to-camera matrix of a camera at ``center`` with world-to-camera
+    rotation ``r_cw``."""
+    v = np.eye(4)
+    v[:3, :3] = r_cw
+    v[:3, 3] = -r_cw @ center
+    return v
+
+
 def _any_perp(v):
     u = np.array([1.0, 0.0, 0.0]) if abs(v[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
     p = np.cross(v, u)

@@ -15,7 +15,7 @@ import itertools
 
 import numpy as np
 
-from ._collide import _rotation, frustum
+from ._collide import _rotation, frustum, viewmat
 from ._stage import StageMistake
 
 #: A port's frustum vertices may lie this share of the scale (the largest coordinate
@@ -34,12 +34,7 @@ def _camera(rng, width, height):
     k = np.array([[f, 0, width / 2 + rng.uniform(-4, 4)],
                   [0, f * rng.uniform(0.9, 1.1), height / 2 + rng.uniform(-4, 4)],
                   [0, 0, 1]], np.float64)
-    r_cw = _rotation(rng)
-    center = rng.uniform(-3, 3, size=3)
-    viewmat = np.eye(4)
-    viewmat[:3, :3] = r_cw
-    viewmat[:3, 3] = -r_cw @ center
-    return k, viewmat
+    return k, viewmat(_rotation(rng), rng.uniform(-3, 3, size=3))
 
 
 def frustum_case(seed):
@@ -97,10 +92,10 @@ def _hull(points):
     return np.asarray(lower[:-1] + upper[:-1], np.float64)
 
 
-def mistaken_frustum(name, case):
-    """The float64 ``(V, 3)`` vertices mistake ``name`` computes (``"none"``: the
-    conventions, without mistake)."""
-    mask, depth = case["mask"], case["depth"].astype(np.float64)
+def mistaken_frustum(name, case, dtype=np.float64):
+    """The ``(V, 3)`` vertices mistake ``name`` computes (``"none"``: the conventions,
+    without mistake), in ``dtype`` arithmetic."""
+    mask, depth = case["mask"], case["depth"].astype(dtype)
     if name == "transposed":
         mask = mask.T.copy()
     ys, xs = np.nonzero(mask)
@@ -110,7 +105,7 @@ def mistaken_frustum(name, case):
             x0, x1, y0, y1 = x0 + 0.5, x1 - 0.5, y0 + 0.5, y1 - 0.5
         if name == "no_far_edge":
             x1, y1 = x1 - 1, y1 - 1
-        corners = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], np.float64)
+        corners = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], dtype)
     else:
         off = 0.5 if name == "pixel_centres" else 0.0
         if off:
@@ -118,15 +113,15 @@ def mistaken_frustum(name, case):
         else:
             pts = np.concatenate([np.stack([xs + dx, ys + dy], 1)
                                   for dx in (0, 1) for dy in (0, 1)])
-        corners = _hull(pts)
+        corners = _hull(pts).astype(dtype)
     valid = np.isfinite(depth) & (depth > 0)
     region = valid if name == "all_depths" else valid & case["mask"]
     near, far = depth[region].min(), depth[region].max()
-    k, v = case["k"], case["viewmat"]
+    k, v = case["k"].astype(dtype), case["viewmat"].astype(dtype)
     r_wc = v[:3, :3].T
     center = -r_wc @ v[:3, 3]
     d = np.stack([(corners[:, 0] - k[0, 2]) / k[0, 0], (corners[:, 1] - k[1, 2]) / k[1, 1],
-                  np.ones(len(corners))], 1)
+                  np.ones(len(corners), dtype)], 1)
     if name == "ray_distance":
         d = d / np.linalg.norm(d, axis=1, keepdims=True)
     return np.concatenate([center + (d * z) @ r_wc.T for z in (near, far)])
@@ -257,11 +252,11 @@ def mistaken_views(name, n, edges, centers):
 
 
 def tour_follows_the_rule(trajectory, independent, centers):
-    """Whether ``trajectory`` visits exactly ``independent``, starts at its first view and
-    always steps to a nearest remaining centre (within ``TOUR_REL``): the index of the
-    first wrong step, or None."""
+    """Whether ``trajectory`` visits exactly ``independent``, starts at its first view in
+    candidate order (the lowest index) and always steps to a nearest remaining centre
+    (within ``TOUR_REL``): the index of the first wrong step, or None."""
     if sorted(trajectory) != sorted(independent) or (
-            independent and trajectory[0] != independent[0]):
+            independent and trajectory[0] != min(independent)):
         return 0
     left = set(trajectory[1:])
     for k in range(1, len(trajectory)):

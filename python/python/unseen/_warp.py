@@ -12,7 +12,7 @@ exactly, its depth and colour within small tolerances.
 
 import numpy as np
 
-from ._collide import _rotation
+from ._collide import _axis_angle, _rotation, viewmat
 from ._stage import StageMistake
 
 #: A port's depth may differ by this share (nearest: the point's float32 z; bilinear: a
@@ -29,19 +29,13 @@ MAX_SET_ASIDE = 0.25
 ASIDE_EDGE, ASIDE_Z_TIE, ASIDE_BAND, ASIDE_CLEANING = 1, 2, 4, 8
 
 
-def _viewmat(r_cw, center):
-    v = np.eye(4)
-    v[:3, :3] = r_cw
-    v[:3, 3] = -r_cw @ center
-    return v
-
-
 def warp_case(seed):
     """A seeded case: an RGB float32 ``image`` (H, W, 3) and its camera-z ``depth`` (H, W)
     — a back wall 3–5 m away behind a box 1–2 m away, with noise and 3 % invalid depths
     (0, NaN, ∞) — seen from ``source`` and warped to ``target`` (``k``, ``viewmat``,
-    ``width``, ``height`` each): the target turned by up to 8° and moved by 0.1–0.5 m,
-    its size and focal length within 20 % of the source's. ``footprint`` alternates
+    ``width``, ``height`` each; fy within 10 % of fx, principal points off centre): the
+    target turned by up to 8° and moved by 0.1–0.5 m, its size and focal length within
+    20 % of the source's. ``footprint`` alternates
     nearest and bilinear; every third case cleans (``close_cracks`` 1, ``grow_holes`` 1),
     with the bilinear footprint: under magnification nearest leaves one-pixel cracks
     wherever a point lies at a pixel edge, and the cleaning's reach around them would set
@@ -49,19 +43,17 @@ def warp_case(seed):
     rng = np.random.default_rng(np.random.PCG64(60_000 + seed))
     w, h = int(rng.integers(40, 81)), int(rng.integers(30, 61))
     f = rng.uniform(0.7, 1.3) * w
-    ks = np.array([[f, 0, w / 2], [0, f, h / 2], [0, 0, 1]], np.float64)
+    ks = np.array([[f, 0, w / 2 + rng.uniform(-4, 4)],
+                   [0, f * rng.uniform(0.9, 1.1), h / 2 + rng.uniform(-4, 4)], [0, 0, 1]],
+                  np.float64)
     r_s = _rotation(rng)
     c_s = rng.uniform(-2, 2, size=3)
     tw, th = int(w * rng.uniform(0.8, 1.2)), int(h * rng.uniform(0.8, 1.2))
     ft = f * rng.uniform(0.8, 1.2)
-    kt = np.array([[ft, 0, tw / 2 + rng.uniform(-3, 3)], [0, ft, th / 2 + rng.uniform(-3, 3)],
-                   [0, 0, 1]], np.float64)
-    axis = rng.normal(size=3)
-    axis /= np.linalg.norm(axis)
-    angle = np.radians(rng.uniform(0, 8))
-    kx = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    turn = np.eye(3) + np.sin(angle) * kx + (1 - np.cos(angle)) * kx @ kx
-    r_t = turn @ r_s
+    kt = np.array([[ft, 0, tw / 2 + rng.uniform(-3, 3)],
+                   [0, ft * rng.uniform(0.9, 1.1), th / 2 + rng.uniform(-3, 3)], [0, 0, 1]],
+                  np.float64)
+    r_t = _axis_angle(rng.normal(size=3), np.radians(rng.uniform(0, 8))) @ r_s
     move = rng.normal(size=3)
     c_t = c_s + move / np.linalg.norm(move) * rng.uniform(0.1, 0.5)
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
@@ -78,8 +70,8 @@ def warp_case(seed):
     img = np.where(box[..., None], 1 - img, img).astype(np.float32)
     cleaning = seed % 3 == 2
     return {"image": img, "depth": depth,
-            "source": {"k": ks, "viewmat": _viewmat(r_s, c_s), "width": w, "height": h},
-            "target": {"k": kt, "viewmat": _viewmat(r_t, c_t), "width": tw, "height": th},
+            "source": {"k": ks, "viewmat": viewmat(r_s, c_s), "width": w, "height": h},
+            "target": {"k": kt, "viewmat": viewmat(r_t, c_t), "width": tw, "height": th},
             "footprint": "bilinear" if cleaning else ("nearest", "bilinear")[seed % 2],
             "depth_tolerance": 0.01,
             "close_cracks": int(cleaning), "grow_holes": int(cleaning)}
