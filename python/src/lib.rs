@@ -850,14 +850,17 @@ fn align<'py>(
 /// mean over the pixels whose window lies inside the image: pytorch-msssim) or `"reflect"`
 /// (the images mirrored by the window's radius, the mean over every pixel: torchmetrics).
 /// Returns `ssim`, `map` (the per-pixel mean over channels it averages: `(H, W)`, or
-/// `(H − 10, W − 10)` for `"valid"`) and `l1`, the mean absolute difference.
+/// `(H − 10, W − 10)` for `"valid"`) and `l1`, the mean absolute difference; with
+/// `gradient` (`"inria"`, 3 channels) also INRIA's `loss` (0.8·L1 + 0.2·(1 − SSIM)) and
+/// its gradients `grad_ssim` = dSSIM/dx and `grad_loss` = dloss/dx.
 #[pyfunction]
-#[pyo3(signature = (x, y, *, conventions = "inria"))]
+#[pyo3(signature = (x, y, *, conventions = "inria", gradient = false))]
 fn ssim<'py>(
     py: Python<'py>,
     x: &Bound<'py, PyAny>,
     y: &Bound<'py, PyAny>,
     conventions: &str,
+    gradient: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     use unseen::train::ssim::{Border, ssim_border};
     let mut bound = Vec::new();
@@ -883,6 +886,33 @@ fn ssim<'py>(
     out.set_item("ssim", value)?;
     out.set_item("map", to_numpy(py, map, &map_shape)?)?;
     out.set_item("l1", l1)?;
+    if gradient {
+        use unseen::train::loss::{LossInput, LossWeights, image_loss};
+        if border != Border::Zero || c != 3 {
+            return Err(PyValueError::new_err(
+                "gradient: only for conventions 'inria' (the training loss) on 3 channels",
+            ));
+        }
+        let (_, grad_ssim) = py.detach(|| unseen::train::ssim::ssim(&a, &b, w, h, c, true));
+        let input = LossInput {
+            width: w,
+            height: h,
+            rgb: &a,
+            target_rgb: &b,
+            depth: None,
+            target_depth: None,
+            mask: None,
+        };
+        let loss = py
+            .detach(|| image_loss(&input, &LossWeights::INRIA))
+            .map_err(py_err)?;
+        out.set_item("loss", loss.terms.total)?;
+        out.set_item(
+            "grad_ssim",
+            to_numpy(py, grad_ssim.unwrap_or_default(), &[h, w, c])?,
+        )?;
+        out.set_item("grad_loss", to_numpy(py, loss.grad_rgb, &[h, w, c])?)?;
+    }
     Ok(out)
 }
 

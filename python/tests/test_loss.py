@@ -71,14 +71,17 @@ def _inria_port():
         g = torch.exp(-t * t / (2 * 1.5 * 1.5))
         g = g / g.sum()
         w = (g[:, None] @ g[None, :]).expand(3, 1, 11, 11).contiguous()
-        a, b = to(x), to(y)
+        a, b = to(x).clone().requires_grad_(True), to(y)
         blur = lambda v: F.conv2d(v, w, padding=5, groups=3)  # noqa: E731
         m1, m2 = blur(a), blur(b)
         s11, s22, s12 = blur(a * a) - m1 ** 2, blur(b * b) - m2 ** 2, blur(a * b) - m1 * m2
         ssim = (((2 * m1 * m2 + 1e-4) * (2 * s12 + 9e-4))
                 / ((m1 ** 2 + m2 ** 2 + 1e-4) * (s11 + s22 + 9e-4))).mean()
         l1 = (a - b).abs().mean()
-        return {"ssim": ssim.item(), "l1": l1.item(), "loss": (0.8 * l1 + 0.2 * (1 - ssim)).item()}
+        loss = 0.8 * l1 + 0.2 * (1 - ssim)
+        (grad,) = torch.autograd.grad(loss, a)
+        return {"ssim": ssim.item(), "l1": l1.item(), "loss": loss.item(),
+                "grad": grad[0].permute(1, 2, 0).numpy()}
 
     return port
 
@@ -116,3 +119,20 @@ def test_third_party_ssim_passes_under_its_convention(make, conventions):
     other = "valid" if conventions == "inria" else "inria"
     r = ut.compare_loss(port, seed=0, conventions=other)
     assert not r.ok and r.cause == f"the {conventions!r} SSIM convention", r.message()
+
+
+def test_wrong_loss_gradients_fail():
+    """The gradient of INRIA's loss: L1 averaged per pixel instead of per value (3× too
+    large), or the D-SSIM term's sign flipped, fails; the oracle's own passes."""
+    for seed in range(4):
+        c = ut.loss_case(seed)
+        o = unseen.ssim(c["x"], c["y"], gradient=True)
+        n = c["x"].size
+        l1 = 0.8 * np.sign(c["x"] - c["y"]) / n
+        for name, grad in (("per pixel", o["grad_loss"] + 2 * l1),
+                           ("sign", 2 * l1 - o["grad_loss"])):
+            r = ut.compare_loss(lambda x, y, g=grad: {"grad": g}, c)
+            assert not r.ok and "grad" in r.message(), f"{name}: {r.message()}"
+        assert ut.compare_loss(lambda x, y: {"grad": o["grad_loss"]}, c).ok
+    with pytest.raises(ValueError, match="only for conventions 'inria'"):
+        unseen.ssim(c["x"], c["y"], conventions="valid", gradient=True)

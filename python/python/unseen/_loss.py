@@ -24,6 +24,10 @@ SSIM_ATOL = 2e-5
 L1_RTOL = 1e-5
 #: INRIA's weights (SPEC.md §14.1).
 LAMBDA_DSSIM = 0.2
+#: A port's gradient of INRIA's loss with respect to the rendered image may differ by this
+#: share of the oracle's largest gradient value: SSIM's variances cancel (E[x²] − E[x]²) in
+#: float32 (measured: INRIA's formula under torch autograd within 5.3e-5 on 20 seeds; ×4).
+GRAD_ATOL_REL = 2e-4
 CONVENTIONS = ("inria", "valid", "reflect")
 
 

@@ -60,8 +60,8 @@ from . import views as _views_oracle
 from . import warp as _warp_oracle
 from . import densify as _densify_oracle
 from ._loss import (  # noqa: F401
-    CONVENTIONS as LOSS_CONVENTIONS, L1_RTOL, LAMBDA_DSSIM, LOSS_MISTAKES, SSIM_ATOL, loss_case,
-    ssim_reference)
+    CONVENTIONS as LOSS_CONVENTIONS, GRAD_ATOL_REL, L1_RTOL, LAMBDA_DSSIM, LOSS_MISTAKES, SSIM_ATOL,
+    loss_case, ssim_reference)
 from ._align import (  # noqa: F401
     ALIGN_MISTAKES, CONSENSUS_SLACK, LSQ_RTOL, RESIDUAL_SLACK, align_case, consensus,
     mistaken_fit)
@@ -1601,8 +1601,10 @@ def compare_loss(port, case=None, *, seed=0, conventions="inria"):
     by default).
 
     ``port(x, y)`` takes two float32 ``(H, W, 3)`` images in [0, 1] and returns a dict with
-    any of ``ssim`` (the mean SSIM), ``l1`` (the mean absolute difference) and ``loss``
-    (INRIA's ``0.8·L1 + 0.2·(1 − SSIM)``). ``conventions`` is the SSIM border
+    any of ``ssim`` (the mean SSIM), ``l1`` (the mean absolute difference), ``loss``
+    (INRIA's ``0.8·L1 + 0.2·(1 − SSIM)``) and ``grad`` (the loss's gradient with respect to
+    ``x``, ``(H, W, 3)``, under "inria" only: within ``GRAD_ATOL_REL`` of the oracle's
+    largest value). ``conventions`` is the SSIM border
     (``LOSS_CONVENTIONS``: "inria" zero padding, "valid" pytorch-msssim, "reflect"
     torchmetrics). SSIM may differ by ``SSIM_ATOL``, L1 by ``L1_RTOL`` relative, the loss by
     their weighted sum; on a failure the other conventions and ``LOSS_MISTAKES`` are tried
@@ -1618,8 +1620,11 @@ def compare_loss(port, case=None, *, seed=0, conventions="inria"):
     tol["loss"] = (1 - LAMBDA_DSSIM) * tol["l1"] + LAMBDA_DSSIM * SSIM_ATOL
     h, w = x.shape[:2]
     report = Report(f"loss on {h}×{w} images", conventions, units="")
-    got = {k: float(v) for k, v in port(x.copy(), y.copy()).items() if k in oracle}
-    if not got:
+    result = port(x.copy(), y.copy())
+    got = {k: float(v) for k, v in result.items() if k in oracle}
+    if "grad" in result:
+        _compare_loss_gradient(report, np.asarray(result["grad"]), x, y, conventions)
+    if not got and "grad" not in result:
         report.failures.append(Failure("loss", 1, 1, "", (), math.nan, math.nan,
                                        note="the port returned none of ssim, l1, loss"))
         return report
@@ -2043,6 +2048,28 @@ def compare_densify(port, case=None, *, seed=0):
             results.append((d + m + sum(1 for i, k in rows_g if k == "unknown"), mk.text))
         _diagnosis(report, results, base)
     return report
+
+
+def _compare_loss_gradient(report, grad, x, y, conventions):
+    """Add to ``report`` a failure of the port's loss gradient ``grad`` against the
+    oracle's (INRIA's loss, zero padding)."""
+    if conventions != "inria":
+        report.failures.append(Failure("grad", 1, 1, "", (), math.nan, math.nan,
+                                       note="the loss gradient is compared under 'inria' only"))
+        return
+    want = _ssim_oracle(x, y, conventions="inria", gradient=True)["grad_loss"]
+    if grad.shape != want.shape:
+        report.failures.append(Failure("grad", 1, 1, "", (), math.nan, math.nan,
+                                       note=f"expected shape {want.shape}, got {grad.shape}"))
+        return
+    tol = GRAD_ATOL_REL * float(np.abs(want).max())
+    bad = ~(np.abs(grad.astype(np.float64) - want) <= tol)
+    if bad.any():
+        where = tuple(int(i) for i in np.unravel_index(
+            int(np.argmax(np.where(bad, np.abs(grad - want), -1))), want.shape))
+        report.failures.append(Failure("grad", int(bad.sum()), want.size, f"atol {tol:.2g}",
+                                       where, float(grad[where]), float(want[where]),
+                                       near=None))
 
 
 def _became(rows, i):
