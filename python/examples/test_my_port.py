@@ -2,8 +2,9 @@
 scenes of every family with unseen (the oracle) and with the port under test, and judge
 them (SPEC.md §8.1); and `unseen.testing.compare_adam`, `compare_collide`, `compare_align`,
 `compare_loss`, `compare_inpaint`, `compare_frustum`, `compare_views`, `compare_warp` and
-`compare_densify` judge its optimizer, frustum collision test, depth alignment, loss, Telea
-inpainting, region frustums, independent-view selection, DIBR warp and densification (replace the `port_*` functions; set ADAM_CONVENTIONS and
+`compare_densify` and `compare_qa_mask` judge its optimizer, frustum collision test, depth
+alignment, loss, Telea inpainting, region frustums, independent-view selection, DIBR warp,
+densification and QA-Mask (replace the `port_*` functions; set ADAM_CONVENTIONS and
 LOSS_CONVENTIONS).
 
 To test your port, replace `port_render` / `port_backward` with calls into it (gsplat's
@@ -144,6 +145,16 @@ def port_densify(scene, grad_accum, count, *, extent, world_prune, normals):
                           world_prune=world_prune, normals=normals)
 
 
+def port_mask_scene(trained, *, base, sh_degree):
+    """The port under test: the QA-Mask scene built from a trained scene."""
+    return unseen.qa_mask(**trained, base=list(base), sh_degree=sh_degree)
+
+
+def port_mask(tuned, camera, *, base, target):
+    """The port under test: the (H, W) QA-Mask of a fine-tuned mask scene."""
+    return unseen.qa_mask(**tuned, camera=camera, base=list(base), target=list(target))["mask"]
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_stages_match_the_oracle(seed):
     for report in (testing.compare_collide(port_collide, seed=seed),
@@ -153,6 +164,8 @@ def test_stages_match_the_oracle(seed):
                    testing.compare_frustum(port_frustum, seed=seed),
                    testing.compare_views(port_views, seed=seed),
                    testing.compare_warp(port_warp, seed=seed),
-                   testing.compare_densify(port_densify, seed=seed)):
+                   testing.compare_densify(port_densify, seed=seed),
+                   testing.compare_qa_mask({"mask_scene": port_mask_scene, "mask": port_mask},
+                                           seed=seed)):
         print(report.message())
         assert report.ok, report.message()

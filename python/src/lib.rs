@@ -1251,6 +1251,53 @@ fn densify<'py>(
     Ok(out)
 }
 
+/// The QA-Mask (SPEC.md §15.1) for ports. With `camera`: the mask of a (fine-tuned) mask
+/// scene, rendered over `base` and projected on the base–target colour axis (`mask`,
+/// `(H, W)`). Without: the mask scene built from a trained one (same geometry, SH DC the
+/// `base` colour, zero higher coefficients at `sh_degree`), as arrays.
+#[pyfunction]
+#[pyo3(signature = (means, quats, scales, opacities, sh, camera = None, *, base = [1.0, 0.0, 0.0], target = [0.0, 0.0, 0.0], sh_degree = 5))]
+#[allow(clippy::too_many_arguments)]
+fn qa_mask<'py>(
+    py: Python<'py>,
+    means: &Bound<'py, PyAny>,
+    quats: &Bound<'py, PyAny>,
+    scales: &Bound<'py, PyAny>,
+    opacities: &Bound<'py, PyAny>,
+    sh: &Bound<'py, PyAny>,
+    camera: Option<&PyCamera>,
+    base: [f32; 3],
+    target: [f32; 3],
+    sh_degree: u32,
+) -> PyResult<Bound<'py, PyDict>> {
+    use unseen::qamask::{QaMaskConfig, mask_scene, render_qa_mask};
+    let g = scene(means, quats, scales, opacities, sh)?;
+    let cfg = QaMaskConfig {
+        sh_degree,
+        base_color: base,
+        target_color: target,
+        ..QaMaskConfig::default()
+    };
+    match camera {
+        Some(cam) => {
+            let (w, h) = (cam.inner.width as usize, cam.inner.height as usize);
+            let mask = py
+                .detach(|| {
+                    cfg.validate()?;
+                    render_qa_mask(&g, &cam.inner, &cfg)
+                })
+                .map_err(py_err)?;
+            let out = PyDict::new(py);
+            out.set_item("mask", to_numpy(py, mask, &[h, w])?)?;
+            Ok(out)
+        }
+        None => {
+            let m = py.detach(|| mask_scene(&g, &cfg)).map_err(py_err)?;
+            scene_dict(py, m)
+        }
+    }
+}
+
 /// The crate version, SPEC.md's conventions version and the numerics revision (a port
 /// records them beside its goldens).
 #[pyfunction]
@@ -1282,5 +1329,6 @@ fn _unseen(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(views, m)?)?;
     m.add_function(wrap_pyfunction!(warp, m)?)?;
     m.add_function(wrap_pyfunction!(densify, m)?)?;
+    m.add_function(wrap_pyfunction!(qa_mask, m)?)?;
     Ok(())
 }

@@ -44,6 +44,7 @@ conventions), ``camera`` a ``unseen.Camera`` (K, world-to-camera viewmat, width,
 from dataclasses import dataclass, field
 import inspect
 import itertools
+import sys
 import math
 import time
 
@@ -59,6 +60,7 @@ from . import frustum as _frustum_oracle
 from . import views as _views_oracle
 from . import warp as _warp_oracle
 from . import densify as _densify_oracle
+from . import qa_mask as _qa_mask_oracle
 from ._loss import (  # noqa: F401
     CONVENTIONS as LOSS_CONVENTIONS, GRAD_ATOL_REL, L1_RTOL, LAMBDA_DSSIM, LOSS_MISTAKES, SSIM_ATOL,
     loss_case, ssim_reference)
@@ -73,6 +75,8 @@ from ._views import (  # noqa: F401
     FRUSTUM_MISTAKES, FRUSTUM_REL, MAX_FLIPS, TOUR_REL, VIEWS_MISTAKES, frustum_case,
     _closing, mistaken_frustum, mistaken_views, tour_follows_the_rule, unmatched, views_case,
 )
+from ._qamask import C0, DC_ULPS, QA_MASK_MISTAKES, project  # noqa: F401
+from ._qamask import qa_mask_case as _qa_mask_case
 from ._densify import (  # noqa: F401
     CHILD_MEAN_REL, CHILD_SCALE_ATOL, DENSIFY_MISTAKES, MAX_SET_ASIDE as DENSIFY_MAX_SET_ASIDE,
     densify_case, densify_reference, near_decisions, parse_rows, row_differences,
@@ -2109,3 +2113,126 @@ def _child_and_copy_values(got, rows_g, want, rows_w, case, flags):
                     bad.append((r, f"a child of Gaussian {i} placed at "
                                    f"{np.array2string(m, precision=6)}"))
     return bad
+
+
+# -- The QA-Mask (SPEC.md §15.1) ---------------------------------------------------------
+
+
+def qa_mask_case(seed):
+    """A seeded QA-Mask case (see ``unseen._qamask.qa_mask_case``)."""
+    return _qa_mask_case(seed, sys.modules[__name__])
+
+
+def compare_qa_mask(port, case=None, *, seed=0):
+    """Compare a port of the QA-Mask's own steps with unseen's on ``case``
+    (``qa_mask_case(seed)`` by default).
+
+    ``port`` is a dict of either or both of ``"mask_scene"`` — ``f(trained, *, base,
+    sh_degree)``: the mask scene built from a trained scene (gsplat-convention arrays) —
+    and ``"mask"`` — ``f(tuned, camera, *, base, target)``: the ``(H, W)`` mask of a
+    fine-tuned mask scene. The mask scene must keep the geometry bit for bit, have SH DC
+    within ``DC_ULPS`` of ``(base − 0.5)/C0`` and zero higher coefficients at
+    ``sh_degree``; the mask must agree on every pixel the render's diagnostics do not flag,
+    within the render's tolerance (§8.1) carried through the projection. On a failure each
+    of ``QA_MASK_MISTAKES`` is tried and named when it explains the port clearly better
+    than the others. Returns a ``Report``.
+    """
+    case = qa_mask_case(seed) if case is None else case
+    base, target = case["base"], case["target"]
+    report = Report(f"QA-Mask (base {base}, target {target}, SH degree {case['sh_degree']})",
+                    "inria")
+    results = []
+    base_failing = 0
+    if port.get("mask_scene") is not None:
+        trained = case["trained"]
+        want = _qa_mask_oracle(**trained, base=list(base), sh_degree=case["sh_degree"])
+        got = port["mask_scene"]({k: v.copy() for k, v in trained.items()}, base=base,
+                                 sh_degree=case["sh_degree"])
+        bad = _mask_scene_failures(got, want, trained)
+        for key, count, total, note in bad:
+            report.failures.append(Failure(key, count, total, "", (), math.nan, math.nan,
+                                           note=note))
+            base_failing += count
+        if bad:
+            for mk in QA_MASK_MISTAKES[:2]:
+                emulated = _mistaken_mask_scene(mk.name, want, trained)
+                results.append((sum(c for _, c, _, _ in _mask_scene_failures(
+                    got, emulated, trained)), mk.text))
+    if port.get("mask") is not None:
+        tuned, camera = case["tuned"], case["camera"]
+        want = _qa_mask_oracle(**tuned, camera=camera, base=list(base),
+                               target=list(target))["mask"]
+        r = render(**tuned, camera=camera, background=list(base), diagnostics=True)
+        diag = r["diagnostics"]
+        aside = (diag["pixel_flags"] & PIXEL_FORWARD_FLAGS) != 0
+        report.excluded = {"pixels near a rasterizer decision": int(aside.sum())}
+        report.excluded_fraction = float(aside.mean())
+        d = np.asarray(base) - np.asarray(target)
+        rgb = r["rgb"].astype(np.float64)
+        tol_c = COLOR_ATOL + COLOR_RTOL * np.abs(rgb) + diag["rgb_error"][..., None]
+        tol = (tol_c * np.abs(d)).sum(-1) / (d @ d)
+        got = np.asarray(port["mask"]({k: v.copy() for k, v in tuned.items()}, camera,
+                                      base=base, target=target), np.float64)
+        if got.shape != want.shape:
+            report.failures.append(Failure("mask", 1, 1, "", (), math.nan, math.nan,
+                                           note=f"expected shape {want.shape}, got {got.shape}"))
+            return report
+        wrong = ~aside & ~(np.abs(got - want) <= tol)
+        if report.excluded_fraction > MAX_EXCLUDED_FRACTION:
+            report.failures.append(Failure("pixels", int(aside.sum()), aside.size, "", (),
+                                           math.nan, math.nan, note="too many pixels lie near "
+                                           "a rasterizer decision: the case cannot judge"))
+        if wrong.any():
+            where = np.unravel_index(int(np.argmax(np.where(wrong, np.abs(got - want), -1))),
+                                     want.shape)
+            report.failures.append(Failure("mask", int(wrong.sum()), int((~aside).sum()),
+                                           "the render's tolerance, projected", where,
+                                           float(got[where]), float(want[where])))
+            base_failing += int(wrong.sum())
+            over_target = render(**tuned, camera=camera, background=list(target))["rgb"]
+            emulated = {
+                "target_background": project(over_target, base, target),
+                "no_clamp": project(rgb, base, target, clamp=False),
+                "mean_channel": rgb.mean(-1),
+                "opacity": 1.0 - r["alpha"].astype(np.float64),
+            }
+            for mk in QA_MASK_MISTAKES[2:]:
+                left = ~aside & ~(np.abs(got - emulated[mk.name]) <= tol)
+                results.append((int(left.sum()), mk.text))
+    if report.failures and results:
+        _diagnosis(report, results, max(base_failing, 1))
+    return report
+
+
+def _mask_scene_failures(got, want, trained):
+    """``(quantity, count, total, note)`` for each way a mask scene ``got`` differs from
+    ``want``: geometry bits, the SH shape, the DC within ``DC_ULPS``, the rest exactly."""
+    out = []
+    for k in ("means", "quats", "scales", "opacities"):
+        g = np.asarray(got[k], np.float32)
+        if g.shape != trained[k].shape or g.tobytes() != trained[k].tobytes():
+            out.append((k, 1, 1, f"{k}: not the trained scene's bits"))
+    g = np.asarray(got["sh"], np.float32)
+    if g.shape != want["sh"].shape:
+        out.append(("sh", 1, 1, f"sh: expected shape {want['sh'].shape}, got {g.shape}"))
+        return out
+    dc_g, dc_w = g[:, 0].view(np.int32).astype(np.int64), want["sh"][:, 0].view(np.int32)
+    dc_bad = int((np.abs(dc_g - dc_w) > DC_ULPS).sum())
+    if dc_bad:
+        out.append(("sh DC", dc_bad, dc_g.size, f"{dc_bad} DC values more than {DC_ULPS} ulps "
+                    f"from (base − 0.5)/C0 = {want['sh'][0, 0]}; port {g[0, 0]}"))
+    rest_bad = int((g[:, 1:] != want["sh"][:, 1:]).sum())
+    if rest_bad:
+        out.append(("sh rest", rest_bad, g[:, 1:].size, f"{rest_bad} higher SH coefficients "
+                    "other than the oracle's (zero)"))
+    return out
+
+
+def _mistaken_mask_scene(name, want, trained):
+    sh = want["sh"].copy()
+    if name == "dc_unshifted":
+        sh[:, 0] = (sh[:, 0] * np.float32(C0) + np.float32(0.5)) / np.float32(C0)
+    elif name == "rest_kept":
+        k = min(sh.shape[1], trained["sh"].shape[1])
+        sh[:, 1:k] = trained["sh"][:, 1:k]
+    return dict(want, sh=sh)
