@@ -296,3 +296,58 @@ pub fn dump_warp(
     Manifest::new("oracle warp", "", inputs, wr.entries).write(dir)?;
     Ok(())
 }
+
+/// `unseen oracle densify`: one densify-and-prune step of `g` with the given statistics,
+/// `extent`, large-Gaussian test and split draws ([`crate::train::densify::Normals::Given`]):
+/// the new scene's `means`, `quats` (wxyz), `scales` (log), `opacities` (logits) and `sh`
+/// `(N, K, 3)` as .npy in `dir`, the counts in the manifest (SPEC.md §8.2, §14.3).
+pub fn dump_densify(
+    mut g: Gaussians,
+    (grad_accum, count): (Vec<f32>, Vec<u32>),
+    extent: f32,
+    world_prune: bool,
+    normals: &[[f32; 3]],
+    dir: &Path,
+) -> Result<()> {
+    use crate::train::densify::{DensifyConfig, densify_given};
+    let n = g.len();
+    let cfg = DensifyConfig::default();
+    let report = densify_given(
+        &mut g,
+        (grad_accum, count),
+        &cfg,
+        extent,
+        world_prune,
+        normals,
+    )?;
+    crate::io::create_dir_all(dir)?;
+    let mut wr = Writer {
+        dir,
+        entries: Vec::new(),
+    };
+    let m = g.len();
+    let k = g.rest_per_channel() + 1;
+    wr.put("means", &flat(&g.means), &[m, 3])?;
+    wr.put("quats", &flat(&g.quats), &[m, 4])?;
+    wr.put("scales", &flat(&g.log_scales), &[m, 3])?;
+    wr.put("opacities", &g.opacity_logits, &[m])?;
+    let sh: Vec<f32> = (0..m)
+        .flat_map(|i| {
+            g.sh_dc[i]
+                .iter()
+                .chain(g.rest(i))
+                .copied()
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    wr.put("sh", &sh, &[m, k, 3])?;
+    let inputs = serde_json::json!({
+        "gaussians": n,
+        "extent": extent,
+        "world_prune": world_prune,
+        "config": cfg,
+        "report": report,
+    });
+    Manifest::new("oracle densify", "", inputs, wr.entries).write(dir)?;
+    Ok(())
+}

@@ -162,6 +162,32 @@ pub enum OraclePass {
         #[command(flatten)]
         args: crate::geometry::WarpArgs,
     },
+    /// One densify-and-prune step with INRIA's thresholds and the split children's draws
+    /// given (SPEC.md §14.3): the new scene as .npy (gsplat's conventions) and the counts.
+    Densify {
+        /// The scene (INRIA 3DGS PLY).
+        scene: PathBuf,
+        /// Per Gaussian, the sum over visible views of the NDC mean-gradient norm: float32
+        /// .npy of shape (N,).
+        #[arg(long)]
+        grad_accum: PathBuf,
+        /// Per Gaussian, the views it was visible in: float32 .npy (N,) of whole numbers.
+        #[arg(long)]
+        count: PathBuf,
+        /// The split children's draws: float32 .npy (2, N, 3), copy c of Gaussian i takes
+        /// [c, i].
+        #[arg(long)]
+        normals: PathBuf,
+        /// The scene extent.
+        #[arg(long)]
+        extent: f32,
+        /// Test large Gaussians too (after the first opacity reset).
+        #[arg(long)]
+        world_prune: bool,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Telea inpainting traced for a port's comparison (SPEC.md §19.1): the fill, each
     /// pixel's arrival time and order, and per value its mean, gradient term, error bound
     /// and decisions; with `--forced`, each value computed from the port's predecessors.
@@ -515,6 +541,59 @@ pub fn run_oracle_command(a: OracleArgs) -> Result<()> {
             forced,
             out,
         } => run_oracle_inpaint(&image, &mask, radius, forced.as_deref(), &out),
+        OraclePass::Densify {
+            scene,
+            grad_accum,
+            count,
+            normals,
+            extent,
+            world_prune,
+            out,
+        } => {
+            let (g, _) = ply::read_ply(&scene)?;
+            let n = g.len();
+            let vector = |path: &Path| -> Result<Vec<f32>> {
+                let (shape, v) = unseen::io::npy::read_npy_f32(path)?;
+                if shape != [n] {
+                    return Err(Error::invalid(format!(
+                        "expected shape ({n},) for the scene's {n} Gaussians, got {shape:?}"
+                    ))
+                    .at(path));
+                }
+                Ok(v)
+            };
+            let acc = vector(&grad_accum)?;
+            if let Some(i) = acc.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
+                return Err(
+                    Error::invalid(format!("value {i} is not a finite non-negative sum"))
+                        .at(&grad_accum),
+                );
+            }
+            let counts = vector(&count)?
+                .iter()
+                .map(|&c| {
+                    (c >= 0.0 && c.fract() == 0.0 && c <= u32::MAX as f32)
+                        .then_some(c as u32)
+                        .ok_or_else(|| {
+                            Error::invalid(format!("{c} is not a whole view count")).at(&count)
+                        })
+                })
+                .collect::<Result<Vec<u32>>>()?;
+            let (zs, z) = unseen::io::npy::read_npy_f32(&normals)?;
+            if zs != [2, n, 3] || z.iter().any(|v| !v.is_finite()) {
+                return Err(Error::invalid(format!(
+                    "expected finite draws of shape (2, {n}, 3), got {zs:?}"
+                ))
+                .at(&normals));
+            }
+            let z: Vec<[f32; 3]> = z.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+            unseen::oracle::dump_densify(g, (acc, counts), extent, world_prune, &z, &out)?;
+            println!(
+                "wrote one densification step of {n} Gaussians into {}",
+                out.display()
+            );
+            Ok(())
+        }
         OraclePass::Warp { args } => {
             let i = args.inputs()?;
             unseen::oracle::dump_warp(&i.image, &i.depth, &i.from, &i.to, &i.opts, args.out())?;

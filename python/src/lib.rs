@@ -1199,8 +1199,7 @@ fn densify<'py>(
     min_opacity: f32,
     world_prune_fraction: f32,
 ) -> PyResult<Bound<'py, PyDict>> {
-    use unseen::train::adam::{Adam, AdamConfig};
-    use unseen::train::densify::{DensifyConfig, DensifyStats, Normals, densify_and_prune};
+    use unseen::train::densify::{DensifyConfig, densify_given};
     let mut g = scene(means, quats, scales, opacities, sh)?;
     let n = g.len();
     let mut b = vec![("N".to_string(), n)];
@@ -1224,25 +1223,9 @@ fn densify<'py>(
         world_prune_fraction,
         ..DensifyConfig::default()
     };
-    let mut stats = DensifyStats {
-        grad_accum: acc,
-        count: cnt,
-        max_radius: vec![0.0; n],
-    };
     let z = triples(&z);
     let report = py
-        .detach(|| {
-            let mut adam = Adam::new(AdamConfig::default(), &g)?;
-            densify_and_prune(
-                &mut g,
-                &mut adam,
-                &mut stats,
-                &cfg,
-                extent,
-                world_prune,
-                Normals::Given(&z),
-            )
-        })
+        .detach(|| densify_given(&mut g, (acc, cnt), &cfg, extent, world_prune, &z))
         .map_err(py_err)?;
     let out = scene_dict(py, g)?;
     out.set_item("cloned", report.cloned)?;

@@ -250,6 +250,47 @@ pub fn densify_and_prune(
     Ok(report)
 }
 
+/// One [`densify_and_prune`] step of `g` outside training, for a port's comparison: the
+/// statistics given (`grad_accum`, `count` per Gaussian), fresh Adam moments, the split
+/// draws given ([`Normals::Given`]).
+pub fn densify_given(
+    g: &mut Gaussians,
+    (grad_accum, count): (Vec<f32>, Vec<u32>),
+    cfg: &DensifyConfig,
+    extent: f32,
+    world_prune: bool,
+    normals: &[[f32; 3]],
+) -> Result<DensifyReport> {
+    let n = g.len();
+    if grad_accum.len() != n || count.len() != n {
+        return Err(crate::error::Error::invalid(format!(
+            "{} gradient sums and {} counts for {n} Gaussians",
+            grad_accum.len(),
+            count.len()
+        )));
+    }
+    if !(extent.is_finite() && extent > 0.0) {
+        return Err(crate::error::Error::invalid(format!(
+            "the extent must be finite and positive, got {extent}"
+        )));
+    }
+    let mut stats = DensifyStats {
+        grad_accum,
+        count,
+        max_radius: vec![0.0; n],
+    };
+    let mut adam = Adam::new(crate::train::adam::AdamConfig::default(), g)?;
+    densify_and_prune(
+        g,
+        &mut adam,
+        &mut stats,
+        cfg,
+        extent,
+        world_prune,
+        Normals::Given(normals),
+    )
+}
+
 /// INRIA's opacity reset: `opacity = min(σ(o), value)` as a logit, Adam moments zeroed.
 pub fn reset_opacity(g: &mut Gaussians, adam: &mut Adam, value: f32) {
     let cap = ln(value / (1.0 - value));

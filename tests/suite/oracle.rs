@@ -419,3 +419,75 @@ fn oracle_warp_dumps_the_traced_warp() {
     assert!(!o.status.success() && err.contains("missing.exr"), "{err}");
     assert!(!bad.exists());
 }
+
+/// `unseen oracle densify`: one step of a random scene with given statistics and draws as
+/// .npy, the library's step bit for bit, the counts in the manifest; counts that are not
+/// whole numbers are one clear error naming the file, and nothing is written.
+#[test]
+fn oracle_densify_dumps_the_step_and_refuses_fractional_counts() {
+    use unseen::io::npy::write_npy;
+    use unseen::train::adam::{Adam, AdamConfig};
+    use unseen::train::densify::{DensifyConfig, DensifyStats, Normals, densify_and_prune};
+    let t = crate::support::TempDir::new("oracle-densify");
+    let g = unseen::scene::random_scene(300, 3, 7, 0.005, 0.3);
+    unseen::gaussian::ply::write_ply(&g, &t.path().join("scene.ply")).unwrap();
+    let n = g.len();
+    let mut u = unseen::rng::Uniform::new(3);
+    let count: Vec<f32> = (0..n).map(|_| (u.unit() * 4.0).floor()).collect();
+    let acc: Vec<f32> = count.iter().map(|&c| c * 4e-4 * u.unit()).collect();
+    let z: Vec<f32> = (0..2 * n * 3).map(|_| u.normal()).collect();
+    write_npy(&t.path().join("acc.npy"), &acc, &[n]).unwrap();
+    write_npy(&t.path().join("count.npy"), &count, &[n]).unwrap();
+    write_npy(&t.path().join("half.npy"), &vec![0.5f32; n], &[n]).unwrap();
+    write_npy(&t.path().join("z.npy"), &z, &[2, n, 3]).unwrap();
+    let run = |count: &str, out: &str| {
+        Command::new(env!("CARGO_BIN_EXE_unseen"))
+            .args(["oracle", "densify", "--extent", "4", "--world-prune"])
+            .arg(t.path().join("scene.ply"))
+            .arg("--grad-accum")
+            .arg(t.path().join("acc.npy"))
+            .arg("--count")
+            .arg(t.path().join(count))
+            .arg("--normals")
+            .arg(t.path().join("z.npy"))
+            .arg("--out")
+            .arg(t.path().join(out))
+            .output()
+            .unwrap()
+    };
+    let o = run("count.npy", "dump");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (mut want, mut adam) = (g.clone(), Adam::new(AdamConfig::default(), &g).unwrap());
+    let mut stats = DensifyStats {
+        grad_accum: acc.clone(),
+        count: count.iter().map(|&c| c as u32).collect(),
+        max_radius: vec![0.0; n],
+    };
+    let z3: Vec<[f32; 3]> = z.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    let r = densify_and_prune(
+        &mut want,
+        &mut adam,
+        &mut stats,
+        &DensifyConfig::default(),
+        4.0,
+        true,
+        Normals::Given(&z3),
+    )
+    .unwrap();
+    assert!(r.cloned > 0 && r.split > 0, "{r:?}");
+    let dir = t.path().join("dump");
+    let (shape, means) = read_npy_f32(&dir.join("means.npy")).unwrap();
+    assert_eq!(shape, [want.len(), 3]);
+    let flat: Vec<f32> = want.means.concat();
+    assert_eq!(crate::support::bits(&means), crate::support::bits(&flat));
+    let m: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!(m["inputs"]["report"]["split"], r.split, "{m}");
+    let o = run("half.npy", "bad");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("half.npy") && err.contains("whole"),
+        "{err}"
+    );
+    assert!(!t.path().join("bad").exists());
+}
