@@ -351,3 +351,54 @@ pub fn dump_densify(
     Manifest::new("oracle densify", "", inputs, wr.entries).write(dir)?;
     Ok(())
 }
+
+/// `unseen oracle align`: the alignment `s·r + t ≈ m` of `estimate` to `depth` (RANSAC with
+/// `ransac`, else least squares; SPEC.md §17) and per pixel what a port's fit is judged by:
+/// `residual` (f4, `|s·r + t − m| / |m|`, NaN where the pixel is not valid) and `inlier`
+/// (u1, within the RANSAC threshold); the fit in the manifest.
+pub fn dump_align(
+    estimate: &[f32],
+    depth: &[f32],
+    shape: &[usize],
+    space: crate::warp::align::Space,
+    ransac: Option<&crate::warp::align::RansacConfig>,
+    dir: &Path,
+) -> Result<()> {
+    use crate::warp::align::{Frame, Space, least_squares, ransac as fit_ransac};
+    let frames = [Frame { estimate, depth }];
+    let fit = match ransac {
+        Some(cfg) => fit_ransac(&frames, space, cfg)?,
+        None => least_squares(&frames, space)?,
+    };
+    let threshold = ransac.map_or(f64::INFINITY, |c| c.threshold);
+    let (residual, inlier): (Vec<f32>, Vec<u8>) = estimate
+        .iter()
+        .zip(depth)
+        .map(|(&r, &d)| {
+            if !(r.is_finite() && d.is_finite() && d > 0.0) {
+                return (f32::NAN, 0);
+            }
+            let m = match space {
+                Space::Depth => d as f64,
+                Space::Disparity => 1.0 / d as f64,
+            };
+            let rel = (fit.scale * r as f64 + fit.offset - m).abs() / m.abs();
+            (rel as f32, (rel <= threshold) as u8)
+        })
+        .unzip();
+    crate::io::create_dir_all(dir)?;
+    let mut wr = Writer {
+        dir,
+        entries: Vec::new(),
+    };
+    wr.put("residual", &residual, shape)?;
+    wr.put("inlier", &inlier, shape)?;
+    let inputs = serde_json::json!({
+        "space": space.name(),
+        "method": if ransac.is_some() { "ransac" } else { "least_squares" },
+        "ransac": ransac,
+        "fit": fit,
+    });
+    Manifest::new("oracle align", "", inputs, wr.entries).write(dir)?;
+    Ok(())
+}

@@ -162,6 +162,31 @@ pub enum OraclePass {
         #[command(flatten)]
         args: crate::geometry::WarpArgs,
     },
+    /// The depth alignment `s·r + t ≈ m` (SPEC.md §17): per pixel the relative residual and
+    /// whether it is an inlier, the fit in the manifest.
+    Align {
+        /// The estimate r: float32 .npy of any shape.
+        estimate: PathBuf,
+        /// The metric depth (valid: finite and > 0): float32 .npy of the estimate's shape.
+        depth: PathBuf,
+        /// `depth` (m = d) or `disparity` (m = 1/d).
+        #[arg(long, default_value = "disparity", value_parser = crate::one_of(&unseen::warp::align::Space::ALL, unseen::warp::align::Space::name))]
+        space: unseen::warp::align::Space,
+        /// `ransac` or `least_squares`.
+        #[arg(long, default_value = "ransac")]
+        method: String,
+        /// RANSAC: inlier when `|s·r + t − m| ≤ threshold·|m|`.
+        #[arg(long, default_value_t = unseen::warp::align::RansacConfig::default().threshold)]
+        threshold: f64,
+        /// RANSAC: at most this many iterations (adaptive stop at 0.999 confidence).
+        #[arg(long, default_value_t = unseen::warp::align::RansacConfig::default().iterations)]
+        iterations: u32,
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// One densify-and-prune step with INRIA's thresholds and the split children's draws
     /// given (SPEC.md §14.3): the new scene as .npy (gsplat's conventions) and the counts.
     Densify {
@@ -590,6 +615,49 @@ pub fn run_oracle_command(a: OracleArgs) -> Result<()> {
             unseen::oracle::dump_densify(g, (acc, counts), extent, world_prune, &z, &out)?;
             println!(
                 "wrote one densification step of {n} Gaussians into {}",
+                out.display()
+            );
+            Ok(())
+        }
+        OraclePass::Align {
+            estimate,
+            depth,
+            space,
+            method,
+            threshold,
+            iterations,
+            seed,
+            out,
+        } => {
+            use unseen::warp::align::RansacConfig;
+            let (shape, r) = unseen::io::npy::read_npy_f32(&estimate)?;
+            let (dshape, d) = unseen::io::npy::read_npy_f32(&depth)?;
+            if dshape != shape {
+                return Err(Error::invalid(format!(
+                    "the depth has shape {dshape:?}, the estimate {shape:?}"
+                ))
+                .at(&depth));
+            }
+            let cfg = RansacConfig {
+                threshold,
+                iterations,
+                seed,
+                ..RansacConfig::default()
+            };
+            let ransac = match method.as_str() {
+                "ransac" => Some(&cfg),
+                "least_squares" => None,
+                other => {
+                    return Err(Error::invalid(format!(
+                        "--method: expected ransac or least_squares, got {other:?}"
+                    )));
+                }
+            };
+            unseen::oracle::dump_align(&r, &d, &shape, space, ransac, &out)
+                .map_err(|e| e.at(&estimate))?;
+            println!(
+                "wrote the {method} alignment of {} into {}",
+                estimate.display(),
                 out.display()
             );
             Ok(())

@@ -806,15 +806,9 @@ fn align<'py>(
     let mut bound = Vec::new();
     let (_, r) = array::<f32>("estimate", estimate, &[(None, "N")], &mut bound)?;
     let (_, d) = array::<f32>("depth", depth, &[(None, "N")], &mut bound)?;
-    let space = match space {
-        "depth" => Space::Depth,
-        "disparity" => Space::Disparity,
-        other => {
-            return Err(PyValueError::new_err(format!(
-                "space: expected 'depth' or 'disparity', got {other:?}"
-            )));
-        }
-    };
+    let space: Space = space
+        .parse()
+        .map_err(|e: Error| PyValueError::new_err(format!("space: {}", e.message)))?;
     let frames = [Frame {
         estimate: &r,
         depth: &d,

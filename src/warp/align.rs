@@ -22,6 +22,8 @@ pub enum Space {
     Disparity,
 }
 
+crate::error::text_enum!(Space, "space", { Depth => "depth", Disparity => "disparity" });
+
 /// A fitted alignment and how well it fits.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct Alignment {

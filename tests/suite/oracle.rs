@@ -491,3 +491,65 @@ fn oracle_densify_dumps_the_step_and_refuses_fractional_counts() {
     );
     assert!(!t.path().join("bad").exists());
 }
+
+/// `unseen oracle align`: per pixel the relative residual and inlier flag of the library's
+/// fit, the fit in the manifest; an unknown method is one clear error.
+#[test]
+fn oracle_align_dumps_residuals_and_inliers() {
+    use unseen::io::npy::write_npy;
+    use unseen::warp::align::{Frame, RansacConfig, Space, ransac};
+    let t = crate::support::TempDir::new("oracle-align");
+    let mut u = unseen::rng::Uniform::new(9);
+    let d: Vec<f32> = (0..400).map(|_| 0.5 + 4.0 * u.unit()).collect();
+    let r: Vec<f32> = d
+        .iter()
+        .enumerate()
+        .map(|(i, &d)| {
+            if i % 5 == 0 {
+                u.unit()
+            } else {
+                (1.0 / d - 0.1) / 2.0
+            }
+        })
+        .collect();
+    write_npy(&t.path().join("r.npy"), &r, &[20, 20]).unwrap();
+    write_npy(&t.path().join("d.npy"), &d, &[20, 20]).unwrap();
+    let run = |method: &str, out: &str| {
+        Command::new(env!("CARGO_BIN_EXE_unseen"))
+            .args(["oracle", "align", "--method", method])
+            .arg(t.path().join("r.npy"))
+            .arg(t.path().join("d.npy"))
+            .arg("--out")
+            .arg(t.path().join(out))
+            .output()
+            .unwrap()
+    };
+    let o = run("ransac", "dump");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let fit = ransac(
+        &[Frame {
+            estimate: &r,
+            depth: &d,
+        }],
+        Space::Disparity,
+        &RansacConfig::default(),
+    )
+    .unwrap();
+    let m: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(t.path().join("dump/manifest.json")).unwrap())
+            .unwrap();
+    assert_eq!(m["inputs"]["fit"]["inliers"], fit.inliers, "{m}");
+    let (shape, res) = read_npy_f32(&t.path().join("dump/residual.npy")).unwrap();
+    assert_eq!(shape, [20, 20]);
+    let inl = std::fs::read(t.path().join("dump/inlier.npy")).unwrap();
+    let flags = &inl[inl.len() - 400..];
+    assert_eq!(flags.iter().filter(|&&f| f == 1).count(), fit.inliers);
+    assert!(
+        res.iter()
+            .zip(flags)
+            .all(|(&r, &f)| (f == 1) == (r as f64 <= 0.05))
+    );
+    let o = run("irls", "bad");
+    assert!(String::from_utf8_lossy(&o.stderr).contains("expected ransac or least_squares"));
+    assert!(!t.path().join("bad").exists());
+}
