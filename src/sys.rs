@@ -46,6 +46,21 @@ pub fn release_freed_memory() {
     }
 }
 
+/// The stack of every worker thread the crate starts. Rust's default is 2 MiB; the lane
+/// kernels' frames exceed it in unoptimized builds (`backward_range_avx2` needs 2–4 MiB at
+/// opt-level 0, so `cargo run` without `--release` overflowed while training). 16 MiB of
+/// address space, touched only as far as used.
+pub const WORKER_STACK_BYTES: usize = 16 << 20;
+
+/// Give the global pool [`WORKER_STACK_BYTES`] stacks. Call once before any parallel work
+/// (the command line's `main` does); later calls, or a global pool already running, change
+/// nothing.
+pub fn init_global_pool() {
+    let _ = rayon::ThreadPoolBuilder::new()
+        .stack_size(WORKER_STACK_BYTES)
+        .build_global();
+}
+
 /// Run `f` in a pool of `threads` threads (`None`: the global pool). Results never depend on
 /// the count (SPEC.md §6); only the wall time does.
 pub fn with_threads<T: Send>(
@@ -57,11 +72,33 @@ pub fn with_threads<T: Send>(
         Some(n) => {
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(n.max(1))
+                .stack_size(WORKER_STACK_BYTES)
                 .build()
                 .map_err(|e| {
                     crate::error::Error::invalid(format!("cannot start {n} threads: {e}"))
                 })?;
             Ok(pool.install(f))
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// A worker of [`super::with_threads`] holds a 3 MiB frame (more than Rust's 2 MiB default
+    /// thread stack): what the unoptimized lane kernels need.
+    #[test]
+    fn workers_have_room_for_unoptimized_kernel_frames() {
+        let sum = super::with_threads(Some(2), || {
+            rayon::join(
+                || {
+                    let big = std::hint::black_box([1u8; 3 << 20]);
+                    big.iter().map(|&b| b as usize).sum::<usize>()
+                },
+                || 0,
+            )
+            .0
+        })
+        .unwrap();
+        assert_eq!(sum, 3 << 20);
     }
 }

@@ -105,6 +105,7 @@ fn exit_cleanly_on_interrupt() {
 }
 
 fn main() -> ExitCode {
+    unseen::sys::init_global_pool();
     unseen::sys::keep_freed_memory();
     exit_cleanly_on_interrupt();
     match run(Cli::parse()) {

@@ -1288,6 +1288,7 @@ fn versions() -> (String, u32, u32) {
 
 #[pymodule]
 fn _unseen(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    unseen::sys::init_global_pool();
     m.add_class::<PyCamera>()?;
     m.add_function(wrap_pyfunction!(load_cameras, m)?)?;
     m.add_function(wrap_pyfunction!(render, m)?)?;
