@@ -18,7 +18,7 @@ other predecessors and it fails (25 of 60 seeds). Port ``T`` as float32.
 
 import numpy as np
 
-from ._stage import StageMistake
+from ._stage import StageMistake, ellipse_mask
 
 #: At most this share of a case's fill values may be set aside (more: the case cannot
 #: judge the port). Measured: 0.2–2 % on the generator's cases.
@@ -30,11 +30,7 @@ ASIDE_SWITCH, ASIDE_DIRECTION, ASIDE_ROUNDING = 1, 2, 4
 
 
 def _blob(shape, rng):
-    h, w = shape
-    yy, xx = np.mgrid[0:h, 0:w]
-    cy, cx = rng.uniform(0, h), rng.uniform(0, w)
-    ry, rx = rng.uniform(2, h / 4), rng.uniform(2, w / 4)
-    return (yy - cy) ** 2 / ry ** 2 + (xx - cx) ** 2 / rx ** 2 < 1
+    return ellipse_mask(shape, rng, 2, 4)
 
 
 def _scribble(shape, rng):

@@ -16,7 +16,7 @@ import itertools
 import numpy as np
 
 from ._collide import _rotation, frustum, viewmat
-from ._stage import StageMistake
+from ._stage import StageMistake, ellipse_mask
 
 #: A port's frustum vertices may lie this share of the scale (the largest coordinate
 #: magnitude) from the oracle's: float32 arithmetic (1e-7 relative, a few operations)
@@ -45,15 +45,13 @@ def frustum_case(seed):
     rng = np.random.default_rng(np.random.PCG64(40_000 + seed))
     w, h = int(rng.integers(40, 97)), int(rng.integers(30, 73))
     k, viewmat = _camera(rng, w, h)
-    yy, xx = np.mgrid[0:h, 0:w]
     while True:
         mask = np.zeros((h, w), bool)
         for _ in range(rng.integers(1, 4)):
-            cy, cx = rng.uniform(0, h), rng.uniform(0, w)
-            ry, rx = rng.uniform(1.5, h / 3), rng.uniform(1.5, w / 3)
-            mask |= (yy - cy) ** 2 / ry ** 2 + (xx - cx) ** 2 / rx ** 2 < 1
+            mask |= ellipse_mask((h, w), rng, 1.5, 3)
         if mask.sum() >= 4:
             break
+    yy, xx = np.mgrid[0:h, 0:w]
     depth = (rng.uniform(0.5, 3.0) + rng.uniform(-0.02, 0.02) * xx
              + rng.uniform(-0.02, 0.02) * yy + rng.normal(0, 0.05, (h, w)))
     depth = np.clip(depth, 0.5, 6.0).astype(np.float32)

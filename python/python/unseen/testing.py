@@ -75,6 +75,7 @@ from ._views import (  # noqa: F401
     FRUSTUM_MISTAKES, FRUSTUM_REL, MAX_FLIPS, TOUR_REL, VIEWS_MISTAKES, frustum_case,
     _closing, mistaken_frustum, mistaken_views, tour_follows_the_rule, unmatched, views_case,
 )
+from ._collide import viewmat as _viewmat
 from ._qamask import C0, DC_ULPS, QA_MASK_MISTAKES, project  # noqa: F401
 from ._qamask import qa_mask_case as _qa_mask_case
 from ._densify import (  # noqa: F401
@@ -1224,11 +1225,9 @@ def look_camera(width, height, *, fx=None, fy=None, cx=None, cy=None, roll=0.0, 
         return m
 
     r_wc = rot(1, yaw) @ rot(0, pitch) @ rot(2, roll)
-    viewmat = np.eye(4)
-    viewmat[:3, :3] = r_wc.T
-    viewmat[:3, 3] = -r_wc.T @ np.asarray(center, dtype=np.float64)
+    v = _viewmat(r_wc.T, np.asarray(center, dtype=np.float64))
     k = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
-    return Camera(k.astype(dtype), viewmat.astype(dtype), width, height, name)
+    return Camera(k.astype(dtype), v.astype(dtype), width, height, name)
 
 
 def _unproject(camera, u, v, z):
