@@ -402,3 +402,40 @@ pub fn dump_align(
     Manifest::new("oracle align", "", inputs, wr.entries).write(dir)?;
     Ok(())
 }
+
+/// `unseen oracle qa-mask`: the QA-Mask of a (fine-tuned) mask scene for `cam`
+/// ([`crate::qamask::render_qa_mask`]) as `mask.npy` `(H, W)`, and the rendered colour it
+/// projects as `rgb.npy` `(H, W, 3)` (SPEC.md §15.1).
+pub fn dump_qa_mask(
+    scene: &Gaussians,
+    cam: &Camera,
+    cfg: &crate::qamask::QaMaskConfig,
+    dir: &Path,
+) -> Result<()> {
+    cfg.validate()?;
+    let mask = crate::qamask::render_qa_mask(scene, cam, cfg)?;
+    let opts = RenderOptions {
+        background: cfg.base_color,
+        ..RenderOptions::default()
+    };
+    let rgb = crate::raster::render(scene, cam, &opts)?
+        .rgb
+        .expect("the default outputs hold rgb");
+    crate::io::create_dir_all(dir)?;
+    let mut wr = Writer {
+        dir,
+        entries: Vec::new(),
+    };
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    wr.put("mask", &mask, &[h, w])?;
+    wr.put("rgb", &rgb, &[h, w, 3])?;
+    let inputs = serde_json::json!({
+        "camera": cam.name,
+        "gaussians": scene.len(),
+        "sh_degree": scene.sh_degree,
+        "base": cfg.base_color,
+        "target": cfg.target_color,
+    });
+    Manifest::new("oracle qa-mask", "", inputs, wr.entries).write(dir)?;
+    Ok(())
+}

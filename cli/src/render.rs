@@ -162,6 +162,27 @@ pub enum OraclePass {
         #[command(flatten)]
         args: crate::geometry::WarpArgs,
     },
+    /// The QA-Mask of a (fine-tuned) mask scene for one camera (SPEC.md §15.1): the mask
+    /// and the colour it projects, rendered over the base colour.
+    QaMask {
+        /// The mask scene (INRIA 3DGS PLY), e.g. `unseen qa-mask`'s output.
+        scene: PathBuf,
+        /// Cameras (INRIA cameras.json).
+        #[arg(long)]
+        cameras: PathBuf,
+        /// The camera's img_name (default: the first camera).
+        #[arg(long)]
+        camera: Option<String>,
+        /// The base colour (background of the render): a name or R,G,B in [0, 1].
+        #[arg(long, default_value = "red")]
+        base: String,
+        /// The target colour of the fine-tune.
+        #[arg(long, default_value = "black")]
+        target: String,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// The depth alignment `s·r + t ≈ m` (SPEC.md §17): per pixel the relative residual and
     /// whether it is an inlier, the fit in the manifest.
     Align {
@@ -615,6 +636,37 @@ pub fn run_oracle_command(a: OracleArgs) -> Result<()> {
             unseen::oracle::dump_densify(g, (acc, counts), extent, world_prune, &z, &out)?;
             println!(
                 "wrote one densification step of {n} Gaussians into {}",
+                out.display()
+            );
+            Ok(())
+        }
+        OraclePass::QaMask {
+            scene,
+            cameras,
+            camera,
+            base,
+            target,
+            out,
+        } => {
+            use unseen::qamask::{QaMaskConfig, parse_color};
+            let (g, _) = ply::read_ply(&scene)?;
+            let cams = inria::read_cameras_json(&cameras)?;
+            let cam = match &camera {
+                Some(name) => find(&cams, name, &cameras)?,
+                None => cams
+                    .first()
+                    .ok_or_else(|| Error::invalid("the file lists no camera").at(&cameras))?,
+            };
+            let cfg = QaMaskConfig {
+                sh_degree: g.sh_degree,
+                base_color: parse_color(&base)?,
+                target_color: parse_color(&target)?,
+                ..QaMaskConfig::default()
+            };
+            unseen::oracle::dump_qa_mask(&g, cam, &cfg, &out).map_err(|e| e.at(&scene))?;
+            println!(
+                "wrote the QA-Mask of camera '{}' into {}",
+                cam.name,
                 out.display()
             );
             Ok(())

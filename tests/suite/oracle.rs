@@ -553,3 +553,42 @@ fn oracle_align_dumps_residuals_and_inliers() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("expected ransac or least_squares"));
     assert!(!t.path().join("bad").exists());
 }
+
+/// `unseen oracle qa-mask`: the mask of a mask scene for one camera as .npy, the library's
+/// bits, with the colour it projects; an unknown colour name is one clear error.
+#[test]
+fn oracle_qa_mask_dumps_the_mask_and_its_colour() {
+    use unseen::qamask::{QaMaskConfig, mask_scene, render_qa_mask};
+    let t = crate::support::TempDir::new("oracle-qa-mask");
+    let demo = reference("demo");
+    let (trained, _) = unseen::gaussian::ply::read_ply(&demo.join("scene.ply")).unwrap();
+    let cfg = QaMaskConfig::default();
+    let mut m = mask_scene(&trained, &cfg).unwrap();
+    for (k, v) in m.sh_rest.iter_mut().enumerate() {
+        *v = ((k * 37 % 101) as f32 / 101.0 - 0.5) * 0.4; // as a fine-tune leaves it
+    }
+    unseen::gaussian::ply::write_ply(&m, &t.path().join("mask.ply")).unwrap();
+    let run = |base: &str, out: &str| {
+        Command::new(env!("CARGO_BIN_EXE_unseen"))
+            .args(["oracle", "qa-mask", "--base", base])
+            .arg(t.path().join("mask.ply"))
+            .arg("--cameras")
+            .arg(demo.join("cameras.json"))
+            .arg("--out")
+            .arg(t.path().join(out))
+            .output()
+            .unwrap()
+    };
+    let o = run("red", "dump");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let cams = unseen::camera::inria::read_cameras_json(&demo.join("cameras.json")).unwrap();
+    let want = render_qa_mask(&m, &cams[0], &cfg).unwrap();
+    let (shape, got) = read_npy_f32(&t.path().join("dump/mask.npy")).unwrap();
+    assert_eq!(shape, [cams[0].height as usize, cams[0].width as usize]);
+    assert_eq!(crate::support::bits(&got), crate::support::bits(&want));
+    assert!(got.iter().any(|&v| v > 0.0 && v < 1.0));
+    let o = run("mauve", "bad");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("mauve"), "{err}");
+    assert!(!t.path().join("bad").exists());
+}
