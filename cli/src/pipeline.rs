@@ -136,7 +136,8 @@ pub struct Knobs {
     #[arg(long, value_parser = crate::one_of(&Outline::ALL, Outline::name))]
     frustum_outline: Option<Outline>,
     /// Not the paper's method (an audit comparison): stage 1 generates a colliding set of
-    /// the independent set's size with matched coverage.
+    /// the independent set's size whose coverage of the evaluation views' unseen surface
+    /// matches the independent set's (needs --eval and a dataset with truth depth).
     #[arg(long)]
     conflicting_views: bool,
     /// Not the paper's method: the generate–reconstruct–shift cycle it replaces (paradigm
@@ -183,7 +184,10 @@ impl Knobs {
         if let Some(o) = self.frustum_outline {
             c.frustum_outline = o;
         }
-        c.conflicting_views |= self.conflicting_views;
+        if self.conflicting_views {
+            c.conflicting_views =
+                Some(unseen::pipeline::selection::ConflictMatch::EvaluationCoverage);
+        }
         if self.cycle {
             c.paradigm = Paradigm::Cycle;
         }

@@ -6,12 +6,14 @@
 //! The unseen surface is sampled by the evaluation views' *extrapolated* pixels with a
 //! truth depth (SPEC.md §20.7): each is a surface point no training view sees. A stage-1
 //! view *generated* that point when the point is visible in the view (its truth depth
-//! agrees, [`seen_at`]) at a pixel of its inpainting mask. Evaluation poses serve only to
-//! measure here; nothing the pipeline chooses reads them.
+//! agrees) at a pixel of its inpainting mask
+//! ([`crate::pipeline::evaluate::visit_unseen_surface`]). Evaluation poses serve to
+//! measure here; the one choice that reads them is the audit's own control,
+//! `conflicting_views`, matched on this same coverage (SPEC.md §20.2).
 
 use crate::error::{Error, Result};
 use crate::pipeline::artifacts::{load_image, load_mask};
-use crate::pipeline::evaluate::seen_at;
+use crate::pipeline::evaluate::{Generating, visit_unseen_surface};
 use crate::pipeline::rundir::StepDone;
 use crate::pipeline::views::{Plan, SetAside};
 use crate::pipeline::{Inputs, Step, candidate_truth, stem};
@@ -162,8 +164,9 @@ pub fn diagnose(inputs: &Inputs, steps: &[StepDone]) -> Result<Diagnostics> {
     })
 }
 
-/// [`Generation`] of the stage-1 views `(truth, mask, inpainting)` on the extrapolated
-/// pixels of the evaluation views (their existing-pixel masks in `masks`).
+/// [`Generation`] of the stage-1 views `(truth, mask, inpainting)` on the sample of the
+/// unseen surface ([`visit_unseen_surface`]; the evaluation views' existing-pixel masks in
+/// `masks`).
 fn generation(
     inputs: &Inputs,
     masks: &Path,
@@ -173,48 +176,40 @@ fn generation(
         crate::io::image::ImageF32,
     )],
 ) -> Result<Option<Generation>> {
+    let existing = inputs
+        .evaluation
+        .iter()
+        .map(|&i| load_mask(masks, &stem(&inputs.data.views[i].camera.name)))
+        .collect::<Result<Vec<_>>>()?;
+    let views: Vec<Generating> = stage1
+        .iter()
+        .map(|(t, mask, _)| Generating {
+            camera: &t.camera,
+            depth: &t.depth,
+            mask,
+        })
+        .collect();
     let (mut pixels, mut once, mut twice) = (0u64, 0u64, 0u64);
     let (mut sq, mut pairs) = (0f64, 0u64);
-    // (stage-1 view, its pixel) of each view that generated the current point.
-    let mut hits: Vec<(usize, usize)> = Vec::with_capacity(stage1.len());
-    for &i in &inputs.evaluation {
-        let v = &inputs.data.views[i];
-        let Some(depth) = v.depth.as_deref() else {
-            continue;
-        };
-        let existing = load_mask(masks, &stem(&v.camera.name))?;
-        let w = v.camera.width as usize;
-        for (p, &seen) in existing.iter().enumerate() {
-            let z = depth[p] as f64;
-            if seen || !(z.is_finite() && z > 0.0) {
-                continue;
-            }
-            pixels += 1;
-            let x = v.camera.pixel_point(p % w, p / w, z);
-            hits.clear();
-            for (k, (t, mask, _)) in stage1.iter().enumerate() {
-                if let Some(q) = seen_at(&t.camera, &t.depth, x).filter(|&q| mask[q]) {
-                    hits.push((k, q));
-                }
-            }
-            once += u64::from(!hits.is_empty());
-            twice += u64::from(hits.len() >= 2);
-            for (a, &(ka, qa)) in hits.iter().enumerate() {
-                for &(kb, qb) in &hits[a + 1..] {
-                    let (ia, ib) = (&stage1[ka].2, &stage1[kb].2);
-                    let d: f64 = (0..3)
-                        .map(|c| {
-                            let e = (ia.data[qa * ia.channels + c] - ib.data[qb * ib.channels + c])
-                                as f64;
-                            e * e
-                        })
-                        .sum();
-                    sq += d / 3.0;
-                    pairs += 1;
-                }
+    visit_unseen_surface(inputs, &existing, &views, |hits| {
+        pixels += 1;
+        once += u64::from(!hits.is_empty());
+        twice += u64::from(hits.len() >= 2);
+        for (a, &(ka, qa)) in hits.iter().enumerate() {
+            for &(kb, qb) in &hits[a + 1..] {
+                let (ia, ib) = (&stage1[ka].2, &stage1[kb].2);
+                let d: f64 = (0..3)
+                    .map(|c| {
+                        let e =
+                            (ia.data[qa * ia.channels + c] - ib.data[qb * ib.channels + c]) as f64;
+                        e * e
+                    })
+                    .sum();
+                sq += d / 3.0;
+                pairs += 1;
             }
         }
-    }
+    });
     if pixels == 0 {
         return Ok(None);
     }

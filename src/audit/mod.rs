@@ -158,7 +158,10 @@ impl Variant {
             Variant::NoQaMask => c.mask_source = MaskSource::None,
             Variant::OpacityMask => c.mask_source = MaskSource::Opacity,
             Variant::EvenViews => c.independent_detection = false,
-            Variant::ConflictingViews => c.conflicting_views = true,
+            Variant::ConflictingViews => {
+                c.conflicting_views =
+                    Some(crate::pipeline::selection::ConflictMatch::EvaluationCoverage)
+            }
             Variant::NoDepthSupervision => c.depth_supervision = false,
             Variant::NoPropagation => c.propagation = false,
             Variant::QaSh3 => c.qa_sh_degree = 3,

@@ -319,7 +319,7 @@ fn rests_on(pool: &[JobResult], v: &Verdict) -> String {
     };
     // The verdict's own count, over the seeds of its plan.
     let (same, paired) = (v.same_computation, v.same_computation + v.judged);
-    // The conflicting set's match of the independent set's coverage weight (SPEC.md §20.2).
+    // The conflicting set's match of the independent set's coverage (SPEC.md §20.2).
     let weights: Vec<f64> = var
         .iter()
         .filter_map(|r| {
@@ -338,7 +338,7 @@ fn rests_on(pool: &[JobResult], v: &Verdict) -> String {
     } else {
         let worst = weights.iter().copied().fold(0.0, f64::max);
         format!(
-            "; coverage weight matched on {} runs (worst {:.1} %)",
+            "; coverage matched on {} runs (worst {:.1} %)",
             weights.len(),
             100.0 * worst
         )

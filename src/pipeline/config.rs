@@ -504,10 +504,11 @@ pub struct PipelineConfig {
     #[serde(skip_serializing_if = "is_bounding_box")]
     pub frustum_outline: Outline,
     /// **An audit comparison, not the paper's method**: stage 1 generates a set of the
-    /// independent set's size in which some pair collides and whose coverage matches the
-    /// independent set's within [`super::selection::CONFLICT_COVERAGE_TOLERANCE`] (SPEC.md §20.2).
-    #[serde(skip_serializing_if = "std::ops::Not::not")]
-    pub conflicting_views: bool,
+    /// independent set's size in which some pair collides and whose coverage, measured as
+    /// named, matches the independent set's within
+    /// [`super::selection::CONFLICT_COVERAGE_TOLERANCE`] (SPEC.md §20.2).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub conflicting_views: Option<super::selection::ConflictMatch>,
 
     // ---- stage 1 (§3.3.1)
     /// Training views per independent view that start a video (paper: 3).
@@ -584,7 +585,7 @@ impl PipelineConfig {
             independent_detection: true,
             selection: SelectionRule::Greedy,
             frustum_outline: Outline::BoundingBox,
-            conflicting_views: false,
+            conflicting_views: None,
             video_sources: 3,
             video_frames: 16,
             align_space: None,
@@ -680,7 +681,7 @@ impl PipelineConfig {
                 self.coverage_alpha
             ));
         }
-        if self.conflicting_views && !self.independent_detection {
+        if self.conflicting_views.is_some() && !self.independent_detection {
             return bad(
                 "conflicting_views replaces the independent set: it needs independent_detection"
                     .into(),

@@ -159,6 +159,74 @@ pub fn existing_pixels(cam: &Camera, depth: &[f32], train: &[(&Camera, &[f32])])
     out
 }
 
+/// The existing-pixel masks of the evaluation poses ([`existing_pixels`] against the
+/// training views with a truth depth), in `inputs.evaluation` order: what step
+/// `eval/masks` writes.
+pub fn existing_masks(inputs: &Inputs) -> Vec<Vec<bool>> {
+    let data = &inputs.data;
+    let train: Vec<(&Camera, &[f32])> = data
+        .train
+        .iter()
+        .filter_map(|&i| {
+            let v = &data.views[i];
+            v.depth.as_deref().map(|d| (&v.camera, d))
+        })
+        .collect();
+    inputs
+        .evaluation
+        .iter()
+        .map(|&i| {
+            let v = &data.views[i];
+            let d = v.depth.as_deref().expect("checked by load_inputs");
+            existing_pixels(&v.camera, d, &train)
+        })
+        .collect()
+}
+
+/// A view that generated part of the unseen surface: its camera, its truth depth and the
+/// pixels it generated (its inpainting mask).
+pub struct Generating<'a> {
+    pub camera: &'a Camera,
+    pub depth: &'a [f32],
+    pub mask: &'a [bool],
+}
+
+/// The sample of the unseen surface (SPEC.md §21.5): every *extrapolated* pixel of the
+/// evaluation views (not in `existing`, [`existing_masks`]) with a truth depth is a surface
+/// point no training view sees. `visit` gets, per point in view-then-raster order, the
+/// `(view, pixel)` of each of `views` that generated it: the point is visible in the view
+/// ([`seen_at`]) at a pixel of its mask. The audit's coverage diagnostic and the colliding
+/// set it matches to the independent set both count on this one sample.
+pub fn visit_unseen_surface(
+    inputs: &Inputs,
+    existing: &[Vec<bool>],
+    views: &[Generating],
+    mut visit: impl FnMut(&[(usize, usize)]),
+) {
+    let mut hits: Vec<(usize, usize)> = Vec::with_capacity(views.len());
+    for (&i, existing) in inputs.evaluation.iter().zip(existing) {
+        let v = &inputs.data.views[i];
+        let Some(depth) = v.depth.as_deref() else {
+            continue;
+        };
+        let w = v.camera.width as usize;
+        for (p, &seen) in existing.iter().enumerate() {
+            let z = depth[p] as f64;
+            if seen || !(z.is_finite() && z > 0.0) {
+                continue;
+            }
+            let x = v.camera.pixel_point(p % w, p / w, z);
+            hits.clear();
+            for (k, g) in views.iter().enumerate() {
+                if let Some(q) = seen_at(g.camera, g.depth, x).filter(|&q| g.mask[q]) {
+                    hits.push((k, q));
+                }
+            }
+            visit(&hits);
+        }
+    }
+}
+
 impl Run<'_> {
     /// The existing-pixel masks of the evaluation poses (step `eval/masks`).
     pub fn eval_masks(&self) -> Result<StepDone> {
@@ -175,18 +243,8 @@ impl Run<'_> {
             "tolerance": VISIBILITY_DEPTH_TOLERANCE,
         });
         self.step(&Step::EvalMasks, key, |w| {
-            let train: Vec<(&Camera, &[f32])> = data
-                .train
-                .iter()
-                .filter_map(|&i| {
-                    let v = &data.views[i];
-                    v.depth.as_deref().map(|d| (&v.camera, d))
-                })
-                .collect();
-            for &i in &inputs.evaluation {
+            for (&i, m) in inputs.evaluation.iter().zip(existing_masks(inputs)) {
                 let v = &data.views[i];
-                let d = v.depth.as_deref().expect("checked by load_inputs");
-                let m = existing_pixels(&v.camera, d, &train);
                 save_mask(
                     w,
                     &stem(&v.camera.name),

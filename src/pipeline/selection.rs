@@ -1,6 +1,7 @@
 //! Which candidates stage 1 generates (SPEC.md §20.2): the independent set by the
-//! configured rule (the paper says "independent", not which maximal set), the coverage
-//! weight that rules and the audit's coverage-matched colliding set compare, and that set.
+//! configured rule (the paper says "independent", not which maximal set) with the coverage
+//! weight the rules compare, and the audit's colliding set matched to it on the coverage
+//! the audit measures.
 
 use crate::camera::Camera;
 use crate::collide::independent::{colliding_sets, maximal_independent_sets, members};
@@ -32,8 +33,56 @@ impl SelectionRule {
 }
 
 /// The largest relative difference between the coverage of the audit's colliding set and
-/// the independent set's for the two to count as matched: 10 %.
+/// the independent set's ([`SurfaceCoverage`]) for the two to count as matched: 10 %.
 pub const CONFLICT_COVERAGE_TOLERANCE: f64 = 0.10;
+
+/// How the audit's colliding set is matched to the independent set (SPEC.md §20.2).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ConflictMatch {
+    /// On [`SurfaceCoverage`]: the share of the evaluation views' unseen surface the set
+    /// generates, the coverage the audit's diagnostics report. It reads the evaluation
+    /// views and the truth: an audit control, never a method's choice.
+    #[default]
+    EvaluationCoverage,
+}
+
+crate::error::text_enum!(ConflictMatch, "conflict matching", {
+    EvaluationCoverage => "evaluation_coverage",
+});
+
+/// The coverage of sets of candidate views that the audit measures (SPEC.md §21.5): of the
+/// sample of the unseen surface
+/// ([`visit_unseen_surface`](super::evaluate::visit_unseen_surface)), the share of points
+/// some view of the set generated.
+pub struct SurfaceCoverage {
+    /// Per sample point some candidate generated, the candidates that did (bit `i`:
+    /// candidate `i`).
+    hits: Vec<u32>,
+    /// Points in the sample (generated or not).
+    points: u64,
+}
+
+impl SurfaceCoverage {
+    /// From the sample's points, each given as the candidates that generated it; at most
+    /// 32 candidates (detection's own limit).
+    pub fn new(points: impl IntoIterator<Item = u32>) -> Self {
+        let mut n = 0u64;
+        let hits = points
+            .into_iter()
+            .inspect(|_| n += 1)
+            .filter(|&b| b != 0)
+            .collect();
+        SurfaceCoverage { hits, points: n }
+    }
+
+    /// The share of the sample that `views` generated (0 for an empty sample).
+    pub fn of(&self, views: &[usize]) -> f64 {
+        let set: u32 = views.iter().map(|&i| 1u32 << i).fold(0, |a, b| a | b);
+        let n = self.hits.iter().filter(|&&b| b & set != 0).count();
+        n as f64 / self.points.max(1) as f64
+    }
+}
 
 /// The coverage weight of sets of candidate views: the distinct voxels that their
 /// inpainted regions' points occupy. A region's points are every `stride`-th pixel of its
@@ -123,20 +172,28 @@ pub fn independent_set(
 }
 
 /// The audit's colliding set (SPEC.md §20.2): of the sets of `|independent|` candidates
-/// in which some pair collides, the one whose coverage is nearest the independent set's
-/// (ties: the first), with its relative coverage difference; `None` when no such set
-/// exists (fewer than two views, or no collision).
+/// in which some pair collides, the one whose [`SurfaceCoverage`] is nearest the
+/// independent set's (ties: the first), with its relative coverage difference (∞ when the
+/// independent set covers nothing and it does); `None` when no such set exists (fewer than
+/// two views, or no collision).
 pub fn conflicting_set(
     n: usize,
     edges: &[(usize, usize)],
     independent: &[usize],
-    coverage: &Coverage,
+    coverage: &SurfaceCoverage,
 ) -> Result<Option<(Vec<usize>, f64)>> {
-    let target = coverage.of(independent) as f64;
+    let target = coverage.of(independent);
     let mut best: Option<(f64, Vec<usize>)> = None;
     for set in colliding_sets(n, edges, independent.len())? {
         let v = members(set);
-        let gap = (coverage.of(&v) as f64 - target).abs() / target.max(1.0);
+        let c = coverage.of(&v);
+        let gap = if target > 0.0 {
+            (c - target).abs() / target
+        } else if c > 0.0 {
+            f64::INFINITY
+        } else {
+            0.0
+        };
         if best.as_ref().is_none_or(|(b, _)| gap < *b) {
             best = Some((gap, v));
         }

@@ -24,7 +24,8 @@ use super::generators::{Generators, SlotKind};
 use super::poses::{nearest_training, same_pose};
 use super::rundir::{StepDone, StepWriter};
 use super::selection::{
-    CONFLICT_COVERAGE_TOLERANCE, Coverage, SelectionRule, conflicting_set, independent_set,
+    CONFLICT_COVERAGE_TOLERANCE, ConflictMatch, Coverage, SelectionRule, SurfaceCoverage,
+    conflicting_set, independent_set,
 };
 use super::steps::Step;
 use super::{Event, Inputs, Run};
@@ -104,21 +105,29 @@ pub struct Plan {
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Choice {
     pub rule: SelectionRule,
-    /// The rule's independent set and its coverage ([`Coverage`]: voxels).
+    /// The rule's independent set and its coverage weight ([`Coverage`]: voxels).
     pub independent: Vec<String>,
     pub coverage: usize,
-    /// With `conflicting_views`: the colliding set nearest in coverage, its coverage and
-    /// relative difference, and whether stage 1 uses it (within
-    /// [`CONFLICT_COVERAGE_TOLERANCE`]; else the independent set, and the run computes
-    /// what the independent set computes).
+    /// With `conflicting_views`: the colliding set matched to the independent set.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub conflicting: Option<ConflictingChoice>,
 }
 
+/// The audit's colliding set: the one nearest the independent set in the coverage it is
+/// matched on, both coverages, their relative difference, and whether stage 1 uses it
+/// (within [`CONFLICT_COVERAGE_TOLERANCE`]; else the independent set, and the run computes
+/// what the independent set computes).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ConflictingChoice {
     pub views: Vec<String>,
-    pub coverage: usize,
+    /// The coverage matched on; absent in records of the first rule (a voxel weight, no
+    /// longer run), whose `coverage` was that weight.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub matched_on: Option<ConflictMatch>,
+    /// [`SurfaceCoverage`] of this set and of the independent set.
+    pub coverage: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub independent_coverage: Option<f64>,
     pub coverage_difference: f64,
     pub used: bool,
 }
@@ -128,14 +137,23 @@ struct Chosen {
     rule: SelectionRule,
     independent: Vec<usize>,
     coverage: usize,
-    conflicting: Option<(Vec<usize>, usize, f64, bool)>,
+    conflicting: Option<Conflicting>,
+}
+
+/// [`ConflictingChoice`] in candidate indices.
+struct Conflicting {
+    views: Vec<usize>,
+    coverage: f64,
+    independent_coverage: f64,
+    difference: f64,
+    used: bool,
 }
 
 impl Chosen {
     /// The set stage 1 generates.
     fn stage1_indices(&self) -> &[usize] {
         match &self.conflicting {
-            Some((v, _, _, true)) => v,
+            Some(c) if c.used => &c.views,
             _ => &self.independent,
         }
     }
@@ -146,32 +164,39 @@ impl Chosen {
             rule: self.rule,
             independent: names(&self.independent),
             coverage: self.coverage,
-            conflicting: self.conflicting.map(|(v, c, d, used)| ConflictingChoice {
-                views: names(&v),
-                coverage: c,
-                coverage_difference: d,
-                used,
+            conflicting: self.conflicting.map(|c| ConflictingChoice {
+                views: names(&c.views),
+                matched_on: Some(ConflictMatch::EvaluationCoverage),
+                coverage: c.coverage,
+                independent_coverage: Some(c.independent_coverage),
+                coverage_difference: c.difference,
+                used: c.used,
             }),
         }
     }
 }
 
-/// The independent set by `config.selection` and, with `conflicting_views`, the
-/// coverage-matched colliding set.
+/// The independent set by `config.selection` and, with the audit's colliding set's
+/// coverage `surface` (`conflicting_views`), that set.
 fn choose(
     config: &super::PipelineConfig,
     n: usize,
     sel: &crate::collide::independent::Selection,
     coverage: &Coverage,
+    surface: Option<&SurfaceCoverage>,
 ) -> Result<Chosen> {
     let independent = independent_set(config.selection, n, &sel.edges, &sel.independent, coverage)?;
-    let conflicting = if config.conflicting_views {
-        conflicting_set(n, &sel.edges, &independent, coverage)?.map(|(v, d)| {
-            let c = coverage.of(&v);
-            (v, c, d, d <= CONFLICT_COVERAGE_TOLERANCE)
-        })
-    } else {
-        None
+    let conflicting = match surface {
+        Some(surface) => {
+            conflicting_set(n, &sel.edges, &independent, surface)?.map(|(v, d)| Conflicting {
+                coverage: surface.of(&v),
+                independent_coverage: surface.of(&independent),
+                views: v,
+                difference: d,
+                used: d <= CONFLICT_COVERAGE_TOLERANCE,
+            })
+        }
+        None => None,
     };
     Ok(Chosen {
         rule: config.selection,
@@ -179,6 +204,50 @@ fn choose(
         independent,
         conflicting,
     })
+}
+
+/// [`SurfaceCoverage`] of the active candidates `cams` with inpainting masks `masks`: on the
+/// evaluation views' unseen surface, with the dataset's truth depth at every pose. An error
+/// names what is missing where the run has no evaluation views or no truth.
+fn surface_coverage(
+    inputs: &Inputs,
+    cams: &[&Camera],
+    masks: &[Vec<bool>],
+) -> Result<SurfaceCoverage> {
+    let need = "conflicting_views matches the colliding set on the evaluation views' unseen \
+                surface: it needs evaluation cameras (--eval) and the dataset's truth depth";
+    if inputs.evaluation.is_empty() {
+        return Err(Error::invalid(format!(
+            "{need}; the run has no evaluation cameras"
+        )));
+    }
+    if cams.len() > crate::collide::independent::EXACT_MAX_VIEWS {
+        return Err(Error::invalid(format!(
+            "conflicting_views compares every set of candidates: at most {} active candidates, got {}",
+            crate::collide::independent::EXACT_MAX_VIEWS,
+            cams.len()
+        )));
+    }
+    let truth = super::candidate_truth(inputs)
+        .map_err(|e| Error::invalid(format!("{need}: {}", e.message)))?;
+    let mut views = Vec::with_capacity(cams.len());
+    for (cam, mask) in cams.iter().zip(masks) {
+        let t = truth
+            .iter()
+            .find(|t| t.camera.name == cam.name)
+            .ok_or_else(|| Error::invalid(format!("{need}; none at candidate '{}'", cam.name)))?;
+        views.push(super::evaluate::Generating {
+            camera: cam,
+            depth: &t.depth,
+            mask,
+        });
+    }
+    let existing = super::evaluate::existing_masks(inputs);
+    let mut points = Vec::new();
+    super::evaluate::visit_unseen_surface(inputs, &existing, &views, |hits| {
+        points.push(hits.iter().map(|&(k, _)| 1u32 << k).fold(0, |a, b| a | b));
+    });
+    Ok(SurfaceCoverage::new(points))
 }
 
 /// A candidate left out of detection, and why (SPEC.md §20.2).
@@ -259,10 +328,10 @@ impl Run<'_> {
         if config.frustum_outline != Outline::BoundingBox {
             key["frustum_outline"] = config.frustum_outline.name().into();
         }
-        if config.conflicting_views {
-            key["conflicting_views"] = true.into();
+        if let Some(m) = config.conflicting_views {
+            key["conflicting_views"] = m.name().into();
         }
-        if config.selection != SelectionRule::Greedy || config.conflicting_views {
+        if config.selection != SelectionRule::Greedy || config.conflicting_views.is_some() {
             // The coverage weight's points.
             key["init_stride"] = config.init_stride.into();
         }
@@ -570,7 +639,7 @@ fn write_plan(run: &Run, found: Found, w: &mut StepWriter) -> Result<()> {
     let centers: Vec<DVec3> = cams.iter().map(|c| c.center).collect();
     // The paper's choice (greedy, stage 1 on the independent set) needs no coverage and
     // records none, so its plan keeps its bytes.
-    let choice = (config.selection != SelectionRule::Greedy || config.conflicting_views)
+    let choice = (config.selection != SelectionRule::Greedy || config.conflicting_views.is_some())
         .then(|| {
             let coverage = Coverage::new(
                 &cams,
@@ -578,7 +647,13 @@ fn write_plan(run: &Run, found: Found, w: &mut StepWriter) -> Result<()> {
                 &found.depths,
                 config.init_stride as usize,
             );
-            choose(config, active.len(), &sel, &coverage)
+            let surface = match config.conflicting_views {
+                Some(ConflictMatch::EvaluationCoverage) => {
+                    Some(surface_coverage(inputs, &cams, &found.masks)?)
+                }
+                None => None,
+            };
+            choose(config, active.len(), &sel, &coverage, surface.as_ref())
         })
         .transpose()?;
     // The set stage 1 generates: the chosen one, or as many views evenly spaced.

@@ -2316,7 +2316,9 @@ fn the_stage1_set_follows_the_selection_rule_and_the_conflicting_set_matches_cov
     };
     let (default, text) = detect("default", &|_| {});
     assert!(!text.contains("choice"), "{text}");
-    let (greedy, _) = detect("greedy", &|c| c.conflicting_views = true);
+    let (greedy, _) = detect("greedy", &|c| {
+        c.conflicting_views = Some(unseen::pipeline::selection::ConflictMatch::EvaluationCoverage)
+    });
     let choice = greedy.choice.clone().unwrap();
     assert_eq!(choice.rule, SelectionRule::Greedy);
     assert_eq!(choice.independent, default.independent);
@@ -2352,6 +2354,68 @@ fn the_stage1_set_follows_the_selection_rule_and_the_conflicting_set_matches_cov
         "a hull lies within its bounding box: {:?} vs {:?}",
         hull.collisions,
         default.collisions
+    );
+}
+
+/// The audit's colliding set is matched on the coverage its diagnostics report (SPEC.md
+/// §20.2, §21.5): the coverages `plan.json` records for the independent and the colliding
+/// set are, to the bit, what the diagnostics of the finished runs measure from their
+/// stage-1 steps (`full`'s, and the variant's). Without evaluation cameras the variant
+/// stops with an error that says what it needs.
+#[test]
+fn the_conflicting_set_is_matched_on_the_coverage_the_diagnostics_measure() {
+    use unseen::pipeline::selection::ConflictMatch;
+    use unseen::pipeline::views::Plan;
+    let t = TempDir::new("pipeline-conflict-match");
+    let Tiny { inp, cfg, .. } = TinyRun::new().build(&t);
+    let run = |name: &str, c: &PipelineConfig| {
+        let out = t.path().join(name);
+        let o = pipeline::run_with(c, &inp, &out, &Default::default(), &quiet).unwrap();
+        let plan: Plan =
+            serde_json::from_slice(&std::fs::read(out.join("views/plan.json")).unwrap()).unwrap();
+        let d = unseen::audit::diagnostics::diagnose(&inp, &o.steps).unwrap();
+        (plan, d.stage1.expect("the tiny lounge has truth").coverage)
+    };
+    let conflicting = PipelineConfig {
+        conflicting_views: Some(ConflictMatch::EvaluationCoverage),
+        interpolation: false,
+        ..cfg.clone()
+    };
+    let (plan, measured) = run("conflicting", &conflicting);
+    let (_, full_measured) = run(
+        "full",
+        &PipelineConfig {
+            interpolation: false,
+            ..cfg.clone()
+        },
+    );
+    let c = plan
+        .choice
+        .unwrap()
+        .conflicting
+        .expect("the tiny lounge has collisions");
+    assert_eq!(c.matched_on, Some(ConflictMatch::EvaluationCoverage));
+    let independent = c.independent_coverage.unwrap();
+    assert_eq!(independent.to_bits(), full_measured.to_bits(), "{c:?}");
+    let used = if c.used { c.coverage } else { independent };
+    assert_eq!(used.to_bits(), measured.to_bits(), "{c:?}");
+    assert_eq!(
+        c.coverage_difference.to_bits(),
+        ((c.coverage - independent).abs() / independent).to_bits()
+    );
+
+    let t2 = TempDir::new("pipeline-conflict-match-no-eval");
+    let Tiny { inp, .. } = TinyRun::new().without_evaluation().build(&t2);
+    let opts = pipeline::RunOptions {
+        scope: pipeline::Scope::Until(pipeline::Step::Views),
+        ..Default::default()
+    };
+    let Err(e) = pipeline::run_with(&conflicting, &inp, &t2.path().join("x"), &opts, &quiet) else {
+        panic!("no evaluation cameras, yet the run went on");
+    };
+    assert!(
+        e.to_string().contains("needs evaluation cameras (--eval)"),
+        "{e}"
     );
 }
 
