@@ -439,3 +439,101 @@ pub fn dump_qa_mask(
     Manifest::new("oracle qa-mask", "", inputs, wr.entries).write(dir)?;
     Ok(())
 }
+
+/// `unseen oracle collide`: GJK's proximity of two convex hulls (SPEC.md §16.1) as .npy
+/// scalars: `distance`, `lower_bound` and `touch_eps` (f8), `intersect` (u1) and
+/// `iterations` (u4). A port's verdict is judged against `intersect` unless
+/// `lower_bound` lies within the contact band of `touch_eps`
+/// (`unseen.testing.compare_collide`).
+pub fn dump_collide(
+    a: &crate::collide::gjk::ConvexHull,
+    b: &crate::collide::gjk::ConvexHull,
+    dir: &Path,
+) -> Result<()> {
+    let p = crate::collide::gjk::proximity(a, b)?;
+    crate::io::create_dir_all(dir)?;
+    let mut wr = Writer {
+        dir,
+        entries: Vec::new(),
+    };
+    wr.put("distance", &[p.distance], &[])?;
+    wr.put("lower_bound", &[p.lower_bound], &[])?;
+    wr.put("touch_eps", &[p.touch_eps], &[])?;
+    wr.put("intersect", &[u8::from(p.intersect)], &[])?;
+    wr.put("iterations", &[p.iterations as u32], &[])?;
+    let inputs = serde_json::json!({
+        "vertices": [a.vertices.len(), b.vertices.len()],
+    });
+    Manifest::new("oracle collide", "", inputs, wr.entries).write(dir)?;
+    Ok(())
+}
+
+/// `unseen oracle views`: independent-view detection on regions given as masks and depth
+/// ranges (SPEC.md §16.2–16.3), array by array: the frustums' vertices in world
+/// coordinates, all views' together (`vertices` (ΣV, 3) f8; view `k`'s are rows
+/// `offsets[k]..offsets[k + 1]`, `offsets` (n + 1,) u4), `ranges` (n, 2) f8, every pair's
+/// GJK `distance` and `lower_bound` (n, n) f8 (0 on the diagonal), `collisions` (n, n) u1,
+/// and the `independent` views in greedy order and their `trajectory` (k,) u4.
+pub fn dump_views(
+    cams: &[&Camera],
+    masks: &[Vec<bool>],
+    ranges: &[[f64; 2]],
+    outline: crate::collide::frustum::Outline,
+    dir: &Path,
+) -> Result<()> {
+    use crate::collide::gjk::proximity;
+    use crate::collide::independent::select_regions;
+    let (polys, sel) = select_regions(cams, masks, ranges, outline, None)?;
+    let n = polys.len();
+    let hulls = polys.iter().map(|p| p.hull()).collect::<Result<Vec<_>>>()?;
+    let (mut distance, mut lower) = (vec![0f64; n * n], vec![0f64; n * n]);
+    let mut collisions = vec![0u8; n * n];
+    for i in 0..n {
+        for j in i + 1..n {
+            let p = proximity(&hulls[i], &hulls[j])?;
+            for (a, b) in [(i, j), (j, i)] {
+                distance[a * n + b] = p.distance;
+                lower[a * n + b] = p.lower_bound;
+            }
+        }
+    }
+    for &(i, j) in &sel.edges {
+        collisions[i * n + j] = 1;
+        collisions[j * n + i] = 1;
+    }
+    let mut offsets = vec![0u32];
+    let mut vertices = Vec::new();
+    for p in &polys {
+        vertices.extend(p.vertices.iter().flat_map(|v| [v.x, v.y, v.z]));
+        offsets.push((vertices.len() / 3) as u32);
+    }
+    let index = |v: &[usize]| v.iter().map(|&i| i as u32).collect::<Vec<u32>>();
+    crate::io::create_dir_all(dir)?;
+    let mut wr = Writer {
+        dir,
+        entries: Vec::new(),
+    };
+    wr.put("vertices", &vertices, &[vertices.len() / 3, 3])?;
+    wr.put("offsets", &offsets, &[n + 1])?;
+    let flat_ranges: Vec<f64> = ranges.iter().flatten().copied().collect();
+    wr.put("ranges", &flat_ranges, &[n, 2])?;
+    wr.put("distance", &distance, &[n, n])?;
+    wr.put("lower_bound", &lower, &[n, n])?;
+    wr.put("collisions", &collisions, &[n, n])?;
+    wr.put(
+        "independent",
+        &index(&sel.independent),
+        &[sel.independent.len()],
+    )?;
+    wr.put(
+        "trajectory",
+        &index(&sel.trajectory),
+        &[sel.trajectory.len()],
+    )?;
+    let inputs = serde_json::json!({
+        "cameras": cams.iter().map(|c| c.name.as_str()).collect::<Vec<_>>(),
+        "outline": outline.name(),
+    });
+    Manifest::new("oracle views", "", inputs, wr.entries).write(dir)?;
+    Ok(())
+}

@@ -169,7 +169,8 @@ pub fn run_warp(a: &WarpArgs) -> Result<()> {
     Ok(())
 }
 
-fn read_hull(path: &Path) -> Result<ConvexHull> {
+/// A polyhedron file `{"vertices": [[x, y, z], ...]}` as its convex hull.
+pub fn read_hull(path: &Path) -> Result<ConvexHull> {
     #[derive(serde::Deserialize)]
     #[serde(deny_unknown_fields)]
     struct File {
@@ -232,35 +233,75 @@ fn read_ranges(path: &Path) -> Result<BTreeMap<String, [f64; 2]>> {
         .collect()
 }
 
-pub fn run_views(a: &ViewsArgs) -> Result<()> {
-    let cams = inria::read_cameras_json(&a.cameras)?;
-    let ranges = read_ranges(&a.depth_ranges)?;
-    let outline = a.outline;
-    let mut cand = Vec::new();
-    let mut masks = Vec::new();
-    let mut rs = Vec::new();
-    for name in &a.candidates {
-        let cam = find(&cams, name, &a.cameras)?;
-        let path = a.masks.join(format!("{name}.png"));
-        let m = read_png(&path)?;
-        if (m.width, m.height) != (cam.width as usize, cam.height as usize) {
-            return Err(Error::invalid(format!(
-                "mask is {}x{} but camera '{name}' is {}x{}",
-                m.width, m.height, cam.width, cam.height
-            ))
-            .at(&path));
-        }
-        masks.push(
-            m.data
-                .chunks(m.channels)
-                .map(|c| c.iter().any(|&v| v > 0.0))
-                .collect::<Vec<bool>>(),
-        );
-        rs.push(*ranges.get(name).ok_or_else(|| {
-            Error::invalid(format!("no depth range for '{name}'")).at(&a.depth_ranges)
-        })?);
-        cand.push(cam);
+/// What `unseen views` and `unseen oracle views` read: the candidates' cameras in the
+/// greedy order, their masks and their depth ranges.
+pub struct ViewsInputs {
+    pub cameras: Vec<unseen::camera::Camera>,
+    pub masks: Vec<Vec<bool>>,
+    pub ranges: Vec<[f64; 2]>,
+}
+
+impl ViewsArgs {
+    /// The output folder.
+    pub fn out(&self) -> &Path {
+        &self.out
     }
+
+    pub fn outline(&self) -> Outline {
+        self.outline
+    }
+
+    /// Read and check the inputs.
+    pub fn inputs(&self) -> Result<ViewsInputs> {
+        let a = self;
+        let cams = inria::read_cameras_json(&a.cameras)?;
+        let ranges = read_ranges(&a.depth_ranges)?;
+        let mut cand = Vec::new();
+        let mut masks = Vec::new();
+        let mut rs = Vec::new();
+        for name in &a.candidates {
+            let cam = find(&cams, name, &a.cameras)?;
+            let path = a.masks.join(format!("{name}.png"));
+            let m = read_png(&path)?;
+            if (m.width, m.height) != (cam.width as usize, cam.height as usize) {
+                return Err(Error::invalid(format!(
+                    "mask is {}x{} but camera '{name}' is {}x{}",
+                    m.width, m.height, cam.width, cam.height
+                ))
+                .at(&path));
+            }
+            masks.push(
+                m.data
+                    .chunks(m.channels)
+                    .map(|c| c.iter().any(|&v| v > 0.0))
+                    .collect::<Vec<bool>>(),
+            );
+            rs.push(*ranges.get(name).ok_or_else(|| {
+                Error::invalid(format!("no depth range for '{name}'")).at(&a.depth_ranges)
+            })?);
+            cand.push(cam.clone());
+        }
+        Ok(ViewsInputs {
+            cameras: cand,
+            masks,
+            ranges: rs,
+        })
+    }
+}
+
+pub fn run_views(a: &ViewsArgs) -> Result<()> {
+    let outline = a.outline;
+    let ViewsInputs {
+        cameras,
+        masks,
+        ranges: rs,
+    } = a.inputs()?;
+    let cand: Vec<&unseen::camera::Camera> = cameras.iter().collect();
+    let ranges: BTreeMap<&str, [f64; 2]> = cameras
+        .iter()
+        .zip(&rs)
+        .map(|(c, r)| (c.name.as_str(), *r))
+        .collect();
     let (polys, sel) =
         select_regions(&cand, &masks, &rs, outline, None).map_err(|e| e.at(&a.masks))?;
     let names =
@@ -276,7 +317,7 @@ pub fn run_views(a: &ViewsArgs) -> Result<()> {
             serde_json::json!({
                 "name": p.name,
                 "vertices": p.vertices.iter().map(|v| [v.x, v.y, v.z]).collect::<Vec<_>>(),
-                "depth_range": ranges[&p.name],
+                "depth_range": ranges[p.name.as_str()],
             })
         })
         .collect();

@@ -234,6 +234,24 @@ pub enum OraclePass {
         #[arg(long)]
         out: PathBuf,
     },
+    /// GJK's proximity of two convex polyhedra (SPEC.md §16.1): distance, its lower bound,
+    /// the contact band, the verdict and the iterations, as .npy scalars.
+    Collide {
+        /// First polyhedron: {"vertices": [[x, y, z], ...]} (their convex hull).
+        a: PathBuf,
+        /// Second polyhedron, same format.
+        b: PathBuf,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Independent-view detection array by array (SPEC.md §16.2–16.3; `unseen views`'s
+    /// arguments): the frustums' vertices, every pair's distance and lower bound, the
+    /// collisions, the independent views and their trajectory.
+    Views {
+        #[command(flatten)]
+        args: crate::geometry::ViewsArgs,
+    },
     /// Telea inpainting traced for a port's comparison (SPEC.md §19.1): the fill, each
     /// pixel's arrival time and order, and per value its mean, gradient term, error bound
     /// and decisions; with `--forced`, each value computed from the port's predecessors.
@@ -711,6 +729,31 @@ pub fn run_oracle_command(a: OracleArgs) -> Result<()> {
                 "wrote the {method} alignment of {} into {}",
                 estimate.display(),
                 out.display()
+            );
+            Ok(())
+        }
+        OraclePass::Collide { a, b, out } => {
+            let (ha, hb) = (
+                crate::geometry::read_hull(&a)?,
+                crate::geometry::read_hull(&b)?,
+            );
+            unseen::oracle::dump_collide(&ha, &hb, &out)?;
+            println!(
+                "wrote the proximity of {} and {} into {}",
+                a.display(),
+                b.display(),
+                out.display()
+            );
+            Ok(())
+        }
+        OraclePass::Views { args } => {
+            let i = args.inputs()?;
+            let cams: Vec<&unseen::camera::Camera> = i.cameras.iter().collect();
+            unseen::oracle::dump_views(&cams, &i.masks, &i.ranges, args.outline(), args.out())?;
+            println!(
+                "wrote independent-view detection of {} candidates into {}",
+                cams.len(),
+                args.out().display()
             );
             Ok(())
         }

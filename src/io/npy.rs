@@ -6,7 +6,7 @@ use crate::error::{Error, Result};
 use std::io::Write;
 use std::path::Path;
 
-/// Element types we write.
+/// Element types we write and read.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Dtype {
     U8,
@@ -34,6 +34,8 @@ impl Dtype {
 pub trait NpyElement: Copy {
     const DTYPE: Dtype;
     fn put(self, out: &mut Vec<u8>);
+    /// The value of its `size_of::<Self>()` little-endian bytes.
+    fn get(bytes: &[u8]) -> Self;
 }
 
 macro_rules! element {
@@ -42,6 +44,9 @@ macro_rules! element {
             const DTYPE: Dtype = $d;
             fn put(self, out: &mut Vec<u8>) {
                 out.extend_from_slice(&self.to_le_bytes());
+            }
+            fn get(bytes: &[u8]) -> Self {
+                <$t>::from_le_bytes(bytes.try_into().expect("one element's bytes"))
             }
         }
     };
@@ -98,6 +103,12 @@ pub fn write_npy<T: NpyElement>(path: &Path, data: &[T], shape: &[usize]) -> Res
 
 /// Read an `.npy` of little-endian `f32` (what the tests and tools need): shape and data.
 pub fn read_npy_f32(path: &Path) -> Result<(Vec<usize>, Vec<f32>)> {
+    read_npy(path)
+}
+
+/// Read a version 1.0 `.npy` of `T`'s dtype in C order (for `u8`, numpy's `bool` too):
+/// shape and data.
+pub fn read_npy<T: NpyElement>(path: &Path) -> Result<(Vec<usize>, Vec<T>)> {
     let b = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     let bad = |m: &str| Error::parse(path, m.to_string());
     if b.len() < 10 || &b[..8] != b"\x93NUMPY\x01\x00" {
@@ -106,8 +117,11 @@ pub fn read_npy_f32(path: &Path) -> Result<(Vec<usize>, Vec<f32>)> {
     let hl = u16::from_le_bytes([b[8], b[9]]) as usize;
     let header = std::str::from_utf8(b.get(10..10 + hl).ok_or_else(|| bad("truncated header"))?)
         .map_err(|_| bad("header is not text"))?;
-    if !header.contains("'descr': '<f4'") || header.contains("'fortran_order': True") {
-        return Err(bad("only little-endian f32 in C order is supported"));
+    let descr = T::DTYPE.descr();
+    let dtype_ok = header.contains(&format!("'descr': '{descr}'"))
+        || (T::DTYPE == Dtype::U8 && header.contains("'descr': '|b1'"));
+    if !dtype_ok || header.contains("'fortran_order': True") {
+        return Err(bad(&format!("only {descr} in C order is supported here")));
     }
     let inner = header
         .split("'shape': (")
@@ -121,16 +135,13 @@ pub fn read_npy_f32(path: &Path) -> Result<(Vec<usize>, Vec<f32>)> {
         .map(|s| s.parse().map_err(|_| bad("invalid shape")))
         .collect::<Result<_>>()?;
     let body = &b[10 + hl..];
+    let size = std::mem::size_of::<T>();
     let bytes = shape
         .iter()
-        .try_fold(4usize, |n, &d| n.checked_mul(d))
+        .try_fold(size, |n, &d| n.checked_mul(d))
         .ok_or_else(|| bad("the shape's size overflows"))?;
     if body.len() != bytes {
         return Err(bad("data size does not match the shape"));
     }
-    let data = body
-        .chunks_exact(4)
-        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-        .collect();
-    Ok((shape, data))
+    Ok((shape, body.chunks_exact(size).map(T::get).collect()))
 }

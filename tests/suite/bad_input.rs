@@ -434,6 +434,47 @@ fn every_subcommand_answers_bad_input_with_one_error_line_and_no_output() {
             code: 1,
         },
         Cmd {
+            name: "oracle collide",
+            inputs: vec![
+                input("a", cube.clone(), Kind::Json),
+                input("b", cube.clone(), Kind::Json),
+            ],
+            out: Out::Folder,
+            args: Box::new(|p, out| os(&[&"oracle", &"collide", &p("a"), &p("b"), &"--out", &out])),
+            code: 1,
+        },
+        Cmd {
+            name: "oracle views",
+            inputs: vec![
+                input("cameras", lounge.join("cameras.json"), Kind::Cameras),
+                input("ranges", ranges.clone(), Kind::Json),
+                Input {
+                    name: "masks",
+                    path: masks.clone(),
+                    kind: Kind::Dir,
+                    inner: vec![("heldout_000.png", Kind::Png)],
+                },
+            ],
+            out: Out::Folder,
+            args: Box::new(|p, out| {
+                os(&[
+                    &"oracle",
+                    &"views",
+                    &"--cameras",
+                    &p("cameras"),
+                    &"--candidates",
+                    &"heldout_000",
+                    &"--masks",
+                    &p("masks"),
+                    &"--depth-ranges",
+                    &p("ranges"),
+                    &"--out",
+                    &out,
+                ])
+            }),
+            code: 1,
+        },
+        Cmd {
             name: "inpaint",
             inputs: vec![
                 input("image", lounge.join("images/heldout_000.png"), Kind::Png),

@@ -568,17 +568,22 @@ fn cli_warp_collide_and_views() {
         r#"{"heldout_000": [1.0, 3.0], "heldout_001": [[1.0, 2.0], [2.0, 4.0]], "heldout_002": [0.5, 6.0]}"#,
     )
     .unwrap();
-    let st = unseen()
-        .args(["views", "--cameras"])
-        .arg(root.join("cameras.json"))
-        .args(["--candidates", &names.join(","), "--masks"])
-        .arg(&masks)
-        .arg("--depth-ranges")
-        .arg(&ranges)
-        .args(["--outline", "hull", "--out"])
-        .arg(out.join("views"))
-        .output()
-        .unwrap();
+    // `unseen [oracle] views` on these candidates, with a hull outline.
+    let views = |command: &[&str], dir: &str| {
+        unseen()
+            .args(command)
+            .arg("--cameras")
+            .arg(root.join("cameras.json"))
+            .args(["--candidates", &names.join(","), "--masks"])
+            .arg(&masks)
+            .arg("--depth-ranges")
+            .arg(&ranges)
+            .args(["--outline", "hull", "--out"])
+            .arg(out.join(dir))
+            .output()
+            .unwrap()
+    };
+    let st = views(&["views"], "views");
     assert!(
         st.status.success(),
         "{}",
@@ -604,18 +609,85 @@ fn cli_warp_collide_and_views() {
     )
     .unwrap();
     assert_eq!(models.len(), 3);
+    // The oracle dumps of the same detection and of one pair (SPEC.md §8.2): the frustums
+    // `views` wrote, bit for bit; each pair's verdict and distance as `oracle collide`
+    // computes them; the sets by index.
+    let st = views(&["oracle", "views"], "oracle-views");
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    use unseen::io::npy::read_npy;
+    let dump = |name: &str| out.join("oracle-views").join(format!("{name}.npy"));
+    let (vs, vertices) = read_npy::<f64>(&dump("vertices")).unwrap();
+    let (_, offsets) = read_npy::<u32>(&dump("offsets")).unwrap();
+    let (cs, collisions) = read_npy::<u8>(&dump("collisions")).unwrap();
+    let (_, distance) = read_npy::<f64>(&dump("distance")).unwrap();
+    let (_, independent) = read_npy::<u32>(&dump("independent")).unwrap();
+    let (_, trajectory) = read_npy::<u32>(&dump("trajectory")).unwrap();
+    let n = names.len();
+    assert_eq!((vs[1], cs, offsets.len()), (3, vec![n, n], n + 1));
+    for k in 0..n {
+        let want: Vec<f64> = v["frustums"][k]["vertices"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|p| p.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()))
+            .collect();
+        let rows = &vertices[3 * offsets[k] as usize..3 * offsets[k + 1] as usize];
+        assert_eq!(rows, &want[..], "frustum {k}");
+    }
+    let name_of = |i: &u32| serde_json::json!(names[*i as usize]);
+    assert_eq!(
+        independent.iter().map(name_of).collect::<Vec<_>>(),
+        *v["independent"].as_array().unwrap()
+    );
+    assert_eq!(
+        trajectory.iter().map(name_of).collect::<Vec<_>>(),
+        *v["trajectory"].as_array().unwrap()
+    );
+    for i in 0..n {
+        for j in i + 1..n {
+            let listed = v["collisions"]
+                .as_array()
+                .unwrap()
+                .contains(&serde_json::json!([names[i], names[j]]));
+            assert_eq!(collisions[i * n + j] == 1, listed, "pair {i} {j}");
+            assert_eq!(collisions[i * n + j], collisions[j * n + i]);
+            let hull = |k: usize| {
+                let f = out.join(format!("frustum-{k}.json"));
+                let vs = &v["frustums"][k]["vertices"];
+                std::fs::write(&f, serde_json::json!({ "vertices": vs }).to_string()).unwrap();
+                f
+            };
+            let pair = out.join(format!("oracle-collide-{i}-{j}"));
+            let st = unseen()
+                .args(["oracle", "collide"])
+                .arg(hull(i))
+                .arg(hull(j))
+                .arg("--out")
+                .arg(&pair)
+                .output()
+                .unwrap();
+            assert!(
+                st.status.success(),
+                "{}",
+                String::from_utf8_lossy(&st.stderr)
+            );
+            let (shape, hit) = read_npy::<u8>(&pair.join("intersect.npy")).unwrap();
+            let (_, d) = read_npy::<f64>(&pair.join("distance.npy")).unwrap();
+            assert_eq!((shape, hit[0]), (vec![], collisions[i * n + j]));
+            assert_eq!(
+                d[0].to_bits(),
+                distance[i * n + j].to_bits(),
+                "pair {i} {j}"
+            );
+        }
+    }
+
     std::fs::remove_file(masks.join("heldout_001.png")).unwrap();
-    let st = unseen()
-        .args(["views", "--cameras"])
-        .arg(root.join("cameras.json"))
-        .args(["--candidates", &names.join(","), "--masks"])
-        .arg(&masks)
-        .arg("--depth-ranges")
-        .arg(&ranges)
-        .arg("--out")
-        .arg(out.join("views-bad"))
-        .output()
-        .unwrap();
+    let st = views(&["views"], "views-bad");
     let err = String::from_utf8_lossy(&st.stderr);
     assert!(
         !st.status.success() && err.contains("heldout_001.png"),
