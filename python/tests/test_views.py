@@ -132,6 +132,27 @@ def test_near_contact_pairs_may_be_decided_either_way():
     assert flipped >= 10
 
 
+def test_the_greedy_check_equals_enumerating_every_allowed_graph():
+    # greedy_allows decides in one pass what trying each of the 2^k graphs decides: checked
+    # against that enumeration on random graphs with up to 8 near-contact pairs.
+    import itertools
+    from unseen._views import _greedy, greedy_allows
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        n = int(rng.integers(1, 8))
+        pairs = [(i, j) for i in range(n) for j in range(i + 1, n)]
+        kind = rng.integers(0, 3, len(pairs))  # 0 apart, 1 firm, 2 near
+        firm = [e for e, k in zip(pairs, kind) if k == 1]
+        near = [e for e, k in zip(pairs, kind) if k == 2][:8]
+        allowed = {tuple(sorted(_greedy(n, firm + [e for e, on in zip(near, flips) if on],
+                                        range(n))))
+                   for flips in itertools.product((False, True), repeat=len(near))}
+        for size in range(n + 1):
+            for chosen in itertools.combinations(range(n), size):
+                ok = greedy_allows(n, firm, near, list(chosen)) is None
+                assert ok == (chosen in allowed), (n, firm, near, chosen)
+
+
 def test_a_port_deciding_a_clear_pair_wrong_fails():
     case = ut.views_case(0)
     want = unseen.views(case["frustums"], case["centers"])

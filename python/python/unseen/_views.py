@@ -26,7 +26,6 @@ FRUSTUM_REL = 1e-6
 TOUR_REL = 1e-6
 #: The most near-contact pairs whose verdicts are enumerated (2^k graphs); a case with more
 #: cannot judge the selection.
-MAX_FLIPS = 8
 
 
 def _camera(rng, width, height):
@@ -205,6 +204,31 @@ def _greedy(n, edges, order):
         if not adj[i] & set(chosen):
             chosen.append(i)
     return chosen
+
+
+def greedy_allows(n, firm, near, chosen):
+    """Whether ``chosen`` is the greedy selection (candidate order) of some collision graph
+    made of the ``firm`` pairs and any subset of the ``near`` ones: None if so, else why
+    not. Exact and linear in the pairs, for any number of near-contact pairs: the subset
+    that turns near pairs inside the set off and near pairs from a member to a later
+    non-member on makes greedy choose ``chosen`` exactly when no firm pair lies inside it
+    and every other view has a firm or near pair with an earlier member."""
+    members = set(chosen)
+    if len(members) != len(chosen) or any(not 0 <= v < n for v in chosen):
+        return f"{sorted(chosen)} is not a set of views 0..{n - 1}"
+    inside = sorted(e for e in firm if e[0] in members and e[1] in members)
+    if inside:
+        return f"views {inside[0][0]} and {inside[0][1]} collide beyond contact noise"
+    reach = {}
+    for i, j in list(firm) + list(near):
+        for a, b in ((i, j), (j, i)):
+            if a in members and a < b:
+                reach.setdefault(b, a)
+    for v in range(n):
+        if v not in members and v not in reach:
+            return (f"view {v} collides with no earlier chosen view, so greedy selection "
+                    f"would take it")
+    return None
 
 
 def _closing(tour):
