@@ -1,5 +1,6 @@
-"""The frustum collision test through unseen.testing (SPEC.md §16): the oracle's binding, four
-seeded wrong ports (each must fail with its mistake named) and a real third-party one,
+"""The frustum collision test through unseen.testing (SPEC.md §16): the oracle's binding,
+seeded wrong ports, the harness's emulations and four written here (each must fail with its
+mistake named) and a real third-party one,
 python-fcl's convex-convex collision and distance (FCL's GJK), on 20 seeds of
 ``collide_case``. python-fcl's test is skipped, with the reason printed, where it is not
 installed (python/requirements-stages.txt).
@@ -36,12 +37,75 @@ def test_the_oracle_passes_and_the_case_can_judge():
         assert 0 < r.excluded_fraction <= ut.MAX_SET_ASIDE, r.message()
 
 
-@pytest.mark.parametrize("mistake", [m.name for m in ut.COLLIDE_MISTAKES])
-def test_wrong_ports_fail_with_their_mistake_named(mistake):
+@pytest.mark.parametrize("mistake,variant", [(m, v) for m, vs in ut.COLLIDE_VARIANTS.items()
+                                               for v in vs])
+def test_wrong_ports_fail_with_their_mistake_named(mistake, variant):
     text = next(m.text for m in ut.COLLIDE_MISTAKES if m.name == mistake)
-    port = lambda a, b, faces: ut.mistaken_verdict(mistake, a, b, faces)  # noqa: E731
+    port = lambda a, b, faces: ut.mistaken_verdict(variant, a, b, faces)  # noqa: E731
     for seed in range(8):
         r = ut.compare_collide(port, seed=seed)
+        assert not r.ok, f"seed {seed}: the mistake passed"
+        assert r.cause == text, f"seed {seed}: {r.message()}"
+
+
+# Wrong ports written here, apart from the harness's emulations of its mistakes (which
+# name the cause): each makes its mistake its own way (another bounding-sphere centre,
+# face planes by Newell's method, strict inequalities), so the naming is tested on ports
+# it did not write.
+
+
+def _sphere_port(a, b, faces):
+    # Spheres about the bounding boxes' centres. (With boxes and centroid spheres as two
+    # mistakes this port was named neither: boxes and spheres became one mistake.)
+    ca, cb = (a.min(0) + a.max(0)) / 2, (b.min(0) + b.max(0)) / 2
+    ra = max(np.linalg.norm(v - ca) for v in a)
+    rb = max(np.linalg.norm(v - cb) for v in b)
+    return float(np.linalg.norm(ca - cb)) <= ra + rb
+
+
+def _box_port(a, b, faces):
+    lo, hi = np.maximum(a.min(0), b.min(0)), np.minimum(a.max(0), b.max(0))
+    return bool((lo <= hi).all())
+
+
+def _newell_planes(v, faces):
+    # Outward unit normals by Newell's method and the plane offsets.
+    out = []
+    for f in faces:
+        n = np.zeros(3)
+        for k in range(len(f)):
+            p, q = v[f[k]], v[f[(k + 1) % len(f)]]
+            n += [(p[1] - q[1]) * (p[2] + q[2]), (p[2] - q[2]) * (p[0] + q[0]),
+                  (p[0] - q[0]) * (p[1] + q[1])]
+        n /= np.linalg.norm(n)
+        out.append((n, max(float(n @ v[i]) for i in f)))
+    return out
+
+
+def _containment_port(a, b, faces):
+    def inside(points, planes):
+        return any(all(n @ x <= d + 1e-12 for n, d in planes) for x in points)
+    return inside(a, _newell_planes(b, faces)) or inside(b, _newell_planes(a, faces))
+
+
+def _face_axes_port(a, b, faces):
+    for n, _ in _newell_planes(a, faces) + _newell_planes(b, faces):
+        pa, pb = a @ n, b @ n
+        if pa.max() < pb.min() or pb.max() < pa.min():
+            return False
+    return True
+
+
+WRONG_PORTS = {"spheres": _sphere_port, "boxes": _box_port,
+               "vertex_containment": _containment_port, "face_axes_only": _face_axes_port}
+
+
+@pytest.mark.parametrize("port", sorted(WRONG_PORTS))
+def test_independent_wrong_ports_fail_with_their_mistake_named(port):
+    mistake = {"spheres": "bounding_volume", "boxes": "bounding_volume"}.get(port, port)
+    text = next(m.text for m in ut.COLLIDE_MISTAKES if m.name == mistake)
+    for seed in range(8):
+        r = ut.compare_collide(WRONG_PORTS[port], seed=seed)
         assert not r.ok, f"seed {seed}: the mistake passed"
         assert r.cause == text, f"seed {seed}: {r.message()}"
 

@@ -153,21 +153,35 @@ def _separated_on(axis, a, b):
 
 
 COLLIDE_MISTAKES = (
-    StageMistake("aabb", "axis-aligned bounding boxes instead of the frustums"),
-    StageMistake("spheres", "bounding spheres (about the centroids) instead of the frustums"),
+    StageMistake("bounding_volume", "a bounding volume (an axis-aligned box, or a sphere about "
+                 "the centroid or the box's centre) instead of the frustums"),
     StageMistake("vertex_containment", "a vertex of one inside the other (misses edges "
                    "crossing faces and edge-edge overlaps)"),
     StageMistake("face_axes_only", "separating axes from face normals only (no edge × edge "
                    "axes: false collisions)"),
 )
 
+#: The ways each mistake is made, as ``mistaken_verdict`` emulates them: a mistake explains
+#: a port as well as its best variant does. Box and spheres are one mistake: on the case
+#: generator's near misses they disagree on a few pairs only (a sphere port about the box
+#: centre differs from a box port on 1 pair in 29), too few to tell them apart.
+COLLIDE_VARIANTS = {
+    "bounding_volume": ("aabb", "spheres", "box_spheres"),
+    "vertex_containment": ("vertex_containment",),
+    "face_axes_only": ("face_axes_only",),
+}
+
 
 def mistaken_verdict(name, a, b, faces=FRUSTUM_FACES):
-    """The verdict (True: collide) of mistake ``name`` on the pair."""
+    """The verdict (True: collide) of variant ``name`` of a mistake (``COLLIDE_VARIANTS``)
+    on the pair."""
     if name == "aabb":
         return bool(np.all(a.max(0) >= b.min(0)) and np.all(b.max(0) >= a.min(0)))
-    if name == "spheres":
-        ca, cb = a.mean(0), b.mean(0)
+    if name in ("spheres", "box_spheres"):
+        if name == "spheres":
+            ca, cb = a.mean(0), b.mean(0)
+        else:
+            ca, cb = (a.min(0) + a.max(0)) / 2, (b.min(0) + b.max(0)) / 2
         ra, rb = np.linalg.norm(a - ca, axis=1).max(), np.linalg.norm(b - cb, axis=1).max()
         return bool(np.linalg.norm(ca - cb) <= ra + rb)
     na, da = _planes(a, faces)

@@ -67,7 +67,7 @@ from ._align import (  # noqa: F401
     ALIGN_MISTAKES, CONSENSUS_SLACK, LSQ_RTOL, RESIDUAL_SLACK, align_case, consensus,
     mistaken_fit)
 from ._collide import (  # noqa: F401
-    COLLIDE_MISTAKES, CONTACT_REL, DISTANCE_REL, FRUSTUM_FACES, MAX_SET_ASIDE, collide_case,
+    COLLIDE_MISTAKES, COLLIDE_VARIANTS, CONTACT_REL, DISTANCE_REL, FRUSTUM_FACES, MAX_SET_ASIDE, collide_case,
     frustum, mistaken_verdict)
 from ._adam import ADAM_MISTAKES, adam_bounds, adam_case, adam_reference  # noqa: F401
 from ._views import (  # noqa: F401
@@ -1527,8 +1527,9 @@ def compare_collide(port, case=None, *, seed=0):
     if wrong:
         results = []
         for mk in COLLIDE_MISTAKES:
-            left = sum(1 for i, (a, b) in enumerate(pairs)
-                       if not aside[i] and mistaken_verdict(mk.name, a, b, faces) != verdicts[i])
+            left = min(sum(1 for i, (a, b) in enumerate(pairs)
+                           if not aside[i] and mistaken_verdict(v, a, b, faces) != verdicts[i])
+                       for v in COLLIDE_VARIANTS[mk.name])
             results.append((left, mk.text))
         _diagnosis(report, results, len(wrong))
     return report
