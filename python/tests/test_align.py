@@ -86,3 +86,50 @@ def test_scikit_learn_passes():
     for seed in SEEDS:
         r = ut.compare_align(port, seed=seed)
         assert r.ok, f"seed {seed}: {r.message()}"
+
+
+def _sklearn_port(mistake):
+    # scikit-learn's fit with one mistake made the way a port would make it (not the
+    # harness's emulations): the naming is tested on ports it did not write.
+    lm = pytest.importorskip("sklearn.linear_model", reason="scikit-learn is not installed "
+                             "(python/requirements-stages.txt)")
+
+    def port(estimate, depth, *, space, threshold, method):
+        ok = np.isfinite(estimate) & np.isfinite(depth) & (depth > 0)
+        r = estimate[ok].astype(np.float64)
+        d = depth[ok].astype(np.float64)
+        if mistake == "wrong_space":
+            space = "depth" if space == "disparity" else "disparity"
+        m = d if space == "depth" else 1.0 / d
+        x, y = (m, r) if mistake == "swapped" else (r, m)
+        model = lm.LinearRegression(fit_intercept=mistake != "no_offset")
+        if method == "least_squares" or mistake == "no_ransac":
+            fit = model.fit(x[:, None], y)
+        else:
+            fit = lm.RANSACRegressor(model, min_samples=2, residual_threshold=threshold,
+                                     loss=lambda t, p: np.abs(t - p) / np.abs(t),
+                                     max_trials=1000, stop_probability=0.999,
+                                     random_state=5).fit(x[:, None], y).estimator_
+        return float(fit.coef_[0]), float(fit.intercept_)
+
+    return port
+
+
+@pytest.mark.parametrize("mistake", [m.name for m in ut.ALIGN_MISTAKES])
+def test_scikit_learn_ports_with_a_mistake_fail_with_it_named(mistake):
+    text = next(m.text for m in ut.ALIGN_MISTAKES if m.name == mistake)
+    port = _sklearn_port(mistake)
+    judged, named = 0, 0
+    for seed in range(12):
+        case = ut.align_case(seed)
+        if mistake == "no_ransac" and case["method"] == "least_squares":
+            continue  # that mistake is least squares
+        r = ut.compare_align(port, case)
+        assert not r.ok, f"seed {seed}: the mistake passed"
+        judged += 1
+        named += r.cause == text
+        assert r.cause in ("", text), f"seed {seed}: another mistake named: {r.message()}"
+    # Measured (seeds 0-11): named on 8 of 12 (wrong space: scikit-learn's RANSAC finds
+    # other lines in the curved other space than ours, by rule and by prediction), 11 of 12
+    # (no offset, swapped), 9 of 9 (no RANSAC); the rest unnamed, never another.
+    assert 3 * named >= 2 * judged, f"named on {named} of {judged}"

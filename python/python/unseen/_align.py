@@ -98,6 +98,28 @@ def _ransac(x, y, inlier, seed, iterations=1000):
     return _lsq(x[keep], y[keep])
 
 
+def mistaken_consensus(name, scale, offset, estimate, depth, *, space, threshold):
+    """The consensus count of the fit ``(scale, offset)`` under mistake ``name``'s own model
+    and rule (``wrong_space``: in the other space; ``swapped``: ``scale·m + offset ≈ r``
+    within ``threshold·|r|``; ``no_offset``: through the origin, 0 for a fit with an
+    offset), or None for a mistake without a consensus (``no_ransac``). A port that made
+    the mistake with its own RANSAC draws holds as much consensus under that rule as the
+    mistake's emulation does, whatever its draws."""
+    ok = _valid(estimate, depth)
+    r = np.asarray(estimate, np.float64)[ok]
+    m = _target(np.asarray(depth)[ok], space)
+    if name == "wrong_space":
+        m = _target(np.asarray(depth)[ok], "depth" if space == "disparity" else "disparity")
+    elif name == "swapped":
+        r, m = m, r
+    elif name == "no_offset":
+        if offset != 0.0:
+            return 0
+    else:
+        return None
+    return int((np.abs(scale * r + offset - m) <= threshold * np.abs(m)).sum())
+
+
 def mistaken_fit(name, estimate, depth, *, space, threshold, seed=0):
     """The ``(scale, offset)`` mistake ``name`` fits (float64, its own seeded RANSAC)."""
     ok = _valid(estimate, depth)

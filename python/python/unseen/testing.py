@@ -65,7 +65,7 @@ from ._loss import (  # noqa: F401
     loss_case, ssim_reference)
 from ._align import (  # noqa: F401
     ALIGN_MISTAKES, CONSENSUS_SLACK, LSQ_RTOL, RESIDUAL_SLACK, align_case, consensus,
-    mistaken_fit)
+    mistaken_consensus, mistaken_fit)
 from ._collide import (  # noqa: F401
     COLLIDE_MISTAKES, COLLIDE_VARIANTS, CONTACT_REL, DISTANCE_REL, FRUSTUM_FACES, MAX_SET_ASIDE, collide_case,
     frustum, mistaken_verdict)
@@ -1588,11 +1588,21 @@ def compare_align(port, case=None, *, seed=0):
         apart = lambda s, t: float(np.mean(np.abs((s - s_p) * x + (t - t_p)))) / scale  # noqa: E731
         # How far each mistake's fit predicts from the port's, against how far the
         # oracle's does: the naming rule on that ratio (in thousandths).
+        # A RANSAC mistake by its own rule instead: the share of the consensus its
+        # emulation reaches that the port's fit misses under that rule, in units of
+        # CONSENSUS_SLACK (other draws find other fits; the rule does not care).
         base, far = 1000, apart(want["scale"], want["offset"]) or 1.0
         results = []
         for mk in ALIGN_MISTAKES:
             s_m, t_m = mistaken_fit(mk.name, r, d, space=space, threshold=thr, seed=seed)
-            results.append((min(10 * base, int(round(base * apart(s_m, t_m) / far))), mk.text))
+            held = None if method == "least_squares" else mistaken_consensus(
+                mk.name, s_p, t_p, r, d, space=space, threshold=thr)
+            left = base * apart(s_m, t_m) / far
+            if held is not None:
+                reach = mistaken_consensus(mk.name, s_m, t_m, r, d, space=space, threshold=thr)
+                short = max(0.0, 1.0 - held / max(reach, 1))
+                left = min(left, base * short / CONSENSUS_SLACK)
+            results.append((min(10 * base, int(round(left))), mk.text))
         _diagnosis(report, results, base)
     return report
 
