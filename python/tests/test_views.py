@@ -168,7 +168,7 @@ def test_a_port_deciding_a_clear_pair_wrong_fails():
 @pytest.mark.parametrize("mistake", [m.name for m in ut.VIEWS_MISTAKES])
 def test_wrong_selections_fail_with_their_mistake_named(mistake):
     text = next(m.text for m in ut.VIEWS_MISTAKES if m.name == mistake)
-    judged = 0
+    judged, named = 0, 0
     for seed in SEEDS:
         case = ut.views_case(seed)
         n = len(case["frustums"])
@@ -184,9 +184,64 @@ def test_wrong_selections_fail_with_their_mistake_named(mistake):
         r = ut.compare_views(port, case)
         assert not r.ok, f"seed {seed}: the mistake passed"
         judged += 1
-        # Measured: named on every seed where it changes the result.
-        assert r.cause == text, f"seed {seed}: {r.message()}"
-    assert judged >= 5
+        named += r.cause == text
+        assert r.cause in ("", text), f"seed {seed}: {r.message()}"
+    # Measured: named on every seed where it changes the result but seed 18, where the
+    # reverse greedy set is the one largest set (either mistake chooses it for certain).
+    assert judged >= 5 and named >= judged - 1, f"named on {named} of {judged}"
+
+
+def _own_selection(mistake):
+    """A selection port written here, apart from the harness's emulations: its own greedy
+    pass (or a brute-force largest set), nearest-neighbour tour and gaps, one mistake."""
+    import itertools
+
+    def port(frustums, centers):
+        n = len(frustums)
+        hit = {(i, j): unseen.proximity(frustums[i], frustums[j])["intersect"]
+               for i in range(n) for j in range(i + 1, n)}
+        free = lambda views: not any(hit[(a, b)] for a, b in itertools.combinations(views, 2))  # noqa: E731
+        if mistake == "maximum_set":
+            chosen = next(list(c) for k in range(n, 0, -1)
+                          for c in itertools.combinations(range(n), k) if free(c))
+        else:
+            chosen = []
+            for v in (reversed(range(n)) if mistake == "reverse_order" else range(n)):
+                if free(sorted(chosen + [v])):
+                    chosen.append(v)
+        if mistake == "index_tour":
+            tour = sorted(chosen)
+        else:
+            left, tour = sorted(chosen), []
+            tour.append(left.pop(0))
+            while left:
+                d = [float(((centers[v] - centers[tour[-1]]) ** 2).sum()) for v in left]
+                tour.append(left.pop(int(np.argmin(d))))
+        gaps = [(tour[k], tour[k + 1]) for k in range(len(tour) - 1)]
+        if mistake != "open_tour" and len(tour) > 1:
+            gaps.append((tour[-1], tour[0]))
+        return {"independent": chosen, "trajectory": tour, "gaps": gaps}
+    return port
+
+
+@pytest.mark.parametrize("mistake", [m.name for m in ut.VIEWS_MISTAKES])
+def test_selection_ports_written_here_fail_with_their_mistake_named(mistake):
+    text = next(m.text for m in ut.VIEWS_MISTAKES if m.name == mistake)
+    assert ut.compare_views(_own_selection("none"), seed=0).ok
+    judged, named = 0, 0
+    for seed in SEEDS:
+        case = ut.views_case(seed)
+        r = ut.compare_views(_own_selection(mistake), case)
+        if r.ok:
+            continue  # the mistake changes nothing on this case
+        judged += 1
+        named += r.cause == text
+        # Unnamed only where another mistake chooses the same set (a reverse greedy set
+        # that is also a largest one), never another named.
+        assert r.cause in ("", text), f"seed {seed}: {r.message()}"
+    # Measured: named on every judged seed but seed 18 (the reverse greedy set is the one
+    # largest set there).
+    assert judged >= 5 and named >= judged - 1, f"named on {named} of {judged}"
 
 
 def test_python_fcl_selection_passes():

@@ -206,29 +206,70 @@ def _greedy(n, edges, order):
     return chosen
 
 
-def greedy_allows(n, firm, near, chosen):
-    """Whether ``chosen`` is the greedy selection (candidate order) of some collision graph
-    made of the ``firm`` pairs and any subset of the ``near`` ones: None if so, else why
-    not. Exact and linear in the pairs, for any number of near-contact pairs: the subset
-    that turns near pairs inside the set off and near pairs from a member to a later
-    non-member on makes greedy choose ``chosen`` exactly when no firm pair lies inside it
-    and every other view has a firm or near pair with an earlier member."""
+def greedy_allows(n, firm, near, chosen, order=None):
+    """Whether ``chosen`` is the greedy selection (in ``order``, default candidate order) of
+    some collision graph made of the ``firm`` pairs and any subset of the ``near`` ones:
+    None if so, else why not. Exact and linear in the pairs, for any number of near-contact
+    pairs: the subset that turns near pairs inside the set off and near pairs from a member
+    to a later non-member on makes greedy choose ``chosen`` exactly when no firm pair lies
+    inside it and every other view has a firm or near pair with an earlier member."""
     members = set(chosen)
     if len(members) != len(chosen) or any(not 0 <= v < n for v in chosen):
         return f"{sorted(chosen)} is not a set of views 0..{n - 1}"
     inside = sorted(e for e in firm if e[0] in members and e[1] in members)
     if inside:
         return f"views {inside[0][0]} and {inside[0][1]} collide beyond contact noise"
-    reach = {}
+    rank = {v: k for k, v in enumerate(range(n) if order is None else order)}
+    reach = set()
     for i, j in list(firm) + list(near):
         for a, b in ((i, j), (j, i)):
-            if a in members and a < b:
-                reach.setdefault(b, a)
+            if a in members and rank[a] < rank[b]:
+                reach.add(b)
     for v in range(n):
         if v not in members and v not in reach:
             return (f"view {v} collides with no earlier chosen view, so greedy selection "
                     f"would take it")
     return None
+
+
+def _largest_free(n, edges):
+    """The largest sets of views with no pair in ``edges`` (all of one size)."""
+    for size in range(n, 0, -1):
+        found = [c for c in itertools.combinations(range(n), size)
+                 if not any(i in c and j in c for i, j in edges)]
+        if found:
+            return found
+    return [()]
+
+
+def explains_selection(name, n, firm, near, chosen):
+    """How likely selection mistake ``name`` (``VIEWS_MISTAKES``) is to choose the set
+    ``chosen`` on a graph the near-contact pairs allow: 1 for greedy in reverse order when
+    it can; 1/k for a largest set when ``chosen`` is one of k largest sets (a search among
+    them may return any); 0 when the mistake cannot choose it."""
+    if name == "reverse_order":
+        return float(greedy_allows(n, firm, near, chosen, order=range(n - 1, -1, -1)) is None)
+    if name == "maximum_set":
+        members = set(chosen)
+        if any(i in members and j in members for i, j in firm):
+            return 0.0
+        # The graph that turns on every near pair but those inside the set keeps it
+        # independent and leaves every other set the fewest views.
+        edges = list(firm) + [(i, j) for i, j in near if not (i in members and j in members)]
+        largest = _largest_free(n, edges)
+        return 1.0 / len(largest) if tuple(sorted(members)) in largest else 0.0
+    raise ValueError(f"not a selection mistake: {name!r}")
+
+
+def mistaken_tour(name, chosen, centers):
+    """``(trajectory, gaps)`` mistake ``name`` makes through the set ``chosen``."""
+    tour, gaps = _tour(sorted(chosen), centers)
+    if name == "index_tour":
+        tour = sorted(chosen)
+        gaps = _closing(tour)
+    if name == "open_tour":
+        gaps = gaps[:-1]
+    return tour, gaps
 
 
 def _closing(tour):

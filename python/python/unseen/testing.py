@@ -72,8 +72,8 @@ from ._collide import (  # noqa: F401
 from ._adam import ADAM_MISTAKES, adam_bounds, adam_case, adam_reference  # noqa: F401
 from ._views import (  # noqa: F401
     FRUSTUM_MISTAKES, FRUSTUM_REL, TOUR_REL, VIEWS_MISTAKES, frustum_case,
-    _closing, greedy_allows, mistaken_frustum, mistaken_views, tour_follows_the_rule, unmatched,
-    views_case,
+    _closing, explains_selection, greedy_allows, mistaken_frustum, mistaken_tour, mistaken_views,
+    tour_follows_the_rule, unmatched, views_case,
 )
 from ._collide import viewmat as _viewmat
 from ._qamask import C0, DC_ULPS, QA_MASK_MISTAKES, project  # noqa: F401
@@ -1884,16 +1884,32 @@ def compare_views(port, case=None, *, seed=0):
                     note=f"the port's gaps {[tuple(g) for g in got['gaps']]}, its tour's "
                          f"{closed}"))
     if wrong:
+        # Each mistake explains the whole failure or none of it, on the graphs the
+        # near-contact pairs allow: a tour mistake the tour and gaps through a set the rule
+        # can choose; a selection mistake a set the rule cannot choose, by how likely it
+        # is to choose it (greedy in reverse order for certain, a largest-set search 1 in
+        # k largest sets): a set both can choose is put down to the likelier (none when
+        # it is the only largest set). Its tour's start is then the port's own affair.
+        set_ok = why is None
+        edges_ok = not any(f.quantity == "edges" for f in report.failures)
+        odds = {mk.name: (0.0 if set_ok else explains_selection(mk.name, n, firm, near,
+                                                                  independent))
+                for mk in VIEWS_MISTAKES if mk.name not in ("index_tour", "open_tour")}
+        likeliest = max(odds.values(), default=0.0)
         results = []
-        oracle_edges = [tuple(e) for e in want["edges"]]
         for mk in VIEWS_MISTAKES:
-            ind, tour, gaps = mistaken_views(mk.name, n, oracle_edges, centers)
-            left = len(set(ind) ^ set(independent))
-            if not left:
-                left += sum(a != b for a, b in zip(tour, trajectory)) > 0
+            if mk.name in odds:
+                explained = odds[mk.name] / likeliest if likeliest > 0 else 0.0
+            else:
+                tour, gaps = mistaken_tour(mk.name, independent, centers)
+                follows = tour_follows_the_rule(trajectory, sorted(independent), centers)
+                same = set_ok and (trajectory == tour if mk.name == "index_tour"
+                                   else follows is None)
                 if "gaps" in got:
-                    left += [tuple(map(int, g)) for g in got["gaps"]] != gaps
-            results.append((left, mk.text))
+                    same = same and [tuple(map(int, g)) for g in got["gaps"]] == gaps
+                explained = float(same)
+            explained *= edges_ok
+            results.append((int(round(wrong * (1.0 - explained))), mk.text))
         _diagnosis(report, results, wrong)
     return report
 
