@@ -102,6 +102,71 @@ def test_wrong_frustum_ports_fail_with_their_mistake_named(mistake):
         assert r.cause == text, f"seed {seed}: {r.message()}"
 
 
+def _own_frustum(mistake="none"):
+    """A frustum port written here, apart from the harness's emulations: camera-to-world by
+    matrix inverse, its own monotone-chain hull, one mistake."""
+    def hull(points):
+        pts = sorted(set(map(tuple, points)))
+        if len(pts) < 3:
+            return pts
+
+        def half(seq):
+            out = []
+            for p in seq:
+                while len(out) >= 2 and ((out[-1][0] - out[-2][0]) * (p[1] - out[-2][1]) -
+                                         (out[-1][1] - out[-2][1]) * (p[0] - out[-2][0])) <= 0:
+                    out.pop()
+                out.append(p)
+            return out[:-1]
+        return half(pts) + half(pts[::-1])
+
+    def port(mask, depth, k, viewmat, outline):
+        if mistake == "transposed":
+            mask = mask.T
+        ys, xs = np.nonzero(mask)
+        if mistake == "pixel_centres":
+            pts = np.stack([xs + 0.5, ys + 0.5], 1)
+        else:
+            pts = np.concatenate([np.stack([xs + dx, ys + dy], 1) for dx in (0, 1)
+                                  for dy in (0, 1)])
+        if outline == "bounding_box" or mistake == "no_far_edge":
+            (x0, y0), (x1, y1) = pts.min(0), pts.max(0)
+            if mistake == "no_far_edge":
+                x1, y1 = x1 - 1, y1 - 1
+            outline_pts = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+        else:
+            outline_pts = hull(pts)
+        ok = np.isfinite(depth) & (depth > 0)
+        if mistake != "all_depths":
+            ok &= np.asarray(mask if mistake != "transposed" else mask.T)
+        zs = depth[ok].astype(np.float64)
+        cam_to_world = np.linalg.inv(viewmat)
+        rays = np.linalg.inv(k) @ np.array([[u, v, 1.0] for u, v in outline_pts]).T
+        if mistake == "ray_distance":
+            rays = rays / np.linalg.norm(rays, axis=0)
+        out = []
+        for z in (zs.min(), zs.max()):
+            p = np.vstack([rays * z, np.ones(rays.shape[1])])
+            out.extend((cam_to_world @ p)[:3].T)
+        return np.array(out)
+    return port
+
+
+def test_a_frustum_port_written_here_passes():
+    for seed in SEEDS:
+        r = ut.compare_frustum(_own_frustum(), seed=seed)
+        assert r.ok, f"seed {seed}: {r.message()}"
+
+
+@pytest.mark.parametrize("mistake", [m.name for m in ut.FRUSTUM_MISTAKES])
+def test_frustum_ports_written_here_fail_with_their_mistake_named(mistake):
+    text = next(m.text for m in ut.FRUSTUM_MISTAKES if m.name == mistake)
+    for seed in range(8):
+        r = ut.compare_frustum(_own_frustum(mistake), seed=seed)
+        assert not r.ok, f"seed {seed}: the mistake passed"
+        assert r.cause == text, f"seed {seed}: {r.message()}"
+
+
 def _greedy_port(decide):
     """A selection port on its own collision verdicts ``decide(a, b, i, j)``."""
     def port(frustums, centers):
