@@ -115,3 +115,107 @@ def test_gsplat_default_strategy_passes():
     for seed in SEEDS:
         r = ut.compare_densify(port, seed=seed)
         assert r.ok, f"seed {seed}: {r.message()}"
+
+
+def _gsplat_port(with_moments=True, mistake=None):
+    """gsplat's DefaultStrategy (grow, then prune) on CPU, its torch.randn replaced by the
+    case's draws; with ``with_moments`` real torch.optim.Adam optimizers carry the case's
+    moments through it, and ``mistake`` (test doubles of MOMENT_MISTAKES) spoils them
+    after."""
+    torch = pytest.importorskip("torch", reason="torch is not installed "
+                                "(python/requirements-port.txt)")
+    pytest.importorskip("gsplat", reason="gsplat is not installed "
+                        "(python/requirements-port.txt)")
+    import gsplat.strategy.default as gd
+    from gsplat.strategy import DefaultStrategy
+
+    def split_sh(d):
+        return {"means": d["means"], "quats": d["quats"], "scales": d["scales"],
+                "opacities": d["opacities"], "sh0": d["sh"][:, :1], "shN": d["sh"][:, 1:]}
+
+    def join_sh(d):
+        out = {k: d[k] for k in ("means", "quats", "scales", "opacities")}
+        out["sh"] = np.concatenate([d["sh0"], d["shN"]], 1)
+        return out
+
+    def run(scene, grad_accum, count, extent, world_prune, normals, moments):
+        strategy = DefaultStrategy()  # INRIA's thresholds; screen-space tests off
+        params = {k: torch.nn.Parameter(torch.from_numpy(v.copy()), requires_grad=False)
+                  for k, v in split_sh(scene).items()}
+        optimizers = {}
+        if moments is not None:
+            m, v = split_sh(moments[0]), split_sh(moments[1])
+            for k, p in params.items():
+                opt = torch.optim.Adam([p], lr=1e-3, eps=1e-15)
+                opt.state[p] = {"step": torch.tensor(10.0),
+                                "exp_avg": torch.from_numpy(m[k].copy()),
+                                "exp_avg_sq": torch.from_numpy(v[k].copy())}
+                optimizers[k] = opt
+        state = {"grad2d": torch.from_numpy(grad_accum.copy()),
+                 "count": torch.from_numpy(count.astype(np.float32)),
+                 "scene_scale": extent, "radii": None}
+        # After the first opacity reset the large-Gaussian prune is on, as ours.
+        step = (strategy.reset_every if world_prune else strategy.refine_start_iter) \
+            + strategy.refine_every
+        split = gd.split
+
+        def split_with_the_cases_normals(params, optimizers, state, mask, **kw):
+            z = torch.from_numpy(normals[:, torch.where(mask)[0].numpy()].copy())
+            randn, torch.randn = torch.randn, lambda *a, **k: z
+            try:
+                return split(params, optimizers, state, mask, **kw)
+            finally:
+                torch.randn = randn
+
+        gd.split = split_with_the_cases_normals
+        try:
+            strategy._grow_gs(params, optimizers, state, step)
+            strategy._prune_gs(params, optimizers, state, step)
+        finally:
+            gd.split = split
+        out = join_sh({k: params[k].detach().numpy() for k in params})
+        if moments is not None:
+            for name in ("exp_avg", "exp_avg_sq"):
+                out[name] = join_sh({k: optimizers[k].state[params[k]][name].numpy()
+                                     for k in params})
+        return out
+
+    if not with_moments:
+        def port(scene, grad_accum, count, *, extent, world_prune, normals):
+            return run(scene, grad_accum, count, extent, world_prune, normals, None)
+        return port
+
+    def port(scene, grad_accum, count, *, extent, world_prune, normals, moments):
+        out = run(scene, grad_accum, count, extent, world_prune, normals, moments)
+        n_in, n_out = len(scene["means"]), len(out["means"])
+        for j, name in enumerate(("exp_avg", "exp_avg_sq")):
+            given = moments[j]
+            for k in KEYS:
+                if mistake == "reset_moments":
+                    out[name][k] = np.zeros_like(out[name][k])
+                elif mistake == "unmoved_moments":
+                    o = np.zeros_like(out[name][k])
+                    o[:min(n_in, n_out)] = given[k][:min(n_in, n_out)]
+                    out[name][k] = o
+                elif mistake == "parent_moments":
+                    # Every row takes its source Gaussian's moments (the SH tag names it:
+                    # a test double may read it, a port could not).
+                    src = out["sh"][:, -1, 2].astype(int)
+                    out[name][k] = given[k][src]
+        return out
+    return port
+
+
+def test_gsplat_default_strategy_carries_adams_moments():
+    for seed in SEEDS:
+        r = ut.compare_densify(_gsplat_port(), seed=seed)
+        assert r.ok, f"seed {seed}: {r.message()}"
+
+
+@pytest.mark.parametrize("mistake", [m.name for m in ut.MOMENT_MISTAKES])
+def test_moments_carried_wrong_fail_with_the_mistake_named(mistake):
+    text = next(m.text for m in ut.MOMENT_MISTAKES if m.name == mistake)
+    for seed in range(8):
+        r = ut.compare_densify(_gsplat_port(mistake=mistake), seed=seed)
+        assert not r.ok, f"seed {seed}: the mistake passed"
+        assert r.cause == text, f"seed {seed}: {r.message()}"

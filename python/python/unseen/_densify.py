@@ -210,3 +210,53 @@ def row_differences(rows_a, rows_b, flags):
     first = int(differ[0]) if len(differ) else next(
         (a[0] for a, b in zip(seq_a, seq_b) if a != b), None)
     return len(differ), moved, first
+
+
+# -- Adam's moments through a densification step ------------------------------------------
+
+#: Ways a port carries the optimizer's moments through the step wrongly. The convention
+#: (INRIA's `cat_tensors_to_optimizer` and `_prune_optimizer`, gsplat's strategy ops): a
+#: Gaussian that stays keeps its moments, every new row (a clone's copy, a split child)
+#: starts from zero, a removed one takes its moments with it.
+MOMENT_MISTAKES = (
+    StageMistake("parent_moments", "the new Gaussians (clones, split children) take their "
+                 "parent's Adam moments, not zeros"),
+    StageMistake("reset_moments", "every Adam moment reset to zero (a new optimizer after "
+                 "densifying)"),
+    StageMistake("unmoved_moments", "the moments left in the input's row order, not selected "
+                 "and appended with the Gaussians"),
+)
+
+_KEYS = ("means", "quats", "scales", "opacities", "sh")
+
+
+def densify_moments(case, seed):
+    """Adam moments for ``case``: ``(exp_avg, exp_avg_sq)``, each a dict of float32 arrays
+    shaped like the scene's (second moments positive), from their own stream (the case's
+    draws are unchanged)."""
+    rng = np.random.default_rng(np.random.PCG64(71_000 + seed))
+    m = {k: rng.normal(0, 1e-3, case[k].shape).astype(np.float32) for k in _KEYS}
+    v = {k: (rng.random(case[k].shape) * 1e-6 + 1e-12).astype(np.float32) for k in _KEYS}
+    return m, v
+
+
+def expected_moments(name, rows, moments, n_in):
+    """The moments of the output rows ``rows`` (``parse_rows`` of the oracle's layout) that
+    ``name`` (``"none"``: the convention, or one of ``MOMENT_MISTAKES``) carries from the
+    input ``moments`` (a dict per key)."""
+    out = {}
+    for k, a in moments.items():
+        o = np.zeros((len(rows),) + a.shape[1:], a.dtype)
+        seen = set()
+        for r, (i, kind) in enumerate(rows):
+            stays = kind == "copy" and i not in seen
+            if kind == "copy":
+                seen.add(i)
+            if name == "none" and stays and i >= 0:
+                o[r] = a[i]
+            elif name == "parent_moments" and i >= 0:
+                o[r] = a[i]
+            elif name == "unmoved_moments" and r < n_in:
+                o[r] = a[r]
+        out[k] = o
+    return out

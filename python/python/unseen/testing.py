@@ -79,6 +79,7 @@ from ._collide import viewmat as _viewmat
 from ._qamask import C0, DC_ULPS, QA_MASK_MISTAKES, project  # noqa: F401
 from ._qamask import qa_mask_case as _qa_mask_case
 from ._densify import (  # noqa: F401
+    MOMENT_MISTAKES, densify_moments, expected_moments,
     CHILD_MEAN_REL, CHILD_SCALE_ATOL, DENSIFY_MISTAKES, MAX_SET_ASIDE as DENSIFY_MAX_SET_ASIDE,
     densify_case, densify_reference, near_decisions, parse_rows, row_differences,
 )
@@ -2005,9 +2006,13 @@ def compare_densify(port, case=None, *, seed=0):
     scene's arrays. Gaussians within ``DECISION_REL`` of a threshold are set aside with
     what they become (at most ``DENSIFY_MAX_SET_ASIDE``); for every other one the port must
     clone, split and prune as the oracle, lay the rows out in its order, copy parameters
-    bit for bit and place children within ``CHILD_MEAN_REL`` and ``CHILD_SCALE_ATOL``. On a
-    failure each of ``DENSIFY_MISTAKES`` is emulated and named when it explains the port
-    clearly better than the others. Returns a ``Report``.
+    bit for bit and place children within ``CHILD_MEAN_REL`` and ``CHILD_SCALE_ATOL``. A port
+    that takes a ``moments`` argument gets Adam's ``(exp_avg, exp_avg_sq)`` (dicts shaped
+    like the scene, ``densify_moments``) and returns them after the step as ``exp_avg`` and
+    ``exp_avg_sq``: a Gaussian that stays keeps its moments bit for bit, every new row starts
+    from zero (INRIA's and gsplat's optimizer surgery; ``MOMENT_MISTAKES``). On a failure
+    each of ``DENSIFY_MISTAKES`` is emulated and named when it explains the port clearly
+    better than the others. Returns a ``Report``.
     """
     case = densify_case(seed) if case is None else case
     n = len(case["means"])
@@ -2019,10 +2024,15 @@ def compare_densify(port, case=None, *, seed=0):
                     f"{want['split']} split, {want['pruned']} pruned by the oracle)",
                     "inria", units="Gaussians")
     report.bound = DENSIFY_MAX_SET_ASIDE
-    got = port({k: v.copy() for k, v in scene.items()}, case["grad_accum"].copy(),
-               case["count"].copy(), extent=case["extent"], world_prune=case["world_prune"],
-               normals=case["normals"].copy())
-    got = {k: np.asarray(got[k]) for k in _SCENE_KEYS}
+    kwargs = {}
+    if "moments" in inspect.signature(port).parameters:
+        m, v = densify_moments(case, seed)
+        kwargs["moments"] = ({k: a.copy() for k, a in m.items()},
+                             {k: a.copy() for k, a in v.items()})
+    result = port({k: v.copy() for k, v in scene.items()}, case["grad_accum"].copy(),
+                  case["count"].copy(), extent=case["extent"], world_prune=case["world_prune"],
+                  normals=case["normals"].copy(), **kwargs)
+    got = {k: np.asarray(result[k]) for k in _SCENE_KEYS}
     flags = near_decisions(case)
     report.excluded = {"near a threshold": int(flags.sum())}
     report.excluded_fraction = float(flags.mean())
@@ -2060,6 +2070,8 @@ def compare_densify(port, case=None, *, seed=0):
                 "values", len(bad), len(rows_g), "copies exact, children within bounds", (r,),
                 math.nan, math.nan, note=f"{len(bad)} rows with other values; first: row {r} "
                 f"({what})"))
+    if kwargs and not (decisions or moved or unknown):
+        _compare_moments(report, result, kwargs["moments"], rows_g, flags, n)
     if decisions or moved or unknown:
         base = decisions + moved + len(unknown)
         results = []
@@ -2091,6 +2103,43 @@ def _compare_loss_gradient(report, grad, x, y, conventions):
         report.failures.append(Failure("grad", int(bad.sum()), want.size, f"atol {tol:.2g}",
                                        where, float(grad[where]), float(want[where]),
                                        near=None))
+
+
+def _compare_moments(report, result, moments, rows, flags, n):
+    """Add to ``report`` the port's Adam moments (``result["exp_avg"]``,
+    ``result["exp_avg_sq"]``, dicts per parameter) that differ from the convention's
+    (``expected_moments`` on the port's own rows, whose layout the caller has judged) bit
+    for bit, rows of Gaussians near a threshold aside; on a
+    failure one of ``MOMENT_MISTAKES`` is named when it explains the rows clearly better."""
+    if "exp_avg" not in result or "exp_avg_sq" not in result:
+        report.failures.append(Failure("moments", 1, 1, "", (), math.nan, math.nan,
+                                       note="the port took the moments but returned no "
+                                            "exp_avg / exp_avg_sq"))
+        return
+    got = [{k: np.asarray(result[name][k]) for k in _SCENE_KEYS}
+           for name in ("exp_avg", "exp_avg_sq")]
+
+    def differing(name):
+        rows_bad = set()
+        for g, given in zip(got, moments):
+            want = expected_moments(name, rows, given, n)
+            for k in _SCENE_KEYS:
+                if g[k].shape != want[k].shape:
+                    return set(range(len(rows)))
+                for r, (i, _) in enumerate(rows):
+                    if (i < 0 or not flags[i]) and g[k][r].tobytes() != want[k][r].tobytes():
+                        rows_bad.add(r)
+        return rows_bad
+
+    bad = differing("none")
+    if not bad:
+        return
+    first = min(bad)
+    report.failures.append(Failure(
+        "moments", len(bad), len(rows), "kept rows' moments carried, new rows zero", (first,),
+        math.nan, math.nan, note=f"{len(bad)} rows with other Adam moments; first: row {first} "
+                                 f"({_became(rows, rows[first][0])} of Gaussian {rows[first][0]})"))
+    _diagnosis(report, [(len(differing(mk.name)), mk.text) for mk in MOMENT_MISTAKES], len(bad))
 
 
 def _became(rows, i):
