@@ -117,11 +117,11 @@ def test_gsplat_default_strategy_passes():
         assert r.ok, f"seed {seed}: {r.message()}"
 
 
-def _gsplat_port(with_moments=True, mistake=None):
-    """gsplat's DefaultStrategy (grow, then prune) on CPU, its torch.randn replaced by the
-    case's draws; with ``with_moments`` real torch.optim.Adam optimizers carry the case's
-    moments through it, and ``mistake`` (test doubles of MOMENT_MISTAKES) spoils them
-    after."""
+def _gsplat_port(with_moments=True, mistake=None, **strategy_kw):
+    """gsplat's DefaultStrategy (grow, then prune; ``strategy_kw`` its options) on CPU, its
+    torch.randn replaced by the case's draws; with ``with_moments`` real
+    torch.optim.Adam optimizers carry the case's moments through it, and ``mistake`` (test
+    doubles of MOMENT_MISTAKES) spoils them after."""
     torch = pytest.importorskip("torch", reason="torch is not installed "
                                 "(python/requirements-port.txt)")
     pytest.importorskip("gsplat", reason="gsplat is not installed "
@@ -139,7 +139,8 @@ def _gsplat_port(with_moments=True, mistake=None):
         return out
 
     def run(scene, grad_accum, count, extent, world_prune, normals, moments):
-        strategy = DefaultStrategy()  # INRIA's thresholds; screen-space tests off
+        # INRIA's thresholds by default; screen-space tests off.
+        strategy = DefaultStrategy(**strategy_kw)
         params = {k: torch.nn.Parameter(torch.from_numpy(v.copy()), requires_grad=False)
                   for k, v in split_sh(scene).items()}
         optimizers = {}
@@ -219,3 +220,21 @@ def test_moments_carried_wrong_fail_with_the_mistake_named(mistake):
         r = ut.compare_densify(_gsplat_port(mistake=mistake), seed=seed)
         assert not r.ok, f"seed {seed}: the mistake passed"
         assert r.cause == text, f"seed {seed}: {r.message()}"
+
+
+def test_gsplat_made_wrong_fails_with_the_mistake_named():
+    # Two of DENSIFY_MISTAKES made with gsplat's own strategy rather than the harness's
+    # emulation: its mean gradient with every view count taken as one (the summed
+    # gradient), and its size test off (grow_scale3d = 0: every hot Gaussian split).
+    plain = _gsplat_port(with_moments=False)
+    ports = {
+        "sum_not_mean": lambda scene, grad_accum, count, **kw: plain(
+            scene, grad_accum, np.ones_like(count), **kw),
+        "no_size_test": _gsplat_port(with_moments=False, grow_scale3d=0.0),
+    }
+    for mistake, port in ports.items():
+        text = next(m.text for m in ut.DENSIFY_MISTAKES if m.name == mistake)
+        for seed in range(8):
+            r = ut.compare_densify(port, seed=seed)
+            assert not r.ok, f"{mistake}, seed {seed}: the mistake passed"
+            assert r.cause == text, f"{mistake}, seed {seed}: {r.message()}"
