@@ -136,3 +136,39 @@ def test_wrong_loss_gradients_fail():
         assert ut.compare_loss(lambda x, y: {"grad": o["grad_loss"]}, c).ok
     with pytest.raises(ValueError, match="only for conventions 'inria'"):
         unseen.ssim(c["x"], c["y"], conventions="valid", gradient=True)
+
+
+def test_library_ssim_with_a_mistake_fails_with_it_named():
+    # LOSS_MISTAKES made through the libraries' own options rather than the harness's
+    # emulation: pytorch-msssim (valid) and torchmetrics (reflect) on [0, 1] images told
+    # their data range is 255, and with a Gaussian window of σ = 1; torchmetrics with an
+    # 11×11 box window.
+    _torch()
+    ms = pytest.importorskip("pytorch_msssim", reason="pytorch-msssim is not installed "
+                             "(python/requirements-port.txt)")
+    tm = pytest.importorskip("torchmetrics.functional.image", reason="torchmetrics is not "
+                             "installed (python/requirements-port.txt)")
+    import torch
+
+    to = lambda a: torch.from_numpy(a).permute(2, 0, 1)[None]  # noqa: E731
+    ports = [
+        ("valid", "data_range_255",
+         lambda x, y: {"ssim": ms.ssim(to(x), to(y), data_range=255).item()}),
+        ("valid", "sigma_1",
+         lambda x, y: {"ssim": ms.ssim(to(x), to(y), data_range=1.0, win_sigma=1.0).item()}),
+        ("reflect", "data_range_255", lambda x, y: {
+            "ssim": tm.structural_similarity_index_measure(to(x), to(y),
+                                                           data_range=255.0).item()}),
+        ("reflect", "sigma_1", lambda x, y: {
+            "ssim": tm.structural_similarity_index_measure(to(x), to(y), data_range=1.0,
+                                                           sigma=1.0).item()}),
+        ("reflect", "box_window", lambda x, y: {
+            "ssim": tm.structural_similarity_index_measure(
+                to(x), to(y), data_range=1.0, gaussian_kernel=False, kernel_size=11).item()}),
+    ]
+    for conventions, mistake, port in ports:
+        text = next(m.text for m in ut.LOSS_MISTAKES if m.name == mistake)
+        for seed in range(6):
+            r = ut.compare_loss(port, seed=seed, conventions=conventions)
+            assert not r.ok, f"{conventions} {mistake}, seed {seed}: the mistake passed"
+            assert r.cause == text, f"{conventions} {mistake}, seed {seed}: {r.message()}"
