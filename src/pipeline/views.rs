@@ -24,8 +24,7 @@ use super::generators::{Generators, SlotKind};
 use super::poses::{nearest_training, same_pose};
 use super::rundir::{StepDone, StepWriter};
 use super::selection::{
-    CONFLICT_COVERAGE_TOLERANCE, ConflictMatch, Coverage, SelectionRule, SurfaceCoverage,
-    conflicting_set, independent_set,
+    ConflictMatch, Coverage, SelectionRule, SurfaceCoverage, conflicting_set, independent_set,
 };
 use super::steps::Step;
 use super::{Event, Inputs, Run};
@@ -113,10 +112,11 @@ pub struct Choice {
     pub conflicting: Option<ConflictingChoice>,
 }
 
-/// The audit's colliding set: the one nearest the independent set in the coverage it is
-/// matched on, both coverages, their relative difference, and whether stage 1 uses it
-/// (within [`CONFLICT_COVERAGE_TOLERANCE`]; else the independent set, and the run computes
-/// what the independent set computes).
+/// The audit's colliding set ([`conflicting_set`]): both coverages, their relative
+/// difference, its overlap, and whether stage 1 uses it (it qualifies: coverage within
+/// [`super::selection::CONFLICT_COVERAGE_TOLERANCE`], overlap at least
+/// [`super::selection::CONFLICT_MIN_OVERLAP`]; else stage 1 generates the independent set,
+/// and the run computes what the independent set computes).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ConflictingChoice {
     pub views: Vec<String>,
@@ -129,6 +129,10 @@ pub struct ConflictingChoice {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub independent_coverage: Option<f64>,
     pub coverage_difference: f64,
+    /// The share of the sample two of its views generate ([`SurfaceCoverage::overlap`]),
+    /// at least [`super::selection::CONFLICT_MIN_OVERLAP`] for the set to qualify.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub overlap: Option<f64>,
     pub used: bool,
 }
 
@@ -146,6 +150,7 @@ struct Conflicting {
     coverage: f64,
     independent_coverage: f64,
     difference: f64,
+    overlap: f64,
     used: bool,
 }
 
@@ -170,6 +175,7 @@ impl Chosen {
                 coverage: c.coverage,
                 independent_coverage: Some(c.independent_coverage),
                 coverage_difference: c.difference,
+                overlap: Some(c.overlap),
                 used: c.used,
             }),
         }
@@ -188,12 +194,13 @@ fn choose(
     let independent = independent_set(config.selection, n, &sel.edges, &sel.independent, coverage)?;
     let conflicting = match surface {
         Some(surface) => {
-            conflicting_set(n, &sel.edges, &independent, surface)?.map(|(v, d)| Conflicting {
+            conflicting_set(n, &sel.edges, &independent, surface)?.map(|(v, d, used)| Conflicting {
                 coverage: surface.of(&v),
                 independent_coverage: surface.of(&independent),
+                overlap: surface.overlap(&v),
                 views: v,
                 difference: d,
-                used: d <= CONFLICT_COVERAGE_TOLERANCE,
+                used,
             })
         }
         None => None,

@@ -2293,7 +2293,9 @@ fn independent_views_of_different_sizes_get_a_gap_camera_and_finish() {
 #[test]
 fn the_stage1_set_follows_the_selection_rule_and_the_conflicting_set_matches_coverage() {
     use unseen::collide::frustum::Outline;
-    use unseen::pipeline::selection::{CONFLICT_COVERAGE_TOLERANCE, SelectionRule};
+    use unseen::pipeline::selection::{
+        CONFLICT_COVERAGE_TOLERANCE, CONFLICT_MIN_OVERLAP, SelectionRule,
+    };
     use unseen::pipeline::views::Plan;
     let t = TempDir::new("pipeline-selection");
     let Tiny { inp, cfg, .. } = TinyRun::new().build(&t);
@@ -2334,6 +2336,7 @@ fn the_stage1_set_follows_the_selection_rule_and_the_conflicting_set_matches_cov
     assert_eq!(
         conflicting.used,
         conflicting.coverage_difference <= CONFLICT_COVERAGE_TOLERANCE
+            && conflicting.overlap.unwrap() >= CONFLICT_MIN_OVERLAP
     );
     let stage1 = if conflicting.used {
         &conflicting.views
@@ -2374,7 +2377,7 @@ fn the_conflicting_set_is_matched_on_the_coverage_the_diagnostics_measure() {
         let plan: Plan =
             serde_json::from_slice(&std::fs::read(out.join("views/plan.json")).unwrap()).unwrap();
         let d = unseen::audit::diagnostics::diagnose(&inp, &o.steps).unwrap();
-        (plan, d.stage1.expect("the tiny lounge has truth").coverage)
+        (plan, d.stage1.expect("the tiny lounge has truth"))
     };
     let conflicting = PipelineConfig {
         conflicting_views: Some(ConflictMatch::EvaluationCoverage),
@@ -2396,9 +2399,21 @@ fn the_conflicting_set_is_matched_on_the_coverage_the_diagnostics_measure() {
         .expect("the tiny lounge has collisions");
     assert_eq!(c.matched_on, Some(ConflictMatch::EvaluationCoverage));
     let independent = c.independent_coverage.unwrap();
-    assert_eq!(independent.to_bits(), full_measured.to_bits(), "{c:?}");
-    let used = if c.used { c.coverage } else { independent };
-    assert_eq!(used.to_bits(), measured.to_bits(), "{c:?}");
+    assert_eq!(
+        independent.to_bits(),
+        full_measured.coverage.to_bits(),
+        "{c:?}"
+    );
+    if c.used {
+        assert_eq!(c.coverage.to_bits(), measured.coverage.to_bits(), "{c:?}");
+        assert_eq!(
+            c.overlap.unwrap().to_bits(),
+            measured.overlap.to_bits(),
+            "{c:?}"
+        );
+    } else {
+        assert_eq!(independent.to_bits(), measured.coverage.to_bits(), "{c:?}");
+    }
     assert_eq!(
         c.coverage_difference.to_bits(),
         ((c.coverage - independent).abs() / independent).to_bits()
