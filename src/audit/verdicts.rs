@@ -432,7 +432,7 @@ impl Pair<'_> {
     }
 
     /// The variant's mechanism did not apply on this draw: `conflicting_views` found no
-    /// colliding set within the coverage tolerance and generated the independent set, as
+    /// colliding set that qualifies (coverage and overlap) and generated the independent set, as
     /// `full` does (SPEC.md §20.2). Its Δ is then noise between two runs of one method
     /// (their random streams differ with the plan's record), so, like a same computation,
     /// the draw is no unit (SPEC.md §21.5).
@@ -672,7 +672,7 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
                     )
                 }
                 stats::Outcome::NotTested if conflicting => format!(
-                    "not tested here (on all {} seeds the same scene, or no colliding set matched the coverage)",
+                    "not tested here (on all {} seeds the same scene, or no colliding set qualified)",
                     c.same
                 ),
                 stats::Outcome::NotTested => format!(
@@ -700,7 +700,7 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
                     c.same,
                     c.same + c.diffs.len(),
                     if conflicting {
-                        "the same scene, or no colliding set matched"
+                        "the same scene, or no colliding set qualified"
                     } else {
                         "same computation"
                     }

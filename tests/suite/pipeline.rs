@@ -1048,7 +1048,7 @@ fn the_original_areas_claim_is_non_inferiority_of_the_final_scene_against_the_or
     assert_eq!(large.verdict, "contradicted", "{large:?}");
 }
 
-/// `conflicting_views` where no colliding set matched the independent set's coverage
+/// `conflicting_views` where no colliding set qualified (SPEC.md §20.2)
 /// generates the independent set, as `full` does, with other random streams: such a seed is
 /// not a unit of "conflicts cost at equal coverage" (its Δ would be noise between two runs
 /// of one method), and the verdict says on how many seeds the claim was not tested.
