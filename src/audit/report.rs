@@ -523,8 +523,11 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
         } else {
             String::new()
         };
-        let n = if v.seeds > v.judged {
-            format!("{} (+{} beyond the plan)", v.judged, v.seeds - v.judged)
+        // Seeds in the pool beyond the planned ones (the planned seeds that were not tested
+        // are counted in the verdict, not here).
+        let beyond = v.seeds.saturating_sub(v.judged + v.same_computation);
+        let n = if beyond > 0 {
+            format!("{} (+{beyond} beyond the plan)", v.judged)
         } else {
             v.judged.to_string()
         };
