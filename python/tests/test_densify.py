@@ -71,47 +71,7 @@ def test_a_port_moving_children_fails_on_values():
 
 
 def test_gsplat_default_strategy_passes():
-    torch = pytest.importorskip("torch", reason="torch is not installed "
-                                "(python/requirements-port.txt)")
-    pytest.importorskip("gsplat", reason="gsplat is not installed "
-                        "(python/requirements-port.txt)")
-    import gsplat.strategy.default as gd
-    from gsplat.strategy import DefaultStrategy
-
-    def port(scene, grad_accum, count, *, extent, world_prune, normals):
-        strategy = DefaultStrategy()  # INRIA's thresholds; screen-space tests off
-        params = {k: torch.nn.Parameter(torch.from_numpy(v.copy()), requires_grad=False)
-                  for k, v in (("means", scene["means"]), ("quats", scene["quats"]),
-                               ("scales", scene["scales"]),
-                               ("opacities", scene["opacities"]),
-                               ("sh0", scene["sh"][:, :1]), ("shN", scene["sh"][:, 1:]))}
-        state = {"grad2d": torch.from_numpy(grad_accum.copy()),
-                 "count": torch.from_numpy(count.astype(np.float32)),
-                 "scene_scale": extent, "radii": None}
-        # After the first opacity reset the large-Gaussian prune is on, as ours.
-        step = (strategy.reset_every if world_prune else strategy.refine_start_iter) \
-            + strategy.refine_every
-        split = gd.split
-
-        def split_with_the_cases_normals(params, optimizers, state, mask, **kw):
-            z = torch.from_numpy(normals[:, torch.where(mask)[0].numpy()].copy())
-            randn, torch.randn = torch.randn, lambda *a, **k: z
-            try:
-                return split(params, optimizers, state, mask, **kw)
-            finally:
-                torch.randn = randn
-
-        gd.split = split_with_the_cases_normals
-        try:
-            strategy._grow_gs(params, {}, state, step)
-            strategy._prune_gs(params, {}, state, step)
-        finally:
-            gd.split = split
-        out = {k: params[k].detach().numpy() for k in ("means", "quats", "scales", "opacities")}
-        out["sh"] = np.concatenate([params["sh0"].detach().numpy(),
-                                    params["shN"].detach().numpy()], 1)
-        return out
-
+    port = _gsplat_port(with_moments=False)
     for seed in SEEDS:
         r = ut.compare_densify(port, seed=seed)
         assert r.ok, f"seed {seed}: {r.message()}"
