@@ -14,11 +14,12 @@
 //! then times R further iterations (default 200, densification included, as the pipeline
 //! trains) from clones of that state on 1 and 2 threads, alternating, K rounds (default
 //! 3); prints the fastest round of each with the trainer's own per-phase split, and the
-//! ratio. The clones train the same bits on both counts (checked).
+//! ratio. The clones train the same bits on both counts (checked). Each stage on 1 and 2
+//! threads beside its floor: `cargo bench --bench roofline`.
 
 mod common;
 
-use common::median;
+use common::{arg, median};
 use std::path::Path;
 use std::time::Instant;
 use unseen::dataset::{self, LoadOptions};
@@ -26,14 +27,6 @@ use unseen::gaussian::Param;
 use unseen::raster::backward::{GradGroups, ImageGrads, backward, render_for_backward};
 use unseen::train::loss::{LossInput, LossWeights, image_loss};
 use unseen::train::trainer::{TrainConfig, Trainer};
-
-fn arg(name: &str, default: usize) -> usize {
-    let args: Vec<String> = std::env::args().collect();
-    args.iter()
-        .position(|a| a == name)
-        .and_then(|i| args.get(i + 1))
-        .map_or(default, |v| v.parse().expect("a number"))
-}
 
 /// Seconds of `reps` steps of a clone of `t` on `pool`, the phases' split, and a digest
 /// of the resulting means (so both thread counts are seen to train the same bits).
@@ -69,18 +62,7 @@ fn scaling() {
         arg("--rounds", 3),
     );
     let resolution = arg("--resolution", 2) as u32;
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("reference_data/scenes/lounge");
-    let opts = LoadOptions {
-        resolution,
-        ..LoadOptions::default()
-    };
-    let data = dataset::load(&root, &opts).unwrap();
-    let cfg = TrainConfig {
-        iterations: u32::MAX,
-        resolution,
-        save_iterations: vec![],
-        ..TrainConfig::default()
-    };
+    let (data, cfg) = common::lounge(resolution);
     let all = std::thread::available_parallelism().map_or(1, |n| n.get());
     let pool = |n| {
         rayon::ThreadPoolBuilder::new()
@@ -135,7 +117,6 @@ fn scaling() {
             ms(t.adam)
         );
     }
-    stage_split(&t, &data, &p1, &pn, all);
     let (s1, t1) = best[0].unwrap();
     let (sn, tn) = best[1].unwrap();
     println!(
@@ -145,167 +126,6 @@ fn scaling() {
         t1.loss / tn.loss,
         (t1.backward + t1.adam) / (tn.backward + tn.adam)
     );
-}
-
-/// Milliseconds of each stage of one iteration (the trainer's render options, the INRIA
-/// loss, the full backward into arrays, then Adam over the six groups) on the first 24
-/// training views of the warmed state: per view the fastest of 5 alternating runs on 1 and
-/// `all` threads, then the median over the views.
-fn stage_split(
-    t: &Trainer,
-    data: &dataset::Dataset,
-    p1: &rayon::ThreadPool,
-    pn: &rayon::ThreadPool,
-    all: usize,
-) {
-    use unseen::raster::backward::composite::{PixelGrads, composite_backward};
-    use unseen::raster::backward::project::project_backward_into;
-    use unseen::raster::plan::RenderPlan;
-    use unseen::raster::{RenderReport, composite, project, tile};
-    const STAGES: [&str; 8] = [
-        "project",
-        "bin",
-        "blend",
-        "loss",
-        "blend bwd",
-        "proj bwd",
-        "adam",
-        "bin reuse",
-    ];
-    let mut samples = [[const { Vec::new() }; 8], [const { Vec::new() }; 8]];
-    let scratch = std::sync::Mutex::new(tile::BinScratch::default());
-    let mut opts = t.render_options(false);
-    opts.outputs.backward_state = true;
-    let plan = RenderPlan::for_backward(&t.gaussians, &opts);
-    let g = &t.gaussians;
-    for k in 0..24 {
-        let view = &data.views[data.train[k % data.train.len()]];
-        let cam = &view.camera;
-        let (w, h) = (cam.width as usize, cam.height as usize);
-        let mut fastest = [[f64::MAX; 8]; 2];
-        for (which, pool) in std::iter::repeat_n([p1, pn], 5).flatten().enumerate() {
-            let which = which % 2;
-            pool.install(|| {
-                let mut lap = {
-                    let mut clock = Instant::now();
-                    move || {
-                        let now = Instant::now();
-                        let d = (now - clock).as_secs_f64();
-                        clock = now;
-                        d
-                    }
-                };
-                let mut report = RenderReport::default();
-                let mut laps = [0f64; 8];
-                lap();
-                let pr = project::project(g, cam, &plan, &opts, &mut report);
-                laps[0] = lap();
-                let bins = tile::bin(&pr, w, h, opts.kernel);
-                laps[1] = lap();
-                let mut b2 = tile::TileBins::default();
-                tile::bin_into(
-                    &pr,
-                    w,
-                    h,
-                    opts.kernel,
-                    &mut scratch.lock().unwrap(),
-                    &mut b2,
-                );
-                laps[7] = lap();
-                let want = composite::Want {
-                    rgb: true,
-                    alpha: false,
-                    depth: false,
-                    expected_depth: false,
-                    backward_state: true,
-                };
-                let out = composite::composite(
-                    w,
-                    h,
-                    &pr,
-                    &bins,
-                    &plan,
-                    opts.background,
-                    want,
-                    opts.kernel,
-                    &mut report,
-                );
-                laps[2] = lap();
-                let rgb = out.rgb.as_deref().unwrap();
-                let loss = image_loss(
-                    &LossInput {
-                        width: w,
-                        height: h,
-                        rgb,
-                        target_rgb: &view.image.data,
-                        depth: None,
-                        target_depth: None,
-                        mask: None,
-                    },
-                    &LossWeights::INRIA,
-                )
-                .unwrap();
-                laps[3] = lap();
-                let pg = PixelGrads {
-                    v_rgb: Some(&loss.grad_rgb),
-                    v_alpha: None,
-                    v_depth: None,
-                    v_expected_depth: None,
-                    final_t: out.final_t.as_deref().unwrap(),
-                    n_contrib: out.n_contrib.as_deref().unwrap(),
-                    depth: None,
-                };
-                let cg = composite_backward(
-                    w,
-                    h,
-                    &pr,
-                    &bins,
-                    plan.cull_rows,
-                    plan.conventions.max_alpha(),
-                    opts.background,
-                    &pg,
-                    true,
-                    opts.kernel,
-                );
-                laps[4] = lap();
-                let camf = project::CameraF32::new(cam);
-                let mut grads = unseen::raster::backward::project::Gradients::default();
-                project_backward_into(
-                    g,
-                    &camf,
-                    &pr,
-                    &plan,
-                    &GradGroups::ALL,
-                    &cg.splats,
-                    opts.kernel,
-                    &mut grads,
-                );
-                laps[5] = lap();
-                let (mut scene, mut adam) = (g.clone(), t.adam.clone());
-                lap();
-                for p in Param::ALL {
-                    adam.step(&mut scene, p, grads.param(p), 1e-3);
-                }
-                laps[6] = lap();
-                for (f, l) in fastest[which].iter_mut().zip(laps) {
-                    *f = f.min(l);
-                }
-            });
-        }
-        for (which, f) in fastest.iter().enumerate() {
-            for (v, l) in samples[which].iter_mut().zip(f) {
-                v.push(*l);
-            }
-        }
-    }
-    println!(
-        "stage (ms: median over 24 views of the fastest of 5)  1 thread  {all} threads  ratio"
-    );
-    for (i, name) in STAGES.iter().enumerate() {
-        let a = median(samples[0][i].clone()) * 1e3;
-        let b = median(samples[1][i].clone()) * 1e3;
-        println!("{name:>10} {a:>24.3} {b:>10.3} {:>6.2}x", a / b);
-    }
 }
 
 fn main() {

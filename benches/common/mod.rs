@@ -2,6 +2,10 @@
 #![allow(dead_code)] // each bench uses some of them
 
 use std::time::Instant;
+use unseen::raster::Kernel;
+use unseen::raster::composite::bare_blend;
+use unseen::raster::project::Splat;
+use unseen::raster::tile::tile_rect;
 
 /// The fastest of `runs` runs of `f` in seconds, and the last run's result.
 pub fn best<T>(runs: usize, mut f: impl FnMut() -> T) -> (f64, T) {
@@ -40,4 +44,357 @@ pub fn pools() -> Vec<(usize, rayon::ThreadPool)> {
             )
         })
         .collect()
+}
+
+/// 128 splats inside one 16×16 tile (σ of 1–4 px, opacities 0.02–0.06, so transmittance
+/// stays above the stop over the whole list and every splat is evaluated on every row).
+pub fn tile_splats() -> Vec<Splat> {
+    let mut u = unseen::rng::Uniform::new(3);
+    (0..128)
+        .map(|_| {
+            let sd = u.range(1.0, 4.0);
+            let inv = 1.0 / (sd * sd);
+            Splat {
+                mean: [u.range(0.0, 16.0), u.range(0.0, 16.0)],
+                conic: [inv, u.range(-0.2, 0.2) * inv, inv],
+                opacity: u.range(0.02, 0.06),
+                color: [u.unit(), u.unit(), u.unit()],
+                depth: u.range(1.0, 5.0),
+            }
+        })
+        .collect()
+}
+
+/// Bare-kernel pairs per second in the current pool (median of 5).
+pub fn bare_rate(splats: &[Splat], kernel: Kernel) -> f64 {
+    let rows = 1 << 14;
+    median(
+        (0..5)
+            .map(|_| {
+                let t0 = Instant::now();
+                let pairs = bare_blend(splats, rows, kernel);
+                pairs as f64 / t0.elapsed().as_secs_f64()
+            })
+            .collect(),
+    )
+}
+
+/// Seconds to read every parameter the projection reads (means, scales, rotations,
+/// opacities, SH) once, xor-folded in parallel chunks (median of 5): the memory-bandwidth
+/// floor of the per-Gaussian stages in the current pool. (An f32 sum here was bound by the
+/// add's latency, one value per 3–4 cycles, not by memory: it overstated the floor ~3×.)
+pub fn read_seconds(scene: &unseen::gaussian::Gaussians) -> f64 {
+    use rayon::prelude::*;
+    let arrays: [&[f32]; 6] = [
+        scene.means.as_flattened(),
+        scene.log_scales.as_flattened(),
+        scene.quats.as_flattened(),
+        &scene.opacity_logits,
+        scene.sh_dc.as_flattened(),
+        &scene.sh_rest,
+    ];
+    median(
+        (0..5)
+            .map(|_| {
+                let t0 = Instant::now();
+                let s: u32 = arrays
+                    .iter()
+                    .map(|a| {
+                        a.par_chunks(1 << 14)
+                            .map(|c| c.iter().fold(0u32, |x, &y| x ^ y.to_bits()))
+                            .reduce(|| 0, |x, y| x ^ y)
+                    })
+                    .fold(0, |x, y| x ^ y);
+                std::hint::black_box(s);
+                t0.elapsed().as_secs_f64()
+            })
+            .collect(),
+    )
+}
+
+/// The binning floor's input, made outside the timing from a projection: the visible
+/// splats' keys `depth_bits << 32 | index` in index order, the smallest depth bits, and every
+/// splat's tile rectangle.
+pub struct FloorInput {
+    keys: Vec<u64>,
+    min: u32,
+    rects: Vec<[u32; 4]>,
+    tiles: (usize, usize),
+}
+
+impl FloorInput {
+    pub fn new(p: &unseen::raster::project::Projected, w: usize, h: usize) -> FloorInput {
+        let tiles = (w.div_ceil(16), h.div_ceil(16));
+        let rects = p
+            .splats
+            .iter()
+            .zip(&p.radii)
+            .map(|(s, &r)| tile_rect(s.mean, r, tiles.0, tiles.1).map(|v| v as u32))
+            .collect();
+        let keys: Vec<u64> = (0..p.radii.len())
+            .filter(|&i| p.radii[i][0] > 0 || p.radii[i][1] > 0)
+            .map(|i| u64::from(p.splats[i].depth.to_bits()) << 32 | i as u64)
+            .collect();
+        let min = keys.iter().map(|k| (k >> 32) as u32).min().unwrap_or(0);
+        FloorInput {
+            keys,
+            min,
+            rects,
+            tiles,
+        }
+    }
+}
+
+/// Seconds of the bare sort and the bare count-and-scatter of `f` in the current pool
+/// (median of 5 each), and the intersections written (checked against the binning's).
+pub fn floor_seconds(f: &FloorInput) -> (f64, f64, usize) {
+    use rayon::prelude::*;
+    let n = f.keys.len();
+    let threads = rayon::current_num_threads();
+    let len = n.div_ceil(threads).max(1);
+    let (mut a, mut b) = (f.keys.clone(), f.keys.clone());
+    let max = a.iter().map(|k| (k >> 32) as u32).max().unwrap_or(0);
+    let bits = 32 - (max - f.min).leading_zeros();
+    let passes = bits.div_ceil(11);
+    // LSD radix sort, equal digits of ≤ 11 bits: per-chunk histograms, a prefix sum in
+    // (digit, chunk) order, per-chunk scatters.
+    let mut sort = || {
+        a.copy_from_slice(&f.keys);
+        if passes == 0 {
+            return;
+        }
+        let width = bits.div_ceil(passes);
+        let buckets = 1usize << width;
+        for pass in 0..passes {
+            let shift = 32 + pass * width;
+            let min = u64::from(f.min) << 32;
+            let digit = move |k: u64| ((k - min) >> shift) as usize & (buckets - 1);
+            let mut hist: Vec<Vec<usize>> = a
+                .par_chunks(len)
+                .map(|c| {
+                    let mut h = vec![0usize; buckets];
+                    c.iter().for_each(|&k| h[digit(k)] += 1);
+                    h
+                })
+                .collect();
+            let mut acc = 0;
+            for d in 0..buckets {
+                for h in hist.iter_mut() {
+                    (h[d], acc) = (acc, acc + h[d]);
+                }
+            }
+            let out = b.as_mut_ptr() as usize;
+            a.par_chunks(len).zip(hist).for_each(|(c, mut cur)| {
+                for &k in c {
+                    let d = digit(k);
+                    // SAFETY: the prefix sum gives each (chunk, digit) its own range < n.
+                    unsafe { (out as *mut u64).add(cur[d]).write(k) };
+                    cur[d] += 1;
+                }
+            });
+            std::mem::swap(&mut a, &mut b);
+        }
+    };
+    let mut t_sort = Vec::new();
+    for _ in 0..5 {
+        let t0 = Instant::now();
+        sort();
+        t_sort.push(t0.elapsed().as_secs_f64());
+    }
+    let sorted = a;
+    // Per-tile counts per chunk of the sorted keys, a prefix sum in (tile, chunk) order,
+    // per-chunk scatters of the indices.
+    let (tx, ty) = f.tiles;
+    let mut ids = vec![0u32; 0];
+    let mut scatter = || {
+        let mut cur: Vec<Vec<usize>> = sorted
+            .par_chunks(len)
+            .map(|c| {
+                let mut count = vec![0usize; tx * ty];
+                for &k in c {
+                    let [x0, x1, y0, y1] = f.rects[k as u32 as usize].map(|v| v as usize);
+                    for y in y0..y1 {
+                        count[y * tx + x0..y * tx + x1]
+                            .iter_mut()
+                            .for_each(|v| *v += 1);
+                    }
+                }
+                count
+            })
+            .collect();
+        let mut acc = 0;
+        for t in 0..tx * ty {
+            for c in cur.iter_mut() {
+                (c[t], acc) = (acc, acc + c[t]);
+            }
+        }
+        ids.resize(acc, 0);
+        let out = ids.as_mut_ptr() as usize;
+        sorted.par_chunks(len).zip(cur).for_each(|(c, mut cur)| {
+            for &k in c {
+                let [x0, x1, y0, y1] = f.rects[k as u32 as usize].map(|v| v as usize);
+                for y in y0..y1 {
+                    for c in &mut cur[y * tx + x0..y * tx + x1] {
+                        // SAFETY: the prefix sum gives each (chunk, tile) its own range.
+                        unsafe { (out as *mut u32).add(*c).write(k as u32) };
+                        *c += 1;
+                    }
+                }
+            }
+        });
+    };
+    let mut t_scatter = Vec::new();
+    for _ in 0..5 {
+        let t0 = Instant::now();
+        scatter();
+        t_scatter.push(t0.elapsed().as_secs_f64());
+    }
+    (median(t_sort), median(t_scatter), ids.len())
+}
+
+/// Backward bare-kernel pairs per second in the current pool (median of 5):
+/// `raster::backward::composite::bare_blend_backward` over `splats`.
+pub fn bare_backward_rate(splats: &[Splat], kernel: Kernel) -> f64 {
+    use unseen::raster::backward::composite::bare_blend_backward;
+    let rows = 1 << 12;
+    median(
+        (0..5)
+            .map(|_| {
+                let t0 = Instant::now();
+                let pairs = bare_blend_backward(splats, rows, kernel);
+                pairs as f64 / t0.elapsed().as_secs_f64()
+            })
+            .collect(),
+    )
+}
+
+/// The SSIM blur's bare rate at row width `width` in the current pool (outputs per second,
+/// median of 5): `train::ssim::bare_blur`.
+pub fn blur_rate(width: usize) -> f64 {
+    let rows = (1 << 20) / width.max(1);
+    median(
+        (0..5)
+            .map(|_| {
+                let t0 = Instant::now();
+                let outputs = unseen::train::ssim::bare_blur(width, rows);
+                outputs as f64 / t0.elapsed().as_secs_f64()
+            })
+            .collect(),
+    )
+}
+
+/// [`stream_seconds`]' kernels: an xor fold, an in-place xor.
+#[inline(always)]
+fn stream_fold(c: &[u32]) -> u32 {
+    c.iter().fold(0u32, |x, &y| x ^ y)
+}
+#[inline(always)]
+fn stream_update(c: &mut [u32], x: u32) {
+    c.iter_mut().for_each(|v| *v ^= x);
+}
+#[cfg(target_arch = "x86_64")]
+mod stream_wide {
+    #[target_feature(enable = "avx512f")]
+    pub fn fold512(c: &[u32]) -> u32 {
+        super::stream_fold(c)
+    }
+    #[target_feature(enable = "avx512f")]
+    pub fn update512(c: &mut [u32], x: u32) {
+        super::stream_update(c, x)
+    }
+    #[target_feature(enable = "avx2")]
+    pub fn fold256(c: &[u32]) -> u32 {
+        super::stream_fold(c)
+    }
+    #[target_feature(enable = "avx2")]
+    pub fn update256(c: &mut [u32], x: u32) {
+        super::stream_update(c, x)
+    }
+}
+
+/// Seconds to stream `read_only` 32-bit values (read once, xor-folded) and to update
+/// `read_write` 32-bit values in place (read, xor-ed, written back) in the current pool,
+/// fastest of 5, arrays allocated and touched before the timing: the memory floor of a
+/// stage that reads and writes that many values (e.g. Adam: the gradient read-only; the
+/// parameter and its two moments read and written). Chunks of 16 384 values in parallel,
+/// each compiled for the widest vector unit the CPU has (the library's kernels are; the
+/// bench's baseline build is SSE2 only, whose 16-byte operations do not reach the cache's
+/// bandwidth).
+pub fn stream_seconds(read_only: usize, read_write: usize) -> f64 {
+    use rayon::prelude::*;
+    const CHUNK: usize = 1 << 14;
+    // 2: AVX-512F, 1: AVX2, 0: neither (as the library's kernels choose).
+    #[cfg(target_arch = "x86_64")]
+    let isa = if is_x86_feature_detected!("avx512f") {
+        2
+    } else {
+        u8::from(is_x86_feature_detected!("avx2"))
+    };
+    #[cfg(not(target_arch = "x86_64"))]
+    let isa = 0;
+    let fold_isa = |c: &[u32]| match isa {
+        // SAFETY: the feature was detected above.
+        #[cfg(target_arch = "x86_64")]
+        2 => unsafe { stream_wide::fold512(c) },
+        // SAFETY: as above.
+        #[cfg(target_arch = "x86_64")]
+        1 => unsafe { stream_wide::fold256(c) },
+        _ => stream_fold(c),
+    };
+    let update_isa = |c: &mut [u32], x: u32| match isa {
+        // SAFETY: the feature was detected above.
+        #[cfg(target_arch = "x86_64")]
+        2 => unsafe { stream_wide::update512(c, x) },
+        // SAFETY: as above.
+        #[cfg(target_arch = "x86_64")]
+        1 => unsafe { stream_wide::update256(c, x) },
+        _ => stream_update(c, x),
+    };
+    let src = vec![1u32; read_only];
+    let mut rw = vec![1u32; read_write];
+    let mut t_best = f64::MAX;
+    for _ in 0..5 {
+        let t0 = Instant::now();
+        let x = src
+            .par_chunks(CHUNK)
+            .map(fold_isa)
+            .reduce(|| 0, |x, y| x ^ y);
+        rw.par_chunks_mut(CHUNK).for_each(|c| update_isa(c, x | 1));
+        t_best = t_best.min(t0.elapsed().as_secs_f64());
+        std::hint::black_box(&rw);
+    }
+    t_best
+}
+
+/// The bundled lounge at `1/resolution` of its size and a training configuration for it
+/// that never ends and never saves (the benches time steps of it).
+pub fn lounge(
+    resolution: u32,
+) -> (
+    unseen::dataset::Dataset,
+    unseen::train::trainer::TrainConfig,
+) {
+    use unseen::dataset::{LoadOptions, load};
+    let root =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("reference_data/scenes/lounge");
+    let opts = LoadOptions {
+        resolution,
+        ..LoadOptions::default()
+    };
+    let cfg = unseen::train::trainer::TrainConfig {
+        iterations: u32::MAX,
+        resolution,
+        save_iterations: vec![],
+        ..Default::default()
+    };
+    (load(&root, &opts).unwrap(), cfg)
+}
+
+/// The number after `name` on the command line (`default` without it).
+pub fn arg(name: &str, default: usize) -> usize {
+    let args: Vec<String> = std::env::args().collect();
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1))
+        .map_or(default, |v| v.parse().expect("a number"))
 }

@@ -473,6 +473,36 @@ fn ssim_with(
     (total / n, g)
 }
 
+/// The blur alone: the bound of the SSIM term's cost (`benches/roofline.rs`). `rows` output
+/// rows of `width` values, each the eleven-tap window over eleven cache-resident source
+/// rows, with [`ssim_with`]'s row kernel compiled for this CPU (the same operations, the
+/// same tail handling at this width); rows split over the rayon pool in fixed blocks.
+/// Returns the outputs written. One SSIM with its gradient blurs `16·c` planes of
+/// `width × height` (the five moments and the three derivative planes, along x and y).
+#[doc(hidden)]
+pub fn bare_blur(width: usize, rows: usize) -> u64 {
+    let k = kernel();
+    let isa = Isa::detect();
+    let blocks = rayon::current_num_threads().max(1);
+    let per = rows.div_ceil(blocks);
+    (0..blocks)
+        .into_par_iter()
+        .map(|b| {
+            let src: Vec<f64> = (0..width + 2 * RADIUS)
+                .map(|i| (i % 7) as f64 * 0.125)
+                .collect();
+            let mut out = vec![0.0; width];
+            let n = ((b + 1) * per).min(rows).saturating_sub(b * per);
+            for _ in 0..n {
+                let taps = std::array::from_fn(|t| &src[t..t + width]);
+                taps_for(isa, &taps, &k, &mut out);
+                std::hint::black_box(&mut out);
+            }
+            (n * width) as u64
+        })
+        .sum()
+}
+
 /// The buffers of [`ssim_with`], kept per thread between calls.
 #[derive(Default)]
 struct Work {

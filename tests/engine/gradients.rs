@@ -649,6 +649,10 @@ fn backward_skips_are_bit_identical() {
                     "{kernel:?} geometry {geometry}"
                 );
                 assert!(a.splats.iter().any(|g| g.color[0] != 0.0));
+                // The visits walked are all the work unit's without the skips and a strict
+                // part of it with them.
+                assert_eq!(b.walked, b.pairs, "{kernel:?}");
+                assert!(0 < a.walked && a.walked < a.pairs, "{kernel:?}");
                 let bg = a.background.map(f32::to_bits);
                 match &reference {
                     None => reference = Some((bits, bg)),
@@ -809,6 +813,37 @@ fn reused_gradient_buffers_give_fresh_bits() {
                     grads_bits(&g) == grads_bits(&fresh),
                     "degree {degree}, {groups:?}, buffer of {n}"
                 );
+            }
+        }
+    }
+}
+
+/// The bare backward kernel (the roofline's bound for the blend backward) walks every splat
+/// on every row it is given, in every form, whatever the rows' split over threads.
+#[test]
+fn bare_backward_walks_every_visit() {
+    use unseen::raster::Kernel;
+    use unseen::raster::backward::composite::bare_blend_backward;
+    use unseen::raster::project::Splat;
+    let mut u = Uniform::new(5);
+    let splats: Vec<Splat> = (0..100)
+        .map(|_| Splat {
+            mean: [u.range(0.0, 16.0), u.range(0.0, 16.0)],
+            conic: [0.3, 0.05, 0.4],
+            opacity: u.range(0.02, 0.06),
+            color: [u.unit(), u.unit(), u.unit()],
+            depth: u.range(1.0, 5.0),
+        })
+        .collect();
+    for threads in [1, 3] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        for kernel in [Kernel::Scalar, Kernel::Avx2, Kernel::Auto] {
+            for rows in [0, 1, 37] {
+                let pairs = pool.install(|| bare_blend_backward(&splats, rows, kernel));
+                assert_eq!(pairs, rows as u64 * 100 * 16, "{kernel:?}, {rows} rows");
             }
         }
     }

@@ -122,8 +122,13 @@ pub struct PixelGrads<'a> {
 pub struct CompositeGrads {
     pub splats: Vec<SplatGrad>,
     pub background: [f32; 3],
-    /// Gaussian-pixel pairs walked backward.
+    /// Gaussian-pixel pairs walked backward: 16 per (row, splat within the row's reach
+    /// before its last blended splat), skipped or not — the same count for every kernel
+    /// and plan (the work unit).
     pub pairs: u64,
+    /// Of those, the pairs of the row visits a kernel evaluated (16 per visit the exact skips
+    /// kept): what [`bare_blend_backward`]'s rate is compared with.
+    pub walked: u64,
 }
 
 /// The gradients of one task's run of tiles.
@@ -133,6 +138,7 @@ struct TileGrads {
     gids: Vec<u32>,
     grads: Vec<SplatGrad>,
     pairs: u64,
+    walked: u64,
 }
 
 const LANES: usize = TILE_SIZE;
@@ -808,6 +814,7 @@ fn tiles<const ISA: u8, const GEOMETRY: bool>(
         gids: Vec::with_capacity(most),
         grads: Vec::with_capacity(most),
         pairs: 0,
+        walked: 0,
     };
     // The thread's work area, reused by every tile and run it blends: no allocation (nor
     // the page faults of fresh memory) once it has grown to the largest tile. Taken out
@@ -974,6 +981,7 @@ fn tiles_with<const ISA: u8, const GEOMETRY: bool>(
                 keep |= u32::from(kept) << row;
             }
             out.pairs += counted * LANES as u64;
+            out.walked += u64::from(keep.count_ones()) * LANES as u64;
             let walked = keep != 0;
             while keep != 0 {
                 let row = keep.trailing_zeros() as usize;
@@ -1198,10 +1206,87 @@ pub fn composite_backward(
             }
         });
     let pairs = parts.iter().map(|b| b.pairs).sum();
+    let walked = parts.iter().map(|b| b.walked).sum();
     let bg = background_grad(width, height, bins, g);
     CompositeGrads {
         splats,
         background: bg.map(|v| v as f32),
         pairs,
+        walked,
     }
+}
+
+/// The backward blend kernel alone: the bound [`composite_backward`] is measured against
+/// (`benches/roofline.rs`, SPEC.md §5.8), as [`crate::raster::composite::bare_blend`] is the
+/// forward's. `rows` tile rows (16 pixels each, at image rows `row % 16`), each walking every
+/// splat of `splats` back to front with all ten gradients (the training backward), with the
+/// same row kernel and arithmetic as [`composite_backward`]: every visit asks for both
+/// halves, every pixel has the whole list before its last blended splat, the list and its
+/// accumulators stay in the cache (at most 256 splats), no list building, no reduction, no
+/// per-Gaussian sums. Rows are split over the rayon pool in fixed blocks, each with its own
+/// accumulators. Returns the Gaussian-pixel pairs walked (16 per row and splat, as
+/// [`CompositeGrads::walked`] counts them).
+#[doc(hidden)]
+pub fn bare_blend_backward(splats: &[Splat], rows: usize, kernel: Kernel) -> u64 {
+    assert!(
+        splats.len() <= 256,
+        "the bare kernel's list must stay in the cache"
+    );
+    let list: Vec<Entry> = (0..splats.len())
+        .map(|k| Entry {
+            s: splats[k],
+            pos: k as u32,
+        })
+        .collect();
+    let idx: Vec<u32> = (0..list.len() as u32).map(|i| i | 0b11 << 30).collect();
+    let mut px = [0f32; LANES];
+    for (l, v) in px.iter_mut().enumerate() {
+        *v = l as f32 + 0.5;
+    }
+    // A state every splat can blend into and that stays finite over the walk: the
+    // transmittance grows by 1/(1 − α) per blended splat (α ≤ 0.06 here).
+    let fresh = RowState {
+        t: [1e-3; LANES],
+        t_final: [1e-3; LANES],
+        v: [[0.25; LANES], [-0.5; LANES], [0.125; LANES]],
+        v_d: [0.0625; LANES],
+        v_alpha: [0.0; LANES],
+        bg_dot: [0.0; LANES],
+        n: [list.len() as u32; LANES],
+        buf: [[0.0; LANES]; 3],
+        buf_z: [0.0; LANES],
+    };
+    let (avx512, avx2) = (kernel.avx512(), kernel.avx2());
+    let max_alpha = 0.99;
+    let blocks = rayon::current_num_threads().max(1);
+    let per = rows.div_ceil(blocks);
+    (0..blocks)
+        .into_par_iter()
+        .map(|b| {
+            let mut acc = vec![[[0f32; HALF]; NC]; list.len()];
+            let range = (b * per).min(rows)..((b + 1) * per).min(rows);
+            let walked = range.len() as u64 * list.len() as u64 * LANES as u64;
+            for row in range {
+                let py = (row % TILE_SIZE) as f32 + 0.5;
+                let mut st = fresh;
+                #[cfg(target_arch = "x86_64")]
+                if avx512 {
+                    // SAFETY: AVX-512F was detected above.
+                    unsafe {
+                        avx512::row::<true>(max_alpha, &list, &idx, &px, py, &mut st, &mut acc)
+                    }
+                } else if avx2 {
+                    // SAFETY: AVX2 was detected above.
+                    unsafe { avx2::row::<true>(max_alpha, &list, &idx, &px, py, &mut st, &mut acc) }
+                } else {
+                    row_lanes::<true>(max_alpha, &list, &idx, &px, py, &mut st, &mut acc)
+                }
+                #[cfg(not(target_arch = "x86_64"))]
+                row_lanes::<true>(max_alpha, &list, &idx, &px, py, &mut st, &mut acc);
+                std::hint::black_box(&st);
+            }
+            std::hint::black_box(&acc); // the accumulators are the kernel's only output
+            walked
+        })
+        .sum()
 }
