@@ -1,5 +1,5 @@
 //! A training iteration against its roofline: `cargo bench --bench roofline [-- --quick]
-//! [--json FILE] [--warmup N] [--reps R] [--views K]`.
+//! [--json FILE] [--warmup N] [--reps R] [--views K] [--resolution D] [--threads N]`.
 //!
 //! For lounge at 80×60 and 160×120, after `N` training iterations (default 1 500: a densified
 //! state as the pipeline meets it), on 1 and all threads: each stage of one iteration timed
@@ -336,7 +336,13 @@ fn main() {
         "{:>13} {:>8} {:>3} {:>9} {:>12} {:>10} {:>7}",
         "stage", "size", "thr", "gaussians", "measured ms", "floor ms", "ratio"
     );
-    for resolution in [2u32, 1] {
+    // `--resolution D`: only 1/D of lounge's size; `--threads N`: only that pool.
+    let sizes: Vec<u32> = match arg("--resolution", 0) {
+        0 => vec![2, 1],
+        d => vec![d as u32],
+    };
+    let only_threads = arg("--threads", 0);
+    for resolution in sizes {
         let (data, cfg) = common::lounge(resolution);
         let mut t = Trainer::new(&data, cfg).unwrap();
         let (_, all) = pools.last().unwrap();
@@ -348,6 +354,9 @@ fn main() {
         let cam0 = &data.views[data.train[0]].camera;
         let (width, height) = (cam0.width, cam0.height);
         for (threads, pool) in &pools {
+            if only_threads != 0 && *threads != only_threads {
+                continue;
+            }
             pool.install(|| {
                 let rates = Rates::measure(&t, width as usize);
                 let mut measured = [const { Vec::new() }; 8];

@@ -11,10 +11,7 @@ use super::jobs::SHARED_BEFORE;
 use super::jobs::{Job, JobResult, jobs};
 use super::report::Report;
 use super::{Audit, AuditConfig, Variant};
-use crate::batch::cost::{
-    BASE_BYTES, ORIGINAL_BYTES_PER_PIXEL, ORIGINAL_SECONDS_PER_ITERATION_PIXEL,
-    PIPELINE_BYTES_PER_PIXEL, PIPELINE_SECONDS_PER_ITERATION_PIXEL, pipeline_work, scoped_work,
-};
+use crate::batch::cost::{BASE_BYTES, Calibration, pipeline_work, scoped_work};
 use crate::batch::{
     ArrayWave, Cost, Request, SlurmOptions, least_request, request, shell_quote, write_submission,
 };
@@ -431,15 +428,10 @@ impl Audit<'_> {
                     .map(|j| {
                         let k = kind(j);
                         let units = work(cfg, j, shape);
+                        let c = Calibration::of(cfg.base.preset);
                         let (rate, bytes_per_pixel) = match j {
-                            Job::Original { .. } => (
-                                ORIGINAL_SECONDS_PER_ITERATION_PIXEL,
-                                ORIGINAL_BYTES_PER_PIXEL,
-                            ),
-                            _ => (
-                                PIPELINE_SECONDS_PER_ITERATION_PIXEL,
-                                PIPELINE_BYTES_PER_PIXEL,
-                            ),
+                            Job::Original { .. } => (c.original_seconds, c.original_bytes),
+                            _ => (c.pipeline_seconds, c.pipeline_bytes),
                         };
                         let (s, u, peak) = measured[k];
                         if u > 0.0 && peak > 0.0 {

@@ -41,7 +41,7 @@ pub fn waves(config: &PipelineConfig, bound: &Shape, pixels: f64) -> Vec<BatchWa
         bound[k]
             .steps
             .iter()
-            .map(|p| pipeline_cost_of(step_work(config, &p.step, pixels), pixels))
+            .map(|p| pipeline_cost_of(config.preset, step_work(config, &p.step, pixels), pixels))
             .collect()
     };
     // A job is named by the stage of its earliest step in pipeline order (its latest for
