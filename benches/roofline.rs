@@ -1,10 +1,12 @@
 //! A training iteration against its roofline: `cargo bench --bench roofline [-- --quick]
-//! [--json FILE] [--warmup N] [--reps R] [--views K] [--resolution D] [--threads N]`.
+//! [--json FILE] [--warmup N] [--reps R] [--views K] [--rounds M] [--resolution D]
+//! [--threads N]`.
 //!
 //! For lounge at 80×60 and 160×120, after `N` training iterations (default 1 500: a densified
 //! state as the pipeline meets it), on 1 and all threads: each stage of one iteration timed
 //! on its own (per view the fastest of `R` runs, default 5, then the median over `K` views,
-//! default 16) beside its **floor**, measured in the same pool and run:
+//! default 16) beside its **floor**, measured in the same pool beside every view (the median
+//! over the views, as the stage's):
 //!
 //! | stage | floor |
 //! |---|---|
@@ -25,8 +27,11 @@
 //! `stages` is the sum of the rows above (Adam unfused); `iteration` is `Trainer::step`
 //! itself (Adam fused into the projection backward, one densification in a hundred steps
 //! amortized), fastest of 3 rounds of `4·max(R, 5)` steps from clones of the warmed state;
-//! the floor of both is the sum of the stages' floors. `--json FILE` writes one record per
-//! (stage, size, threads).
+//! the floor of both is the sum of the stages' floors. `--rounds M` repeats the measurement
+//! M times, the pools alternating, and reports per row the round of the median ratio and
+//! the ratios' range (the machine's noise, in the same run). The first line names the CPU
+//! and the instruction set the kernels use. `--json FILE` writes one record per (stage,
+//! size, threads).
 
 mod common;
 
@@ -56,6 +61,9 @@ const STAGES: [&str; 8] = [
     "densify stats",
 ];
 
+/// A stage's name, measured seconds and floor seconds in one round.
+type Row = (String, f64, f64);
+
 /// One row of the table (and of `--json`).
 #[derive(serde::Serialize)]
 struct Record {
@@ -66,7 +74,11 @@ struct Record {
     gaussians: usize,
     measured_seconds: f64,
     floor_seconds: f64,
+    /// Of the round with the median ratio.
     ratio: f64,
+    /// The smallest and largest ratio over the rounds.
+    ratio_range: [f64; 2],
+    rounds: usize,
 }
 
 /// The floors' rates in the current pool (each measured once per pool and size).
@@ -76,36 +88,47 @@ struct Rates {
     backward: f64,
     /// The SSIM blur at the image's width, outputs per second.
     blur: f64,
-    /// The streaming floors of project, proj bwd, adam and densify stats, seconds.
-    stream: [f64; 4],
 }
 
 impl Rates {
-    fn measure(t: &Trainer, width: usize) -> Rates {
+    fn measure(width: usize) -> Rates {
         let tile = tile_splats();
-        let g = &t.gaussians;
-        let n = g.len();
-        let rest_active = 3 * ((t.active_sh_degree as usize + 1).pow(2) - 1);
-        let read = n * (3 + 3 + 4 + 1 + 3 + rest_active);
-        let params = n * (3 + 3 + 4 + 1 + 3) + g.sh_rest.len();
         Rates {
             forward: bare_rate(&tile, Kernel::Auto),
             backward: bare_backward_rate(&tile, Kernel::Auto),
             blur: blur_rate(width),
-            stream: [
-                // Read the parameters (the active SH degree's); write a splat (10 values)
-                // and its radii (2).
-                stream_seconds(read, 12 * n),
-                // Read the parameters and the splat gradients (10); write every gradient
-                // and the screen-space ones (4).
-                stream_seconds(read + 10 * n, params + 4 * n),
-                // Read the gradients; update x, m, v.
-                stream_seconds(params, 3 * params),
-                // Read the NDC gradient (2) and radii (2); update the three statistics.
-                stream_seconds(4 * n, 3 * n),
-            ],
         }
     }
+}
+
+/// The streaming floors of project, proj bwd, adam and densify stats (seconds), measured
+/// beside each view's stages (a floor measured once per round was at the mercy of the
+/// neighbours' memory traffic in that one moment: on a shared host Adam came out below it).
+fn stream_floors(t: &Trainer) -> [f64; 4] {
+    let g = &t.gaussians;
+    let n = g.len();
+    let rest_active = 3 * ((t.active_sh_degree as usize + 1).pow(2) - 1);
+    // The arrays the projection reads (the active SH degree's share of the rest).
+    let params_read = [3 * n, 3 * n, 4 * n, n, 3 * n, rest_active * n];
+    let groups = [3 * n, 3 * n, 4 * n, n, 3 * n, g.sh_rest.len()];
+    let with = |a: &[usize], b: &[usize]| [a, b].concat();
+    [
+        // Read the parameters; write the splats (10 values) and radii (2).
+        stream_seconds(&params_read, &[10 * n, 2 * n]),
+        // Read the parameters and the splat gradients (10); write every gradient and the
+        // screen-space ones (2 + 2).
+        stream_seconds(
+            &with(&params_read, &[10 * n]),
+            &with(&groups, &[2 * n, 2 * n]),
+        ),
+        // Per group: read the gradient; update x, m, v.
+        groups
+            .iter()
+            .map(|&len| stream_seconds(&[len], &[len, len, len]))
+            .sum(),
+        // Read the NDC gradient (2) and radii (2); update the three statistics.
+        stream_seconds(&[2 * n, 2 * n], &[n, n, n]),
+    ]
 }
 
 /// Seconds per stage of one iteration on view `view` of the warmed trainer `t` (the
@@ -228,15 +251,16 @@ fn stages(t: &Trainer, view: &dataset::View, rates: &Rates, reps: usize) -> ([f6
         "the floor's lists differ from the binning's"
     );
     let (project_compute, backward_compute) = per_gaussian_floors(t, cam, &pr, &last_splat_grads);
+    let stream = stream_floors(t);
     let floors = [
-        rates.stream[0].max(project_compute),
+        stream[0].max(project_compute),
         sort + scatter,
         counts.0 as f64 / rates.forward,
         (16 * 3 * w * h) as f64 / rates.blur,
         counts.1 as f64 / rates.backward,
-        rates.stream[1].max(backward_compute),
-        rates.stream[2],
-        rates.stream[3],
+        stream[1].max(backward_compute),
+        stream[2],
+        stream[3],
     ];
     (fastest, floors)
 }
@@ -317,12 +341,57 @@ fn iteration_seconds(t: &Trainer, reps: usize) -> f64 {
     best
 }
 
+/// One round on the current pool: per stage the median over `views` views of the fastest of
+/// `reps` and its floor, then `stages` (their sum) and `iteration` (`Trainer::step`).
+fn measure_rows(
+    t: &Trainer,
+    data: &dataset::Dataset,
+    views: usize,
+    reps: usize,
+    width: u32,
+) -> Vec<Row> {
+    let mut measured = [const { Vec::new() }; 8];
+    let mut floors = [const { Vec::new() }; 8];
+    for k in 0..views {
+        let view = &data.views[data.train[k % data.train.len()]];
+        // The bare rates beside every view's stages too, as the streaming floors: each
+        // floor is then the median over the same moments as its stage.
+        let rates = Rates::measure(width as usize);
+        let (m, f) = stages(t, view, &rates, reps);
+        for i in 0..8 {
+            measured[i].push(m[i]);
+            floors[i].push(f[i]);
+        }
+    }
+    let mut rows: Vec<Row> = STAGES
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            (
+                s.to_string(),
+                median(measured[i].clone()),
+                median(floors[i].clone()),
+            )
+        })
+        .collect();
+    let floor_sum: f64 = rows.iter().map(|r| r.2).sum();
+    let stage_sum: f64 = rows.iter().map(|r| r.1).sum();
+    rows.push(("stages".into(), stage_sum, floor_sum));
+    rows.push((
+        "iteration".into(),
+        iteration_seconds(t, 4 * reps.max(5)),
+        floor_sum,
+    ));
+    rows
+}
+
 fn main() {
     unseen::sys::keep_freed_memory(); // as the CLI does (SPEC.md §6)
     let quick = std::env::args().any(|a| a == "--quick");
     let warmup = arg("--warmup", if quick { 500 } else { 1500 });
     let reps = arg("--reps", if quick { 3 } else { 5 });
     let views = arg("--views", if quick { 4 } else { 16 });
+    let rounds = arg("--rounds", 1).max(1);
     let json = {
         let args: Vec<String> = std::env::args().collect();
         args.iter()
@@ -331,10 +400,11 @@ fn main() {
             .cloned()
     };
     let pools = common::pools();
+    println!("{}", common::machine());
     let mut records = Vec::new();
     println!(
-        "{:>13} {:>8} {:>3} {:>9} {:>12} {:>10} {:>7}",
-        "stage", "size", "thr", "gaussians", "measured ms", "floor ms", "ratio"
+        "{:>13} {:>8} {:>3} {:>9} {:>12} {:>10} {:>7} {:>13}",
+        "stage", "size", "thr", "gaussians", "measured ms", "floor ms", "ratio", "range"
     );
     // `--resolution D`: only 1/D of lounge's size; `--threads N`: only that pool.
     let sizes: Vec<u32> = match arg("--resolution", 0) {
@@ -353,64 +423,51 @@ fn main() {
         });
         let cam0 = &data.views[data.train[0]].camera;
         let (width, height) = (cam0.width, cam0.height);
-        for (threads, pool) in &pools {
-            if only_threads != 0 && *threads != only_threads {
-                continue;
+        // Rounds alternate the pools; per (stage, pool) the round of the median ratio is
+        // reported, with the ratios' range over the rounds.
+        let mut per_pool: Vec<(usize, Vec<Vec<Row>>)> = Vec::new();
+        for _ in 0..rounds {
+            for (threads, pool) in &pools {
+                if only_threads != 0 && *threads != only_threads {
+                    continue;
+                }
+                let rows = pool.install(|| measure_rows(&t, &data, views, reps, width));
+                match per_pool.iter_mut().find(|(n, _)| n == threads) {
+                    Some((_, r)) => r.push(rows),
+                    None => per_pool.push((*threads, vec![rows])),
+                }
             }
-            pool.install(|| {
-                let rates = Rates::measure(&t, width as usize);
-                let mut measured = [const { Vec::new() }; 8];
-                let mut floors = [const { Vec::new() }; 8];
-                for k in 0..views {
-                    let view = &data.views[data.train[k % data.train.len()]];
-                    let (m, f) = stages(&t, view, &rates, reps);
-                    for i in 0..8 {
-                        measured[i].push(m[i]);
-                        floors[i].push(f[i]);
-                    }
-                }
-                let mut rows: Vec<(String, f64, f64)> = STAGES
-                    .iter()
-                    .enumerate()
-                    .map(|(i, s)| {
-                        (
-                            s.to_string(),
-                            median(measured[i].clone()),
-                            median(floors[i].clone()),
-                        )
-                    })
-                    .collect();
-                let floor_sum: f64 = rows.iter().map(|r| r.2).sum();
-                let stage_sum: f64 = rows.iter().map(|r| r.1).sum();
-                rows.push(("stages".into(), stage_sum, floor_sum));
-                rows.push((
-                    "iteration".into(),
-                    iteration_seconds(&t, 4 * reps.max(5)),
-                    floor_sum,
-                ));
-                for (stage, m, f) in rows {
-                    println!(
-                        "{:>13} {:>8} {:>3} {:>9} {:>12.3} {:>10.3} {:>7.2}",
-                        stage,
-                        format!("{width}x{height}"),
-                        threads,
-                        t.gaussians.len(),
-                        m * 1e3,
-                        f * 1e3,
-                        m / f
-                    );
-                    records.push(Record {
-                        stage,
-                        width,
-                        height,
-                        threads: *threads,
-                        gaussians: t.gaussians.len(),
-                        measured_seconds: m,
-                        floor_seconds: f,
-                        ratio: m / f,
-                    });
-                }
-            });
+        }
+        for (threads, runs) in per_pool {
+            for i in 0..runs[0].len() {
+                let mut of: Vec<&Row> = runs.iter().map(|r| &r[i]).collect();
+                of.sort_by(|a, b| (a.1 / a.2).total_cmp(&(b.1 / b.2)));
+                let (lo, hi) = (of[0].1 / of[0].2, of[of.len() - 1].1 / of[of.len() - 1].2);
+                let (stage, m, f) = of[of.len() / 2].clone();
+                println!(
+                    "{:>13} {:>8} {:>3} {:>9} {:>12.3} {:>10.3} {:>7.2} {:>13}",
+                    stage,
+                    format!("{width}x{height}"),
+                    threads,
+                    t.gaussians.len(),
+                    m * 1e3,
+                    f * 1e3,
+                    m / f,
+                    format!("{lo:.2}-{hi:.2}")
+                );
+                records.push(Record {
+                    stage,
+                    width,
+                    height,
+                    threads,
+                    gaussians: t.gaussians.len(),
+                    measured_seconds: m,
+                    floor_seconds: f,
+                    ratio: m / f,
+                    ratio_range: [lo, hi],
+                    rounds,
+                });
+            }
         }
     }
     if let Some(path) = json {

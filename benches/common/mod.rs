@@ -312,15 +312,17 @@ mod stream_wide {
     }
 }
 
-/// Seconds to stream `read_only` 32-bit values (read once, xor-folded) and to update
-/// `read_write` 32-bit values in place (read, xor-ed, written back) in the current pool,
-/// fastest of 5, arrays allocated and touched before the timing: the memory floor of a
-/// stage that reads and writes that many values (e.g. Adam: the gradient read-only; the
-/// parameter and its two moments read and written). Chunks of 16 384 values in parallel,
-/// each compiled for the widest vector unit the CPU has (the library's kernels are; the
-/// bench's baseline build is SSE2 only, whose 16-byte operations do not reach the cache's
-/// bandwidth).
-pub fn stream_seconds(read_only: usize, read_write: usize) -> f64 {
+/// Seconds to stream arrays as a stage does, in one pass: each of `reads` (lengths in 32-bit
+/// values) read once and xor-folded, each of `updates` read, xor-ed and written back in
+/// place; in the current pool, fastest of 5, arrays allocated and touched before the
+/// timing: the memory floor of a stage that reads and updates those arrays (e.g. one Adam
+/// group: the gradient read; the parameter and its two moments updated). The pass is split
+/// into tasks of 16 384 values of the longest array; task `c` takes the `c`-th share of
+/// every array, all its arrays in turn (as the stage's loop has all its streams in flight),
+/// each loop compiled for the widest vector unit the CPU has (the library's kernels are;
+/// the bench's baseline build is SSE2 only, whose 16-byte operations do not reach the
+/// cache's bandwidth).
+pub fn stream_seconds(reads: &[usize], updates: &[usize]) -> f64 {
     use rayon::prelude::*;
     const CHUNK: usize = 1 << 14;
     // 2: AVX-512F, 1: AVX2, 0: neither (as the library's kernels choose).
@@ -350,18 +352,37 @@ pub fn stream_seconds(read_only: usize, read_write: usize) -> f64 {
         1 => unsafe { stream_wide::update256(c, x) },
         _ => stream_update(c, x),
     };
-    let src = vec![1u32; read_only];
-    let mut rw = vec![1u32; read_write];
+    let src: Vec<Vec<u32>> = reads.iter().map(|&n| vec![1u32; n]).collect();
+    let mut dst: Vec<Vec<u32>> = updates.iter().map(|&n| vec![1u32; n]).collect();
+    let longest = reads.iter().chain(updates).copied().max().unwrap_or(0);
+    let tasks = longest.div_ceil(CHUNK).max(1);
+    let share = |n: usize, c: usize| c * n / tasks..(c + 1) * n / tasks;
     let mut t_best = f64::MAX;
     for _ in 0..5 {
         let t0 = Instant::now();
-        let x = src
-            .par_chunks(CHUNK)
-            .map(fold_isa)
-            .reduce(|| 0, |x, y| x ^ y);
-        rw.par_chunks_mut(CHUNK).for_each(|c| update_isa(c, x | 1));
+        // Each task's shares of the updated arrays, split up front (disjoint ranges).
+        let mut parts: Vec<Vec<&mut [u32]>> = (0..tasks).map(|_| Vec::new()).collect();
+        for d in dst.iter_mut() {
+            let n = d.len();
+            let mut rest: &mut [u32] = d;
+            for (c, p) in parts.iter_mut().enumerate() {
+                let len = share(n, c).len();
+                let (head, tail) = std::mem::take(&mut rest).split_at_mut(len);
+                p.push(head);
+                rest = tail;
+            }
+        }
+        parts.into_par_iter().enumerate().for_each(|(c, mut mine)| {
+            let mut x = 1u32;
+            for s in &src {
+                x ^= fold_isa(&s[share(s.len(), c)]);
+            }
+            for d in mine.iter_mut() {
+                update_isa(d, x);
+            }
+        });
         t_best = t_best.min(t0.elapsed().as_secs_f64());
-        std::hint::black_box(&rw);
+        std::hint::black_box(&dst);
     }
     t_best
 }
@@ -397,4 +418,30 @@ pub fn arg(name: &str, default: usize) -> usize {
         .position(|a| a == name)
         .and_then(|i| args.get(i + 1))
         .map_or(default, |v| v.parse().expect("a number"))
+}
+
+/// The CPU's model name (from `/proc/cpuinfo` where there is one), its logical CPUs and the
+/// widest instruction set the kernels use on it: what a figure's machine is named by.
+pub fn machine() -> String {
+    let model = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split(':').nth(1))
+                .map(|m| m.trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown CPU".into());
+    #[cfg(target_arch = "x86_64")]
+    let isa = if is_x86_feature_detected!("avx512f") {
+        "AVX-512F"
+    } else if is_x86_feature_detected!("avx2") {
+        "AVX2"
+    } else {
+        "no AVX2"
+    };
+    #[cfg(not(target_arch = "x86_64"))]
+    let isa = "scalar kernels";
+    let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
+    format!("{model}, {cpus} logical CPUs, {isa}")
 }
