@@ -6,16 +6,23 @@
 # Usage: reference_data/audit/run_dose.sh ROOM PARAM A..B [UNSEEN_BINARY]
 #   PARAM: hallucination, photometric or depth_distortion
 #   e.g. reference_data/audit/run_dose.sh lounge hallucination 0..2
-# LEVELS overrides the levels (default 0,0.25,0.5,0.75,1).
+# LEVELS overrides the levels (default 0,0.25,0.5,0.75,1). FAMILY names a candidate family
+# of the room (SPEC.md §20.7, e.g. FAMILY=ring-13: the lounge's bridge views rarely give a
+# colliding set that qualifies), into reference_data/audit/<room>-<family>-dose-<param>/.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 room="$1"; param="$2"; seeds="$3"; bin="${4:-target/release/unseen}"
 levels="${LEVELS:-0,0.25,0.5,0.75,1}"
+family=()
 out="reference_data/audit/$room-dose-$param"
-work="${WORK:-/tmp/unseen-dose-$room-$param}"
+if [ -n "${FAMILY:-}" ]; then
+  family=(--candidates "$FAMILY")
+  out="reference_data/audit/$room-$FAMILY-dose-$param"
+fi
+work="${WORK:-/tmp/unseen-dose-$room${FAMILY:+-$FAMILY}-$param}"
 mkdir -p "$work" "$out"
 cp "$out/samples.json" "$work/" 2>/dev/null || true
-nice -n 19 "$bin" audit "reference_data/scenes/$room" --preset quick \
+nice -n 19 "$bin" audit "reference_data/scenes/$room" --preset quick "${family[@]}" \
   --variants full,even_views,conflicting_views --sweep "$param=$levels" \
   --seeds "$seeds" --threads 2 --out "$work"
 cp "$work"/{samples.json,audit.json,audit.md,inconsistency.svg} "$work"/dose-*.svg "$out/"
