@@ -81,7 +81,7 @@ struct Record {
     rounds: usize,
 }
 
-/// The floors' rates in the current pool (each measured once per pool and size).
+/// The bare kernels' rates in the current pool (measured beside each view).
 struct Rates {
     /// Forward and backward bare kernels, pairs per second.
     forward: f64,
