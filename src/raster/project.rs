@@ -878,8 +878,11 @@ fn project_range<R: Lanes>(
             store(&b, &mut splats[k..], &mut radii[k..], counts);
             continue;
         }
-        store(&b, &mut splats[k..], &mut radii[k..], counts);
+        // The survivors' SH rows are staged one at a time below: ask for all of them first,
+        // so that their cache misses overlap (with each other and with the store).
         let ok = lanes_of(R::select(b.culls.ok, R::splat(1.0), R::splat(0.0)));
+        prefetch_rows(g, first + k, &ok[..R::N], st.len);
+        store(&b, &mut splats[k..], &mut radii[k..], counts);
         for (l, &ok) in ok[..R::N].iter().enumerate() {
             if ok != 0.0 && st.push(g, first + k + l, k + l) == R::N {
                 st.flush::<R>(cam, degree, |k, sum| {
@@ -898,6 +901,30 @@ fn project_range<R: Lanes>(
         }
         store(&b, &mut splats[k..], &mut radii[k..], counts);
     }
+}
+
+/// Ask for the first `len` SH rest values of Gaussian `i + l` for each lane `l` whose `ok`
+/// is not 0: one prefetch per cache line. Never faults; changes no value.
+#[inline(always)]
+fn prefetch_rows(g: &Gaussians, i: usize, ok: &[f32], len: usize) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        if len == 0 {
+            return;
+        }
+        let stride = g.rest_per_channel() * 3;
+        for (l, _) in ok.iter().enumerate().filter(|(_, ok)| **ok != 0.0) {
+            let row = &g.sh_rest[(i + l) * stride..(i + l) * stride + len];
+            // 16 floats per 64-byte line; the last value covers a line the steps miss.
+            for off in (0..len).step_by(16).chain([len - 1]) {
+                // SAFETY: prefetching never faults; the address is inside `row`.
+                unsafe { _mm_prefetch::<_MM_HINT_T0>(row.as_ptr().add(off).cast()) };
+            }
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (g, i, ok, len);
 }
 
 /// Entry `k`'s colour from its staged sum; where the sum is not finite the Gaussian is
