@@ -99,6 +99,7 @@ fn main() {
                             v_expected_depth: None,
                             final_t: r.final_t.as_deref().unwrap(),
                             n_contrib: r.n_contrib.as_deref().unwrap(),
+                            blend_halves: r.blend_halves.as_deref().unwrap(),
                             depth: None,
                         };
                         let mut splat_grads = Vec::new();

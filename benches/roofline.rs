@@ -203,6 +203,7 @@ fn stages(t: &Trainer, view: &dataset::View, rates: &Rates, reps: usize) -> ([f6
             v_expected_depth: None,
             final_t: out.final_t.as_deref().unwrap(),
             n_contrib: out.n_contrib.as_deref().unwrap(),
+            blend_halves: out.blend_halves.as_deref().unwrap(),
             depth: None,
         };
         let cg = composite_backward(

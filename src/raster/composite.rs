@@ -246,6 +246,17 @@ impl Cut {
     };
 }
 
+/// Lanes of a half row: the unit of the blended-halves record (one AVX2 register).
+const HALF_ROW: usize = GROUP / 2;
+
+/// The blended-halves record of one batch as its rows are walked: `halves[k]` has bit
+/// `2·row + h` set when some pixel of half `h` (columns `8h..8h + 8`) of tile row `row`
+/// blended batch splat `k`; `shift` is `2·row` for the row being walked.
+struct HalvesRecord {
+    halves: [u32; BATCH],
+    shift: u32,
+}
+
 /// Blend state of a group of pixels (one tile row).
 #[derive(Clone, Copy)]
 struct Group {
@@ -310,7 +321,8 @@ pub(crate) fn splat_alpha(s: &Splat, dx: f32, dy: f32, max_alpha: f32) -> SplatA
     SplatAlpha { sigma, e, a, alpha }
 }
 
-/// Blend one splat into one pixel. The single scalar definition of the per-pixel arithmetic.
+/// Blend one splat into one pixel; returns whether it blended. The single scalar definition
+/// of the per-pixel arithmetic.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn blend_lane<const DEPTH: bool, const TRACK: bool>(
@@ -326,7 +338,7 @@ fn blend_lane<const DEPTH: bool, const TRACK: bool>(
     d: &mut f32,
     n: &mut u32,
     active: &mut u32,
-) {
+) -> bool {
     let SplatAlpha { sigma, alpha, .. } = splat_alpha(s, dx, dy, cut.max_alpha);
     let t0 = *t;
     let nt = t0 * (1.0 - alpha);
@@ -345,11 +357,15 @@ fn blend_lane<const DEPTH: bool, const TRACK: bool>(
     }
     *t = if blend { nt } else { t0 };
     *active = if stop { 0 } else { *active };
+    blend
 }
 
 /// Walk the tile's list for one group, lane by lane (the reference form, and the fallback
-/// without AVX2). Returns the Gaussian-pixel evaluations (16 per splat visited).
+/// without AVX2). Returns the Gaussian-pixel evaluations (16 per splat visited). With
+/// `TRACK`, `rec.halves[k]` gets bit `rec.shift + h` where some pixel of half `h` of the row
+/// blended batch splat `k`.
 #[inline(never)]
+#[allow(clippy::too_many_arguments)]
 fn blend_group_lanes<const DEPTH: bool, const TRACK: bool>(
     list: &[TileSplat],
     sets: &[u64],
@@ -357,6 +373,7 @@ fn blend_group_lanes<const DEPTH: bool, const TRACK: bool>(
     py: f32,
     st: &mut Group,
     cut: &Cut,
+    rec: &mut HalvesRecord,
 ) -> u64 {
     let mut pairs = 0;
     for k in Members::new(sets) {
@@ -366,10 +383,11 @@ fn blend_group_lanes<const DEPTH: bool, const TRACK: bool>(
         }
         pairs += GROUP as u64;
         let dy = ts.s.mean[1] - py;
+        let mut bits = 0;
         #[allow(clippy::needless_range_loop)] // `l` indexes seven state arrays
         for l in 0..GROUP {
             let dx = ts.s.mean[0] - px[l];
-            blend_lane::<DEPTH, TRACK>(
+            let blended = blend_lane::<DEPTH, TRACK>(
                 cut,
                 &ts.s,
                 dx,
@@ -383,6 +401,10 @@ fn blend_group_lanes<const DEPTH: bool, const TRACK: bool>(
                 &mut st.n[l],
                 &mut st.active[l],
             );
+            bits |= u32::from(blended) << (l / HALF_ROW);
+        }
+        if TRACK {
+            rec.halves[k] |= bits << rec.shift;
         }
     }
     pairs
@@ -392,7 +414,7 @@ fn blend_group_lanes<const DEPTH: bool, const TRACK: bool>(
 /// the group's state held in registers for the whole walk.
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use super::{Cut, GROUP, Group, Members, SIGMA_CLAMP, TileSplat};
+    use super::{Cut, GROUP, Group, HalvesRecord, Members, SIGMA_CLAMP, TileSplat};
     use crate::math::fastexp::exp_avx2_in_range;
     use std::arch::x86_64::*;
 
@@ -409,6 +431,7 @@ mod avx2 {
         py: f32,
         st: &mut Group,
         cut: &Cut,
+        rec: &mut HalvesRecord,
     ) -> u64 {
         let c = |x: f32| _mm256_set1_ps(x);
         let zero = _mm256_setzero_ps();
@@ -473,6 +496,7 @@ mod avx2 {
                     ),
                 );
             }
+            let mut bits = 0;
             for h in 0..H {
                 let (alpha, valid) = (alphas[h], valids[h]);
                 let nt = _mm256_mul_ps(t[h], _mm256_sub_ps(c(1.0), alpha));
@@ -490,9 +514,13 @@ mod avx2 {
                 }
                 if TRACK {
                     n[h] = _mm256_blendv_epi8(n[h], pos, _mm256_castps_si256(blend));
+                    bits |= u32::from(_mm256_movemask_ps(blend) != 0) << h;
                 }
                 t[h] = _mm256_blendv_ps(t[h], nt, blend);
                 act[h] = _mm256_andnot_ps(stop, act[h]);
+            }
+            if TRACK {
+                rec.halves[k] |= bits << rec.shift;
             }
         }
         for h in 0..H {
@@ -522,7 +550,7 @@ pub(crate) use avx512::splat_alpha16;
 /// the operations those of [`avx2::blend_group`] one for one, masks in mask registers.
 #[cfg(target_arch = "x86_64")]
 mod avx512 {
-    use super::{Cut, GROUP, Group, Members, SIGMA_CLAMP, Splat, TileSplat};
+    use super::{Cut, GROUP, Group, HalvesRecord, Members, SIGMA_CLAMP, Splat, TileSplat};
     use crate::math::fastexp::exp_avx512_in_range;
     use std::arch::x86_64::*;
 
@@ -567,6 +595,7 @@ mod avx512 {
         py: f32,
         st: &mut Group,
         cut: &Cut,
+        rec: &mut HalvesRecord,
     ) -> u64 {
         let c = |x: f32| _mm512_set1_ps(x);
         let zero = _mm512_setzero_ps();
@@ -614,6 +643,8 @@ mod avx512 {
             }
             if TRACK {
                 n = _mm512_mask_blend_epi32(blend, n, _mm512_set1_epi32(ts.pos1 as i32));
+                let bits = u32::from(blend & 0xff != 0) | u32::from(blend >> 8 != 0) << 1;
+                rec.halves[k] |= bits << rec.shift;
             }
             t = _mm512_mask_mov_ps(t, blend, nt);
             act &= !stop;
@@ -651,6 +682,7 @@ struct Images {
     expected_depth: Shared<f32>,
     final_t: Shared<f32>,
     n_contrib: Shared<u32>,
+    blend_halves: Shared<u32>,
 }
 
 /// Which images to write, fixed for a whole render (a subset of what the plan computes).
@@ -686,6 +718,10 @@ fn tiles_impl<const DEPTH: bool, const TRACK: bool, const ISA: u8>(
     let mut masks = [0u32; BATCH];
     let mut sets: RowSets = [[0; WORDS]; TILE_SIZE];
     let mut groups = [Group::new(0); TILE_SIZE];
+    let mut rec = HalvesRecord {
+        halves: [0; BATCH],
+        shift: 0,
+    };
     for t in run {
         let (ty, tx) = (t / bins.tiles_x, t % bins.tiles_x);
         let (y0, x0) = (ty * TILE_SIZE, tx * TILE_SIZE);
@@ -733,6 +769,9 @@ fn tiles_impl<const DEPTH: bool, const TRACK: bool, const ISA: u8>(
             }
             #[cfg(not(target_arch = "x86_64"))]
             row_sets(&masks, words, &mut sets);
+            if TRACK {
+                rec.halves[..batch.len()].fill(0);
+            }
             for row in 0..rows {
                 if !alive[row] {
                     continue;
@@ -740,22 +779,33 @@ fn tiles_impl<const DEPTH: bool, const TRACK: bool, const ISA: u8>(
                 let py = (y0 + row) as f32 + 0.5;
                 let st = &mut groups[row];
                 let set = &sets[row][..words];
+                rec.shift = 2 * row as u32;
+                let r = &mut rec;
                 #[cfg(target_arch = "x86_64")]
                 let pairs = match ISA {
                     // SAFETY: ISA_AVX512 only inside `tiles_avx512`, entered after detection.
                     ISA_AVX512 => unsafe {
-                        avx512::blend_group::<DEPTH, TRACK>(&batch, set, &px, py, st, &cut)
+                        avx512::blend_group::<DEPTH, TRACK>(&batch, set, &px, py, st, &cut, r)
                     },
                     // SAFETY: ISA_AVX2 only inside `tiles_avx2`, entered after detection.
                     ISA_AVX2 => unsafe {
-                        avx2::blend_group::<DEPTH, TRACK>(&batch, set, &px, py, st, &cut)
+                        avx2::blend_group::<DEPTH, TRACK>(&batch, set, &px, py, st, &cut, r)
                     },
-                    _ => blend_group_lanes::<DEPTH, TRACK>(&batch, set, &px, py, st, &cut),
+                    _ => blend_group_lanes::<DEPTH, TRACK>(&batch, set, &px, py, st, &cut, r),
                 };
                 #[cfg(not(target_arch = "x86_64"))]
-                let pairs = blend_group_lanes::<DEPTH, TRACK>(&batch, set, &px, py, st, &cut);
+                let pairs = blend_group_lanes::<DEPTH, TRACK>(&batch, set, &px, py, st, &cut, r);
                 pairs_total += pairs;
                 alive[row] = st.active.iter().any(|&a| a != 0);
+            }
+            if TRACK && want.backward_state {
+                // Positions of the chunk no row reaches keep the record's initial 0.
+                let at = bins.offsets[t];
+                for (ts, &h) in batch.iter().zip(&rec.halves) {
+                    // SAFETY: intersection `at + pos1 − 1` belongs to tile `t`, which only
+                    // this task writes ([`composite`] hands each tile to exactly one task).
+                    unsafe { out.blend_halves.write(at + ts.pos1 as usize - 1, h) };
+                }
             }
         }
         // Write the tile's pixels.
@@ -899,22 +949,59 @@ pub fn bare_blend(splats: &[Splat], rows: usize, kernel: Kernel) -> u64 {
     let run = |row: usize| -> u64 {
         let py = (row % TILE_SIZE) as f32 + 0.5;
         let mut st = Group::new(GROUP);
+        // Not written without `TRACK`.
+        let mut rec = HalvesRecord {
+            halves: [0; BATCH],
+            shift: 0,
+        };
         #[cfg(target_arch = "x86_64")]
         let pairs = if avx512 {
             // SAFETY: AVX-512F was detected above.
             unsafe {
-                avx512::blend_group::<false, false>(&list, &sets, &px, py, &mut st, &Cut::GSPLAT)
+                avx512::blend_group::<false, false>(
+                    &list,
+                    &sets,
+                    &px,
+                    py,
+                    &mut st,
+                    &Cut::GSPLAT,
+                    &mut rec,
+                )
             }
         } else if avx2 {
             // SAFETY: AVX2 was detected above.
             unsafe {
-                avx2::blend_group::<false, false>(&list, &sets, &px, py, &mut st, &Cut::GSPLAT)
+                avx2::blend_group::<false, false>(
+                    &list,
+                    &sets,
+                    &px,
+                    py,
+                    &mut st,
+                    &Cut::GSPLAT,
+                    &mut rec,
+                )
             }
         } else {
-            blend_group_lanes::<false, false>(&list, &sets, &px, py, &mut st, &Cut::GSPLAT)
+            blend_group_lanes::<false, false>(
+                &list,
+                &sets,
+                &px,
+                py,
+                &mut st,
+                &Cut::GSPLAT,
+                &mut rec,
+            )
         };
         #[cfg(not(target_arch = "x86_64"))]
-        let pairs = blend_group_lanes::<false, false>(&list, &sets, &px, py, &mut st, &Cut::GSPLAT);
+        let pairs = blend_group_lanes::<false, false>(
+            &list,
+            &sets,
+            &px,
+            py,
+            &mut st,
+            &Cut::GSPLAT,
+            &mut rec,
+        );
         std::hint::black_box(&st); // the final state is the kernel's only output
         pairs
     };
@@ -930,6 +1017,10 @@ pub struct CompositeOut {
     pub expected_depth: Option<Vec<f32>>,
     pub final_t: Option<Vec<f32>>,
     pub n_contrib: Option<Vec<u32>>,
+    /// Per (tile, Gaussian) intersection, in the order of `TileBins::ids`: bit `2·r + h` set
+    /// when some pixel of half `h` (columns `8h..8h + 8`) of the tile's row `r` blended the
+    /// splat. Backward state: the backward walks exactly these row halves.
+    pub blend_halves: Option<Vec<u32>>,
 }
 
 /// Blend all tiles. Parallel over runs of tiles ([`MAX_TASKS`] at most); each tile's pixels
@@ -954,6 +1045,7 @@ pub fn composite(
         expected_depth: want.expected_depth.then(|| vec![0.0; npix]),
         final_t: want.backward_state.then(|| vec![0.0; npix]),
         n_contrib: want.backward_state.then(|| vec![0; npix]),
+        blend_halves: want.backward_state.then(|| vec![0; bins.ids.len()]),
     };
     // Runs of whole tiles, many more than threads (bands of tiles were too coarse to share
     // out at small images); each writes only its tiles' pixels.
@@ -965,6 +1057,7 @@ pub fn composite(
         expected_depth: shared(&mut out.expected_depth),
         final_t: shared(&mut out.final_t),
         n_contrib: Shared::new(out.n_contrib.as_deref_mut().unwrap_or_default()),
+        blend_halves: Shared::new(out.blend_halves.as_deref_mut().unwrap_or_default()),
     };
     let n_tiles = bins.tiles_x * bins.tiles_y;
     let per = n_tiles.div_ceil(MAX_TASKS).max(1);

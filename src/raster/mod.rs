@@ -218,6 +218,9 @@ pub struct Render {
     /// Per pixel: one past the position, in its tile's list, of the last blended splat
     /// (INRIA's `n_contrib`; 0 when nothing was blended). Backward state.
     pub n_contrib: Option<Vec<u32>>,
+    /// Per (tile, Gaussian) intersection (in the tile lists' order): which halves of which
+    /// tile rows blended the splat (`composite::CompositeOut::blend_halves`). Backward state.
+    pub blend_halves: Option<Vec<u32>>,
     pub plan: Option<RenderPlan>,
     pub report: RenderReport,
 }
@@ -297,6 +300,7 @@ pub fn render_staged(
         expected_depth: out.expected_depth,
         final_t: out.final_t,
         n_contrib: out.n_contrib,
+        blend_halves: out.blend_halves,
         plan: Some(*plan),
         report,
     };

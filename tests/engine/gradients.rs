@@ -623,6 +623,7 @@ fn backward_skips_are_bit_identical() {
             v_expected_depth: Some(&v3),
             final_t: r.final_t.as_deref().unwrap(),
             n_contrib: r.n_contrib.as_deref().unwrap(),
+            blend_halves: r.blend_halves.as_deref().unwrap(),
             depth: r.depth.as_deref(),
         };
         for geometry in [true, false] {

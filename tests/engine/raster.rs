@@ -793,8 +793,12 @@ fn kernels_agree_on_centred_and_degenerate_splats() {
     let radii = vec![[14, 14]; splats.len()];
     let p = Projected { splats, radii };
     let scene = random_scene(1, 0, 1, 0.01, 0.1);
-    let opts = RenderOptions::default();
+    let opts = RenderOptions {
+        outputs: Outputs::ALL,
+        ..Default::default()
+    };
     let plan = RenderPlan::new(&scene, &opts);
+    assert!(plan.track_backward_state && plan.accumulate_depth);
     let want = Want {
         rgb: true,
         alpha: true,
@@ -837,7 +841,58 @@ fn kernels_agree_on_centred_and_degenerate_splats() {
     for ((_, out), k) in outs.iter().zip(kernels).skip(1) {
         assert!(images(out) == images(reference), "forward, {k:?}");
         assert_eq!(out.n_contrib, reference.n_contrib, "n_contrib, {k:?}");
+        assert_eq!(
+            out.blend_halves, reference.blend_halves,
+            "blend_halves, {k:?}"
+        );
     }
+    // The record marks exactly the row halves where some pixel blended the splat: before the
+    // pixel's n_contrib, in a row the splat's radius reaches (row culling, SPEC.md §5.4; the
+    // radii here are not the conics'), σ ≥ 0 and α ≥ 1/255, with the forward's f32 arithmetic
+    // (SPEC.md §5.8); the backward walks only those.
+    let (nc, rec) = (
+        reference.n_contrib.as_deref().unwrap(),
+        reference.blend_halves.as_deref().unwrap(),
+    );
+    let max_alpha = plan.conventions.max_alpha();
+    let mut marked = 0;
+    for t in 0..bins.tiles_x * bins.tiles_y {
+        let (y0, x0) = ((t / bins.tiles_x) * 16, (t % bins.tiles_x) * 16);
+        for (pos, &gid) in bins.tile(t).iter().enumerate() {
+            let s = &p.splats[gid as usize];
+            let ry = p.radii[gid as usize][1] as f32 + 1.0;
+            let reach = ((s.mean[1] - ry).floor() as i64)..((s.mean[1] + ry).ceil() as i64 + 1);
+            assert!(plan.cull_rows);
+            let mut expected = 0u32;
+            for row in 0..16 {
+                for l in 0..16 {
+                    let (x, y) = (x0 + l, y0 + row);
+                    if x >= w
+                        || y >= h
+                        || pos as u32 >= nc[y * w + x]
+                        || !reach.contains(&(y as i64))
+                    {
+                        continue;
+                    }
+                    let (dx, dy) = (s.mean[0] - (x as f32 + 0.5), s.mean[1] - (y as f32 + 0.5));
+                    let sigma =
+                        0.5 * (s.conic[0] * dx * dx + s.conic[2] * dy * dy) + s.conic[1] * dx * dy;
+                    let alpha =
+                        (s.opacity * unseen::math::fastexp::exp(-sigma.min(30.0))).min(max_alpha);
+                    if sigma >= 0.0 && alpha >= unseen::raster::project::ALPHA_THRESHOLD {
+                        expected |= 1 << (2 * row + l / 8);
+                    }
+                }
+            }
+            assert_eq!(
+                rec[bins.offsets[t] + pos],
+                expected,
+                "tile {t}, position {pos}"
+            );
+            marked += expected.count_ones();
+        }
+    }
+    assert!(marked > 100, "{marked} row halves blended");
     let n = w * h;
     let v: Vec<f32> = (0..4 * n).map(|_| u.range(-1.0, 1.0)).collect();
     let g = PixelGrads {
@@ -847,6 +902,7 @@ fn kernels_agree_on_centred_and_degenerate_splats() {
         v_expected_depth: None,
         final_t: reference.final_t.as_deref().unwrap(),
         n_contrib: reference.n_contrib.as_deref().unwrap(),
+        blend_halves: reference.blend_halves.as_deref().unwrap(),
         depth: None,
     };
     let grads = |k| {

@@ -37,24 +37,24 @@
 //!
 //! Exact skips (all tested against walking every (row, splat) of the prefix,
 //! `backward_skips_are_bit_identical`, and against the scalar reference, which evaluates every
-//! lane of every visit it is given, `backward_simd_and_scalar_are_bit_identical`). A row visits
-//! a splat only if, with the plan's culling on:
-//! - the row is within `ry + 1` pixels of its centre (row culling, SPEC.md §5.4);
-//! - some pixel of the row within `rx + 1` pixels of its centre in x (the same argument in x)
-//!   blended it or a splat behind it (`position < n_contrib`);
-//! - the row does not miss the ellipse: [`RowBound`], the minimum of σ over the row, with
-//!   margins far above f32 rounding, must not exceed `ln(255·o)`.
-//!
+//! lane of every visit it is given, `backward_simd_and_scalar_are_bit_identical`). With the
+//! plan's culling on, a row visits a splat only in the halves (8 lanes) where the forward
+//! blended it: the forward records, per (tile, splat) intersection, the row halves where some
+//! pixel blended the splat (`CompositeOut::blend_halves`, tested against the definition in
+//! `kernels_agree_on_centred_and_degenerate_splats`). A lane blends in the forward exactly
+//! when it is valid in the backward: `position < n_contrib` means the pixel was still
+//! blending there, and σ and α are recomputed with the same bits, so `σ ≥ 0` and
+//! `α ≥ 1/255` decide alike (the splat where the forward stopped lies at or past
+//! `n_contrib`). Every other (row, half) would add only +0.0.
+
 //! In a visit, a splat that blends no pixel changes nothing (its contributions are +0.0,
 //! accumulators are never −0.0, no state moves): the AVX2 kernel skips the rest of the
-//! visit, and skips evaluating a half row (8 lanes) beyond the splat's x reach or without
-//! a blending pixel. The AVX-512F kernel evaluates the whole row when either half is asked
+//! visit, and skips evaluating a half row (8 lanes) the record does not ask for. The AVX-512F kernel evaluates the whole row when either half is asked
 //! for, masks the lanes of a half not asked for out of `valid` (so they contribute +0.0 and
 //! move no state, exactly as the lanes AVX2 does not evaluate), and does not branch on a
 //! visit where no lane blends: it runs with an empty mask (a branch there mispredicts on
 //! real tile lists, SPEC.md §5.8).
 
-use crate::math::round::{ceil, floor};
 use crate::raster::composite::MAX_TASKS;
 use crate::raster::composite::{
     EXPECTED_DEPTH_EPS, SIGMA_CLAMP, SplatAlpha, splat_alpha, splat_rows,
@@ -114,6 +114,9 @@ pub struct PixelGrads<'a> {
     pub v_expected_depth: Option<&'a [f32]>,
     pub final_t: &'a [f32],
     pub n_contrib: &'a [u32],
+    /// The forward's record of which row halves blended each (tile, splat) intersection
+    /// (`CompositeOut::blend_halves`): with culling, the rows and halves walked.
+    pub blend_halves: &'a [u32],
     /// Forward D, needed only with `v_expected_depth`.
     pub depth: Option<&'a [f32]>,
 }
@@ -196,108 +199,17 @@ pub(crate) fn sum8(v: &[f32; HALF]) -> f32 {
     m[0] + m[1]
 }
 
-/// The columns `[lo, hi)` of the tile starting at image column `x0` that splat `gid` can
-/// reach: those within `rx + 1` pixels of its centre — the x mirror of [`splat_rows`], exact
-/// by the same argument (SPEC.md §5.4).
-fn splat_cols(p: &Projected, gid: usize, x0: usize) -> (usize, usize) {
-    let mx = p.splats[gid].mean[0];
-    let rx = p.radii[gid][0] as f32 + 1.0;
-    let lo = (floor(mx - rx) - x0 as f32).max(0.0);
-    let hi = (ceil(mx + rx) - x0 as f32 + 1.0).min(LANES as f32);
-    (lo as usize, if hi > lo { hi as usize } else { lo as usize })
-}
+/// Bits `2·row` of a per-(row, half) mask.
+const EVEN_BITS: u32 = 0x5555_5555;
 
-/// Bit `h` set when columns `[lo, hi)` meet half `h` of the row (lanes `8h..8h+8`).
-fn halves(lo: usize, hi: usize) -> u32 {
-    (0..LANES / HALF)
-        .filter(|h| lo < (h + 1) * HALF && hi > h * HALF)
-        .fold(0, |m, h| m | 1 << h)
-}
-
-/// A conservative test of which halves of a row a splat may blend, from the row alone. At
-/// row offset `dy`, `σ(dx) = σ_min + ½·A·(dx − dx*)²` with `σ_min = ½·dy²·(C − B²/A)` and
-/// `dx* = −B·dy/A` (the conic is positive definite), and a pixel blends only if
-/// `σ ≤ ln(255·o)` (else α < 1/255). Evaluated in f64 with margins far above the rounding of
-/// σ in f32 (a few ulp of `A·dx² + C·dy²`, dx bounded over the tile), of `dx = mean − p` and
-/// of `exp`, so a half it excludes is one where the kernel finds no blending lane (tested
-/// against walking every visit, `backward_skips_are_bit_identical`).
-struct RowBound {
-    a: f64,
-    /// `B/A`.
-    b_a: f64,
-    /// `½·(C − B²/A)`.
-    coef: f64,
-    /// `ln(255·o)` plus a margin.
-    limit: f64,
-    a_dx2: f64,
-    c: f64,
-    /// Centre x relative to the tile's first column.
-    mx: f64,
-}
-
-/// Slack, in pixels, on the extent of a row's blendable interval (covers the rounding of
-/// `dx` in f32 many times over).
-const ROW_SLACK: f64 = 0.01;
-
-impl RowBound {
-    fn new(s: &Splat, x0: usize) -> Option<RowBound> {
-        let [a, b, c] = s.conic.map(f64::from);
-        if !(a > 0.0 && c > 0.0 && b.is_finite() && a.is_finite() && c.is_finite()) {
-            return None;
-        }
-        let mx = f64::from(s.mean[0]) - x0 as f64;
-        let dx = (mx - 0.5).abs().max((mx - LANES as f64 + 0.5).abs()) + 1.0;
-        Some(RowBound {
-            a,
-            b_a: b / a,
-            coef: 0.5 * (c - b * b / a),
-            limit: (255.0 * f64::from(s.opacity)).ln() + 1e-3,
-            a_dx2: a * dx * dx,
-            c,
-            mx,
-        })
-    }
-
-    /// The halves (bit `h`: lanes `8h..8h+8`) of the row at offset `dy` (as the kernel
-    /// computes it) where some pixel may blend.
-    /// Branch-free (a NaN room keeps both halves, a negative one none: selects at the
-    /// end), so that [`RowBound::halves_rows`] vectorizes over rows.
-    #[inline(always)]
-    fn halves(&self, dy: f32) -> u32 {
-        let dy = f64::from(dy);
-        let dy2 = dy * dy;
-        let smin = self.coef * dy2;
-        let room = self.limit + 1e-6 * (self.a_dx2 + self.c * dy2 + smin.abs()) - smin;
-        // Pixel centres p with |p − (mean + B·dy/A)| ≤ w may blend, w = √(2·room/A) +
-        // ROW_SLACK. Half h holds such a p iff its pixel centres [first, last] lie within w
-        // of the centre, i.e. d = max(first − centre, centre − last) − ROW_SLACK is ≤ 0 or
-        // A·d² ≤ 2·room: the same test without a division or a square root.
-        let centre = self.mx + self.b_a * dy;
-        let two_room = 2.0 * room;
-        let mut m = 0;
-        for h in 0..LANES / HALF {
-            // Pixel centres of half h: (8h + 0.5) ..= (8h + 7.5).
-            let (first, last) = ((h * HALF) as f64 + 0.5, ((h + 1) * HALF) as f64 - 0.5);
-            let d = (first - centre).max(centre - last) - ROW_SLACK;
-            // A NaN centre keeps the half (conservative). No branch: it mispredicts.
-            let keep = d.is_nan() | (d <= 0.0) | (self.a * d * d <= two_room);
-            m |= u32::from(keep) << h;
-        }
-        let m = if room < 0.0 { 0 } else { m };
-        if room.is_nan() { 0b11 } else { m }
-    }
-
-    /// [`RowBound::halves`] of every row of a tile starting at image row `y0`, for a splat
-    /// centred at row coordinate `my` (row `r` at `dy = my − (y0 + r + 0.5)`, as the kernel
-    /// computes it): one fixed-length loop the compiler vectorizes.
-    #[inline(always)]
-    fn halves_rows(&self, my: f32, y0: usize) -> [u32; TILE_SIZE] {
-        let mut out = [0u32; TILE_SIZE];
-        for (r, o) in out.iter_mut().enumerate() {
-            *o = self.halves(my - ((y0 + r) as f32 + 0.5));
-        }
-        out
-    }
+/// Bit `row` of a 16-bit row mask moved to bit `2·row`.
+#[inline(always)]
+fn spread_rows(m: u32) -> u32 {
+    let mut x = m & 0xffff;
+    x = (x | x << 8) & 0x00ff_00ff;
+    x = (x | x << 4) & 0x0f0f_0f0f;
+    x = (x | x << 2) & 0x3333_3333;
+    (x | x << 1) & EVEN_BITS
 }
 
 /// A row's visit: the entry index, with the halves to evaluate in the top two bits.
@@ -526,7 +438,7 @@ mod avx2 {
             // First σ, α and the blend mask of both halves; a splat that blends no pixel of
             // the row (or of a half) changes nothing there (its contributions are +0.0 and no
             // state moves), so skipping it is exact — and common, splats being narrower than
-            // a tile. A half beyond the splat's x reach is not even evaluated.
+            // a tile. A half the record does not ask for is not even evaluated.
             let (mut dxs, mut es, mut as_, mut alphas, mut valids) =
                 ([zero; 2], [zero; 2], [zero; 2], [zero; 2], [zero; 2]);
             for h in 0..2 {
@@ -874,9 +786,6 @@ fn tiles_with<const ISA: u8, const GEOMETRY: bool>(
         gids,
     } = scratch;
     let mut states = [RowState::default(); TILE_SIZE];
-    // `range_n[a][b][row]`: the largest n of columns [a, b) of the row (rows contiguous, so
-    // that a splat's 16 rows are one load).
-    let mut range_n = [[[0u32; TILE_SIZE]; LANES + 1]; LANES];
     for t in tiles {
         let (ty, tx) = (t / bins.tiles_x, t % bins.tiles_x);
         let y0 = ty * TILE_SIZE;
@@ -905,21 +814,13 @@ fn tiles_with<const ISA: u8, const GEOMETRY: bool>(
                 st.n[l] = g.n_contrib[i];
             }
             row_n[row] = st.n.iter().copied().max().unwrap_or(0);
-            // The largest n of every column range [a, b) of the row.
-            for (a, r) in range_n.iter_mut().enumerate() {
-                let mut m = 0;
-                r[a][row] = 0;
-                for b in a..LANES {
-                    m = m.max(st.n[b]);
-                    r[b + 1][row] = m;
-                }
-            }
         }
         // Only the prefix some pixel blended is needed, and of it only the splats some row
         // walks: those that can reach the row and lie before its last blended splat. Each
         // row gets the indices of its entries (ascending, walked in reverse).
         let max_n = row_n.iter().copied().max().unwrap_or(0) as usize;
         let prefix = &ids[..max_n];
+        let off = bins.offsets[t];
         list.clear();
         gids.clear();
         for r in rows_idx.iter_mut() {
@@ -940,61 +841,43 @@ fn tiles_with<const ISA: u8, const GEOMETRY: bool>(
                     _mm_prefetch::<_MM_HINT_T0>(p.radii.as_ptr().add(a) as *const i8);
                 }
             }
-            let s = &p.splats[gid as usize];
             let (lo, hi) = splat_rows(p, gid as usize, y0, rows, cull_rows);
-            // With culling, a visit is also skipped when no pixel of the row within the
-            // splat's x reach gets as far as this splat, or when the row misses the ellipse.
-            let (clo, chi) = if cull_rows {
-                splat_cols(p, gid as usize, x0)
-            } else {
-                (0, LANES)
-            };
-            let bound = if cull_rows {
-                RowBound::new(s, x0)
-            } else {
-                None
-            };
-            let i = list.len() as u32;
-            debug_assert!(i <= VISIT_INDEX);
-            let reach = halves(clo, chi);
-            let row_halves = bound
-                .as_ref()
-                .map_or([0b11; TILE_SIZE], |b| b.halves_rows(s.mean[1], y0));
             // Per row, branch-free over all 16 rows: whether the visit is counted (before the
             // row's last blended splat: the work unit counts every such visit, skipped or not,
-            // the same count for every kernel and plan) and whether it is kept (a pixel of
-            // the row within the splat's x reach gets as far as this splat, and the row may
-            // meet the ellipse in a half the splat reaches).
-            let n_rows = if !cull_rows {
-                row_n
-            } else if clo < chi {
-                range_n[clo][chi]
-            } else {
-                [0; TILE_SIZE]
-            };
+            // the same count for every kernel and plan).
             let pos32 = pos as u32;
-            let (mut counted, mut keep) = (0u64, 0u32);
-            for row in 0..TILE_SIZE {
-                let within = (row as u32 >= lo) & ((row as u32) < hi);
-                counted += u64::from(within & (pos32 < row_n[row]));
-                let kept = within & (pos32 < n_rows[row]) & (row_halves[row] & reach != 0);
-                keep |= u32::from(kept) << row;
+            let (mut counted, mut within_n) = (0u64, 0u32);
+            for (row, &n) in row_n.iter().enumerate() {
+                let within = (row as u32 >= lo) & ((row as u32) < hi) & (pos32 < n);
+                counted += u64::from(within);
+                within_n |= u32::from(within) << row;
             }
             out.pairs += counted * LANES as u64;
+            // The visits kept, as (row, halves) pairs in bits `2·row + h`: with culling the
+            // row halves where the forward blended this splat (a lane the forward did not
+            // blend contributes +0.0 and moves no state), else every counted row, whole.
+            let halves = if cull_rows {
+                g.blend_halves[off + pos]
+            } else {
+                spread_rows(within_n) * 0b11
+            };
+            let mut keep = (halves | halves >> 1) & EVEN_BITS;
+            if keep == 0 {
+                continue;
+            }
             out.walked += u64::from(keep.count_ones()) * LANES as u64;
-            let walked = keep != 0;
+            let i = list.len() as u32;
+            debug_assert!(i <= VISIT_INDEX);
             while keep != 0 {
-                let row = keep.trailing_zeros() as usize;
+                let b = keep.trailing_zeros();
                 keep &= keep - 1;
-                rows_idx[row].push(i | (row_halves[row] & reach) << 30);
+                rows_idx[b as usize / 2].push(i | (halves >> b & 0b11) << 30);
             }
-            if walked {
-                list.push(Entry {
-                    s: *s,
-                    pos: pos as u32,
-                });
-                gids.push(gid);
-            }
+            list.push(Entry {
+                s: p.splats[gid as usize],
+                pos: pos32,
+            });
+            gids.push(gid);
         }
         acc.clear();
         acc.resize(list.len(), [[0.0; HALF]; NC]);

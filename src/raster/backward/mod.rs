@@ -176,7 +176,9 @@ fn blend_backward(
         }
     }
     let r = &fwd.render;
-    let (Some(final_t), Some(n_contrib)) = (&r.final_t, &r.n_contrib) else {
+    let (Some(final_t), Some(n_contrib), Some(blend_halves)) =
+        (&r.final_t, &r.n_contrib, &r.blend_halves)
+    else {
         return Err(Error::invalid(
             "the forward render lacks the backward state",
         ));
@@ -194,6 +196,7 @@ fn blend_backward(
         v_expected_depth: v.expected_depth.as_deref(),
         final_t,
         n_contrib,
+        blend_halves,
         depth,
     };
     Ok(composite::composite_backward(
