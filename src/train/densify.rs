@@ -22,6 +22,8 @@
 use crate::error::Result;
 use crate::gaussian::Gaussians;
 use crate::math::fastexp::{exp, ln, sigmoid};
+use crate::raster::backward::composite::SplatGrad;
+use crate::raster::backward::project::mean2d_ndc;
 use crate::raster::project::quat_to_rotmat;
 use crate::rng::Uniform;
 use crate::train::adam::Adam;
@@ -98,15 +100,63 @@ impl DensifyStats {
             .zip(means2d_ndc.par_chunks(CHUNK).zip(radii.par_chunks(CHUNK)))
             .for_each(|(((acc, count), max_r), (m2d, radii))| {
                 for i in 0..acc.len() {
-                    let r = radii[i][0].max(radii[i][1]);
-                    if r > 0 {
-                        let [gx, gy] = m2d[i];
-                        acc[i] += (gx * gx + gy * gy).sqrt();
-                        count[i] += 1;
-                        max_r[i] = max_r[i].max(r as f32);
-                    }
+                    add_one(&mut acc[i], &mut count[i], &mut max_r[i], m2d[i], radii[i]);
                 }
             });
+    }
+
+    /// The statistics in chunks of `chunk` Gaussians (the last may be shorter), to be
+    /// added to chunk by chunk ([`StatsChunk::add_view`]).
+    pub(crate) fn chunks_mut(&mut self, chunk: usize) -> Vec<StatsChunk<'_>> {
+        self.grad_accum
+            .chunks_mut(chunk)
+            .zip(self.count.chunks_mut(chunk))
+            .zip(self.max_radius.chunks_mut(chunk))
+            .map(|((grad_accum, count), max_radius)| StatsChunk {
+                grad_accum,
+                count,
+                max_radius,
+            })
+            .collect()
+    }
+}
+
+/// One Gaussian's statistics after one view: the single definition of what a view adds.
+#[inline(always)]
+fn add_one(acc: &mut f32, count: &mut u32, max_r: &mut f32, ndc: [f32; 2], radii: [i32; 2]) {
+    let r = radii[0].max(radii[1]);
+    if r > 0 {
+        let [gx, gy] = ndc;
+        *acc += (gx * gx + gy * gy).sqrt();
+        *count += 1;
+        *max_r = max_r.max(r as f32);
+    }
+}
+
+/// A chunk of [`DensifyStats`] ([`DensifyStats::chunks_mut`]), added to where the projection
+/// backward hands over the chunk's gradients: the same additions as
+/// [`DensifyStats::add_view`], without a pass of their own.
+pub(crate) struct StatsChunk<'a> {
+    grad_accum: &'a mut [f32],
+    count: &'a mut [u32],
+    max_radius: &'a mut [f32],
+}
+
+impl StatsChunk<'_> {
+    /// Add one view from the chunk's splat gradients (screen-space means in pixels, as
+    /// [`crate::raster::backward::project::mean2d_ndc`] converts them for
+    /// [`DensifyStats::add_view`]) and radii, on a `width × height` camera.
+    pub(crate) fn add_view(&mut self, splats: &[SplatGrad], radii: &[[i32; 2]], size: [u32; 2]) {
+        assert!(splats.len() == self.count.len() && radii.len() == self.count.len());
+        for i in 0..self.count.len() {
+            add_one(
+                &mut self.grad_accum[i],
+                &mut self.count[i],
+                &mut self.max_radius[i],
+                mean2d_ndc(splats[i].mean2d, size[0], size[1]),
+                radii[i],
+            );
+        }
     }
 }
 

@@ -14,17 +14,39 @@ use crate::error::{Error, Result};
 use crate::gaussian::{Gaussians, Param};
 use crate::math::fastexp::ln;
 use crate::math::sh::{SH_C0, num_coeffs};
+use crate::raster::backward::project::{CHUNK, ChunkGrads, GradSink, ParamView};
 use crate::raster::backward::{
     GradGroups, Gradients, ImageGrads, backward_apply, backward_into, render_for_backward,
 };
 use crate::raster::{Conventions, Outputs, RenderOptions};
 use crate::rng::{Uniform, stage_seed};
-use crate::train::adam::{Adam, AdamConfig, ExpSchedule};
+use crate::train::adam::{Adam, AdamChunk, AdamConfig, ExpSchedule};
 use crate::train::densify::{
-    DensifyConfig, DensifyReport, DensifyStats, Normals, densify_and_prune, reset_opacity,
+    DensifyConfig, DensifyReport, DensifyStats, Normals, StatsChunk, densify_and_prune,
+    reset_opacity,
 };
 use crate::train::knn::mean_sq_dist_3nn;
 use crate::train::loss::{LossInput, LossWeights, image_loss, psnr};
+
+/// A chunk of the fused step: Adam's update of the chunk and, on iterations that gather
+/// them, its densification statistics (a `size[0] × size[1]` view).
+struct TrainChunk<'a> {
+    adam: AdamChunk<'a>,
+    stats: Option<StatsChunk<'a>>,
+    size: [u32; 2],
+}
+
+impl GradSink for TrainChunk<'_> {
+    fn params(&self) -> ParamView<'_> {
+        self.adam.params()
+    }
+    fn take(&mut self, grads: &ChunkGrads) {
+        self.adam.take(grads);
+        if let Some(s) = &mut self.stats {
+            s.add_view(grads.splats, grads.radii, self.size);
+        }
+    }
+}
 
 /// Learning rates (INRIA `OptimizationParams`; opacity as in the 2024 update).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -482,7 +504,21 @@ impl<'a> Trainer<'a> {
                     steps[i] = Some(self.adam.begin(p, lrs[i]));
                 }
             }
-            let mut chunks = self.adam.fused_chunks(&mut self.gaussians, steps);
+            // The densification statistics are added where each chunk's gradients are
+            // handed over, too: the same additions as `add_view`, without a pass of their own.
+            let stats_on = self.config.densify.is_some() && plan.stats;
+            let mut stats = stats_on.then(|| self.stats.chunks_mut(CHUNK).into_iter());
+            let size = [cam.width, cam.height];
+            let mut chunks: Vec<TrainChunk> = self
+                .adam
+                .fused_chunks(&mut self.gaussians, steps)
+                .into_iter()
+                .map(|adam| TrainChunk {
+                    adam,
+                    stats: stats.as_mut().and_then(Iterator::next),
+                    size,
+                })
+                .collect();
             backward_apply(cam, &opts, &fwd, &v, &groups, &mut chunks, &mut grads)?
         } else {
             backward_into(&self.gaussians, cam, &opts, &fwd, &v, &groups, &mut grads)?
@@ -494,8 +530,10 @@ impl<'a> Trainer<'a> {
         if let Some(d) = self.config.densify
             && plan.stats
         {
-            self.stats
-                .add_view(&grads.means2d_ndc, &fwd.projected.radii);
+            if !fused {
+                self.stats
+                    .add_view(&grads.means2d_ndc, &fwd.projected.radii);
+            }
             if plan.densify {
                 let world_prune = it > d.opacity_reset_interval;
                 densified = Some(densify_and_prune(

@@ -514,10 +514,12 @@ fn training_is_bit_identical_across_thread_counts() {
     assert!(a == b, "PLY bytes differ between 1 and 2 threads");
 }
 
-/// Adam fused into the projection backward (chunk by chunk, no gradient arrays) gives the
-/// bits of the reference form (gradient arrays, then one Adam step per group) — scene and
-/// both moments — over 300 iterations with two densifications and an opacity reset (where
-/// the fused path steps aside), with every group training and with two groups frozen.
+/// Adam and the densification statistics fused into the projection backward (chunk by
+/// chunk, no gradient arrays, no pass of their own) give the bits of the reference form
+/// (gradient arrays, then one Adam step per group and `DensifyStats::add_view`) — scene,
+/// both moments and the statistics — over 300 iterations with two densifications and an
+/// opacity reset (where the fused path steps aside), with every group training and with two
+/// groups frozen.
 #[test]
 fn fused_adam_keeps_the_bits_of_separate_steps() {
     let d = lounge(2);
@@ -535,7 +537,17 @@ fn fused_adam_keeps_the_bits_of_separate_steps() {
             };
             let mut t = Trainer::new(&d, cfg).unwrap();
             t.fused_adam = fused;
+            // The statistics just before the last densification (which starts them afresh).
+            let mut stats = Vec::new();
             while t.iteration < 300 {
+                if t.iteration == 299 {
+                    let s = &t.stats;
+                    assert!(s.count.iter().any(|&c| c > 0), "statistics gathered");
+                    stats = (s.grad_accum.iter().chain(&s.max_radius))
+                        .map(|v| v.to_bits())
+                        .chain(s.count.iter().copied())
+                        .collect();
+                }
                 t.step().unwrap();
             }
             (
@@ -543,6 +555,7 @@ fn fused_adam_keeps_the_bits_of_separate_steps() {
                 bits(&t.adam.m),
                 bits(&t.adam.v),
                 t.adam.steps,
+                stats,
             )
         };
         let (fused, separate) = (run(true), run(false));
@@ -559,6 +572,10 @@ fn fused_adam_keeps_the_bits_of_separate_steps() {
             "second moments differ (frozen {frozen:?})"
         );
         assert_eq!(fused.3, separate.3, "step counters (frozen {frozen:?})");
+        assert!(
+            fused.4 == separate.4,
+            "densification statistics differ (frozen {frozen:?})"
+        );
     }
 }
 

@@ -115,9 +115,9 @@ pub fn backward_into(
 
 /// [`backward_into`] whose parameter gradients go chunk by chunk to `sinks` (the scene's
 /// chunks of [`project::CHUNK`] Gaussians, which also hold the parameters the projection
-/// backward reads: [`project::project_backward_apply`]) instead of into arrays; `grads`
-/// gets only the screen-space mean gradients and the background's. The same gradients,
-/// bit for bit.
+/// backward reads: [`project::project_backward_apply`]) instead of into arrays, each chunk
+/// with its splat gradients (the screen-space means: [`project::ChunkGrads::splats`]);
+/// `grads` gets only the background's. The same gradients, bit for bit.
 #[allow(clippy::too_many_arguments)]
 pub fn backward_apply<S: project::GradSink>(
     cam: &Camera,
@@ -130,7 +130,6 @@ pub fn backward_apply<S: project::GradSink>(
 ) -> Result<u64> {
     let cg = blend_backward(cam, opts, fwd, v, groups)?;
     let camf = CameraF32::new(cam);
-    project::screen_grads(&camf, &cg.splats, grads);
     grads.background = if groups.background {
         cg.background
     } else {

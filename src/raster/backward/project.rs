@@ -134,6 +134,10 @@ impl<'a> ParamView<'a> {
 /// The gradients of one chunk of Gaussians, laid out like their parameters (entry `k` is
 /// the chunk's Gaussian `k`), as [`project_backward_apply`] hands them over.
 pub struct ChunkGrads<'a> {
+    /// The blend backward's gradients of the chunk's splats (screen-space means among them)
+    /// and the forward's radii (`(0, 0)`: culled), entry `k` for Gaussian `k`.
+    pub splats: &'a [SplatGrad],
+    pub radii: &'a [[i32; 2]],
     pub means: &'a [[f32; 3]],
     pub log_scales: &'a [[f32; 3]],
     pub quats: &'a [[f32; 4]],
@@ -817,12 +821,18 @@ pub(crate) fn screen_grads(cam: &CameraF32, splat_grads: &[SplatGrad], out: &mut
     out.means2d.clear();
     out.means2d.extend(splat_grads.iter().map(|s| s.mean2d));
     out.means2d_ndc.clear();
-    out.means2d_ndc.extend(splat_grads.iter().map(|s| {
-        [
-            s.mean2d[0] * 0.5 * cam.width as f32,
-            s.mean2d[1] * 0.5 * cam.height as f32,
-        ]
-    }));
+    out.means2d_ndc.extend(
+        splat_grads
+            .iter()
+            .map(|s| mean2d_ndc(s.mean2d, cam.width, cam.height)),
+    );
+}
+
+/// A screen-space mean gradient in pixels, in INRIA's NDC units (× (W/2, H/2)): what
+/// densification accumulates.
+#[inline]
+pub fn mean2d_ndc(g: [f32; 2], width: u32, height: u32) -> [f32; 2] {
+    [g[0] * 0.5 * width as f32, g[1] * 0.5 * height as f32]
 }
 
 /// [`backward_range`] in the lane width `kernel` chooses (sixteen Gaussians per AVX-512F
@@ -918,6 +928,8 @@ pub fn project_backward_apply<S: GradSink>(
                 &mut o,
             );
             let grads = ChunkGrads {
+                splats: &splat_grads[first..first + n],
+                radii: &fwd.radii[first..first + n],
                 means: &buf.means,
                 log_scales: &buf.log_scales,
                 quats: &buf.quats,
