@@ -7,7 +7,7 @@
 //! |---|---|---|
 //! | depth accumulation | no depth output requested | depth never feeds colour |
 //! | SH bands above the highest non-zero band | always | `0·Y` adds ±0, and `+0.5` erases the sign of a zero |
-//! | per-pixel `final_t` / `n_contrib` bookkeeping | not requested (inference) | bookkeeping only |
+//! | per-pixel `final_t` / `n_contrib`, per-intersection `blend_halves` bookkeeping | not requested (inference) | bookkeeping only |
 //! | background term `T·bg` | background is exactly black | `C + T·0 = C` for `C ≥ 0` |
 //! | rows of a tile outside a Gaussian's radius + 1 px | unless a lower alpha threshold lets the 3.33σ cap bind | `α < 1/255` there (SPEC.md §5.4) |
 
@@ -23,7 +23,8 @@ pub struct Outputs {
     pub depth: bool,
     /// Expected depth `ED = D / max(alpha, 1e-10)`.
     pub expected_depth: bool,
-    /// Per-pixel final transmittance and `n_contrib`, as the backward pass needs.
+    /// Per-pixel final transmittance and `n_contrib`, and per (tile, Gaussian) intersection
+    /// the row halves that blended it (`blend_halves`), as the backward pass needs.
     pub backward_state: bool,
 }
 

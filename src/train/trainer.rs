@@ -507,6 +507,8 @@ impl<'a> Trainer<'a> {
             // The densification statistics are added where each chunk's gradients are
             // handed over, too: the same additions as `add_view`, without a pass of their own.
             let stats_on = self.config.densify.is_some() && plan.stats;
+            // Each chunk of the scene takes the chunk of statistics beside it.
+            assert!(!stats_on || self.stats.count.len() == self.gaussians.len());
             let mut stats = stats_on.then(|| self.stats.chunks_mut(CHUNK).into_iter());
             let size = [cam.width, cam.height];
             let mut chunks: Vec<TrainChunk> = self

@@ -46,11 +46,11 @@
 //! blending there, and σ and α are recomputed with the same bits, so `σ ≥ 0` and
 //! `α ≥ 1/255` decide alike (the splat where the forward stopped lies at or past
 //! `n_contrib`). Every other (row, half) would add only +0.0.
-
+//!
 //! In a visit, a splat that blends no pixel changes nothing (its contributions are +0.0,
 //! accumulators are never −0.0, no state moves): the AVX2 kernel skips the rest of the
-//! visit, and skips evaluating a half row (8 lanes) the record does not ask for. The AVX-512F kernel evaluates the whole row when either half is asked
-//! for, masks the lanes of a half not asked for out of `valid` (so they contribute +0.0 and
+//! visit, and skips evaluating a half row (8 lanes) the record does not ask for. The
+//! AVX-512F kernel evaluates the whole row when either half is asked for, masks the lanes of a half not asked for out of `valid` (so they contribute +0.0 and
 //! move no state, exactly as the lanes AVX2 does not evaluate), and does not branch on a
 //! visit where no lane blends: it runs with an empty mask (a branch there mispredicts on
 //! real tile lists, SPEC.md §5.8).
