@@ -257,6 +257,15 @@ struct HalvesRecord {
     shift: u32,
 }
 
+impl HalvesRecord {
+    fn new() -> Self {
+        HalvesRecord {
+            halves: [0; BATCH],
+            shift: 0,
+        }
+    }
+}
+
 /// Blend state of a group of pixels (one tile row).
 #[derive(Clone, Copy)]
 struct Group {
@@ -718,10 +727,7 @@ fn tiles_impl<const DEPTH: bool, const TRACK: bool, const ISA: u8>(
     let mut masks = [0u32; BATCH];
     let mut sets: RowSets = [[0; WORDS]; TILE_SIZE];
     let mut groups = [Group::new(0); TILE_SIZE];
-    let mut rec = HalvesRecord {
-        halves: [0; BATCH],
-        shift: 0,
-    };
+    let mut rec = HalvesRecord::new();
     for t in run {
         let (ty, tx) = (t / bins.tiles_x, t % bins.tiles_x);
         let (y0, x0) = (ty * TILE_SIZE, tx * TILE_SIZE);
@@ -946,66 +952,32 @@ pub fn bare_blend(splats: &[Splat], rows: usize, kernel: Kernel) -> u64 {
     }
     let px: [f32; GROUP] = std::array::from_fn(|l| l as f32 + 0.5);
     let (avx512, avx2) = (kernel.avx512(), kernel.avx2());
-    let run = |row: usize| -> u64 {
+    let cut = &Cut::GSPLAT;
+    // `rec`: one per task, never written without `TRACK`.
+    let run = |rec: &mut HalvesRecord, row: usize| -> u64 {
         let py = (row % TILE_SIZE) as f32 + 0.5;
         let mut st = Group::new(GROUP);
-        // Not written without `TRACK`.
-        let mut rec = HalvesRecord {
-            halves: [0; BATCH],
-            shift: 0,
-        };
+        let (l, s) = (&list, &sets);
         #[cfg(target_arch = "x86_64")]
         let pairs = if avx512 {
             // SAFETY: AVX-512F was detected above.
-            unsafe {
-                avx512::blend_group::<false, false>(
-                    &list,
-                    &sets,
-                    &px,
-                    py,
-                    &mut st,
-                    &Cut::GSPLAT,
-                    &mut rec,
-                )
-            }
+            unsafe { avx512::blend_group::<false, false>(l, s, &px, py, &mut st, cut, rec) }
         } else if avx2 {
             // SAFETY: AVX2 was detected above.
-            unsafe {
-                avx2::blend_group::<false, false>(
-                    &list,
-                    &sets,
-                    &px,
-                    py,
-                    &mut st,
-                    &Cut::GSPLAT,
-                    &mut rec,
-                )
-            }
+            unsafe { avx2::blend_group::<false, false>(l, s, &px, py, &mut st, cut, rec) }
         } else {
-            blend_group_lanes::<false, false>(
-                &list,
-                &sets,
-                &px,
-                py,
-                &mut st,
-                &Cut::GSPLAT,
-                &mut rec,
-            )
+            blend_group_lanes::<false, false>(l, s, &px, py, &mut st, cut, rec)
         };
         #[cfg(not(target_arch = "x86_64"))]
-        let pairs = blend_group_lanes::<false, false>(
-            &list,
-            &sets,
-            &px,
-            py,
-            &mut st,
-            &Cut::GSPLAT,
-            &mut rec,
-        );
+        let pairs = blend_group_lanes::<false, false>(l, s, &px, py, &mut st, cut, rec);
         std::hint::black_box(&st); // the final state is the kernel's only output
         pairs
     };
-    (0..rows).into_par_iter().with_min_len(64).map(run).sum()
+    (0..rows)
+        .into_par_iter()
+        .with_min_len(64)
+        .map_init(HalvesRecord::new, run)
+        .sum()
 }
 
 /// Final images of a composite, each present only when requested.
