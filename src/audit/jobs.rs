@@ -87,6 +87,45 @@ pub fn jobs(cfg: &AuditConfig) -> Vec<Job> {
     v
 }
 
+/// The jobs of [`jobs`] that a sequential run still computes beside `pool`: a run job whose
+/// sample is pooled as this binary would compute it ([`JobResult::reproduces`]) is not
+/// run again, and neither is the original scene of a seed none of whose runs is left.
+/// Dose grids and new variants on seeds already pooled then compute only what is new.
+pub fn pending(cfg: &AuditConfig, pool: &super::Samples) -> Vec<Job> {
+    let done = |generator: GeneratorKind, variant: Variant, seed: u32| {
+        let (g, v) = (generator.name(), variant.name());
+        pool.samples.iter().any(|r| {
+            (r.generator.as_str(), r.variant.as_str(), r.seed) == (g.as_str(), v, seed)
+                && cfg
+                    .config_digest(generator, variant)
+                    .is_ok_and(|d| r.reproduces(&d))
+        })
+    };
+    let runs: Vec<Job> = jobs(cfg)
+        .into_iter()
+        .filter(|j| match *j {
+            Job::Run {
+                generator,
+                variant,
+                seed,
+            } => !done(generator, variant, seed),
+            _ => false,
+        })
+        .collect();
+    let needs_original = |s: u32| {
+        runs.iter()
+            .any(|j| matches!(*j, Job::Run { seed, .. } if seed == s))
+    };
+    let mut out: Vec<Job> = cfg
+        .seeds
+        .clone()
+        .filter(|&s| needs_original(s))
+        .map(|seed| Job::Original { seed })
+        .collect();
+    out.extend(runs);
+    out
+}
+
 /// The measured outcome of one pipeline job: one sample of the audit.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct JobResult {
@@ -130,6 +169,20 @@ pub struct JobResult {
     /// candidates. `--collect` takes a result only of the audit's own family.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub candidates: Option<super::family::Family>,
+}
+
+impl JobResult {
+    /// Whether this sample is what this binary computes for its job under the pipeline
+    /// configuration digest `config`: the same numerics revision, crate version and
+    /// configuration (the determinism contract then makes the run's bits the same), with
+    /// every record a run now makes (the final scene's digest, the diagnostics).
+    pub fn reproduces(&self, config: &str) -> bool {
+        self.numerics_revision == crate::version::NUMERICS_REVISION
+            && self.crate_version == env!("CARGO_PKG_VERSION")
+            && self.config == config
+            && !self.scene_sha256.is_empty()
+            && self.diagnostics.is_some()
+    }
 }
 
 /// One step of a job: what [`sharing`] counts.

@@ -1,11 +1,12 @@
 //! The audit's report: gathering the samples, `audit.json`, `audit.md` and its plot.
 
-use super::jobs::{JobResult, jobs, sharing};
+use super::jobs::{Job, JobResult, jobs, pending, sharing};
 use super::samples::{self, Samples};
 use super::stats;
 use super::verdicts::{Metric, Verdict, mean_std, metrics_only, verdicts};
 use super::{Audit, AuditConfig, GeneratorKind, Variant};
 use crate::error::{Error, Result};
+use crate::pipeline::Event;
 use crate::pipeline::Level;
 use crate::pipeline::evaluate::Row;
 use std::path::PathBuf;
@@ -71,7 +72,8 @@ impl Audit<'_> {
         Ok(pool)
     }
 
-    /// Run every job of `cfg` that is not done (each resumes its own folder), pool the
+    /// Run every job of `cfg` that is not done — neither pooled as this binary would compute
+    /// it ([`pending`]) nor finished in its folder (each resumes its own) — pool the
     /// results with the samples already in `dir` and in `merge` files, then write
     /// `DIR/samples.json`, `DIR/audit.json`, `DIR/audit.md` and `DIR/inconsistency.svg`.
     pub fn run(&self, merge: &[PathBuf]) -> Result<Report> {
@@ -79,8 +81,16 @@ impl Audit<'_> {
         self.check_inputs()?;
         let pool = self.gather(merge)?;
         crate::io::create_dir_all(self.dir)?;
+        let todo = pending(self.cfg, &pool);
+        let runs = |v: &[Job]| v.iter().filter(|j| matches!(j, Job::Run { .. })).count();
+        let pooled = runs(&jobs(self.cfg)) - runs(&todo);
+        if pooled > 0 {
+            (self.on_event)(Event::Note(format!(
+                "{pooled} run jobs are pooled as this binary computes them: not run again"
+            )));
+        }
         let mut results = Vec::new();
-        for job in jobs(self.cfg) {
+        for job in todo {
             if let Some(r) = self.run_job(&job)? {
                 results.push(r);
             }

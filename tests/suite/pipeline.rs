@@ -807,7 +807,39 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
     assert!(md.contains("QA-Mask over opacity maps, existing"));
     let svg = std::fs::read_to_string(dir.join("inconsistency.svg")).unwrap();
     assert!(svg.starts_with("<svg") && svg.contains("<circle"));
-    // Again: nothing is computed, the results are the same bits.
+    // Again: every job is pooled as this binary computes it, so none starts (not even its
+    // original scene) and the verdicts are the same.
+    let started = std::sync::Mutex::new(Vec::new());
+    let on_started = |e| match e {
+        Event::Stage { name } => started.lock().unwrap().push(name),
+        Event::StepFinished { step, .. } | Event::StepStarted { step } => {
+            started.lock().unwrap().push(step)
+        }
+        _ => {}
+    };
+    let verdicts = |r: &audit::Report| serde_json::to_string(&r.verdicts).unwrap();
+    let pooled = audit::Audit::new(&cfg, &lounge, &dir)
+        .with_events(&on_started)
+        .run(&[])
+        .unwrap();
+    assert!(started.lock().unwrap().is_empty(), "{started:?}");
+    assert!(pooled.results.is_empty());
+    assert_eq!(verdicts(&pooled), verdicts(&report));
+    // A sample of another crate version is not this binary's computation: its job runs
+    // (resuming its folder: nothing is computed) and gives the same bits.
+    let samples = dir.join(audit::samples::SAMPLES_FILE);
+    let text = std::fs::read_to_string(&samples).unwrap();
+    let one = "\"variant\":\"opacity_mask\",\"seed\":1,\"numerics_revision\"";
+    assert_eq!(text.matches(one).count(), 1, "{text}");
+    let at = text.find(one).unwrap();
+    let version = format!("\"crate_version\":\"{}\"", env!("CARGO_PKG_VERSION"));
+    let v = at + text[at..].find(&version).unwrap();
+    let edited = format!(
+        "{}\"crate_version\":\"0.0.0\"{}",
+        &text[..v],
+        &text[v + version.len()..]
+    );
+    std::fs::write(&samples, edited).unwrap();
     let computed = std::sync::Mutex::new(Vec::new());
     let on_computed = |e| {
         if let Event::StepFinished { step, .. } | Event::StepStarted { step } = e {
@@ -818,12 +850,23 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
         .with_events(&on_computed)
         .run(&[])
         .unwrap();
+    let names = |r: &audit::Report| -> Vec<String> {
+        let v = r
+            .results
+            .iter()
+            .map(|j| format!("{}/{}", j.variant, j.seed));
+        v.collect()
+    };
+    assert_eq!(names(&again), ["opacity_mask/1"]);
     assert!(computed.into_inner().unwrap().is_empty());
-    let bits = |r: &audit::Report| serde_json::to_string(&r.results).unwrap();
-    assert_eq!(bits(&report), bits(&again));
+    let bits = |r: &audit::JobResult| serde_json::to_string(r).unwrap();
+    let first = report
+        .results
+        .iter()
+        .find(|r| r.variant == "opacity_mask" && r.seed == 1);
+    assert_eq!(bits(first.unwrap()), bits(&again.results[0]));
+    assert_eq!(verdicts(&again), verdicts(&report));
     // The samples alone, pooled into another folder, give the same verdicts.
-    let verdicts = |r: &audit::Report| serde_json::to_string(&r.verdicts).unwrap();
-    let samples = dir.join(audit::samples::SAMPLES_FILE);
     let elsewhere = t.path().join("elsewhere");
     let pooled = audit::Audit::new(&cfg, &lounge, &elsewhere)
         .report(std::slice::from_ref(&samples))
