@@ -1,6 +1,6 @@
 //! The audit's report: gathering the samples, `audit.json`, `audit.md` and its plot.
 
-use super::jobs::{Job, JobResult, jobs, pending, sharing};
+use super::jobs::{Job, JobResult, jobs, sharing};
 use super::samples::{self, Samples};
 use super::stats;
 use super::verdicts::{Metric, Verdict, mean_std, metrics_only, verdicts};
@@ -170,6 +170,45 @@ impl Audit<'_> {
         crate::io::write_text(&dir.join("audit.md"), &markdown(cfg, &report))?;
         Ok(report)
     }
+}
+
+/// The jobs of [`jobs`] that a sequential run still computes beside `pool`: a run job whose
+/// sample is pooled as this binary would compute it ([`JobResult::reproduces`]) is not
+/// run again, and neither is the original scene of a seed none of whose runs is left.
+/// Dose grids and new variants on seeds already pooled then compute only what is new.
+fn pending(cfg: &AuditConfig, pool: &Samples) -> Vec<Job> {
+    let done = |generator: GeneratorKind, variant: Variant, seed: u32| {
+        let (g, v) = (generator.name(), variant.name());
+        pool.samples.iter().any(|r| {
+            (r.generator.as_str(), r.variant.as_str(), r.seed) == (g.as_str(), v, seed)
+                && cfg
+                    .config_digest(generator, variant)
+                    .is_ok_and(|d| r.reproduces(&d))
+        })
+    };
+    let runs: Vec<Job> = jobs(cfg)
+        .into_iter()
+        .filter(|j| match *j {
+            Job::Run {
+                generator,
+                variant,
+                seed,
+            } => !done(generator, variant, seed),
+            _ => false,
+        })
+        .collect();
+    let needs_original = |s: u32| {
+        runs.iter()
+            .any(|j| matches!(*j, Job::Run { seed, .. } if seed == s))
+    };
+    let mut out: Vec<Job> = cfg
+        .seeds
+        .clone()
+        .filter(|&s| needs_original(s))
+        .map(|seed| Job::Original { seed })
+        .collect();
+    out.extend(runs);
+    out
 }
 
 /// `mean ± std` over the seeds of one (generator, variant), or `mean` with one seed.
