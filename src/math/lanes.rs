@@ -83,6 +83,8 @@ pub trait Lanes: ShScalar + Div<Output = Self> {
     fn all_false() -> Self::Mask;
     /// Whether every lane of `m` is true.
     fn all(m: Self::Mask) -> bool;
+    /// Bit `l` set where lane `l` of `m` is true (bits `N..` clear).
+    fn bits(m: Self::Mask) -> u32;
     /// Neither NaN nor ±∞.
     fn is_finite(self) -> Self::Mask;
     /// Correctly rounded square root.
@@ -151,6 +153,10 @@ impl Lanes for f32 {
     #[inline(always)]
     fn all(m: bool) -> bool {
         m
+    }
+    #[inline(always)]
+    fn bits(m: bool) -> u32 {
+        u32::from(m)
     }
     #[inline(always)]
     fn is_finite(self) -> bool {
@@ -456,6 +462,10 @@ mod avx2 {
         #[inline(always)]
         fn all(m: M8) -> bool {
             unsafe { _mm256_movemask_ps(m.0) == 0xff }
+        }
+        #[inline(always)]
+        fn bits(m: M8) -> u32 {
+            unsafe { _mm256_movemask_ps(m.0) as u32 }
         }
         #[inline(always)]
         fn is_finite(self) -> M8 {
@@ -783,6 +793,10 @@ mod avx512 {
         #[inline(always)]
         fn all(m: __mmask16) -> bool {
             m == 0xffff
+        }
+        #[inline(always)]
+        fn bits(m: __mmask16) -> u32 {
+            u32::from(m)
         }
         #[inline(always)]
         fn is_finite(self) -> __mmask16 {

@@ -34,9 +34,9 @@ use super::plan::RenderPlan;
 use super::{RenderOptions, RenderReport};
 use crate::camera::Camera;
 use crate::gaussian::Gaussians;
+use crate::math::lanes::Lanes;
 #[cfg(target_arch = "x86_64")]
 use crate::math::lanes::{F32x8, F32x16};
-use crate::math::lanes::{Lanes, saturate_i32};
 use crate::math::sh::{MAX_SH_COEFFS, SH_C0, num_coeffs, sh_basis};
 use rayon::prelude::*;
 use std::mem::MaybeUninit;
@@ -780,8 +780,10 @@ pub(crate) fn lanes_of<R: Lanes>(v: R) -> [f32; 16] {
     a
 }
 
-/// Write a block's visible lanes to `splats`/`radii` (culled lanes are left as they are) and
-/// count each lane's outcome in `counts` (`[visible, 1 + Cull …]`).
+/// Write a block's lanes to `splats`/`radii` — its visible lanes' values, +0.0 and 0 for
+/// its culled lanes (their slots' initial values: [`project`] hands out slots set to
+/// `Splat::default()` and `[0, 0]`) — in one transposed store, and count each lane's
+/// outcome in `counts` (`[visible, 1 + Cull …]`).
 #[inline(always)]
 fn store<R: Lanes>(
     b: &Block<R>,
@@ -789,45 +791,39 @@ fn store<R: Lanes>(
     radii: &mut [[i32; 2]],
     counts: &mut [u64; 7],
 ) {
-    if R::all(b.culls.ok) {
-        // Every lane visible (the common case): the fields of all lanes' splats in one
-        // transposed store.
-        counts[0] += R::N as u64;
-        let fields = [
-            b.mean2d[0],
-            b.mean2d[1],
-            b.conic[0],
-            b.conic[1],
-            b.conic[2],
-            b.opacity,
-            b.color[0],
-            b.color[1],
-            b.color[2],
-            b.depth,
-        ];
-        R::store_columns(&fields, Splat::as_floats(&mut splats[..R::N]), SPLAT_FLOATS);
-        R::store_i32_pairs(b.radii[0], b.radii[1], radii);
-        return;
-    }
-    let ok = lanes_of(R::select(b.culls.ok, R::splat(0.0), b.culls.code));
-    let v = lanes_of::<R>;
-    let (mx, my) = (v(b.mean2d[0]), v(b.mean2d[1]));
-    let conic = [v(b.conic[0]), v(b.conic[1]), v(b.conic[2])];
-    let color = [v(b.color[0]), v(b.color[1]), v(b.color[2])];
-    let (op, depth, rx, ry) = (v(b.opacity), v(b.depth), v(b.radii[0]), v(b.radii[1]));
-    for l in 0..R::N {
-        let code = ok[l] as usize;
-        counts[code] += 1;
-        if code == 0 {
-            splats[l] = Splat {
-                mean: [mx[l], my[l]],
-                conic: [conic[0][l], conic[1][l], conic[2][l]],
-                opacity: op[l],
-                color: [color[0][l], color[1][l], color[2][l]],
-                depth: depth[l],
-            };
-            // Radii are at most ~1e19 here; saturate to i32 for storage.
-            radii[l] = [saturate_i32(rx[l]), saturate_i32(ry[l])];
+    let all = R::all(b.culls.ok);
+    let zero = R::splat(0.0);
+    // Where every lane is visible (the common case) no lane needs its zeros.
+    let keep = |v: R| {
+        if all {
+            v
+        } else {
+            R::select(b.culls.ok, v, zero)
+        }
+    };
+    let fields = [
+        keep(b.mean2d[0]),
+        keep(b.mean2d[1]),
+        keep(b.conic[0]),
+        keep(b.conic[1]),
+        keep(b.conic[2]),
+        keep(b.opacity),
+        keep(b.color[0]),
+        keep(b.color[1]),
+        keep(b.color[2]),
+        keep(b.depth),
+    ];
+    R::store_columns(&fields, Splat::as_floats(&mut splats[..R::N]), SPLAT_FLOATS);
+    // Radii are at most ~1e19 here; saturated to i32 for storage.
+    R::store_i32_pairs(keep(b.radii[0]), keep(b.radii[1]), radii);
+    let ok = R::bits(b.culls.ok);
+    counts[0] += u64::from(ok.count_ones());
+    let mut culled = !ok & (u32::MAX >> (32 - R::N));
+    if culled != 0 {
+        let code = lanes_of(b.culls.code);
+        while culled != 0 {
+            counts[code[culled.trailing_zeros() as usize] as usize] += 1;
+            culled &= culled - 1;
         }
     }
 }
@@ -880,11 +876,14 @@ fn project_range<R: Lanes>(
         }
         // The survivors' SH rows are staged one at a time below: ask for all of them first,
         // so that their cache misses overlap (with each other and with the store).
-        let ok = lanes_of(R::select(b.culls.ok, R::splat(1.0), R::splat(0.0)));
-        prefetch_rows(g, first + k, &ok[..R::N], st.len);
+        let ok = R::bits(b.culls.ok);
+        prefetch_rows(g, first + k, ok, st.len);
         store(&b, &mut splats[k..], &mut radii[k..], counts);
-        for (l, &ok) in ok[..R::N].iter().enumerate() {
-            if ok != 0.0 && st.push(g, first + k + l, k + l) == R::N {
+        let mut left = ok;
+        while left != 0 {
+            let l = left.trailing_zeros() as usize;
+            left &= left - 1;
+            if st.push(g, first + k + l, k + l) == R::N {
                 st.flush::<R>(cam, degree, |k, sum| {
                     set_color(k, sum, splats, radii, counts)
                 });
@@ -903,10 +902,10 @@ fn project_range<R: Lanes>(
     }
 }
 
-/// Ask for the first `len` SH rest values of Gaussian `i + l` for each lane `l` whose `ok`
-/// is not 0: one prefetch per cache line. Never faults; changes no value.
+/// Ask for the first `len` SH rest values of Gaussian `i + l` for each bit `l` of `ok`:
+/// one prefetch per cache line. Never faults; changes no value.
 #[inline(always)]
-fn prefetch_rows(g: &Gaussians, i: usize, ok: &[f32], len: usize) {
+fn prefetch_rows(g: &Gaussians, i: usize, ok: u32, len: usize) {
     #[cfg(target_arch = "x86_64")]
     {
         use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
@@ -914,7 +913,10 @@ fn prefetch_rows(g: &Gaussians, i: usize, ok: &[f32], len: usize) {
             return;
         }
         let stride = g.rest_per_channel() * 3;
-        for (l, _) in ok.iter().enumerate().filter(|(_, ok)| **ok != 0.0) {
+        let mut left = ok;
+        while left != 0 {
+            let l = left.trailing_zeros() as usize;
+            left &= left - 1;
             let row = &g.sh_rest[(i + l) * stride..(i + l) * stride + len];
             // 16 floats per 64-byte line; the last value covers a line the steps miss.
             for off in (0..len).step_by(16).chain([len - 1]) {
