@@ -877,7 +877,7 @@ fn project_range<R: Lanes>(
         // The survivors' SH rows are staged one at a time below: ask for all of them first,
         // so that their cache misses overlap (with each other and with the store).
         let ok = R::bits(b.culls.ok);
-        prefetch_rows(g, first + k, ok, st.len);
+        prefetch_rows(&g.sh_rest, g.rest_per_channel() * 3, first + k, ok, st.len);
         store(&b, &mut splats[k..], &mut radii[k..], counts);
         let mut left = ok;
         while left != 0 {
@@ -902,22 +902,22 @@ fn project_range<R: Lanes>(
     }
 }
 
-/// Ask for the first `len` SH rest values of Gaussian `i + l` for each bit `l` of `ok`:
-/// one prefetch per cache line. Never faults; changes no value.
+/// Ask for the first `len` values of row `i + l` of `rest` (rows of `stride` values: SH
+/// rest coefficients) for each bit `l` of `ok`: one prefetch per cache line. Never faults;
+/// changes no value.
 #[inline(always)]
-fn prefetch_rows(g: &Gaussians, i: usize, ok: u32, len: usize) {
+pub(crate) fn prefetch_rows(rest: &[f32], stride: usize, i: usize, ok: u32, len: usize) {
     #[cfg(target_arch = "x86_64")]
     {
         use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
         if len == 0 {
             return;
         }
-        let stride = g.rest_per_channel() * 3;
         let mut left = ok;
         while left != 0 {
             let l = left.trailing_zeros() as usize;
             left &= left - 1;
-            let row = &g.sh_rest[(i + l) * stride..(i + l) * stride + len];
+            let row = &rest[(i + l) * stride..(i + l) * stride + len];
             // 16 floats per 64-byte line; the last value covers a line the steps miss.
             for off in (0..len).step_by(16).chain([len - 1]) {
                 // SAFETY: prefetching never faults; the address is inside `row`.
@@ -926,7 +926,7 @@ fn prefetch_rows(g: &Gaussians, i: usize, ok: u32, len: usize) {
         }
     }
     #[cfg(not(target_arch = "x86_64"))]
-    let _ = (g, i, ok, len);
+    let _ = (rest, stride, i, ok, len);
 }
 
 /// Entry `k`'s colour from its staged sum; where the sum is not finite the Gaussian is

@@ -27,7 +27,7 @@ use crate::raster::kernel::Kernel;
 use crate::raster::plan::RenderPlan;
 use crate::raster::project::{
     COPY, CameraF32, Culls, Geometry, MAX_REST, Projected, SPLAT_FLOATS, Splat, copy_padded, dot3,
-    gather3, geometry_lanes, lanes_of, mat3_mul, sh_basis_lanes, transpose,
+    gather3, geometry_lanes, lanes_of, mat3_mul, prefetch_rows, sh_basis_lanes, transpose,
 };
 
 /// Field offsets (in f32) of a [`Splat`] and a [`SplatGrad`], which share their layout.
@@ -605,6 +605,12 @@ fn backward_range<R: Lanes>(
             continue;
         }
         out.zero(k, width);
+        // The survivors' SH rows are staged one at a time below: ask for all of them first,
+        // so that their cache misses overlap (with each other and with the staging).
+        let ok = (0..width)
+            .filter(|&l| visible(l))
+            .fold(0, |m, l| m | 1 << l);
+        prefetch_rows(&g.sh_rest, rest_in, first + k - g.base, ok, rest_in);
         for l in (0..width).filter(|&l| visible(l)) {
             let (i, at) = (first + k + l, first + k + l - g.base);
             st.slot[used] = k + l;
