@@ -610,7 +610,7 @@ fn backward_range<R: Lanes>(
         let ok = (0..width)
             .filter(|&l| visible(l))
             .fold(0, |m, l| m | 1 << l);
-        prefetch_rows(&g.sh_rest, rest_in, first + k - g.base, ok, rest_in);
+        prefetch_rows(g.sh_rest, rest_in, first + k - g.base, ok, rest_in);
         for l in (0..width).filter(|&l| visible(l)) {
             let (i, at) = (first + k + l, first + k + l - g.base);
             st.slot[used] = k + l;
