@@ -598,3 +598,85 @@ fn committed_mechanisms_audits_follow_from_their_samples() {
         }
     }
 }
+
+/// Every committed audit of this numerics revision and crate version
+/// (`reference_data/audit/*/`: the isolation, candidate-family and dose folders as well as
+/// the mechanisms ones) is what this code judges from its samples: the audit its own
+/// `audit.json` describes (preset, generators, variants, candidate family, plan) re-made from
+/// its `samples.json` alone gives the same `audit.json`, `inconsistency.svg` and dose plots,
+/// byte for byte. Folders of an older revision or version are history (their README says
+/// so) and are skipped.
+#[test]
+fn every_committed_audit_follows_from_its_samples() {
+    use unseen::audit::{self, AuditConfig, GeneratorKind, Variant};
+    let root = reference("audit");
+    let mut judged = Vec::new();
+    let mut folders: Vec<_> = std::fs::read_dir(&root)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.join("audit.json").is_file() && p.join("samples.json").is_file())
+        .collect();
+    folders.sort();
+    for committed in folders {
+        let name = committed.file_name().unwrap().to_string_lossy().to_string();
+        let head: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(committed.join("audit.json")).unwrap()).unwrap();
+        let current = head["numerics_revision"] == unseen::version::NUMERICS_REVISION
+            && head["crate_version"] == env!("CARGO_PKG_VERSION");
+        if !current {
+            continue;
+        }
+        let names = |key: &str| -> Vec<String> {
+            let v = head[key]
+                .as_array()
+                .unwrap_or_else(|| panic!("{name}: {key}"));
+            v.iter().map(|s| s.as_str().unwrap().to_string()).collect()
+        };
+        let preset = serde_json::from_value(head["preset"].clone()).unwrap();
+        let mut cfg = AuditConfig::preset(preset);
+        cfg.generators = names("generators")
+            .iter()
+            .map(|g| GeneratorKind::by_name(g).unwrap())
+            .collect();
+        cfg.variants = names("variants")
+            .iter()
+            .map(|v| Variant::by_name(v).unwrap())
+            .collect();
+        cfg.candidates = head["candidates"]["name"].as_str().map(String::from);
+        cfg.planned_seeds = head["rule"]["planned"].as_u64().unwrap() as usize;
+        cfg.train_iterations = head["train_iterations"].as_u64().unwrap() as u32;
+        cfg.train_resolution = head["train_resolution"].as_u64().unwrap() as u32;
+        let room = head["dataset"].as_str().unwrap();
+        let dataset = reference(&format!("scenes/{room}"));
+        let tmp = TempDir::new(&format!("committed-{name}"));
+        std::fs::copy(committed.join("samples.json"), tmp.join("samples.json")).unwrap();
+        audit::Audit::new(&cfg, &dataset, &tmp).report(&[]).unwrap();
+        let mut files = vec!["audit.json".to_string(), "inconsistency.svg".to_string()];
+        for e in std::fs::read_dir(&committed).unwrap() {
+            let f = e.unwrap().file_name().to_string_lossy().to_string();
+            if f.starts_with("dose-") && f.ends_with(".svg") {
+                files.push(f);
+            }
+        }
+        for file in &files {
+            let want = std::fs::read_to_string(committed.join(file)).unwrap();
+            let got = std::fs::read_to_string(tmp.join(file))
+                .unwrap_or_else(|_| panic!("{name}: the report makes no {file}"));
+            assert!(
+                got == want,
+                "{name}/{file} differs from what its samples give"
+            );
+        }
+        judged.push(name);
+    }
+    for must in [
+        "lounge-mechanisms",
+        "gallery-isolation",
+        "lounge-ring-13-dose-hallucination",
+    ] {
+        assert!(
+            judged.iter().any(|j| j == must),
+            "{must} not judged: {judged:?}"
+        );
+    }
+}
