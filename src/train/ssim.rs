@@ -29,9 +29,6 @@ fn kernel() -> [f64; SSIM_WINDOW] {
     k.map(|v| v / s)
 }
 
-/// Image rows per parallel task: a fixed partition (every value is computed on its own, so
-/// none depends on it or on the thread count).
-const TASK_ROWS: usize = 8;
 /// Window radius (taps `t = 0..11` sit at offsets `t − 5`).
 const RADIUS: usize = SSIM_WINDOW / 2;
 
@@ -97,47 +94,91 @@ fn taps_for(isa: Isa, src: &[&[f64]; SSIM_WINDOW], k: &[f64; SSIM_WINDOW], out: 
     taps(src, k, out)
 }
 
-/// The horizontal pass over `q` quantities of a `w`-wide image into `out`, laid out
-/// `[y][q][x]` (every value written):
-/// quantity `qi` of row `y` is filled into a zero-padded row by `fill(y, qi, row)`, then
-/// blurred along x.
-fn horizontal<F>(isa: Isa, (w, q): (usize, usize), k: &[f64; SSIM_WINDOW], fill: F, out: &mut [f64])
-where
-    F: Fn(usize, usize, &mut [f64]) + Sync,
-{
-    out.par_chunks_mut(TASK_ROWS * q * w)
-        .enumerate()
-        .for_each(|(task, chunk)| {
-            let mut pad = vec![0.0; w + 2 * RADIUS];
-            for (j, row) in chunk.chunks_exact_mut(q * w).enumerate() {
-                let y = task * TASK_ROWS + j;
-                for (qi, dst) in row.chunks_exact_mut(w).enumerate() {
-                    fill(y, qi, &mut pad[RADIUS..RADIUS + w]);
-                    let src = std::array::from_fn(|t| &pad[t..t + w]);
-                    taps_for(isa, &src, k, dst);
-                }
-            }
-        });
+/// The horizontally blurred rows a vertical pass needs, for a sweep down the image: slot
+/// `yy mod 11` holds row `yy`'s `q` quantities (`[slot][q][x]`), so that while output row
+/// `y` is made the ring holds rows `y − 5 ..= y + 5` (those inside the image; rows outside
+/// read from `zeros`). A few hundred kilobytes at most instead of whole planes: the
+/// vertical pass reads each row eleven times while it is in cache.
+struct Ring<'z> {
+    isa: Isa,
+    k: [f64; SSIM_WINDOW],
+    /// Width, height and quantities per row.
+    w: usize,
+    h: usize,
+    q: usize,
+    slots: Vec<f64>,
+    /// The `q` source rows of one image row, each with `RADIUS` zeros on either side.
+    pad: Vec<f64>,
+    zeros: &'z [f64],
 }
 
-/// The vertical pass of quantity `qi` at output row `y` over a horizontal pass `hz`
-/// (`[y][q][x]`), rows outside the image read from `zeros`.
-#[allow(clippy::too_many_arguments)]
-fn vertical(
-    isa: Isa,
-    hz: &[f64],
-    (w, h, q): (usize, usize, usize),
-    y: usize,
-    qi: usize,
-    k: &[f64; SSIM_WINDOW],
-    zeros: &[f64],
-    out: &mut [f64],
-) {
-    let src = std::array::from_fn(|t| match (y + t).checked_sub(RADIUS) {
-        Some(yy) if yy < h => &hz[(yy * q + qi) * w..(yy * q + qi + 1) * w],
-        _ => zeros,
-    });
-    taps_for(isa, &src, k, out)
+/// The most quantities a [`Ring`] blurs per row (the five moments).
+const MAX_Q: usize = 5;
+
+impl<'z> Ring<'z> {
+    fn new(isa: Isa, (w, h, q): (usize, usize, usize), zeros: &'z [f64]) -> Self {
+        assert!(q <= MAX_Q);
+        Ring {
+            isa,
+            k: kernel(),
+            w,
+            h,
+            q,
+            slots: vec![0.0; SSIM_WINDOW * q * w],
+            pad: vec![0.0; q * (w + 2 * RADIUS)],
+            zeros,
+        }
+    }
+
+    /// Row `yy` blurred along x into its slot: `fill(yy, rows)` writes its `q` quantities
+    /// into `rows` (the padded rows' insides), then each is blurred.
+    fn put(&mut self, yy: usize, fill: &mut impl FnMut(usize, &mut [&mut [f64]])) {
+        let (w, q, stride) = (self.w, self.q, self.w + 2 * RADIUS);
+        let mut inner = self
+            .pad
+            .chunks_exact_mut(stride)
+            .map(|r| &mut r[RADIUS..RADIUS + w]);
+        let mut rows: [&mut [f64]; MAX_Q] =
+            std::array::from_fn(|_| inner.next().unwrap_or_default());
+        fill(yy, &mut rows[..q]);
+        let slot = &mut self.slots[(yy % SSIM_WINDOW) * q * w..][..q * w];
+        for (dst, row) in slot.chunks_exact_mut(w).zip(self.pad.chunks_exact(stride)) {
+            let src = std::array::from_fn(|t| &row[t..t + w]);
+            taps_for(self.isa, &src, &self.k, dst);
+        }
+    }
+
+    /// Quantity `qi` of output row `y` blurred along y into `out` (the ring holds the rows
+    /// `y − 5 ..= y + 5` that are inside the image).
+    fn vertical(&self, y: usize, qi: usize, out: &mut [f64]) {
+        let (w, q) = (self.w, self.q);
+        let src = std::array::from_fn(|t| match (y + t).checked_sub(RADIUS) {
+            Some(yy) if yy < self.h => &self.slots[((yy % SSIM_WINDOW) * q + qi) * w..][..w],
+            _ => self.zeros,
+        });
+        taps_for(self.isa, &src, &self.k, out)
+    }
+
+    /// Output rows `rows` in order: before `each(y, ring)` the ring holds what
+    /// [`Ring::vertical`] needs for row `y`. A band's first rows re-blur the five rows above
+    /// it that the band before blurred too (every row's values come from the same operations
+    /// on the same inputs, so the bands' bounds do not change any bit).
+    fn sweep(
+        &mut self,
+        rows: std::ops::Range<usize>,
+        mut fill: impl FnMut(usize, &mut [&mut [f64]]),
+        mut each: impl FnMut(usize, &Self),
+    ) {
+        for yy in rows.start.saturating_sub(RADIUS)..(rows.start + RADIUS).min(self.h) {
+            self.put(yy, &mut fill);
+        }
+        for y in rows {
+            if y + RADIUS < self.h {
+                self.put(y + RADIUS, &mut fill);
+            }
+            each(y, self);
+        }
+    }
 }
 
 /// Per pixel of a row, from the blurred moments `m = [μx, μy, E_xx, E_yy, E_xy]`: the SSIM
@@ -316,14 +357,35 @@ fn ssim_impl(
     ssim_with(Isa::detect(), x, y, (w, h, c), grad, map)
 }
 
-/// [`ssim_impl`] with the row kernels compiled for `isa`. Five passes, the heavy ones
-/// parallel over [`TASK_ROWS`]-row tasks: (1) the horizontal blur of the 5 moments of each
-/// channel (`x, y, x², y², xy`); (2) per row their vertical blur and the per-pixel SSIM and
-/// derivative planes; (3) the mean in channel-then-pixel order (f64, sequential); with the
-/// gradient, (4) the horizontal and (5) the vertical blur of the derivative planes,
-/// combined into `dS̄/dx` per value.
+/// [`ssim_impl`] with the row kernels compiled for `isa`, in as many bands of rows as the
+/// rayon pool has threads (at least [`BAND_ROWS`] rows each; the bands change no bit).
 fn ssim_with(
     isa: Isa,
+    x: &[f32],
+    y: &[f32],
+    dims: (usize, usize, usize),
+    grad: bool,
+    map: Option<&mut [f64]>,
+) -> (f64, Option<Vec<f32>>) {
+    let bands = rayon::current_num_threads().min(dims.1.div_ceil(BAND_ROWS));
+    ssim_in_bands(isa, bands.max(1), x, y, dims, grad, map)
+}
+
+/// Rows a band has at least: its first rows re-blur the five above it along x, so a band
+/// should be several times that.
+const BAND_ROWS: usize = 32;
+
+/// [`ssim_with`] in `bands` bands of rows, each swept down by a [`Ring`] on its own task.
+/// Three passes: (1) per band and channel, the horizontal blur of the 5 moments
+/// (`x, y, x², y², xy`) into the ring, their vertical blur and the per-pixel SSIM and
+/// derivative planes; (2) the mean in channel-then-pixel order (f64, sequential); with the
+/// gradient, (3) per band and channel the horizontal and vertical blur of the derivative
+/// planes, combined into `dS̄/dx` per value. Every value comes from the same operations on
+/// the same inputs whatever the bands (and the thread count).
+#[allow(clippy::too_many_arguments)]
+fn ssim_in_bands(
+    isa: Isa,
+    bands: usize,
     x: &[f32],
     y: &[f32],
     (w, h, c): (usize, usize, usize),
@@ -332,71 +394,58 @@ fn ssim_with(
 ) -> (f64, Option<Vec<f32>>) {
     assert_eq!(x.len(), w * h * c);
     assert_eq!(y.len(), w * h * c);
-    let k = kernel();
-    let np = w * h;
-    let n = (np * c) as f64;
+    let n = (w * h * c) as f64;
     if x.is_empty() {
         return (0.0 / n, grad.then(Vec::new));
     }
+    let band = h.div_ceil(bands);
     // The calling thread's buffers of the last call, resized: every value of each is
     // written below before it is read, so none is cleared (a training loop called this
     // with megabytes of fresh zeroed memory every iteration, serially).
     let mut work = WORK.with_borrow_mut(std::mem::take);
     let Work {
         zeros,
-        xp,
-        yp,
-        hz,
         values,
         deriv,
     } = &mut work;
     zeros.clear();
     zeros.resize(w, 0.0);
-    // The channels apart, in f64: `[ch][p]`.
-    let planes = |img: &[f32], out: &mut Vec<f64>| {
-        out.resize(img.len(), 0.0);
-        for (p, px) in img.chunks_exact(c).enumerate() {
-            for (ch, &v) in px.iter().enumerate() {
-                out[ch * np + p] = v as f64;
-            }
+    let zeros = &zeros[..];
+    // Channel `ch` of pixel row `yy` of an interleaved image, in f64 (exact).
+    let channel = |img: &[f32], yy: usize, ch: usize, dst: &mut [f64]| {
+        let src = &img[yy * w * c..(yy + 1) * w * c];
+        for (d, px) in dst.iter_mut().zip(src.chunks_exact(c)) {
+            *d = px[ch] as f64;
         }
     };
-    planes(x, xp);
-    planes(y, yp);
-    let (xp, yp, zeros) = (&xp[..], &yp[..], &zeros[..]);
-    // (1) Moments: quantity `5·ch + j`, j = x, y, x², y², x·y.
-    let q = 5 * c;
-    hz.resize(h * q * w, 0.0);
-    let fill = |row: usize, qi: usize, dst: &mut [f64]| {
-        let (ch, j) = (qi / 5, qi % 5);
-        let at = (ch * h + row) * w;
-        let (a, b) = (&xp[at..at + w], &yp[at..at + w]);
-        match j {
-            0 => dst.copy_from_slice(a),
-            1 => dst.copy_from_slice(b),
-            2 => dst.iter_mut().zip(a).for_each(|(o, a)| *o = a * a),
-            3 => dst.iter_mut().zip(b).for_each(|(o, b)| *o = b * b),
-            _ => dst
-                .iter_mut()
-                .zip(a.iter().zip(b))
-                .for_each(|(o, (a, b))| *o = a * b),
-        }
-    };
-    horizontal(isa, (w, q), &k, fill, hz);
-    let moments_hz = &hz[..];
-    // (2) Per row: the SSIM map `[y][ch][x]` and the derivative planes `[y][3·ch + j][x]`.
+    // (1) The SSIM map `[y][ch][x]` and the derivative planes `[y][3·ch + j][x]`.
     values.resize(h * c * w, 0.0);
     deriv.resize(if grad { h * 3 * c * w } else { 0 }, 0.0);
     let (values, deriv) = (&mut values[..h * c * w], &mut deriv[..]);
-    let task = |t: usize, vals: &mut [f64], ders: &mut [f64]| {
+    let task = |b: usize, vals: &mut [f64], ders: &mut [f64]| {
+        let y0 = b * band;
+        let rows = y0..(y0 + band).min(h);
+        let mut ring = Ring::new(isa, (w, h, 5), zeros);
         let mut moments = vec![0.0; 5 * w];
-        for (j, vrow) in vals.chunks_exact_mut(c * w).enumerate() {
-            let row = t * TASK_ROWS + j;
-            for (ch, v) in vrow.chunks_exact_mut(w).enumerate() {
+        for ch in 0..c {
+            // Quantities x, y, x², y², x·y of channel `ch`.
+            let fill = |yy: usize, q: &mut [&mut [f64]]| {
+                let [a, b, aa, bb, ab] = q else {
+                    unreachable!("five moments")
+                };
+                channel(x, yy, ch, a);
+                channel(y, yy, ch, b);
+                for i in 0..w {
+                    (aa[i], bb[i], ab[i]) = (a[i] * a[i], b[i] * b[i], a[i] * b[i]);
+                }
+            };
+            ring.sweep(rows.clone(), fill, |row, ring| {
                 for (i, m) in moments.chunks_exact_mut(w).enumerate() {
-                    vertical(isa, moments_hz, (w, h, q), row, 5 * ch + i, &k, zeros, m);
+                    ring.vertical(row, i, m);
                 }
                 let m: [&[f64]; 5] = std::array::from_fn(|i| &moments[i * w..(i + 1) * w]);
+                let j = row - y0;
+                let v = &mut vals[(j * c + ch) * w..(j * c + ch + 1) * w];
                 if grad {
                     let base = (j * 3 * c + 3 * ch) * w;
                     let (d0, rest) = ders[base..base + 3 * w].split_at_mut(w);
@@ -405,22 +454,22 @@ fn ssim_with(
                 } else {
                     pixels_for::<false>(isa, &m, v, &mut [&mut [], &mut [], &mut []]);
                 }
-            }
+            });
         }
     };
     if grad {
         values
-            .par_chunks_mut(TASK_ROWS * c * w)
-            .zip(deriv.par_chunks_mut(TASK_ROWS * 3 * c * w))
+            .par_chunks_mut(band * c * w)
+            .zip(deriv.par_chunks_mut(band * 3 * c * w))
             .enumerate()
-            .for_each(|(t, (vals, ders))| task(t, vals, ders));
+            .for_each(|(b, (vals, ders))| task(b, vals, ders));
     } else {
         values
-            .par_chunks_mut(TASK_ROWS * c * w)
+            .par_chunks_mut(band * c * w)
             .enumerate()
-            .for_each(|(t, vals)| task(t, vals, &mut []));
+            .for_each(|(b, vals)| task(b, vals, &mut []));
     }
-    // (3) The mean, channel by channel in pixel order; the map's mean over channels.
+    // (2) The mean, channel by channel in pixel order; the map's mean over channels.
     let mut total = 0.0;
     let mut map = map;
     for ch in 0..c {
@@ -435,36 +484,39 @@ fn ssim_with(
         }
     }
     let g = grad.then(|| {
-        // (4) The derivative planes blurred along x, (5) along y and combined.
+        // (3) The derivative planes blurred along x, then y, and combined.
         let qd = 3 * c;
-        // Into the moments' storage (no longer needed, and larger).
-        let hd = &mut hz[..h * qd * w];
-        let fill = |row: usize, qi: usize, dst: &mut [f64]| {
-            dst.copy_from_slice(&deriv[(row * qd + qi) * w..(row * qd + qi + 1) * w]);
-        };
-        horizontal(isa, (w, qd), &k, fill, hd);
-        let hd = &hd[..];
+        let deriv = &deriv[..];
         let mut g = vec![0f32; x.len()];
-        g.par_chunks_mut(TASK_ROWS * w * c)
+        g.par_chunks_mut(band * w * c)
             .enumerate()
-            .for_each(|(t, gs)| {
-                let mut b = vec![0.0; 3 * w];
-                for (j, grow) in gs.chunks_exact_mut(w * c).enumerate() {
-                    let row = t * TASK_ROWS + j;
-                    for ch in 0..c {
-                        for (i, bi) in b.chunks_exact_mut(w).enumerate() {
-                            vertical(isa, hd, (w, h, qd), row, 3 * ch + i, &k, zeros, bi);
+            .for_each(|(b, gs)| {
+                let y0 = b * band;
+                let rows = y0..(y0 + band).min(h);
+                let mut ring = Ring::new(isa, (w, h, 3), zeros);
+                let (mut blurred, mut xs, mut ys) = (vec![0.0; 3 * w], vec![0.0; w], vec![0.0; w]);
+                for ch in 0..c {
+                    let fill = |yy: usize, q: &mut [&mut [f64]]| {
+                        for (j, dst) in q.iter_mut().enumerate() {
+                            let at = (yy * qd + 3 * ch + j) * w;
+                            dst.copy_from_slice(&deriv[at..at + w]);
                         }
-                        let (b0, rest) = b.split_at(w);
+                    };
+                    ring.sweep(rows.clone(), fill, |row, ring| {
+                        for (i, bi) in blurred.chunks_exact_mut(w).enumerate() {
+                            ring.vertical(row, i, bi);
+                        }
+                        let (b0, rest) = blurred.split_at(w);
                         let (b1, b2) = rest.split_at(w);
-                        let at = (ch * h + row) * w;
-                        let (xs, ys) = (&xp[at..at + w], &yp[at..at + w]);
+                        channel(x, row, ch, &mut xs);
+                        channel(y, row, ch, &mut ys);
+                        let grow = &mut gs[(row - y0) * w * c..(row - y0 + 1) * w * c];
                         for col in 0..w {
                             // Vectorizes; the interleaved f32 store does not hold it back.
                             let v = (b0[col] + 2.0 * xs[col] * b1[col] + ys[col] * b2[col]) / n;
                             grow[col * c + ch] = v as f32;
                         }
-                    }
+                    });
                 }
             });
         g
@@ -507,9 +559,6 @@ pub fn bare_blur(width: usize, rows: usize) -> u64 {
 #[derive(Default)]
 struct Work {
     zeros: Vec<f64>,
-    xp: Vec<f64>,
-    yp: Vec<f64>,
-    hz: Vec<f64>,
     values: Vec<f64>,
     deriv: Vec<f64>,
 }
@@ -523,21 +572,18 @@ mod tests {
     use super::*;
     use crate::rng::Uniform;
 
-    /// One plane blurred by the passes [`ssim_with`] uses: horizontal, then vertical.
-    fn blur(isa: Isa, img: &[f64], w: usize, h: usize) -> Vec<f64> {
-        let k = kernel();
-        let mut hz = vec![f64::NAN; w * h];
-        horizontal(
-            isa,
-            (w, 1),
-            &k,
-            |y, _, dst| dst.copy_from_slice(&img[y * w..(y + 1) * w]),
-            &mut hz,
-        );
+    /// One plane blurred as [`ssim_in_bands`] blurs: a [`Ring`] swept down `bands` bands.
+    fn blur(isa: Isa, img: &[f64], w: usize, h: usize, bands: usize) -> Vec<f64> {
         let zeros = vec![0.0; w];
         let mut out = vec![f64::NAN; w * h];
-        for (y, row) in out.chunks_exact_mut(w).enumerate() {
-            vertical(isa, &hz, (w, h, 1), y, 0, &k, &zeros, row);
+        let band = h.div_ceil(bands);
+        for (b, chunk) in out.chunks_mut(band * w).enumerate() {
+            let mut ring = Ring::new(isa, (w, h, 1), &zeros);
+            let fill =
+                |y: usize, q: &mut [&mut [f64]]| q[0].copy_from_slice(&img[y * w..(y + 1) * w]);
+            ring.sweep(b * band..(b * band + band).min(h), fill, |y, ring| {
+                ring.vertical(y, 0, &mut chunk[(y - b * band) * w..][..w])
+            });
         }
         out
     }
@@ -550,24 +596,26 @@ mod tests {
             let mut u = Uniform::new(4);
             let img: Vec<f64> = (0..w * h).map(|_| u.unit() as f64).collect();
             let k = kernel();
-            let fast = blur(Isa::detect(), &img, w, h);
-            for y in 0..h {
-                for x in 0..w {
-                    let mut acc = 0.0;
-                    for (ty, ky) in k.iter().enumerate() {
-                        for (tx, kx) in k.iter().enumerate() {
-                            let (yy, xx) =
-                                (y as isize + ty as isize - 5, x as isize + tx as isize - 5);
-                            if (0..h as isize).contains(&yy) && (0..w as isize).contains(&xx) {
-                                acc += ky * kx * img[yy as usize * w + xx as usize];
+            for bands in [1, 2, 5] {
+                let fast = blur(Isa::detect(), &img, w, h, bands);
+                for y in 0..h {
+                    for x in 0..w {
+                        let mut acc = 0.0;
+                        for (ty, ky) in k.iter().enumerate() {
+                            for (tx, kx) in k.iter().enumerate() {
+                                let (yy, xx) =
+                                    (y as isize + ty as isize - 5, x as isize + tx as isize - 5);
+                                if (0..h as isize).contains(&yy) && (0..w as isize).contains(&xx) {
+                                    acc += ky * kx * img[yy as usize * w + xx as usize];
+                                }
                             }
                         }
+                        let got = fast[y * w + x];
+                        assert!(
+                            (got - acc).abs() < 1e-14,
+                            "{w}x{h} ({x},{y}), {bands} bands: {got} vs {acc}"
+                        );
                     }
-                    let got = fast[y * w + x];
-                    assert!(
-                        (got - acc).abs() < 1e-14,
-                        "{w}x{h} ({x},{y}): {got} vs {acc}"
-                    );
                 }
             }
         }
@@ -654,10 +702,10 @@ mod tests {
         (total / n, g, map)
     }
 
-    /// The row-blocked, per-instruction-set, parallel SSIM gives the reference's bits —
-    /// value, gradient and map — on sizes below, at and around the window and the tap
-    /// block (and at multiples of both the tap block and the task rows), for 1–3 channels,
-    /// under every instruction set the CPU has and 1 or 2 threads.
+    /// The banded, per-instruction-set, parallel SSIM gives the reference's bits — value,
+    /// gradient and map — on sizes below, at and around the window and the tap block, for
+    /// 1–3 channels, under every instruction set the CPU has, 1 or 2 threads and any
+    /// number of bands (one row each up to more bands than rows).
     #[test]
     fn ssim_keeps_the_reference_bits_in_every_form() {
         let mut isas = vec![Isa::Baseline];
@@ -681,6 +729,7 @@ mod tests {
             (70, 19, 3),
             (37, 29, 3),
             (64, 16, 3),
+            (20, 70, 3),
         ] {
             let x: Vec<f32> = (0..w * h * c).map(|_| u.unit()).collect();
             let y: Vec<f32> = x
@@ -694,19 +743,26 @@ mod tests {
                         .num_threads(threads)
                         .build()
                         .unwrap();
-                    let (s2, g2, map2) = pool.install(|| {
-                        let mut map2 = vec![0.0; w * h];
-                        let (s2, g2) = ssim_with(isa, &x, &y, (w, h, c), true, Some(&mut map2));
-                        (s2, g2.unwrap(), map2)
-                    });
-                    let at = format!("{w}x{h}x{c} {isa:?} {threads} threads");
-                    assert_eq!(s.to_bits(), s2.to_bits(), "{at}: {s} vs {s2}");
-                    assert_eq!(bits(&g), bits(&g2), "{at}");
-                    assert_eq!(bits64(&map), bits64(&map2), "{at}");
-                    let mut map3 = vec![0.0; w * h];
-                    let (s3, none) = ssim_with(isa, &x, &y, (w, h, c), false, Some(&mut map3));
-                    assert_eq!((s.to_bits(), none), (s3.to_bits(), None), "{at}");
-                    assert_eq!(bits64(&map), bits64(&map3), "{at}");
+                    // The pool's own bands, then bands of 1 row up to more than there are.
+                    for bands in [None, Some(1), Some(2), Some(3), Some(7), Some(h + 1)] {
+                        let run = |grad: bool, map: &mut [f64]| match bands {
+                            None => ssim_with(isa, &x, &y, (w, h, c), grad, Some(map)),
+                            Some(b) => ssim_in_bands(isa, b, &x, &y, (w, h, c), grad, Some(map)),
+                        };
+                        let (s2, g2, map2) = pool.install(|| {
+                            let mut map2 = vec![0.0; w * h];
+                            let (s2, g2) = run(true, &mut map2);
+                            (s2, g2.unwrap(), map2)
+                        });
+                        let at = format!("{w}x{h}x{c} {isa:?} {threads} threads, bands {bands:?}");
+                        assert_eq!(s.to_bits(), s2.to_bits(), "{at}: {s} vs {s2}");
+                        assert_eq!(bits(&g), bits(&g2), "{at}");
+                        assert_eq!(bits64(&map), bits64(&map2), "{at}");
+                        let mut map3 = vec![0.0; w * h];
+                        let (s3, none) = run(false, &mut map3);
+                        assert_eq!((s.to_bits(), none), (s3.to_bits(), None), "{at}");
+                        assert_eq!(bits64(&map), bits64(&map3), "{at}");
+                    }
                 }
             }
         }
