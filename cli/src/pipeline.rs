@@ -546,7 +546,8 @@ pub struct AuditArgs {
     /// With --only: the worker's log, named in its receipt.
     #[arg(long, requires = "only")]
     log: Option<PathBuf>,
-    /// Print the jobs (wave by wave, with --estimate their expected costs) and exit.
+    /// Print the audit's jobs and exit; with --estimate, wave by wave those still to run
+    /// beside the samples pooled in --out and --merge files, with their expected costs.
     #[arg(long)]
     list: bool,
     /// With --list: each job's expected seconds and peak memory on 2 threads (from this
@@ -554,15 +555,16 @@ pub struct AuditArgs {
     /// per wave the CPU-hours and the largest peak.
     #[arg(long, requires = "list")]
     estimate: bool,
-    /// Run no job: merge the jobs' receipts and results into the report; every job
-    /// without a receipt of a success is named (with its log) and the merge fails.
+    /// Run no job: merge the jobs' receipts and results into the report; every job still
+    /// to run beside the pooled samples without a receipt of a success is named (with its
+    /// log) and the merge fails.
     #[arg(long, conflicts_with_all = ["only", "list", "report_only"])]
     collect: bool,
     /// With --collect: the Slurm submission folder the jobs ran from (names their logs).
     #[arg(long, requires = "collect")]
     submission: Option<PathBuf>,
-    /// Write a Slurm submission folder for this audit (job arrays in waves, a merge job,
-    /// submit.sh) and run no job.
+    /// Write a Slurm submission folder for the jobs of this audit not pooled yet as this
+    /// binary computes them (job arrays in waves, a merge job, submit.sh) and run no job.
     #[arg(long, conflicts_with_all = ["only", "list", "report_only", "collect"])]
     emit_slurm: Option<PathBuf>,
     #[command(flatten)]
@@ -683,10 +685,11 @@ pub fn run_audit(a: &AuditArgs) -> Result<()> {
         return Ok(());
     }
     let report = if a.collect {
+        let waves = run.waves_to_run(&a.merge)?;
         let log_of = |j: &audit::Job| {
             a.submission
                 .as_ref()
-                .and_then(|s| cluster::log_in_submission(&cfg, s, j))
+                .and_then(|s| cluster::log_in_submission(&waves, s, j))
         };
         match run.collect(&a.merge, &log_of)? {
             Ok(r) => r,
@@ -698,7 +701,7 @@ pub fn run_audit(a: &AuditArgs) -> Result<()> {
                         .map_or(String::new(), |l| format!(" (log: {l})"));
                     eprintln!("not done: {}: {}{log}", m.job, m.why);
                 }
-                let total: usize = cluster::waves(&cfg).iter().map(|w| w.jobs.len()).sum();
+                let total: usize = waves.iter().map(|w| w.jobs.len()).sum();
                 return Err(Error::invalid(format!(
                     "{} of {total} jobs have no receipt of a success (listed above; the first: {}): nothing merged",
                     missing.len(),
@@ -732,7 +735,7 @@ fn list_audit(cfg: &unseen::audit::AuditConfig, a: &AuditArgs) -> Result<()> {
     }
     let gb = |b: f64| b / 1e9;
     let (mut cpu_hours, mut jobs) = (0.0, 0);
-    for (wave, costs) in unseen::audit::Audit::new(cfg, &a.dataset, &a.out).estimate()? {
+    for (wave, costs) in unseen::audit::Audit::new(cfg, &a.dataset, &a.out).estimate(&a.merge)? {
         let hours: f64 = costs.iter().map(|c| c.seconds).sum::<f64>() * 2.0 / 3600.0;
         let peak = costs.iter().map(|c| c.peak_rss_bytes).fold(0.0, f64::max);
         let longest = costs.iter().map(|c| c.seconds).fold(0.0, f64::max);
@@ -812,8 +815,8 @@ fn emit_audit(
         command.extend(["--merge".into(), show(abs(m)?)]);
     }
     let opts = a.slurm.options();
-    let waves =
-        unseen::audit::Audit::new(cfg, &a.dataset, &a.out).emit_slurm(&command, &sub, &opts)?;
+    let waves = unseen::audit::Audit::new(cfg, &a.dataset, &a.out)
+        .emit_slurm(&command, &a.merge, &sub, &opts)?;
     for (w, r) in &waves {
         println!(
             "{}: {} jobs, --cpus-per-task={} --mem={}M --time={} min",

@@ -217,6 +217,27 @@ pub fn utc(t: std::time::SystemTime) -> String {
 
 // ---------------------------------------------------------------------------- merge
 
+/// [`waves`] without the jobs a sequential run would not compute beside `pool`
+/// (`report::pending`): run jobs pooled as this binary computes them, the originals of
+/// seeds with no run left, and the shared steps of a (generator, seed) with no run left.
+/// Waves may be left empty.
+pub(super) fn pending_waves(cfg: &AuditConfig, pool: &super::samples::Samples) -> Vec<Wave> {
+    let todo = super::report::pending(cfg, pool);
+    let needed = |job: &Job| match *job {
+        Job::Shared { generator, seed } => todo.iter().any(
+            |t| matches!(*t, Job::Run { generator: g, seed: s, .. } if (g, s) == (generator, seed)),
+        ),
+        _ => todo.contains(job),
+    };
+    waves(cfg)
+        .into_iter()
+        .map(|mut w| {
+            w.jobs.retain(needed);
+            w
+        })
+        .collect()
+}
+
 /// A job the merge cannot take: its name, why, and where its log is (when known).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Missing {
@@ -226,8 +247,17 @@ pub struct Missing {
 }
 
 impl Audit<'_> {
-    /// The merge: every job of every wave must have a receipt of a success whose digests
-    /// still verify; the run jobs' results are read from their `audit_job.json` (nothing is
+    /// The waves still to run beside the samples in `DIR/samples.json` and the `merge`
+    /// files ([`pending_waves`]): what `--emit-slurm` submits and `--collect` expects.
+    pub fn waves_to_run(&self, merge: &[PathBuf]) -> Result<Vec<Wave>> {
+        self.cfg.validate()?;
+        self.check_inputs()?;
+        Ok(pending_waves(self.cfg, &self.gather(merge)?))
+    }
+
+    /// The merge: every job of every wave still to run beside the pooled samples
+    /// ([`pending_waves`]: the same jobs `--emit-slurm` submitted, given the same
+    /// samples) must have a receipt of a success whose digests still verify; the run jobs' results are read from their `audit_job.json` (nothing is
     /// computed) and reported as [`Audit::run`] reports them. `log_of` names a job's log for
     /// jobs without a receipt (a receipt names its own). `Ok(Err(missing))`: what is missing
     /// or failed, in wave order; nothing is written then.
@@ -241,7 +271,10 @@ impl Audit<'_> {
         let pool = self.gather(merge)?;
         let mut missing = Vec::new();
         let mut results = Vec::new();
-        for job in waves(self.cfg).into_iter().flat_map(|w| w.jobs) {
+        for job in pending_waves(self.cfg, &pool)
+            .into_iter()
+            .flat_map(|w| w.jobs)
+        {
             match self.take(&job) {
                 Ok(Some(r)) => results.push(r),
                 Ok(None) => {}
@@ -255,6 +288,8 @@ impl Audit<'_> {
         if !missing.is_empty() {
             return Ok(Err(missing));
         }
+        // With every job pooled no worker made the folder.
+        crate::io::create_dir_all(self.dir)?;
         Ok(Ok(self.finish(pool, results)?))
     }
 
@@ -395,11 +430,12 @@ fn training_pixels(cfg: &AuditConfig, dataset: &Path) -> Result<(f64, usize)> {
 }
 
 impl Audit<'_> {
-    /// Every job's expected [`Cost`], wave by wave. Where `dir` holds finished jobs of this
+    /// The expected [`Cost`] of every job still to run beside the samples in `DIR` and the
+    /// `merge` files ([`Audit::waves_to_run`]), wave by wave. Where `dir` holds finished jobs of this
     /// audit (receipts of successes), their measured seconds and peak memory (the steps'
     /// `cost.json`, the original's `train_stats.json`) replace the calibration for their kind:
     /// seconds per iteration-pixel averaged over them, memory their maximum.
-    pub fn estimate(&self) -> Result<Vec<(Wave, Vec<Cost>)>> {
+    pub fn estimate(&self, merge: &[PathBuf]) -> Result<Vec<(Wave, Vec<Cost>)>> {
         let (cfg, dir) = (self.cfg, self.dir);
         let shape = training_pixels(cfg, self.dataset)?;
         let pixels = shape.0;
@@ -419,7 +455,8 @@ impl Audit<'_> {
             m.1 += work(cfg, job, shape);
             m.2 = m.2.max(peak);
         }
-        Ok(waves(cfg)
+        Ok(self
+            .waves_to_run(merge)?
             .into_iter()
             .map(|w| {
                 let costs = w
@@ -485,21 +522,23 @@ fn measured_cost(dir: &Path, job: &Job) -> Option<(f64, f64)> {
 // ------------------------------------------------------------------------- Slurm
 
 impl Audit<'_> {
-    /// Write a Slurm submission folder `out` for the audit ([`write_submission`]): also
-    /// `jobs.txt` (every job, wave by wave) and per wave `wave-N-<name>.txt` (its jobs; array
+    /// Write a Slurm submission folder `out` for the jobs of the audit still to run beside
+    /// its pooled samples ([`Audit::waves_to_run`]; a wave left empty gets no array)
+    /// ([`write_submission`]): also `jobs.txt` (every such job, wave by wave) and per wave `wave-N-<name>.txt` (its jobs; array
     /// task i runs line i+1 as `unseen … --only JOB`); the merge runs `unseen … --collect`.
     /// `command` is the worker's command line without `--only` (binary first, the audit's grid
     /// in absolute paths). Returns the waves with their requests.
     pub fn emit_slurm(
         &self,
         command: &[String],
+        merge: &[PathBuf],
         out: &Path,
         opts: &SlurmOptions,
     ) -> Result<Vec<(Wave, Request)>> {
         if out.is_file() {
             return Err(Error::invalid("the submission path is a file").at(out));
         }
-        let estimates = self.estimate()?;
+        let estimates = self.estimate(merge)?;
         let cpus = opts.cpus.unwrap_or(2).max(1);
         crate::io::create_dir_all(out)?;
         let logs = out.join("logs");
@@ -547,9 +586,10 @@ impl Audit<'_> {
     }
 }
 
-/// The log the submission folder `submission` gives `job` ([`Audit::emit_slurm`]'s names).
-pub fn log_in_submission(cfg: &AuditConfig, submission: &Path, job: &Job) -> Option<String> {
-    waves(cfg).into_iter().find_map(|w| {
+/// The log the submission folder `submission` gives `job` ([`Audit::emit_slurm`]'s names)
+/// among the `waves` it submitted ([`Audit::waves_to_run`]).
+pub fn log_in_submission(waves: &[Wave], submission: &Path, job: &Job) -> Option<String> {
+    waves.iter().find_map(|w| {
         let i = w.jobs.iter().position(|j| j == job)?;
         Some(
             submission

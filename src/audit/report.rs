@@ -176,7 +176,7 @@ impl Audit<'_> {
 /// sample is pooled as this binary would compute it ([`JobResult::reproduces`]) is not
 /// run again, and neither is the original scene of a seed none of whose runs is left.
 /// Dose grids and new variants on seeds already pooled then compute only what is new.
-fn pending(cfg: &AuditConfig, pool: &Samples) -> Vec<Job> {
+pub(super) fn pending(cfg: &AuditConfig, pool: &Samples) -> Vec<Job> {
     let done = |generator: GeneratorKind, variant: Variant, seed: u32| {
         let (g, v) = (generator.name(), variant.name());
         pool.samples.iter().any(|r| {

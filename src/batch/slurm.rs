@@ -109,10 +109,13 @@ pub fn write_submission(
     let mut all: Vec<String> = ids.iter().map(|v| format!("${v}")).collect();
     if let Some(m) = merge {
         write_text(&out.join("merge.sbatch"), &script(m, false))?;
-        submit += &format!(
-            "merge=$(id --dependency=afterany:{} merge.sbatch)\necho \"merge: $merge\"\n",
-            all.join(":")
-        );
+        // With no wave left to run (every job pooled), the merge alone, at once.
+        let dep = if all.is_empty() {
+            String::new()
+        } else {
+            format!(" --dependency=afterany:{}", all.join(":"))
+        };
+        submit += &format!("merge=$(id{dep} merge.sbatch)\necho \"merge: $merge\"\n");
         all.push("$merge".into());
     }
     submit += &format!("echo {} > job-ids.txt\n", all.join(" "));

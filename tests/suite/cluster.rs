@@ -173,6 +173,20 @@ fn workers_with_receipts_merge_to_the_sequential_report_and_the_merge_names_what
     // Fixed and run again: the merge is the sequential audit's report.
     std::fs::remove_file(dir.join(bad)).unwrap();
     ok(&audit(&config, &dir, &["--only", bad]));
+    // A result changed after its receipt is named, not merged.
+    let result = dir.join("runs/truth-low/full/seed-0/audit_job.json");
+    let text = std::fs::read_to_string(&result).unwrap();
+    std::fs::write(&result, format!("{text} ")).unwrap();
+    let o = audit(&config, &dir, &["--collect"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("not done: runs/truth-low/full/seed-0: runs/truth-low/full/seed-0/audit_job.json is missing or changed since the job's receipt"),
+        "{err}"
+    );
+    std::fs::write(&result, text).unwrap();
+    // (Once merged, the pooled samples are the record: a later merge or audit of the same
+    // grid does not read the job folders again.)
     ok(&audit(&config, &dir, &["--collect"]));
     let seq = t.path().join("sequential");
     ok(&audit(&config, &seq, &[]));
@@ -181,17 +195,63 @@ fn workers_with_receipts_merge_to_the_sequential_report_and_the_merge_names_what
         read(&dir, "audit.json") == read(&seq, "audit.json"),
         "audit.json differs"
     );
-    // A result changed after its receipt is named, not merged.
-    let result = dir.join("runs/truth-low/full/seed-0/audit_job.json");
-    let mut text = std::fs::read_to_string(&result).unwrap();
-    text.push(' ');
-    std::fs::write(&result, text).unwrap();
-    let o = audit(&config, &dir, &["--collect"]);
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success());
+    // Pooled: an audit merging these samples submits no wave, only the merge (at once),
+    // and merges without a receipt to what a sequential audit of the same pool writes,
+    // which runs nothing either. A grid with one variant more submits only its runs and
+    // what they need (the originals and shared steps of their seeds).
+    let samples = dir.join("samples.json");
+    let merge = ["--merge", samples.to_str().unwrap()];
+    let (again, sub2) = (t.path().join("again"), t.path().join("submit2"));
+    let printed = ok(&audit(
+        &config,
+        &again,
+        &[&["--emit-slurm", sub2.to_str().unwrap()][..], &merge].concat(),
+    ));
+    assert!(!printed.contains("jobs,"), "{printed}");
+    assert_eq!(std::fs::read_to_string(sub2.join("jobs.txt")).unwrap(), "");
+    let submit = std::fs::read_to_string(sub2.join("submit.sh")).unwrap();
+    assert!(submit.contains("merge=$(id merge.sbatch)"), "{submit}");
+    if let Ok(st) = Command::new("bash")
+        .arg("-n")
+        .arg(sub2.join("submit.sh"))
+        .status()
+    {
+        assert!(st.success(), "submit.sh is not valid shell");
+    }
+    ok(&audit(
+        &config,
+        &again,
+        &[&["--collect"][..], &merge].concat(),
+    ));
+    let pooled = t.path().join("pooled");
+    ok(&audit(&config, &pooled, &merge));
+    assert!(!pooled.join("runs").exists() && !pooled.join("original").exists());
     assert!(
-        err.contains("not done: runs/truth-low/full/seed-0: runs/truth-low/full/seed-0/audit_job.json is missing or changed since the job's receipt"),
-        "{err}"
+        read(&again, "audit.json") == read(&pooled, "audit.json"),
+        "the pooled merge's audit.json differs from the pooled sequential audit's"
+    );
+    let mut args = grid(&config);
+    let v = args.iter().position(|a| a == "--variants").unwrap() + 1;
+    args[v] = "full,opacity_mask,even_views,no_qa_mask".into();
+    let more = Command::new(env!("CARGO_BIN_EXE_unseen"))
+        .args(args)
+        .arg("--out")
+        .arg(t.path().join("more"))
+        .args(["--emit-slurm", t.path().join("submit3").to_str().unwrap()])
+        .args(merge)
+        .output()
+        .unwrap();
+    let printed = ok(&more);
+    assert!(
+        printed.contains("originals: 2 jobs")
+            && printed.contains("shared: 2 jobs")
+            && printed.contains("runs: 2 jobs"),
+        "{printed}"
+    );
+    let listed = std::fs::read_to_string(t.path().join("submit3/wave-3-runs.txt")).unwrap();
+    assert_eq!(
+        listed,
+        "runs/truth-low/no_qa_mask/seed-0\nruns/truth-low/no_qa_mask/seed-1\n"
     );
 }
 
