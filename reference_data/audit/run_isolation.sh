@@ -2,20 +2,30 @@
 # The audit of the paper's central mechanism with the comparisons that isolate it
 # (issue #54; reference_data/audit/<room>-isolation/): under the mechanisms generator
 # (truth-low+hallucinating+relative), full against even_views (the paper's ablation),
-# conflicting_views (a colliding set of the same size at matched coverage), and
-# no_depth_supervision; every run records its diagnostics (SPEC.md §21.5).
+# conflicting_views (a colliding set of the same size at matched coverage),
+# no_depth_supervision, the cycle the paper replaces, and the independent-views claim under
+# the other selection rules and the hull outline (the *_max_cardinality, *_max_coverage and
+# *_hull pairs); every run records its diagnostics (SPEC.md §21.5).
 # Seeds accumulate: each batch adds to the folder's samples.json.
 #
 # Usage: reference_data/audit/run_isolation.sh ROOM A..B [UNSEEN_BINARY]
 #   e.g. reference_data/audit/run_isolation.sh lounge 0..2
-# VARIANTS overrides the variant list (e.g. VARIANTS=full,even_views,conflicting_views,cycle).
+# The default variants are every variant the committed <room>-isolation/ folder holds (its
+# report shows the claims of the variants asked for, so a shorter list drops claims from
+# it); jobs already pooled as this binary computes them are not run again, so the full list
+# costs only what is new. VARIANTS overrides the list.
 # FAMILY names a candidate family of the room (SPEC.md §20.7, e.g. FAMILY=ring-13): the
-# pipeline is given it instead of the bridge views, into reference_data/audit/<room>-<family>/.
+# pipeline is given it instead of the bridge views, into reference_data/audit/<room>-<family>/
+# (default variants there: full, even_views, conflicting_views, as committed).
 # Low priority: see run_mechanisms.sh (nice 19; a setsid batch needs its autogroup niced).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 room="$1"; seeds="$2"; bin="${3:-target/release/unseen}"
-variants="${VARIANTS:-full,even_views,conflicting_views,no_depth_supervision}"
+all=full,even_views,conflicting_views,no_depth_supervision,cycle
+all+=,full_max_cardinality,even_views_max_cardinality,full_max_coverage
+all+=,even_views_max_coverage,full_hull,even_views_hull
+variants="${VARIANTS:-${FAMILY:+full,even_views,conflicting_views}}"
+variants="${variants:-$all}"
 family=()
 out="reference_data/audit/$room-isolation"
 if [ -n "${FAMILY:-}" ]; then
