@@ -160,9 +160,9 @@ impl<'z> Ring<'z> {
     }
 
     /// Output rows `rows` in order: before `each(y, ring)` the ring holds what
-    /// [`Ring::vertical`] needs for row `y`. A band's first rows re-blur the five rows above
-    /// it that the band before blurred too (every row's values come from the same operations
-    /// on the same inputs, so the bands' bounds do not change any bit).
+    /// [`Ring::vertical`] needs for row `y`. A band blurs the five rows above it and the
+    /// five below it too, which its neighbours blur as well (every row's values come from the
+    /// same operations on the same inputs, so the bands' bounds do not change any bit).
     fn sweep(
         &mut self,
         rows: std::ops::Range<usize>,
@@ -371,8 +371,8 @@ fn ssim_with(
     ssim_in_bands(isa, bands.max(1), x, y, dims, grad, map)
 }
 
-/// Rows a band has at least: its first rows re-blur the five above it along x, so a band
-/// should be several times that.
+/// Rows a band has at least: a band re-blurs along x the five rows above it and the five
+/// below it that its neighbours blur too, so a band should be several times that.
 const BAND_ROWS: usize = 32;
 
 /// [`ssim_with`] in `bands` bands of rows, each swept down by a [`Ring`] on its own task.
