@@ -325,15 +325,12 @@ mod stream_wide {
 pub fn stream_seconds(reads: &[usize], updates: &[usize]) -> f64 {
     use rayon::prelude::*;
     const CHUNK: usize = 1 << 14;
-    // 2: AVX-512F, 1: AVX2, 0: neither (as the library's kernels choose).
-    #[cfg(target_arch = "x86_64")]
-    let isa = if is_x86_feature_detected!("avx512f") {
-        2
-    } else {
-        u8::from(is_x86_feature_detected!("avx2"))
+    // 2: AVX-512F, 1: AVX2, 0: neither (as the library's kernels choose, cap included).
+    let isa = match unseen::raster::kernel::auto_isa_name() {
+        "AVX-512F" => 2,
+        "AVX2" => 1,
+        _ => 0,
     };
-    #[cfg(not(target_arch = "x86_64"))]
-    let isa = 0;
     let fold_isa = |c: &[u32]| match isa {
         // SAFETY: the feature was detected above.
         #[cfg(target_arch = "x86_64")]
@@ -432,16 +429,13 @@ pub fn machine() -> String {
                 .map(|m| m.trim().to_string())
         })
         .unwrap_or_else(|| "unknown CPU".into());
-    #[cfg(target_arch = "x86_64")]
-    let isa = if is_x86_feature_detected!("avx512f") {
-        "AVX-512F"
-    } else if is_x86_feature_detected!("avx2") {
-        "AVX2"
-    } else {
-        "no AVX2"
-    };
-    #[cfg(not(target_arch = "x86_64"))]
-    let isa = "scalar kernels";
+    let isa = unseen::raster::kernel::auto_isa_name();
+    let capped = std::env::var(unseen::raster::kernel::MAX_ISA_VAR)
+        .ok()
+        .filter(|v| !v.is_empty())
+        .map_or(String::new(), |v| {
+            format!(" (capped by {}={v})", unseen::raster::kernel::MAX_ISA_VAR)
+        });
     let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
-    format!("{model}, {cpus} logical CPUs, {isa}")
+    format!("{model}, {cpus} logical CPUs, {isa}{capped}")
 }

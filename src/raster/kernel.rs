@@ -60,8 +60,13 @@ impl Isa {
     #[cfg(not(target_arch = "x86_64"))]
     const AVX2_OR_BASELINE: Isa = Isa::Baseline;
 
-    /// The widest set this CPU has (the detection is cached by the standard library).
+    /// The widest set this CPU has (the detection is cached by the standard library),
+    /// capped by [`MAX_ISA_VAR`].
     pub(crate) fn detect() -> Isa {
+        Isa::cpu().min(Isa::cap())
+    }
+
+    fn cpu() -> Isa {
         #[cfg(target_arch = "x86_64")]
         {
             // The AVX-512F forms use AVX2 too (and `Kernel::avx2` reads "at least AVX2").
@@ -74,6 +79,50 @@ impl Isa {
         }
         Isa::Baseline
     }
+
+    /// The cap [`MAX_ISA_VAR`] sets, read once per process (none when unset; a value it
+    /// does not know is reported once on stderr and sets none).
+    fn cap() -> Isa {
+        static CAP: std::sync::OnceLock<Isa> = std::sync::OnceLock::new();
+        *CAP.get_or_init(|| {
+            let widest = Isa::Baseline.max(Isa::AVX2_OR_BASELINE);
+            #[cfg(target_arch = "x86_64")]
+            let widest = widest.max(Isa::Avx512);
+            match std::env::var(MAX_ISA_VAR).as_deref() {
+                Err(_) | Ok("") | Ok("avx512f") => widest,
+                Ok("avx2") => Isa::AVX2_OR_BASELINE,
+                Ok("scalar") => Isa::Baseline,
+                Ok(other) => {
+                    eprintln!(
+                        "{MAX_ISA_VAR}={other:?} is not one of avx512f, avx2, scalar: ignored"
+                    );
+                    widest
+                }
+            }
+        })
+    }
+
+    /// The set's name as benches print it.
+    pub(crate) fn name(self) -> &'static str {
+        match self {
+            Isa::Baseline => "no AVX2",
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx2 => "AVX2",
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx512 => "AVX-512F",
+        }
+    }
+}
+
+/// The environment variable that caps the instruction set every kernel runs on (`avx2`, or
+/// `scalar` for the baseline; `avx512f` or unset: the CPU's widest), so that the narrower
+/// forms can be measured on a wider CPU. Every form gives the same bits (SPEC.md §5.7).
+pub const MAX_ISA_VAR: &str = "UNSEEN_MAX_ISA";
+
+/// The instruction set [`Kernel::Auto`] runs on here (after [`MAX_ISA_VAR`]): "AVX-512F",
+/// "AVX2" or "no AVX2".
+pub fn auto_isa_name() -> &'static str {
+    Isa::detect().name()
 }
 
 /// [`Isa::Baseline`] as a const-generic tag: kernels written once for all widths take the

@@ -824,3 +824,37 @@ fn cli_render_cutoffs() {
         assert!(err.contains(needle), "{flags:?}: {err}");
     }
 }
+
+/// `UNSEEN_MAX_ISA` caps the instruction set of every kernel (projection, blends, their
+/// backward, SSIM, Adam): training under AVX2 or the scalar forms writes the same bytes as
+/// under the CPU's widest, and a value it does not know is named on stderr and ignored.
+#[test]
+fn the_isa_cap_changes_no_bit_of_training() {
+    let lounge = crate::support::tiny_run::lounge();
+    let out = out_dir("isa-cap");
+    let train = |cap: &str| {
+        let dir = out.join(if cap.is_empty() { "widest" } else { cap });
+        let o = unseen()
+            .env(unseen::raster::kernel::MAX_ISA_VAR, cap)
+            .arg("train")
+            .arg(&lounge)
+            .arg("--out")
+            .arg(&dir)
+            .args(["--iterations", "60", "--resolution", "4"])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let ply = std::fs::read(dir.join("point_cloud/iteration_60/point_cloud.ply")).unwrap();
+        (ply, String::from_utf8_lossy(&o.stderr).into_owned())
+    };
+    let (widest, _) = train("");
+    for cap in ["avx2", "scalar"] {
+        assert!(train(cap).0 == widest, "{cap}: another scene");
+    }
+    let (same, err) = train("sse9");
+    assert!(same == widest);
+    assert!(
+        err.contains("UNSEEN_MAX_ISA=\"sse9\" is not one of"),
+        "{err}"
+    );
+}
