@@ -232,7 +232,7 @@ pub fn bin_into(
     let n_all = p.radii.len();
     resize(recs, n_all);
     #[cfg(target_arch = "x86_64")]
-    let avx512 = kernel.avx512();
+    let (avx512, avx2) = (kernel.avx512(), kernel.avx2());
     #[cfg(not(target_arch = "x86_64"))]
     let _ = kernel;
     recs.par_chunks_mut(CHUNK)
@@ -244,6 +244,11 @@ pub fn bin_into(
             if avx512 {
                 // SAFETY: AVX-512F was detected (`Kernel::avx512`).
                 return unsafe { records_avx512(splats, radii, c * CHUNK, grid, out) };
+            }
+            #[cfg(target_arch = "x86_64")]
+            if avx2 {
+                // SAFETY: AVX2 was detected (`Kernel::avx2`).
+                return unsafe { records_avx2(splats, radii, c * CHUNK, grid, out) };
             }
             records(splats, radii, c * CHUNK, grid, out)
         })
@@ -521,6 +526,99 @@ unsafe fn records_avx512(
     (lo.min(tlo), hi.max(thi), count + tcount)
 }
 
+/// [`records`] with the tile rectangles of eight splats per AVX2 instruction (the same
+/// clamps and conversions as [`records_avx512`]), the records then packed and written at
+/// the cursor lane by lane (AVX2 has no compress); the tail one at a time. The same records.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[allow(clippy::needless_range_loop)] // lanes index five arrays together
+unsafe fn records_avx2(
+    splats: &[Splat],
+    radii: &[[i32; 2]],
+    first: usize,
+    grid: Grid,
+    out: &mut [[u64; 2]],
+) -> (u32, u32, usize) {
+    use crate::math::lanes::{F32x8, Lanes};
+    use std::arch::x86_64::*;
+    let (packing, tiles_x, tiles_y) = grid;
+    let n = splats.len().min(radii.len()).min(out.len());
+    let full = n - n % 8;
+    let floats = Splat::floats(&splats[..n]);
+    let (mut lo, mut hi, mut count) = (u32::MAX, 0u32, 0usize);
+    // SAFETY (every intrinsic below): AVX2 is available (the caller's contract); the loads
+    // and stores are of slices of exactly the length they touch.
+    unsafe {
+        let zero = _mm256_setzero_ps();
+        let tile = _mm256_set1_ps(TILE_SIZE as f32);
+        let limit = _mm256_set1_ps((1u32 << 30) as f32);
+        let (hx, hy) = (
+            _mm256_set1_epi32(tiles_x as i32),
+            _mm256_set1_epi32(tiles_y as i32),
+        );
+        // A radii pair's x to the low half of its 128-bit lane, y to the high half.
+        let split = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
+        let mut cols = [F32x8::splat(0.0); SPLAT_FLOATS];
+        let mut rect = [[0i32; 8]; 4];
+        let mut depth = [0u32; 8];
+        for k in (0..full).step_by(8) {
+            F32x8::load_columns(&floats[k * SPLAT_FLOATS..], SPLAT_FLOATS, &mut cols);
+            let (mx, my) = (cols[0].0, cols[1].0);
+            let rp = radii[k..k + 8].as_flattened().as_ptr();
+            let (r0, r1) = (
+                _mm256_permutevar8x32_epi32(_mm256_loadu_si256(rp.cast()), split),
+                _mm256_permutevar8x32_epi32(_mm256_loadu_si256(rp.add(8).cast()), split),
+            );
+            let (rx, ry) = (
+                _mm256_permute2x128_si256::<0x20>(r0, r1),
+                _mm256_permute2x128_si256::<0x31>(r0, r1),
+            );
+            let (rxf, ryf) = (_mm256_cvtepi32_ps(rx), _mm256_cvtepi32_ps(ry));
+            // clamp(v, 0, 2^30): `max(v, 0)` gives 0 for a NaN v (its second operand).
+            let clamp = |v: __m256| _mm256_min_ps(_mm256_max_ps(v, zero), limit);
+            let down = |v: __m256, hi: __m256i| _mm256_min_epi32(_mm256_cvttps_epi32(clamp(v)), hi);
+            let up = |v: __m256, hi: __m256i| {
+                let c = _mm256_round_ps::<{ _MM_FROUND_TO_POS_INF | _MM_FROUND_NO_EXC }>(clamp(v));
+                _mm256_min_epi32(_mm256_cvttps_epi32(c), hi)
+            };
+            let x0 = down(_mm256_div_ps(_mm256_sub_ps(mx, rxf), tile), hx);
+            let x1 = _mm256_max_epi32(up(_mm256_div_ps(_mm256_add_ps(mx, rxf), tile), hx), x0);
+            let y0 = down(_mm256_div_ps(_mm256_sub_ps(my, ryf), tile), hy);
+            let y1 = _mm256_max_epi32(up(_mm256_div_ps(_mm256_add_ps(my, ryf), tile), hy), y0);
+            for (dst, v) in rect.iter_mut().zip([x0, x1, y0, y1]) {
+                _mm256_storeu_si256(dst.as_mut_ptr().cast(), v);
+            }
+            _mm256_storeu_si256(depth.as_mut_ptr().cast(), _mm256_castps_si256(cols[9].0));
+            for l in 0..8 {
+                let i = k + l;
+                let r = [rect[0][l], rect[1][l], rect[2][l], rect[3][l]].map(|v| v as usize);
+                // Branch-free, as `records`: written at the cursor, which moves on past the
+                // visible ones only.
+                out[count] = [
+                    u64::from(depth[l]) << 32 | (first + i) as u64,
+                    packing.pack(r),
+                ];
+                let vis = visible(&radii[i]);
+                lo = if vis { lo.min(depth[l]) } else { lo };
+                hi = if vis { hi.max(depth[l]) } else { hi };
+                count += usize::from(vis);
+            }
+        }
+    }
+    // The tail from the cursor (`count ≤ full`: its writes stay below `n`).
+    let (tlo, thi, tcount) = records(
+        &splats[full..n],
+        &radii[full..n],
+        first + full,
+        grid,
+        &mut out[count..n],
+    );
+    (lo.min(tlo), hi.max(thi), count + tcount)
+}
+
 /// Bits `i` of a 4-bit mask doubled into bits `2i, 2i + 1` (a record is two 64-bit lanes).
 #[cfg(target_arch = "x86_64")]
 const DOUBLED: [u8; 16] = {
@@ -701,14 +799,15 @@ mod tests {
     use super::*;
     use crate::rng::Uniform;
 
-    /// The AVX-512F record pass against the scalar one, bit for bit: centres off the grid,
+    /// The AVX2 and AVX-512F record passes against the scalar one, bit for bit: centres off the grid,
     /// on tile boundaries, NaN, ±∞ and beyond i32; radii culled, one-sided, negative,
     /// huge and `i32::MIN`/`MAX`; arbitrary depth bits; lengths with and without a tail;
     /// grids from 1×1 to 1000×3 tiles.
     #[test]
     fn record_pass_forms_agree() {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx512f") {
+        if std::arch::is_x86_feature_detected!("avx2") {
+            let avx512 = std::arch::is_x86_feature_detected!("avx512f");
             let mut u = Uniform::new(11);
             let specials = [
                 f32::NAN,
@@ -763,10 +862,17 @@ mod tests {
                         .collect();
                     let mut want = vec![[0u64; 2]; n];
                     let mut got = vec![[1u64; 2]; n];
+                    let mut got2 = vec![[2u64; 2]; n];
                     let a = records(&splats, &radii, 5, grid, &mut want);
-                    // SAFETY: AVX-512F is available (checked above).
-                    let b = unsafe { records_avx512(&splats, &radii, 5, grid, &mut got) };
-                    assert_eq!(a, b, "{n} splats, {tiles_x}×{tiles_y} tiles");
+                    // SAFETY: AVX2 is available (checked above).
+                    let c = unsafe { records_avx2(&splats, &radii, 5, grid, &mut got2) };
+                    assert_eq!(a, c, "avx2: {n} splats, {tiles_x}×{tiles_y} tiles");
+                    if avx512 {
+                        // SAFETY: AVX-512F is available (checked above).
+                        let b = unsafe { records_avx512(&splats, &radii, 5, grid, &mut got) };
+                        assert_eq!(a, b, "{n} splats, {tiles_x}×{tiles_y} tiles");
+                        assert_eq!(got[..b.2], want[..a.2], "{n} splats, {tiles_x}×{tiles_y}");
+                    }
                     // The visible splats' records, in index order, at the head.
                     let visible: Vec<[u64; 2]> = (0..n)
                         .filter(|&i| visible(&radii[i]))
@@ -779,9 +885,9 @@ mod tests {
                         "{n} splats, {tiles_x}×{tiles_y} tiles"
                     );
                     assert_eq!(
-                        got[..b.2],
+                        got2[..c.2],
                         visible[..],
-                        "{n} splats, {tiles_x}×{tiles_y} tiles"
+                        "avx2: {n} splats, {tiles_x}×{tiles_y} tiles"
                     );
                 }
             }
