@@ -389,6 +389,29 @@ fn records(
     (lo, hi, count)
 }
 
+/// A vector form's result over splats `..full` of `n`, `(lo, hi, count)`, completed by
+/// [`records`] over the tail from the cursor (`count ≤ full`: its writes stay below `n`).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn with_tail(
+    splats: &[Splat],
+    radii: &[[i32; 2]],
+    first: usize,
+    grid: Grid,
+    out: &mut [[u64; 2]],
+    (full, n): (usize, usize),
+    (lo, hi, count): (u32, u32, usize),
+) -> (u32, u32, usize) {
+    let (tlo, thi, tcount) = records(
+        &splats[full..n],
+        &radii[full..n],
+        first + full,
+        grid,
+        &mut out[count..n],
+    );
+    (lo.min(tlo), hi.max(thi), count + tcount)
+}
+
 /// [`records`], sixteen splats per AVX-512F instruction (the tail one at a time): the same
 /// records. The splats' centres and depths are loaded by a 16×16 transpose, the radii by a
 /// permute; the clamps below 0 and above 2^30 (exact in f32, above every grid [`Packing`]
@@ -515,15 +538,7 @@ unsafe fn records_avx512(
             hi = hi.max(h16[l]);
         }
     }
-    // The tail from the cursor (`count ≤ full`: its writes stay below `n`).
-    let (tlo, thi, tcount) = records(
-        &splats[full..n],
-        &radii[full..n],
-        first + full,
-        grid,
-        &mut out[count..n],
-    );
-    (lo.min(tlo), hi.max(thi), count + tcount)
+    with_tail(splats, radii, first, grid, out, (full, n), (lo, hi, count))
 }
 
 /// [`records`] with the tile rectangles of eight splats per AVX2 instruction (the same
@@ -608,15 +623,7 @@ unsafe fn records_avx2(
             }
         }
     }
-    // The tail from the cursor (`count ≤ full`: its writes stay below `n`).
-    let (tlo, thi, tcount) = records(
-        &splats[full..n],
-        &radii[full..n],
-        first + full,
-        grid,
-        &mut out[count..n],
-    );
-    (lo.min(tlo), hi.max(thi), count + tcount)
+    with_tail(splats, radii, first, grid, out, (full, n), (lo, hi, count))
 }
 
 /// Bits `i` of a 4-bit mask doubled into bits `2i, 2i + 1` (a record is two 64-bit lanes).
