@@ -18,16 +18,23 @@
 //! alpha > 1e-10, `v_alpha −= v_ED·D/alpha²`.
 //!
 //! Loop order: per tile, the walked prefix of its list (up to the largest `n_contrib`) is
-//! gathered once (prefetched: the gather is bound by cache misses), and each tile row gets
-//! the list of splats it must visit; each row (16 pixels: one AVX-512F register, two AVX2
-//! registers, or 16 scalar lanes — [`Kernel`] picks the form, all give the same bits) then
-//! walks only those, back to front, its state in registers. Nothing depends on how bands are
+//! gathered once (prefetched: the gather is bound by cache misses), each splat some row
+//! visits becoming an entry with the (row, half) visits it gets. The entries are then walked
+//! back to front, each over its rows ascending (16 pixels a row: one AVX-512F register, two
+//! AVX2 registers, or 16 scalar lanes — [`Kernel`] picks the form, all give the same bits):
+//! every row meets its splats back to front, its state read from and written back to the
+//! tile's 16 row states (L1-resident), while the entry's accumulators stay in registers and
+//! are reduced as soon as its last row is done. Entry-major rather than row-major (each row
+//! walking its own list with its state in registers): an entry has 3–4 row visits on a
+//! trained scene, and walking rows made every visit read and write the entry's accumulators
+//! in a list-sized array and every entry cost a push per visit; the same operations in the
+//! same order per row and per entry, so the same bits. Nothing depends on how bands are
 //! scheduled.
 //!
 //! Reduction order (SPEC.md §5.8): per (tile, splat) there are 8 lane-pair accumulators per
 //! contribution, starting at +0.0; each row visit adds `c_j + c_{j+8}` to lane `j`
 //! ([`add_pairs`]; AVX2 adds its two registers, AVX-512F the upper 8 lanes of its register to
-//! the lower 8, then each adds the sum into the accumulator), rows in order; once per tile
+//! the lower 8, then each adds the sum into the accumulator), rows in order; once per entry
 //! the 8 lanes are reduced in a fixed tree
 //! (`j + (j+4)`, then `+2`, `+1`: [`sum8`]). The per-(tile, splat) results are then summed
 //! per Gaussian in tile order. Each (tile, splat) sum has one pairwise step, a chain over at
@@ -151,6 +158,7 @@ const NC: usize = 10;
 
 /// Backward state of one tile row (16 pixels), lane by lane.
 #[derive(Clone, Copy, Default)]
+#[repr(C, align(64))]
 struct RowState {
     t: [f32; LANES],
     t_final: [f32; LANES],
@@ -179,6 +187,9 @@ struct Entry {
     s: Splat,
     /// Position in the tile's list (what `n_contrib` counts).
     pos: u32,
+    /// The (row, half) visits it gets: bit `2·row + h` for the half `h` (lanes `8h..8h+8`)
+    /// of tile row `row`.
+    halves: u32,
 }
 
 /// Add one row visit's 16 lane contributions into the 8 lane-pair accumulators:
@@ -211,9 +222,6 @@ fn spread_rows(m: u32) -> u32 {
     x = (x | x << 2) & 0x3333_3333;
     (x | x << 1) & EVEN_BITS
 }
-
-/// A row's visit: the entry index, with the halves to evaluate in the top two bits.
-const VISIT_INDEX: u32 = (1 << 30) - 1;
 
 /// Step the recovered transmittance back over a splat of opacity `alpha`: returns
 /// `ra = 1/max(1e-6, 1 − α)`, the transmittance in front of the splat `T·ra`, and the splat's
@@ -353,36 +361,40 @@ fn reduce_lanes<const GEOMETRY: bool>(acc: &Acc) -> SplatGrad {
     }
 }
 
-/// Walk one row back to front over the entries `idx` (ascending; walked in reverse), lane by
-/// lane, every lane evaluated (the reference form).
+/// Walk one entry (a splat of the tile's list) over the rows its record `halves` asks for
+/// (bits `2·row + h`), rows ascending, every lane of a row evaluated (the reference form);
+/// each row's state is read from and written back to `states`, and the entry's
+/// accumulators start at +0.0 in `acc`.
 #[inline(never)]
-fn row_lanes<const GEOMETRY: bool>(
+fn entry_lanes<const GEOMETRY: bool>(
     max_alpha: f32,
-    list: &[Entry],
-    idx: &[u32],
+    e: &Entry,
     px: &[f32; LANES],
-    py: f32,
-    st: &mut RowState,
-    acc: &mut [Acc],
+    y0: usize,
+    states: &mut [RowState; LANES],
+    acc: &mut Acc,
 ) {
+    *acc = [[0.0; HALF]; NC];
     let mut c = [[0f32; LANES]; NC];
-    for &v in idx.iter().rev() {
-        let i = v & VISIT_INDEX;
-        let Entry { s, pos } = &list[i as usize];
+    let mut keep = (e.halves | e.halves >> 1) & EVEN_BITS;
+    while keep != 0 {
+        let row = keep.trailing_zeros() as usize / 2;
+        keep &= keep - 1;
+        let py = (y0 + row) as f32 + 0.5;
         for (l, &x) in px.iter().enumerate() {
-            lane::<GEOMETRY>(max_alpha, s, *pos, x, py, st, l, &mut c);
+            lane::<GEOMETRY>(max_alpha, &e.s, e.pos, x, py, &mut states[row], l, &mut c);
         }
-        add_row::<GEOMETRY>(&mut acc[i as usize], &c);
+        add_row::<GEOMETRY>(acc, &c);
     }
 }
 
-/// [`row_lanes`] with AVX2 intrinsics: [`lane`]'s operations one for one, two registers of
+/// [`entry_lanes`] with AVX2 intrinsics: [`lane`]'s operations one for one, two registers of
 /// 8 lanes, and [`add_pairs`]'s accumulation (halves added, then added into the entry).
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
     use super::{
-        ALPHA_THRESHOLD, Acc, Entry, LANES, NC, RECOVER_EPS, RowState, SIGMA_CLAMP, VISIT_INDEX,
-        fields,
+        ALPHA_THRESHOLD, Acc, EVEN_BITS, Entry, HALF, LANES, NC, RECOVER_EPS, RowState,
+        SIGMA_CLAMP, fields,
     };
     use crate::math::fastexp::exp_avx2_in_range;
     use std::arch::x86_64::*;
@@ -391,14 +403,13 @@ mod avx2 {
     /// The CPU must support AVX2.
     #[target_feature(enable = "avx2")]
     #[allow(clippy::needless_range_loop)] // h and k index parallel register arrays
-    pub(super) unsafe fn row<const GEOMETRY: bool>(
+    pub(super) unsafe fn entry<const GEOMETRY: bool>(
         max_alpha: f32,
-        list: &[Entry],
-        idx: &[u32],
+        e: &Entry,
         px: &[f32; LANES],
-        py: f32,
-        st: &mut RowState,
-        acc: &mut [Acc],
+        y0: usize,
+        states: &mut [RowState; LANES],
+        acc: &mut Acc,
     ) {
         let c = |x: f32| _mm256_set1_ps(x);
         let zero = _mm256_setzero_ps();
@@ -406,35 +417,26 @@ mod avx2 {
             // SAFETY: h ∈ {0, 1}, so 8h + 8 <= 16 elements.
             unsafe { _mm256_loadu_ps(a.as_ptr().add(8 * h)) }
         };
-        let mut pxv = [zero; 2];
-        let (mut t, mut tf, mut va, mut vd, mut bgd) =
-            ([zero; 2], [zero; 2], [zero; 2], [zero; 2], [zero; 2]);
-        let (mut v, mut buf) = ([[zero; 2]; 3], [[zero; 2]; 3]);
-        let mut bz = [zero; 2];
-        let mut n = [_mm256_setzero_si256(); 2];
-        for h in 0..2 {
-            pxv[h] = ld(px, h);
-            t[h] = ld(&st.t, h);
-            tf[h] = ld(&st.t_final, h);
-            va[h] = ld(&st.v_alpha, h);
-            vd[h] = ld(&st.v_d, h);
-            bgd[h] = ld(&st.bg_dot, h);
-            bz[h] = ld(&st.buf_z, h);
-            for k in 0..3 {
-                v[k][h] = ld(&st.v[k], h);
-                buf[k][h] = ld(&st.buf[k], h);
-            }
-            // SAFETY: as above.
-            n[h] = unsafe { _mm256_loadu_si256(st.n.as_ptr().add(8 * h) as *const __m256i) };
-        }
+        let st_ = |a: &mut [f32; LANES], h: usize, x: __m256| {
+            // SAFETY: h ∈ {0, 1}, so 8h + 8 <= 16 elements.
+            unsafe { _mm256_storeu_ps(a.as_mut_ptr().add(8 * h), x) }
+        };
+        *acc = [[0.0; HALF]; NC];
+        let Entry { s, pos, halves } = *e;
+        let pxv = [ld(px, 0), ld(px, 1)];
+        let posv = _mm256_set1_epi32(pos as i32);
+        let mut keep = (halves | halves >> 1) & EVEN_BITS;
         // Unsigned `pos < n` as signed compare: counts stay far below 2^31.
-        for &visit in idx.iter().rev() {
-            let (i, halves) = (visit & VISIT_INDEX, visit >> 30);
-            let Entry { s, pos } = &list[i as usize];
+        while keep != 0 {
+            let b = keep.trailing_zeros();
+            keep &= keep - 1;
+            let row = b as usize / 2;
+            let halves = halves >> b & 0b11;
+            let st = &mut states[row];
+            let py = (y0 + row) as f32 + 0.5;
             let dy = s.mean[1] - py;
             let cdd = c(s.conic[2] * dy * dy);
             let dyv = c(dy);
-            let posv = _mm256_set1_epi32(*pos as i32);
             // First σ, α and the blend mask of both halves; a splat that blends no pixel of
             // the row (or of a half) changes nothing there (its contributions are +0.0 and no
             // state moves), so skipping it is exact — and common, splats being narrower than
@@ -445,7 +447,9 @@ mod avx2 {
                 if halves & (1 << h) == 0 {
                     continue;
                 }
-                let active = _mm256_castsi256_ps(_mm256_cmpgt_epi32(n[h], posv));
+                // SAFETY: h ∈ {0, 1}, so 8h + 8 <= 16 elements.
+                let n = unsafe { _mm256_loadu_si256(st.n.as_ptr().add(8 * h).cast()) };
+                let active = _mm256_castsi256_ps(_mm256_cmpgt_epi32(n, posv));
                 let dx = _mm256_sub_ps(c(s.mean[0]), pxv[h]);
                 let sum = _mm256_add_ps(_mm256_mul_ps(_mm256_mul_ps(c(s.conic[0]), dx), dx), cdd);
                 // −σ and the exponential in range, as the forward's AVX2 form (SPEC.md
@@ -482,11 +486,13 @@ mod avx2 {
                 // `max_ps(a, b)` is `a > b ? a : b`: the scalar select with the operands so.
                 let den = _mm256_max_ps(one_minus, c(RECOVER_EPS));
                 let ra = _mm256_div_ps(c(1.0), den);
-                let tn = _mm256_mul_ps(t[h], ra);
+                let t = ld(&st.t, h);
+                let tn = _mm256_mul_ps(t, ra);
                 let fac = _mm256_mul_ps(alpha, tn);
                 let sel = |m: __m256, x: __m256| _mm256_and_ps(m, x);
+                let v = [ld(&st.v[0], h), ld(&st.v[1], h), ld(&st.v[2], h)];
                 for k in 0..3 {
-                    cv[k][h] = sel(valid, _mm256_mul_ps(fac, v[k][h]));
+                    cv[k][h] = sel(valid, _mm256_mul_ps(fac, v[k]));
                 }
                 if GEOMETRY {
                     let term = |col: f32, b: __m256, vv: __m256| {
@@ -495,14 +501,16 @@ mod avx2 {
                             vv,
                         )
                     };
-                    let mut v_a = term(s.color[0], buf[0][h], v[0][h]);
-                    v_a = _mm256_add_ps(v_a, term(s.color[1], buf[1][h], v[1][h]));
-                    v_a = _mm256_add_ps(v_a, term(s.color[2], buf[2][h], v[2][h]));
-                    v_a = _mm256_add_ps(v_a, term(s.depth, bz[h], vd[h]));
-                    let tfra = _mm256_mul_ps(tf[h], ra);
-                    v_a = _mm256_add_ps(v_a, _mm256_mul_ps(tfra, va[h]));
-                    v_a = _mm256_sub_ps(v_a, _mm256_mul_ps(tfra, bgd[h]));
-                    cv[3][h] = sel(valid, _mm256_mul_ps(fac, vd[h]));
+                    let buf = [ld(&st.buf[0], h), ld(&st.buf[1], h), ld(&st.buf[2], h)];
+                    let (bz, vd) = (ld(&st.buf_z, h), ld(&st.v_d, h));
+                    let mut v_a = term(s.color[0], buf[0], v[0]);
+                    v_a = _mm256_add_ps(v_a, term(s.color[1], buf[1], v[1]));
+                    v_a = _mm256_add_ps(v_a, term(s.color[2], buf[2], v[2]));
+                    v_a = _mm256_add_ps(v_a, term(s.depth, bz, vd));
+                    let tfra = _mm256_mul_ps(ld(&st.t_final, h), ra);
+                    v_a = _mm256_add_ps(v_a, _mm256_mul_ps(tfra, ld(&st.v_alpha, h)));
+                    v_a = _mm256_sub_ps(v_a, _mm256_mul_ps(tfra, ld(&st.bg_dot, h)));
+                    cv[3][h] = sel(valid, _mm256_mul_ps(fac, vd));
                     let open = _mm256_and_ps(valid, _mm256_cmp_ps::<_CMP_LE_OQ>(a, c(max_alpha)));
                     let v_sigma = _mm256_mul_ps(_mm256_xor_ps(a, c(-0.0)), v_a);
                     let dyy = dyv;
@@ -527,18 +535,17 @@ mod avx2 {
                     cv[8][h] = sel(open, _mm256_mul_ps(v_sigma, gy));
                     cv[9][h] = sel(open, _mm256_mul_ps(e, v_a));
                     for k in 0..3 {
-                        let nb = _mm256_add_ps(buf[k][h], _mm256_mul_ps(c(s.color[k]), fac));
-                        buf[k][h] = _mm256_blendv_ps(buf[k][h], nb, valid);
+                        let nb = _mm256_add_ps(buf[k], _mm256_mul_ps(c(s.color[k]), fac));
+                        st_(&mut st.buf[k], h, _mm256_blendv_ps(buf[k], nb, valid));
                     }
-                    let nz = _mm256_add_ps(bz[h], _mm256_mul_ps(c(s.depth), fac));
-                    bz[h] = _mm256_blendv_ps(bz[h], nz, valid);
+                    let nz = _mm256_add_ps(bz, _mm256_mul_ps(c(s.depth), fac));
+                    st_(&mut st.buf_z, h, _mm256_blendv_ps(bz, nz, valid));
                 }
-                t[h] = _mm256_blendv_ps(t[h], tn, valid);
+                st_(&mut st.t, h, _mm256_blendv_ps(t, tn, valid));
             }
             // `add_pairs`: lane j + lane j+8, then into the entry's accumulator.
-            let a = &mut acc[i as usize];
             for k in 0..fields(GEOMETRY) {
-                let p = a[k].as_mut_ptr();
+                let p = acc[k].as_mut_ptr();
                 // SAFETY: `a[k]` holds 8 f32.
                 unsafe {
                     let sum = _mm256_add_ps(_mm256_loadu_ps(p), _mm256_add_ps(cv[k][0], cv[k][1]));
@@ -558,28 +565,32 @@ mod avx2 {
 #[cfg(target_arch = "x86_64")]
 mod avx512 {
     use super::{
-        ALPHA_THRESHOLD, Acc, Entry, LANES, NC, RECOVER_EPS, RowState, SIGMA_CLAMP, VISIT_INDEX,
+        ALPHA_THRESHOLD, Acc, EVEN_BITS, Entry, LANES, NC, RECOVER_EPS, RowState, SIGMA_CLAMP,
         fields,
     };
     use crate::math::fastexp::exp_avx512_in_range;
     use std::arch::x86_64::*;
 
+    /// One entry (a splat of the tile's list) walked over the rows its record asks for,
+    /// rows ascending, each row's state loaded from and stored back to `states`: the same
+    /// operations as [`row`] in the same order per row and per entry (each row still sees
+    /// its splats back to front when the caller walks the entries so), with the entry's
+    /// accumulators in registers. Returns the entry's accumulators.
+    ///
     /// # Safety
     /// The CPU must support AVX-512F.
     #[target_feature(enable = "avx512f")]
     #[allow(clippy::needless_range_loop)] // k indexes parallel register arrays
-    pub(super) unsafe fn row<const GEOMETRY: bool>(
+    pub(super) unsafe fn entry<const GEOMETRY: bool>(
         max_alpha: f32,
-        list: &[Entry],
-        idx: &[u32],
+        e: &Entry,
         px: &[f32; LANES],
-        py: f32,
-        st: &mut RowState,
-        acc: &mut [Acc],
+        y0: usize,
+        states: &mut [RowState; LANES],
+        acc: &mut Acc,
     ) {
         let c = |x: f32| _mm512_set1_ps(x);
         let zero = _mm512_setzero_ps();
-        // `-x`: the sign bit flipped (integer xor; `_mm512_xor_ps` needs AVX512DQ).
         let neg = |x: __m512| {
             let m = _mm512_set1_epi32(i32::MIN);
             _mm512_castsi512_ps(_mm512_xor_si512(_mm512_castps_si512(x), m))
@@ -588,45 +599,44 @@ mod avx512 {
             // SAFETY: `a` holds exactly LANES = 16 f32.
             unsafe { _mm512_loadu_ps(a.as_ptr()) }
         };
-        let pxv = ld(px);
-        let mut t = ld(&st.t);
-        let (tf, va, vd, bgd) = (
-            ld(&st.t_final),
-            ld(&st.v_alpha),
-            ld(&st.v_d),
-            ld(&st.bg_dot),
-        );
-        let v = [ld(&st.v[0]), ld(&st.v[1]), ld(&st.v[2])];
-        let mut buf = [ld(&st.buf[0]), ld(&st.buf[1]), ld(&st.buf[2])];
-        let mut bz = ld(&st.buf_z);
-        // SAFETY: `st.n` holds exactly 16 u32.
-        let n = unsafe { _mm512_loadu_si512(st.n.as_ptr().cast()) };
-        // Lanes of the halves (bit h: lanes 8h..8h+8) a visit asks for.
+        let st_ = |a: &mut [f32; LANES], x: __m512| {
+            // SAFETY: `a` holds exactly LANES = 16 f32.
+            unsafe { _mm512_storeu_ps(a.as_mut_ptr(), x) }
+        };
         const HALF_LANES: [__mmask16; 4] = [0, 0x00ff, 0xff00, 0xffff];
-        // Unsigned `pos < n` as signed compare: counts stay far below 2^31.
-        for &visit in idx.iter().rev() {
-            let (i, halves) = (visit & VISIT_INDEX, visit >> 30);
-            let Entry { s, pos } = &list[i as usize];
+        let Entry { s, pos, halves } = *e;
+        let pxv = ld(px);
+        let posv = _mm512_set1_epi32(pos as i32);
+        let (mx, c0, c1, c2, op) = (
+            c(s.mean[0]),
+            c(s.conic[0]),
+            c(s.conic[1]),
+            c(s.conic[2]),
+            c(s.opacity),
+        );
+        let dx = _mm512_sub_ps(mx, pxv);
+        let c0dxdx = _mm512_mul_ps(_mm512_mul_ps(c0, dx), dx);
+        let c1dx = _mm512_mul_ps(c1, dx);
+        let mut a8 = [_mm256_setzero_ps(); NC];
+        let mut keep = (halves | halves >> 1) & EVEN_BITS;
+        while keep != 0 {
+            let b = keep.trailing_zeros();
+            keep &= keep - 1;
+            let row = b as usize / 2;
+            let st = &mut states[row];
+            let py = (y0 + row) as f32 + 0.5;
             let dy = s.mean[1] - py;
             let cdd = c(s.conic[2] * dy * dy);
             let dyv = c(dy);
-            let active = _mm512_mask_cmpgt_epi32_mask(
-                HALF_LANES[halves as usize],
-                n,
-                _mm512_set1_epi32(*pos as i32),
-            );
-            let dx = _mm512_sub_ps(c(s.mean[0]), pxv);
-            let sum = _mm512_add_ps(_mm512_mul_ps(_mm512_mul_ps(c(s.conic[0]), dx), dx), cdd);
-            // −σ (up to the sign of a zero), and the exponential without its range
-            // clamps, as the forward kernel computes them (`composite::avx512::splat_alpha16`): a valid lane's
-            // argument `max(−σ, −30) = −min(σ, 30)` lies in [−30, 0].
-            let neg_sigma = _mm512_sub_ps(
-                _mm512_mul_ps(c(-0.5), sum),
-                _mm512_mul_ps(_mm512_mul_ps(c(s.conic[1]), dx), dyv),
-            );
+            // SAFETY: `st.n` holds exactly 16 u32.
+            let n = unsafe { _mm512_loadu_si512(st.n.as_ptr().cast()) };
+            let active =
+                _mm512_mask_cmpgt_epi32_mask(HALF_LANES[(halves >> b & 0b11) as usize], n, posv);
+            let sum = _mm512_add_ps(c0dxdx, cdd);
+            let neg_sigma = _mm512_sub_ps(_mm512_mul_ps(c(-0.5), sum), _mm512_mul_ps(c1dx, dyv));
             // SAFETY: AVX-512F is available in this function.
-            let e = unsafe { exp_avx512_in_range(_mm512_max_ps(neg_sigma, c(-SIGMA_CLAMP))) };
-            let a = _mm512_mul_ps(c(s.opacity), e);
+            let ev = unsafe { exp_avx512_in_range(_mm512_max_ps(neg_sigma, c(-SIGMA_CLAMP))) };
+            let a = _mm512_mul_ps(op, ev);
             let alpha = _mm512_min_ps(a, c(max_alpha));
             let valid = _mm512_mask_cmp_ps_mask::<_CMP_GE_OQ>(
                 _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(active, neg_sigma, zero),
@@ -635,17 +645,20 @@ mod avx512 {
             );
             let mut cv = [zero; NC];
             let one_minus = _mm512_sub_ps(c(1.0), alpha);
-            // `max_ps(a, b)` is `a > b ? a : b`: the scalar select with the operands so.
             let den = _mm512_max_ps(one_minus, c(RECOVER_EPS));
             let ra = _mm512_div_ps(c(1.0), den);
+            let t = ld(&st.t);
             let tn = _mm512_mul_ps(t, ra);
             let fac = _mm512_mul_ps(alpha, tn);
-            // The selected value where `m`, +0.0 elsewhere (as `and_ps` with a lane mask).
             let sel = |m: __mmask16, x: __m512| _mm512_maskz_mov_ps(m, x);
+            let v = [ld(&st.v[0]), ld(&st.v[1]), ld(&st.v[2])];
             for k in 0..3 {
                 cv[k] = sel(valid, _mm512_mul_ps(fac, v[k]));
             }
             if GEOMETRY {
+                let buf = [ld(&st.buf[0]), ld(&st.buf[1]), ld(&st.buf[2])];
+                let bz = ld(&st.buf_z);
+                let vd = ld(&st.v_d);
                 let term = |col: f32, b: __m512, vv: __m512| {
                     _mm512_mul_ps(
                         _mm512_sub_ps(_mm512_mul_ps(c(col), tn), _mm512_mul_ps(b, ra)),
@@ -656,9 +669,9 @@ mod avx512 {
                 v_a = _mm512_add_ps(v_a, term(s.color[1], buf[1], v[1]));
                 v_a = _mm512_add_ps(v_a, term(s.color[2], buf[2], v[2]));
                 v_a = _mm512_add_ps(v_a, term(s.depth, bz, vd));
-                let tfra = _mm512_mul_ps(tf, ra);
-                v_a = _mm512_add_ps(v_a, _mm512_mul_ps(tfra, va));
-                v_a = _mm512_sub_ps(v_a, _mm512_mul_ps(tfra, bgd));
+                let tfra = _mm512_mul_ps(ld(&st.t_final), ra);
+                v_a = _mm512_add_ps(v_a, _mm512_mul_ps(tfra, ld(&st.v_alpha)));
+                v_a = _mm512_sub_ps(v_a, _mm512_mul_ps(tfra, ld(&st.bg_dot)));
                 cv[3] = sel(valid, _mm512_mul_ps(fac, vd));
                 let open = _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(valid, a, c(max_alpha));
                 let v_sigma = _mm512_mul_ps(neg(a), v_a);
@@ -671,37 +684,28 @@ mod avx512 {
                     open,
                     _mm512_mul_ps(_mm512_mul_ps(_mm512_mul_ps(c(0.5), v_sigma), dyv), dyv),
                 );
-                let gx = _mm512_add_ps(
-                    _mm512_mul_ps(c(s.conic[0]), dx),
-                    _mm512_mul_ps(c(s.conic[1]), dyv),
-                );
-                let gy = _mm512_add_ps(
-                    _mm512_mul_ps(c(s.conic[1]), dx),
-                    _mm512_mul_ps(c(s.conic[2]), dyv),
-                );
+                let gx = _mm512_add_ps(_mm512_mul_ps(c0, dx), _mm512_mul_ps(c1, dyv));
+                let gy = _mm512_add_ps(c1dx, _mm512_mul_ps(c2, dyv));
                 cv[7] = sel(open, _mm512_mul_ps(v_sigma, gx));
                 cv[8] = sel(open, _mm512_mul_ps(v_sigma, gy));
-                cv[9] = sel(open, _mm512_mul_ps(e, v_a));
+                cv[9] = sel(open, _mm512_mul_ps(ev, v_a));
                 for k in 0..3 {
                     let nb = _mm512_add_ps(buf[k], _mm512_mul_ps(c(s.color[k]), fac));
-                    buf[k] = _mm512_mask_blend_ps(valid, buf[k], nb);
+                    st_(&mut st.buf[k], _mm512_mask_blend_ps(valid, buf[k], nb));
                 }
                 let nz = _mm512_add_ps(bz, _mm512_mul_ps(c(s.depth), fac));
-                bz = _mm512_mask_blend_ps(valid, bz, nz);
+                st_(&mut st.buf_z, _mm512_mask_blend_ps(valid, bz, nz));
             }
-            t = _mm512_mask_blend_ps(valid, t, tn);
-            // `add_pairs`: lane j + lane j+8, then into the entry's accumulator.
-            let a = &mut acc[i as usize];
+            st_(&mut st.t, _mm512_mask_blend_ps(valid, t, tn));
             for k in 0..fields(GEOMETRY) {
                 let lo = _mm512_castps512_ps256(cv[k]);
                 let hi = _mm256_castpd_ps(_mm512_extractf64x4_pd::<1>(_mm512_castps_pd(cv[k])));
-                let p = a[k].as_mut_ptr();
-                // SAFETY: `a[k]` holds 8 f32.
-                unsafe {
-                    let sum = _mm256_add_ps(_mm256_loadu_ps(p), _mm256_add_ps(lo, hi));
-                    _mm256_storeu_ps(p, sum);
-                }
+                a8[k] = _mm256_add_ps(a8[k], _mm256_add_ps(lo, hi));
             }
+        }
+        for k in 0..NC {
+            // SAFETY: `acc[k]` holds 8 f32.
+            unsafe { _mm256_storeu_ps(acc[k].as_mut_ptr(), a8[k]) };
         }
     }
 }
@@ -754,8 +758,6 @@ fn tiles<const ISA: u8, const GEOMETRY: bool>(
 #[derive(Default)]
 struct Scratch {
     list: Vec<Entry>,
-    rows_idx: [Vec<u32>; TILE_SIZE],
-    acc: Vec<Acc>,
     gids: Vec<u32>,
 }
 
@@ -779,12 +781,7 @@ fn tiles_with<const ISA: u8, const GEOMETRY: bool>(
     scratch: &mut Scratch,
     out: &mut TileGrads,
 ) {
-    let Scratch {
-        list,
-        rows_idx,
-        acc,
-        gids,
-    } = scratch;
+    let Scratch { list, gids } = scratch;
     let mut states = [RowState::default(); TILE_SIZE];
     for t in tiles {
         let (ty, tx) = (t / bins.tiles_x, t % bins.tiles_x);
@@ -816,16 +813,13 @@ fn tiles_with<const ISA: u8, const GEOMETRY: bool>(
             row_n[row] = st.n.iter().copied().max().unwrap_or(0);
         }
         // Only the prefix some pixel blended is needed, and of it only the splats some row
-        // walks: those that can reach the row and lie before its last blended splat. Each
-        // row gets the indices of its entries (ascending, walked in reverse).
+        // walks: those that can reach the row and lie before its last blended splat, each
+        // with the (row, half) visits it gets.
         let max_n = row_n.iter().copied().max().unwrap_or(0) as usize;
         let prefix = &ids[..max_n];
         let off = bins.offsets[t];
         list.clear();
         gids.clear();
-        for r in rows_idx.iter_mut() {
-            r.clear();
-        }
         for (pos, &gid) in prefix.iter().enumerate() {
             // The gather is bound by cache misses on the splats in list order: ask early.
             #[cfg(target_arch = "x86_64")]
@@ -861,61 +855,70 @@ fn tiles_with<const ISA: u8, const GEOMETRY: bool>(
             } else {
                 spread_rows(within_n) * 0b11
             };
-            let mut keep = (halves | halves >> 1) & EVEN_BITS;
+            let keep = (halves | halves >> 1) & EVEN_BITS;
             if keep == 0 {
                 continue;
             }
             out.walked += u64::from(keep.count_ones()) * LANES as u64;
-            let i = list.len() as u32;
-            debug_assert!(i <= VISIT_INDEX);
-            while keep != 0 {
-                let b = keep.trailing_zeros();
-                keep &= keep - 1;
-                rows_idx[b as usize / 2].push(i | (halves >> b & 0b11) << 30);
-            }
             list.push(Entry {
                 s: p.splats[gid as usize],
                 pos: pos32,
+                halves,
             });
             gids.push(gid);
         }
-        acc.clear();
-        acc.resize(list.len(), [[0.0; HALF]; NC]);
         let mut px = [0f32; LANES];
         for (l, v) in px.iter_mut().enumerate() {
             *v = (x0 + l) as f32 + 0.5;
         }
-        for row in 0..rows {
-            let py = (y0 + row) as f32 + 0.5;
-            let (idx, st) = (&rows_idx[row], &mut states[row]);
-            #[cfg(target_arch = "x86_64")]
-            if ISA == ISA_AVX512 {
-                // SAFETY: ISA_AVX512 only when the CPU has AVX-512F (checked by the caller).
-                unsafe { avx512::row::<GEOMETRY>(max_alpha, list, idx, &px, py, st, acc) }
-            } else if ISA == ISA_AVX2 {
-                // SAFETY: ISA_AVX2 only when the CPU has AVX2 (checked by the caller).
-                unsafe { avx2::row::<GEOMETRY>(max_alpha, list, idx, &px, py, st, acc) }
-            } else {
-                row_lanes::<GEOMETRY>(max_alpha, list, idx, &px, py, st, acc)
-            }
-            #[cfg(not(target_arch = "x86_64"))]
-            row_lanes::<GEOMETRY>(max_alpha, list, idx, &px, py, st, acc);
+        // Entries back to front, so that each row meets its splats back to front; each
+        // entry's gradient goes to its place in list order.
+        let first = out.grads.len();
+        out.grads.resize(first + list.len(), SplatGrad::default());
+        let mut acc: Acc = [[0.0; HALF]; NC];
+        for (e, gr) in list.iter().zip(&mut out.grads[first..]).rev() {
+            walk::<ISA, GEOMETRY>(max_alpha, e, &px, y0, &mut states, &mut acc);
+            *gr = reduce_isa::<ISA, GEOMETRY>(&acc);
         }
         out.gids.extend_from_slice(gids);
-        #[cfg(target_arch = "x86_64")]
-        if ISA != ISA_SCALAR {
-            // A loop in this function (compiled for the ISA), not an iterator adaptor: a
-            // generic `fold` may be compiled out of line without AVX2.
-            for a in acc.iter() {
-                out.grads.push(reduce_lanes::<GEOMETRY>(a));
-            }
-            continue;
-        }
-        out.grads.extend(acc.iter().map(reduce::<GEOMETRY>));
     }
 }
 
-/// [`tiles`] compiled for AVX-512F (its list building too, not only the row kernel).
+/// One entry walked by the kernel of `ISA` ([`entry_lanes`] and its vector forms).
+#[inline(always)]
+fn walk<const ISA: u8, const GEOMETRY: bool>(
+    max_alpha: f32,
+    e: &Entry,
+    px: &[f32; LANES],
+    y0: usize,
+    states: &mut [RowState; LANES],
+    acc: &mut Acc,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if ISA == ISA_AVX512 {
+        // SAFETY: ISA_AVX512 only when the CPU has AVX-512F (checked by the caller).
+        unsafe { avx512::entry::<GEOMETRY>(max_alpha, e, px, y0, states, acc) }
+    } else if ISA == ISA_AVX2 {
+        // SAFETY: ISA_AVX2 only when the CPU has AVX2 (checked by the caller).
+        unsafe { avx2::entry::<GEOMETRY>(max_alpha, e, px, y0, states, acc) }
+    } else {
+        entry_lanes::<GEOMETRY>(max_alpha, e, px, y0, states, acc)
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    entry_lanes::<GEOMETRY>(max_alpha, e, px, y0, states, acc);
+}
+
+/// [`reduce`] in the form compiled for `ISA` (the same bits).
+#[inline(always)]
+fn reduce_isa<const ISA: u8, const GEOMETRY: bool>(acc: &Acc) -> SplatGrad {
+    #[cfg(target_arch = "x86_64")]
+    if ISA != ISA_SCALAR {
+        return reduce_lanes::<GEOMETRY>(acc);
+    }
+    reduce::<GEOMETRY>(acc)
+}
+
+/// [`tiles`] compiled for AVX-512F (its list building too, not only the entry kernel).
 ///
 /// # Safety
 /// The CPU must support AVX-512F.
@@ -1101,14 +1104,14 @@ pub fn composite_backward(
 
 /// The backward blend kernel alone: the bound [`composite_backward`] is measured against
 /// (`benches/roofline.rs`, SPEC.md §5.8), as [`crate::raster::composite::bare_blend`] is the
-/// forward's. `rows` tile rows (16 pixels each, at image rows `row % 16`), each walking every
-/// splat of `splats` back to front with all ten gradients (the training backward), with the
-/// same row kernel and arithmetic as [`composite_backward`]: every visit asks for both
-/// halves, every pixel has the whole list before its last blended splat, the list and its
-/// accumulators stay in the cache (at most 256 splats), no list building, no reduction, no
-/// per-Gaussian sums. Rows are split over the rayon pool in fixed blocks, each with its own
-/// accumulators. Returns the Gaussian-pixel pairs walked (16 per row and splat, as
-/// [`CompositeGrads::walked`] counts them).
+/// forward's. `rows` tile rows (16 pixels each, in blocks of 16 rows with a fresh state, as a
+/// tile's), every splat of `splats` walked back to front over every row of its block with all
+/// ten gradients (the training backward), with the same entry kernel and arithmetic as
+/// [`composite_backward`]: every visit asks for both halves, every pixel has the whole list
+/// before its last blended splat, the list and its accumulators stay in the cache (at most
+/// 256 splats), no list building, no reduction, no per-Gaussian sums. Blocks are split over
+/// the rayon pool in fixed runs, each with its own accumulators. Returns the Gaussian-pixel
+/// pairs walked (16 per row and splat, as [`CompositeGrads::walked`] counts them).
 #[doc(hidden)]
 pub fn bare_blend_backward(splats: &[Splat], rows: usize, kernel: Kernel) -> u64 {
     assert!(
@@ -1119,9 +1122,37 @@ pub fn bare_blend_backward(splats: &[Splat], rows: usize, kernel: Kernel) -> u64
         .map(|k| Entry {
             s: splats[k],
             pos: k as u32,
+            halves: u32::MAX,
         })
         .collect();
-    let idx: Vec<u32> = (0..list.len() as u32).map(|i| i | 0b11 << 30).collect();
+    // Runs of whole blocks of 16 rows; the last block of the last run may be shorter.
+    let blocks = rows.div_ceil(TILE_SIZE);
+    let runs = rayon::current_num_threads().max(1);
+    let per = blocks.div_ceil(runs);
+    (0..runs)
+        .into_par_iter()
+        .map(|r| {
+            let rows = (((r + 1) * per * TILE_SIZE).min(rows)).saturating_sub(r * per * TILE_SIZE);
+            #[cfg(target_arch = "x86_64")]
+            if kernel.avx512() {
+                // SAFETY: AVX-512F was detected (`Kernel::avx512`).
+                unsafe { bare_avx512(&list, rows) };
+            } else if kernel.avx2() {
+                // SAFETY: AVX2 was detected (`Kernel::avx2`).
+                unsafe { bare_avx2(&list, rows) };
+            } else {
+                bare_rows::<ISA_SCALAR>(&list, rows);
+            }
+            #[cfg(not(target_arch = "x86_64"))]
+            bare_rows::<ISA_SCALAR>(&list, rows);
+            (rows * list.len() * LANES) as u64
+        })
+        .sum()
+}
+
+/// [`bare_blend_backward`]'s walk of `rows` rows, 16 at a time, in the kernel of `ISA`.
+#[inline(always)]
+fn bare_rows<const ISA: u8>(list: &[Entry], rows: usize) {
     let mut px = [0f32; LANES];
     for (l, v) in px.iter_mut().enumerate() {
         *v = l as f32 + 0.5;
@@ -1139,37 +1170,43 @@ pub fn bare_blend_backward(splats: &[Splat], rows: usize, kernel: Kernel) -> u64
         buf: [[0.0; LANES]; 3],
         buf_z: [0.0; LANES],
     };
-    let (avx512, avx2) = (kernel.avx512(), kernel.avx2());
-    let max_alpha = 0.99;
-    let blocks = rayon::current_num_threads().max(1);
-    let per = rows.div_ceil(blocks);
-    (0..blocks)
-        .into_par_iter()
-        .map(|b| {
-            let mut acc = vec![[[0f32; HALF]; NC]; list.len()];
-            let range = (b * per).min(rows)..((b + 1) * per).min(rows);
-            let walked = range.len() as u64 * list.len() as u64 * LANES as u64;
-            for row in range {
-                let py = (row % TILE_SIZE) as f32 + 0.5;
-                let mut st = fresh;
-                #[cfg(target_arch = "x86_64")]
-                if avx512 {
-                    // SAFETY: AVX-512F was detected above.
-                    unsafe {
-                        avx512::row::<true>(max_alpha, &list, &idx, &px, py, &mut st, &mut acc)
-                    }
-                } else if avx2 {
-                    // SAFETY: AVX2 was detected above.
-                    unsafe { avx2::row::<true>(max_alpha, &list, &idx, &px, py, &mut st, &mut acc) }
-                } else {
-                    row_lanes::<true>(max_alpha, &list, &idx, &px, py, &mut st, &mut acc)
-                }
-                #[cfg(not(target_arch = "x86_64"))]
-                row_lanes::<true>(max_alpha, &list, &idx, &px, py, &mut st, &mut acc);
-                std::hint::black_box(&st);
-            }
-            std::hint::black_box(&acc); // the accumulators are the kernel's only output
-            walked
-        })
-        .sum()
+    let mut acc = vec![[[0f32; HALF]; NC]; list.len()];
+    // The last block's entries ask only for its rows.
+    let mut short = list.to_vec();
+    for y in (0..rows).step_by(TILE_SIZE) {
+        let block = TILE_SIZE.min(rows - y);
+        let list = if block == TILE_SIZE {
+            list
+        } else {
+            let mask = (1u32 << (2 * block)) - 1;
+            short.iter_mut().for_each(|e| e.halves = mask);
+            &short
+        };
+        let mut states = [fresh; TILE_SIZE];
+        for (e, a) in list.iter().zip(&mut acc).rev() {
+            walk::<ISA, true>(0.99, e, &px, 0, &mut states, a);
+        }
+        std::hint::black_box(&states);
+    }
+    std::hint::black_box(&acc); // the accumulators are the kernel's only output
+}
+
+/// [`bare_rows`] compiled for AVX-512F.
+///
+/// # Safety
+/// The CPU must support AVX-512F.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn bare_avx512(list: &[Entry], rows: usize) {
+    bare_rows::<ISA_AVX512>(list, rows)
+}
+
+/// [`bare_rows`] compiled for AVX2.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn bare_avx2(list: &[Entry], rows: usize) {
+    bare_rows::<ISA_AVX2>(list, rows)
 }
