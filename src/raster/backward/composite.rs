@@ -820,6 +820,9 @@ fn tiles_with<const ISA: u8, const GEOMETRY: bool>(
         let off = bins.offsets[t];
         list.clear();
         gids.clear();
+        // The rows still before their last blended splat at `pos` (bit `row`: `pos < n`),
+        // renewed when `pos` reaches the smallest `n` among them.
+        let (mut alive, mut next) = (0u32, 0u32);
         for (pos, &gid) in prefix.iter().enumerate() {
             // The gather is bound by cache misses on the splats in list order: ask early.
             #[cfg(target_arch = "x86_64")]
@@ -836,17 +839,22 @@ fn tiles_with<const ISA: u8, const GEOMETRY: bool>(
                 }
             }
             let (lo, hi) = splat_rows(p, gid as usize, y0, rows, cull_rows);
-            // Per row, branch-free over all 16 rows: whether the visit is counted (before the
-            // row's last blended splat: the work unit counts every such visit, skipped or not,
-            // the same count for every kernel and plan).
+            // The rows whose visit is counted: within the splat's reach and before the row's
+            // last blended splat (the work unit counts every such visit, skipped or not, the
+            // same count for every kernel and plan).
             let pos32 = pos as u32;
-            let (mut counted, mut within_n) = (0u64, 0u32);
-            for (row, &n) in row_n.iter().enumerate() {
-                let within = (row as u32 >= lo) & ((row as u32) < hi) & (pos32 < n);
-                counted += u64::from(within);
-                within_n |= u32::from(within) << row;
+            if pos32 >= next {
+                (alive, next) = (0, u32::MAX);
+                for (row, &n) in row_n.iter().enumerate() {
+                    if pos32 < n {
+                        alive |= 1 << row;
+                        next = next.min(n);
+                    }
+                }
             }
-            out.pairs += counted * LANES as u64;
+            // lo ≤ hi ≤ 16: bits lo..hi.
+            let within_n = ((1u32 << hi) - (1u32 << lo)) & alive;
+            out.pairs += u64::from(within_n.count_ones()) * LANES as u64;
             // The visits kept, as (row, halves) pairs in bits `2·row + h`: with culling the
             // row halves where the forward blended this splat (a lane the forward did not
             // blend contributes +0.0 and moves no state), else every counted row, whole.
