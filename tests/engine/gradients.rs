@@ -819,23 +819,32 @@ fn reused_gradient_buffers_give_fresh_bits() {
     }
 }
 
-/// The bare backward kernel (the roofline's bound for the blend backward) walks every splat
-/// on every row it is given, in every form, whatever the rows' split over threads.
+/// The bare backward kernel (the roofline's bound for the blend backward) walks every row a
+/// splat blends on and no other, in every form, whatever the rows' split over threads.
 #[test]
 fn bare_backward_walks_every_visit() {
     use unseen::raster::Kernel;
     use unseen::raster::backward::composite::bare_blend_backward;
     use unseen::raster::project::Splat;
     let mut u = Uniform::new(5);
-    let splats: Vec<Splat> = (0..100)
+    // Wide splats blend every pixel of a tile (σ ≤ 0.26, α ≥ 0.015): every (row, splat) is
+    // a visit; one splat far off blends none and is never walked.
+    let mut splats: Vec<Splat> = (0..100)
         .map(|_| Splat {
             mean: [u.range(0.0, 16.0), u.range(0.0, 16.0)],
-            conic: [0.3, 0.05, 0.4],
+            conic: [1e-3, 0.0, 1e-3],
             opacity: u.range(0.02, 0.06),
             color: [u.unit(), u.unit(), u.unit()],
             depth: u.range(1.0, 5.0),
         })
         .collect();
+    splats.insert(
+        40,
+        Splat {
+            mean: [1e3, 1e3],
+            ..splats[0]
+        },
+    );
     for threads in [1, 3] {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)

@@ -1113,25 +1113,44 @@ pub fn composite_backward(
 /// The backward blend kernel alone: the bound [`composite_backward`] is measured against
 /// (`benches/roofline.rs`, SPEC.md §5.8), as [`crate::raster::composite::bare_blend`] is the
 /// forward's. `rows` tile rows (16 pixels each, in blocks of 16 rows with a fresh state, as a
-/// tile's), every splat of `splats` walked back to front over every row of its block with all
+/// tile's), every splat of `splats` walked back to front over the rows of its block with all
 /// ten gradients (the training backward), with the same entry kernel and arithmetic as
-/// [`composite_backward`]: every visit asks for both halves, every pixel has the whole list
-/// before its last blended splat, the list and its accumulators stay in the cache (at most
-/// 256 splats), no list building, no reduction, no per-Gaussian sums. Blocks are split over
-/// the rayon pool in fixed runs, each with its own accumulators. Returns the Gaussian-pixel
-/// pairs walked (16 per row and splat, as [`CompositeGrads::walked`] counts them).
+/// [`composite_backward`] with culling: a splat visits the (row, half) pairs where some lane
+/// blends it (its record, as the forward's), every pixel has the whole list before its last
+/// blended splat, the list and its accumulators stay in the cache (at most 256 splats), no
+/// list building, no reduction, no per-Gaussian sums. Blocks are split over the rayon pool
+/// in fixed runs, each with its own accumulators. Returns the Gaussian-pixel pairs walked
+/// (16 per row visit, as [`CompositeGrads::walked`] counts them).
 #[doc(hidden)]
 pub fn bare_blend_backward(splats: &[Splat], rows: usize, kernel: Kernel) -> u64 {
     assert!(
         splats.len() <= 256,
         "the bare kernel's list must stay in the cache"
     );
+    // Each splat's visits as the forward's record would give them: the (row, half) pairs
+    // where some lane blends it (σ ≥ 0, α ≥ 1/255; every pixel has the whole list before
+    // its last blended splat). The others would add +0.0 and are not walked, as in
+    // `composite_backward` with culling.
+    let record = |s: &Splat| {
+        let mut halves = 0u32;
+        for row in 0..TILE_SIZE {
+            for l in 0..LANES {
+                let (dx, dy) = (s.mean[0] - (l as f32 + 0.5), s.mean[1] - (row as f32 + 0.5));
+                let SplatAlpha { sigma, alpha, .. } = splat_alpha(s, dx, dy, BARE_MAX_ALPHA);
+                if sigma >= 0.0 && alpha >= ALPHA_THRESHOLD {
+                    halves |= 1 << (2 * row + l / HALF);
+                }
+            }
+        }
+        halves
+    };
     let list: Vec<Entry> = (0..splats.len())
         .map(|k| Entry {
             s: splats[k],
             pos: k as u32,
-            halves: u32::MAX,
+            halves: record(&splats[k]),
         })
+        .filter(|e| e.halves != 0)
         .collect();
     // Runs of whole blocks of 16 rows; the last block of the last run may be shorter.
     let blocks = rows.div_ceil(TILE_SIZE);
@@ -1153,10 +1172,22 @@ pub fn bare_blend_backward(splats: &[Splat], rows: usize, kernel: Kernel) -> u64
             }
             #[cfg(not(target_arch = "x86_64"))]
             bare_rows::<ISA_SCALAR>(&list, rows);
-            (rows * list.len() * LANES) as u64
+            // Row visits: a block's rows' bits of every entry, whole blocks and the last.
+            let visits = |block: usize| {
+                let rows = (1u64 << (2 * block)) - 1;
+                list.iter()
+                    .map(|e| ((e.halves | e.halves >> 1) & EVEN_BITS) as u64 & rows)
+                    .map(|k| u64::from(k.count_ones()))
+                    .sum::<u64>()
+            };
+            let (whole, last) = (rows / TILE_SIZE, rows % TILE_SIZE);
+            (whole as u64 * visits(TILE_SIZE) + visits(last)) * LANES as u64
         })
         .sum()
 }
+
+/// The α clamp of [`bare_blend_backward`] (the default profile's).
+const BARE_MAX_ALPHA: f32 = 0.99;
 
 /// [`bare_blend_backward`]'s walk of `rows` rows, 16 at a time, in the kernel of `ISA`.
 #[inline(always)]
@@ -1187,12 +1218,15 @@ fn bare_rows<const ISA: u8>(list: &[Entry], rows: usize) {
             list
         } else {
             let mask = (1u32 << (2 * block)) - 1;
-            short.iter_mut().for_each(|e| e.halves = mask);
+            short
+                .iter_mut()
+                .zip(list)
+                .for_each(|(s, e)| s.halves = e.halves & mask);
             &short
         };
         let mut states = [fresh; TILE_SIZE];
         for (e, a) in list.iter().zip(&mut acc).rev() {
-            walk::<ISA, true>(0.99, e, &px, 0, &mut states, a);
+            walk::<ISA, true>(BARE_MAX_ALPHA, e, &px, 0, &mut states, a);
         }
         std::hint::black_box(&states);
     }
