@@ -278,7 +278,8 @@ pub struct Verdict {
     #[serde(flatten)]
     pub claim: Claim,
     pub generator: String,
-    /// The Holm family: the room × generator family (`classical`, `truth`).
+    /// The Holm family: the room × generator family (`classical`, `truth`, a dose
+    /// parameter's), with `-sensitivity` for the sensitivity rows (their own family).
     pub family: String,
     /// Units (seeds) with both runs and a finite difference in the pool, the revisions
     /// among the judged ones, and how many the test judged: those of the plan, seeds 0 to
@@ -628,15 +629,27 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
         Direction::DoesNotHurt => -rule.margin,
     };
     let mut out: Vec<Option<Verdict>> = cells.iter().map(|_| None).collect();
-    let mut families: Vec<&'static str> = Vec::new();
+    // Holm's families: the generator family, the sensitivity rows apart from the paper's
+    // claims (they ask another question: whether one claim's verdict turns on a choice the
+    // paper leaves open; sharing the family would make every claim's correction depend on
+    // how many choices were tried).
+    let family_of = |c: &Cell| {
+        let g = c.generator.family();
+        if c.claim.reference == Variant::Full {
+            g.to_string()
+        } else {
+            format!("{g}-sensitivity")
+        }
+    };
+    let mut families: Vec<String> = Vec::new();
     for c in &cells {
-        if !families.contains(&c.generator.family()) {
-            families.push(c.generator.family());
+        if !families.contains(&family_of(c)) {
+            families.push(family_of(c));
         }
     }
     for family in families {
         let members: Vec<usize> = (0..cells.len())
-            .filter(|&i| cells[i].generator.family() == family)
+            .filter(|&i| family_of(&cells[i]) == family)
             .collect();
         let data: Vec<stats::ClaimData> = members
             .iter()
@@ -709,7 +722,7 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
             let median = j.test.map_or(f64::NAN, |t| t.median);
             out[i] = Some(Verdict {
                 claim: c.claim,
-                family: family.into(),
+                family: family.clone(),
                 generator: g,
                 seeds: c.seeds,
                 revisions,
