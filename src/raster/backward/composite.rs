@@ -556,7 +556,7 @@ mod avx2 {
     }
 }
 
-/// [`avx2::row`] with AVX-512F intrinsics: one 16-lane register per tile row, masks in mask
+/// [`avx2::entry`] with AVX-512F intrinsics: one 16-lane register per tile row, masks in mask
 /// registers, the same operations one for one. A visit evaluates the whole row when either
 /// half is needed; the lanes of a half the AVX2 kernel would not evaluate are masked out of
 /// `valid` (so they contribute +0.0 and move no state, exactly as there). Each contribution
@@ -572,10 +572,9 @@ mod avx512 {
     use std::arch::x86_64::*;
 
     /// One entry (a splat of the tile's list) walked over the rows its record asks for,
-    /// rows ascending, each row's state loaded from and stored back to `states`: the same
-    /// operations as [`row`] in the same order per row and per entry (each row still sees
-    /// its splats back to front when the caller walks the entries so), with the entry's
-    /// accumulators in registers. Returns the entry's accumulators.
+    /// rows ascending, each row's state loaded from and stored back to `states` (each row
+    /// sees its splats back to front when the caller walks the entries so), the entry's
+    /// accumulators in registers until they are written to `acc`.
     ///
     /// # Safety
     /// The CPU must support AVX-512F.
