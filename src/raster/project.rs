@@ -850,7 +850,11 @@ pub fn project_one(
 /// Project Gaussians `first ..` into `splats`/`radii`, `R::N` at a time, the remainder one
 /// at a time. The colour is computed only for Gaussians that survive steps 1–7: in place
 /// for a block whose lanes all survive, else staged with the survivors of later blocks, so
-/// that a culled Gaussian's SH coefficients are never read.
+/// that a culled Gaussian's SH coefficients are never read. A mixed block's survivors' rows
+/// are asked for (prefetched) when the block is projected and staged [`AHEAD`] mixed
+/// blocks later: staged right away, ≈ 20 % of the stage's samples sat on the first store after a row's
+/// load (measured; 16 % after, the stage ≈ 7 % faster).
+/// The staging order, and so every flush's lanes, is the same either way.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn project_range<R: Lanes>(
@@ -867,6 +871,11 @@ fn project_range<R: Lanes>(
     let n = splats.len();
     let full = n - n % R::N;
     let mut st = StagedSh::new(g, degree);
+    // Mixed blocks whose survivors' rows were asked for and are not yet staged (block
+    // start, survivor bits), oldest first: staged `AHEAD` mixed blocks later, so that the
+    // rows have arrived by then.
+    let mut pending = [(0usize, 0u32); AHEAD];
+    let (mut head, mut queued) = (0usize, 0usize);
     for k in (0..full).step_by(R::N) {
         let mut b = project_block::<R>(g, first + k, cam, antialiased, inv_alpha);
         if R::all(b.culls.ok) {
@@ -874,21 +883,28 @@ fn project_range<R: Lanes>(
             store(&b, &mut splats[k..], &mut radii[k..], counts);
             continue;
         }
-        // The survivors' SH rows are staged one at a time below: ask for all of them first,
-        // so that their cache misses overlap (with each other and with the store).
         let ok = R::bits(b.culls.ok);
         prefetch_rows(&g.sh_rest, g.rest_per_channel() * 3, first + k, ok, st.len);
         store(&b, &mut splats[k..], &mut radii[k..], counts);
-        let mut left = ok;
-        while left != 0 {
-            let l = left.trailing_zeros() as usize;
-            left &= left - 1;
-            if st.push(g, first + k + l, k + l) == R::N {
-                st.flush::<R>(cam, degree, |k, sum| {
-                    set_color(k, sum, splats, radii, counts)
-                });
-            }
+        if ok == 0 {
+            continue;
         }
+        if queued == AHEAD {
+            let (k0, ok0) = pending[head];
+            stage::<R>(
+                g, first, cam, degree, k0, ok0, &mut st, splats, radii, counts,
+            );
+            queued -= 1;
+            head = (head + 1) % AHEAD;
+        }
+        pending[(head + queued) % AHEAD] = (k, ok);
+        queued += 1;
+    }
+    for q in 0..queued {
+        let (k0, ok0) = pending[(head + q) % AHEAD];
+        stage::<R>(
+            g, first, cam, degree, k0, ok0, &mut st, splats, radii, counts,
+        );
     }
     st.flush::<R>(cam, degree, |k, sum| {
         set_color(k, sum, splats, radii, counts)
@@ -901,6 +917,39 @@ fn project_range<R: Lanes>(
         store(&b, &mut splats[k..], &mut radii[k..], counts);
     }
 }
+
+/// Stage the survivors `ok` of the block at `k` (entries of `splats`) in `st`, flushing
+/// it whenever it is full.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn stage<R: Lanes>(
+    g: &Gaussians,
+    first: usize,
+    cam: &CameraF32,
+    degree: u32,
+    k: usize,
+    ok: u32,
+    st: &mut StagedSh,
+    splats: &mut [Splat],
+    radii: &mut [[i32; 2]],
+    counts: &mut [u64; 7],
+) {
+    let mut left = ok;
+    while left != 0 {
+        let l = left.trailing_zeros() as usize;
+        left &= left - 1;
+        if st.push(g, first + k + l, k + l) == R::N {
+            st.flush::<R>(cam, degree, |k, sum| {
+                set_color(k, sum, splats, radii, counts)
+            });
+        }
+    }
+}
+
+/// Mixed blocks [`project_range`] keeps between asking for their survivors' SH rows and
+/// staging them (1, 4 and 16 measured alike within noise; 4 is ≈ 60 Gaussians of work,
+/// longer than a miss).
+const AHEAD: usize = 4;
 
 /// Ask for the first `len` values of row `i + l` of `rest` (rows of `stride` values: SH
 /// rest coefficients) for each bit `l` of `ok`: one prefetch per cache line. Never faults;
