@@ -949,7 +949,7 @@ fn stage<R: Lanes>(
 /// Mixed blocks [`project_range`] keeps between asking for their survivors' SH rows and
 /// staging them (1, 4 and 16 measured alike within noise; 4 is ≈ 60 Gaussians of work,
 /// longer than a miss).
-const AHEAD: usize = 4;
+pub(crate) const AHEAD: usize = 4;
 
 /// Ask for the first `len` values of row `i + l` of `rest` (rows of `stride` values: SH
 /// rest coefficients) for each bit `l` of `ok`: one prefetch per cache line. Never faults;

@@ -26,8 +26,8 @@ use crate::math::sh::{Dual3, MAX_SH_COEFFS, ShScalar, num_coeffs, sh_basis};
 use crate::raster::kernel::Kernel;
 use crate::raster::plan::RenderPlan;
 use crate::raster::project::{
-    COPY, CameraF32, Culls, Geometry, MAX_REST, Projected, SPLAT_FLOATS, Splat, copy_padded, dot3,
-    gather3, geometry_lanes, lanes_of, mat3_mul, prefetch_rows, sh_basis_lanes, transpose,
+    AHEAD, COPY, CameraF32, Culls, Geometry, MAX_REST, Projected, SPLAT_FLOATS, Splat, copy_padded,
+    dot3, gather3, geometry_lanes, lanes_of, mat3_mul, prefetch_rows, sh_basis_lanes, transpose,
 };
 
 /// Field offsets (in f32) of a [`Splat`] and a [`SplatGrad`], which share their layout.
@@ -578,11 +578,24 @@ fn backward_range<R: Lanes>(
     // written: a staged block is run before the next direct block, and a row's copy may
     // spill zeros onto the head of the next entries' rows (see `run_staged`).
     let mut used = 0;
+    // Mixed blocks whose survivors' rows were asked for and are not yet staged (block
+    // start, survivor bits), oldest first: staged `AHEAD` mixed blocks later, so that the
+    // rows have arrived by then; all of them before a direct block (the order above).
+    let mut pending = [(0usize, 0u32); AHEAD];
+    let (mut head, mut queued) = (0usize, 0usize);
     let mut k = 0;
     while k < n {
         let width = R::N.min(n - k);
         let visible = |l: usize| fwd.radii[first + k + l] != [0, 0];
         if width == R::N && (0..width).all(visible) {
+            for q in 0..queued {
+                let (k0, ok0) = pending[(head + q) % AHEAD];
+                stage_block::<R>(
+                    g, first, k0, ok0, cam, degree, groups, sg, fwd, &mut st, &mut used, &mut so,
+                    out, pad_in, pad_out,
+                );
+            }
+            (head, queued) = (0, 0);
             if used > 0 {
                 run_staged::<R>(
                     &st, used, &mut so, out, cam, degree, groups, pad_in, pad_out,
@@ -605,41 +618,84 @@ fn backward_range<R: Lanes>(
             continue;
         }
         out.zero(k, width);
-        // The survivors' SH rows are staged one at a time below: ask for all of them first,
-        // so that their cache misses overlap (with each other and with the staging).
         let ok = (0..width)
             .filter(|&l| visible(l))
             .fold(0, |m, l| m | 1 << l);
-        prefetch_rows(g.sh_rest, rest_in, first + k - g.base, ok, rest_in);
-        for l in (0..width).filter(|&l| visible(l)) {
-            let (i, at) = (first + k + l, first + k + l - g.base);
-            st.slot[used] = k + l;
-            st.means[used] = g.means[at];
-            st.log_scales[used] = g.log_scales[at];
-            st.quats[used] = g.quats[at];
-            st.logits[used] = g.opacity_logits[at];
-            copy_padded(
-                &mut st.rest[used * pad_in..(used + 1) * pad_in],
-                &g.sh_rest[at * rest_in..],
-                rest_in,
-            );
-            st.splats[used] = fwd.splats[i];
-            st.radii[used] = fwd.radii[i];
-            st.sg[used] = sg[i];
-            used += 1;
-            if used == R::N {
-                run_staged::<R>(
-                    &st, used, &mut so, out, cam, degree, groups, pad_in, pad_out,
+        if ok != 0 {
+            prefetch_rows(g.sh_rest, rest_in, first + k - g.base, ok, rest_in);
+            if queued == AHEAD {
+                let (k0, ok0) = pending[head];
+                stage_block::<R>(
+                    g, first, k0, ok0, cam, degree, groups, sg, fwd, &mut st, &mut used, &mut so,
+                    out, pad_in, pad_out,
                 );
-                used = 0;
+                queued -= 1;
+                head = (head + 1) % AHEAD;
             }
+            pending[(head + queued) % AHEAD] = (k, ok);
+            queued += 1;
         }
         k += width;
+    }
+    for q in 0..queued {
+        let (k0, ok0) = pending[(head + q) % AHEAD];
+        stage_block::<R>(
+            g, first, k0, ok0, cam, degree, groups, sg, fwd, &mut st, &mut used, &mut so, out,
+            pad_in, pad_out,
+        );
     }
     if used > 0 {
         run_staged::<R>(
             &st, used, &mut so, out, cam, degree, groups, pad_in, pad_out,
         );
+    }
+}
+
+/// Stage the survivors `ok` of the block at entry `k` after the `used` already staged,
+/// running the staged block whenever it is full ([`backward_range`]).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn stage_block<R: Lanes>(
+    g: &ParamView,
+    first: usize,
+    k: usize,
+    ok: u32,
+    cam: &CameraF32,
+    degree: u32,
+    groups: &GradGroups,
+    sg: &[SplatGrad],
+    fwd: &Projected,
+    st: &mut Staged,
+    used: &mut usize,
+    so: &mut StagedOut,
+    out: &mut OutChunk,
+    pad_in: usize,
+    pad_out: usize,
+) {
+    let rest_in = g.rest_per;
+    let mut left = ok;
+    while left != 0 {
+        let l = left.trailing_zeros() as usize;
+        left &= left - 1;
+        let (i, at, u) = (first + k + l, first + k + l - g.base, *used);
+        st.slot[u] = k + l;
+        st.means[u] = g.means[at];
+        st.log_scales[u] = g.log_scales[at];
+        st.quats[u] = g.quats[at];
+        st.logits[u] = g.opacity_logits[at];
+        copy_padded(
+            &mut st.rest[u * pad_in..(u + 1) * pad_in],
+            &g.sh_rest[at * rest_in..],
+            rest_in,
+        );
+        st.splats[u] = fwd.splats[i];
+        st.radii[u] = fwd.radii[i];
+        st.sg[u] = sg[i];
+        *used = u + 1;
+        if *used == R::N {
+            run_staged::<R>(st, R::N, so, out, cam, degree, groups, pad_in, pad_out);
+            *used = 0;
+        }
     }
 }
 
