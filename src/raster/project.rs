@@ -884,7 +884,7 @@ fn project_range<R: Lanes>(
             continue;
         }
         let ok = R::bits(b.culls.ok);
-        prefetch_rows(&g.sh_rest, g.rest_per_channel() * 3, first + k, ok, st.len);
+        prefetch_rows(&g.sh_rest, g.rest_per_channel() * 3, first + k, ok, st.pad);
         store(&b, &mut splats[k..], &mut radii[k..], counts);
         if ok == 0 {
             continue;
@@ -951,24 +951,26 @@ fn stage<R: Lanes>(
 /// longer than a miss).
 pub(crate) const AHEAD: usize = 4;
 
-/// Ask for the first `len` values of row `i + l` of `rest` (rows of `stride` values: SH
-/// rest coefficients) for each bit `l` of `ok`: one prefetch per cache line. Never faults;
-/// changes no value.
+/// Ask for values `0..len` from the start of row `i + l` of `rest` (rows of `stride`
+/// values: SH rest coefficients; `len` may pass the row's end, as a staged copy in whole
+/// chunks reads, and is cut at the array's) for each bit `l` of `ok`: one prefetch per cache
+/// line. Never faults; changes no value.
 #[inline(always)]
 pub(crate) fn prefetch_rows(rest: &[f32], stride: usize, i: usize, ok: u32, len: usize) {
     #[cfg(target_arch = "x86_64")]
     {
         use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
-        if len == 0 {
-            return;
-        }
         let mut left = ok;
         while left != 0 {
             let l = left.trailing_zeros() as usize;
             left &= left - 1;
-            let row = &rest[(i + l) * stride..(i + l) * stride + len];
+            let start = (i + l) * stride;
+            let row = &rest[start.min(rest.len())..(start + len).min(rest.len())];
+            if row.is_empty() {
+                continue;
+            }
             // 16 floats per 64-byte line; the last value covers a line the steps miss.
-            for off in (0..len).step_by(16).chain([len - 1]) {
+            for off in (0..row.len()).step_by(16).chain([row.len() - 1]) {
                 // SAFETY: prefetching never faults; the address is inside `row`.
                 unsafe { _mm_prefetch::<_MM_HINT_T0>(row.as_ptr().add(off).cast()) };
             }

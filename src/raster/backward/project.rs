@@ -622,7 +622,7 @@ fn backward_range<R: Lanes>(
             .filter(|&l| visible(l))
             .fold(0, |m, l| m | 1 << l);
         if ok != 0 {
-            prefetch_rows(g.sh_rest, rest_in, first + k - g.base, ok, rest_in);
+            prefetch_rows(g.sh_rest, rest_in, first + k - g.base, ok, pad_in);
             if queued == AHEAD {
                 let (k0, ok0) = pending[head];
                 stage_block::<R>(
