@@ -248,7 +248,7 @@ pub struct Missing {
 
 impl Audit<'_> {
     /// The waves still to run beside the samples in `DIR/samples.json` and the `merge`
-    /// files ([`pending_waves`]): what `--emit-slurm` submits and `--collect` expects.
+    /// files (`pending_waves`): what `--emit-slurm` submits and `--collect` expects.
     pub fn waves_to_run(&self, merge: &[PathBuf]) -> Result<Vec<Wave>> {
         self.cfg.validate()?;
         self.check_inputs()?;
@@ -256,7 +256,7 @@ impl Audit<'_> {
     }
 
     /// The merge: every job of every wave still to run beside the pooled samples
-    /// ([`pending_waves`]: the same jobs `--emit-slurm` submitted, given the same
+    /// (`pending_waves`: the same jobs `--emit-slurm` submitted, given the same
     /// samples) must have a receipt of a success whose digests still verify; the run jobs' results are read from their `audit_job.json` (nothing is
     /// computed) and reported as [`Audit::run`] reports them. `log_of` names a job's log for
     /// jobs without a receipt (a receipt names its own). `Ok(Err(missing))`: what is missing
@@ -382,7 +382,7 @@ impl Audit<'_> {
 
 // ------------------------------------------------------------------------ estimates
 
-/// The work of a job in training iteration-pixels: the model behind [`estimate`]. A cycle
+/// The work of a job in training iteration-pixels: the model behind [`Audit::estimate`]. A cycle
 /// run (SPEC.md §20.11) fine-tunes a QA-Mask at every trajectory view after the first,
 /// which the bound plan of one candidate does not hold: its trajectory is priced at the
 /// dataset's `candidates` views.

@@ -95,7 +95,7 @@ pub struct JobResult {
     pub seed: u32,
     /// The binary that computed it ([`crate::version::NUMERICS_REVISION`], crate version):
     /// a sample of another revision is another draw of the chaotic training, averaged into
-    /// its seed unless it has the same bits ([`pairs`], [`seed_means`]). 0 / empty in job files
+    /// its seed unless it has the same bits (`pairs`, `seed_means`). 0 / empty in job files
     /// written before it was recorded (the audit's own revision applies).
     #[serde(default)]
     pub numerics_revision: u32,
@@ -336,7 +336,7 @@ impl Audit<'_> {
     }
 
     /// The folder of `seed`'s original scene, which `job` needs: an error naming the job to
-    /// run first unless it is trained ([`original_done`]).
+    /// run first unless it is trained (`original_done`).
     pub(super) fn require_original(&self, job: &Job, seed: u32) -> Result<PathBuf> {
         let dir = self.dir;
         let run = dir.join(Job::Original { seed }.name());

@@ -17,8 +17,8 @@
 //! SPEC.md §21.2).
 //!
 //! This module holds the audit's configuration (variants, generators, presets); the
-//! rest is in [`jobs`] (the jobs, the original scene, one job's run and record, sharing),
-//! [`verdicts`] (claims, paired differences, the decision), [`report`] (`audit.json`,
+//! rest is in [`jobs`](mod@jobs) (the jobs, the original scene, one job's run and record, sharing),
+//! [`verdicts`](mod@verdicts) (claims, paired differences, the decision), [`report`] (`audit.json`,
 //! `audit.md`, the plot), [`samples`] (pooling batches), [`stats`] (the tests) and
 //! [`cluster`] (the same audit as batch jobs).
 

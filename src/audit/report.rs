@@ -73,7 +73,7 @@ impl Audit<'_> {
     }
 
     /// Run every job of `cfg` that is not done — neither pooled as this binary would compute
-    /// it ([`pending`]) nor finished in its folder (each resumes its own) — pool the
+    /// it (`pending`) nor finished in its folder (each resumes its own) — pool the
     /// results with the samples already in `dir` and in `merge` files, then write
     /// `DIR/samples.json`, `DIR/audit.json`, `DIR/audit.md` and `DIR/inconsistency.svg`.
     pub fn run(&self, merge: &[PathBuf]) -> Result<Report> {

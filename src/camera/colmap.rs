@@ -9,7 +9,7 @@
 //! `cameras.bin`: u64 n, then n × (i32 id, i32 model, u64 width, u64 height, f64 params[]);
 //! `images.bin`: u64 n, then n × (i32 id, f64 qw qx qy qz, f64 tx ty tz, i32 camera_id,
 //! NUL-terminated name, u64 n2d, n2d × (f64 x, f64 y, i64 point3d_id));
-//! `points3D.bin`: u64 n, then n × (u64 id, f64 xyz[3], u8 rgb[3], f64 error, u64 len,
+//! `points3D.bin`: u64 n, then n × (u64 id, f64 xyz\[3\], u8 rgb\[3\], f64 error, u64 len,
 //! len × (i32 image_id, i32 point2d_idx)).
 
 use super::{Camera, read_file};

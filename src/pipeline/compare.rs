@@ -77,7 +77,7 @@ impl Comparison {
     }
 }
 
-/// Rank of a step folder in pipeline order ([`Step::order`]; a folder that is no step, e.g.
+/// Rank of a step folder in pipeline order (`Step::order`; a folder that is no step, e.g.
 /// an oracle dump's, after every step, by name).
 fn rank(step: &str) -> (u32, usize, String) {
     step.parse::<super::steps::Step>()

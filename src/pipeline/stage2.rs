@@ -176,7 +176,7 @@ impl Run<'_> {
     }
 
     /// Step `stage2/dependent` (none without dependent views): every dependent view inpainted
-    /// and given its depth ([`complete_dependent`]), the methods in `dependent.json`.
+    /// and given its depth (`complete_dependent`), the methods in `dependent.json`.
     fn dependent_step(
         &self,
         views: &Views,

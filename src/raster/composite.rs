@@ -17,7 +17,7 @@
 //! front to back with its state in registers, until all 16 pixels have stopped. Pixels are
 //! independent, so the order in which groups run does not change any result.
 //!
-//! The per-pixel arithmetic is written once in scalar Rust ([`blend_lane`], the reference
+//! The per-pixel arithmetic is written once in scalar Rust (`blend_lane`, the reference
 //! form, [`Kernel::Scalar`]) and once with AVX2 intrinsics, operation for operation (same
 //! order, no FMA, selects for branches), chosen at run time. Both give the same bits
 //! (tests `simd_and_scalar_kernels_are_bit_identical`, `exp_and_ln_simd_match_scalar_bitwise`).
@@ -1017,7 +1017,7 @@ pub struct CompositeOut {
     pub blend_halves: Option<Vec<u32>>,
 }
 
-/// Blend all tiles. Parallel over runs of tiles ([`MAX_TASKS`] at most); each tile's pixels
+/// Blend all tiles. Parallel over runs of tiles (`MAX_TASKS` at most); each tile's pixels
 /// are computed by one task on their own, so the output does not depend on the thread count.
 #[allow(clippy::too_many_arguments)]
 pub fn composite(

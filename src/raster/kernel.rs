@@ -1,4 +1,4 @@
-//! The crate's one SIMD vocabulary. [`Kernel`] is what a caller asks for; [`Isa`] is the
+//! The crate's one SIMD vocabulary. [`Kernel`] is what a caller asks for; `Isa` is the
 //! instruction set that then runs, resolved once per call site from the CPU's features;
 //! the `ISA_*` tags are the same three sets as const-generic parameters of the kernels
 //! written once for all widths. Every form gives the same bits (SPEC.md §5.7).

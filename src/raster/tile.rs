@@ -11,7 +11,7 @@
 //! bit for bit for any thread count. [`bin_into`] reuses its buffers across frames.
 //!
 //! The parallel scatters write through a shared pointer to slots the prefix sums make
-//! disjoint ([`Shared`], bounds-checked); that and the AVX-512F record pass are the
+//! disjoint (`Shared`, bounds-checked); that and the AVX-512F record pass are the
 //! `unsafe` here.
 
 use super::kernel::Kernel;

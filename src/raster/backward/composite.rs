@@ -33,10 +33,10 @@
 //!
 //! Reduction order (SPEC.md §5.8): per (tile, splat) there are 8 lane-pair accumulators per
 //! contribution, starting at +0.0; each row visit adds `c_j + c_{j+8}` to lane `j`
-//! ([`add_pairs`]; AVX2 adds its two registers, AVX-512F the upper 8 lanes of its register to
+//! (`add_pairs`; AVX2 adds its two registers, AVX-512F the upper 8 lanes of its register to
 //! the lower 8, then each adds the sum into the accumulator), rows in order; once per entry
 //! the 8 lanes are reduced in a fixed tree
-//! (`j + (j+4)`, then `+2`, `+1`: [`sum8`]). The per-(tile, splat) results are then summed
+//! (`j + (j+4)`, then `+2`, `+1`: `sum8`). The per-(tile, splat) results are then summed
 //! per Gaussian in tile order. Each (tile, splat) sum has one pairwise step, a chain over at
 //! most 16 rows and a 3-level tree: as accurate as the former order (a 16-lane tree per row,
 //! then a chain over the rows; the same depth), with one horizontal reduction per

@@ -46,7 +46,7 @@ const LANES: usize = TILE_SIZE;
 /// Recorded blend of one camera: for every tile row, the splats that blend there (back to
 /// front, the backward's walk order) and their α at each pixel of the row. Both replays
 /// rebuild their weights from α with the passes' own recurrences: the forward's
-/// `w = α·T, T ← T·(1 − α)` front to back from `T = 1`, the backward's [`recover`] back to
+/// `w = α·T, T ← T·(1 − α)` front to back from `T = 1`, the backward's `recover` back to
 /// front from the final `T`. α is the one per-pair value either pass needs, so a record
 /// holds 4 bytes per blended pair plus 6 per (row, splat) visit (SPEC.md §5.8, "Frozen
 /// geometry").
