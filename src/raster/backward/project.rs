@@ -574,9 +574,10 @@ fn backward_range<R: Lanes>(
         sh_dc: [[0.0; 3]; 16],
         rest: [0.0; 16 * MAX_REST],
     };
-    // Staged entries are copied out in ascending order, each before any later entry is
-    // written: a staged block is run before the next direct block, and a row's copy may
-    // spill zeros onto the head of the next entries' rows (see `run_staged`).
+    // Staged entries are copied out in ascending order, each before any later entry gets
+    // a value other than zero: a row's copy may spill zeros onto the head of the next
+    // entries' rows (see `run_staged`). So every staged block runs before the next direct
+    // block; a later mixed block may only have been zeroed (`out.zero`) by then.
     let mut used = 0;
     // Mixed blocks whose survivors' rows were asked for and are not yet staged (block
     // start, survivor bits), oldest first: staged `AHEAD` mixed blocks later, so that the
