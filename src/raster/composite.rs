@@ -1120,6 +1120,17 @@ mod tests {
 
     /// The integer row range is the float definition `lo = max(⌊my − ry⌋ − y0, 0)`,
     /// `hi = min(⌈my + ry⌉ − y0 + 1, rows)` (empty when `hi ≤ lo`), on edge values.
+    /// One projected splat centred at row `my` with vertical radius `r` (for `splat_rows`).
+    fn one_splat(my: f32, r: i32) -> Projected {
+        Projected {
+            splats: vec![Splat {
+                mean: [0.0, my],
+                ..Splat::default()
+            }],
+            radii: vec![[1, r]],
+        }
+    }
+
     #[test]
     fn splat_rows_f32_form_matches_the_integer_form() {
         // Every centre class (specials, both sides of each 2^k up to 2^25, random), every
@@ -1156,14 +1167,9 @@ mod tests {
             1 << 24,
             (1 << 24) + 16,
         ];
-        let mut p = Projected::default();
         for &my in &means {
             for &r in &radii {
-                p.splats = vec![Splat {
-                    mean: [0.0, my],
-                    ..Splat::default()
-                }];
-                p.radii = vec![[1, r]];
+                let p = one_splat(my, r);
                 let ry = r as f32 + 1.0;
                 for &y0 in &y0s {
                     for rows in [1usize, 7, 16] {
@@ -1191,14 +1197,9 @@ mod tests {
             16.0, 16.01, 31.5, 32.0, 100.7, 65535.5, 1e7, 3e7, 1e30,
         ];
         let radii = [0i32, 1, 2, 3, 15, 16, 17, 1000, 1 << 20, i32::MAX];
-        let mut p = Projected::default();
         for &my in &means {
             for &r in &radii {
-                p.splats = vec![Splat {
-                    mean: [0.0, my],
-                    ..Splat::default()
-                }];
-                p.radii = vec![[1, r]];
+                let p = one_splat(my, r);
                 for y0 in [0usize, 16, 32, 48, 65520] {
                     for rows in [1usize, 7, 16] {
                         let (lo, hi) = splat_rows(&p, 0, y0, rows, true);
