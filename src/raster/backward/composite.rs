@@ -143,12 +143,32 @@ pub struct CompositeGrads {
 
 /// The gradients of one task's run of tiles.
 struct TileGrads {
-    /// The Gaussian and its gradient per intersection some row of its tile walked, in
-    /// `bins.ids` order (the others would add +0.0).
+    /// The Gaussian and its gradient per intersection some row of its tile walked (the
+    /// others would add +0.0), tile by tile, within a tile grouped by bucket (`starts`).
     gids: Vec<u32>,
     grads: Vec<SplatGrad>,
+    /// Per tile of the run, where each bucket's entries start (`buckets + 1` absolute
+    /// indices into `gids` and `grads`; see [`sum_buckets`]): within a tile the entries are
+    /// grouped by bucket, in list order within a bucket.
+    starts: Vec<u32>,
     pairs: u64,
     walked: u64,
+}
+
+/// The per-Gaussian sum works on buckets of `1 << shift` consecutive Gaussians (of `n`;
+/// returns `shift` and the number of buckets): at least 512, so that a bucket's gradients (20 KiB) stay in L1 while every tile's
+/// entries of the bucket are added, and at most 256 buckets, so that the tiles' bucket
+/// starts stay small. The buckets are the sum's parallel work, each written by one thread.
+/// Each tile writes its entries grouped by bucket as the walk makes them, so the sum reads
+/// every bucket's in one run per tile. (Ranges of Gaussians that each scanned every entry
+/// cost more on 2 threads than on 1: every thread read every entry and mispredicted the
+/// test of its range on about half of them.)
+fn sum_buckets(n: usize) -> (u32, usize) {
+    let mut shift = 9;
+    while n >> shift >= 256 {
+        shift += 1;
+    }
+    (shift, n.div_ceil(1 << shift))
 }
 
 const LANES: usize = TILE_SIZE;
@@ -728,6 +748,7 @@ fn tiles<const ISA: u8, const GEOMETRY: bool>(
     let mut out = TileGrads {
         gids: Vec::with_capacity(most),
         grads: Vec::with_capacity(most),
+        starts: Vec::with_capacity(tiles.len() * (sum_buckets(p.splats.len()).1 + 1)),
         pairs: 0,
         walked: 0,
     };
@@ -758,6 +779,10 @@ fn tiles<const ISA: u8, const GEOMETRY: bool>(
 struct Scratch {
     list: Vec<Entry>,
     gids: Vec<u32>,
+    /// Per entry of the tile, its place among the tile's entries grouped by bucket.
+    place: Vec<u32>,
+    /// Per bucket, the next place (a counting sort's counters).
+    counts: Vec<u32>,
 }
 
 thread_local! {
@@ -780,7 +805,13 @@ fn tiles_with<const ISA: u8, const GEOMETRY: bool>(
     scratch: &mut Scratch,
     out: &mut TileGrads,
 ) {
-    let Scratch { list, gids } = scratch;
+    let Scratch {
+        list,
+        gids,
+        place,
+        counts,
+    } = scratch;
+    let (shift, buckets) = sum_buckets(p.splats.len());
     let mut states = [RowState::default(); TILE_SIZE];
     for t in tiles {
         let (ty, tx) = (t / bins.tiles_x, t % bins.tiles_x);
@@ -878,16 +909,37 @@ fn tiles_with<const ISA: u8, const GEOMETRY: bool>(
         for (l, v) in px.iter_mut().enumerate() {
             *v = (x0 + l) as f32 + 0.5;
         }
+        // Each entry's place among the tile's entries grouped by bucket, list order kept
+        // within a bucket (a stable counting sort), and the buckets' starts.
+        let first = out.gids.len();
+        counts.clear();
+        counts.resize(buckets + 1, 0);
+        for &gid in gids.iter() {
+            counts[(gid >> shift) as usize + 1] += 1;
+        }
+        // `counts[b + 1]` holds bucket b's count: the inclusive prefix sum is the starts.
+        let mut at = first as u32;
+        for c in counts.iter_mut() {
+            at += *c;
+            *c = at;
+        }
+        out.starts.extend_from_slice(counts);
+        place.clear();
+        out.gids.resize(first + gids.len(), 0);
+        for &gid in gids.iter() {
+            let k = &mut counts[(gid >> shift) as usize];
+            place.push(*k);
+            out.gids[*k as usize] = gid;
+            *k += 1;
+        }
         // Entries back to front, so that each row meets its splats back to front; each
-        // entry's gradient goes to its place in list order.
-        let first = out.grads.len();
+        // entry's gradient goes to its place.
         out.grads.resize(first + list.len(), SplatGrad::default());
         let mut acc: Acc = [[0.0; HALF]; NC];
-        for (e, gr) in list.iter().zip(&mut out.grads[first..]).rev() {
+        for (e, &k) in list.iter().zip(place.iter()).rev() {
             walk::<ISA, GEOMETRY>(max_alpha, e, &px, y0, &mut states, &mut acc);
-            *gr = reduce_isa::<ISA, GEOMETRY>(&acc);
+            out.grads[k as usize] = reduce_isa::<ISA, GEOMETRY>(&acc);
         }
-        out.gids.extend_from_slice(gids);
     }
 }
 
@@ -1079,25 +1131,36 @@ pub fn composite_backward(
     let parts: Vec<TileGrads> = longest_first(&bins.run_costs(per, height), |k| {
         run(k * per..((k + 1) * per).min(n_tiles))
     });
-    let mut splats = vec![SplatGrad::default(); p.splats.len()];
     // Sum per Gaussian in tile order. Only walked intersections are listed: the others
-    // would add +0.0 to accumulators that are never −0.0. Ranges of Gaussians in parallel,
-    // each scanning every run of tiles in order: each Gaussian gets its additions in tile
-    // order whatever the ranges are, so the bits do not depend on the partition.
-    let per = p.splats.len().div_ceil(rayon::current_num_threads()).max(1);
-    splats
-        .par_chunks_mut(per)
+    // would add +0.0 to accumulators that are never −0.0. Buckets of Gaussians in
+    // parallel, each zeroed and then given its entries from every run of tiles in order
+    // (and within a run in list order): each Gaussian gets its additions in tile order
+    // whatever thread sums its bucket, so the bits do not depend on the partition.
+    let n = p.splats.len();
+    let (shift, buckets) = sum_buckets(n);
+    let mut splats: Vec<SplatGrad> = Vec::with_capacity(n);
+    splats.spare_capacity_mut()[..n]
+        .par_chunks_mut(1 << shift)
         .enumerate()
-        .for_each(|(ci, out)| {
-            let lo = ci * per;
-            for b in &parts {
-                for (&gid, gr) in b.gids.iter().zip(&b.grads) {
-                    if let Some(s) = (gid as usize).checked_sub(lo).and_then(|k| out.get_mut(k)) {
-                        s.add(gr);
+        .for_each(|(b, out)| {
+            out.fill(std::mem::MaybeUninit::new(SplatGrad::default()));
+            // SAFETY: every element of `out` was just initialized, and `MaybeUninit<T>`
+            // has `T`'s layout.
+            let out = unsafe {
+                &mut *(out as *mut [std::mem::MaybeUninit<SplatGrad>] as *mut [SplatGrad])
+            };
+            let lo = b << shift;
+            for part in &parts {
+                for tile in part.starts.chunks_exact(buckets + 1) {
+                    let range = tile[b] as usize..tile[b + 1] as usize;
+                    for (&gid, gr) in part.gids[range.clone()].iter().zip(&part.grads[range]) {
+                        out[gid as usize - lo].add(gr);
                     }
                 }
             }
         });
+    // SAFETY: the chunks cover the first `n` elements, each initialized above.
+    unsafe { splats.set_len(n) };
     let pairs = parts.iter().map(|b| b.pairs).sum();
     let walked = parts.iter().map(|b| b.walked).sum();
     let bg = background_grad(width, height, bins, g);
