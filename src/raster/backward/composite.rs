@@ -1314,3 +1314,26 @@ unsafe fn bare_avx512(list: &[Entry], rows: usize) {
 unsafe fn bare_avx2(list: &[Entry], rows: usize) {
     bare_rows::<ISA_AVX2>(list, rows)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Buckets of at least 512 Gaussians, at most 256 of them, covering every Gaussian
+    /// exactly once, for scenes from empty to past `u32::MAX >> 1` Gaussians.
+    #[test]
+    fn sum_buckets_cover_the_scene_in_at_most_256_buckets_of_at_least_512() {
+        let mut sizes = vec![0usize, 1, 511, 512, 513, 131_071, 131_072, 131_073, 1 << 31];
+        sizes.extend((0..40).map(|k| 1usize << (k / 2) | k));
+        for n in sizes {
+            let (shift, buckets) = sum_buckets(n);
+            assert!(shift >= 9, "{n}: buckets of {}", 1usize << shift);
+            assert!(buckets <= 256, "{n}: {buckets} buckets");
+            // Every Gaussian's bucket exists, and the last one holds a Gaussian.
+            match n.checked_sub(1) {
+                Some(last) => assert_eq!(last >> shift, buckets - 1, "{n}"),
+                None => assert_eq!(buckets, 0),
+            }
+        }
+    }
+}
