@@ -156,9 +156,9 @@ struct TileGrads {
 }
 
 /// The per-Gaussian sum works on buckets of `1 << shift` consecutive Gaussians (of `n`;
-/// returns `shift` and the number of buckets): at least 512, so that a bucket's gradients (20 KiB) stay in L1 while every tile's
-/// entries of the bucket are added, and at most 256 buckets, so that the tiles' bucket
-/// starts stay small. The buckets are the sum's parallel work, each written by one thread.
+/// returns `shift` and the number of buckets): at least 512, so that a bucket's gradients
+/// (20 KiB) stay in L1 while every tile's entries of the bucket are added, and at most 256
+/// buckets, so that the tiles' bucket starts stay small. The buckets are the sum's parallel work, each written by one thread.
 /// Each tile writes its entries grouped by bucket as the walk makes them, so the sum reads
 /// every bucket's in one run per tile. (Ranges of Gaussians that each scanned every entry
 /// cost more on 2 threads than on 1: every thread read every entry and mispredicted the
@@ -1133,8 +1133,8 @@ pub fn composite_backward(
     });
     // Sum per Gaussian in tile order. Only walked intersections are listed: the others
     // would add +0.0 to accumulators that are never −0.0. Buckets of Gaussians in
-    // parallel, each zeroed and then given its entries from every run of tiles in order
-    // (and within a run in list order): each Gaussian gets its additions in tile order
+    // parallel, each zeroed and then given its entries from every tile in order (and
+    // within a tile in list order): each Gaussian gets its additions in tile order
     // whatever thread sums its bucket, so the bits do not depend on the partition.
     let n = p.splats.len();
     let (shift, buckets) = sum_buckets(n);
