@@ -17,5 +17,8 @@ pub const CONVENTIONS_VERSION: u32 = 1;
 /// `r₀ + Σ(rⱼ − r₀)/n` (exact for equal ranges); 6 stage 2's dependent-view depth by video
 /// depth alignment (the least-squares fit to the stage-1 render became the non-paper
 /// `stage2_depth: render_fit`); 7 the projection's 2D covariance from its factor `F = J·W·R·S`
-/// and its determinant as a sum of squared minors (issue #51: stable on needles).
-pub const NUMERICS_REVISION: u32 = 7;
+/// and its determinant as a sum of squared minors (issue #51: stable on needles); 8 the
+/// projection backward's chain in f64 for Gaussians of 2D condition above
+/// `raster::backward::wide::WIDE_CONDITION` (issue #70: the f32 chain contradicted the
+/// forward on needles).
+pub const NUMERICS_REVISION: u32 = 8;

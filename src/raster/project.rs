@@ -123,6 +123,21 @@ pub struct CameraF32 {
 }
 
 impl CameraF32 {
+    /// The clamped Jacobian's limits on `x/z` and `y/z` (step 4 of the module docs), in f32:
+    /// `[−lim_x_neg, lim_x_pos, −lim_y_neg, lim_y_pos]`, i.e. the lower and upper bound of
+    /// each.
+    pub(crate) fn jacobian_limits(&self) -> [f32; 4] {
+        let (w, h) = (self.width as f32, self.height as f32);
+        let tan_fovx = 0.5 * w / self.fx;
+        let tan_fovy = 0.5 * h / self.fy;
+        [
+            -(self.cx / self.fx + JACOBIAN_GUARD * tan_fovx),
+            (w - self.cx) / self.fx + JACOBIAN_GUARD * tan_fovx,
+            -(self.cy / self.fy + JACOBIAN_GUARD * tan_fovy),
+            (h - self.cy) / self.fy + JACOBIAN_GUARD * tan_fovy,
+        ]
+    }
+
     pub fn new(cam: &Camera) -> CameraF32 {
         let r = cam.camera_from_world_rotation();
         let t = cam.camera_from_world_translation();
@@ -319,14 +334,8 @@ pub(crate) fn geometry_lanes<R: Lanes>(
     let s = [ls[0].exp(), ls[1].exp(), ls[2].exp()];
     // 3. The Gaussian's axes in camera space.
     let q_cam = mat3_mul(&r, &rot);
-    // 4. Clamped Jacobian (the limits are per camera: computed once, in f32).
-    let (w, h) = (cam.width as f32, cam.height as f32);
-    let tan_fovx = 0.5 * w / cam.fx;
-    let tan_fovy = 0.5 * h / cam.fy;
-    let lim_x_pos = c((w - cam.cx) / cam.fx + JACOBIAN_GUARD * tan_fovx);
-    let lim_x_neg = c(-(cam.cx / cam.fx + JACOBIAN_GUARD * tan_fovx));
-    let lim_y_pos = c((h - cam.cy) / cam.fy + JACOBIAN_GUARD * tan_fovy);
-    let lim_y_neg = c(-(cam.cy / cam.fy + JACOBIAN_GUARD * tan_fovy));
+    // 4. Clamped Jacobian (the limits are per camera, in f32).
+    let [lim_x_neg, lim_x_pos, lim_y_neg, lim_y_pos] = cam.jacobian_limits().map(c);
     let rz = c(1.0) / z;
     let rz2 = rz * rz;
     let (xz, yz) = (x * rz, y * rz);

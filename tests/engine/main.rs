@@ -14,6 +14,7 @@ mod golden_drjit;
 mod golden_grad;
 mod gradients;
 mod hard_cases;
+mod hard_gradients;
 mod limits;
 mod mitsuba_crosscheck;
 mod models;

@@ -6,6 +6,7 @@
 pub mod composite;
 pub mod frozen;
 pub mod project;
+pub mod wide;
 
 pub use composite::{PixelGrads, SplatGrad};
 pub use project::{GradGroups, Gradients};

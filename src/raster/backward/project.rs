@@ -18,6 +18,7 @@
 //! `c = max(Σ coeff·Y + 0.5, 0)` → coefficient gradients `Y·v_c` where the clamp is open.
 
 use super::composite::SplatGrad;
+use super::wide::{self, WIDE_CONDITION};
 use crate::gaussian::{Gaussians, Param};
 use crate::math::lanes::Lanes;
 #[cfg(target_arch = "x86_64")]
@@ -310,6 +311,41 @@ fn backward_block<R: Lanes>(
         ..
     } = geo;
     let rz2 = rz * rz;
+    // Gaussians beyond float32 (a 2D condition above `WIDE_CONDITION`): the chain to the
+    // camera-space mean, the scales and the quaternion in f64 (`wide`), selected below.
+    let wide_mask = ((a_ + c_) * (a_ + c_)).gt(c(WIDE_CONDITION) * det) & vis & culls.ok;
+    let wide_bits = R::bits(wide_mask);
+    let mut wide_out = [[0f32; 10]; 16];
+    if wide_bits != 0 {
+        let s_l = [lanes_of(s[0]), lanes_of(s[1]), lanes_of(s[2])];
+        let (cx_bits, cy_bits) = (R::bits(x_clamped), R::bits(y_clamped));
+        for l in (0..n).filter(|&l| wide_bits >> l & 1 == 1) {
+            let sgl = &sg[l];
+            let gr = wide::adjoint(
+                &wide::WideInput {
+                    mean: g.means[at + l],
+                    quat: g.quats[at + l],
+                    s: [s_l[0][l], s_l[1][l], s_l[2][l]],
+                    clamped: [cx_bits >> l & 1 == 1, cy_bits >> l & 1 == 1],
+                    v_mean2d: sgl.mean2d,
+                    v_conic: sgl.conic,
+                    v_depth: sgl.depth,
+                },
+                cam,
+            );
+            let o = &mut wide_out[l];
+            o[..3].copy_from_slice(&gr.v_t);
+            o[3..6].copy_from_slice(&gr.v_log_scale);
+            o[6..].copy_from_slice(&gr.v_quat);
+        }
+    }
+    let wide_lanes = |i: usize, v: R| {
+        if wide_bits == 0 {
+            v
+        } else {
+            R::select(wide_mask, R::gather(|l| wide_out[l][i]), v)
+        }
+    };
     let inv_det = c(1.0) / det;
     let ci = [[c_ * inv_det, -b_ * inv_det], [-b_ * inv_det, a_ * inv_det]];
     // v_Σ2d = −Σ⁻¹·G·Σ⁻¹ with G the symmetric gradient of the conic.
@@ -363,6 +399,9 @@ fn backward_block<R: Lanes>(
     v_t[0] = R::select(x_clamped, v_t[0], v_t[0] + v_tx);
     v_t[2] = R::select(y_clamped, v_t[2] + v_ty * (ty * rz), v_t[2]);
     v_t[1] = R::select(y_clamped, v_t[1], v_t[1] + v_ty);
+    for a in 0..3 {
+        v_t[a] = wide_lanes(a, v_t[a]);
+    }
     let mut r = [[zero; 3]; 3];
     for a in 0..3 {
         for b in 0..3 {
@@ -423,7 +462,7 @@ fn backward_block<R: Lanes>(
             // F = P·diag(s): v_s_k = Σ_a v_F[a][k]·P[a][k]; v_log_s = v_s·s.
             let mut v_ls = [zero; 3];
             for e in 0..3 {
-                v_ls[e] = (v_f[0][e] * p[0][e] + v_f[1][e] * p[1][e]) * s[e];
+                v_ls[e] = wide_lanes(3 + e, (v_f[0][e] * p[0][e] + v_f[1][e] * p[1][e]) * s[e]);
             }
             let v = [lanes_of(v_ls[0]), lanes_of(v_ls[1]), lanes_of(v_ls[2])];
             for l in 0..n {
@@ -470,10 +509,10 @@ fn backward_block<R: Lanes>(
             ];
             let dot = (qh[0] * vq[0] + qh[1] * vq[1]) + (qh[2] * vq[2] + qh[3] * vq[3]);
             let v = [
-                lanes_of((vq[0] - qh[0] * dot) * inv_qn),
-                lanes_of((vq[1] - qh[1] * dot) * inv_qn),
-                lanes_of((vq[2] - qh[2] * dot) * inv_qn),
-                lanes_of((vq[3] - qh[3] * dot) * inv_qn),
+                lanes_of(wide_lanes(6, (vq[0] - qh[0] * dot) * inv_qn)),
+                lanes_of(wide_lanes(7, (vq[1] - qh[1] * dot) * inv_qn)),
+                lanes_of(wide_lanes(8, (vq[2] - qh[2] * dot) * inv_qn)),
+                lanes_of(wide_lanes(9, (vq[3] - qh[3] * dot) * inv_qn)),
             ];
             for l in 0..n {
                 if visible[l] && geo_ok[l] != 0.0 {
