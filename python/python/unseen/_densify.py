@@ -132,6 +132,16 @@ DENSIFY_MISTAKES = (
 )
 
 
+#: Mistakes in the children's values, which keep every decision and the layout: judged
+#: child by child (``_child_and_copy_values``) and named from there.
+DENSIFY_VALUE_MISTAKES = (
+    StageMistake("twin_children", "both children of a split Gaussian drawn from one normal "
+                 "draw (twins at one point: identical gradients, they never separate)"),
+    StageMistake("swapped_draws", "copy c of a split Gaussian drawn from normals[1 − c], "
+                 "not normals[c]"),
+)
+
+
 def densify_reference(case, mistake=None):
     """A NumPy densify-and-prune step of ``case`` (float32 values, float64 decisions)
     under ``mistake`` (one of ``DENSIFY_MISTAKES``' names, or None): the new scene's
@@ -162,7 +172,8 @@ def densify_reference(case, mistake=None):
     s = np.exp(case["scales"][split].astype(np.float64))
     blocks = []
     for c in range(2):
-        zc = case["normals"][c, split].astype(np.float64)
+        draw = {"twin_children": 0, "swapped_draws": 1 - c}.get(mistake, c)
+        zc = case["normals"][draw, split].astype(np.float64)
         means = (np.einsum("nij,nj->ni", rot, s * zc) + case["means"][split]).astype(np.float32)
         shrink = 0.0 if mistake == "no_shrink" else np.log(1.6)
         block = {k: orig[k][split] for k in keys}

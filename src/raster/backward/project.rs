@@ -18,7 +18,7 @@
 //! `c = max(Σ coeff·Y + 0.5, 0)` → coefficient gradients `Y·v_c` where the clamp is open.
 
 use super::composite::SplatGrad;
-use super::wide::{self, WIDE_CONDITION};
+use super::wide::{self, SUBNORMAL_INV_NORM, WIDE_CONDITION};
 use crate::gaussian::{Gaussians, Param};
 use crate::math::lanes::Lanes;
 #[cfg(target_arch = "x86_64")]
@@ -311,9 +311,12 @@ fn backward_block<R: Lanes>(
         ..
     } = geo;
     let rz2 = rz * rz;
-    // Gaussians beyond float32 (a 2D condition above `WIDE_CONDITION`): the chain to the
+    // Gaussians beyond float32 (a 2D condition above `WIDE_CONDITION`, or a quaternion
+    // whose squares are subnormal: `|q|² < 2⁻¹²⁶` ⇔ `1/|q| > 2⁶³`): the chain to the
     // camera-space mean, the scales and the quaternion in f64 (`wide`), selected below.
-    let wide_mask = ((a_ + c_) * (a_ + c_)).gt(c(WIDE_CONDITION) * det) & vis & culls.ok;
+    let beyond =
+        ((a_ + c_) * (a_ + c_)).gt(c(WIDE_CONDITION) * det) | inv_qn.gt(c(SUBNORMAL_INV_NORM));
+    let wide_mask = beyond & vis & culls.ok;
     let wide_bits = R::bits(wide_mask);
     let mut wide_out = [[0f32; 10]; 16];
     if wide_bits != 0 {

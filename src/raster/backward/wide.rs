@@ -12,7 +12,8 @@
 //!
 //! Where `(a + c)² > WIDE_CONDITION·det` (κ + 2 + 1/κ, from the forward's own dilated
 //! covariance, so the choice is a function of the Gaussian's inputs alone and the same in
-//! every lane form and thread count), the chain from the splat's gradients to the
+//! every lane form and thread count), or where the quaternion's squares are subnormal
+//! ([`SUBNORMAL_INV_NORM`]), the chain from the splat's gradients to the
 //! camera-space mean, the log-scales and the raw quaternion runs here in f64 instead: the
 //! same formulas, in the same order, with `u` 2⁻⁵³, so the error is `2⁻⁵³·κ`, below 10⁻⁶
 //! for κ < 10¹⁰. Its inputs are the forward's values where the forward's function is
@@ -31,6 +32,13 @@ use crate::raster::project::{CameraF32, EPS2D};
 /// it the f32 chain stays within 10⁻⁵ of the f64 one on the long axis (test
 /// `wide_adjoint_takes_over_where_f32_loses_the_long_axis`).
 pub const WIDE_CONDITION: f32 = 256.0;
+
+/// `1/|q|` above which a quaternion's squares are f32 subnormals (`|q|² < 2⁻¹²⁶`): its f32
+/// normalization keeps about `log₂(|q|²/2⁻¹⁴⁹)` bits (17 at `|q|` = 10⁻²⁰, one of the
+/// hard cases), and its gradient, `(v_q̂ − q̂(q̂·v_q̂))/|q|`, a projection that cancels, loses
+/// more (measured 6·10⁻⁴ relative against a float64 port). Such a Gaussian's chain runs in
+/// f64 too.
+pub const SUBNORMAL_INV_NORM: f32 = 9.223_372e18; // 2⁶³, exact in f32
 
 /// One Gaussian's inputs to [`adjoint`].
 pub(crate) struct WideInput {
