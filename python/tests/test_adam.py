@@ -70,7 +70,8 @@ def test_a_float32_port_passes(seed):
     assert r.ok, r.message()
 
 
-@pytest.mark.parametrize("mistake", [m.name for m in ut.ADAM_MISTAKES])
+@pytest.mark.parametrize("mistake", [m.name for m in ut.ADAM_MISTAKES
+                                     if m.name != "f32_bias_correction"])
 def test_wrong_ports_fail_with_their_mistake_named(mistake):
     text = next(m.text for m in ut.ADAM_MISTAKES if m.name == mistake)
     for seed in range(8):
@@ -139,3 +140,36 @@ def test_torch_adam_passes_under_its_constants(options):
     # Under the trainer's float32 constants it does not: 1 − β2 differs by 1.3e-5.
     failed = sum(not ut.compare_adam(port, seed=s, conventions="unseen").ok for s in SEEDS)
     assert failed >= len(SEEDS) // 2, failed
+
+
+def test_float32_bias_corrections_fail_where_they_matter_and_are_named_or_listed():
+    """Issue #70: a port computing 1 − βᵗ in float32 (β rounded to float32 first: 1 − β2 =
+    0.00099998713, so the step's √(1 − β2ᵗ) is 6.4e-6 off at t = 1, shrinking with t) was
+    named "the learning rate scaled by 1". It is its own mistake now. It stays within the
+    bound on 6 of seeds 0–11 (the longer runs, where βᵗ's share fades); where it fails it is
+    named, or — on one to three steps, where a learning rate scaled by 1 − 6.4e-6 is the
+    same update to the bound — listed closest beside that control, never mistaken for
+    another."""
+    text = next(m.text for m in ut.ADAM_MISTAKES if m.name == "f32_bias_correction")
+
+    def port(params, grads, *, lr, betas, eps):
+        b1, b2 = F(betas[0]), F(betas[1])
+        x, m, v = params.copy(), np.zeros_like(params), np.zeros_like(params)
+        for t, g in enumerate(grads):
+            n = F(t + 1)
+            m = (b1 * m + F(1 - betas[0]) * g).astype(F)
+            v = (b2 * v + F(1 - betas[1]) * g * g).astype(F)
+            c1, c2 = F(1) - b1 ** n, np.sqrt(F(1) - b2 ** n)
+            x = (x - F(lr) / c1 * (m / (np.sqrt(v) / c2 + F(eps)))).astype(F)
+        return {"params": x, "exp_avg": m, "exp_avg_sq": v}
+
+    failed = 0
+    for seed in range(12):
+        r = ut.compare_adam(port, seed=seed)
+        if r.ok:
+            continue
+        failed += 1
+        msg = r.message()
+        assert r.cause == text or (r.cause == "" and text in msg), f"seed {seed}: {msg}"
+        assert "scaled by 1 (" not in msg, msg
+    assert failed >= 5

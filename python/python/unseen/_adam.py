@@ -77,6 +77,8 @@ ADAM_MISTAKES = (
     StageMistake("betas_swapped", "β1 and β2 swapped"),
     StageMistake("step_off_by_one", "the step count one ahead (bias corrections of t + 1)"),
     StageMistake("abs_not_square", "the second moment of |g| instead of g²"),
+    StageMistake("f32_bias_correction", "the bias corrections 1 − βᵗ in float32 (β rounded "
+                 "first: 1 − β2 = 0.00099998713, the step's √(1 − β2ᵗ) 6.4e-6 off at t = 1)"),
 )
 
 
@@ -100,6 +102,10 @@ def adam_reference(params, grads, *, lr, betas=BETAS, eps=EPS, mistake=None,
         m = b1 * m + (1 - b1) * g[t]
         v = b2 * v + (1 - b2) * (np.abs(g[t]) if mistake == "abs_not_square" else g[t] ** 2)
         c1, c2 = 1.0 - b1 ** n, np.sqrt(1.0 - b2 ** n)
+        if mistake == "f32_bias_correction":
+            f, fn = np.float32, np.float32(n)
+            c1 = float(f(1) - f(b1) ** fn)
+            c2 = float(np.sqrt(f(1) - f(b2) ** fn))
         if mistake == "no_bias_correction":
             step, denom = lr, np.sqrt(v) + eps
         elif mistake == "no_first_correction":

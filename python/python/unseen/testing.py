@@ -1430,8 +1430,10 @@ def _adam_controls(got, want, bounds, params, grads, lr, betas, eps, conventions
             c = float(np.median((port[ok] - x0[ok]) / moved[ok]))
             scaled = dict(want)
             scaled["params"] = np.vstack([want["params"][:-1], x0 + c * moved])
+            factor = (f"{c:.4g}" if abs(c - 1) >= 1e-3
+                      else f"1 {'+' if c >= 1 else '−'} {abs(c - 1):.2g}")
             out.append((_adam_failing(got, scaled, bounds),
-                        f"the learning rate scaled by {c:.4g} (or a mistake that equals it "
+                        f"the learning rate scaled by {factor} (or a mistake that equals it "
                         "on this case)"))
     other = "unseen" if conventions == "pytorch" else "pytorch"
     alt = _adam_oracle(params, grads, lr=lr, betas=betas, eps=eps, conventions=other)
@@ -2202,8 +2204,8 @@ def _became(rows, i):
     kinds = [k for j, k in rows if j == i]
     if not kinds:
         return "removed"
-    return " + ".join(f"{kinds.count(k)} {k}" + ("ren" if k == "child" and kinds.count(k) > 1
-                                                 else "s" if kinds.count(k) > 1 else "")
+    plural = {"copy": "copies", "child": "children"}
+    return " + ".join(f"{kinds.count(k)} {plural[k] if kinds.count(k) > 1 else k}"
                       for k in ("copy", "child") if k in kinds)
 
 
