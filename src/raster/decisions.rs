@@ -28,6 +28,7 @@
 //! in the render, and a flag where it comes within the margin). The replay costs one
 //! scalar walk of the tile lists: a diagnostic, not a render path.
 
+use super::backward::wide::{Factor64, factor64};
 use super::composite::{SplatAlpha, splat_alpha, splat_sigma};
 use super::project::{
     ALPHA_THRESHOLD, CameraF32, EPS2D, FAR_PLANE, JACOBIAN_GUARD, NEAR_PLANE, Splat,
@@ -661,25 +662,15 @@ pub fn conic_rounding(scene: &Gaussians, i: usize, cam: &CameraF32) -> ConicRoun
         [fx / z, 0.0, -fx * tx / (z * z)],
         [0.0, fy / z, -fy * ty / (z * z)],
     ];
-    let q_cam: [[f64; 3]; 3] = std::array::from_fn(|a| {
-        std::array::from_fn(|k| dot3(r[a], [rot[0][k], rot[1][k], rot[2][k]]))
-    });
-    let mut f = [[0.0; 3]; 2];
-    for a in 0..2 {
-        for k in 0..3 {
-            f[a][k] = dot3(j[a], [q_cam[0][k], q_cam[1][k], q_cam[2][k]]) * s[k];
-        }
-    }
+    let Factor64 {
+        f,
+        jc,
+        ss,
+        minors: mu,
+        ..
+    } = factor64(&r, &rot, &j, s);
     let eps = f64::from(EPS2D);
     let (a, c) = (dot3(f[0], f[0]) + eps, dot3(f[1], f[1]) + eps);
-    let jc = [
-        -(j[0][2] * j[1][1]),
-        -(j[0][0] * j[1][2]),
-        j[0][0] * j[1][1],
-    ];
-    let ss = [s[1] * s[2], s[0] * s[2], s[0] * s[1]];
-    let mu: [f64; 3] =
-        std::array::from_fn(|k| ss[k] * dot3([q_cam[0][k], q_cam[1][k], q_cam[2][k]], jc));
     let det = dot3(mu, mu) + eps * (a + c - 2.0 * eps) + eps * eps;
     let norm = |v: [f64; 3]| dot3(v, v).sqrt();
     let terms = |a: usize| {

@@ -80,7 +80,8 @@ from ._qamask import C0, DC_ULPS, QA_MASK_MISTAKES, project  # noqa: F401
 from ._qamask import qa_mask_case as _qa_mask_case
 from ._densify import (  # noqa: F401
     MOMENT_MISTAKES, densify_moments, expected_moments,
-    CHILD_MEAN_REL, CHILD_SCALE_ATOL, DENSIFY_MISTAKES, DENSIFY_VALUE_MISTAKES, MAX_SET_ASIDE as DENSIFY_MAX_SET_ASIDE,
+    CHILD_MEAN_REL, CHILD_SCALE_ATOL, DENSIFY_MISTAKES, DENSIFY_VALUE_MISTAKES,
+    MAX_SET_ASIDE as DENSIFY_MAX_SET_ASIDE,
     densify_case, densify_reference, near_decisions, parse_rows, row_differences,
 )
 from ._warp import (  # noqa: F401
@@ -107,8 +108,9 @@ GRAD_REL_TO_MAX, GRAD_RTOL = 2e-4, 4e-5
 #: A float32 backward's own error on a Gaussian of 2D condition κ (the diagnostics'
 #: ``condition``): the chain's step ``v_F = 2·V·F`` cancels by κ along a needle, so a
 #: correct float32 port's gradients of the Gaussian's mean, scales and rotation lie within
-#: ``BACKWARD_ROUNDING·u·κ`` (u = 2⁻²⁴) of its own largest gradient in the group (SPEC.md
-#: §5.8: at most 184 measured for one float32 chain; ×2 for the port's, rounded up). The
+#: ``BACKWARD_ROUNDING·u·κ`` (u = 2⁻²⁴) of its own largest gradient in the group
+#: (docs/notes/rationale.md §5.8: at most 184 measured for one float32 chain; ×2 for the
+#: port's, rounded up). The
 #: oracle's chain runs in float64 above κ = 256 and its own share is inside the bound below.
 BACKWARD_ROUNDING = 400.0
 #: The allowance's cap, as a share of the Gaussian's own largest gradient: above it

@@ -318,8 +318,9 @@ fn backward_block<R: Lanes>(
         ((a_ + c_) * (a_ + c_)).gt(c(WIDE_CONDITION) * det) | inv_qn.gt(c(SUBNORMAL_INV_NORM));
     let wide_mask = beyond & vis & culls.ok;
     let wide_bits = R::bits(wide_mask);
-    let mut wide_out = [[0f32; 10]; 16];
-    if wide_bits != 0 {
+    // Per lane: v_t (3), v_log_scale (3), v_quat (4); only where some lane is beyond.
+    let wide_out = (wide_bits != 0).then(|| {
+        let mut out = [[0f32; 10]; 16];
         let s_l = [lanes_of(s[0]), lanes_of(s[1]), lanes_of(s[2])];
         let (cx_bits, cy_bits) = (R::bits(x_clamped), R::bits(y_clamped));
         for l in (0..n).filter(|&l| wide_bits >> l & 1 == 1) {
@@ -336,18 +337,16 @@ fn backward_block<R: Lanes>(
                 },
                 cam,
             );
-            let o = &mut wide_out[l];
+            let o = &mut out[l];
             o[..3].copy_from_slice(&gr.v_t);
             o[3..6].copy_from_slice(&gr.v_log_scale);
             o[6..].copy_from_slice(&gr.v_quat);
         }
-    }
-    let wide_lanes = |i: usize, v: R| {
-        if wide_bits == 0 {
-            v
-        } else {
-            R::select(wide_mask, R::gather(|l| wide_out[l][i]), v)
-        }
+        out
+    });
+    let wide_lanes = |i: usize, v: R| match &wide_out {
+        None => v,
+        Some(out) => R::select(wide_mask, R::gather(|l| out[l][i]), v),
     };
     let inv_det = c(1.0) / det;
     let ci = [[c_ * inv_det, -b_ * inv_det], [-b_ * inv_det, a_ * inv_det]];

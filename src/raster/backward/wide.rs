@@ -78,10 +78,6 @@ pub(crate) fn adjoint(inp: &WideInput, cam: &CameraF32) -> WideGrads {
     let qh = q.map(|v| v / qn);
     let rot = rotation_f64(qh);
     let s = inp.s.map(f64::from);
-    // Q = W·R: column k is the Gaussian's axis k in camera space.
-    let q_cam: [[f64; 3]; 3] = std::array::from_fn(|a| {
-        std::array::from_fn(|k| dot3(w[a], [rot[0][k], rot[1][k], rot[2][k]]))
-    });
     let [lx0, lx1, ly0, ly1] = cam.jacobian_limits().map(f64::from);
     let tx = if inp.clamped[0] {
         z * (x / z).clamp(lx0, lx1)
@@ -99,25 +95,16 @@ pub(crate) fn adjoint(inp: &WideInput, cam: &CameraF32) -> WideGrads {
         [fx * rz, 0.0, -fx * tx * rz2],
         [0.0, fy * rz, -fy * ty * rz2],
     ];
-    let mut p = [[0.0; 3]; 2];
-    let mut f = [[0.0; 3]; 2];
-    for a in 0..2 {
-        for k in 0..3 {
-            p[a][k] = dot3(j[a], [q_cam[0][k], q_cam[1][k], q_cam[2][k]]);
-            f[a][k] = p[a][k] * s[k];
-        }
-    }
+    let Factor64 {
+        q_cam,
+        p,
+        f,
+        minors,
+        ..
+    } = factor64(&w, &rot, &j, s);
     // The dilated covariance and its cancellation-free determinant (SPEC.md §5.1).
     let e = f64::from(EPS2D);
     let (a0, b, c0) = (dot3(f[0], f[0]), dot3(f[0], f[1]), dot3(f[1], f[1]));
-    let jc = [
-        -(j[0][2] * j[1][1]),
-        -(j[0][0] * j[1][2]),
-        j[0][0] * j[1][1],
-    ];
-    let ss = [s[1] * s[2], s[0] * s[2], s[0] * s[1]];
-    let minors: [f64; 3] =
-        std::array::from_fn(|k| ss[k] * dot3([q_cam[0][k], q_cam[1][k], q_cam[2][k]], jc));
     let det = (dot3(minors, minors) + e * (a0 + c0)) + e * e;
     let (a, c) = (a0 + e, c0 + e);
     let ci = [[c / det, -b / det], [-b / det, a / det]];
@@ -195,6 +182,49 @@ pub(crate) fn adjoint(inp: &WideInput, cam: &CameraF32) -> WideGrads {
         v_t: v_t.map(|v| v as f32),
         v_log_scale: v_log_scale.map(|v| v as f32),
         v_quat: std::array::from_fn(|i| ((vq[i] - qh[i] * dot) / qn) as f32),
+    }
+}
+
+/// The projection's factor in f64 (SPEC.md §5.1): the Gaussian's axes in camera space
+/// `Q = W·R`, `P = J·Q`, `F = P·diag(s)`, and the 2×2 minors of `F` as `s_i·s_j·(Qᵀ·(J₀ ×
+/// J₁))_k` (`jc = J₀ × J₁`, `ss_k = s_i·s_j`): products and sums, no subtraction.
+pub(crate) struct Factor64 {
+    pub q_cam: [[f64; 3]; 3],
+    pub p: [[f64; 3]; 2],
+    pub f: [[f64; 3]; 2],
+    pub jc: [f64; 3],
+    pub ss: [f64; 3],
+    pub minors: [f64; 3],
+}
+
+/// [`Factor64`] of the camera rotation `w`, the Gaussian's rotation `rot`, the (clamped)
+/// Jacobian `j` and the scales `s`.
+pub(crate) fn factor64(
+    w: &[[f64; 3]; 3],
+    rot: &[[f64; 3]; 3],
+    j: &[[f64; 3]; 2],
+    s: [f64; 3],
+) -> Factor64 {
+    let q_cam: [[f64; 3]; 3] = std::array::from_fn(|a| {
+        std::array::from_fn(|k| dot3(w[a], [rot[0][k], rot[1][k], rot[2][k]]))
+    });
+    let col = |k: usize| [q_cam[0][k], q_cam[1][k], q_cam[2][k]];
+    let p: [[f64; 3]; 2] = std::array::from_fn(|a| std::array::from_fn(|k| dot3(j[a], col(k))));
+    let f: [[f64; 3]; 2] = std::array::from_fn(|a| std::array::from_fn(|k| p[a][k] * s[k]));
+    let jc = [
+        -(j[0][2] * j[1][1]),
+        -(j[0][0] * j[1][2]),
+        j[0][0] * j[1][1],
+    ];
+    let ss = [s[1] * s[2], s[0] * s[2], s[0] * s[1]];
+    let minors = std::array::from_fn(|k| ss[k] * dot3(col(k), jc));
+    Factor64 {
+        q_cam,
+        p,
+        f,
+        jc,
+        ss,
+        minors,
     }
 }
 
