@@ -256,10 +256,24 @@ def test_float64_gsplat_port_passes_hard_forward_and_backward():
         assert any("beyond float32" in n for n in bwd.notes), bwd.message()
 
 
+def test_gsplat_port_backward_on_hard_is_named_from_its_forward():
+    """Issue #70: given the port's forward (``port_render``, as check_port passes it), a
+    failing backward on ``hard`` is named the textbook projection when the port's forward on
+    the same scene is: seeds 0–19 measured, 20 of 20 named (≈ 0.4 s a seed)."""
+    render, backward = gsplat_port(GSPLAT_MAX_ALPHA)
+    for seed in SEEDS:
+        s, cam = ut.scene(1500, 3, seed, width=80, height=64, family="hard",
+                          dtype=np.float32)
+        r = ut.compare_backward(backward, s, cam, conventions="gsplat", check=False,
+                                seed=seed, max_excluded_fraction=ut.HARD_MAX_EXCLUDED_FRACTION,
+                                port_render=render)
+        assert not r.ok and r.cause.startswith(ut.TEXTBOOK_MISTAKE), r.message()
+
+
 def test_gsplat_port_backward_on_hard_notes_the_projection():
-    """The backward cannot localise the textbook projection (a needle's footprint box is
-    the whole image): its failing comparison names no mistake but says the scene holds
-    Gaussians that projection cannot resolve (≈ 5 s)."""
+    """Without the port's forward the backward cannot localise the textbook projection (a
+    needle's footprint box is the whole image): its failing comparison names no mistake but
+    says the scene holds Gaussians that projection cannot resolve (≈ 5 s)."""
     _, backward = gsplat_port(GSPLAT_MAX_ALPHA)
     s, cam = ut.scene(1500, 3, 1, width=80, height=64, family="hard", dtype=np.float32)
     r = ut.compare_backward(backward, s, cam, conventions="gsplat", check=False,

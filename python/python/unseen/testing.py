@@ -642,8 +642,19 @@ def _diagnose_textbook(report, got, want, keys, conic_bad=None):
         report.candidates = sorted(report.candidates + [(text, left)], key=lambda c: c[1])
         # A port that returns its conics must also get some of theirs wrong.
         conics_agree = conic_bad is not None and not conic_bad[idx].any()
-        if not conics_agree and left <= NAME_MAX_LEFT * base and all(
-                n > NAME_MAX_LEFT * base and n >= NAME_MIN_RATIO * left for n in others):
+        explains = not conics_agree and left <= NAME_MAX_LEFT * base and all(
+            n > NAME_MAX_LEFT * base and n >= NAME_MIN_RATIO * left for n in others)
+        # The mistake is float32 arithmetic: a port that returns float64 values is not
+        # told it (it may compute in float32 and widen; the note says so).
+        wide = all(np.asarray(got[k]).dtype == np.float64 for k in ("rgb", "alpha")
+                   if k in keys and k in got)
+        if explains and wide:
+            items = _textbook_items(idx[concerned], cond, [weight[k] for k in concerned])
+            report.notes.append(
+                f"the failing values lie in the footprints of Gaussians a float32 textbook "
+                f"projection cannot resolve, but the port returns float64 values: that "
+                f"mistake is named only for a float32 port ({items})")
+        elif explains:
             report.cause = text
             report.likely_cause = text if not left else (
                 f"{text} (its footprints hold {1 - left / base:.1%} of the failing values)")
@@ -1033,7 +1044,8 @@ def _localise_cutoffs(port_backward, got, scene, camera, fwd, v, skip, bg, conve
 
 def compare_backward(port_backward, scene, camera, grad_rgb=None, *, conventions="inria",
                      background=None, seed=0, margins=None, threads=None, check=True,
-                     diagnose=True, max_excluded_fraction=MAX_EXCLUDED_FRACTION):
+                     diagnose=True, max_excluded_fraction=MAX_EXCLUDED_FRACTION,
+                     port_render=None):
     """Compare a port's gradients with unseen's.
 
     ``port_backward(scene, camera, grad_rgb, *, background) -> dict`` returns the gradients
@@ -1045,6 +1057,9 @@ def compare_backward(port_backward, scene, camera, grad_rgb=None, *, conventions
     decision are set aside. Raises ``AssertionError`` naming every failing group. The
     diagnosis cannot try cut-off mistakes (the oracle's backward refuses non-default
     cut-offs): the message says so, and ``check_port``'s forward comparison names them.
+    ``port_render`` (the port's forward, as ``compare_render`` takes it; ``check_port``
+    passes it) lets a failing backward on a scene with ill-conditioned Gaussians be named
+    the textbook projection when the port's forward on the same scene is.
     """
     scene = _as_scene(scene)
     bg = _as_background(DEFAULT_BACKGROUND if background is None else background)
@@ -1116,15 +1131,25 @@ def compare_backward(port_backward, scene, camera, grad_rgb=None, *, conventions
                 port_backward, got, scene, camera, fwd, v, skip, bg, conventions, threads,
                 base)
             ill = textbook_ill_conditioned(diag)
-            if len(ill):
-                # Not localised: a needle's footprint box covers the image, so zeroing the
-                # upstream gradient there would pass any port.
+            if len(ill) and port_render is not None:
+                # A needle's footprint box covers the image, so the backward cannot localise
+                # the projection by zeroing the upstream gradient there; the port's own
+                # forward on the same scene can (it is what the backward differentiates).
+                fwd_report = compare_render(
+                    port_render, scene, camera, conventions=conventions, background=bg,
+                    margins=margins, threads=threads, check=False,
+                    max_excluded_fraction=max_excluded_fraction)
+                if fwd_report.cause.startswith(TEXTBOOK_MISTAKE):
+                    report.cause = report.likely_cause = (
+                        f"{fwd_report.cause} (named by the port's forward on this scene: "
+                        f"its backward differentiates that projection)")
+            if len(ill) and not report.cause:
                 cond = np.asarray(diag["condition"], dtype=np.float64)
                 report.notes.append(
                     f"the scene holds Gaussians a float32 textbook projection (J·Σc·Jᵀ, "
                     f"a·c − b²) cannot resolve, {_textbook_items(ill, cond, [0] * len(ill))}; "
-                    f"the backward cannot tell that mistake from others (check_port's "
-                    f"forward comparison of the same family names it)")
+                    f"the backward alone cannot tell that mistake from others (given the "
+                    f"port's forward, `port_render=`, it is named from there)")
     if check and not report.ok:
         raise AssertionError(report.message())
     return report
@@ -1250,7 +1275,7 @@ def check_port(render, backward=None, *, conventions="inria", seed=0, families=N
                 result.reports.append(compare_backward(
                     backward, s, cam, conventions=conventions,
                     background=background_for(seed, fam, case), seed=seed, threads=threads,
-                    check=False, max_excluded_fraction=bound))
+                    check=False, max_excluded_fraction=bound, port_render=render))
         out.families[fam] = result
     out.seconds = time.perf_counter() - start
     if check and not out.ok:
