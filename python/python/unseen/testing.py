@@ -62,7 +62,7 @@ from . import densify as _densify_oracle
 from . import qa_mask as _qa_mask_oracle
 from ._loss import (  # noqa: F401
     CONVENTIONS as LOSS_CONVENTIONS, GRAD_ATOL_REL, L1_RTOL, LAMBDA_DSSIM, LOSS_MISTAKES, SSIM_ATOL,
-    loss_case, ssim_reference)
+    SSIM_MAP_ATOL, loss_case, loss_gradient_reference, ssim_map_reference, ssim_reference)
 from ._align import (  # noqa: F401
     ALIGN_MISTAKES, CONSENSUS_SLACK, LSQ_RTOL, RESIDUAL_SLACK, align_case, consensus,
     mistaken_consensus, mistaken_fit)
@@ -1694,15 +1694,21 @@ def compare_loss(port, case=None, *, seed=0, conventions="inria"):
     by default).
 
     ``port(x, y)`` takes two float32 ``(H, W, 3)`` images in [0, 1] and returns a dict with
-    any of ``ssim`` (the mean SSIM), ``l1`` (the mean absolute difference), ``loss``
-    (INRIA's ``0.8·L1 + 0.2·(1 − SSIM)``) and ``grad`` (the loss's gradient with respect to
-    ``x``, ``(H, W, 3)``, under "inria" only: within ``GRAD_ATOL_REL`` of the oracle's
-    largest value). ``conventions`` is the SSIM border
+    any of ``ssim`` (the mean SSIM), ``map`` (SSIM per pixel: ``(H', W')``, or
+    ``(H', W', C)`` per channel, averaged over channels), ``l1`` (the mean absolute
+    difference), ``loss`` (INRIA's ``0.8·L1 + 0.2·(1 − SSIM)``) and ``grad`` (the loss's
+    gradient with respect to ``x``, ``(H, W, 3)``, under "inria" only: within
+    ``GRAD_ATOL_REL`` of the oracle's largest value). ``conventions`` is the SSIM border
     (``LOSS_CONVENTIONS``: "inria" zero padding, "valid" pytorch-msssim, "reflect"
-    torchmetrics). SSIM may differ by ``SSIM_ATOL``, L1 by ``L1_RTOL`` relative, the loss by
-    their weighted sum; on a failure the other conventions and ``LOSS_MISTAKES`` are tried
-    and one is named when it predicts the port's value clearly better than the others.
-    Returns a ``Report``.
+    torchmetrics; the map is ``(H − 10, W − 10)`` under "valid"). SSIM may differ by
+    ``SSIM_ATOL``, its map by ``SSIM_MAP_ATOL`` per pixel, L1 by ``L1_RTOL`` relative, the
+    loss by their weighted sum.
+
+    On a failure the other conventions and ``LOSS_MISTAKES`` are tried on the richest
+    evidence that failed: the map pixel by pixel, else the gradient value by value (both
+    under the naming rule), else one number, which names a hypothesis only when it
+    reproduces the port's value within the tolerance and no other does. Returns a
+    ``Report``.
     """
     case = loss_case(seed) if case is None else case
     x, y = case["x"], case["y"]
@@ -1715,44 +1721,64 @@ def compare_loss(port, case=None, *, seed=0, conventions="inria"):
     report = Report(f"loss on {h}×{w} images", conventions, units="")
     result = port(x.copy(), y.copy())
     got = {k: float(v) for k, v in result.items() if k in oracle}
-    if "grad" in result:
-        _compare_loss_gradient(report, np.asarray(result["grad"]), x, y, conventions)
-    if not got and "grad" not in result:
+    if not got and not {"map", "grad"} & set(result):
         report.failures.append(Failure("loss", 1, 1, "", (), math.nan, math.nan,
-                                       note="the port returned none of ssim, l1, loss"))
+                                       note="the port returned none of ssim, map, l1, loss"))
         return report
-    failed = []
+    evidence = []  # (kind, port's values, their tolerance, failing values): richest first
+    if "map" in result:
+        m = np.asarray(result["map"], np.float64)
+        m = m.mean(axis=2) if m.ndim == 3 else m
+        bad = _compare_loss_map(report, m, want["map"])
+        if bad:
+            evidence.append(("map", m, SSIM_MAP_ATOL, bad))
+    if "grad" in result:
+        g = np.asarray(result["grad"])
+        bad, atol = _compare_loss_gradient(report, g, x, y, conventions)
+        if bad:
+            evidence.append(("grad", g.astype(np.float64), atol, bad))
     for k, v in got.items():
         if not abs(v - oracle[k]) <= tol[k]:
-            failed.append(k)
             report.failures.append(Failure(k, 1, 1, f"atol {tol[k]:.2g}", (), v, oracle[k],
                                            near=None))
-    key = next((k for k in ("ssim", "loss") if k in failed), None)
-    if key is not None:
-        # How far each hypothesis's value lies from the port's, against the oracle's (in
-        # thousandths), under the naming rule.
-        far = abs(got[key] - oracle[key]) or 1.0
-        l1 = oracle["l1"]
-
-        def value(ssim, dssim=True):
-            if key == "ssim":
-                return ssim
-            return (1 - LAMBDA_DSSIM) * l1 + LAMBDA_DSSIM * ((1 - ssim) if dssim else ssim)
-
-        hypotheses = [(f"the {c!r} SSIM convention", value(ssim_reference(x, y, conventions=c)))
-                      for c in LOSS_CONVENTIONS if c != conventions]
-        for mk in LOSS_MISTAKES:
-            if mk.name == "no_dssim":
-                if key == "loss":
-                    hypotheses.append((mk.text, value(oracle["ssim"], dssim=False)))
-                continue
-            hypotheses.append((mk.text, value(ssim_reference(x, y, conventions=conventions,
-                                                             mistake=mk.name))))
-        base = 1000
-        results = [(min(10 * base, int(round(base * abs(got[key] - v) / far))), text)
-                   for text, v in hypotheses]
-        _diagnosis(report, results, base)
+            if k != "l1":
+                evidence.append((k, np.array([v]), tol[k], 1))
+    if evidence:
+        # Per value, each hypothesis leaves the values it does not reproduce within the
+        # tolerance; one number (base 1) thus names only a hypothesis that reproduces it,
+        # and only when no other does.
+        kind, values, atol, failing = evidence[0]
+        results = [(int(np.sum(~(np.abs(values - v) <= atol))) if v.shape == values.shape
+                    else values.size, text)
+                   for text, v in _loss_hypotheses(kind, x, y, conventions, oracle["l1"])]
+        _diagnosis(report, results, failing)
     return report
+
+
+def _loss_hypotheses(kind, x, y, conventions, l1):
+    """``(text, values)`` of every other convention and known mistake for evidence ``kind``
+    ("map", "grad", "ssim" or "loss"), in float64."""
+    out = []
+    if kind != "grad":  # the gradient is judged under "inria" only
+        for c in LOSS_CONVENTIONS:
+            if c != conventions:
+                out.append((f"the {c!r} SSIM convention", c, None))
+    for mk in LOSS_MISTAKES:
+        if mk.name != "no_dssim" or kind in ("loss", "grad"):
+            out.append((mk.text, conventions, mk.name))
+    values = []
+    for text, c, mistake in out:
+        if kind == "grad":
+            v = loss_gradient_reference(x, y, mistake=mistake)
+        elif kind == "map":
+            v = ssim_map_reference(x, y, conventions=c, mistake=mistake)
+        else:
+            s = ssim_reference(x, y, conventions=c,
+                               mistake=None if mistake == "no_dssim" else mistake)
+            v = np.array([s if kind == "ssim" else (1 - LAMBDA_DSSIM) * l1 + LAMBDA_DSSIM * (
+                s if mistake == "no_dssim" else 1 - s)])
+        values.append((text, v))
+    return values
 
 
 
@@ -2168,18 +2194,36 @@ def compare_densify(port, case=None, *, seed=0):
     return report
 
 
+def _compare_loss_map(report, got, want):
+    """Add to ``report`` a failure of the port's SSIM map ``got`` against the oracle's;
+    return how many of its values fail (all of them for another shape)."""
+    if got.shape != want.shape:
+        report.failures.append(Failure("map", 1, 1, "", (), math.nan, math.nan,
+                                       note=f"expected shape {want.shape}, got {got.shape}"))
+        return got.size
+    bad = ~(np.abs(got - want) <= SSIM_MAP_ATOL)
+    if bad.any():
+        where = tuple(int(i) for i in np.unravel_index(
+            int(np.argmax(np.where(bad, np.abs(got - want), -1))), want.shape))
+        report.failures.append(Failure("map", int(bad.sum()), want.size,
+                                       f"atol {SSIM_MAP_ATOL:g}", where, float(got[where]),
+                                       float(want[where]), near=None))
+    return int(bad.sum())
+
+
 def _compare_loss_gradient(report, grad, x, y, conventions):
     """Add to ``report`` a failure of the port's loss gradient ``grad`` against the
-    oracle's (INRIA's loss, zero padding)."""
+    oracle's (INRIA's loss, zero padding); return how many values fail (0 when it cannot
+    be judged) and the tolerance."""
     if conventions != "inria":
         report.failures.append(Failure("grad", 1, 1, "", (), math.nan, math.nan,
                                        note="the loss gradient is compared under 'inria' only"))
-        return
+        return 0, 0.0
     want = _ssim_oracle(x, y, conventions="inria", gradient=True)["grad_loss"]
     if grad.shape != want.shape:
         report.failures.append(Failure("grad", 1, 1, "", (), math.nan, math.nan,
                                        note=f"expected shape {want.shape}, got {grad.shape}"))
-        return
+        return 0, 0.0
     tol = GRAD_ATOL_REL * float(np.abs(want).max())
     bad = ~(np.abs(grad.astype(np.float64) - want) <= tol)
     if bad.any():
@@ -2188,6 +2232,7 @@ def _compare_loss_gradient(report, grad, x, y, conventions):
         report.failures.append(Failure("grad", int(bad.sum()), want.size, f"atol {tol:.2g}",
                                        where, float(grad[where]), float(want[where]),
                                        near=None))
+    return int(bad.sum()), tol
 
 
 def _compare_moments(report, result, moments, rows, flags, n):
