@@ -202,6 +202,62 @@ def test_gsplat_made_wrong_fails_with_the_mistake_named():
             assert r.cause == text, f"{mistake}, seed {seed}: {r.message()}"
 
 
+def _span(text):
+    """The interval a threshold hypothesis states ("of a–b", "of ≥ a", "of ≤ b")."""
+    m = re.search(r" of (≥ |≤ )?([0-9.e+-]+)(?:–([0-9.e+-]+))?[ ,]", text)
+    lo = float(m.group(2))
+    if m.group(1):
+        return (lo, np.inf) if m.group(1) == "≥ " else (0.0, lo)
+    return lo, float(m.group(3))
+
+
+def test_gsplat_with_other_settings_fails_with_the_threshold_it_used():
+    """gsplat's strategy set otherwise than INRIA (issue #70: caught, never named): the
+    judge infers from the port's decisions the interval a threshold must lie in, and names
+    the threshold, with that interval, which explains every decision. Measured: named on
+    every seed where the setting changes a decision (12 of 12; prune_scale3d only acts on
+    the odd seeds, with the large-Gaussian prune on; a scene_scale is told from
+    grow_scale3d only there)."""
+    text = ut.DENSIFY_THRESHOLD_TEXT
+    plain = _gsplat_port(with_moments=False)
+
+    def doubled_extent(scene, g, c, *, extent, **kw):
+        return plain(scene, g, c, extent=2 * extent, **kw)
+
+    # (port, what is named and the value its interval holds on even / odd seeds); None:
+    # the setting changes no decision there.
+    ports = [
+        ({"grow_grad2d": 8e-4}, [(text["grad_threshold"], 8e-4)] * 2),
+        ({"grow_grad2d": 1e-4}, [(text["grad_threshold"], 1e-4)] * 2),
+        ({"prune_opa": 0.02}, [(text["min_opacity"], 0.02)] * 2),
+        ({"grow_scale3d": 0.03}, [(text["percent_dense"], 0.03)] * 2),
+        ({"prune_scale3d": 0.3}, [None, (text["world_prune_fraction"], 0.3)]),
+        (doubled_extent, [(text["percent_dense"], 0.02), ("an extent (scene_scale) of", 2.0)]),
+    ]
+    for settings, expected in ports:
+        port = settings if callable(settings) else _gsplat_port(with_moments=False, **settings)
+        for seed in range(8):
+            r = ut.compare_densify(port, seed=seed)
+            if expected[seed % 2] is None:
+                assert r.ok, f"{settings}, seed {seed}: {r.message()}"
+                continue
+            named, value = expected[seed % 2]
+            assert not r.ok, f"{settings}, seed {seed}: passed"
+            assert r.cause.startswith(named), f"{settings}, seed {seed}: {r.message()}"
+            lo, hi = _span(r.cause)
+            assert lo <= value <= hi, f"{settings}, seed {seed}: {r.cause}"
+
+
+def test_gsplat_revised_opacity_fails_named():
+    text = next(m.text for m in ut.DENSIFY_VALUE_MISTAKES if m.name == "revised_opacity")
+    port = _gsplat_port(with_moments=False, revised_opacity=True)
+    for seed in range(8):
+        r = ut.compare_densify(port, seed=seed)
+        if _splits(r) == 0:
+            continue
+        assert not r.ok and r.cause == text, f"seed {seed}: {r.message()}"
+
+
 def _splits(report):
     """How many Gaussians the oracle split (from the report's title)."""
     return int(re.search(r", (\d+) split", report.what).group(1))

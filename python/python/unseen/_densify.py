@@ -75,11 +75,26 @@ def _sigmoid(x):
     return 1.0 / (1.0 + np.exp(-np.asarray(x, np.float64)))
 
 
+#: The step's thresholds (INRIA's; gsplat's ``DefaultStrategy`` defaults): the mean
+#: gradient that makes a Gaussian grow (``grow_grad2d``), the largest scale up to which it
+#: is cloned rather than split and the one beyond which it is pruned as too large, both as
+#: shares of the extent (``grow_scale3d``, ``prune_scale3d``, times gsplat's
+#: ``scene_scale``), and the opacity below which it is pruned (``prune_opa``).
+THRESHOLDS = {"grad_threshold": 2e-4, "percent_dense": 0.01, "min_opacity": 0.005,
+              "world_prune_fraction": 0.1}
+#: What each threshold is called in a report.
+THRESHOLD_TEXT = {
+    "grad_threshold": "a gradient threshold (grow_grad2d)",
+    "percent_dense": "a clone / split limit (grow_scale3d, or a scene_scale) of the extent",
+    "min_opacity": "a prune opacity (prune_opa)",
+    "world_prune_fraction": "a large-Gaussian limit (prune_scale3d) of the extent",
+}
+
+
 def near_decisions(case, thresholds=None):
     """Per Gaussian of the case, whether a threshold decision about it or what it becomes
     lies within ``DECISION_REL`` of the threshold (bool ``(N,)``)."""
-    t = {"grad_threshold": 2e-4, "percent_dense": 0.01, "min_opacity": 0.005,
-         "world_prune_fraction": 0.1, **(thresholds or {})}
+    t = {**THRESHOLDS, **(thresholds or {})}
     count = case["count"].astype(np.float32)
     grad = np.where(count > 0, case["grad_accum"] / np.maximum(count, 1), 0).astype(np.float64)
     largest = np.exp(case["scales"].astype(np.float64).max(1))
@@ -139,13 +154,17 @@ DENSIFY_VALUE_MISTAKES = (
                  "draw (twins at one point: identical gradients, they never separate)"),
     StageMistake("swapped_draws", "copy c of a split Gaussian drawn from normals[1 − c], "
                  "not normals[c]"),
+    StageMistake("revised_opacity", "split children at the revised opacity 1 − √(1 − α) "
+                 "(gsplat's revised_opacity, arXiv:2404.06109), not their parent's"),
 )
 
 
-def densify_reference(case, mistake=None):
+def densify_reference(case, mistake=None, thresholds=None):
     """A NumPy densify-and-prune step of ``case`` (float32 values, float64 decisions)
-    under ``mistake`` (one of ``DENSIFY_MISTAKES``' names, or None): the new scene's
-    arrays."""
+    under ``mistake`` (one of ``DENSIFY_MISTAKES``' or ``DENSIFY_VALUE_MISTAKES``' names, or
+    None) and ``thresholds`` (``THRESHOLDS``' keys; the others at their value): the new
+    scene's arrays."""
+    t = {**THRESHOLDS, **(thresholds or {})}
     n = len(case["means"])
     count = case["count"].astype(np.float32)
     grad = np.where(count > 0, case["grad_accum"] / np.maximum(count, np.float32(1)),
@@ -153,9 +172,9 @@ def densify_reference(case, mistake=None):
     if mistake == "sum_not_mean":
         grad = case["grad_accum"]
     extent = np.float32(case["extent"])
-    hot = grad >= np.float32(2e-4)
+    hot = grad >= np.float32(t["grad_threshold"])
     largest = np.exp(case["scales"].max(1))
-    small = largest <= np.float32(0.01) * extent
+    small = largest <= np.float32(t["percent_dense"]) * extent
     clone = np.nonzero(hot & small)[0]
     split = np.nonzero(hot & ~small)[0]
     if mistake == "no_size_test":
@@ -170,6 +189,10 @@ def densify_reference(case, mistake=None):
                     2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
                    1).reshape(-1, 3, 3)
     s = np.exp(case["scales"][split].astype(np.float64))
+    opacity = case["opacities"][split]
+    if mistake == "revised_opacity":
+        a = 1 - np.sqrt(1 - _sigmoid(opacity))
+        opacity = np.log(a / (1 - a)).astype(np.float32)
     blocks = []
     for c in range(2):
         draw = {"twin_children": 0, "swapped_draws": 1 - c}.get(mistake, c)
@@ -179,6 +202,7 @@ def densify_reference(case, mistake=None):
         block = {k: orig[k][split] for k in keys}
         block["means"] = means
         block["scales"] = (case["scales"][split] - shrink).astype(np.float32)
+        block["opacities"] = opacity
         blocks.append(block)
     if mistake == "interleaved_children":
         children = {k: np.stack([blocks[0][k], blocks[1][k]], 1).reshape(
@@ -191,10 +215,93 @@ def densify_reference(case, mistake=None):
     if mistake != "keep_split_originals":
         remove[split] = True
     tested = np.arange(m) < (n if mistake == "prune_originals_only" else m)
-    transparent = _sigmoid(grown["opacities"]) < 0.005
-    big = np.exp(grown["scales"].max(1)) > 0.1 * extent if case["world_prune"] else False
+    transparent = _sigmoid(grown["opacities"]) < t["min_opacity"]
+    big = (np.exp(grown["scales"].max(1)) > t["world_prune_fraction"] * extent
+           if case["world_prune"] else False)
     remove |= tested & (transparent | big)
     return {k: v[~remove] for k, v in grown.items()}
+
+
+def _interval(below, above):
+    """The thresholds ``t`` with every value of ``below`` under it and every value of
+    ``above`` at or over it: ``(lo, hi)``, or None when there is none."""
+    lo = float(np.max(below)) if len(below) else 0.0
+    hi = float(np.min(above)) if len(above) else np.inf
+    return (lo, hi) if lo < hi else None
+
+
+def inferred_thresholds(case, rows, flags):
+    """The thresholds a port's decisions imply: for each of ``THRESHOLDS``' keys the
+    interval ``(lo, hi)`` every threshold consistent with what the port's rows (``rows``,
+    ``parse_rows``) made of the Gaussians lies in, or None when no single threshold
+    explains them. Gaussians set aside (``flags``) do not count; the opacity is read from
+    Gaussians well inside the large-Gaussian limit, that limit from opaque ones (α ≥ 0.05,
+    10× the prune opacity)."""
+    n = len(flags)
+    copies, children = np.zeros(n, np.int64), np.zeros(n, np.int64)
+    for i, kind in rows:
+        if i >= 0 and kind == "copy":
+            copies[i] += 1
+        elif i >= 0 and kind == "child":
+            children[i] += 1
+    count = case["count"].astype(np.float64)
+    grad = np.where(count > 0, case["grad_accum"] / np.maximum(count, 1), 0.0)
+    largest = np.exp(case["scales"].astype(np.float64).max(1)) / case["extent"]
+    alpha = _sigmoid(case["opacities"])
+    ok = ~flags
+    grown, stayed = ok & ((copies >= 2) | (children >= 1)), ok & (copies == 1) & (children == 0)
+    cloned, split = ok & (copies >= 2), ok & (children >= 1) & (copies == 0)
+    gone = ok & (copies == 0) & (children == 0)
+    out = {"grad_threshold": _interval(grad[stayed], grad[grown]),
+           "percent_dense": _interval(largest[cloned], largest[split])}
+    # A split Gaussian's rows are its children, 1.6 times smaller.
+    row_largest = np.where(split, largest / 1.6, largest)
+    thin = row_largest <= THRESHOLDS["world_prune_fraction"] / 2 if case["world_prune"] else ok
+    out["min_opacity"] = _interval(alpha[gone & thin], alpha[ok & thin & ~gone])
+    opaque = alpha >= 10 * THRESHOLDS["min_opacity"]
+    out["world_prune_fraction"] = _interval(
+        row_largest[ok & opaque & ~gone], row_largest[gone & opaque]
+    ) if case["world_prune"] else (0.0, np.inf)
+    return out
+
+
+def threshold_hypotheses(case, rows, flags):
+    """``(text, thresholds)`` for each threshold (or, with the large-Gaussian prune on, the
+    extent both size limits scale with: gsplat's ``scene_scale``) whose interval implied
+    by the port's decisions (``inferred_thresholds``) excludes the oracle's value; the
+    hypothesis uses the interval's geometric middle."""
+    out = []
+    inferred = inferred_thresholds(case, rows, flags)
+
+    def middle(lo, hi):
+        if lo <= 0:
+            return hi / 1.5
+        return lo * 1.5 if not np.isfinite(hi) else float(np.sqrt(lo * hi))
+
+    def span(lo, hi):
+        return f"≥ {lo:.3g}" if not np.isfinite(hi) else (
+            f"≤ {hi:.3g}" if lo <= 0 else f"{lo:.3g}–{hi:.3g}")
+
+    for key, value in THRESHOLDS.items():
+        iv = inferred[key]
+        if iv is None or iv[0] < value <= iv[1]:
+            continue
+        if key == "world_prune_fraction" and not case["world_prune"]:
+            continue
+        out.append((f"{THRESHOLD_TEXT[key]} of {span(*iv)}, not {value:g}",
+                    {key: middle(*iv)}))
+    size, big = inferred["percent_dense"], inferred["world_prune_fraction"]
+    if case["world_prune"] and size is not None and big is not None:
+        # One factor k on both limits: k·0.01 in the size interval, k·0.1 in the other.
+        lo = max(size[0] / THRESHOLDS["percent_dense"], big[0] / THRESHOLDS["world_prune_fraction"])
+        hi = min(size[1] / THRESHOLDS["percent_dense"], big[1] / THRESHOLDS["world_prune_fraction"])
+        if lo < hi and not lo < 1.0 <= hi:
+            k = middle(lo, hi)
+            out.append((f"an extent (scene_scale) of {span(lo, hi)} times the scene's, "
+                        "scaling both size limits",
+                        {"percent_dense": k * THRESHOLDS["percent_dense"],
+                         "world_prune_fraction": k * THRESHOLDS["world_prune_fraction"]}))
+    return out
 
 
 def row_differences(rows_a, rows_b, flags):

@@ -82,7 +82,8 @@ from ._densify import (  # noqa: F401
     MOMENT_MISTAKES, densify_moments, expected_moments,
     CHILD_MEAN_REL, CHILD_SCALE_ATOL, DENSIFY_MISTAKES, DENSIFY_VALUE_MISTAKES,
     MAX_SET_ASIDE as DENSIFY_MAX_SET_ASIDE,
-    densify_case, densify_reference, near_decisions, parse_rows, row_differences,
+    THRESHOLDS as DENSIFY_THRESHOLDS, THRESHOLD_TEXT as DENSIFY_THRESHOLD_TEXT, densify_case, densify_reference, inferred_thresholds,
+    near_decisions, parse_rows, row_differences, threshold_hypotheses,
 )
 from ._warp import (  # noqa: F401
     COLOR_ATOL_BILINEAR, COLOR_ATOL_NEAREST, DEPTH_RTOL, MAX_SET_ASIDE as WARP_MAX_SET_ASIDE,
@@ -2185,11 +2186,19 @@ def compare_densify(port, case=None, *, seed=0):
         _compare_moments(report, result, kwargs["moments"], rows_g, flags, n)
     if decisions or moved or unknown:
         base = decisions + moved + len(unknown)
-        results = []
-        for mk in DENSIFY_MISTAKES:
-            emulated = parse_rows(densify_reference(case, mk.name), case)
+        # The listed mistakes (a child's revised opacity changes what is pruned), and
+        # each threshold the port's decisions imply where it excludes the oracle's.
+        hypotheses = [(mk.text, mk.name, None)
+                      for mk in DENSIFY_MISTAKES + DENSIFY_VALUE_MISTAKES]
+        hypotheses += [(text, None, t) for text, t in threshold_hypotheses(case, rows_g, flags)]
+        results, seen = [], []
+        for text, name, thresholds in hypotheses:
+            emulated = parse_rows(densify_reference(case, name, thresholds), case)
+            if thresholds and emulated in seen:
+                continue  # a listed mistake in other words (no size test: a limit of 0)
+            seen.append(emulated)
             d, m, _ = row_differences(rows_g, emulated, flags)
-            results.append((d + m + sum(1 for i, k in rows_g if k == "unknown"), mk.text))
+            results.append((d + m + sum(1 for i, k in rows_g if k == "unknown"), text))
         _diagnosis(report, results, base)
     return report
 
@@ -2297,7 +2306,7 @@ def _child_and_copy_values(got, rows_g, want, rows_w, case, flags):
     for r, (i, kind) in enumerate(rows_g):
         if i < 0 or flags[i] or kind == "unknown":
             continue
-        for k in ("quats", "opacities", "sh"):
+        for k in ("quats", "sh") + (("opacities",) if kind == "copy" else ()):
             if got[k][r].tobytes() != case[k][i].tobytes():
                 bad.append((r, f"{k} not copied from Gaussian {i}"))
                 break
@@ -2316,7 +2325,13 @@ def _child_and_copy_values(got, rows_g, want, rows_w, case, flags):
                     bad.append((r, f"child {c} of Gaussian {i}: the oracle has {len(mine)}"))
                     continue
                 want_m = want["means"][mine[c]].astype(np.float64)
-                if np.abs(m - want_m).max() > CHILD_MEAN_REL * scale:
+                # The parent's opacity bit for bit, or a revised one within a few ulps.
+                o, want_o = got["opacities"][r], want["opacities"][mine[c]]
+                if (o.tobytes() != want_o.tobytes() if want_o == case["opacities"][i] else
+                        not abs(float(o) - float(want_o)) <= CHILD_SCALE_ATOL):
+                    bad.append((r, f"child {c} of Gaussian {i} at opacity {o:.7g}, the "
+                                   f"oracle's {want_o:.7g}"))
+                elif np.abs(m - want_m).max() > CHILD_MEAN_REL * scale:
                     bad.append((r, f"child {c} of Gaussian {i} (drawn from normals[{c}, {i}]) "
                                    f"placed at {np.array2string(m, precision=6)}, the oracle's "
                                    f"at {np.array2string(want_m, precision=6)}"))
