@@ -67,6 +67,8 @@ FRUSTUM_MISTAKES = (
     StageMistake("ray_distance", "near and far as distances along each ray, not camera z"),
     StageMistake("all_depths", "the depth range of the whole image, not of the region"),
     StageMistake("transposed", "the mask read transposed (x and y swapped)"),
+    StageMistake("fy_from_fx", "the vertical focal length taken from the horizontal one "
+                 "(fy = fx: square pixels assumed)"),
 )
 
 
@@ -115,6 +117,8 @@ def mistaken_frustum(name, case, dtype=np.float64):
     region = valid if name == "all_depths" else valid & case["mask"]
     near, far = depth[region].min(), depth[region].max()
     k, v = case["k"].astype(dtype), case["viewmat"].astype(dtype)
+    if name == "fy_from_fx":
+        k[1, 1] = k[0, 0]
     r_wc = v[:3, :3].T
     center = -r_wc @ v[:3, 3]
     d = np.stack([(corners[:, 0] - k[0, 2]) / k[0, 0], (corners[:, 1] - k[1, 2]) / k[1, 1],
@@ -122,6 +126,49 @@ def mistaken_frustum(name, case, dtype=np.float64):
     if name == "ray_distance":
         d = d / np.linalg.norm(d, axis=1, keepdims=True)
     return np.concatenate([center + (d * z) @ r_wc.T for z in (near, far)])
+
+
+def _solid_planes(vertices):
+    """Outward unit normals and offsets of a frustum's faces from its vertices (the outline's
+    corners at the near depth, counter-clockwise in the image, then the same corners at the
+    far depth): the near and far faces and one side face per outline edge."""
+    m = len(vertices) // 2
+    near, far = vertices[:m], vertices[m:]
+    centroid = vertices.mean(0)
+    planes = []
+    for i in range(m):
+        j = (i + 1) % m
+        # A side face; for a degenerate edge (two equal corners) there is none.
+        planes.append((near[i], np.cross(near[j] - near[i], far[i] - near[i])))
+    for face in (near, far):  # Newell's normal: the plane of a camera depth
+        nxt = np.roll(face, -1, axis=0)
+        planes.append((face.mean(0), np.cross(face, nxt).sum(0)))
+    out = []
+    for p, n in planes:
+        length = np.linalg.norm(n)
+        if length == 0:
+            continue
+        n = n / length
+        if n @ (centroid - p) > 0:
+            n = -n
+        out.append((n, n @ p))
+    return out
+
+
+def solid_unmatched(want, got, tol):
+    """How far a port's frustum ``got`` is from being the oracle's solid ``want`` (both
+    ``(V, 3)`` vertices): the oracle's vertices no port vertex lies within ``tol`` of, plus
+    the port's vertices more than ``tol`` outside the oracle's solid. A corner on an edge
+    (a hull that keeps collinear corners) is the same solid and counts nothing."""
+    if len(want) == 0 or len(got) == 0:
+        return len(want) + len(got)
+    dist = np.linalg.norm(want[:, None, :] - got[None, :, :], axis=2)
+    missing = int((dist.min(1) > tol).sum())
+    extra = got[dist.min(0) > tol]  # the port's vertices that are none of the oracle's
+    outside = np.zeros(len(extra), bool)
+    for n, d in _solid_planes(want):
+        outside |= extra @ n - d > tol
+    return missing + int(outside.sum())
 
 
 def unmatched(a, b, tol):

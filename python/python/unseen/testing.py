@@ -73,7 +73,7 @@ from ._adam import ADAM_MISTAKES, adam_bounds, adam_case, adam_reference  # noqa
 from ._views import (  # noqa: F401
     FRUSTUM_MISTAKES, FRUSTUM_REL, TOUR_REL, VIEWS_MISTAKES, frustum_case,
     _closing, explains_selection, greedy_allows, mistaken_frustum, mistaken_tour, mistaken_views,
-    tour_follows_the_rule, unmatched, views_case,
+    solid_unmatched, tour_follows_the_rule, unmatched, views_case,
 )
 from ._collide import viewmat as _viewmat
 from ._qamask import C0, DC_ULPS, QA_MASK_MISTAKES, project  # noqa: F401
@@ -1888,10 +1888,12 @@ def compare_frustum(port, case=None, *, seed=0):
     ``port(mask, depth, k, viewmat, outline)`` takes the region (bool ``(H, W)``), its
     depth (float32 ``(H, W)``; valid: finite and > 0), the camera (``k`` 3×3 and the
     world-to-camera ``viewmat`` 4×4, float64) and ``outline`` (``"bounding_box"`` or
-    ``"hull"``) and returns the frustum's vertices (``(V, 3)``, any order). Each vertex
-    must lie within ``FRUSTUM_REL`` of the scale of one of the oracle's, and the other way
-    round. On a failure each of ``FRUSTUM_MISTAKES`` is tried and named when its vertices
-    explain the port's clearly better than the others. Returns a ``Report``.
+    ``"hull"``) and returns the frustum's vertices (``(V, 3)``, any order). They are
+    compared as solids: each of the oracle's vertices must have one of the port's within
+    ``FRUSTUM_REL`` of the scale, and each of the port's must lie within it of the oracle's
+    solid (a hull that keeps collinear corners passes). On a failure each of
+    ``FRUSTUM_MISTAKES`` is tried and named when its vertices explain the port's clearly
+    better than the others. Returns a ``Report``.
     """
     case = frustum_case(seed) if case is None else case
     cam = Camera(case["k"], case["viewmat"], case["width"], case["height"])
@@ -1907,17 +1909,18 @@ def compare_frustum(port, case=None, *, seed=0):
         return report
     scale = float(np.abs(w).max())
     tol = FRUSTUM_REL * scale
-    off = unmatched(w, got, tol)
-    if off or len(got) != len(w):
+    off = solid_unmatched(w, got, tol)
+    if off:
         dist = np.linalg.norm(w[:, None, :] - got[None, :, :], axis=2).min(1)
         i = int(np.argmax(dist))
         report.failures.append(Failure(
             "vertices", off, len(w) + len(got), f"{FRUSTUM_REL:g}·scale", (i,),
             float(dist[i]), 0.0,
             note=f"{len(got)} vertices against the oracle's {len(w)}; {off} without a "
-                 f"counterpart within {tol:.3g}; farthest: oracle vertex {i} "
-                 f"{np.array2string(w[i], precision=5)}, {dist[i]:.3g} from the nearest"))
-        results = [(unmatched(mistaken_frustum(mk.name, case), got, tol), mk.text)
+                 f"counterpart within {tol:.3g} or outside the oracle's solid; farthest: "
+                 f"oracle vertex {i} {np.array2string(w[i], precision=5)}, {dist[i]:.3g} "
+                 f"from the nearest"))
+        results = [(solid_unmatched(mistaken_frustum(mk.name, case), got, tol), mk.text)
                    for mk in FRUSTUM_MISTAKES]
         _diagnosis(report, results, max(off, 1))
     return report
