@@ -129,3 +129,85 @@ def test_python_fcl_passes():
     for seed in SEEDS:
         r = ut.compare_collide(port, seed=seed)
         assert r.ok, f"seed {seed}: {r.message()}"
+
+
+def _fcl():
+    return pytest.importorskip("fcl", reason="python-fcl is not installed "
+                               "(python/requirements-stages.txt)")
+
+
+def _fcl_convex(fcl, v, faces):
+    flat = np.array([x for f in faces for x in (len(f), *f)])
+    return fcl.CollisionObject(fcl.Convex(v, len(faces), flat))
+
+
+def _fcl_mesh_port(a, b, faces):
+    """python-fcl on triangle meshes (BVHModel) of the two frustums: FCL tests their
+    triangles against each other, so a frustum wholly inside the other does not collide."""
+    fcl = _fcl()
+
+    def mesh(v):
+        m = fcl.BVHModel()
+        tris = np.array([(f[0], f[k], f[k + 1]) for f in faces for k in (1, 2)])
+        m.beginModel(len(v), len(tris))
+        m.addSubModel(v, tris)
+        m.endModel()
+        return fcl.CollisionObject(m)
+
+    hit = fcl.CollisionResult()
+    fcl.collide(mesh(a), mesh(b), fcl.CollisionRequest(), hit)
+    return hit.is_collision
+
+
+def _fcl_box_port(a, b, faces):
+    """python-fcl on each frustum's own oriented bounding box (fcl.Box placed by a
+    Transform): axes along the near face's first edge and the frustum's axis."""
+    fcl = _fcl()
+
+    def box(v):
+        x = v[1] - v[0]
+        z = v[4:].mean(0) - v[:4].mean(0)
+        x = x / np.linalg.norm(x)
+        y = np.cross(z, x)
+        y = y / np.linalg.norm(y)
+        z = np.cross(x, y)
+        r = np.stack([x, y, z], 1)  # local to world
+        local = v @ r
+        lo, hi = local.min(0), local.max(0)
+        return fcl.CollisionObject(fcl.Box(*(hi - lo)), fcl.Transform(r, r @ ((lo + hi) / 2)))
+
+    hit = fcl.CollisionResult()
+    fcl.collide(box(a), box(b), fcl.CollisionRequest(), hit)
+    return hit.is_collision
+
+
+def _fcl_slack_port(a, b, faces, slack=1e-3):
+    """python-fcl's convex collision with a contact tolerance: pairs nearer than 1e-3 (an
+    absolute distance, as a port with a fixed epsilon would) called colliding."""
+    fcl = _fcl()
+    oa, ob = _fcl_convex(fcl, a, faces), _fcl_convex(fcl, b, faces)
+    d = fcl.DistanceResult()
+    fcl.distance(oa, ob, fcl.DistanceRequest(), d)
+    return d.min_distance <= slack
+
+
+@pytest.mark.parametrize("port, named", [
+    (_fcl_mesh_port, "the frustums' surfaces"),
+    (_fcl_box_port, "a bounding volume"),
+    (_fcl_slack_port, "a contact tolerance of"),
+], ids=["triangle-meshes", "oriented-boxes", "contact-slack-1e-3"])
+def test_python_fcl_made_wrong_fails_with_the_mistake_named(port, named):
+    """Issue #70: python-fcl's triangle-mesh collision, an oriented box and a 1e-3 contact
+    slack were caught but never named. The slack is inferred from the pairs the port calls
+    colliding: its interval must hold 1e-3."""
+    failed = 0
+    for seed in range(8):
+        r = ut.compare_collide(port, seed=seed)
+        if r.ok:
+            continue  # the case holds no pair the mistake decides otherwise
+        failed += 1
+        assert r.cause.startswith(named), f"seed {seed}: {r.message()}"
+        if port is _fcl_slack_port:
+            lo, hi = (float(x) for x in r.cause.split(" of ")[1].split(":")[0].split("–"))
+            assert lo <= 1e-3 <= hi, r.cause
+    assert failed >= 6, failed

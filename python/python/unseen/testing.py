@@ -67,8 +67,8 @@ from ._align import (  # noqa: F401
     ALIGN_MISTAKES, CONSENSUS_SLACK, LSQ_RTOL, RESIDUAL_SLACK, align_case, consensus,
     mistaken_consensus, mistaken_fit)
 from ._collide import (  # noqa: F401
-    COLLIDE_MISTAKES, COLLIDE_VARIANTS, CONTACT_REL, DISTANCE_REL, FRUSTUM_FACES, MAX_SET_ASIDE, collide_case,
-    frustum, mistaken_verdict)
+    COLLIDE_MISTAKES, COLLIDE_VARIANTS, CONTACT_REL, DISTANCE_REL, FRUSTUM_FACES, MAX_SET_ASIDE,
+    SLACK_MAX_REL, collide_case, contact_slack, frustum, mistaken_verdict)
 from ._adam import ADAM_MISTAKES, adam_bounds, adam_case, adam_reference  # noqa: F401
 from ._views import (  # noqa: F401
     FRUSTUM_MISTAKES, FRUSTUM_REL, TOUR_REL, VIEWS_MISTAKES, frustum_case,
@@ -1562,9 +1562,10 @@ def compare_collide(port, case=None, *, seed=0):
     pairs, faces = case["pairs"], case["faces"]
     report = Report(f"frustum collisions, {len(pairs)} pairs", "unseen", units="pairs")
     report.bound = MAX_SET_ASIDE
-    verdicts, wrong, aside, dist_bad = [], [], [], []
+    verdicts, wrong, aside, dist_bad, wants = [], [], [], [], []
     for i, (a, b) in enumerate(pairs):
         want = _proximity(a, b)
+        wants.append(want)
         got = port(a.copy(), b.copy(), faces)
         d = None
         if isinstance(got, dict):
@@ -1592,7 +1593,7 @@ def compare_collide(port, case=None, *, seed=0):
                                        f"{CONTACT_REL:g} of contact: the case cannot judge"))
     if wrong:
         i = wrong[0]
-        want = _proximity(*pairs[i])
+        want = wants[i]
         report.failures.append(Failure(
             "intersect", len(wrong), len(pairs) - n_aside, "the same verdict", (i,),
             float(verdicts[i]), float(want["intersect"]),
@@ -1611,6 +1612,21 @@ def compare_collide(port, case=None, *, seed=0):
                            if not aside[i] and mistaken_verdict(v, a, b, faces) != verdicts[i])
                        for v in COLLIDE_VARIANTS[mk.name])
             results.append((left, mk.text))
+        # A contact tolerance: separated pairs closer than some s called colliding.
+        apart = [i for i in range(len(pairs)) if not aside[i] and not wants[i]["intersect"]]
+        slack = contact_slack([wants[i]["distance"] for i in apart],
+                              [verdicts[i] for i in apart])
+        scale = max(float(np.abs(np.asarray(p)).max()) for p in pairs)
+        # Beyond SLACK_MAX_REL of the scale it is no contact tolerance but a looser shape
+        # (a bounding volume's margin), which the listed mistakes stand for.
+        if slack is not None and slack[0] <= SLACK_MAX_REL * scale:
+            lo, hi = slack
+            s = lo * 1.5 if not np.isfinite(hi) else float(np.sqrt(lo * hi))
+            left = sum(1 for i in range(len(pairs)) if not aside[i] and verdicts[i] != (
+                wants[i]["intersect"] or wants[i]["distance"] <= s))
+            span = f"{lo:.3g}–{hi:.3g}" if np.isfinite(hi) else f"≥ {lo:.3g}"
+            results.append((left, f"a contact tolerance of {span}: separated pairs closer "
+                                  "than that called colliding"))
         _diagnosis(report, results, len(wrong))
     return report
 
