@@ -148,12 +148,47 @@ def test_opencv_passes():
     assert worst < 0.05
 
 
-def test_opencv_navier_stokes_fails():
+def test_opencv_navier_stokes_fails_and_is_given_no_name():
+    """Navier–Stokes inpainting (Bertalmío et al. 2001) is another algorithm, not a
+    variation of Telea's update that one value can be recomputed under from its
+    predecessors: caught on every seed, never named (SPEC.md §8.2)."""
     cv2 = _cv2()
 
     def port(image, mask, radius):
         src = image if image.shape[2] == 3 else image[..., 0]
         return cv2.inpaint(src, mask.astype(np.uint8), radius, cv2.INPAINT_NS)
 
-    for seed in range(3):
-        assert not ut.compare_inpaint(port, seed=seed).ok
+    for seed in range(12):
+        r = ut.compare_inpaint(port, seed=seed)
+        assert not r.ok and r.cause == "", f"seed {seed}: {r.message()}"
+
+
+def test_opencv_made_wrong_fails_with_the_mistake_named():
+    """Issue #70: OpenCV's Telea at a fixed radius of 5, or on the mask dilated by
+    ``cv2.dilate`` (a 3×3 square, once or twice), was caught but never named. The radius is
+    named from the fill values (every whole radius 1–8 is tried); the dilation from the
+    known pixels the port changed (the ring the grown mask adds)."""
+    cv2 = _cv2()
+
+    def port(radius=None, dilate=0):
+        def run(image, mask, r):
+            src = image if image.shape[2] == 3 else image[..., 0]
+            m = mask.astype(np.uint8)
+            if dilate:
+                m = cv2.dilate(m, np.ones((3, 3), np.uint8), iterations=dilate)
+            return cv2.inpaint(src, m, radius or r, cv2.INPAINT_TELEA)
+        return run
+
+    for kwargs, text in (({"radius": 5}, "a radius of 5"),
+                         ({"dilate": 1}, "the mask dilated by 1 pixel (a 3×3 square)"),
+                         ({"dilate": 2}, "the mask dilated by 2 pixels (a 3×3 square)")):
+        judged = 0
+        for seed in range(12):
+            case = ut.inpaint_case(seed)
+            if kwargs.get("radius") == round(case["radius"]):
+                continue
+            judged += 1
+            r = ut.compare_inpaint(port(**kwargs), case)
+            assert not r.ok, f"{kwargs}, seed {seed}: the mistake passed"
+            assert r.cause.startswith(text), f"{kwargs}, seed {seed}: {r.message()}"
+        assert judged >= 9

@@ -1873,21 +1873,66 @@ def compare_inpaint(port, case=None, *, seed=0):
             f"oracle's on the port's own predecessors; worst at [{', '.join(map(str, where))}]: "
             f"port {got[where]}, oracle {trace['image'][where]} (unrounded "
             f"{value[where]:.4f})"))
-        results = []
-        for mk in INPAINT_MISTAKES:
-            if mk.name == "round_nearest" and image.dtype != np.uint8:
-                continue
-            v = mistaken_values(mk.name, image, mask, radius, got, trace)
+        def unexplained(v):
+            """The judged values ``v`` (a hypothesis's, pre-rounding) does not explain: an
+            8-bit value it rounds to, or one within float noise of its rounding boundary, is
+            explained; a float one within the bound."""
             if image.dtype == np.uint8:
-                # A mistake explains a value it rounds to, or one within float noise of
-                # its rounding boundary.
                 left = judged & (round_cast(v, np.uint8) != got) & ~(
                     np.abs(v - np.round(v)) <= 1e-3)
             else:
                 left = judged & ~(np.abs(got - v) <= trace["bound"] + 1e-5 * np.abs(v))
-            results.append((int(left.sum()), mk.text))
-        _diagnosis(report, results, int(wrong.sum()))
+            return int(left.sum())
+
+        results = [(unexplained(mistaken_values(mk.name, image, mask, radius, got, trace)),
+                    mk.text) for mk in INPAINT_MISTAKES
+                   if mk.name != "round_nearest" or image.dtype == np.uint8]
+        # Another radius: the oracle itself at that radius (it also sets how far outside
+        # the mask ``T`` is solved), forced to the port's values.
+        for r in _other_radii(radius):
+            t = _inpaint_oracle(image, mask, radius=float(r), forced=got)
+            results.append((unexplained(t["mean"].astype(np.float64) + t["term"]),
+                            f"a radius of {r:g}, not {radius:g}"))
+        if not outside.any():
+            _diagnosis(report, results, int(wrong.sum()))
+    if outside.any():
+        # Known pixels changed: a fill of a larger region. Each dilation of the mask
+        # leaves the changed pixels outside it and the unchanged ones inside it.
+        changed = outside.any(axis=2)
+        results = []
+        for shape, grown in _dilations(mask):
+            results.append((int((changed ^ grown).sum()), f"the mask dilated by {shape}"))
+        _diagnosis(report, results, int(changed.sum()))
     return report
+
+
+def _other_radii(radius):
+    """The whole radii 1–8 a port might have used instead of ``radius`` (which OpenCV
+    rounds half to even)."""
+    given = int(min(max(np.round(radius), 1), 100))
+    return [r for r in range(1, 9) if r != given]
+
+
+def _dilations(mask):
+    """``(text, ring)`` for the mask grown by 1–3 steps of a 3×3 square (``cv2.dilate``'s
+    default) or a cross: the known pixels a fill of the grown mask changes."""
+    out = []
+    for name, cross in (("a 3×3 square", False), ("a cross (4-neighbours)", True)):
+        grown = mask.copy()
+        for k in range(1, 4):
+            g = grown.copy()
+            g[1:] |= grown[:-1]
+            g[:-1] |= grown[1:]
+            g[:, 1:] |= grown[:, :-1]
+            g[:, :-1] |= grown[:, 1:]
+            if not cross:
+                g[1:, 1:] |= grown[:-1, :-1]
+                g[1:, :-1] |= grown[:-1, 1:]
+                g[:-1, 1:] |= grown[1:, :-1]
+                g[:-1, :-1] |= grown[1:, 1:]
+            grown = g
+            out.append((f"{k} pixel{'s' if k > 1 else ''} ({name})", grown & ~mask))
+    return out
 
 
 def _bits(a):
