@@ -48,7 +48,9 @@ def consensus(scale, offset, estimate, depth, *, space, threshold):
 def align_case(seed):
     """A seeded case: ``estimate`` and ``depth`` (float32 (3000,)), ``space``, ``threshold``
     and ``method``. Depths 0.5–6 m; the estimate is the target under a random scale and
-    offset with 1 % noise, 10–40 % outliers (uniform over the estimate's range), 3 %
+    offset with 1 % noise, 10–40 % outliers (uniform over the estimate's range, but those
+    among the smallest third of ``|m|`` a second surface 12–20 % of ``m`` off the line: what
+    an absolute threshold cannot tell from the line where ``|m|`` is small), 3 %
     pixels without depth and 1 % without estimate; space alternates between disparity and
     depth; every fourth case is least squares."""
     rng = np.random.default_rng(np.random.PCG64(20_000 + seed))
@@ -62,6 +64,16 @@ def align_case(seed):
     if method == "ransac":
         out = rng.random(n) < rng.uniform(0.1, 0.4)
         r[out] = rng.uniform(r.min(), r.max(), out.sum())
+        # The outliers among the smallest third of |m| (the far wall in disparity, the
+        # near object in depth) form a second surface, 12–20 % of m off the line: beyond
+        # twice the relative threshold (no line holds both), but inside an absolute one
+        # where |m| is small, so an absolute rule lets it bend the fit. Its draws have
+        # their own stream: the case's others are those of the generator without it.
+        own = np.random.default_rng(np.random.PCG64(25_000 + seed))
+        small = (np.abs(m) <= np.quantile(np.abs(m), 0.35)) & out
+        off = own.uniform(0.12, 0.2) * own.choice([-1, 1])
+        r[small] = (m[small] * (1 + off) - t0) / s0 * (
+            1 + 0.005 * own.standard_normal(int(small.sum())))
     d[rng.random(n) < 0.03] = 0.0
     r[rng.random(n) < 0.01] = np.nan
     return {"estimate": r.astype(np.float32), "depth": d.astype(np.float32), "space": space,
@@ -73,6 +85,8 @@ ALIGN_MISTAKES = (
     StageMistake("no_offset", "no offset (s·r ≈ m through the origin)"),
     StageMistake("no_ransac", "least squares over every pixel (outliers included)"),
     StageMistake("swapped", "estimate and target swapped (r fitted to m)"),
+    StageMistake("absolute_threshold", "an absolute inlier threshold |s·r + t − m| ≤ "
+                 "threshold (scikit-learn's default loss), not relative to |m|"),
 )
 
 
@@ -102,7 +116,7 @@ def mistaken_consensus(name, scale, offset, estimate, depth, *, space, threshold
     """The consensus count of the fit ``(scale, offset)`` under mistake ``name``'s own model
     and rule (``wrong_space``: in the other space; ``swapped``: ``scale·m + offset ≈ r``
     within ``threshold·|r|``; ``no_offset``: through the origin, 0 for a fit with an
-    offset), or None for a mistake without a consensus (``no_ransac``). A port that made
+    offset; ``absolute_threshold``: within ``threshold``), or None for a mistake without a consensus (``no_ransac``). A port that made
     the mistake with its own RANSAC draws holds as much consensus under that rule as the
     mistake's emulation does, whatever its draws."""
     ok = _valid(estimate, depth)
@@ -115,6 +129,8 @@ def mistaken_consensus(name, scale, offset, estimate, depth, *, space, threshold
     elif name == "no_offset":
         if offset != 0.0:
             return 0
+    elif name == "absolute_threshold":
+        return int((np.abs(scale * r + offset - m) <= threshold).sum())
     else:
         return None
     return int((np.abs(scale * r + offset - m) <= threshold * np.abs(m)).sum())
@@ -131,6 +147,8 @@ def mistaken_fit(name, estimate, depth, *, space, threshold, seed=0):
         m = _target(np.asarray(depth)[ok], "depth" if space == "disparity" else "disparity")
     if name == "swapped":
         return _ransac(m, r, lambda s, t: np.abs(s * m + t - r) <= threshold * np.abs(r), seed)
+    if name == "absolute_threshold":
+        return _ransac(r, m, lambda s, t: np.abs(s * r + t - m) <= threshold, seed)
     if name == "no_offset":
         s, t = _ransac(r, m, lambda s, t: np.abs(s * r + t - m) <= threshold * np.abs(m), seed)
         keep = np.abs(s * r + t - m) <= threshold * np.abs(m)
