@@ -241,6 +241,12 @@ VIEWS_MISTAKES = (
 )
 
 
+#: Random candidate orders ``explains_selection`` tries for greedy in another order.
+ORDER_DRAWS = 256
+#: What a set chosen greedily in some other order is called.
+ANOTHER_ORDER = "greedy in another candidate order (none of the listed mistakes)"
+
+
 def _greedy(n, edges, order):
     adj = {i: set() for i in range(n)}
     for i, j in edges:
@@ -290,12 +296,18 @@ def _largest_free(n, edges):
 
 
 def explains_selection(name, n, firm, near, chosen):
-    """How likely selection mistake ``name`` (``VIEWS_MISTAKES``) is to choose the set
-    ``chosen`` on a graph the near-contact pairs allow: 1 for greedy in reverse order when
-    it can; 1/k for a largest set when ``chosen`` is one of k largest sets (a search among
-    them may return any); 0 when the mistake cannot choose it."""
+    """How likely selection mistake ``name`` (``VIEWS_MISTAKES``, or ``"another_order"``)
+    is to choose the set ``chosen`` on a graph the near-contact pairs allow: 1 for greedy in
+    reverse order when it can; 1/k for a largest set when ``chosen`` is one of k largest
+    sets (a search among them may return any); for greedy in another order, the share of
+    ``ORDER_DRAWS`` seeded random orders that choose it; 0 when it cannot."""
     if name == "reverse_order":
         return float(greedy_allows(n, firm, near, chosen, order=range(n - 1, -1, -1)) is None)
+    if name == "another_order":
+        orders = np.random.default_rng(np.random.PCG64(61_000)).permuted(
+            np.tile(np.arange(n), (ORDER_DRAWS, 1)), axis=1)
+        return float(np.mean([greedy_allows(n, firm, near, chosen, order=[int(v) for v in o])
+                              is None for o in orders]))
     if name == "maximum_set":
         members = set(chosen)
         if any(i in members and j in members for i, j in firm):

@@ -71,7 +71,7 @@ from ._collide import (  # noqa: F401
     SLACK_MAX_REL, collide_case, contact_slack, frustum, mistaken_verdict)
 from ._adam import ADAM_MISTAKES, adam_bounds, adam_case, adam_reference  # noqa: F401
 from ._views import (  # noqa: F401
-    FRUSTUM_MISTAKES, FRUSTUM_REL, TOUR_REL, VIEWS_MISTAKES, frustum_case,
+    ANOTHER_ORDER, FRUSTUM_MISTAKES, FRUSTUM_REL, TOUR_REL, VIEWS_MISTAKES, frustum_case,
     _closing, explains_selection, greedy_allows, mistaken_frustum, mistaken_tour, mistaken_views,
     solid_unmatched, tour_follows_the_rule, unmatched, views_case,
 )
@@ -2065,20 +2065,38 @@ def compare_views(port, case=None, *, seed=0):
     if wrong:
         # Each mistake explains the whole failure or none of it, on the graphs the
         # near-contact pairs allow: a tour mistake the tour and gaps through a set the rule
-        # can choose; a selection mistake a set the rule cannot choose, by how likely it
-        # is to choose it (greedy in reverse order for certain, a largest-set search 1 in
-        # k largest sets): a set both can choose is put down to the likelier (none when
-        # it is the only largest set). Its tour's start is then the port's own affair.
+        # can choose; a selection mistake a set the rule cannot choose, by its share of
+        # how likely each hypothesis is to choose it (greedy in reverse order for certain,
+        # a largest-set search 1 in k largest sets, greedy in another order the share of
+        # random orders that do), over the case and its relabellings. Its tour's start is
+        # then the port's own affair.
         set_ok = why is None
         edges_ok = not any(f.quantity == "edges" for f in report.failures)
-        odds = {mk.name: (0.0 if set_ok else explains_selection(mk.name, n, firm, near,
-                                                                  independent))
-                for mk in VIEWS_MISTAKES if mk.name not in ("index_tour", "open_tour")}
-        likeliest = max(odds.values(), default=0.0)
-        results = []
+        names = [mk.name for mk in VIEWS_MISTAKES if mk.name not in ("index_tour", "open_tour")]
+        odds = {name: (0.0 if set_ok else explains_selection(name, n, firm, near, independent))
+                for name in names + ["another_order"]}
+        if any(odds.values()):
+            # One set can be a mistake's by chance (a greedy pass in another order that
+            # lands on the one largest set): the port chooses again on the candidates
+            # relabelled, and a mistake keeps its odds only as far as it chooses every set.
+            for k in range(VIEWS_RELABELLINGS):
+                perm = np.random.default_rng(np.random.PCG64(60_000 + k)).permutation(n)
+                inv = np.argsort(perm)
+                relabel = lambda pairs: [tuple(sorted((int(inv[a]), int(inv[b]))))  # noqa: E731
+                                         for a, b in pairs]
+                again = port([frustums[i].copy() for i in perm], centers[perm].copy())
+                chosen = [int(v) for v in again["independent"]]
+                for name in odds:
+                    odds[name] *= explains_selection(name, n, relabel(firm), relabel(near),
+                                                     chosen)
+        # A selection hypothesis explains the share of the odds it holds: greedy in some
+        # other order competes, so a set most orders would choose names nothing.
+        total = sum(odds.values())
+        results = [(int(round(wrong * (1.0 - odds["another_order"] / total))), ANOTHER_ORDER)
+                   ] if total > 0 else []
         for mk in VIEWS_MISTAKES:
             if mk.name in odds:
-                explained = odds[mk.name] / likeliest if likeliest > 0 else 0.0
+                explained = odds[mk.name] / total if total > 0 else 0.0
             else:
                 tour, gaps = mistaken_tour(mk.name, independent, centers)
                 follows = tour_follows_the_rule(trajectory, sorted(independent), centers)
@@ -2091,6 +2109,11 @@ def compare_views(port, case=None, *, seed=0):
             results.append((int(round(wrong * (1.0 - explained))), mk.text))
         _diagnosis(report, results, wrong)
     return report
+
+
+#: How many relabellings of the candidates ``compare_views`` asks a failing port to choose
+#: on before it names a selection mistake.
+VIEWS_RELABELLINGS = 8
 
 
 # -- DIBR forward warp (SPEC.md §18) -----------------------------------------------------
