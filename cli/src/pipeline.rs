@@ -715,10 +715,11 @@ pub fn run_audit(a: &AuditArgs) -> Result<()> {
     } else {
         unseen::sys::with_threads(a.threads, || run.run(&a.merge))??
     };
+    // Verdicts are about the median Δ; the mean is printed beside it, labelled.
     for v in &report.verdicts {
         println!(
-            "{:<42} {:<11} {:+6.2} dB  {}",
-            v.claim.id, v.generator, v.mean_diff, v.verdict
+            "{:<42} {:<11} median {:+6.2} dB (mean {:+6.2})  {}",
+            v.claim.id, v.generator, v.median_diff, v.mean_diff, v.verdict
         );
     }
     println!("audit: report in {}", a.out.join("audit.md").display());

@@ -332,6 +332,15 @@ fn diagnostics_mean(rows: &[&JobResult]) -> Option<DiagnosticsMean> {
 }
 
 /// A number with `digits` decimals, `∞`, or `–` (NaN, −∞: nothing to show).
+/// A p-value to three decimals, or `< 0.001` below (never a p of "0.000").
+fn p_value(p: f64) -> String {
+    if p < 0.001 {
+        "< 0.001".into()
+    } else {
+        format!("{p:.3}")
+    }
+}
+
 fn num(x: f64, digits: usize) -> String {
     if x.is_finite() {
         format!("{x:.digits$}")
@@ -595,7 +604,7 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
             interval(v.hierarchical),
             // (An interim look's p invites stopping at it: in audit.json only.)
             if v.p_holm.is_finite() && !v.verdict.starts_with("interim") {
-                format!("{:.3}", v.p_holm)
+                p_value(v.p_holm)
             } else {
                 "–".into()
             },

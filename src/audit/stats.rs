@@ -416,7 +416,8 @@ impl Rule {
             .zip(family.iter().zip(&judged))
             .map(|(t, (c, d))| match t {
                 Some(t) if spread(d) && complete(c, d) => t.p_two_sided(),
-                Some(_) if spread(d) => 1.0,
+                // Below its plan (one seed included, which has no spread yet): p = 1.
+                Some(_) if !complete(c, d) => 1.0,
                 _ => f64::NAN,
             })
             .collect();
@@ -716,11 +717,18 @@ mod tests {
         };
         let flat = [1.0, -1.0, 2.0, -2.0, 3.0, -3.0];
         let strong = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
-        let (x, y) = (judge(&flat), judge(&strong));
+        // One seed: no spread yet, but interim all the same, so in m (it was left out, and
+        // a complete claim moved when another claim got its second seed).
+        let (x, y, one) = (judge(&flat), judge(&strong), judge(&[2.0]));
         assert_eq!(x[0].outcome, Outcome::Holds);
         assert_eq!((x[0].outcome, x[0].p_holm), (y[0].outcome, y[0].p_holm));
+        assert_eq!((x[0].outcome, x[0].p_holm), (one[0].outcome, one[0].p_holm));
         assert!((x[0].p_holm - 3.0 * 2.0 * 17.0 / 65536.0).abs() < 1e-15);
-        assert_eq!(y[1].outcome, Outcome::Interim);
+        assert_eq!(
+            (y[1].outcome, one[1].outcome),
+            (Outcome::Interim, Outcome::Interim)
+        );
+        assert_eq!(one[0].family_tests, 3);
         // 15 of 16 above 0 but one far below: the median says better, the mean worse.
         let mut d = vec![0.1; 16];
         d[0] = -10.0;
