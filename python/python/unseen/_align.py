@@ -116,9 +116,10 @@ def mistaken_consensus(name, scale, offset, estimate, depth, *, space, threshold
     """The consensus count of the fit ``(scale, offset)`` under mistake ``name``'s own model
     and rule (``wrong_space``: in the other space; ``swapped``: ``scale·m + offset ≈ r``
     within ``threshold·|r|``; ``no_offset``: through the origin, 0 for a fit with an
-    offset; ``absolute_threshold``: within ``threshold``), or None for a mistake without a consensus (``no_ransac``). A port that made
-    the mistake with its own RANSAC draws holds as much consensus under that rule as the
-    mistake's emulation does, whatever its draws."""
+    offset; ``absolute_threshold``: within ``threshold``), or None for a mistake without a
+    consensus (``no_ransac``). A port that made the mistake with its own RANSAC draws holds
+    as much consensus under that rule as the mistake's emulation does, whatever its
+    draws."""
     ok = _valid(estimate, depth)
     r = np.asarray(estimate, np.float64)[ok]
     m = _target(np.asarray(depth)[ok], space)

@@ -82,8 +82,9 @@ from ._densify import (  # noqa: F401
     MOMENT_MISTAKES, densify_moments, expected_moments,
     CHILD_MEAN_REL, CHILD_SCALE_ATOL, DENSIFY_MISTAKES, DENSIFY_VALUE_MISTAKES,
     MAX_SET_ASIDE as DENSIFY_MAX_SET_ASIDE,
-    THRESHOLDS as DENSIFY_THRESHOLDS, THRESHOLD_TEXT as DENSIFY_THRESHOLD_TEXT, densify_case, densify_reference, inferred_thresholds,
-    near_decisions, parse_rows, row_differences, threshold_hypotheses,
+    THRESHOLDS as DENSIFY_THRESHOLDS, THRESHOLD_TEXT as DENSIFY_THRESHOLD_TEXT,
+    densify_case, densify_reference, inferred_thresholds, near_decisions, parse_rows,
+    row_differences, threshold_hypotheses,
 )
 from ._warp import (  # noqa: F401
     COLOR_ATOL_BILINEAR, COLOR_ATOL_NEAREST, DEPTH_RTOL, MAX_SET_ASIDE as WARP_MAX_SET_ASIDE,
