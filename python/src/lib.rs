@@ -910,6 +910,55 @@ fn ssim<'py>(
     Ok(out)
 }
 
+/// GMSD's maps of a render `x` against its truth `y`, float32 `(H, W, 3)` (SPEC.md §20.7,
+/// `eval::GradientBlocks`): per 2 × 2 block `similarity`, `render_energy` and
+/// `truth_energy` `(⌈H/2⌉, ⌈W/2⌉)`, and over the pixels of `mask` (bool `(H, W)`, default
+/// every pixel) the pooled `gmsd` and `detail_ratio` and their `sums` (`weight`,
+/// `gms_deficit` (Σ weight·(1 − similarity)), `gms_deficit_squares`,
+/// `render_gradient_energy`, `truth_gradient_energy`).
+#[pyfunction]
+#[pyo3(signature = (x, y, *, mask = None))]
+fn gradient_similarity<'py>(
+    py: Python<'py>,
+    x: &Bound<'py, PyAny>,
+    y: &Bound<'py, PyAny>,
+    mask: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    use unseen::pipeline::evaluate::ClassSums;
+    let mut bound = Vec::new();
+    let dims = [(None, "H"), (None, "W"), (Some(3), "3")];
+    let (shape, a) = array::<f32>("x", x, &dims, &mut bound)?;
+    let (_, b) = array::<f32>("y", y, &dims, &mut bound)?;
+    let (h, w) = (shape[0], shape[1]);
+    let m = match mask {
+        Some(m) => array::<bool>("mask", m, &[(None, "H"), (None, "W")], &mut bound)?.1,
+        None => vec![true; h * w],
+    };
+    let (g, sums) = py.detach(|| {
+        let g = unseen::eval::GradientBlocks::new(&a, &b, w, h);
+        let mut sums = ClassSums::default();
+        for p in (0..w * h).filter(|&p| m[p]) {
+            sums.add_gradients(&g, p % w, p / w, w, h);
+        }
+        (g, sums)
+    });
+    let out = PyDict::new(py);
+    let half = [g.height, g.width];
+    out.set_item("gmsd", ClassSums::gmsd([&sums]))?;
+    out.set_item("detail_ratio", ClassSums::detail_ratio([&sums]))?;
+    let s = PyDict::new(py);
+    s.set_item("weight", sums.gms_weight)?;
+    s.set_item("gms_deficit", sums.gms_deficit)?;
+    s.set_item("gms_deficit_squares", sums.gms_deficit_squares)?;
+    s.set_item("render_gradient_energy", sums.render_gradient_energy)?;
+    s.set_item("truth_gradient_energy", sums.truth_gradient_energy)?;
+    out.set_item("sums", s)?;
+    out.set_item("similarity", to_numpy(py, g.similarity, &half)?)?;
+    out.set_item("render_energy", to_numpy(py, g.render_energy, &half)?)?;
+    out.set_item("truth_energy", to_numpy(py, g.truth_energy, &half)?)?;
+    Ok(out)
+}
+
 /// Telea inpainting (SPEC.md §19.1, OpenCV's `INPAINT_TELEA` arithmetic) of `image`, uint8
 /// or float32 `(H, W, C)`, where the bool `(H, W)` `mask` is true, traced for a port's
 /// comparison. With `forced` (a port's output, the image's shape and dtype) every fill
@@ -1302,6 +1351,7 @@ fn _unseen(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(proximity, m)?)?;
     m.add_function(wrap_pyfunction!(align, m)?)?;
     m.add_function(wrap_pyfunction!(ssim, m)?)?;
+    m.add_function(wrap_pyfunction!(gradient_similarity, m)?)?;
     m.add_function(wrap_pyfunction!(inpaint, m)?)?;
     m.add_function(wrap_pyfunction!(frustum, m)?)?;
     m.add_function(wrap_pyfunction!(views, m)?)?;

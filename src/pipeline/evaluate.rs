@@ -71,6 +71,22 @@ pub struct ClassSums {
     pub squared_error: f64,
     /// Σ over the class's pixels of the SSIM map (11×11 Gaussian window, σ 1.5).
     pub ssim_sum: f64,
+    /// GMSD's blocks over the class ([`crate::eval::GradientBlocks`]): Σ of each pixel's
+    /// weight (one over its block's pixels), and Σ weight × the block's deficit `1 −
+    /// similarity`, its square, and the render's and the truth's gradient energy (the
+    /// deficit, not the similarity near 1, so that the variance does not cancel for
+    /// near-identical images). 0 in samples written before they were recorded (the metrics
+    /// are then NaN).
+    #[serde(default)]
+    pub gms_weight: f64,
+    #[serde(default)]
+    pub gms_deficit: f64,
+    #[serde(default)]
+    pub gms_deficit_squares: f64,
+    #[serde(default)]
+    pub render_gradient_energy: f64,
+    #[serde(default)]
+    pub truth_gradient_energy: f64,
 }
 
 impl ClassSums {
@@ -86,6 +102,52 @@ impl ClassSums {
         } else {
             -10.0 * (se / (3 * n) as f64).log10()
         }
+    }
+
+    /// Pooled GMSD of a set of views' sums: the weighted population standard deviation of
+    /// the gradient magnitude similarity over the class's blocks (NaN with no block).
+    pub fn gmsd<'a>(sums: impl IntoIterator<Item = &'a ClassSums>) -> f64 {
+        let (mut w, mut s, mut q) = (0f64, 0f64, 0f64);
+        for c in sums {
+            w += c.gms_weight;
+            s += c.gms_deficit;
+            q += c.gms_deficit_squares;
+        }
+        if w > 0.0 {
+            let mean = s / w;
+            (q / w - mean * mean).max(0.0).sqrt()
+        } else {
+            f64::NAN
+        }
+    }
+
+    /// Pooled detail ratio: the render's gradient energy over the truth's on the class
+    /// (below 1 where the render is smoother: averaged generations blur).
+    pub fn detail_ratio<'a>(sums: impl IntoIterator<Item = &'a ClassSums>) -> f64 {
+        let (mut r, mut t) = (0f64, 0f64);
+        for c in sums {
+            r += c.render_gradient_energy;
+            t += c.truth_gradient_energy;
+        }
+        if t > 0.0 { r / t } else { f64::NAN }
+    }
+
+    /// Add pixel `(x, y)` of a `w × h` view to the class's GMSD sums.
+    pub fn add_gradients(
+        &mut self,
+        g: &crate::eval::GradientBlocks,
+        x: usize,
+        y: usize,
+        w: usize,
+        h: usize,
+    ) {
+        let (b, weight) = g.block_of(x, y, w, h);
+        let d = 1.0 - g.similarity[b];
+        self.gms_weight += weight;
+        self.gms_deficit += weight * d;
+        self.gms_deficit_squares += weight * d * d;
+        self.render_gradient_energy += weight * g.render_energy[b];
+        self.truth_gradient_energy += weight * g.truth_energy[b];
     }
 }
 
@@ -293,10 +355,11 @@ impl Run<'_> {
                 None => (inputs.scene.clone(), inputs.scene_sha256.clone()),
                 Some(s) => (scene_of(s)?, s.digest.clone()),
             };
-            // `records`: the metrics carry per-view sums (a step cached before they were
-            // recorded is not reused).
-            let key =
-                serde_json::json!({"scene": digest, "masks": masks.digest, "records": "per-view"});
+            // `records`: the metrics carry per-view sums, with GMSD's (a step cached before
+            // they were recorded is not reused).
+            let key = serde_json::json!({
+                "scene": digest, "masks": masks.digest, "records": "per-view+gradients"
+            });
             let st = self.step(&Step::Eval(name.parse()?), key, |w| {
                 let row = score(inputs, &scene, name, &existing, w)?;
                 w.json("metrics.json", &row)?;
@@ -345,6 +408,7 @@ fn score(
             .map(|x| x.clamp(0.0, 1.0))
             .collect();
         let map = ssim_map(&rgb, &v.image.data, wd, ht, 3);
+        let gradients = crate::eval::GradientBlocks::new(&rgb, &v.image.data, wd, ht);
         // The pooled sums run over all views in pixel order (their bits are the metrics'
         // since revision 1); the view's own sums beside them.
         let mut own = [ClassSums::default(); 3];
@@ -361,6 +425,7 @@ fn score(
                 sn[cls] += 1;
                 own[cls].pixels += 1;
                 own[cls].ssim_sum += map[p];
+                own[cls].add_gradients(&gradients, p % wd, p / wd, wd, ht);
             }
         }
         let [all, existing_sums, extrapolated] = own;
@@ -428,4 +493,32 @@ fn score(
         gaussians: scene.len(),
         views,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ClassSums;
+    use crate::eval::GradientBlocks;
+
+    /// An image against itself: every block's similarity is 1, GMSD 0 and the detail ratio
+    /// 1; on odd sides every pixel of the image weighs its block once in all.
+    #[test]
+    fn gradient_blocks_of_an_image_against_itself() {
+        for (w, h) in [(8, 6), (7, 5), (1, 1), (3, 2)] {
+            let img: Vec<f32> = (0..w * h * 3)
+                .map(|i| ((i * 37) % 101) as f32 / 100.0)
+                .collect();
+            let g = GradientBlocks::new(&img, &img, w, h);
+            assert_eq!((g.width, g.height), (w.div_ceil(2), h.div_ceil(2)));
+            assert!(g.similarity.iter().all(|&s| s == 1.0));
+            let mut all = ClassSums::default();
+            for p in 0..w * h {
+                all.add_gradients(&g, p % w, p / w, w, h);
+            }
+            assert_eq!(all.gms_weight, (g.width * g.height) as f64, "{w}×{h}");
+            assert_eq!(ClassSums::gmsd([&all]), 0.0);
+            let flat = all.truth_gradient_energy == 0.0;
+            assert!(flat || ClassSums::detail_ratio([&all]) == 1.0);
+        }
+    }
 }

@@ -773,7 +773,7 @@ fn conflict_picture(
                 crate::pipeline::evaluate::ClassSums {
                     pixels: 1,
                     squared_error: se,
-                    ssim_sum: 0.0,
+                    ..Default::default()
                 }
             })
             .collect();

@@ -1323,6 +1323,7 @@ fn audit_verdicts_pool_seeds_and_revisions_and_test_non_inferiority() {
             pixels: 1,
             squared_error: 3.0 * 10f64.powf(-psnr / 10.0),
             ssim_sum: 0.5,
+            ..Default::default()
         };
         unseen::pipeline::evaluate::ViewRecord {
             view: "v".into(),
@@ -2547,6 +2548,7 @@ fn psnr_of_identical_images_is_infinity_in_json_and_reports() {
         pixels: 10,
         squared_error: 0.0,
         ssim_sum: 10.0,
+        ..Default::default()
     };
     assert_eq!(ClassSums::psnr([&exact]), f64::INFINITY);
     let row = Row {
