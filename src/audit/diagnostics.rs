@@ -13,7 +13,9 @@
 
 use crate::error::{Error, Result};
 use crate::pipeline::artifacts::{load_image, load_mask};
-use crate::pipeline::evaluate::{Generating, visit_unseen_surface};
+use crate::pipeline::evaluate::{
+    CLASS_CONTESTED, CLASS_OTHER, CLASS_UNCONTESTED, Generating, visit_unseen_surface,
+};
 use crate::pipeline::rundir::StepDone;
 use crate::pipeline::views::{Plan, SetAside};
 use crate::pipeline::{Inputs, Step, candidate_truth, stem};
@@ -74,8 +76,13 @@ pub struct Generation {
     pub conflict: f64,
 }
 
-/// The diagnostics of a finished run: its steps (by name) and its inputs (with truth).
-pub fn diagnose(inputs: &Inputs, steps: &[StepDone]) -> Result<Diagnostics> {
+/// The diagnostics of a finished run: its steps (by name) and its inputs (with truth); and
+/// each evaluation pixel's class (`CLASS_*` of [`crate::pipeline::evaluate`]), per view in
+/// evaluation order, where the run generated part of the unseen surface.
+pub fn diagnose(
+    inputs: &Inputs,
+    steps: &[StepDone],
+) -> Result<(Diagnostics, Option<Vec<Vec<u8>>>)> {
     let dirs: BTreeMap<&str, &Path> = steps
         .iter()
         .map(|s| (s.name.as_str(), s.dir.as_path()))
@@ -129,9 +136,9 @@ pub fn diagnose(inputs: &Inputs, steps: &[StepDone]) -> Result<Diagnostics> {
         }
         stage1.push((t, mask, image));
     }
-    let generation = match dir_of(&Step::EvalMasks) {
-        Some(masks) if !stage1.is_empty() => generation(inputs, masks, &stage1)?,
-        _ => None,
+    let (generation, classes) = match dir_of(&Step::EvalMasks) {
+        Some(masks) if !stage1.is_empty() => generation(inputs, masks, &stage1)?.unzip(),
+        _ => (None, None),
     };
 
     let stage2_filled = match dir_of(&Step::Dependent) {
@@ -146,7 +153,7 @@ pub fn diagnose(inputs: &Inputs, steps: &[StepDone]) -> Result<Diagnostics> {
         }
         None => f64::NAN,
     };
-    Ok(Diagnostics {
+    let diagnostics = Diagnostics {
         candidates: plan.candidates.len(),
         covered: plan.covered.len(),
         set_aside: plan.set_aside.clone(),
@@ -161,12 +168,13 @@ pub fn diagnose(inputs: &Inputs, steps: &[StepDone]) -> Result<Diagnostics> {
         stage1: generation,
         stage2_filled,
         choice: plan.choice.clone(),
-    })
+    };
+    Ok((diagnostics, classes))
 }
 
 /// [`Generation`] of the stage-1 views `(truth, mask, inpainting)` on the sample of the
 /// unseen surface ([`visit_unseen_surface`]; the evaluation views' existing-pixel masks in
-/// `masks`).
+/// `masks`), and each evaluation pixel's class (`CLASS_*`), per view in evaluation order.
 fn generation(
     inputs: &Inputs,
     masks: &Path,
@@ -175,7 +183,7 @@ fn generation(
         Vec<bool>,
         crate::io::image::ImageF32,
     )],
-) -> Result<Option<Generation>> {
+) -> Result<Option<(Generation, Vec<Vec<u8>>)>> {
     let existing = inputs
         .evaluation
         .iter()
@@ -191,7 +199,16 @@ fn generation(
         .collect();
     let (mut pixels, mut once, mut twice) = (0u64, 0u64, 0u64);
     let (mut sq, mut pairs) = (0f64, 0u64);
-    visit_unseen_surface(inputs, &existing, &views, |hits| {
+    let mut classes: Vec<Vec<u8>> = existing
+        .iter()
+        .map(|m| vec![CLASS_OTHER; m.len()])
+        .collect();
+    visit_unseen_surface(inputs, &existing, &views, |e, p, hits| {
+        classes[e][p] = if hits.len() >= 2 {
+            CLASS_CONTESTED
+        } else {
+            CLASS_UNCONTESTED
+        };
         pixels += 1;
         once += u64::from(!hits.is_empty());
         twice += u64::from(hits.len() >= 2);
@@ -213,16 +230,19 @@ fn generation(
     if pixels == 0 {
         return Ok(None);
     }
-    Ok(Some(Generation {
-        pixels,
-        coverage: once as f64 / pixels as f64,
-        overlap: twice as f64 / pixels as f64,
-        conflict: if pairs == 0 {
-            f64::NAN
-        } else {
-            sq / pairs as f64
+    Ok(Some((
+        Generation {
+            pixels,
+            coverage: once as f64 / pixels as f64,
+            overlap: twice as f64 / pixels as f64,
+            conflict: if pairs == 0 {
+                f64::NAN
+            } else {
+                sq / pairs as f64
+            },
         },
-    }))
+        classes,
+    )))
 }
 
 fn is_zero(n: &usize) -> bool {

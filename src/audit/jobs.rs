@@ -33,6 +33,11 @@ pub enum Job {
     },
 }
 
+/// The file a run job writes its evaluation pixels' classes to, beside `audit_job.json`:
+/// one byte per pixel (`CLASS_*` of [`crate::pipeline::evaluate`]), the evaluation views in
+/// order; absent where the run generated nothing of the unseen surface.
+pub const CLASSES_FILE: &str = "classes.bin";
+
 /// Where a [`Job::Shared`] stops: before this step.
 pub const SHARED_BEFORE: Step = Step::Stage1Recon;
 
@@ -123,6 +128,10 @@ pub struct JobResult {
     /// written before it was recorded.
     #[serde(default, skip_serializing_if = "String::is_empty")]
     pub scene_sha256: String,
+    /// The final scene's PLY, relative to the job's folder (where the audit's pairs
+    /// render it again: [`super::pairs`]). Empty in samples written before it was recorded.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub final_scene: String,
     /// What the run did ([`super::diagnostics`]); absent in samples written before.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub diagnostics: Option<super::diagnostics::Diagnostics>,
@@ -274,7 +283,28 @@ impl Audit<'_> {
                     .ok_or_else(|| Error::invalid("the run made no final scene").at(&out))?;
                 let scene_sha256 =
                     crate::io::sha256_hex(&std::fs::read(scene).map_err(|e| Error::io(scene, e))?);
-                let diagnostics = super::diagnostics::diagnose(&inputs, &outcome.steps)?;
+                let (diagnostics, classes) = super::diagnostics::diagnose(&inputs, &outcome.steps)?;
+                // The classes of the evaluation pixels, for the pairs a claim compares on
+                // them (`pairs`); none where the run generated nothing.
+                let classes_path = out.join(CLASSES_FILE);
+                match classes {
+                    Some(c) => crate::io::write_atomic(&classes_path, |f| {
+                        std::io::Write::write_all(f, &c.concat())
+                    })?,
+                    None => match std::fs::remove_file(&classes_path) {
+                        Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                            return Err(Error::io(&classes_path, e));
+                        }
+                        _ => {}
+                    },
+                }
+                let final_scene = scene
+                    .strip_prefix(&out)
+                    .map_err(|_| {
+                        Error::invalid("the final scene is not in the run's folder").at(scene)
+                    })?
+                    .to_string_lossy()
+                    .into_owned();
                 let result = JobResult {
                     generator: generator.name(),
                     variant: variant.name().into(),
@@ -287,6 +317,7 @@ impl Audit<'_> {
                     stage_seconds,
                     steps,
                     scene_sha256,
+                    final_scene,
                     diagnostics: Some(diagnostics),
                     candidates: family::family(dataset, self.cfg.candidates.as_deref())?,
                 };

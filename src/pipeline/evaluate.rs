@@ -256,17 +256,18 @@ pub struct Generating<'a> {
 /// The sample of the unseen surface (SPEC.md §21.5): every *extrapolated* pixel of the
 /// evaluation views (not in `existing`, [`existing_masks`]) with a truth depth is a surface
 /// point no training view sees. `visit` gets, per point in view-then-raster order, the
-/// `(view, pixel)` of each of `views` that generated it: the point is visible in the view
-/// ([`seen_at`]) at a pixel of its mask. The audit's coverage diagnostic and the colliding
-/// set it matches to the independent set both count on this one sample.
+/// evaluation view's index (in `inputs.evaluation`) and pixel, and the `(view, pixel)` of
+/// each of `views` that generated it: the point is visible in the view ([`seen_at`]) at a
+/// pixel of its mask. The audit's coverage diagnostic, its pixel classes and the colliding
+/// set it matches to the independent set all count on this one sample.
 pub fn visit_unseen_surface(
     inputs: &Inputs,
     existing: &[Vec<bool>],
     views: &[Generating],
-    mut visit: impl FnMut(&[(usize, usize)]),
+    mut visit: impl FnMut(usize, usize, &[(usize, usize)]),
 ) {
     let mut hits: Vec<(usize, usize)> = Vec::with_capacity(views.len());
-    for (&i, existing) in inputs.evaluation.iter().zip(existing) {
+    for (e, (&i, existing)) in inputs.evaluation.iter().zip(existing).enumerate() {
         let v = &inputs.data.views[i];
         let Some(depth) = v.depth.as_deref() else {
             continue;
@@ -284,10 +285,19 @@ pub fn visit_unseen_surface(
                     hits.push((k, q));
                 }
             }
-            visit(&hits);
+            visit(e, p, &hits);
         }
     }
 }
+
+/// An evaluation pixel's class for the audit's pixel classes (SPEC.md §21.5): not on the
+/// sample of the unseen surface (existing, or without truth depth).
+pub const CLASS_OTHER: u8 = 0;
+/// An extrapolated pixel whose surface point at most one stage-1 view generated.
+pub const CLASS_UNCONTESTED: u8 = 1;
+/// An extrapolated pixel whose surface point two or more stage-1 views generated: where
+/// their generations can conflict.
+pub const CLASS_CONTESTED: u8 = 2;
 
 impl Run<'_> {
     /// The existing-pixel masks of the evaluation poses (step `eval/masks`).

@@ -251,7 +251,7 @@ fn surface_coverage(
     }
     let existing = super::evaluate::existing_masks(inputs);
     let mut points = Vec::new();
-    super::evaluate::visit_unseen_surface(inputs, &existing, &views, |hits| {
+    super::evaluate::visit_unseen_surface(inputs, &existing, &views, |_, _, hits| {
         points.push(hits.iter().map(|&(k, _)| 1u32 << k).fold(0, |a, b| a | b));
     });
     Ok(SurfaceCoverage::new(points))

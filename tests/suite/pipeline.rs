@@ -799,6 +799,30 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
             "{g:?}"
         );
         assert!((0.0..=1.0).contains(&d.stage2_filled), "{d:?}");
+        // Its evaluation pixels' classes: one byte per pixel, the sample of the unseen
+        // surface and the points two stage-1 views generated as the diagnostics count them;
+        // its final scene where the result says, with the digest it gives.
+        let folder = dir.join(
+            Job::Run {
+                generator: GeneratorKind::by_name(&r.generator).unwrap(),
+                variant: Variant::by_name(&r.variant).unwrap(),
+                seed: r.seed,
+            }
+            .folder(),
+        );
+        let classes = std::fs::read(folder.join(audit::jobs::CLASSES_FILE)).unwrap();
+        let evaluated: usize = r.last.views.iter().map(|v| v.all.pixels as usize).sum();
+        assert_eq!(classes.len(), evaluated, "{}", folder.display());
+        let count = |c: u8| classes.iter().filter(|&&k| k == c).count() as u64;
+        use unseen::pipeline::evaluate::{CLASS_CONTESTED, CLASS_OTHER, CLASS_UNCONTESTED};
+        assert_eq!(
+            count(CLASS_OTHER) + count(CLASS_UNCONTESTED) + count(CLASS_CONTESTED),
+            evaluated as u64
+        );
+        assert_eq!(count(CLASS_UNCONTESTED) + count(CLASS_CONTESTED), g.pixels);
+        assert_eq!(count(CLASS_CONTESTED) as f64 / g.pixels as f64, g.overlap);
+        let scene = std::fs::read(folder.join(&r.final_scene)).unwrap();
+        assert_eq!(unseen::io::sha256_hex(&scene), r.scene_sha256);
     }
     let md = std::fs::read_to_string(dir.join("audit.md")).unwrap();
     assert!(md.contains("| truth-low | opacity_mask |"), "{md}");
@@ -1046,6 +1070,7 @@ fn sample(variant: &str, seed: u32, revision: u32, psnr: f64) -> unseen::audit::
         stage_seconds: Default::default(),
         steps: vec![],
         scene_sha256: String::new(),
+        final_scene: String::new(),
         diagnostics: None,
         candidates: None,
     }
@@ -2443,7 +2468,7 @@ fn the_conflicting_set_is_matched_on_the_coverage_the_diagnostics_measure() {
         let o = pipeline::run_with(c, &inp, &out, &Default::default(), &quiet).unwrap();
         let plan: Plan =
             serde_json::from_slice(&std::fs::read(out.join("views/plan.json")).unwrap()).unwrap();
-        let d = unseen::audit::diagnostics::diagnose(&inp, &o.steps).unwrap();
+        let (d, _) = unseen::audit::diagnostics::diagnose(&inp, &o.steps).unwrap();
         (plan, d.stage1.expect("the tiny lounge has truth"))
     };
     let conflicting = PipelineConfig {
