@@ -38,6 +38,7 @@ pub mod diagnostics;
 pub mod dose;
 pub mod family;
 pub mod jobs;
+pub mod pairs;
 pub mod report;
 pub mod samples;
 pub mod stats;

@@ -132,6 +132,18 @@ impl ClassSums {
         if t > 0.0 { r / t } else { f64::NAN }
     }
 
+    /// Add pixel `p` of a scored view: its squared error over the three channels (render
+    /// and truth clamped to [0, 1]), its SSIM and its GMSD terms.
+    pub fn add(&mut self, v: &ScoredView, p: usize) {
+        for c in 0..3 {
+            let d = (v.rgb[p * 3 + c] - v.truth[p * 3 + c].clamp(0.0, 1.0)) as f64;
+            self.squared_error += d * d;
+        }
+        self.pixels += 1;
+        self.ssim_sum += v.ssim[p];
+        self.add_gradients(&v.gradients, p % v.width, p / v.width, v.width, v.height);
+    }
+
     /// Add pixel `(x, y)` of a `w × h` view to the class's GMSD sums.
     pub fn add_gradients(
         &mut self,
@@ -148,6 +160,45 @@ impl ClassSums {
         self.gms_deficit_squares += weight * d * d;
         self.render_gradient_energy += weight * g.render_energy[b];
         self.truth_gradient_energy += weight * g.truth_energy[b];
+    }
+}
+
+/// A scene rendered at an evaluation view and scored against its truth, per pixel: what
+/// [`ClassSums::add`] sums over a class.
+pub struct ScoredView<'a> {
+    pub width: usize,
+    pub height: usize,
+    /// The render, clamped to [0, 1].
+    pub rgb: Vec<f32>,
+    pub truth: &'a [f32],
+    /// SSIM's map (11×11 Gaussian window, σ 1.5) and GMSD's blocks.
+    pub ssim: Vec<f64>,
+    pub gradients: crate::eval::GradientBlocks,
+}
+
+impl<'a> ScoredView<'a> {
+    /// Render `scene` at `view` under `opts` and score it against the view's image.
+    pub fn new(
+        scene: &Gaussians,
+        view: &'a crate::dataset::View,
+        opts: &RenderOptions,
+    ) -> Result<ScoredView<'a>> {
+        let (w, h) = (view.image.width, view.image.height);
+        let rgb: Vec<f32> = render(scene, &view.camera, opts)?
+            .rgb
+            .expect("rgb")
+            .iter()
+            .map(|x| x.clamp(0.0, 1.0))
+            .collect();
+        let truth = &view.image.data[..];
+        Ok(ScoredView {
+            width: w,
+            height: h,
+            ssim: ssim_map(&rgb, truth, w, h, 3),
+            gradients: crate::eval::GradientBlocks::new(&rgb, truth, w, h),
+            rgb,
+            truth,
+        })
     }
 }
 
@@ -411,14 +462,8 @@ fn score(
     for (k, &i) in inputs.evaluation.iter().enumerate() {
         let v = &data.views[i];
         let (wd, ht) = (v.image.width, v.image.height);
-        let rgb: Vec<f32> = render(scene, &v.camera, &opts)?
-            .rgb
-            .expect("rgb")
-            .iter()
-            .map(|x| x.clamp(0.0, 1.0))
-            .collect();
-        let map = ssim_map(&rgb, &v.image.data, wd, ht, 3);
-        let gradients = crate::eval::GradientBlocks::new(&rgb, &v.image.data, wd, ht);
+        let scored = ScoredView::new(scene, v, &opts)?;
+        let (rgb, map) = (&scored.rgb, &scored.ssim);
         // The pooled sums run over all views in pixel order (their bits are the metrics'
         // since revision 1); the view's own sums beside them.
         let mut own = [ClassSums::default(); 3];
@@ -428,14 +473,11 @@ fn score(
                 for c in 0..3 {
                     let d = (rgb[p * 3 + c] - v.image.data[p * 3 + c].clamp(0.0, 1.0)) as f64;
                     se[cls] += d * d;
-                    own[cls].squared_error += d * d;
                 }
                 n[cls] += 3;
                 ss[cls] += map[p];
                 sn[cls] += 1;
-                own[cls].pixels += 1;
-                own[cls].ssim_sum += map[p];
-                own[cls].add_gradients(&gradients, p % wd, p / wd, wd, ht);
+                own[cls].add(&scored, p);
             }
         }
         let [all, existing_sums, extrapolated] = own;
@@ -446,7 +488,7 @@ fn score(
             extrapolated,
         });
         if k < 4 {
-            let img = crate::eval::side_by_side(&rgb, &v.image.data, wd, ht)?;
+            let img = crate::eval::side_by_side(rgb, &v.image.data, wd, ht)?;
             w.put(&format!("{}.png", stem(&v.camera.name)), |p| {
                 write_png(p, &img)
             })?;

@@ -823,6 +823,48 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
         assert_eq!(count(CLASS_CONTESTED) as f64 / g.pixels as f64, g.overlap);
         let scene = std::fs::read(folder.join(&r.final_scene)).unwrap();
         assert_eq!(unseen::io::sha256_hex(&scene), r.scene_sha256);
+        // The pair of this run with itself on its classes: both sides the same bits, the
+        // classes' pixels counted, and contested + uncontested the extrapolated pixels with
+        // truth depth, whose sums the evaluation's extrapolated class holds.
+        let inputs = unseen::pipeline::load_inputs(
+            &dir.join(Job::Original { seed: r.seed }.name()),
+            &lounge.join("candidates.json"),
+            Some(&lounge.join("evaluation.json")),
+            Some(&lounge),
+        )
+        .unwrap();
+        let (g, _) = unseen::gaussian::ply::read_ply(&folder.join(&r.final_scene)).unwrap();
+        let pair = audit::pairs::score_pair(&inputs, &g, &g, &classes).unwrap();
+        assert_eq!(pair.len(), r.last.views.len());
+        let (mut contested, mut uncontested, mut whole) = (0, 0, 0);
+        for (p, v) in pair.iter().zip(&r.last.views) {
+            assert_eq!(p.view, v.view);
+            assert_eq!(p.contested[0], p.contested[1]);
+            assert_eq!(p.uncontested[0], p.uncontested[1]);
+            contested += p.contested[0].pixels;
+            uncontested += p.uncontested[0].pixels;
+            let both = p.contested[0].squared_error + p.uncontested[0].squared_error;
+            let pixels = p.contested[0].pixels + p.uncontested[0].pixels;
+            assert!(pixels <= v.extrapolated.pixels);
+            if pixels == v.extrapolated.pixels {
+                let want = v.extrapolated.squared_error;
+                assert!(
+                    (both - want).abs() <= 1e-12 * want.max(1.0),
+                    "{both} {want}"
+                );
+                whole += 1;
+            }
+        }
+        assert!(
+            whole > 0,
+            "no view with truth depth on every extrapolated pixel"
+        );
+        assert_eq!(
+            (contested, uncontested),
+            (count(CLASS_CONTESTED), count(CLASS_UNCONTESTED))
+        );
+        let wrong = audit::pairs::score_pair(&inputs, &g, &g, &classes[1..]);
+        assert!(wrong.unwrap_err().to_string().contains("pixel classes for"));
     }
     let md = std::fs::read_to_string(dir.join("audit.md")).unwrap();
     assert!(md.contains("| truth-low | opacity_mask |"), "{md}");
