@@ -497,8 +497,9 @@ pub struct AuditArgs {
     /// classical,truth-low; paper classical and the three truth levels).
     #[arg(long, value_delimiter = ',')]
     generators: Vec<String>,
-    /// A dose–response sweep, `PARAM=v1,v2,…` with PARAM hallucination, photometric or
-    /// depth_distortion and levels in [0, 1] (e.g. `hallucination=0,0.25,0.5,0.75,1`): one
+    /// A dose–response sweep, `PARAM=v1,v2,…` with PARAM hallucination, photometric,
+    /// depth_distortion or ghosting (the planted-harm control: true images shifted up to
+    /// 8 px per call) and levels in [0, 1] (e.g. `hallucination=0,0.25,0.5,0.75,1`): one
     /// generator per level (`dose-<param>-<percent>`), added to `--generators` (alone when
     /// none is given). Repeatable.
     #[arg(long)]

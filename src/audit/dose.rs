@@ -18,12 +18,22 @@ pub enum DoseParam {
     Photometric,
     /// The relative-depth distortion and flicker as a fraction of the high level's.
     DepthDistortion,
+    /// A planted harm, the audit's positive control (issue-free by construction): the true
+    /// image of every generation call, nothing else wrong, shifted by `t ×`
+    /// [`GHOST_MAX_PX`] in a seeded direction per call, so that two calls generating one
+    /// surface place it apart and a scene fitting both ghosts. Not the mechanisms
+    /// generator: its blur, gain and hallucination would blur what is displaced.
+    Ghosting,
 }
+
+/// The ghosting sweep's shift at level 1, in pixels of the generated image.
+pub const GHOST_MAX_PX: f32 = 8.0;
 
 crate::error::text_enum!(DoseParam, "sweep parameter", {
     Hallucination => "hallucination",
     Photometric => "photometric",
     DepthDistortion => "depth_distortion",
+    Ghosting => "ghosting",
 });
 
 impl DoseParam {
@@ -33,6 +43,7 @@ impl DoseParam {
             DoseParam::Hallucination => "dose-hallucination",
             DoseParam::Photometric => "dose-photometric",
             DoseParam::DepthDistortion => "dose-depth_distortion",
+            DoseParam::Ghosting => "dose-ghosting",
         }
     }
 }
@@ -359,6 +370,7 @@ mod tests {
             ("photometric=0.125", "two decimals"),
             ("depth_distortion=0.5,0.5", "twice"),
             ("photometric=x", "not a number"),
+            ("ghosting=2", "not in [0, 1]"),
         ] {
             let e = parse_sweep(bad).unwrap_err().to_string();
             assert!(e.contains(says), "{bad}: {e}");
@@ -398,6 +410,21 @@ mod tests {
         let d = dose(DoseParam::DepthDistortion, 0).inconsistency;
         assert_eq!((d.depth_flicker, d.depth_distortion), (0.0, 0.0));
         assert_eq!(d.gain, base.inconsistency.gain);
+        // The planted harm: the consistent truth generator with the shift alone.
+        let truth = at(GeneratorKind::Truth(Level::None));
+        assert_eq!(dose(DoseParam::Ghosting, 0), truth);
+        let g = dose(DoseParam::Ghosting, 50);
+        assert_eq!(
+            g.inconsistency,
+            Inconsistency {
+                shift_px: 0.5 * super::GHOST_MAX_PX,
+                ..Inconsistency::NONE
+            }
+        );
+        assert_eq!(
+            (g.hallucination, g.truth_depth),
+            (truth.hallucination, truth.truth_depth)
+        );
         // In a configuration file: names for the named levels, numbers between.
         let text = |h: Hallucination| serde_json::to_string(&h).unwrap();
         assert_eq!(text(Hallucination::Low), "\"low\"");

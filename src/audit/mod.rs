@@ -242,7 +242,7 @@ impl GeneratorKind {
                     .filter(|g| g.name() == name);
                 dose.ok_or_else(|| {
                     Error::invalid(format!(
-                        "unknown generator '{name}' (classical, truth-none, truth-low, truth-high, truth-low+hallucinating+relative, truth-high+hallucinating+relative, dose-<hallucination|photometric|depth_distortion>-<0..100>)"
+                        "unknown generator '{name}' (classical, truth-none, truth-low, truth-high, truth-low+hallucinating+relative, truth-high+hallucinating+relative, dose-<hallucination|photometric|depth_distortion|ghosting>-<0..100>)"
                     ))
                 })
             }
@@ -264,6 +264,13 @@ impl GeneratorKind {
                 c.inconsistency = Inconsistency::at(level);
                 c.hallucination = Hallucination::at(level);
                 c.truth_depth = TruthDepth::Relative;
+            }
+            GeneratorKind::Dose {
+                param: dose::DoseParam::Ghosting,
+                percent,
+            } => {
+                GeneratorKind::Truth(Level::None).apply(c);
+                c.inconsistency.shift_px = f32::from(percent) / 100.0 * dose::GHOST_MAX_PX;
             }
             GeneratorKind::Dose { param, percent } => {
                 GeneratorKind::Mechanisms(Level::Low).apply(c);
@@ -287,6 +294,7 @@ impl GeneratorKind {
                         c.inconsistency.depth_flicker = t * high.depth_flicker;
                         c.inconsistency.depth_distortion = t * high.depth_distortion;
                     }
+                    dose::DoseParam::Ghosting => unreachable!("matched above"),
                 }
             }
         }
