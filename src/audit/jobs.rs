@@ -129,9 +129,14 @@ pub struct JobResult {
     #[serde(default, skip_serializing_if = "String::is_empty")]
     pub scene_sha256: String,
     /// The final scene's PLY, relative to the job's folder (where the audit's pairs
-    /// render it again: [`super::pairs`]). Empty in samples written before it was recorded.
+    /// render it again: [`mod@super::pairs`]). Empty in samples written before it was recorded.
     #[serde(default, skip_serializing_if = "String::is_empty")]
     pub final_scene: String,
+    /// This run paired with its seed's `full` run on this run's pixel classes
+    /// ([`mod@super::pairs`]): made when an audit finishes with both runs' folders at hand
+    /// (`Audit::pair_up`); absent for `full` itself and in samples written before.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pair: Option<super::pairs::Pair>,
     /// What the run did ([`super::diagnostics`]); absent in samples written before.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub diagnostics: Option<super::diagnostics::Diagnostics>,
@@ -318,6 +323,7 @@ impl Audit<'_> {
                     steps,
                     scene_sha256,
                     final_scene,
+                    pair: None,
                     diagnostics: Some(diagnostics),
                     candidates: family::family(dataset, self.cfg.candidates.as_deref())?,
                 };

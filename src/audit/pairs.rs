@@ -10,6 +10,16 @@ use crate::pipeline::Inputs;
 use crate::pipeline::evaluate::{CLASS_CONTESTED, CLASS_UNCONTESTED, ClassSums, ScoredView};
 use crate::raster::RenderOptions;
 
+/// A run paired with its seed's `full` run (same generator, same numerics revision): both
+/// final scenes scored on this run's pixel classes.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Pair {
+    /// The reference run's variant and its final scene's digest (what the sums are of).
+    pub reference: String,
+    pub reference_scene: String,
+    pub views: Vec<PairView>,
+}
+
 /// One evaluation view of a pair: the reference's and the variant's sums (in that order) on
 /// the variant's contested and uncontested pixels.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -120,6 +120,7 @@ impl Audit<'_> {
         for r in &results {
             pool.insert(r.clone());
         }
+        self.pair_up(&mut pool)?;
         pool.write(&dir.join(samples::SAMPLES_FILE))?;
         let rule = stats::Rule {
             planned: cfg.planned_seeds,
@@ -819,4 +820,97 @@ pub fn plot(cfg: &AuditConfig, results: &[JobResult]) -> String {
         top + ph + 75.0
     );
     svg
+}
+
+impl super::Audit<'_> {
+    /// Pair every run of the pool with its seed's `full` run (same generator and numerics
+    /// revision) where the pair is missing or of another `full` scene, and both runs'
+    /// folders hold what the results name: the final scenes (with the digests recorded)
+    /// and the run's [`super::jobs::CLASSES_FILE`] ([`mod@super::pairs`]). Without them (a report from samples
+    /// alone, another machine's folders) the pool keeps the pairs it has.
+    pub(super) fn pair_up(&self, pool: &mut super::samples::Samples) -> Result<()> {
+        use super::jobs::CLASSES_FILE;
+        use super::pairs::{Pair, score_pair};
+        let full = Variant::Full.name();
+        let mut inputs: std::collections::BTreeMap<u32, crate::pipeline::Inputs> =
+            Default::default();
+        for i in 0..pool.samples.len() {
+            let v = &pool.samples[i];
+            if v.variant == full || v.final_scene.is_empty() {
+                continue;
+            }
+            let Some(f) = pool.samples.iter().find(|f| {
+                f.variant == full
+                    && (f.generator.as_str(), f.seed, f.numerics_revision)
+                        == (v.generator.as_str(), v.seed, v.numerics_revision)
+                    && !f.final_scene.is_empty()
+            }) else {
+                continue;
+            };
+            if v.pair
+                .as_ref()
+                .is_some_and(|p| p.reference_scene == f.scene_sha256)
+            {
+                continue;
+            }
+            let (Ok(generator), Ok(variant)) = (
+                GeneratorKind::by_name(&v.generator),
+                Variant::by_name(&v.variant),
+            ) else {
+                continue;
+            };
+            let folder = |variant| {
+                self.dir.join(
+                    Job::Run {
+                        generator,
+                        variant,
+                        seed: v.seed,
+                    }
+                    .folder(),
+                )
+            };
+            let (vdir, fdir) = (folder(variant), folder(Variant::Full));
+            let scene = |dir: &std::path::Path, file: &str, sha: &str| {
+                let bytes = std::fs::read(dir.join(file)).ok()?;
+                (crate::io::sha256_hex(&bytes) == sha).then(|| dir.join(file))
+            };
+            let (Some(vs), Some(fs), Ok(classes)) = (
+                scene(&vdir, &v.final_scene, &v.scene_sha256),
+                scene(&fdir, &f.final_scene, &f.scene_sha256),
+                std::fs::read(vdir.join(CLASSES_FILE)),
+            ) else {
+                continue;
+            };
+            let seed = v.seed;
+            let reference_scene = f.scene_sha256.clone();
+            let seed_inputs = match inputs.entry(seed) {
+                std::collections::btree_map::Entry::Occupied(e) => e.into_mut(),
+                std::collections::btree_map::Entry::Vacant(e) => {
+                    let run = self.dir.join(Job::Original { seed }.name());
+                    if !self.original_done(&run, seed) {
+                        continue;
+                    }
+                    e.insert(crate::pipeline::load_inputs(
+                        &run,
+                        &super::family::candidates_file(
+                            self.dataset,
+                            self.cfg.candidates.as_deref(),
+                        ),
+                        Some(&self.dataset.join("evaluation.json")),
+                        Some(self.dataset),
+                    )?)
+                }
+            };
+            let (reference, _) = crate::gaussian::ply::read_ply(&fs)?;
+            let (run, _) = crate::gaussian::ply::read_ply(&vs)?;
+            let views =
+                score_pair(seed_inputs, &reference, &run, &classes).map_err(|e| e.at(&vdir))?;
+            pool.samples[i].pair = Some(Pair {
+                reference: full.into(),
+                reference_scene,
+                views,
+            });
+        }
+        Ok(())
+    }
 }

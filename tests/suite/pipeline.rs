@@ -866,6 +866,56 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
         let wrong = audit::pairs::score_pair(&inputs, &g, &g, &classes[1..]);
         assert!(wrong.unwrap_err().to_string().contains("pixel classes for"));
     }
+    // The finished audit paired each run with its seed's full run on the run's classes:
+    // what `score_pair` gives from the folders; full itself has no pair.
+    let pooled = audit::samples::Samples::read(&dir.join(audit::samples::SAMPLES_FILE)).unwrap();
+    for v in &pooled.samples {
+        if v.variant == "full" {
+            assert!(v.pair.is_none());
+            continue;
+        }
+        let f = pooled
+            .samples
+            .iter()
+            .find(|f| f.variant == "full" && f.seed == v.seed)
+            .unwrap();
+        let pair = v.pair.as_ref().expect("paired");
+        assert_eq!(
+            (pair.reference.as_str(), &pair.reference_scene),
+            ("full", &f.scene_sha256)
+        );
+        let folder = |variant: &str| {
+            dir.join(
+                Job::Run {
+                    generator: GeneratorKind::by_name(&v.generator).unwrap(),
+                    variant: Variant::by_name(variant).unwrap(),
+                    seed: v.seed,
+                }
+                .folder(),
+            )
+        };
+        let scene = |variant: &str, file: &str| {
+            unseen::gaussian::ply::read_ply(&folder(variant).join(file))
+                .unwrap()
+                .0
+        };
+        let inputs = unseen::pipeline::load_inputs(
+            &dir.join(Job::Original { seed: v.seed }.name()),
+            &lounge.join("candidates.json"),
+            Some(&lounge.join("evaluation.json")),
+            Some(&lounge),
+        )
+        .unwrap();
+        let classes = std::fs::read(folder(&v.variant).join(audit::jobs::CLASSES_FILE)).unwrap();
+        let want = audit::pairs::score_pair(
+            &inputs,
+            &scene("full", &f.final_scene),
+            &scene(&v.variant, &v.final_scene),
+            &classes,
+        )
+        .unwrap();
+        assert_eq!(pair.views, want);
+    }
     let md = std::fs::read_to_string(dir.join("audit.md")).unwrap();
     assert!(md.contains("| truth-low | opacity_mask |"), "{md}");
     assert!(md.contains("same computation 0 of 2"), "{md}");
@@ -1113,6 +1163,7 @@ fn sample(variant: &str, seed: u32, revision: u32, psnr: f64) -> unseen::audit::
         steps: vec![],
         scene_sha256: String::new(),
         final_scene: String::new(),
+        pair: None,
         diagnostics: None,
         candidates: None,
     }
