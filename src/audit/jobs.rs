@@ -348,19 +348,11 @@ impl Audit<'_> {
         crate::pipeline::Outcome,
     )> {
         let Audit {
-            cfg,
-            dataset,
-            dir,
-            on_event,
+            cfg, dir, on_event, ..
         } = *self;
         let run = self.require_original(job, seed)?;
         on_event(Event::Stage { name: job.name() });
-        let inputs = crate::pipeline::load_inputs(
-            &run,
-            &family::candidates_file(dataset, cfg.candidates.as_deref()),
-            Some(&dataset.join("evaluation.json")),
-            Some(dataset),
-        )?;
+        let inputs = self.seed_inputs(&run)?;
         let pc = cfg.pipeline_config(generator, variant, seed)?;
         let out = dir.join(job.folder());
         let opts = RunOptions {
@@ -370,6 +362,18 @@ impl Audit<'_> {
         };
         let outcome = crate::pipeline::run_with(&pc, &inputs, &out, &opts, on_event)?;
         Ok((pc, inputs, outcome))
+    }
+
+    /// A pipeline's inputs for the original scene trained in `run`: the audit's candidate
+    /// family and the dataset's evaluation poses, with truth.
+    pub(super) fn seed_inputs(&self, run: &Path) -> Result<crate::pipeline::Inputs> {
+        let dataset = self.dataset;
+        crate::pipeline::load_inputs(
+            run,
+            &family::candidates_file(dataset, self.cfg.candidates.as_deref()),
+            Some(&dataset.join("evaluation.json")),
+            Some(dataset),
+        )
     }
 
     /// The folder of `seed`'s original scene, which `job` needs: an error naming the job to

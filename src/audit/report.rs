@@ -890,15 +890,7 @@ impl super::Audit<'_> {
                     if !self.original_done(&run, seed) {
                         continue;
                     }
-                    e.insert(crate::pipeline::load_inputs(
-                        &run,
-                        &super::family::candidates_file(
-                            self.dataset,
-                            self.cfg.candidates.as_deref(),
-                        ),
-                        Some(&self.dataset.join("evaluation.json")),
-                        Some(self.dataset),
-                    )?)
+                    e.insert(self.seed_inputs(&run)?)
                 }
             };
             let (reference, _) = crate::gaussian::ply::read_ply(&fs)?;
