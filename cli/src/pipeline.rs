@@ -719,8 +719,12 @@ pub fn run_audit(a: &AuditArgs) -> Result<()> {
     // Verdicts are about the median Δ; the mean is printed beside it, labelled.
     for v in &report.verdicts {
         println!(
-            "{:<42} {:<11} median {:+6.2} dB (mean {:+6.2})  {}",
-            v.claim.id, v.generator, v.median_diff, v.mean_diff, v.verdict
+            "{:<58} {:<11} median {:>10} (mean {:>10})  {}",
+            v.claim.id,
+            v.generator,
+            v.median_shown(),
+            unseen::audit::shown_delta(v.mean_diff, v.claim.metric),
+            v.verdict
         );
     }
     println!("audit: report in {}", a.out.join("audit.md").display());

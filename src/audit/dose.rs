@@ -4,7 +4,7 @@
 //! crosses 0 (and where its interval's ends do), and one plot per claim.
 
 use super::GeneratorKind;
-use super::verdicts::Verdict;
+use super::verdicts::{Metric, Verdict, shown_delta};
 use crate::error::{Error, Result};
 
 /// The generator parameter a sweep varies, from none (0) to full (1); every other setting
@@ -91,6 +91,9 @@ pub struct Response {
     #[serde(with = "crate::io::json_float")]
     pub crossing: f64,
     pub crossing_range: [Option<f64>; 2],
+    /// The claim's metric (for the unit of Δ in tables and plots).
+    #[serde(skip)]
+    pub metric: Metric,
 }
 
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -130,7 +133,12 @@ pub fn crossing(levels: &[f64], values: &[Option<f64>], null: f64) -> Option<f64
 pub fn responses(verdicts: &[Verdict]) -> Vec<Response> {
     let mut out = Vec::new();
     let mut keys: Vec<(DoseParam, &str)> = Vec::new();
-    for v in verdicts {
+    // The panel's secondary rows are tables only (SPEC.md §21.7); its primary claims and
+    // their nulls are plotted.
+    let plotted = |v: &&Verdict| {
+        !matches!(v.claim.metric, Metric::Classes(..)) || v.claim.metric.is_primary()
+    };
+    for v in verdicts.iter().filter(plotted) {
         if let Ok(GeneratorKind::Dose { param, .. }) = GeneratorKind::by_name(&v.generator) {
             let k = (param, v.claim.id);
             if !keys.contains(&k) {
@@ -149,6 +157,7 @@ pub fn responses(verdicts: &[Verdict]) -> Vec<Response> {
             .collect();
         rows.sort_by_key(|r| r.0);
         let null = rows.first().map_or(0.0, |r| r.1.null);
+        let metric = rows.first().map_or(Metric::PsnrAll, |r| r.1.claim.metric);
         let x: Vec<f64> = rows.iter().map(|r| f64::from(r.0) / 100.0).collect();
         let median: Vec<Option<f64>> = rows.iter().map(|r| Some(r.1.median_diff)).collect();
         let lo: Vec<Option<f64>> = rows.iter().map(|r| r.1.ci.map(|c| c[0])).collect();
@@ -170,6 +179,7 @@ pub fn responses(verdicts: &[Verdict]) -> Vec<Response> {
                 .collect(),
             crossing: crossing(&x, &median, null).unwrap_or(f64::NAN),
             crossing_range: [crossing(&x, &lo, null), crossing(&x, &hi, null)],
+            metric,
         });
     }
     out
@@ -195,7 +205,7 @@ pub fn plot_name(r: &Response) -> String {
     format!("dose-{}-{slug}.svg", r.param)
 }
 
-/// A response as an SVG: Δ (dB) against the level, the median with its interval as a
+/// A response as an SVG: Δ (in the metric's unit) against the level, the median with its interval as a
 /// bar, the null value as a dashed line.
 pub fn plot(r: &Response) -> String {
     let null = r.null;
@@ -219,9 +229,15 @@ pub fn plot(r: &Response) -> String {
     let px = |x: f64| m + x * (w - 2.0 * m);
     let py = |y: f64| h - m - (y - y0) / (y1 - y0) * (h - 2.0 * m);
     let mut s = format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" font-family=\"sans-serif\" font-size=\"11\">\n<text x=\"{m}\" y=\"16\">{}: Δ (dB) against {}</text>\n",
-        r.claim, r.param
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" font-family=\"sans-serif\" font-size=\"11\">\n<text x=\"{m}\" y=\"16\">{}: Δ{} against {}</text>\n",
+        r.claim,
+        match r.metric.unit() {
+            "" => String::new(),
+            u => format!(" ({u})"),
+        },
+        r.param
     );
+    let digits = if r.metric.unit().is_empty() { 4 } else { 2 };
     s += &format!(
         "<line x1=\"{:.1}\" y1=\"{:.1}\" x2=\"{:.1}\" y2=\"{:.1}\" stroke=\"#888\" stroke-dasharray=\"4 3\"/>\n",
         px(0.0),
@@ -238,7 +254,7 @@ pub fn plot(r: &Response) -> String {
     }
     for (y, anchor) in [(y0, y0), (y1, y1)] {
         s += &format!(
-            "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\">{anchor:+.2}</text>\n",
+            "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\">{anchor:+.digits$}</text>\n",
             m - 4.0,
             py(y) + 4.0
         );
@@ -283,9 +299,15 @@ pub fn markdown(responses: &[Response]) -> String {
             .levels
             .iter()
             .map(|l| {
+                let d = if r.metric.unit().is_empty() { 4 } else { 2 };
                 let ci =
-                    l.ci.map_or_else(String::new, |[a, b]| format!(" [{a:+.2}, {b:+.2}]"));
-                format!("{:.2}: {:+.2}{ci} ({})", l.level, l.median, l.n)
+                    l.ci.map_or_else(String::new, |[a, b]| format!(" [{a:+.d$}, {b:+.d$}]"));
+                format!(
+                    "{:.2}: {}{ci} ({})",
+                    l.level,
+                    shown_delta(l.median, r.metric),
+                    l.n
+                )
             })
             .collect();
         let crossing = if r.crossing.is_finite() {

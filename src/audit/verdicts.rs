@@ -3,49 +3,178 @@
 //! (SPEC.md §21.2).
 
 use super::jobs::JobResult;
+use super::pairs::PairView;
 use super::stats;
 use super::{AuditConfig, GeneratorKind, Variant};
 use crate::pipeline::evaluate::{ClassSums, Row, ViewRecord};
 
 /// The metric a claim compares (on the evaluation poses, final scene of each variant).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
-#[serde(rename_all = "snake_case")]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Metric {
     PsnrAll,
     PsnrExisting,
     PsnrExtrapolated,
     /// Mean PSNR over the training half's test views (the original areas).
     PsnrTrainHalf,
+    /// A measure of the panel on the variant run's pixel classes, both runs scored there
+    /// (the variant's [`JobResult::pair`], SPEC.md §21.7).
+    Classes(Measure, Region),
 }
 
+/// A measure of the panel (SPEC.md §21.7), pooled over a set of views' [`ClassSums`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Measure {
+    Psnr,
+    Ssim,
+    Gmsd,
+    /// The render's gradient energy over the truth's.
+    Detail,
+}
+
+impl Measure {
+    pub const ALL: [Measure; 4] = [Measure::Psnr, Measure::Ssim, Measure::Gmsd, Measure::Detail];
+
+    /// The measure over a set of views' sums of one class.
+    pub fn pooled<'a>(self, sums: impl IntoIterator<Item = &'a ClassSums>) -> f64 {
+        match self {
+            Measure::Psnr => ClassSums::psnr(sums),
+            Measure::Ssim => ClassSums::ssim(sums),
+            Measure::Gmsd => ClassSums::gmsd(sums),
+            Measure::Detail => ClassSums::detail_ratio(sums),
+        }
+    }
+
+    /// How much better `full` is than `variant` (positive: the full method better): the
+    /// difference for PSNR and SSIM, its negative for GMSD (a deviation: lower is
+    /// better), and for the detail ratio how much closer to 1 it is in log
+    /// (`|ln r_variant| − |ln r_full|`: averaging shows below 1, noise above).
+    pub fn better(self, full: f64, variant: f64) -> f64 {
+        match self {
+            Measure::Psnr | Measure::Ssim => full - variant,
+            Measure::Gmsd => variant - full,
+            Measure::Detail => variant.ln().abs() - full.ln().abs(),
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Measure::Psnr => "psnr",
+            Measure::Ssim => "ssim",
+            Measure::Gmsd => "gmsd",
+            Measure::Detail => "detail",
+        }
+    }
+
+    fn label(self) -> &'static str {
+        match self {
+            Measure::Psnr => "PSNR",
+            Measure::Ssim => "SSIM",
+            Measure::Gmsd => "GMSD",
+            Measure::Detail => "detail ratio",
+        }
+    }
+}
+
+/// Where a panel measure is taken: the variant run's pixel classes (SPEC.md §21.5).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Region {
+    /// Extrapolated pixels whose surface point ≥ 2 of the variant's stage-1 views generated.
+    Contested,
+    /// The rest of the unseen-surface sample: the within-pair null.
+    Uncontested,
+    /// `Δ_contested − Δ_uncontested`: the conflicts' signature, everything global to the
+    /// two runs removed.
+    DiffInDiff,
+}
+
+impl Region {
+    pub fn name(self) -> &'static str {
+        match self {
+            Region::Contested => "contested",
+            Region::Uncontested => "uncontested",
+            Region::DiffInDiff => "diff_in_diff",
+        }
+    }
+
+    fn label(self) -> &'static str {
+        match self {
+            Region::Contested => "contested",
+            Region::Uncontested => "uncontested",
+            Region::DiffInDiff => "contested − uncontested",
+        }
+    }
+}
+
+/// The measure of the primary claims (SPEC.md §21.7, registered before their samples).
+pub const PRIMARY_MEASURE: Measure = Measure::Gmsd;
+
 impl Metric {
+    /// The metric of a scene's row (NaN for a panel metric: it is of a pair of scenes).
     pub(crate) fn of(self, r: &Row) -> f64 {
         match self {
             Metric::PsnrAll => r.psnr_all,
             Metric::PsnrExisting => r.psnr_existing,
             Metric::PsnrExtrapolated => r.psnr_extrapolated,
             Metric::PsnrTrainHalf => r.psnr_train_half,
+            Metric::Classes(..) => f64::NAN,
         }
     }
 
     /// The per-view sums of the metric's pixel class (none for the training half, which
-    /// is a mean over its views).
+    /// is a mean over its views, nor for a panel metric, which reads the pair's).
     fn class(self, v: &ViewRecord) -> Option<&ClassSums> {
         match self {
             Metric::PsnrAll => Some(&v.all),
             Metric::PsnrExisting => Some(&v.existing),
             Metric::PsnrExtrapolated => Some(&v.extrapolated),
-            Metric::PsnrTrainHalf => None,
+            Metric::PsnrTrainHalf | Metric::Classes(..) => None,
         }
     }
 
-    pub(crate) fn label(self) -> &'static str {
+    pub(crate) fn label(self) -> String {
         match self {
-            Metric::PsnrAll => "PSNR all",
-            Metric::PsnrExisting => "PSNR existing",
-            Metric::PsnrExtrapolated => "PSNR extrapolated",
-            Metric::PsnrTrainHalf => "train-half PSNR",
+            Metric::PsnrAll => "PSNR all".into(),
+            Metric::PsnrExisting => "PSNR existing".into(),
+            Metric::PsnrExtrapolated => "PSNR extrapolated".into(),
+            Metric::PsnrTrainHalf => "train-half PSNR".into(),
+            Metric::Classes(m, r) => format!("{} {}", m.label(), r.label()),
         }
+    }
+
+    /// The unit of the metric's Δ: `dB`, or empty for a ratio.
+    pub fn unit(self) -> &'static str {
+        match self {
+            Metric::Classes(Measure::Ssim | Measure::Gmsd | Measure::Detail, _) => "",
+            _ => "dB",
+        }
+    }
+
+    /// The name in `audit.json`: `psnr_all`, …, and `<measure>_<region>` for the panel.
+    pub fn name(self) -> String {
+        match self {
+            Metric::PsnrAll => "psnr_all".into(),
+            Metric::PsnrExisting => "psnr_existing".into(),
+            Metric::PsnrExtrapolated => "psnr_extrapolated".into(),
+            Metric::PsnrTrainHalf => "psnr_train_half".into(),
+            Metric::Classes(m, r) => format!("{}_{}", m.name(), r.name()),
+        }
+    }
+
+    /// A metric of the panel (SPEC.md §21.7), read from the pair of scenes.
+    pub fn is_panel(self) -> bool {
+        matches!(self, Metric::Classes(..))
+    }
+
+    /// A primary claim's metric (SPEC.md §21.7): [`PRIMARY_MEASURE`] on contested pixels,
+    /// or on uncontested ones (the within-pair null judged beside it).
+    pub fn is_primary(self) -> bool {
+        matches!(self, Metric::Classes(m, Region::Contested | Region::Uncontested) if m == PRIMARY_MEASURE)
+    }
+}
+
+impl serde::Serialize for Metric {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(&self.name())
     }
 }
 
@@ -94,10 +223,48 @@ impl Claim {
         }
     }
 
-    /// The pair's difference `full − baseline` of the claim's metric.
+    /// The pair's difference `full − baseline` of the claim's metric (for the panel, how
+    /// much better full is: [`Measure::better`]).
     fn diff(&self, p: &Pair) -> f64 {
-        let (a, b) = self.rows(p);
-        self.metric.of(a) - self.metric.of(b)
+        match self.metric {
+            Metric::Classes(measure, region) => match self.scored(p) {
+                Some(views) => class_diff(measure, region, views.iter()),
+                None => f64::NAN,
+            },
+            m => {
+                let (a, b) = self.rows(p);
+                m.of(a) - m.of(b)
+            }
+        }
+    }
+
+    /// A panel claim's views: the variant run's pair with this claim's reference run, when
+    /// it scored the very scene the pool holds for it (none otherwise).
+    fn scored<'a>(&self, p: &Pair<'a>) -> Option<&'a [PairView]> {
+        let pair = p.variant.pair.as_ref()?;
+        (pair.reference == self.reference.name()
+            && !p.full.scene_sha256.is_empty()
+            && pair.reference_scene == p.full.scene_sha256)
+            .then_some(&pair.views[..])
+    }
+}
+
+/// How much better the reference run (first of each `PairView` side) is than the variant
+/// on `region` of a set of views, by `measure` (SPEC.md §21.7).
+fn class_diff<'a>(
+    measure: Measure,
+    region: Region,
+    views: impl Iterator<Item = &'a PairView> + Clone,
+) -> f64 {
+    let delta = |side: fn(&PairView) -> &[ClassSums; 2]| {
+        let full = measure.pooled(views.clone().map(|v| &side(v)[0]));
+        let variant = measure.pooled(views.clone().map(|v| &side(v)[1]));
+        measure.better(full, variant)
+    };
+    match region {
+        Region::Contested => delta(|v| &v.contested),
+        Region::Uncontested => delta(|v| &v.uncontested),
+        Region::DiffInDiff => delta(|v| &v.contested) - delta(|v| &v.uncontested),
     }
 }
 
@@ -267,6 +434,175 @@ pub const CLAIMS: [Claim; 18] = [
     },
 ];
 
+/// A claim of the panel (SPEC.md §21.7): full against `variant` by one measure on one
+/// region of the variant's pixel classes, full better.
+macro_rules! class_claim {
+    ($id:literal, $variant:ident, $measure:ident, $region:ident) => {
+        Claim {
+            id: $id,
+            reference: Variant::Full,
+            variant: Variant::$variant,
+            baseline: Baseline::Variant,
+            metric: Metric::Classes(Measure::$measure, Region::$region),
+            direction: Direction::Beats,
+            paper: MECHANISM_NOTE,
+        }
+    };
+}
+
+/// The mechanism claims where conflicts act (SPEC.md §21.7, registered before their
+/// samples): per variant the primary claim ([`PRIMARY_MEASURE`] on contested pixels), its
+/// within-pair null (on uncontested pixels), then the secondary panel.
+pub const CLASS_CLAIMS: [Claim; 24] = [
+    class_claim!(
+        "independent views, GMSD contested",
+        EvenViews,
+        Gmsd,
+        Contested
+    ),
+    class_claim!(
+        "independent views, GMSD uncontested",
+        EvenViews,
+        Gmsd,
+        Uncontested
+    ),
+    class_claim!(
+        "independent views, PSNR contested",
+        EvenViews,
+        Psnr,
+        Contested
+    ),
+    class_claim!(
+        "independent views, SSIM contested",
+        EvenViews,
+        Ssim,
+        Contested
+    ),
+    class_claim!(
+        "independent views, detail contested",
+        EvenViews,
+        Detail,
+        Contested
+    ),
+    class_claim!(
+        "independent views, GMSD contested − uncontested",
+        EvenViews,
+        Gmsd,
+        DiffInDiff
+    ),
+    class_claim!(
+        "independent views, PSNR contested − uncontested",
+        EvenViews,
+        Psnr,
+        DiffInDiff
+    ),
+    class_claim!(
+        "independent views, SSIM contested − uncontested",
+        EvenViews,
+        Ssim,
+        DiffInDiff
+    ),
+    class_claim!(
+        "independent views, detail contested − uncontested",
+        EvenViews,
+        Detail,
+        DiffInDiff
+    ),
+    class_claim!(
+        "independent views, PSNR uncontested",
+        EvenViews,
+        Psnr,
+        Uncontested
+    ),
+    class_claim!(
+        "independent views, SSIM uncontested",
+        EvenViews,
+        Ssim,
+        Uncontested
+    ),
+    class_claim!(
+        "independent views, detail uncontested",
+        EvenViews,
+        Detail,
+        Uncontested
+    ),
+    class_claim!(
+        "conflicts cost at equal coverage, GMSD contested",
+        ConflictingViews,
+        Gmsd,
+        Contested
+    ),
+    class_claim!(
+        "conflicts cost at equal coverage, GMSD uncontested",
+        ConflictingViews,
+        Gmsd,
+        Uncontested
+    ),
+    class_claim!(
+        "conflicts cost at equal coverage, PSNR contested",
+        ConflictingViews,
+        Psnr,
+        Contested
+    ),
+    class_claim!(
+        "conflicts cost at equal coverage, SSIM contested",
+        ConflictingViews,
+        Ssim,
+        Contested
+    ),
+    class_claim!(
+        "conflicts cost at equal coverage, detail contested",
+        ConflictingViews,
+        Detail,
+        Contested
+    ),
+    class_claim!(
+        "conflicts cost at equal coverage, GMSD contested − uncontested",
+        ConflictingViews,
+        Gmsd,
+        DiffInDiff
+    ),
+    class_claim!(
+        "conflicts cost at equal coverage, PSNR contested − uncontested",
+        ConflictingViews,
+        Psnr,
+        DiffInDiff
+    ),
+    class_claim!(
+        "conflicts cost at equal coverage, SSIM contested − uncontested",
+        ConflictingViews,
+        Ssim,
+        DiffInDiff
+    ),
+    class_claim!(
+        "conflicts cost at equal coverage, detail contested − uncontested",
+        ConflictingViews,
+        Detail,
+        DiffInDiff
+    ),
+    class_claim!(
+        "conflicts cost at equal coverage, PSNR uncontested",
+        ConflictingViews,
+        Psnr,
+        Uncontested
+    ),
+    class_claim!(
+        "conflicts cost at equal coverage, SSIM uncontested",
+        ConflictingViews,
+        Ssim,
+        Uncontested
+    ),
+    class_claim!(
+        "conflicts cost at equal coverage, detail uncontested",
+        ConflictingViews,
+        Detail,
+        Uncontested
+    ),
+];
+
+/// What a panel row's paper column says.
+const MECHANISM_NOTE: &str = "§3.2 \"conflict-free generation\": overlapping generations conflict; Table 4 (−3.52 dB without detection)";
+
 /// What a sensitivity row's paper column says: the claim of Table 4 under a choice the
 /// paper does not state.
 const SENSITIVITY_NOTE: &str =
@@ -323,6 +659,80 @@ pub struct Verdict {
     /// `holds`, `contradicted`, `inconclusive`, `interim (n of N seeds)` or `no verdict
     /// (…)` with its reason.
     pub verdict: String,
+    /// On a primary claim (SPEC.md §21.7) whose panel splits: the rows of its variant and
+    /// generator on contested pixels or in difference in differences whose median has the
+    /// other sign, when one of them or the primary is decided.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub panel_splits: Option<String>,
+}
+
+impl Verdict {
+    /// Holds or contradicted (whatever note follows the word).
+    pub fn decided(&self) -> bool {
+        self.verdict.starts_with("holds") || self.verdict.starts_with("contradicted")
+    }
+
+    /// Its median Δ with the metric's unit, signed: `+0.31 dB`, `−0.0042`.
+    pub fn median_shown(&self) -> String {
+        shown_delta(self.median_diff, self.claim.metric)
+    }
+}
+
+/// A Δ of `metric` signed, with its unit: two decimals in dB, four without a unit.
+pub fn shown_delta(d: f64, metric: Metric) -> String {
+    match metric.unit() {
+        "" => format!("{d:+.4}"),
+        u => format!("{d:+.2} {u}"),
+    }
+}
+
+/// Flag each primary claim whose panel splits (SPEC.md §21.7): among it and the rows of its
+/// variant and generator on contested pixels and in difference in differences, medians of
+/// both signs, one of those rows decided; the flag lists the rows of the other sign than
+/// the primary's (none when its median is 0 or absent).
+fn flag_panel_splits(verdicts: &mut [Verdict]) {
+    for i in 0..verdicts.len() {
+        let v = &verdicts[i];
+        if !(v.claim.metric.is_primary()
+            && matches!(v.claim.metric, Metric::Classes(_, Region::Contested)))
+        {
+            continue;
+        }
+        let group: Vec<&Verdict> = verdicts
+            .iter()
+            .filter(|w| w.claim.variant == v.claim.variant && w.generator == v.generator)
+            .filter(|w| {
+                matches!(
+                    w.claim.metric,
+                    Metric::Classes(_, Region::Contested | Region::DiffInDiff)
+                )
+            })
+            .filter(|w| w.median_diff.is_finite() && w.median_diff != 0.0)
+            .collect();
+        let positive = group.iter().any(|w| w.median_diff > 0.0);
+        let negative = group.iter().any(|w| w.median_diff < 0.0);
+        if !(positive && negative && group.iter().any(|w| w.decided())) {
+            continue;
+        }
+        if !(v.median_diff.is_finite() && v.median_diff != 0.0) {
+            continue;
+        }
+        let sign = v.median_diff > 0.0;
+        let other: Vec<String> = group
+            .iter()
+            .filter(|w| (w.median_diff > 0.0) != sign)
+            .map(|w| {
+                let word = if w.decided() { &w.verdict[..] } else { "" };
+                let word = word.split(';').next().unwrap_or_default();
+                let label = w.claim.metric.label();
+                match word {
+                    "" => format!("{label} {}", w.median_shown()),
+                    _ => format!("{label} {} ({word})", w.median_shown()),
+                }
+            })
+            .collect();
+        verdicts[i].panel_splits = Some(other.join(", "));
+    }
 }
 
 /// Mean and sample standard deviation (NaN for fewer than 2 values).
@@ -353,30 +763,68 @@ pub const HIERARCHICAL_REPLICATES: usize = 2000;
 /// least 90 % for normal units.
 pub const HIERARCHICAL_MIN_UNITS: usize = 10;
 
+/// A unit of the hierarchical bootstrap: its evaluation views, as a claim's Δ is
+/// recomputed from them.
+enum Unit<'a> {
+    /// The per-view records of the two rows a claim compares (the same views, in order).
+    Rows(&'a [ViewRecord], &'a [ViewRecord]),
+    /// A panel claim's pair of scenes scored on the variant's classes.
+    Pair(&'a [PairView]),
+}
+
+impl Unit<'_> {
+    fn views(&self) -> usize {
+        match self {
+            Unit::Rows(a, _) => a.len(),
+            Unit::Pair(v) => v.len(),
+        }
+    }
+
+    /// The claim's Δ on the views `picks` (with repeats): pooled PSNR of the metric's
+    /// class for a row metric, [`class_diff`] for a panel one.
+    fn diff(&self, metric: Metric, picks: &[usize]) -> f64 {
+        match (self, metric) {
+            (Unit::Pair(v), Metric::Classes(m, r)) => {
+                class_diff(m, r, picks.iter().map(|&i| &v[i]))
+            }
+            (Unit::Rows(a, b), _) => {
+                let pa = ClassSums::psnr(picks.iter().map(|&i| class_of(metric, &a[i])));
+                let pb = ClassSums::psnr(picks.iter().map(|&i| class_of(metric, &b[i])));
+                pa - pb
+            }
+            (Unit::Pair(_), _) => f64::NAN,
+        }
+    }
+}
+
 /// The hierarchical bootstrap's 95 % percentile interval of the mean paired difference
-/// of `metric`: units resampled with replacement, then each unit's evaluation views
-/// (the same views for both runs of the pair), the metric recomputed as pooled PSNR of
-/// the resampled views. Units without per-view records (or with different view lists)
-/// are left out; `None` below two units.
+/// of the claim's metric: units resampled with replacement, then each unit's evaluation
+/// views (the same views for both runs of the pair), the metric recomputed from the
+/// resampled views (pooled PSNR of a row metric's class; a panel measure on the pair's
+/// classes). Units without per-view records (or with different view lists) are left out;
+/// `None` below [`HIERARCHICAL_MIN_UNITS`] and for the training half.
 fn hierarchical(pairs: &[Pair], claim: &Claim, alpha: f64, seed: u64) -> (Option<[f64; 2]>, usize) {
     let metric = claim.metric;
-    let units: Vec<(&[ViewRecord], &[ViewRecord])> = pairs
+    let units: Vec<Unit> = pairs
         .iter()
-        .map(|p| claim.rows(p))
-        .map(|(a, b)| (&a.views[..], &b.views[..]))
-        .filter(|(a, b)| {
-            !a.is_empty()
-                && a.len() == b.len()
-                && a.iter().zip(b.iter()).all(|(x, y)| x.view == y.view)
+        .filter_map(|p| match metric {
+            Metric::Classes(..) => claim.scored(p).map(Unit::Pair),
+            _ => {
+                let (a, b) = claim.rows(p);
+                Some(Unit::Rows(&a.views[..], &b.views[..]))
+            }
+        })
+        .filter(|u| match u {
+            Unit::Rows(a, b) => {
+                !a.is_empty()
+                    && a.len() == b.len()
+                    && a.iter().zip(b.iter()).all(|(x, y)| x.view == y.view)
+                    && metric.class(&a[0]).is_some()
+            }
+            Unit::Pair(v) => !v.is_empty(),
         })
         .collect();
     let n = units.len();
-    let Some(first) = units.first().and_then(|(a, _)| a.first()) else {
-        return (None, 0);
-    };
-    if metric.class(first).is_none() {
-        return (None, 0);
-    }
     if n < HIERARCHICAL_MIN_UNITS {
         return (None, n);
     }
@@ -386,12 +834,11 @@ fn hierarchical(pairs: &[Pair], claim: &Claim, alpha: f64, seed: u64) -> (Option
     for _ in 0..HIERARCHICAL_REPLICATES {
         let (mut sum, mut count) = (0.0, 0usize);
         for _ in 0..n {
-            let (a, b) = units[u.below(n as u32) as usize];
+            let unit = &units[u.below(n as u32) as usize];
+            let views = unit.views();
             picks.clear();
-            picks.extend((0..a.len()).map(|_| u.below(a.len() as u32) as usize));
-            let pa = ClassSums::psnr(picks.iter().map(|&i| class_of(metric, &a[i])));
-            let pb = ClassSums::psnr(picks.iter().map(|&i| class_of(metric, &b[i])));
-            let d = pa - pb;
+            picks.extend((0..views).map(|_| u.below(views as u32) as usize));
+            let d = unit.diff(metric, &picks);
             if d.is_finite() {
                 sum += d;
                 count += 1;
@@ -562,7 +1009,7 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
         same: usize,
     }
     let mut cells = Vec::new();
-    for claim in CLAIMS {
+    for &claim in CLAIMS.iter().chain(&CLASS_CLAIMS) {
         if !cfg.variants.contains(&claim.variant) || !cfg.variants.contains(&claim.reference) {
             continue;
         }
@@ -633,12 +1080,15 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
     // claims (they ask another question: whether one claim's verdict turns on a choice the
     // paper leaves open; sharing the family would make every claim's correction depend on
     // how many choices were tried).
+    // The panel's claims likewise: the primary claims with their within-pair null, and the
+    // secondary panel (SPEC.md §21.7), so that neither moves the paper's claims.
     let family_of = |c: &Cell| {
         let g = c.generator.family();
-        if c.claim.reference == Variant::Full {
-            g.to_string()
-        } else {
-            format!("{g}-sensitivity")
+        match c.claim.metric {
+            _ if c.claim.reference != Variant::Full => format!("{g}-sensitivity"),
+            m @ Metric::Classes(..) if m.is_primary() => format!("{g}-classes"),
+            Metric::Classes(..) => format!("{g}-panel"),
+            _ => g.to_string(),
         }
     };
     let mut families: Vec<String> = Vec::new();
@@ -742,8 +1192,11 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
                 hierarchical: hier,
                 hierarchical_units: hier_units,
                 verdict,
+                panel_splits: None,
             });
         }
     }
-    out.into_iter().flatten().collect()
+    let mut out: Vec<Verdict> = out.into_iter().flatten().collect();
+    flag_panel_splits(&mut out);
+    out
 }

@@ -104,6 +104,17 @@ impl ClassSums {
         }
     }
 
+    /// Pooled SSIM of a set of views' sums: the mean of the map over their pixels (NaN
+    /// with no pixel).
+    pub fn ssim<'a>(sums: impl IntoIterator<Item = &'a ClassSums>) -> f64 {
+        let (mut s, mut n) = (0f64, 0u64);
+        for c in sums {
+            s += c.ssim_sum;
+            n += c.pixels;
+        }
+        if n == 0 { f64::NAN } else { s / n as f64 }
+    }
+
     /// Pooled GMSD of a set of views' sums: the weighted population standard deviation of
     /// the gradient magnitude similarity over the class's blocks (NaN with no block).
     pub fn gmsd<'a>(sums: impl IntoIterator<Item = &'a ClassSums>) -> f64 {

@@ -1255,6 +1255,178 @@ fn a_conflicting_set_that_was_not_used_is_not_a_unit() {
     assert!(v.verdict.contains("not tested on 4 of 16 seeds"), "{v:?}");
 }
 
+/// The panel (SPEC.md §21.7): both runs of a pair judged on the variant's contested and
+/// uncontested pixels from the variant's `pair`, every Δ oriented so that positive means
+/// full is better (GMSD's sign flipped, the detail ratio by its distance from 1), the
+/// primary claims in their own Holm family with their uncontested null, the rest in the
+/// panel's, the paper's claims untouched; a pair that scored another scene than the
+/// pool's full run is no unit; a panel that disagrees with the primary is flagged.
+#[test]
+fn the_panel_judges_both_runs_on_the_variants_contested_pixels() {
+    use unseen::audit::pairs::{Pair, PairView};
+    use unseen::audit::{AuditConfig, GeneratorKind, Measure, Variant, stats::Rule, verdicts};
+    use unseen::pipeline::evaluate::ClassSums;
+    let cfg = AuditConfig {
+        variants: vec![Variant::Full, Variant::ConflictingViews],
+        generators: vec![GeneratorKind::Truth(unseen::pipeline::Level::Low)],
+        ..AuditConfig::quick()
+    };
+    // Sums of a class of 100 pixels (weight 1 each): squared error `se`, SSIM `ss`, the
+    // GMSD deficit's mean `m` and spread `sd`, gradient energy `r` over the truth's 1.
+    let sums = |se: f64, ss: f64, m: f64, sd: f64, r: f64| ClassSums {
+        pixels: 100,
+        squared_error: se,
+        ssim_sum: 100.0 * ss,
+        gms_weight: 100.0,
+        gms_deficit: 100.0 * m,
+        gms_deficit_squares: 100.0 * (sd * sd + m * m),
+        render_gradient_energy: 100.0 * r,
+        truth_gradient_energy: 100.0,
+    };
+    let pool = |mismatched: Option<u32>| {
+        let mut pool = Vec::new();
+        for seed in 0..16u32 {
+            let e = 0.001 * f64::from(seed);
+            let mut full = sample("full", seed, 8, 20.0);
+            full.scene_sha256 = format!("{seed:064}");
+            let mut c = sample("conflicting_views", seed, 8, 20.0);
+            c.scene_sha256 = format!("{:064}", seed + 100);
+            // On contested pixels the variant averaged two generations: less squared error
+            // (PSNR rewards it), a larger GMSD and less detail; on uncontested pixels the
+            // two runs differ by noise only.
+            let noise = if seed % 2 == 0 { e } else { -e };
+            let reference_scene = if mismatched == Some(seed) {
+                "another scene".into()
+            } else {
+                full.scene_sha256.clone()
+            };
+            c.pair = Some(Pair {
+                reference: "full".into(),
+                reference_scene,
+                views: vec![PairView {
+                    view: "v".into(),
+                    contested: [
+                        sums(3.0, 0.6, 0.1, 0.05, 1.0),
+                        sums(2.0 + e, 0.6 - e, 0.1, 0.15 + e, 0.5),
+                    ],
+                    uncontested: [
+                        sums(1.0, 0.8, 0.1, 0.05, 1.0),
+                        sums(1.0, 0.8, 0.1, 0.05 + noise, 1.0),
+                    ],
+                }],
+            });
+            pool.extend([full, c]);
+        }
+        pool
+    };
+    // A pair that scored another scene than the pool's full run is no Δ: the claim waits
+    // for that seed.
+    let v = verdicts(&cfg, &pool(Some(15)), &Rule::default());
+    let id = "conflicts cost at equal coverage, GMSD contested";
+    let primary = v.iter().find(|v| v.claim.id == id).unwrap();
+    assert_eq!(primary.verdict, "interim (15 of 16 seeds)", "{primary:?}");
+    let v = verdicts(&cfg, &pool(None), &Rule::default());
+    let find = |id: &str| {
+        v.iter()
+            .find(|v| v.claim.id == id)
+            .unwrap_or_else(|| panic!("{id}: {v:#?}"))
+    };
+    let primary = find("conflicts cost at equal coverage, GMSD contested");
+    assert_eq!(primary.family, "truth-classes");
+    // Every seed full better by 0.1 + e.
+    assert_eq!(
+        (primary.judged, primary.above, primary.below),
+        (16, 16, 0),
+        "{primary:?}"
+    );
+    assert!(primary.verdict.starts_with("holds"), "{primary:?}");
+    assert!((primary.median_diff - 0.1075).abs() < 1e-9, "{primary:?}");
+    let null = find("conflicts cost at equal coverage, GMSD uncontested");
+    assert_eq!(null.family, "truth-classes");
+    assert!(null.verdict.starts_with("inconclusive"), "{null:?}");
+    let psnr = find("conflicts cost at equal coverage, PSNR contested");
+    assert_eq!(psnr.family, "truth-panel");
+    assert!(psnr.verdict.starts_with("contradicted"), "{psnr:?}");
+    // The median of 16 is the mean of seeds 7 and 8's Δ.
+    let at = |e: f64| -10.0 * (3.0f64 / 300.0).log10() + 10.0 * ((2.0 + e) / 300.0).log10();
+    let want = 0.5 * (at(0.007) + at(0.008));
+    assert!((psnr.median_diff - want).abs() < 1e-12, "{psnr:?}");
+    let detail = find("conflicts cost at equal coverage, detail contested");
+    assert!((detail.median_diff - 2f64.ln()).abs() < 1e-12, "{detail:?}");
+    let did = find("conflicts cost at equal coverage, GMSD contested − uncontested");
+    assert!(did.verdict.starts_with("holds"), "{did:?}");
+    // The primary holds while PSNR on the same pixels is contradicted: the panel splits.
+    let split = primary.panel_splits.as_deref().expect("split flagged");
+    assert!(
+        split.contains("PSNR contested") && split.contains("contradicted"),
+        "{split}"
+    );
+    assert!(!split.contains("GMSD"), "{split}");
+    // The paper's claim is judged as before, in its own family.
+    let paper = find("conflicts cost at equal coverage");
+    assert_eq!(paper.family, "truth");
+    assert!(
+        paper.verdict.starts_with("no verdict"),
+        "Δ = 0 on every seed: {paper:?}"
+    );
+    // Orientation of each measure.
+    assert_eq!(Measure::Gmsd.better(0.1, 0.25), 0.15);
+    assert_eq!(Measure::Psnr.better(21.0, 20.0), 1.0);
+    assert!((Measure::Detail.better(2.0, 0.25) - (4f64.ln() - 2f64.ln())).abs() < 1e-15);
+    assert!(
+        v.iter().filter(|v| v.family == "truth-panel").count() == 10,
+        "{v:#?}"
+    );
+
+    // The report: its own section with each metric's unit, the split, the names in JSON.
+    let lounge = reference("scenes/lounge");
+    let tmp = TempDir::new("panel-report");
+    let mut samples = unseen::audit::samples::Samples::new(unseen::audit::samples::Provenance {
+        dataset: "lounge".into(),
+        dataset_digest: unseen::audit::samples::dataset_digest(&lounge).unwrap(),
+        preset: cfg.base.preset,
+        train_iterations: cfg.train_iterations,
+        train_resolution: cfg.train_resolution,
+        candidates: None,
+    });
+    for r in pool(None) {
+        samples.insert(r);
+    }
+    samples
+        .write(&tmp.join(unseen::audit::samples::SAMPLES_FILE))
+        .unwrap();
+    unseen::audit::Audit::new(&cfg, &lounge, &tmp)
+        .report(&[])
+        .unwrap();
+    let md = std::fs::read_to_string(tmp.join("audit.md")).unwrap();
+    let section = md
+        .split("## Where conflicts act")
+        .nth(1)
+        .expect("the panel's section");
+    assert!(
+        section.contains("| conflicting_views | **GMSD contested** | truth-low | truth-classes | 16 | +0.1075 | 16 / 0 |"),
+        "{section}"
+    );
+    assert!(
+        section.contains("PSNR contested -1.74 dB (contradicted)"),
+        "{section}"
+    );
+    let claims = md
+        .split("## Claims")
+        .nth(1)
+        .unwrap()
+        .split("## ")
+        .next()
+        .unwrap();
+    assert!(
+        !claims.contains("GMSD"),
+        "the paper's table holds its claims only: {claims}"
+    );
+    let json = std::fs::read_to_string(tmp.join("audit.json")).unwrap();
+    assert!(json.contains("\"metric\": \"gmsd_contested\""), "{json}");
+    assert!(json.contains("\"metric\": \"psnr_diff_in_diff\""), "{json}");
+}
+
 /// A dose–response sweep (SPEC.md §21.6): each level is a generator judged as any other
 /// (Holm within the sweep), and the response of a claim whose Δ falls with the level
 /// crosses 0 between the levels around the sign change, with a plot.
