@@ -18,11 +18,12 @@ pub enum DoseParam {
     Photometric,
     /// The relative-depth distortion and flicker as a fraction of the high level's.
     DepthDistortion,
-    /// A planted harm, the audit's positive control (issue-free by construction): the true
-    /// image of every generation call, nothing else wrong, shifted by `t ×`
-    /// [`GHOST_MAX_PX`] in a seeded direction per call, so that two calls generating one
-    /// surface place it apart and a scene fitting both ghosts. Not the mechanisms
-    /// generator: its blur, gain and hallucination would blur what is displaced.
+    /// A planted harm, the audit's positive control: the hallucination grid's level none
+    /// (the mechanisms generator without hallucination: its views are chosen as the claims'
+    /// are) with every generation call shifted as a whole by `t ×` [`GHOST_MAX_PX`] in a
+    /// seeded direction, so that two calls generating one surface place it apart and a
+    /// scene fitting both ghosts (and blurs: the gradient energy of an average of two
+    /// displaced copies is at most the mean of theirs).
     Ghosting,
 }
 
@@ -404,7 +405,7 @@ mod tests {
     /// is off.
     #[test]
     fn sweep_levels_move_one_parameter_of_the_mechanisms_generator() {
-        use crate::pipeline::{Hallucination, Inconsistency, Level};
+        use crate::pipeline::{Hallucination, Inconsistency, Level, PipelineConfig};
         let cfg = super::super::AuditConfig::quick();
         let at = |g: GeneratorKind| cfg.pipeline_config(g, Variant::Full, 0).unwrap();
         let base = at(GeneratorKind::Mechanisms(Level::Low));
@@ -432,20 +433,22 @@ mod tests {
         let d = dose(DoseParam::DepthDistortion, 0).inconsistency;
         assert_eq!((d.depth_flicker, d.depth_distortion), (0.0, 0.0));
         assert_eq!(d.gain, base.inconsistency.gain);
-        // The planted harm: the consistent truth generator with the shift alone.
-        let truth = at(GeneratorKind::Truth(Level::None));
-        assert_eq!(dose(DoseParam::Ghosting, 0), truth);
+        // The planted harm: the grid's level none with the shift alone moved.
+        let none = dose(DoseParam::Hallucination, 0);
         let g = dose(DoseParam::Ghosting, 50);
         assert_eq!(
             g.inconsistency,
             Inconsistency {
                 shift_px: 0.5 * super::GHOST_MAX_PX,
-                ..Inconsistency::NONE
+                ..none.inconsistency
             }
         );
         assert_eq!(
-            (g.hallucination, g.truth_depth),
-            (truth.hallucination, truth.truth_depth)
+            PipelineConfig {
+                inconsistency: none.inconsistency,
+                ..g
+            },
+            none
         );
         // In a configuration file: names for the named levels, numbers between.
         let text = |h: Hallucination| serde_json::to_string(&h).unwrap();

@@ -269,7 +269,10 @@ impl GeneratorKind {
                 param: dose::DoseParam::Ghosting,
                 percent,
             } => {
-                GeneratorKind::Truth(Level::None).apply(c);
+                // The hallucination grid's level none (so that the views are chosen as in
+                // the claims' runs), every call shifted as a whole.
+                GeneratorKind::Mechanisms(Level::Low).apply(c);
+                c.hallucination = Hallucination::None;
                 c.inconsistency.shift_px = f32::from(percent) / 100.0 * dose::GHOST_MAX_PX;
             }
             GeneratorKind::Dose { param, percent } => {

@@ -65,7 +65,7 @@ impl Measure {
         }
     }
 
-    fn label(self) -> &'static str {
+    pub fn label(self) -> &'static str {
         match self {
             Measure::Psnr => "PSNR",
             Measure::Ssim => "SSIM",
@@ -105,8 +105,9 @@ impl Region {
     }
 }
 
-/// The measure of the primary claims (SPEC.md §21.7, registered before their samples).
-pub const PRIMARY_MEASURE: Measure = Measure::Gmsd;
+/// The measure of the primary claims (SPEC.md §21.7: registered before the claims' samples,
+/// revised once after the control's pilot, before any of them).
+pub const PRIMARY_MEASURE: Measure = Measure::Detail;
 
 impl Metric {
     /// The metric of a scene's row (NaN for a panel metric: it is of a pair of scenes).
@@ -455,15 +456,15 @@ macro_rules! class_claim {
 /// within-pair null (on uncontested pixels), then the secondary panel.
 pub const CLASS_CLAIMS: [Claim; 24] = [
     class_claim!(
-        "independent views, GMSD contested",
+        "independent views, detail contested",
         EvenViews,
-        Gmsd,
+        Detail,
         Contested
     ),
     class_claim!(
-        "independent views, GMSD uncontested",
+        "independent views, detail uncontested",
         EvenViews,
-        Gmsd,
+        Detail,
         Uncontested
     ),
     class_claim!(
@@ -479,15 +480,15 @@ pub const CLASS_CLAIMS: [Claim; 24] = [
         Contested
     ),
     class_claim!(
-        "independent views, detail contested",
+        "independent views, GMSD contested",
         EvenViews,
-        Detail,
+        Gmsd,
         Contested
     ),
     class_claim!(
-        "independent views, GMSD contested − uncontested",
+        "independent views, detail contested − uncontested",
         EvenViews,
-        Gmsd,
+        Detail,
         DiffInDiff
     ),
     class_claim!(
@@ -503,9 +504,9 @@ pub const CLASS_CLAIMS: [Claim; 24] = [
         DiffInDiff
     ),
     class_claim!(
-        "independent views, detail contested − uncontested",
+        "independent views, GMSD contested − uncontested",
         EvenViews,
-        Detail,
+        Gmsd,
         DiffInDiff
     ),
     class_claim!(
@@ -521,21 +522,21 @@ pub const CLASS_CLAIMS: [Claim; 24] = [
         Uncontested
     ),
     class_claim!(
-        "independent views, detail uncontested",
+        "independent views, GMSD uncontested",
         EvenViews,
-        Detail,
+        Gmsd,
         Uncontested
     ),
     class_claim!(
-        "conflicts cost at equal coverage, GMSD contested",
+        "conflicts cost at equal coverage, detail contested",
         ConflictingViews,
-        Gmsd,
+        Detail,
         Contested
     ),
     class_claim!(
-        "conflicts cost at equal coverage, GMSD uncontested",
+        "conflicts cost at equal coverage, detail uncontested",
         ConflictingViews,
-        Gmsd,
+        Detail,
         Uncontested
     ),
     class_claim!(
@@ -551,15 +552,15 @@ pub const CLASS_CLAIMS: [Claim; 24] = [
         Contested
     ),
     class_claim!(
-        "conflicts cost at equal coverage, detail contested",
+        "conflicts cost at equal coverage, GMSD contested",
         ConflictingViews,
-        Detail,
+        Gmsd,
         Contested
     ),
     class_claim!(
-        "conflicts cost at equal coverage, GMSD contested − uncontested",
+        "conflicts cost at equal coverage, detail contested − uncontested",
         ConflictingViews,
-        Gmsd,
+        Detail,
         DiffInDiff
     ),
     class_claim!(
@@ -575,9 +576,9 @@ pub const CLASS_CLAIMS: [Claim; 24] = [
         DiffInDiff
     ),
     class_claim!(
-        "conflicts cost at equal coverage, detail contested − uncontested",
+        "conflicts cost at equal coverage, GMSD contested − uncontested",
         ConflictingViews,
-        Detail,
+        Gmsd,
         DiffInDiff
     ),
     class_claim!(
@@ -593,9 +594,9 @@ pub const CLASS_CLAIMS: [Claim; 24] = [
         Uncontested
     ),
     class_claim!(
-        "conflicts cost at equal coverage, detail uncontested",
+        "conflicts cost at equal coverage, GMSD uncontested",
         ConflictingViews,
-        Detail,
+        Gmsd,
         Uncontested
     ),
 ];
