@@ -12,13 +12,16 @@
 //! `conflicting_views`, matched on this same coverage (SPEC.md §20.2).
 
 use crate::error::{Error, Result};
+use crate::gaussian::Gaussians;
 use crate::pipeline::artifacts::{load_image, load_mask};
 use crate::pipeline::evaluate::{
-    CLASS_CONTESTED, CLASS_OTHER, CLASS_UNCONTESTED, Generating, visit_unseen_surface,
+    CLASS_CONTESTED, CLASS_OTHER, CLASS_UNCONTESTED, ClassSums, Generating, ScoredView, seen_at,
+    visit_unseen_surface,
 };
 use crate::pipeline::rundir::StepDone;
 use crate::pipeline::views::{Plan, SetAside};
 use crate::pipeline::{Inputs, Step, candidate_truth, stem};
+use crate::raster::RenderOptions;
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -58,6 +61,21 @@ pub struct Diagnostics {
     /// relative difference).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub choice: Option<crate::pipeline::views::Choice>,
+    /// Generation fidelity (SPEC.md §21.7): per stage-1 view, the final scene rendered
+    /// there against what the view generated, on the pixels it generated; empty when not
+    /// measured (no truth at the candidate poses, or a run recorded before).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub fidelity: Vec<FidelityView>,
+}
+
+/// A stage-1 view's generation fidelity: [`ClassSums`] of the final scene's render there
+/// against the view's generation (as the truth), over the generated pixels whose surface
+/// point another stage-1 view generated too (*contested*) and over the rest.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct FidelityView {
+    pub view: String,
+    pub contested: ClassSums,
+    pub uncontested: ClassSums,
 }
 
 /// The stage-1 views' generation of the unseen surface.
@@ -82,6 +100,7 @@ pub struct Generation {
 pub fn diagnose(
     inputs: &Inputs,
     steps: &[StepDone],
+    scene: Option<&Gaussians>,
 ) -> Result<(Diagnostics, Option<Vec<Vec<u8>>>)> {
     let dirs: BTreeMap<&str, &Path> = steps
         .iter()
@@ -136,6 +155,10 @@ pub fn diagnose(
         }
         stage1.push((t, mask, image));
     }
+    let fidelity = match scene {
+        Some(scene) => fidelity(inputs, scene, &stage1)?,
+        None => Vec::new(),
+    };
     let (generation, classes) = match dir_of(&Step::EvalMasks) {
         Some(masks) if !stage1.is_empty() => generation(inputs, masks, &stage1)?.unzip(),
         _ => (None, None),
@@ -168,8 +191,63 @@ pub fn diagnose(
         stage1: generation,
         stage2_filled,
         choice: plan.choice.clone(),
+        fidelity,
     };
     Ok((diagnostics, classes))
+}
+
+/// The final scene's [`FidelityView`] at each stage-1 view `(truth, mask, generation)`: a
+/// generated pixel is contested when its surface point (from the view's truth depth) is
+/// seen by another stage-1 view ([`seen_at`]) at a pixel of its mask.
+fn fidelity(
+    inputs: &Inputs,
+    scene: &Gaussians,
+    stage1: &[(
+        &crate::pipeline::generators::Truth,
+        Vec<bool>,
+        crate::io::image::ImageF32,
+    )],
+) -> Result<Vec<FidelityView>> {
+    let opts = RenderOptions {
+        background: inputs.background,
+        ..RenderOptions::default()
+    };
+    let mut out = Vec::with_capacity(stage1.len());
+    for (k, (t, mask, image)) in stage1.iter().enumerate() {
+        let rgb: Vec<f32> = match image.channels {
+            3 => image.data.clone(),
+            c => image
+                .data
+                .chunks_exact(c)
+                .flat_map(|p| [p[0], p[1], p[2]])
+                .collect(),
+        };
+        let scored = ScoredView::against(scene, &t.camera, &rgb, &opts)?;
+        let mut view = FidelityView {
+            view: t.camera.name.clone(),
+            contested: ClassSums::default(),
+            uncontested: ClassSums::default(),
+        };
+        let w = t.camera.width as usize;
+        for (p, _) in mask.iter().enumerate().filter(|(_, m)| **m) {
+            let z = t.depth[p] as f64;
+            let contested = z.is_finite()
+                && z > 0.0
+                && stage1.iter().enumerate().any(|(j, (o, om, _))| {
+                    j != k
+                        && seen_at(&o.camera, &o.depth, t.camera.pixel_point(p % w, p / w, z))
+                            .is_some_and(|q| om[q])
+                });
+            let sums = if contested {
+                &mut view.contested
+            } else {
+                &mut view.uncontested
+            };
+            sums.add(&scored, p);
+        }
+        out.push(view);
+    }
+    Ok(out)
 }
 
 /// [`Generation`] of the stage-1 views `(truth, mask, inpainting)` on the sample of the

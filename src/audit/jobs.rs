@@ -288,7 +288,9 @@ impl Audit<'_> {
                     .ok_or_else(|| Error::invalid("the run made no final scene").at(&out))?;
                 let scene_sha256 =
                     crate::io::sha256_hex(&std::fs::read(scene).map_err(|e| Error::io(scene, e))?);
-                let (diagnostics, classes) = super::diagnostics::diagnose(&inputs, &outcome.steps)?;
+                let (final_gaussians, _) = crate::gaussian::ply::read_ply(scene)?;
+                let (diagnostics, classes) =
+                    super::diagnostics::diagnose(&inputs, &outcome.steps, Some(&final_gaussians))?;
                 // The classes of the evaluation pixels, for the pairs a claim compares on
                 // them (`pairs`); none where the run generated nothing.
                 let classes_path = out.join(CLASSES_FILE);

@@ -2,6 +2,7 @@
 //! differences per unit (seed at a numerics revision), and the decision rule of [`super::stats`]
 //! (SPEC.md §21.2).
 
+use super::diagnostics::FidelityView;
 use super::jobs::JobResult;
 use super::pairs::PairView;
 use super::stats;
@@ -19,6 +20,9 @@ pub enum Metric {
     /// A measure of the panel on the variant run's pixel classes, both runs scored there
     /// (the variant's [`JobResult::pair`], SPEC.md §21.7).
     Classes(Measure, Region),
+    /// Generation fidelity (SPEC.md §21.7): PSNR of each run's final scene against its own
+    /// stage-1 generations on the pixels they generated ([`FidelityView`]).
+    Fidelity,
 }
 
 /// A measure of the panel (SPEC.md §21.7), pooled over a set of views' [`ClassSums`].
@@ -117,7 +121,7 @@ impl Metric {
             Metric::PsnrExisting => r.psnr_existing,
             Metric::PsnrExtrapolated => r.psnr_extrapolated,
             Metric::PsnrTrainHalf => r.psnr_train_half,
-            Metric::Classes(..) => f64::NAN,
+            Metric::Classes(..) | Metric::Fidelity => f64::NAN,
         }
     }
 
@@ -128,7 +132,7 @@ impl Metric {
             Metric::PsnrAll => Some(&v.all),
             Metric::PsnrExisting => Some(&v.existing),
             Metric::PsnrExtrapolated => Some(&v.extrapolated),
-            Metric::PsnrTrainHalf | Metric::Classes(..) => None,
+            Metric::PsnrTrainHalf | Metric::Classes(..) | Metric::Fidelity => None,
         }
     }
 
@@ -139,6 +143,7 @@ impl Metric {
             Metric::PsnrExtrapolated => "PSNR extrapolated".into(),
             Metric::PsnrTrainHalf => "train-half PSNR".into(),
             Metric::Classes(m, r) => format!("{} {}", m.label(), r.label()),
+            Metric::Fidelity => "PSNR against own generations".into(),
         }
     }
 
@@ -158,12 +163,13 @@ impl Metric {
             Metric::PsnrExtrapolated => "psnr_extrapolated".into(),
             Metric::PsnrTrainHalf => "psnr_train_half".into(),
             Metric::Classes(m, r) => format!("{}_{}", m.name(), r.name()),
+            Metric::Fidelity => "psnr_fidelity".into(),
         }
     }
 
     /// A metric of the panel (SPEC.md §21.7), read from the pair of scenes.
     pub fn is_panel(self) -> bool {
-        matches!(self, Metric::Classes(..))
+        matches!(self, Metric::Classes(..) | Metric::Fidelity)
     }
 
     /// A primary claim's metric (SPEC.md §21.7): [`PRIMARY_MEASURE`] on contested pixels,
@@ -228,6 +234,7 @@ impl Claim {
     /// much better full is: [`Measure::better`]).
     fn diff(&self, p: &Pair) -> f64 {
         match self.metric {
+            Metric::Fidelity => fidelity_psnr(p.full) - fidelity_psnr(p.variant),
             Metric::Classes(measure, region) => match self.scored(p) {
                 Some(views) => class_diff(measure, region, views.iter()),
                 None => f64::NAN,
@@ -248,6 +255,13 @@ impl Claim {
             && pair.reference_scene == p.full.scene_sha256)
             .then_some(&pair.views[..])
     }
+}
+
+/// PSNR of a run's final scene against its own stage-1 generations, pooled over every
+/// generated pixel (NaN when not measured).
+fn fidelity_psnr(r: &JobResult) -> f64 {
+    let views: &[FidelityView] = r.diagnostics.as_ref().map_or(&[], |d| &d.fidelity);
+    ClassSums::psnr(views.iter().flat_map(|v| [&v.contested, &v.uncontested]))
 }
 
 /// How much better the reference run (first of each `PairView` side) is than the variant
@@ -454,7 +468,7 @@ macro_rules! class_claim {
 /// The mechanism claims where conflicts act (SPEC.md §21.7, registered before their
 /// samples): per variant the primary claim ([`PRIMARY_MEASURE`] on contested pixels), its
 /// within-pair null (on uncontested pixels), then the secondary panel.
-pub const CLASS_CLAIMS: [Claim; 24] = [
+pub const CLASS_CLAIMS: [Claim; 26] = [
     class_claim!(
         "independent views, detail contested",
         EvenViews,
@@ -599,6 +613,24 @@ pub const CLASS_CLAIMS: [Claim; 24] = [
         Gmsd,
         Uncontested
     ),
+    Claim {
+        metric: Metric::Fidelity,
+        ..class_claim!(
+            "independent views, fidelity to own generations",
+            EvenViews,
+            Psnr,
+            Contested
+        )
+    },
+    Claim {
+        metric: Metric::Fidelity,
+        ..class_claim!(
+            "conflicts cost at equal coverage, fidelity to own generations",
+            ConflictingViews,
+            Psnr,
+            Contested
+        )
+    },
 ];
 
 /// What a panel row's paper column says.
@@ -661,8 +693,8 @@ pub struct Verdict {
     /// (…)` with its reason.
     pub verdict: String,
     /// On a primary claim (SPEC.md §21.7) whose panel splits: the rows of its variant and
-    /// generator on contested pixels or in difference in differences whose median has the
-    /// other sign, when one of them or the primary is decided.
+    /// generator on contested pixels, in difference in differences or of generation
+    /// fidelity whose median has the other sign, when one of them or the primary is decided.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub panel_splits: Option<String>,
 }
@@ -688,7 +720,8 @@ pub fn shown_delta(d: f64, metric: Metric) -> String {
 }
 
 /// Flag each primary claim whose panel splits (SPEC.md §21.7): among it and the rows of its
-/// variant and generator on contested pixels and in difference in differences, medians of
+/// variant and generator on contested pixels, in difference in differences and of
+/// generation fidelity, medians of
 /// both signs, one of those rows decided; the flag lists the rows of the other sign than
 /// the primary's (none when its median is 0 or absent).
 fn flag_panel_splits(verdicts: &mut [Verdict]) {
@@ -705,7 +738,7 @@ fn flag_panel_splits(verdicts: &mut [Verdict]) {
             .filter(|w| {
                 matches!(
                     w.claim.metric,
-                    Metric::Classes(_, Region::Contested | Region::DiffInDiff)
+                    Metric::Classes(_, Region::Contested | Region::DiffInDiff) | Metric::Fidelity
                 )
             })
             .filter(|w| w.median_diff.is_finite() && w.median_diff != 0.0)
@@ -1087,8 +1120,8 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
         let g = c.generator.family();
         match c.claim.metric {
             _ if c.claim.reference != Variant::Full => format!("{g}-sensitivity"),
-            m @ Metric::Classes(..) if m.is_primary() => format!("{g}-classes"),
-            Metric::Classes(..) => format!("{g}-panel"),
+            m if m.is_primary() => format!("{g}-classes"),
+            m if m.is_panel() => format!("{g}-panel"),
             _ => g.to_string(),
         }
     };

@@ -194,14 +194,31 @@ impl<'a> ScoredView<'a> {
         view: &'a crate::dataset::View,
         opts: &RenderOptions,
     ) -> Result<ScoredView<'a>> {
-        let (w, h) = (view.image.width, view.image.height);
-        let rgb: Vec<f32> = render(scene, &view.camera, opts)?
+        ScoredView::against(scene, &view.camera, &view.image.data, opts)
+    }
+
+    /// Render `scene` at `camera` under `opts` and score it against `truth` (RGB of the
+    /// camera's size, the image a view holds or one a generator made there).
+    pub fn against(
+        scene: &Gaussians,
+        camera: &Camera,
+        truth: &'a [f32],
+        opts: &RenderOptions,
+    ) -> Result<ScoredView<'a>> {
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        if truth.len() != w * h * 3 {
+            return Err(Error::invalid(format!(
+                "an image of {} values to score a {w}×{h} render against (RGB: {})",
+                truth.len(),
+                w * h * 3
+            )));
+        }
+        let rgb: Vec<f32> = render(scene, camera, opts)?
             .rgb
             .expect("rgb")
             .iter()
             .map(|x| x.clamp(0.0, 1.0))
             .collect();
-        let truth = &view.image.data[..];
         Ok(ScoredView {
             width: w,
             height: h,

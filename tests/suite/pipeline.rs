@@ -1315,6 +1315,21 @@ fn the_panel_judges_both_runs_on_the_variants_contested_pixels() {
                     ],
                 }],
             });
+            // Each run's scene against its own generations: the variant's cannot reproduce
+            // both of two disagreeing ones.
+            let fidelity = |se: f64| {
+                serde_json::from_value(serde_json::json!({
+                    "candidates": 4, "covered": 0, "set_aside": [], "collisions": 2, "pairs": 6,
+                    "stage1_views": ["a", "b"], "stage1_collisions": 0, "dependent_per_gap": [1],
+                    "interpolated": 0, "degenerate_gaps": 0, "stage1": null, "stage2_filled": 0.1,
+                    "fidelity": [{"view": "a",
+                                  "contested": {"pixels": 50, "squared_error": se, "ssim_sum": 40.0},
+                                  "uncontested": {"pixels": 50, "squared_error": se, "ssim_sum": 40.0}}]
+                }))
+                .unwrap()
+            };
+            full.diagnostics = Some(fidelity(0.3));
+            c.diagnostics = Some(fidelity(0.6 + e));
             pool.extend([full, c]);
         }
         pool
@@ -1358,6 +1373,12 @@ fn the_panel_judges_both_runs_on_the_variants_contested_pixels() {
     assert_eq!(gmsd.family, "truth-panel");
     assert!(gmsd.verdict.starts_with("holds"), "{gmsd:?}");
     assert!((gmsd.median_diff - 0.1075).abs() < 1e-9, "{gmsd:?}");
+    // Fidelity: 10·log10 of the squared-error ratio, full better.
+    let fid = find("conflicts cost at equal coverage, fidelity to own generations");
+    assert_eq!(fid.family, "truth-panel");
+    let want = 0.5 * (10.0 * (0.607f64 / 0.3).log10() + 10.0 * (0.608f64 / 0.3).log10());
+    assert!((fid.median_diff - want).abs() < 1e-12, "{fid:?}");
+    assert!(fid.verdict.starts_with("holds"), "{fid:?}");
     let did = find("conflicts cost at equal coverage, detail contested − uncontested");
     assert!(did.verdict.starts_with("holds"), "{did:?}");
     // The primary holds while PSNR on the same pixels is contradicted: the panel splits.
@@ -1382,7 +1403,7 @@ fn the_panel_judges_both_runs_on_the_variants_contested_pixels() {
     assert_eq!(Measure::Psnr.better(21.0, 20.0), 1.0);
     assert!((Measure::Detail.better(2.0, 0.25) - (4f64.ln() - 2f64.ln())).abs() < 1e-15);
     assert!(
-        v.iter().filter(|v| v.family == "truth-panel").count() == 10,
+        v.iter().filter(|v| v.family == "truth-panel").count() == 11,
         "{v:#?}"
     );
 
@@ -2741,16 +2762,67 @@ fn the_conflicting_set_is_matched_on_the_coverage_the_diagnostics_measure() {
         let o = pipeline::run_with(c, &inp, &out, &Default::default(), &quiet).unwrap();
         let plan: Plan =
             serde_json::from_slice(&std::fs::read(out.join("views/plan.json")).unwrap()).unwrap();
-        let (d, _) = unseen::audit::diagnostics::diagnose(&inp, &o.steps).unwrap();
-        (plan, d.stage1.expect("the tiny lounge has truth"))
+        let (scene, _) = unseen::gaussian::ply::read_ply(o.scene.as_ref().unwrap()).unwrap();
+        let (d, _) = unseen::audit::diagnostics::diagnose(&inp, &o.steps, Some(&scene)).unwrap();
+        // Generation fidelity, from the files: the final scene rendered at each stage-1
+        // view against its generation, over the pixels it generated.
+        let truth = unseen::pipeline::candidate_truth(&inp).unwrap();
+        assert_eq!(d.fidelity.len(), d.stage1_views.len());
+        for (f, name) in d.fidelity.iter().zip(&d.stage1_views) {
+            assert_eq!(&f.view, name);
+            let dir = &o
+                .steps
+                .iter()
+                .find(|s| s.name == format!("stage1/{}", unseen::pipeline::stem(name)))
+                .unwrap()
+                .dir;
+            let image =
+                unseen::io::image::read_exr(&dir.join("inpaint.exr"), &["R", "G", "B"]).unwrap();
+            let mask = unseen::io::image::read_png(&dir.join("inpaint.mask.png")).unwrap();
+            let cam = &truth
+                .iter()
+                .find(|t| &t.camera.name == name)
+                .unwrap()
+                .camera;
+            let opts = unseen::raster::RenderOptions {
+                background: inp.background,
+                ..Default::default()
+            };
+            let rgb = unseen::raster::render(&scene, cam, &opts)
+                .unwrap()
+                .rgb
+                .unwrap();
+            let (mut n, mut se) = (0u64, 0f64);
+            for p in 0..mask.width * mask.height {
+                if mask.data[p * mask.channels] > 0.5 {
+                    n += 1;
+                    for c in 0..3 {
+                        let e =
+                            rgb[p * 3 + c].clamp(0.0, 1.0) - image.data[p * 3 + c].clamp(0.0, 1.0);
+                        se += f64::from(e) * f64::from(e);
+                    }
+                }
+            }
+            assert_eq!(f.contested.pixels + f.uncontested.pixels, n, "{name}");
+            let got = f.contested.squared_error + f.uncontested.squared_error;
+            assert!(
+                (got - se).abs() <= 1e-12 * se.max(1.0),
+                "{name}: {got} vs {se}"
+            );
+        }
+        (
+            plan,
+            d.stage1.expect("the tiny lounge has truth"),
+            d.fidelity,
+        )
     };
     let conflicting = PipelineConfig {
         conflicting_views: Some(ConflictMatch::EvaluationCoverage),
         interpolation: false,
         ..cfg.clone()
     };
-    let (plan, measured) = run("conflicting", &conflicting);
-    let (_, full_measured) = run(
+    let (plan, measured, fidelity) = run("conflicting", &conflicting);
+    let (_, full_measured, _) = run(
         "full",
         &PipelineConfig {
             interpolation: false,
@@ -2770,6 +2842,11 @@ fn the_conflicting_set_is_matched_on_the_coverage_the_diagnostics_measure() {
         "{c:?}"
     );
     if c.used {
+        // Generations that overlap: some generated pixels are contested.
+        assert!(
+            fidelity.iter().any(|f| f.contested.pixels > 0),
+            "{fidelity:?}"
+        );
         assert_eq!(c.coverage.to_bits(), measured.coverage.to_bits(), "{c:?}");
         assert_eq!(
             c.overlap.unwrap().to_bits(),
