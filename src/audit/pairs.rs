@@ -84,3 +84,111 @@ pub fn score_pair(
     }
     Ok(out)
 }
+
+/// The folder of an audit's contact sheets, `sheets/<generator>/<variant>/seed-<s>.png`.
+pub const SHEETS_DIR: &str = "sheets";
+
+/// Where the contact sheet of a run's pair lies, relative to the audit's folder.
+pub fn sheet_path(generator: &str, variant: &str, seed: u32) -> std::path::PathBuf {
+    std::path::Path::new(SHEETS_DIR)
+        .join(generator)
+        .join(variant)
+        .join(format!("seed-{seed}.png"))
+}
+
+/// Pixels of a contact sheet panel per pixel of the view (nearest neighbour).
+pub const SHEET_SCALE: usize = 4;
+
+/// Gap between the panels of a contact sheet, in sheet pixels (white).
+const SHEET_GAP: usize = 4;
+
+/// Factor of the absolute difference in a contact sheet's last panel.
+pub const SHEET_DIFFERENCE_GAIN: f32 = 4.0;
+
+/// Brightness kept outside the contested pixels in a contact sheet's crop.
+const SHEET_DIM: f32 = 0.35;
+
+/// A contact sheet of a pair on its most contested evaluation view (`None` when no view has
+/// a contested pixel): four panels side by side — truth, the reference's render, the
+/// variant's, and `SHEET_DIFFERENCE_GAIN · |reference − variant|` — each the bounding box of
+/// the view's contested pixels, the other pixels of the box dimmed to `SHEET_DIM`, scaled
+/// `SHEET_SCALE`× by nearest neighbour (SPEC.md §21.7).
+pub fn contact_sheet(
+    inputs: &Inputs,
+    reference: &Gaussians,
+    variant: &Gaussians,
+    classes: &[u8],
+) -> Result<Option<crate::io::image::ImageF32>> {
+    let data = &inputs.data;
+    let mut best: Option<(usize, usize, usize)> = None; // (contested, view, offset)
+    let mut at = 0;
+    for &i in &inputs.evaluation {
+        let v = &data.views[i];
+        let n = v.image.width * v.image.height;
+        let Some(class) = classes.get(at..at + n) else {
+            return Err(Error::invalid(format!(
+                "{} pixel classes for the evaluation views",
+                classes.len()
+            )));
+        };
+        let c = class.iter().filter(|&&c| c == CLASS_CONTESTED).count();
+        if c > best.map_or(0, |b| b.0) {
+            best = Some((c, i, at));
+        }
+        at += n;
+    }
+    let Some((_, i, at)) = best else {
+        return Ok(None);
+    };
+    let v = &data.views[i];
+    let (w, h) = (v.image.width, v.image.height);
+    let class = &classes[at..at + w * h];
+    let contested = |x: usize, y: usize| class[y * w + x] == CLASS_CONTESTED;
+    let (mut x0, mut y0, mut x1, mut y1) = (w, h, 0, 0);
+    for y in 0..h {
+        for x in (0..w).filter(|&x| contested(x, y)) {
+            (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x), y1.max(y));
+        }
+    }
+    let opts = RenderOptions {
+        background: inputs.background,
+        ..RenderOptions::default()
+    };
+    let render = |g: &Gaussians| -> Result<Vec<f32>> {
+        Ok(crate::raster::render(g, &v.camera, &opts)?
+            .rgb
+            .expect("rgb"))
+    };
+    let (a, b) = (render(reference)?, render(variant)?);
+    let panel = |x: usize, y: usize, k: usize, c: usize| -> f32 {
+        let p = (y * w + x) * 3 + c;
+        let value = match k {
+            0 => v.image.data[p],
+            1 => a[p],
+            2 => b[p],
+            _ => SHEET_DIFFERENCE_GAIN * (a[p].clamp(0.0, 1.0) - b[p].clamp(0.0, 1.0)).abs(),
+        };
+        let dim = if contested(x, y) { 1.0 } else { SHEET_DIM };
+        value.clamp(0.0, 1.0) * dim
+    };
+    let (cw, ch) = ((x1 - x0 + 1) * SHEET_SCALE, (y1 - y0 + 1) * SHEET_SCALE);
+    let width = 4 * cw + 3 * SHEET_GAP;
+    let mut img = crate::io::image::ImageF32 {
+        width,
+        height: ch,
+        channels: 3,
+        data: vec![1.0; width * ch * 3],
+    };
+    for k in 0..4 {
+        for sy in 0..ch {
+            for sx in 0..cw {
+                let (x, y) = (x0 + sx / SHEET_SCALE, y0 + sy / SHEET_SCALE);
+                let o = (sy * width + k * (cw + SHEET_GAP) + sx) * 3;
+                for c in 0..3 {
+                    img.data[o + c] = panel(x, y, k, c);
+                }
+            }
+        }
+    }
+    Ok(Some(img))
+}

@@ -3,7 +3,7 @@
 use super::jobs::{Job, JobResult, jobs, sharing};
 use super::samples::{self, Samples};
 use super::stats;
-use super::verdicts::{Metric, Verdict, mean_std, metrics_only, verdicts};
+use super::verdicts::{Metric, Region, Verdict, mean_std, median_seed, metrics_only, verdicts};
 use super::{Audit, AuditConfig, GeneratorKind, Variant};
 use crate::error::{Error, Result};
 use crate::pipeline::Event;
@@ -41,6 +41,10 @@ pub struct Report {
     /// Every pooled sample.
     #[serde(skip)]
     pub pool: Vec<JobResult>,
+    /// Per primary claim on contested pixels (by its index in `verdicts`), the contact
+    /// sheet of its median seed, when the audit's folder has it (SPEC.md §21.7).
+    #[serde(skip)]
+    pub sheets: Vec<(usize, u32, std::path::PathBuf)>,
 }
 
 impl Audit<'_> {
@@ -146,6 +150,19 @@ impl Audit<'_> {
         let usable: Vec<JobResult> = pool.samples.into_iter().filter(|r| !other(r)).collect();
         let verdicts = verdicts(cfg, &usable, &rule);
         let responses = super::dose::responses(&verdicts);
+        let sheets = verdicts
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| {
+                v.claim.metric.is_primary()
+                    && matches!(v.claim.metric, Metric::Classes(_, Region::Contested))
+            })
+            .filter_map(|(k, v)| {
+                let seed = median_seed(&usable, v)?;
+                let path = super::pairs::sheet_path(&v.generator, v.claim.variant.name(), seed);
+                dir.join(&path).is_file().then_some((k, seed, path))
+            })
+            .collect();
         let report = Report {
             crate_version: env!("CARGO_PKG_VERSION").into(),
             numerics_revision: crate::version::NUMERICS_REVISION,
@@ -161,6 +178,7 @@ impl Audit<'_> {
             rule,
             results,
             pool: usable,
+            sheets,
         };
         let json = serde_json::to_string_pretty(&report).expect("serializes") + "\n";
         crate::io::write_text(&dir.join("audit.json"), &json)?;
@@ -588,6 +606,19 @@ fn where_conflicts_act(report: &Report) -> String {
             v.panel_splits.as_deref().unwrap_or("–"),
         );
     }
+    for (k, seed, path) in &report.sheets {
+        let v = &report.verdicts[*k];
+        s += &format!(
+            "\n**{}, {}, at its median seed ({seed})**: truth | full | {} | {}·|full − {}| on the most contested evaluation view, cropped to its contested pixels (the rest dimmed).\n\n![{} at seed {seed}]({})\n",
+            v.claim.id,
+            v.generator,
+            v.claim.variant.name(),
+            super::pairs::SHEET_DIFFERENCE_GAIN,
+            v.claim.variant.name(),
+            v.claim.id,
+            path.display()
+        );
+    }
     s
 }
 
@@ -950,6 +981,9 @@ impl super::Audit<'_> {
             };
             let seed = v.seed;
             let reference_scene = f.scene_sha256.clone();
+            let sheet = self
+                .dir
+                .join(super::pairs::sheet_path(&v.generator, &v.variant, v.seed));
             let seed_inputs = match inputs.entry(seed) {
                 std::collections::btree_map::Entry::Occupied(e) => e.into_mut(),
                 std::collections::btree_map::Entry::Vacant(e) => {
@@ -964,6 +998,13 @@ impl super::Audit<'_> {
             let (run, _) = crate::gaussian::ply::read_ply(&vs)?;
             let views =
                 score_pair(seed_inputs, &reference, &run, &classes).map_err(|e| e.at(&vdir))?;
+            let made = super::pairs::contact_sheet(seed_inputs, &reference, &run, &classes)
+                .map_err(|e| e.at(&vdir))?;
+            if let Some(img) = made {
+                let parent = sheet.parent().expect("a sheet's folder");
+                std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
+                crate::io::image::write_png(&sheet, &img)?;
+            }
             pool.samples[i].pair = Some(Pair {
                 reference: full.into(),
                 reference_scene,

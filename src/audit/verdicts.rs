@@ -711,6 +711,30 @@ impl Verdict {
     }
 }
 
+/// The seed whose Δ of `v`'s claim lies nearest its median (the lowest of ties; within the
+/// plan), the one a contact sheet shows (SPEC.md §21.7).
+pub fn median_seed(pool: &[JobResult], v: &Verdict) -> Option<u32> {
+    let c = &v.claim;
+    let pairs = pairs_against(pool, &v.generator, c.reference, c.variant);
+    let mut best: Option<(f64, u32)> = None;
+    let mut k = 0;
+    while k < pairs.len() {
+        let seed = pairs[k].seed;
+        let group: Vec<f64> = pairs[k..]
+            .iter()
+            .take_while(|p| p.seed == seed)
+            .map(|p| c.diff(p))
+            .collect();
+        k += group.len();
+        let d = group.iter().sum::<f64>() / group.len() as f64;
+        let off = (d - v.median_diff).abs();
+        if (seed as usize) < v.planned && off.is_finite() && best.is_none_or(|b| off < b.0) {
+            best = Some((off, seed));
+        }
+    }
+    best.map(|b| b.1)
+}
+
 /// A Δ of `metric` signed, with its unit: two decimals in dB, four without a unit.
 pub fn shown_delta(d: f64, metric: Metric) -> String {
     match metric.unit() {

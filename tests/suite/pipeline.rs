@@ -915,6 +915,22 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
         )
         .unwrap();
         assert_eq!(pair.views, want);
+        // Its contact sheet: four panels of the crop around the contested pixels of its
+        // most contested view, when it has any.
+        let sheet = dir.join(audit::pairs::sheet_path(&v.generator, &v.variant, v.seed));
+        let contested = classes.contains(&unseen::pipeline::evaluate::CLASS_CONTESTED);
+        assert_eq!(sheet.is_file(), contested, "{}", sheet.display());
+        if contested {
+            let img = unseen::io::image::read_png(&sheet).unwrap();
+            let panel = img.width - 3 * 4;
+            assert!(
+                panel.is_multiple_of(4 * audit::pairs::SHEET_SCALE)
+                    && img.height.is_multiple_of(audit::pairs::SHEET_SCALE),
+                "{}×{}",
+                img.width,
+                img.height
+            );
+        }
     }
     let md = std::fs::read_to_string(dir.join("audit.md")).unwrap();
     assert!(md.contains("| truth-low | opacity_mask |"), "{md}");
@@ -2763,7 +2779,8 @@ fn the_conflicting_set_is_matched_on_the_coverage_the_diagnostics_measure() {
         let plan: Plan =
             serde_json::from_slice(&std::fs::read(out.join("views/plan.json")).unwrap()).unwrap();
         let (scene, _) = unseen::gaussian::ply::read_ply(o.scene.as_ref().unwrap()).unwrap();
-        let (d, _) = unseen::audit::diagnostics::diagnose(&inp, &o.steps, Some(&scene)).unwrap();
+        let (d, classes) =
+            unseen::audit::diagnostics::diagnose(&inp, &o.steps, Some(&scene)).unwrap();
         // Generation fidelity, from the files: the final scene rendered at each stage-1
         // view against its generation, over the pixels it generated.
         let truth = unseen::pipeline::candidate_truth(&inp).unwrap();
@@ -2810,19 +2827,17 @@ fn the_conflicting_set_is_matched_on_the_coverage_the_diagnostics_measure() {
                 "{name}: {got} vs {se}"
             );
         }
-        (
-            plan,
-            d.stage1.expect("the tiny lounge has truth"),
-            d.fidelity,
-        )
+        let classes = classes.expect("classes").concat();
+        let stage1 = d.stage1.expect("the tiny lounge has truth");
+        (plan, stage1, d.fidelity, scene, classes)
     };
     let conflicting = PipelineConfig {
         conflicting_views: Some(ConflictMatch::EvaluationCoverage),
         interpolation: false,
         ..cfg.clone()
     };
-    let (plan, measured, fidelity) = run("conflicting", &conflicting);
-    let (_, full_measured, _) = run(
+    let (plan, measured, fidelity, conflicting_scene, _) = run("conflicting", &conflicting);
+    let (_, full_measured, _, full_scene, _) = run(
         "full",
         &PipelineConfig {
             interpolation: false,
@@ -2860,6 +2875,65 @@ fn the_conflicting_set_is_matched_on_the_coverage_the_diagnostics_measure() {
         c.coverage_difference.to_bits(),
         ((c.coverage - independent).abs() / independent).to_bits()
     );
+
+    // A pair's contact sheet (SPEC.md §21.7) on classes with a 5 × 3 contested block in the
+    // second evaluation view (and 2 pixels in the first: fewer, so not the one shown): four
+    // panels of the block's crop, the truth, each render and 4·|difference|.
+    let sizes: Vec<usize> = inp
+        .evaluation
+        .iter()
+        .map(|&i| inp.data.views[i].image.data.len() / 3)
+        .collect();
+    let mut classes = vec![0u8; sizes.iter().sum()];
+    classes[3] = 2;
+    classes[4] = 2;
+    let view = &inp.data.views[inp.evaluation[1]];
+    let w = view.image.width;
+    for y in 7..10 {
+        for x in 10..15 {
+            classes[sizes[0] + y * w + x] = 2;
+        }
+    }
+    use unseen::audit::pairs::{SHEET_DIFFERENCE_GAIN, SHEET_SCALE as k, contact_sheet};
+    let sheet = contact_sheet(&inp, &full_scene, &conflicting_scene, &classes)
+        .unwrap()
+        .expect("contested pixels");
+    assert_eq!((sheet.width, sheet.height), (4 * 5 * k + 12, 3 * k));
+    let opts = unseen::raster::RenderOptions {
+        background: inp.background,
+        ..Default::default()
+    };
+    let render = |g| {
+        unseen::raster::render(g, &view.camera, &opts)
+            .unwrap()
+            .rgb
+            .unwrap()
+    };
+    let (a, b) = (render(&full_scene), render(&conflicting_scene));
+    let p = 8 * w + 12; // (12, 8): panel pixel (2, 1) of the crop
+    for c in 0..3 {
+        let at = |panel: usize| {
+            sheet.data[((k + 1) * sheet.width + panel * (5 * k + 4) + 2 * k + 1) * 3 + c]
+        };
+        let (ta, tb) = (a[p * 3 + c].clamp(0.0, 1.0), b[p * 3 + c].clamp(0.0, 1.0));
+        assert_eq!(at(0), view.image.data[p * 3 + c].clamp(0.0, 1.0));
+        assert_eq!((at(1), at(2)), (ta, tb));
+        assert_eq!(
+            at(3),
+            (SHEET_DIFFERENCE_GAIN * (ta - tb).abs()).clamp(0.0, 1.0)
+        );
+    }
+    assert!(
+        contact_sheet(
+            &inp,
+            &full_scene,
+            &conflicting_scene,
+            &vec![0; classes.len()]
+        )
+        .unwrap()
+        .is_none()
+    );
+    assert!(contact_sheet(&inp, &full_scene, &conflicting_scene, &classes[1..]).is_err());
 
     let t2 = TempDir::new("pipeline-conflict-match-no-eval");
     let Tiny { inp, .. } = TinyRun::new().without_evaluation().build(&t2);
