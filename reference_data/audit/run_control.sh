@@ -30,4 +30,8 @@ nice -n 19 "$bin" audit "$dataset" --preset quick "${family[@]}" \
   --seeds "$seeds" --threads 2 --out "$work"
 cp "$work"/{samples.json,audit.json,audit.md,inconsistency.svg} "$out/"
 cp "$work"/dose-*.svg "$out/" 2>/dev/null || true
+# The contact sheets audit.md shows (each primary claim's at its median seed).
+grep -o '](sheets/[^)]*\.png)' "$work/audit.md" | sed 's/^](//; s/)$//' | while read -r f; do
+  mkdir -p "$out/$(dirname "$f")" && cp "$work/$f" "$out/$f"
+done
 rm -rf "$work/runs" "$work/cache" "$work/original"

@@ -12,6 +12,10 @@
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 room="$1"; param="$2"; seeds="$3"; bin="${4:-target/release/unseen}"
+# ROOM is a bundled room's name or any dataset folder with truth, candidates.json and
+# evaluation.json (absolute, or from the repository's root): its folder name names the output.
+dataset="reference_data/scenes/$room"
+if [ -d "$room" ]; then dataset="$room"; room="$(basename "$(cd "$room" && pwd)")"; fi
 levels="${LEVELS:-0,0.25,0.5,0.75,1}"
 family=()
 out="reference_data/audit/$room-dose-$param"
@@ -22,7 +26,7 @@ fi
 work="${WORK:-/tmp/unseen-dose-$room${FAMILY:+-$FAMILY}-$param}"
 mkdir -p "$work" "$out"
 cp "$out/samples.json" "$work/" 2>/dev/null || true
-nice -n 19 "$bin" audit "reference_data/scenes/$room" --preset quick "${family[@]}" \
+nice -n 19 "$bin" audit "$dataset" --preset quick "${family[@]}" \
   --variants full,even_views,conflicting_views --sweep "$param=$levels" \
   --seeds "$seeds" --threads 2 --out "$work"
 cp "$work"/{samples.json,audit.json,audit.md,inconsistency.svg} "$work"/dose-*.svg "$out/"

@@ -21,6 +21,10 @@
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 room="$1"; seeds="$2"; bin="${3:-target/release/unseen}"
+# ROOM is a bundled room's name or any dataset folder with truth, candidates.json and
+# evaluation.json (absolute, or from the repository's root): its folder name names the output.
+dataset="reference_data/scenes/$room"
+if [ -d "$room" ]; then dataset="$room"; room="$(basename "$(cd "$room" && pwd)")"; fi
 all=full,even_views,conflicting_views,no_depth_supervision,cycle
 all+=,full_max_cardinality,even_views_max_cardinality,full_max_coverage
 all+=,even_views_max_coverage,full_hull,even_views_hull
@@ -35,7 +39,7 @@ fi
 work="${WORK:-/tmp/unseen-isolation-$room${FAMILY:+-$FAMILY}}"
 mkdir -p "$work" "$out"
 cp "$out/samples.json" "$work/" 2>/dev/null || true
-nice -n 19 "$bin" audit "reference_data/scenes/$room" --preset quick "${family[@]}" \
+nice -n 19 "$bin" audit "$dataset" --preset quick "${family[@]}" \
   --variants "$variants" --generators truth-low+hallucinating+relative \
   --seeds "$seeds" --threads 2 --out "$work"
 cp "$work"/{samples.json,audit.json,audit.md,inconsistency.svg} "$out/"
