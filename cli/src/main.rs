@@ -38,6 +38,9 @@ enum Command {
     /// Check the paper's claims: every ablation under several generators and seeds, with
     /// verdicts per claim (DIR/audit.md)
     Audit(pipeline::AuditArgs),
+    /// The results table of audits (their folders' audit.json): per primary claim, its
+    /// null and the panel's rows, as markdown (README.md's table).
+    AuditTable(pipeline::AuditTableArgs),
     /// Train 3D Gaussians on a dataset (unseen scene, COLMAP or transforms.json directory)
     /// with INRIA's recipe; writes INRIA's output layout into --out.
     Train(train::TrainArgs),
@@ -76,6 +79,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Command::Demo(a) => pipeline::run_demo(&a),
         Command::Extrapolate(a) => pipeline::run_extrapolate(&a),
         Command::Audit(a) => pipeline::run_audit(&a),
+        Command::AuditTable(a) => pipeline::run_audit_table(&a),
         Command::Train(a) => train::run_train(a),
         Command::Eval(a) => train::run_eval(a),
         Command::QaMask(a) => train::run_qa_mask(a),

@@ -303,6 +303,20 @@ fn emit_extrapolate(
 }
 
 #[derive(Args)]
+pub struct AuditTableArgs {
+    /// Audit folders (each with an audit.json), in the table's order.
+    #[arg(required = true)]
+    folders: Vec<PathBuf>,
+}
+
+/// `unseen audit-table`: the results table of audits, as README.md shows it.
+pub fn run_audit_table(a: &AuditTableArgs) -> Result<()> {
+    let folders: Vec<&std::path::Path> = a.folders.iter().map(PathBuf::as_path).collect();
+    print!("{}", unseen::audit::results::table(&folders)?);
+    Ok(())
+}
+
+#[derive(Args)]
 pub struct CompareArgs {
     a: PathBuf,
     b: PathBuf,

@@ -40,6 +40,7 @@ pub mod family;
 pub mod jobs;
 pub mod pairs;
 pub mod report;
+pub mod results;
 pub mod samples;
 pub mod stats;
 pub mod verdicts;

@@ -246,6 +246,25 @@ impl Claim {
         }
     }
 
+    /// A panel claim's seed where conflicts have nowhere to act: its pair was scored (or its
+    /// fidelity measured) but the variant's set was not used, or the pair's region holds no
+    /// pixel (the variant's stage-1 views generated no point twice). Counted towards the
+    /// plan, not as a unit, as a same computation is (SPEC.md §21.7).
+    fn nowhere_to_act(&self, p: &Pair) -> bool {
+        match self.metric {
+            Metric::Classes(_, region) => self.scored(p).is_some_and(|views| {
+                let pixels = |f: fn(&PairView) -> &[ClassSums; 2]| {
+                    views.iter().map(|v| f(v)[1].pixels).sum::<u64>()
+                };
+                p.not_applied()
+                    || pixels(|v| &v.contested) == 0
+                    || (region != Region::Contested && pixels(|v| &v.uncontested) == 0)
+            }),
+            Metric::Fidelity => p.not_applied(),
+            _ => false,
+        }
+    }
+
     /// A panel claim's views: the variant run's pair with this claim's reference run, when
     /// it scored the very scene the pool holds for it (none otherwise).
     fn scored<'a>(&self, p: &Pair<'a>) -> Option<&'a [PairView]> {
@@ -1089,7 +1108,7 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
                     .filter(|p| {
                         same_config(p.full, &full_cfg) && same_config(p.variant, &variant_cfg)
                     })
-                    .filter(|p| claim.diff(p).is_finite())
+                    .filter(|p| claim.diff(p).is_finite() || claim.nowhere_to_act(p))
                     .collect();
             if pairs.is_empty() {
                 continue;
@@ -1107,9 +1126,12 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
                 .iter()
                 .filter(|_| claim.baseline == Baseline::Variant)
                 .filter(|p| {
-                    pairs
-                        .iter()
-                        .all(|q| q.seed != p.seed || q.same_computation() || q.not_applied())
+                    pairs.iter().all(|q| {
+                        q.seed != p.seed
+                            || q.same_computation()
+                            || q.not_applied()
+                            || claim.nowhere_to_act(q)
+                    })
                 })
                 .map(|p| p.seed)
                 .collect();
@@ -1192,6 +1214,10 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
                         rule.planned
                     )
                 }
+                stats::Outcome::NotTested if c.claim.metric.is_panel() => format!(
+                    "not tested here (on all {} seeds the same scene, no colliding set qualified, or no contested pixel)",
+                    c.same
+                ),
                 stats::Outcome::NotTested if conflicting => format!(
                     "not tested here (on all {} seeds the same scene, or no colliding set qualified)",
                     c.same
@@ -1220,7 +1246,9 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
                     "; not tested on {} of {} seeds ({})",
                     c.same,
                     c.same + c.diffs.len(),
-                    if conflicting {
+                    if c.claim.metric.is_panel() {
+                        "the same scene, no colliding set qualified, or no contested pixel"
+                    } else if conflicting {
                         "the same scene, or no colliding set qualified"
                     } else {
                         "same computation"

@@ -698,6 +698,18 @@ fn every_subcommand_answers_bad_input_with_one_error_line_and_no_output() {
             code: 1,
         },
         Cmd {
+            name: "audit-table",
+            inputs: vec![Input {
+                name: "audit",
+                path: reference("audit/gallery-isolation"),
+                kind: Kind::Dir,
+                inner: vec![("audit.json", Kind::Json)],
+            }],
+            out: Out::None,
+            args: Box::new(|p, _| os(&[&"audit-table", &p("audit")])),
+            code: 1,
+        },
+        Cmd {
             name: "demo",
             inputs: vec![input("config", pipeline_config.clone(), Kind::Json)],
             out: Out::Folder,

@@ -1356,6 +1356,29 @@ fn the_panel_judges_both_runs_on_the_variants_contested_pixels() {
     let id = "conflicts cost at equal coverage, detail contested";
     let primary = v.iter().find(|v| v.claim.id == id).unwrap();
     assert_eq!(primary.verdict, "interim (15 of 16 seeds)", "{primary:?}");
+    // A seed where the variant's views generated no point twice: nowhere for conflicts to
+    // act, so counted towards the plan and not as a unit.
+    let mut none_contested = pool(None);
+    for r in none_contested
+        .iter_mut()
+        .filter(|r| r.seed == 3 && r.pair.is_some())
+    {
+        for v in &mut r.pair.as_mut().unwrap().views {
+            v.contested = Default::default();
+        }
+    }
+    let v = verdicts(&cfg, &none_contested, &Rule::default());
+    let primary = v.iter().find(|v| v.claim.id == id).unwrap();
+    assert_eq!(
+        (primary.judged, primary.same_computation),
+        (15, 1),
+        "{primary:?}"
+    );
+    assert!(
+        primary.verdict.contains("not tested on 1 of 16 seeds")
+            && primary.verdict.contains("no contested pixel"),
+        "{primary:?}"
+    );
     let v = verdicts(&cfg, &pool(None), &Rule::default());
     let find = |id: &str| {
         v.iter()

@@ -1,0 +1,127 @@
+//! The results table of committed audits (SPEC.md §21.7): per room, generator and variant
+//! of a primary claim, the primary claim, its within-pair null and the panel's rows that
+//! answer the averaging question — PSNR over all pixels (the paper's metric), PSNR, SSIM
+//! and GMSD on contested pixels, generation fidelity — each with n, median Δ, its interval
+//! and verdict, read from each audit's `audit.json`. README.md shows it as generated
+//! (`unseen audit-table`), and a test checks the two agree.
+
+use crate::error::{Error, Result};
+use serde_json::Value;
+use std::path::Path;
+
+/// The metrics a row group shows after the primary claim and its null, in this order, by
+/// their `audit.json` names: the paper's claim of the same variant, then the panel.
+const SHOWN: [&str; 5] = [
+    "psnr_all",
+    "psnr_contested",
+    "ssim_contested",
+    "gmsd_contested",
+    "psnr_fidelity",
+];
+
+/// The table (markdown, with its header) of the audits in `folders` (each holding an
+/// `audit.json`), in the order given.
+pub fn table(folders: &[&Path]) -> Result<String> {
+    let mut s = String::from(
+        "| room | generator | variant | metric | n | median Δ [95 % CI] | verdict |\n|---|---|---|---|---|---|---|\n",
+    );
+    for folder in folders {
+        let path = folder.join("audit.json");
+        let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+        let audit: Value = serde_json::from_slice(&bytes)
+            .map_err(|e| Error::parse(&path, format!("invalid JSON: {e}")))?;
+        let field = |v: &Value, key: &str| -> Result<String> {
+            v.get(key)
+                .and_then(Value::as_str)
+                .map(str::to_string)
+                .ok_or_else(|| Error::parse(&path, format!("no string '{key}'")))
+        };
+        let room = match audit.get("candidates").and_then(|c| c.get("name")) {
+            Some(Value::String(f)) => format!("{} ({f})", field(&audit, "dataset")?),
+            _ => field(&audit, "dataset")?,
+        };
+        let verdicts = audit
+            .get("verdicts")
+            .and_then(Value::as_array)
+            .ok_or_else(|| Error::parse(&path, "no 'verdicts' list"))?;
+        for primary in verdicts.iter().filter(|v| {
+            v.get("family")
+                .and_then(Value::as_str)
+                .is_some_and(|f| f.ends_with("-classes"))
+                && v.get("metric")
+                    .and_then(Value::as_str)
+                    .is_some_and(|m| m.ends_with("_contested"))
+        }) {
+            let (generator, variant) = (field(primary, "generator")?, field(primary, "variant")?);
+            let metric = field(primary, "metric")?;
+            let null = metric.replace("_contested", "_uncontested");
+            let same = |v: &&Value, m: &str| {
+                field(v, "generator").ok().as_deref() == Some(generator.as_str())
+                    && field(v, "variant").ok().as_deref() == Some(variant.as_str())
+                    && field(v, "metric").ok().as_deref() == Some(m)
+            };
+            let names = [metric.as_str(), null.as_str()]
+                .into_iter()
+                .chain(SHOWN.iter().copied());
+            for (k, m) in names.enumerate() {
+                let Some(v) = verdicts.iter().find(|v| same(v, m)) else {
+                    continue;
+                };
+                let mark = if k == 0 { "**" } else { "" };
+                s += &format!(
+                    "| {room} | {generator} | {variant} | {mark}{}{mark} | {} | {} | {} |\n",
+                    label(m),
+                    v.get("judged").and_then(Value::as_u64).unwrap_or(0),
+                    delta(v, m),
+                    field(v, "verdict")?
+                );
+            }
+        }
+    }
+    Ok(s)
+}
+
+/// A metric's label from its `audit.json` name (`detail_contested` → "detail ratio,
+/// contested").
+fn label(name: &str) -> String {
+    if name == "psnr_all" {
+        return "PSNR, all pixels (the paper's)".into();
+    }
+    if name == "psnr_fidelity" {
+        return "PSNR against own generations".into();
+    }
+    let (measure, region) = name.split_once('_').unwrap_or((name, ""));
+    let measure = match measure {
+        "detail" => "detail ratio",
+        "gmsd" => "GMSD",
+        "ssim" => "SSIM",
+        "psnr" => "PSNR",
+        m => m,
+    };
+    format!(
+        "{measure}, {}",
+        region.replace("diff_in_diff", "contested − uncontested")
+    )
+}
+
+/// `+0.1234 [+0.1000, +0.2000]` (dB with two decimals for PSNR), `–` where absent.
+fn delta(v: &Value, metric: &str) -> String {
+    let digits = if metric.starts_with("psnr") { 2 } else { 4 };
+    let unit = if metric.starts_with("psnr") {
+        " dB"
+    } else {
+        ""
+    };
+    let Some(m) = v.get("median_diff").and_then(Value::as_f64) else {
+        return "–".into();
+    };
+    let ci = match v
+        .get("ci")
+        .and_then(Value::as_array)
+        .map(|c| c.iter().filter_map(Value::as_f64).collect::<Vec<_>>())
+    {
+        Some(c) if c.len() == 2 => format!(" [{:+.digits$}, {:+.digits$}]", c[0], c[1]),
+        _ => String::new(),
+    };
+    format!("{m:+.digits$}{unit}{ci}")
+}
