@@ -260,7 +260,14 @@ impl Claim {
                     || pixels(|v| &v.contested) == 0
                     || (region != Region::Contested && pixels(|v| &v.uncontested) == 0)
             }),
-            Metric::Fidelity => p.not_applied(),
+            Metric::Fidelity => {
+                let measured = |r: &JobResult| {
+                    r.diagnostics
+                        .as_ref()
+                        .is_some_and(|d| !d.fidelity.is_empty())
+                };
+                p.not_applied() && measured(p.full) && measured(p.variant)
+            }
             _ => false,
         }
     }
