@@ -136,9 +136,7 @@ pub fn responses(verdicts: &[Verdict]) -> Vec<Response> {
     let mut keys: Vec<(DoseParam, &str)> = Vec::new();
     // The panel's secondary rows are tables only (SPEC.md §21.7); its primary claims and
     // their nulls are plotted.
-    let plotted = |v: &&Verdict| {
-        !matches!(v.claim.metric, Metric::Classes(..)) || v.claim.metric.is_primary()
-    };
+    let plotted = |v: &&Verdict| !v.claim.metric.is_panel() || v.claim.metric.is_primary();
     for v in verdicts.iter().filter(plotted) {
         if let Ok(GeneratorKind::Dose { param, .. }) = GeneratorKind::by_name(&v.generator) {
             let k = (param, v.claim.id);
