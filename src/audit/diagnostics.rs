@@ -196,17 +196,21 @@ pub fn diagnose(
     Ok((diagnostics, classes))
 }
 
+/// A stage-1 view of a finished run: its truth (camera and depth), its inpainting mask and
+/// its generation.
+type Stage1View<'a> = (
+    &'a crate::pipeline::generators::Truth,
+    Vec<bool>,
+    crate::io::image::ImageF32,
+);
+
 /// The final scene's [`FidelityView`] at each stage-1 view `(truth, mask, generation)`: a
 /// generated pixel is contested when its surface point (from the view's truth depth) is
 /// seen by another stage-1 view ([`seen_at`]) at a pixel of its mask.
 fn fidelity(
     inputs: &Inputs,
     scene: &Gaussians,
-    stage1: &[(
-        &crate::pipeline::generators::Truth,
-        Vec<bool>,
-        crate::io::image::ImageF32,
-    )],
+    stage1: &[Stage1View],
 ) -> Result<Vec<FidelityView>> {
     let opts = RenderOptions {
         background: inputs.background,
@@ -256,11 +260,7 @@ fn fidelity(
 fn generation(
     inputs: &Inputs,
     masks: &Path,
-    stage1: &[(
-        &crate::pipeline::generators::Truth,
-        Vec<bool>,
-        crate::io::image::ImageF32,
-    )],
+    stage1: &[Stage1View],
 ) -> Result<Option<(Generation, Vec<Vec<u8>>)>> {
     let existing = inputs
         .evaluation

@@ -743,16 +743,7 @@ pub fn median_seed(pool: &[JobResult], v: &Verdict) -> Option<u32> {
     let c = &v.claim;
     let pairs = pairs_against(pool, &v.generator, c.reference, c.variant);
     let mut best: Option<(f64, u32)> = None;
-    let mut k = 0;
-    while k < pairs.len() {
-        let seed = pairs[k].seed;
-        let group: Vec<f64> = pairs[k..]
-            .iter()
-            .take_while(|p| p.seed == seed)
-            .map(|p| c.diff(p))
-            .collect();
-        k += group.len();
-        let d = group.iter().sum::<f64>() / group.len() as f64;
+    for (seed, d) in seed_groups(&pairs, |p| c.diff(p)) {
         let off = (d - v.median_diff).abs();
         if (seed as usize) < v.planned && off.is_finite() && best.is_none_or(|b| off < b.0) {
             best = Some((off, seed));
@@ -1045,6 +1036,14 @@ pub fn seed_means(pairs: &[Pair], metric: Metric) -> Vec<f64> {
 
 /// [`seed_means`] of any paired difference `diff`.
 fn seed_diffs(pairs: &[Pair], diff: impl Fn(&Pair) -> f64) -> Vec<f64> {
+    seed_groups(pairs, diff)
+        .into_iter()
+        .map(|(_, d)| d)
+        .collect()
+}
+
+/// Per seed (pairs in seed order), the seed and the mean of its pairs' `diff`.
+fn seed_groups(pairs: &[Pair], diff: impl Fn(&Pair) -> f64) -> Vec<(u32, f64)> {
     let mut out = Vec::new();
     let mut k = 0;
     while k < pairs.len() {
@@ -1055,7 +1054,7 @@ fn seed_diffs(pairs: &[Pair], diff: impl Fn(&Pair) -> f64) -> Vec<f64> {
             .map(&diff)
             .collect();
         k += group.len();
-        out.push(group.iter().sum::<f64>() / group.len() as f64);
+        out.push((seed, group.iter().sum::<f64>() / group.len() as f64));
     }
     out
 }
