@@ -261,3 +261,205 @@ impl GradientBlocks {
         ((y / 2) * self.width + x / 2, 1.0 / inside as f64)
     }
 }
+
+/// Multi-view consistency (SPEC.md §21.7): a render and its alpha and expected depth at one
+/// camera, as [`consistency_errors`] warps one into another.
+#[derive(Clone, Copy, Debug)]
+pub struct DepthRender<'a> {
+    pub camera: &'a crate::camera::Camera,
+    /// RGB, row-major, clamped to [0, 1].
+    pub rgb: &'a [f32],
+    pub alpha: &'a [f32],
+    /// Expected depth (camera z).
+    pub depth: &'a [f32],
+}
+
+/// Pixels whose accumulated opacity is below this show mostly background: their depth is
+/// not a surface's, so they neither warp nor receive (SPEC.md §21.7).
+pub const CONSISTENCY_MIN_ALPHA: f32 = 0.5;
+
+/// A warped point and the receiving render see one surface when their depths agree within
+/// this share: twice the warp's own same-surface band (1 %), since each expected depth
+/// carries its own blend of splats along its ray (SPEC.md §21.7).
+pub const CONSISTENCY_DEPTH_TOL: f32 = 0.02;
+
+/// Per pixel of `to`, the squared colour difference (summed over RGB) between `from`'s
+/// render warped there with its expected depth (the DIBR warp, nearest footprint, SPEC.md
+/// §18) and `to`'s own render, where both see one surface: the warp landed a point whose
+/// depth is within [`CONSISTENCY_DEPTH_TOL`] of `to`'s expected depth and both pixels are
+/// opaque ([`CONSISTENCY_MIN_ALPHA`]); NaN elsewhere. A scene that fits disagreeing
+/// generations with view-dependent colour shows it here, where its renders from two nearby
+/// cameras disagree about one surface.
+pub fn consistency_errors(from: DepthRender, to: DepthRender) -> Result<Vec<f64>> {
+    use crate::error::Error;
+    use crate::warp::dibr::{WarpOptions, warp};
+    let check = |r: &DepthRender, which: &str| {
+        let n = r.camera.width as usize * r.camera.height as usize;
+        if r.rgb.len() != 3 * n || r.alpha.len() != n || r.depth.len() != n {
+            return Err(Error::invalid(format!(
+                "{which} render of camera '{}' ({}×{}): {} colour, {} alpha and {} depth values",
+                r.camera.name,
+                r.camera.width,
+                r.camera.height,
+                r.rgb.len(),
+                r.alpha.len(),
+                r.depth.len()
+            )));
+        }
+        Ok(n)
+    };
+    check(&from, "source")?;
+    let n = check(&to, "target")?;
+    let opaque = |a: f32| a >= CONSISTENCY_MIN_ALPHA;
+    let depth: Vec<f32> = from
+        .depth
+        .iter()
+        .zip(from.alpha)
+        .map(|(&z, &a)| if opaque(a) { z } else { 0.0 })
+        .collect();
+    let image = ImageF32 {
+        width: from.camera.width as usize,
+        height: from.camera.height as usize,
+        channels: 3,
+        data: from.rgb.to_vec(),
+    };
+    let w = warp(
+        &image,
+        &depth,
+        from.camera,
+        to.camera,
+        &WarpOptions::default(),
+    )?;
+    Ok((0..n)
+        .map(|p| {
+            let (wz, z) = (w.depth[p], to.depth[p]);
+            let seen = !w.holes[p]
+                && opaque(to.alpha[p])
+                && z > 0.0
+                && (wz - z).abs() <= CONSISTENCY_DEPTH_TOL * z;
+            if seen {
+                (0..3)
+                    .map(|c| {
+                        let d = f64::from(w.image.data[p * 3 + c] - to.rgb[p * 3 + c]);
+                        d * d
+                    })
+                    .sum()
+            } else {
+                f64::NAN
+            }
+        })
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::Camera;
+    use glam::DVec3;
+
+    /// Two cameras 0.3 apart along x facing a wall at z = 5 (camera z 5 at every pixel):
+    /// the target's render differs from the source's by `δ` in every channel but sees
+    /// something nearer in one box and little opacity in another; the source is
+    /// transparent in a third.
+    #[test]
+    fn consistency_compares_the_renders_of_one_surface_only() {
+        let (w, h) = (40usize, 30usize);
+        let cam = |name: &str, x: f64| {
+            let eye = DVec3::new(x, 0.0, 0.0);
+            Camera::look_at(
+                name,
+                w as u32,
+                h as u32,
+                1.0,
+                eye,
+                eye + DVec3::Z,
+                -DVec3::Y,
+            )
+            .unwrap()
+        };
+        let (a, b) = (cam("a", 0.0), cam("b", 0.3));
+        let n = w * h;
+        let inside = |p: usize, (x0, x1, y0, y1): (usize, usize, usize, usize)| {
+            (x0..x1).contains(&(p % w)) && (y0..y1).contains(&(p / w))
+        };
+        let (near, faint, clear) = ((20, 26, 5, 10), (20, 26, 15, 20), (30, 36, 22, 27));
+        let rgb_a = vec![0.25f32; 3 * n];
+        let rgb_b = vec![0.375f32; 3 * n];
+        let alpha_a: Vec<f32> = (0..n)
+            .map(|p| if inside(p, clear) { 0.4 } else { 1.0 })
+            .collect();
+        let alpha_b: Vec<f32> = (0..n)
+            .map(|p| if inside(p, faint) { 0.4 } else { 1.0 })
+            .collect();
+        let depth_a = vec![5.0f32; n];
+        let depth_b: Vec<f32> = (0..n)
+            .map(|p| if inside(p, near) { 2.5 } else { 5.0 })
+            .collect();
+        let from = DepthRender {
+            camera: &a,
+            rgb: &rgb_a,
+            alpha: &alpha_a,
+            depth: &depth_a,
+        };
+        let to = DepthRender {
+            camera: &b,
+            rgb: &rgb_b,
+            alpha: &alpha_b,
+            depth: &depth_b,
+        };
+        let e = consistency_errors(from, to).unwrap();
+        let want = 3.0 * f64::from(0.375f32 - 0.25).powi(2);
+        // b's view is a's shifted by 0.3 / 5 of the wall's width per unit depth: the
+        // focal length 20 / tan(0.5) ≈ 36.6 px, so 0.3 · 36.6 / 5 ≈ 2.2 px; a's clear box
+        // lands about 2 px to the left of where it is in a.
+        let shift = 0.3 * a.fx / 5.0;
+        let mut seen = 0;
+        for (p, &e) in e.iter().enumerate() {
+            let (x, y) = ((p % w) as f64 + 0.5, (p / w) as f64 + 0.5);
+            let from_x = x + shift; // where in a the wall point at b's pixel lies
+            let from_clear = (30.0..36.0).contains(&from_x) && (22.0..27.0).contains(&y);
+            let edge = (from_x - from_x.round()).abs() < 1e-3;
+            if inside(p, near) || inside(p, faint) || from_x >= w as f64 {
+                assert!(e.is_nan(), "pixel {p}: {e}");
+            } else if from_clear
+                && !edge
+                && (from_x - 30.0).abs() > 1.0
+                && (from_x - 36.0).abs() > 1.0
+            {
+                assert!(
+                    e.is_nan(),
+                    "pixel {p} reached from a's transparent box: {e}"
+                );
+            } else if !from_clear
+                && (from_x - 30.0).abs() > 1.0
+                && (from_x - 36.0).abs() > 1.0
+                && from_x < w as f64 - 1.0
+            {
+                assert_eq!(e, want, "pixel {p}");
+                seen += 1;
+            }
+        }
+        assert!(seen > n / 2, "{seen} of {n}");
+        // The same render on both sides agrees exactly wherever it is seen.
+        let same = consistency_errors(from, DepthRender { camera: &a, ..from }).unwrap();
+        assert!(same.iter().all(|e| e.is_nan() || *e == 0.0));
+        assert_eq!(
+            same.iter().filter(|e| e.is_nan()).count(),
+            alpha_a
+                .iter()
+                .filter(|&&x| x < CONSISTENCY_MIN_ALPHA)
+                .count()
+        );
+        // Wrong sizes are named.
+        let err = consistency_errors(
+            from,
+            DepthRender {
+                depth: &depth_b[1..],
+                ..to
+            },
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains("target render of camera 'b'"), "{err}");
+    }
+}

@@ -512,8 +512,9 @@ pub struct AuditArgs {
     #[arg(long, value_delimiter = ',')]
     generators: Vec<String>,
     /// A dose–response sweep, `PARAM=v1,v2,…` with PARAM hallucination, photometric,
-    /// depth_distortion or ghosting (the planted-harm control: true images shifted up to
-    /// 8 px per call) and levels in [0, 1] (e.g. `hallucination=0,0.25,0.5,0.75,1`): one
+    /// depth_distortion or ghosting (the planted-harm control: true images shifted by
+    /// level × 8 px per call, levels up to 2) and levels in [0, 1] (e.g.
+    /// `hallucination=0,0.25,0.5,0.75,1`): one
     /// generator per level (`dose-<param>-<percent>`), added to `--generators` (alone when
     /// none is given). Repeatable.
     #[arg(long)]

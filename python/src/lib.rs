@@ -959,6 +959,68 @@ fn gradient_similarity<'py>(
     Ok(out)
 }
 
+/// Multi-view consistency (SPEC.md §21.7) of a render at camera `target` with the render at
+/// camera `source` warped there: each render as RGB float32 `(H, W, 3)` (clamped to [0, 1]
+/// by the caller), its alpha and its expected depth, float32 `(H, W)`. Returns float64 `(H,
+/// W)`: per target pixel the squared colour difference summed over RGB where both renders
+/// see one surface, NaN elsewhere.
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+fn view_consistency<'py>(
+    py: Python<'py>,
+    source: &PyCamera,
+    rgb: &Bound<'py, PyAny>,
+    alpha: &Bound<'py, PyAny>,
+    depth: &Bound<'py, PyAny>,
+    target: &PyCamera,
+    target_rgb: &Bound<'py, PyAny>,
+    target_alpha: &Bound<'py, PyAny>,
+    target_depth: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyAny>> {
+    use unseen::eval::{DepthRender, consistency_errors};
+    let (from, to) = (&source.inner, &target.inner);
+    let read = |cam: &unseen::camera::Camera,
+                names: [&str; 3],
+                arrays: [&Bound<'py, PyAny>; 3]|
+     -> PyResult<(Vec<f32>, Vec<f32>, Vec<f32>)> {
+        let mut bound = vec![
+            ("H".to_string(), cam.height as usize),
+            ("W".to_string(), cam.width as usize),
+        ];
+        let image = [(None, "H"), (None, "W"), (Some(3), "3")];
+        let (_, c) = array::<f32>(names[0], arrays[0], &image, &mut bound)?;
+        let plane = [(None, "H"), (None, "W")];
+        let (_, a) = array::<f32>(names[1], arrays[1], &plane, &mut bound)?;
+        let (_, d) = array::<f32>(names[2], arrays[2], &plane, &mut bound)?;
+        Ok((c, a, d))
+    };
+    let s = read(from, ["rgb", "alpha", "depth"], [rgb, alpha, depth])?;
+    let t = read(
+        to,
+        ["target_rgb", "target_alpha", "target_depth"],
+        [target_rgb, target_alpha, target_depth],
+    )?;
+    let errors = py
+        .detach(|| {
+            consistency_errors(
+                DepthRender {
+                    camera: from,
+                    rgb: &s.0,
+                    alpha: &s.1,
+                    depth: &s.2,
+                },
+                DepthRender {
+                    camera: to,
+                    rgb: &t.0,
+                    alpha: &t.1,
+                    depth: &t.2,
+                },
+            )
+        })
+        .map_err(py_err)?;
+    to_numpy(py, errors, &[to.height as usize, to.width as usize])
+}
+
 /// Telea inpainting (SPEC.md §19.1, OpenCV's `INPAINT_TELEA` arithmetic) of `image`, uint8
 /// or float32 `(H, W, C)`, where the bool `(H, W)` `mask` is true, traced for a port's
 /// comparison. With `forced` (a port's output, the image's shape and dtype) every fill
@@ -1352,6 +1414,7 @@ fn _unseen(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(align, m)?)?;
     m.add_function(wrap_pyfunction!(ssim, m)?)?;
     m.add_function(wrap_pyfunction!(gradient_similarity, m)?)?;
+    m.add_function(wrap_pyfunction!(view_consistency, m)?)?;
     m.add_function(wrap_pyfunction!(inpaint, m)?)?;
     m.add_function(wrap_pyfunction!(frustum, m)?)?;
     m.add_function(wrap_pyfunction!(views, m)?)?;

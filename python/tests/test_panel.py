@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import unseen
+from unseen import testing as ut
 
 #: The cases: image sizes (odd sides included: GMSD pads them with a zero row or column).
 SIZES = [(60, 80), (61, 79), (33, 47), (2, 3)]
@@ -119,3 +120,71 @@ def test_bad_input_is_refused():
         unseen.gradient_similarity(r, t, mask=mask[:, :29].copy())
     with pytest.raises(ValueError, match="x: expected"):
         unseen.gradient_similarity(r[..., :2].copy(), t)
+
+
+def _consistency_case(seed):
+    """A source render (``warp_case``'s image and depth, with an alpha under ½ on a tenth of
+    its pixels) and a target render near what the source shows there: the warped colours
+    plus noise, the warped depths off by up to ±4 % (so the 2 % test goes both ways), an
+    alpha under ½ on a tenth; holes hold random colours and depths."""
+    case = ut.warp_case(seed)
+    rng = np.random.default_rng(np.random.PCG64(90_000 + seed))
+    src, tgt = case["source"], case["target"]
+    h, w = case["depth"].shape
+    th, tw = tgt["height"], tgt["width"]
+    rgb = np.clip(case["image"], 0, 1).astype(np.float32)
+    depth = np.nan_to_num(case["depth"], nan=0.0, posinf=0.0).astype(np.float32)
+    alpha = np.where(rng.random((h, w)) < 0.1, 0.3, 1.0).astype(np.float32)
+    ref = ut.warp_reference({**case, "image": rgb, "depth": np.where(alpha >= 0.5, depth, 0),
+                             "footprint": "nearest", "close_cracks": 0, "grow_holes": 0})
+    holes = ref["holes"].reshape(th, tw)
+    t_rgb = ref["image"].reshape(th, tw, 3) + 0.05 * rng.standard_normal((th, tw, 3))
+    t_rgb = np.where(holes[..., None], rng.random((th, tw, 3)), np.clip(t_rgb, 0, 1))
+    t_depth = ref["depth"].reshape(th, tw) * rng.uniform(0.96, 1.04, (th, tw))
+    t_depth = np.where(holes, rng.uniform(1, 5, (th, tw)), t_depth)
+    t_alpha = np.where(rng.random((th, tw)) < 0.1, 0.3, 1.0)
+    cams = [unseen.Camera(c["k"], c["viewmat"], c["width"], c["height"]) for c in (src, tgt)]
+    return (case, cams, rgb, alpha, depth,
+            t_rgb.astype(np.float32), t_alpha.astype(np.float32), t_depth.astype(np.float32))
+
+
+def _numpy_consistency(case, rgb, alpha, depth, t_rgb, t_alpha, t_depth):
+    """The definition (SPEC.md §21.7) in NumPy on the NumPy warp (``warp_reference``,
+    float64): the source's transparent pixels do not warp; a target pixel is compared where
+    a point landed, the target is opaque and the depths agree within 2 %."""
+    th, tw = t_depth.shape
+    w = ut.warp_reference({**case, "image": rgb, "depth": np.where(alpha >= 0.5, depth, 0),
+                           "footprint": "nearest", "close_cracks": 0, "grow_holes": 0})
+    wz = w["depth"].reshape(th, tw)
+    z = t_depth.astype(np.float64)
+    seen = ~w["holes"].reshape(th, tw) & (t_alpha >= 0.5) & (z > 0) & \
+        (np.abs(wz - z) <= 0.02 * z)
+    err = ((w["image"].reshape(th, tw, 3) - t_rgb) ** 2).sum(-1)
+    return np.where(seen, err, np.nan), np.abs(np.abs(wz - z) / np.where(z > 0, z, 1) - 0.02)
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_view_consistency_is_the_definition(seed):
+    case, (src, tgt), rgb, alpha, depth, t_rgb, t_alpha, t_depth = _consistency_case(seed)
+    got = unseen.view_consistency(src, rgb, alpha, depth, tgt, t_rgb, t_alpha, t_depth)
+    want, band = _numpy_consistency(case, rgb, alpha, depth, t_rgb, t_alpha, t_depth)
+    # The warp's decisions within a port's float noise (its `aside` map), and the 2 % test
+    # within float32 rounding of its limit, may go either way in float64.
+    aside = unseen.warp(rgb, np.where(alpha >= 0.5, depth, 0).astype(np.float32), src,
+                        tgt)["aside"] != 0
+    decided = ~aside & (band > 1e-5)
+    assert decided.mean() > 0.75
+    assert (np.isnan(got) == np.isnan(want))[decided].all()
+    both = decided & ~np.isnan(want)
+    assert both.sum() > 0.1 * both.size and np.isnan(want[decided]).sum() > 0
+    # Float32 colour differences squared in float64: within an ulp of the difference.
+    np.testing.assert_allclose(got[both], want[both], rtol=1e-6, atol=1e-12)
+
+
+def test_view_consistency_refuses_bad_input():
+    _, (src, tgt), rgb, alpha, depth, t_rgb, t_alpha, t_depth = _consistency_case(0)
+    with pytest.raises(ValueError, match="target_depth: expected"):
+        unseen.view_consistency(src, rgb, alpha, depth, tgt, t_rgb, t_alpha, t_depth[1:])
+    with pytest.raises(ValueError, match="rgb: expected"):
+        unseen.view_consistency(src, rgb[..., :2].copy(), alpha, depth, tgt, t_rgb, t_alpha,
+                                t_depth)

@@ -30,6 +30,11 @@ pub enum DoseParam {
 /// The ghosting sweep's shift at level 1, in pixels of the generated image.
 pub const GHOST_MAX_PX: f32 = 8.0;
 
+/// The ghosting sweep's highest level: its unit (pixels) has no natural end, and a room
+/// whose unseen surfaces carry little texture needs more than [`GHOST_MAX_PX`] for two
+/// displaced generations to differ (SPEC.md §21.6).
+pub const GHOST_MAX_LEVEL: u8 = 200;
+
 crate::error::text_enum!(DoseParam, "sweep parameter", {
     Hallucination => "hallucination",
     Photometric => "photometric",
@@ -47,9 +52,18 @@ impl DoseParam {
             DoseParam::Ghosting => "dose-ghosting",
         }
     }
+
+    /// The highest level, in percent: 100 (full) but for ghosting ([`GHOST_MAX_LEVEL`]).
+    pub fn max_percent(self) -> u8 {
+        match self {
+            DoseParam::Ghosting => GHOST_MAX_LEVEL,
+            _ => 100,
+        }
+    }
 }
 
-/// `PARAM=v1,v2,…` (levels in [0, 1], at most two decimals) → its generators.
+/// `PARAM=v1,v2,…` (levels in [0, 1], ghosting's in [0, 2]; at most two decimals) → its
+/// generators.
 pub fn parse_sweep(text: &str) -> Result<Vec<GeneratorKind>> {
     let bad = |why: String| Error::invalid(format!("--sweep '{text}': {why}"));
     let (param, values) = text.split_once('=').ok_or_else(|| {
@@ -62,9 +76,11 @@ pub fn parse_sweep(text: &str) -> Result<Vec<GeneratorKind>> {
             .trim()
             .parse()
             .map_err(|_| bad(format!("'{v}' is not a number")))?;
-        let percent = crate::pipeline::config::whole_percent(x).ok_or_else(|| {
+        let max = param.max_percent();
+        let percent = crate::pipeline::config::whole_percent(x, max).ok_or_else(|| {
             bad(format!(
-                "level {v} is not in [0, 1] with at most two decimals"
+                "level {v} is not in [0, {}] with at most two decimals",
+                f64::from(max) / 100.0
             ))
         })?;
         let g = GeneratorKind::Dose { param, percent };
@@ -225,7 +241,9 @@ pub fn plot(r: &Response) -> String {
     if y1 - y0 < 1e-9 {
         (y0, y1) = (y0 - 1.0, y1 + 1.0);
     }
-    let px = |x: f64| m + x * (w - 2.0 * m);
+    // Levels run to 1, or to the sweep's highest where it goes beyond (ghosting).
+    let x1 = r.levels.iter().fold(1.0f64, |a, l| a.max(l.level));
+    let px = |x: f64| m + x / x1 * (w - 2.0 * m);
     let py = |y: f64| h - m - (y - y0) / (y1 - y0) * (h - 2.0 * m);
     let mut s = format!(
         "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" font-family=\"sans-serif\" font-size=\"11\">\n<text x=\"{m}\" y=\"16\">{}: Δ{} against {}</text>\n",
@@ -241,12 +259,12 @@ pub fn plot(r: &Response) -> String {
         "<line x1=\"{:.1}\" y1=\"{:.1}\" x2=\"{:.1}\" y2=\"{:.1}\" stroke=\"#888\" stroke-dasharray=\"4 3\"/>\n",
         px(0.0),
         py(null),
-        px(1.0),
+        px(x1),
         py(null)
     );
-    for (x, label) in [(0.0, "0"), (0.5, "0.5"), (1.0, "1")] {
+    for x in [0.0, x1 / 2.0, x1] {
         s += &format!(
-            "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{label}</text>\n",
+            "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{x}</text>\n",
             px(x),
             h - m + 16.0
         );
@@ -377,9 +395,15 @@ mod tests {
         for n in &names {
             assert_eq!(&GeneratorKind::by_name(n).unwrap().name(), n);
         }
+        // Ghosting's unit is pixels, with levels up to 2 (16 px).
+        let g = parse_sweep("ghosting=1,2").unwrap();
+        let names: Vec<String> = g.iter().map(|g| g.name()).collect();
+        assert_eq!(names, ["dose-ghosting-100", "dose-ghosting-200"]);
+        assert_eq!(GeneratorKind::by_name("dose-ghosting-200").unwrap(), g[1]);
         for bad in [
             "dose-hallucination-050",
             "dose-hallucination-101",
+            "dose-ghosting-201",
             "dose-colour-10",
         ] {
             assert!(GeneratorKind::by_name(bad).is_err(), "{bad}");
@@ -391,7 +415,7 @@ mod tests {
             ("photometric=0.125", "two decimals"),
             ("depth_distortion=0.5,0.5", "twice"),
             ("photometric=x", "not a number"),
-            ("ghosting=2", "not in [0, 1]"),
+            ("ghosting=2.5", "not in [0, 2]"),
         ] {
             let e = parse_sweep(bad).unwrap_err().to_string();
             assert!(e.contains(says), "{bad}: {e}");

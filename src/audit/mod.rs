@@ -235,15 +235,16 @@ impl GeneratorKind {
                     .strip_prefix("dose-")
                     .and_then(|rest| rest.rsplit_once('-'))
                     .and_then(|(param, percent)| {
+                        let param: dose::DoseParam = param.parse().ok()?;
                         Some(GeneratorKind::Dose {
-                            param: param.parse().ok()?,
-                            percent: percent.parse().ok().filter(|&p| p <= 100)?,
+                            param,
+                            percent: percent.parse().ok().filter(|&p| p <= param.max_percent())?,
                         })
                     })
                     .filter(|g| g.name() == name);
                 dose.ok_or_else(|| {
                     Error::invalid(format!(
-                        "unknown generator '{name}' (classical, truth-none, truth-low, truth-high, truth-low+hallucinating+relative, truth-high+hallucinating+relative, dose-<hallucination|photometric|depth_distortion|ghosting>-<0..100>)"
+                        "unknown generator '{name}' (classical, truth-none, truth-low, truth-high, truth-low+hallucinating+relative, truth-high+hallucinating+relative, dose-<hallucination|photometric|depth_distortion>-<0..100>, dose-ghosting-<0..200>)"
                     ))
                 })
             }

@@ -5,10 +5,11 @@
 //! on uncontested ones, is what conflicts do, with everything global to the runs removed.
 
 use crate::error::{Error, Result};
+use crate::eval::{DepthRender, consistency_errors};
 use crate::gaussian::Gaussians;
 use crate::pipeline::Inputs;
 use crate::pipeline::evaluate::{CLASS_CONTESTED, CLASS_UNCONTESTED, ClassSums, ScoredView};
-use crate::raster::RenderOptions;
+use crate::raster::{Outputs, RenderOptions, render};
 
 /// A run paired with its seed's `full` run (same generator, same numerics revision): both
 /// final scenes scored on this run's pixel classes.
@@ -31,7 +32,9 @@ pub struct PairView {
 
 /// Score `reference` and `variant` at every evaluation view of `inputs` on `classes`, the
 /// variant run's class of each evaluation pixel ([`super::jobs::CLASSES_FILE`]: one byte
-/// per pixel, the views in evaluation order).
+/// per pixel, the views in evaluation order): each class's PSNR, SSIM and gradient sums,
+/// and its multi-view consistency against the nearest other evaluation view
+/// ([`neighbours`], [`crate::eval::consistency_errors`]).
 pub fn score_pair(
     inputs: &Inputs,
     reference: &Gaussians,
@@ -39,11 +42,9 @@ pub fn score_pair(
     classes: &[u8],
 ) -> Result<Vec<PairView>> {
     let data = &inputs.data;
-    let pixels: usize = inputs
-        .evaluation
-        .iter()
-        .map(|&i| data.views[i].image.width * data.views[i].image.height)
-        .sum();
+    let views: Vec<&crate::dataset::View> =
+        inputs.evaluation.iter().map(|&i| &data.views[i]).collect();
+    let pixels: usize = views.iter().map(|v| v.image.width * v.image.height).sum();
     if classes.len() != pixels {
         return Err(Error::invalid(format!(
             "{} pixel classes for {pixels} evaluation pixels",
@@ -52,37 +53,99 @@ pub fn score_pair(
     }
     let opts = RenderOptions {
         background: inputs.background,
+        outputs: Outputs {
+            rgb: true,
+            alpha: true,
+            expected_depth: true,
+            ..Outputs::RGB
+        },
         ..RenderOptions::default()
     };
+    // Both scenes at every view: the scored render, with its alpha and expected depth.
+    let mut seen: [Vec<Seen>; 2] = [Vec::new(), Vec::new()];
+    for (scene, out) in [reference, variant].into_iter().zip(&mut seen) {
+        for v in &views {
+            let r = render(scene, &v.camera, &opts)?;
+            let (w, h) = (r.width, r.height);
+            let scored = ScoredView::of_render(r.rgb.expect("rgb"), &v.image.data, w, h);
+            out.push(Seen {
+                scored,
+                alpha: r.alpha.expect("alpha"),
+                depth: r.expected_depth.expect("expected depth"),
+            });
+        }
+    }
+    let neighbour = neighbours(&views.iter().map(|v| &v.camera).collect::<Vec<_>>());
     let mut at = 0;
-    let mut out = Vec::with_capacity(inputs.evaluation.len());
-    for &i in &inputs.evaluation {
-        let v = &data.views[i];
+    let mut out = Vec::with_capacity(views.len());
+    for (k, v) in views.iter().enumerate() {
         let n = v.image.width * v.image.height;
         let class = &classes[at..at + n];
         at += n;
-        let scored = [
-            ScoredView::new(reference, v, &opts)?,
-            ScoredView::new(variant, v, &opts)?,
-        ];
+        let mut errors: [Option<Vec<f64>>; 2] = [None, None];
+        if let Some(from) = neighbour[k] {
+            for (e, side) in errors.iter_mut().zip(&seen) {
+                *e = Some(consistency_errors(
+                    side[from].at(&views[from].camera),
+                    side[k].at(&v.camera),
+                )?);
+            }
+        }
         let mut view = PairView {
             view: v.camera.name.clone(),
             contested: Default::default(),
             uncontested: Default::default(),
         };
+        for s in view.contested.iter_mut().chain(&mut view.uncontested) {
+            s.consistency = Some(Default::default());
+        }
         for (p, &c) in class.iter().enumerate() {
             let sums = match c {
                 CLASS_CONTESTED => &mut view.contested,
                 CLASS_UNCONTESTED => &mut view.uncontested,
                 _ => continue,
             };
-            for (s, run) in sums.iter_mut().zip(&scored) {
-                s.add(run, p);
+            for ((s, side), e) in sums.iter_mut().zip(&seen).zip(&errors) {
+                s.add(&side[k].scored, p);
+                s.add_consistency(e.as_ref().map_or(f64::NAN, |e| e[p]));
             }
         }
         out.push(view);
     }
     Ok(out)
+}
+
+/// A scene's scored render at a view, with the alpha and expected depth that multi-view
+/// consistency warps by.
+struct Seen<'a> {
+    scored: ScoredView<'a>,
+    alpha: Vec<f32>,
+    depth: Vec<f32>,
+}
+
+impl Seen<'_> {
+    fn at<'b>(&'b self, camera: &'b crate::camera::Camera) -> DepthRender<'b> {
+        DepthRender {
+            camera,
+            rgb: &self.scored.rgb,
+            alpha: &self.alpha,
+            depth: &self.depth,
+        }
+    }
+}
+
+/// Each camera's nearest other camera by centre (ties: the earlier), whose render
+/// multi-view consistency warps into it; none for a lone camera.
+pub fn neighbours(cameras: &[&crate::camera::Camera]) -> Vec<Option<usize>> {
+    (0..cameras.len())
+        .map(|k| {
+            (0..cameras.len())
+                .filter(|&l| l != k)
+                .map(|l| (cameras[l].center.distance_squared(cameras[k].center), l))
+                .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)))
+                .map(|(_, l)| l)
+        })
+        .collect()
 }
 
 /// The folder of an audit's contact sheets, `sheets/<generator>/<variant>/seed-<s>.png`.

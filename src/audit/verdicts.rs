@@ -33,10 +33,19 @@ pub enum Measure {
     Gmsd,
     /// The render's gradient energy over the truth's.
     Detail,
+    /// Multi-view consistency: PSNR of the nearest other evaluation view's render, warped
+    /// here with its depth, against this view's render, where both see one surface.
+    Consistency,
 }
 
 impl Measure {
-    pub const ALL: [Measure; 4] = [Measure::Psnr, Measure::Ssim, Measure::Gmsd, Measure::Detail];
+    pub const ALL: [Measure; 5] = [
+        Measure::Psnr,
+        Measure::Ssim,
+        Measure::Gmsd,
+        Measure::Detail,
+        Measure::Consistency,
+    ];
 
     /// The measure over a set of views' sums of one class.
     pub fn pooled<'a>(self, sums: impl IntoIterator<Item = &'a ClassSums>) -> f64 {
@@ -45,16 +54,17 @@ impl Measure {
             Measure::Ssim => ClassSums::ssim(sums),
             Measure::Gmsd => ClassSums::gmsd(sums),
             Measure::Detail => ClassSums::detail_ratio(sums),
+            Measure::Consistency => ClassSums::consistency_psnr(sums),
         }
     }
 
     /// How much better `full` is than `variant` (positive: the full method better): the
-    /// difference for PSNR and SSIM, its negative for GMSD (a deviation: lower is
+    /// difference for PSNR, SSIM and consistency (a PSNR), its negative for GMSD (a deviation: lower is
     /// better), and for the detail ratio how much closer to 1 it is in log
     /// (`|ln r_variant| − |ln r_full|`: averaging shows below 1, noise above).
     pub fn better(self, full: f64, variant: f64) -> f64 {
         match self {
-            Measure::Psnr | Measure::Ssim => full - variant,
+            Measure::Psnr | Measure::Ssim | Measure::Consistency => full - variant,
             Measure::Gmsd => variant - full,
             Measure::Detail => variant.ln().abs() - full.ln().abs(),
         }
@@ -66,6 +76,7 @@ impl Measure {
             Measure::Ssim => "ssim",
             Measure::Gmsd => "gmsd",
             Measure::Detail => "detail",
+            Measure::Consistency => "consistency",
         }
     }
 
@@ -75,6 +86,7 @@ impl Measure {
             Measure::Ssim => "SSIM",
             Measure::Gmsd => "GMSD",
             Measure::Detail => "detail ratio",
+            Measure::Consistency => "multi-view consistency",
         }
     }
 }
@@ -252,9 +264,17 @@ impl Claim {
     /// plan, not as a unit, as a same computation is (SPEC.md §21.7).
     fn nowhere_to_act(&self, p: &Pair) -> bool {
         match self.metric {
-            Metric::Classes(_, region) => self.scored(p).is_some_and(|views| {
+            Metric::Classes(measure, region) => self.scored(p).is_some_and(|views| {
+                // The pixels the measure has on the variant's side: for consistency, those
+                // seen on one surface from the neighbouring view.
                 let pixels = |f: fn(&PairView) -> &[ClassSums; 2]| {
-                    views.iter().map(|v| f(v)[1].pixels).sum::<u64>()
+                    views
+                        .iter()
+                        .map(|v| match measure {
+                            Measure::Consistency => f(v)[1].consistency.map_or(0, |c| c.pixels),
+                            _ => f(v)[1].pixels,
+                        })
+                        .sum::<u64>()
                 };
                 p.not_applied()
                     || pixels(|v| &v.contested) == 0
@@ -274,9 +294,19 @@ impl Claim {
 
     /// A panel claim's views: the variant run's pair with this claim's reference run, when
     /// it scored the very scene the pool holds for it (none otherwise).
+    /// A consistency claim reads only pairs that recorded it (samples written before it
+    /// was have none: SPEC.md §21.7).
     fn scored<'a>(&self, p: &Pair<'a>) -> Option<&'a [PairView]> {
         let pair = p.variant.pair.as_ref()?;
-        (pair.reference == self.reference.name()
+        let recorded = match self.metric {
+            Metric::Classes(Measure::Consistency, _) => pair
+                .views
+                .iter()
+                .all(|v| v.contested.iter().all(|s| s.consistency.is_some())),
+            _ => true,
+        };
+        (recorded
+            && pair.reference == self.reference.name()
             && !p.full.scene_sha256.is_empty()
             && pair.reference_scene == p.full.scene_sha256)
             .then_some(&pair.views[..])
@@ -494,7 +524,7 @@ macro_rules! class_claim {
 /// The mechanism claims where conflicts act (SPEC.md §21.7, registered before their
 /// samples): per variant the primary claim ([`PRIMARY_MEASURE`] on contested pixels), its
 /// within-pair null (on uncontested pixels), then the secondary panel.
-pub const CLASS_CLAIMS: [Claim; 26] = [
+pub const CLASS_CLAIMS: [Claim; 32] = [
     class_claim!(
         "independent views, detail contested",
         EvenViews,
@@ -637,6 +667,42 @@ pub const CLASS_CLAIMS: [Claim; 26] = [
         "conflicts cost at equal coverage, GMSD uncontested",
         ConflictingViews,
         Gmsd,
+        Uncontested
+    ),
+    class_claim!(
+        "independent views, multi-view consistency contested",
+        EvenViews,
+        Consistency,
+        Contested
+    ),
+    class_claim!(
+        "independent views, multi-view consistency contested − uncontested",
+        EvenViews,
+        Consistency,
+        DiffInDiff
+    ),
+    class_claim!(
+        "independent views, multi-view consistency uncontested",
+        EvenViews,
+        Consistency,
+        Uncontested
+    ),
+    class_claim!(
+        "conflicts cost at equal coverage, multi-view consistency contested",
+        ConflictingViews,
+        Consistency,
+        Contested
+    ),
+    class_claim!(
+        "conflicts cost at equal coverage, multi-view consistency contested − uncontested",
+        ConflictingViews,
+        Consistency,
+        DiffInDiff
+    ),
+    class_claim!(
+        "conflicts cost at equal coverage, multi-view consistency uncontested",
+        ConflictingViews,
+        Consistency,
         Uncontested
     ),
     Claim {

@@ -234,10 +234,10 @@ impl Hallucination {
     }
 }
 
-/// `x` in [0, 1] as a whole percentage, if it is one (to 1e-9): a swept level.
-pub fn whole_percent(x: f64) -> Option<u8> {
+/// `x` in [0, `max` / 100] as a whole percentage, if it is one (to 1e-9): a swept level.
+pub fn whole_percent(x: f64, max: u8) -> Option<u8> {
     let p = (x * 100.0).round();
-    ((0.0..=1.0).contains(&x) && (x * 100.0 - p).abs() < 1e-9).then_some(p as u8)
+    ((0.0..=f64::from(max)).contains(&p) && (x * 100.0 - p).abs() < 1e-9).then_some(p as u8)
 }
 
 /// In a configuration: `"none"`, `"low"`, `"high"`, or a level in [0, 1] as a number
@@ -271,7 +271,7 @@ impl<'de> serde::Deserialize<'de> for Hallucination {
                     "unknown hallucination '{n}' (none, low, high, or a level in [0, 1])"
                 ))),
             },
-            Form::Level(x) => whole_percent(x)
+            Form::Level(x) => whole_percent(x, 100)
                 .map(Hallucination::from_percent)
                 .ok_or_else(|| {
                     D::Error::custom(format!(

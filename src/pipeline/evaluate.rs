@@ -87,6 +87,19 @@ pub struct ClassSums {
     pub render_gradient_energy: f64,
     #[serde(default)]
     pub truth_gradient_energy: f64,
+    /// Multi-view consistency over the class ([`crate::eval::consistency_errors`]): recorded
+    /// for a pair's classes only, absent before it was (and then not written).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub consistency: Option<Consistency>,
+}
+
+/// A class's multi-view consistency sums (SPEC.md §21.7): its pixels that the nearest other
+/// evaluation view's render reached on one surface, and Σ over them and the three channels
+/// of the squared colour difference.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Consistency {
+    pub pixels: u64,
+    pub squared_error: f64,
 }
 
 impl ClassSums {
@@ -141,6 +154,35 @@ impl ClassSums {
             t += c.truth_gradient_energy;
         }
         if t > 0.0 { r / t } else { f64::NAN }
+    }
+
+    /// Pooled consistency PSNR of a set of views' sums: `−10·log10(Σ squared_error / (3·Σ
+    /// pixels))` of the neighbours' warped renders against the views' own (NaN with no
+    /// pixel, or where a view did not record it).
+    pub fn consistency_psnr<'a>(sums: impl IntoIterator<Item = &'a ClassSums>) -> f64 {
+        let (mut se, mut n) = (0f64, 0u64);
+        for s in sums {
+            let Some(c) = s.consistency else {
+                return f64::NAN;
+            };
+            se += c.squared_error;
+            n += c.pixels;
+        }
+        if n == 0 {
+            f64::NAN
+        } else {
+            -10.0 * (se / (3 * n) as f64).log10()
+        }
+    }
+
+    /// Add one pixel's consistency error (the sum over RGB; NaN: the pixel is not seen on
+    /// one surface from the neighbour, and only starts the record).
+    pub fn add_consistency(&mut self, error: f64) {
+        let c = self.consistency.get_or_insert_with(Consistency::default);
+        if error.is_finite() {
+            c.pixels += 1;
+            c.squared_error += error;
+        }
     }
 
     /// Add pixel `p` of a scored view: its squared error over the three channels (render
@@ -213,20 +255,23 @@ impl<'a> ScoredView<'a> {
                 w * h * 3
             )));
         }
-        let rgb: Vec<f32> = render(scene, camera, opts)?
-            .rgb
-            .expect("rgb")
-            .iter()
-            .map(|x| x.clamp(0.0, 1.0))
-            .collect();
-        Ok(ScoredView {
+        let rgb = render(scene, camera, opts)?.rgb.expect("rgb");
+        Ok(ScoredView::of_render(rgb, truth, w, h))
+    }
+
+    /// Score a `w × h` render's RGB (clamped here) against `truth`, of the same size.
+    pub fn of_render(mut rgb: Vec<f32>, truth: &'a [f32], w: usize, h: usize) -> ScoredView<'a> {
+        for x in &mut rgb {
+            *x = x.clamp(0.0, 1.0);
+        }
+        ScoredView {
             width: w,
             height: h,
             ssim: ssim_map(&rgb, truth, w, h, 3),
             gradients: crate::eval::GradientBlocks::new(&rgb, truth, w, h),
             rgb,
             truth,
-        })
+        }
     }
 }
 

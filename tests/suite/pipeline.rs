@@ -836,13 +836,19 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
         let (g, _) = unseen::gaussian::ply::read_ply(&folder.join(&r.final_scene)).unwrap();
         let pair = audit::pairs::score_pair(&inputs, &g, &g, &classes).unwrap();
         assert_eq!(pair.len(), r.last.views.len());
-        let (mut contested, mut uncontested, mut whole) = (0, 0, 0);
+        let (mut contested, mut uncontested, mut whole, mut mutual) = (0, 0, 0, 0);
         for (p, v) in pair.iter().zip(&r.last.views) {
             assert_eq!(p.view, v.view);
             assert_eq!(p.contested[0], p.contested[1]);
             assert_eq!(p.uncontested[0], p.uncontested[1]);
             contested += p.contested[0].pixels;
             uncontested += p.uncontested[0].pixels;
+            // Multi-view consistency recorded on every class, over pixels of the class.
+            for s in [&p.contested[0], &p.uncontested[0]] {
+                let c = s.consistency.expect("recorded");
+                assert!(c.pixels <= s.pixels && c.squared_error >= 0.0, "{c:?}");
+            }
+            mutual += p.uncontested[0].consistency.unwrap().pixels;
             let both = p.contested[0].squared_error + p.uncontested[0].squared_error;
             let pixels = p.contested[0].pixels + p.uncontested[0].pixels;
             assert!(pixels <= v.extrapolated.pixels);
@@ -858,6 +864,10 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
         assert!(
             whole > 0,
             "no view with truth depth on every extrapolated pixel"
+        );
+        assert!(
+            mutual > 0,
+            "no unseen pixel seen on one surface by a neighbour"
         );
         assert_eq!(
             (contested, uncontested),
@@ -1298,6 +1308,7 @@ fn the_panel_judges_both_runs_on_the_variants_contested_pixels() {
         gms_deficit_squares: 100.0 * (sd * sd + m * m),
         render_gradient_energy: 100.0 * r,
         truth_gradient_energy: 100.0,
+        consistency: None,
     };
     let pool = |mismatched: Option<u32>| {
         let mut pool = Vec::new();
@@ -1444,6 +1455,63 @@ fn the_panel_judges_both_runs_on_the_variants_contested_pixels() {
     assert!(
         v.iter().filter(|v| v.family == "truth-panel").count() == 11,
         "{v:#?}"
+    );
+
+    // Pairs recorded before multi-view consistency have no record: its claims skip them.
+    assert!(
+        !v.iter()
+            .any(|v| v.claim.id.contains("multi-view consistency")),
+        "{v:#?}"
+    );
+    // Recorded: each run's renders agree with their neighbours' to `se` on 100 pixels; the
+    // variant's less on contested pixels. A seed whose contested pixels no neighbour sees
+    // on one surface is nowhere to act.
+    let with_consistency = |blind: Option<u32>| {
+        let mut pool = pool(None);
+        for r in pool.iter_mut().filter(|r| r.pair.is_some()) {
+            let (seed, e) = (r.seed, 0.001 * f64::from(r.seed));
+            for v in &mut r.pair.as_mut().unwrap().views {
+                let c = |pixels: u64, squared_error: f64| {
+                    Some(unseen::pipeline::evaluate::Consistency {
+                        pixels,
+                        squared_error,
+                    })
+                };
+                let contested = if blind == Some(seed) { 0 } else { 100 };
+                v.contested[0].consistency = c(contested, 0.3);
+                v.contested[1].consistency = c(contested, 0.6 + e);
+                v.uncontested[0].consistency = c(100, 0.3);
+                v.uncontested[1].consistency = c(100, 0.3 + if seed % 2 == 0 { e } else { -e });
+            }
+        }
+        pool
+    };
+    let v = verdicts(&cfg, &with_consistency(None), &Rule::default());
+    let mvc = |v: &[unseen::audit::Verdict], id: &str| {
+        v.iter()
+            .find(|v| {
+                v.claim.id
+                    == format!("conflicts cost at equal coverage, multi-view consistency {id}")
+            })
+            .cloned()
+            .unwrap_or_else(|| panic!("{id}: {v:#?}"))
+    };
+    let contested = mvc(&v, "contested");
+    assert_eq!(contested.family, "truth-panel");
+    let want = 0.5 * (10.0 * (0.607f64 / 0.3).log10() + 10.0 * (0.608f64 / 0.3).log10());
+    assert!(
+        (contested.median_diff - want).abs() < 1e-12,
+        "{contested:?}"
+    );
+    assert!(contested.verdict.starts_with("holds"), "{contested:?}");
+    assert!(mvc(&v, "uncontested").verdict.starts_with("inconclusive"));
+    assert_eq!(v.iter().filter(|v| v.family == "truth-panel").count(), 14);
+    let v = verdicts(&cfg, &with_consistency(Some(3)), &Rule::default());
+    let contested = mvc(&v, "contested");
+    assert_eq!(
+        (contested.judged, contested.same_computation),
+        (15, 1),
+        "{contested:?}"
     );
 
     // The report: its own section with each metric's unit, the split, the names in JSON.

@@ -49,6 +49,7 @@ from ._unseen import (
     save_ply,
     ssim,
     versions as _versions,
+    view_consistency,
     views,
     warp,
 )
@@ -73,6 +74,7 @@ __all__ = [
     "save_ply",
     "ssim",
     "versions",
+    "view_consistency",
     "views",
     "warp",
 ]
