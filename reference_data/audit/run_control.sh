@@ -31,7 +31,7 @@ nice -n 19 "$bin" audit "$dataset" --preset quick "${family[@]}" \
 cp "$work"/{samples.json,audit.json,audit.md,inconsistency.svg} "$out/"
 cp "$work"/dose-*.svg "$out/" 2>/dev/null || true
 # The contact sheets audit.md shows (each primary claim's at its median seed).
-grep -o '](sheets/[^)]*\.png)' "$work/audit.md" | sed 's/^](//; s/)$//' | while read -r f; do
+{ grep -o '](sheets/[^)]*\.png)' "$work/audit.md" || true; } | sed 's/^](//; s/)$//' | while read -r f; do
   mkdir -p "$out/$(dirname "$f")" && cp "$work/$f" "$out/$f"
 done
 rm -rf "$work/runs" "$work/cache" "$work/original"

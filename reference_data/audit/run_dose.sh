@@ -9,6 +9,7 @@
 # LEVELS overrides the levels (default 0,0.25,0.5,0.75,1). FAMILY names a candidate family
 # of the room (SPEC.md §20.7, e.g. FAMILY=ring-13: the lounge's bridge views rarely give a
 # colliding set that qualifies), into reference_data/audit/<room>-<family>-dose-<param>/.
+# OUT names another folder (e.g. a re-run with the panel beside an earlier revision's).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 room="$1"; param="$2"; seeds="$3"; bin="${4:-target/release/unseen}"
@@ -23,6 +24,7 @@ if [ -n "${FAMILY:-}" ]; then
   family=(--candidates "$FAMILY")
   out="reference_data/audit/$room-$FAMILY-dose-$param"
 fi
+out="${OUT:-$out}"
 work="${WORK:-/tmp/unseen-dose-$room${FAMILY:+-$FAMILY}-$param}"
 mkdir -p "$work" "$out"
 cp "$out/samples.json" "$work/" 2>/dev/null || true
@@ -30,4 +32,8 @@ nice -n 19 "$bin" audit "$dataset" --preset quick "${family[@]}" \
   --variants full,even_views,conflicting_views --sweep "$param=$levels" \
   --seeds "$seeds" --threads 2 --out "$work"
 cp "$work"/{samples.json,audit.json,audit.md,inconsistency.svg} "$work"/dose-*.svg "$out/"
+# The contact sheets audit.md shows (each primary claim's at its median seed).
+{ grep -o '](sheets/[^)]*\.png)' "$work/audit.md" || true; } | sed 's/^](//; s/)$//' | while read -r f; do
+  mkdir -p "$out/$(dirname "$f")" && cp "$work/$f" "$out/$f"
+done
 rm -rf "$work/runs" "$work/cache" "$work/original"

@@ -1,7 +1,7 @@
 //! The results table of committed audits (SPEC.md §21.7): per room, generator and variant
 //! of a primary claim, the primary claim, its within-pair null and the panel's rows that
 //! answer the averaging question — PSNR over all pixels (the paper's metric), PSNR, SSIM
-//! and GMSD on contested pixels, generation fidelity — each with n, median Δ, its interval
+//! and GMSD on contested pixels, multi-view consistency there, generation fidelity — each with n, median Δ, its interval
 //! and verdict, read from each audit's `audit.json`. README.md shows it as generated
 //! (`unseen audit-table`), and a test checks the two agree.
 
@@ -11,11 +11,12 @@ use std::path::Path;
 
 /// The metrics a row group shows after the primary claim and its null, in this order, by
 /// their `audit.json` names: the paper's claim of the same variant, then the panel.
-const SHOWN: [&str; 5] = [
+const SHOWN: [&str; 6] = [
     "psnr_all",
     "psnr_contested",
     "ssim_contested",
     "gmsd_contested",
+    "consistency_contested",
     "psnr_fidelity",
 ];
 
@@ -96,6 +97,7 @@ fn label(name: &str) -> String {
         "gmsd" => "GMSD",
         "ssim" => "SSIM",
         "psnr" => "PSNR",
+        "consistency" => "multi-view consistency",
         m => m,
     };
     format!(
@@ -104,14 +106,12 @@ fn label(name: &str) -> String {
     )
 }
 
-/// `+0.1234 [+0.1000, +0.2000]` (dB with two decimals for PSNR), `–` where absent.
+/// `+0.1234 [+0.1000, +0.2000]` (dB with two decimals for PSNR and multi-view consistency,
+/// a PSNR), `–` where absent.
 fn delta(v: &Value, metric: &str) -> String {
-    let digits = if metric.starts_with("psnr") { 2 } else { 4 };
-    let unit = if metric.starts_with("psnr") {
-        " dB"
-    } else {
-        ""
-    };
+    let db = metric.starts_with("psnr") || metric.starts_with("consistency");
+    let digits = if db { 2 } else { 4 };
+    let unit = if db { " dB" } else { "" };
     let Some(m) = v.get("median_diff").and_then(Value::as_f64) else {
         return "–".into();
     };
