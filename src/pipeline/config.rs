@@ -315,6 +315,26 @@ pub enum Stage2Depth {
     RenderFit,
 }
 
+/// Where a reconstruction's position learning rate starts (SPEC.md §20.5; issue #72: the
+/// paper does not say).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FineTuneRates {
+    /// At INRIA's initial rate, its schedule over the fine-tune's own iterations, as a
+    /// new training would (the released training code's behaviour when handed a scene).
+    #[default]
+    Restart,
+    /// Where the scene's schedule stopped: after the original training's iterations and
+    /// each earlier reconstruction's.
+    Continue,
+}
+
+impl FineTuneRates {
+    fn is_restart(&self) -> bool {
+        *self == FineTuneRates::Restart
+    }
+}
+
 /// How the pipeline extrapolates (SPEC.md §20.11).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -552,6 +572,15 @@ pub struct PipelineConfig {
     /// Interpolation by video reuse and the fixer (§3.3.3); off skips the stage.
     pub interpolation: bool,
     pub interpolate: ReconConfig,
+    /// **A choice the paper leaves open** (issue #72): where each reconstruction's position
+    /// learning rate starts. Written only away from the default.
+    #[serde(skip_serializing_if = "FineTuneRates::is_restart")]
+    pub fine_tune_rates: FineTuneRates,
+    /// **A choice the paper leaves open** (issue #72): the share of each reconstruction's
+    /// iterations on the original training views; `None` (default) draws every view, original
+    /// or generated, alike from one stack.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub original_share: Option<f32>,
     /// The fixer's targets are remade from the scene being trained every this many
     /// iterations of the interpolation (paper: "on the fly"); 0 = once, from the stage-2
     /// scene.
@@ -604,6 +633,8 @@ impl PipelineConfig {
             stage2: ReconConfig::default(),
             interpolation: true,
             interpolate: ReconConfig::default(),
+            fine_tune_rates: FineTuneRates::Restart,
+            original_share: None,
             fixer_every: 3000,
         }
     }
@@ -718,6 +749,11 @@ impl PipelineConfig {
                 return bad(format!("loss weight {n} = {v} must be finite and >= 0"));
             }
         }
+        if let Some(share) = self.original_share
+            && !(share > 0.0 && share < 1.0)
+        {
+            return bad(format!("original_share must be in (0, 1), got {share}"));
+        }
         let i = &self.inconsistency;
         if ![i.gain, i.offset, i.blur_sigma_px, i.shift_px, i.patch_size]
             .iter()
@@ -730,6 +766,28 @@ impl PipelineConfig {
             );
         }
         Ok(())
+    }
+
+    /// Steps into the position schedule at which the reconstruction `stage` (a scene's
+    /// name, or the cycle's `cycle:<k>`) of a scene trained `scene_iterations` starts: 0
+    /// unless `fine_tune_rates` continues, then the iterations every earlier training of
+    /// the scene took.
+    pub fn position_offset(&self, scene_iterations: u32, stage: &str, recon: &ReconConfig) -> u32 {
+        if self.fine_tune_rates == FineTuneRates::Restart {
+            return 0;
+        }
+        let before = match stage {
+            "stage2" => self.stage1.iterations,
+            "interpolate" => self
+                .stage1
+                .iterations
+                .saturating_add(self.stage2.iterations),
+            _ => stage
+                .strip_prefix("cycle:")
+                .and_then(|k| k.parse::<u32>().ok())
+                .map_or(0, |k| k.saturating_mul(recon.iterations)),
+        };
+        scene_iterations.saturating_add(before)
     }
 
     /// Whether the original training views' dataset depth is supervised (the non-paper
@@ -838,5 +896,41 @@ mod tests {
         .to_string();
         assert!(e.contains("over.json") && e.contains("spiral"), "{e}");
         assert_eq!("cycle".parse::<Paradigm>().unwrap(), Paradigm::Cycle);
+    }
+
+    /// The fine-tune switches (issue #72; SPEC.md §20.5): left out of a written default
+    /// configuration, read by name, a continued schedule's offset per reconstruction, a
+    /// share outside (0, 1) refused.
+    #[test]
+    fn the_fine_tune_switches_are_left_out_when_default_and_offset_each_stage() {
+        let file = std::path::Path::new("over.json");
+        let quick = PipelineConfig::quick();
+        let text = serde_json::to_string(&quick).unwrap();
+        assert!(!text.contains("fine_tune_rates") && !text.contains("original_share"));
+        assert_eq!(quick.position_offset(1500, "stage2", &quick.stage2), 0);
+        let c = PipelineConfig::with_overrides(
+            Preset::Quick,
+            serde_json::json!({"fine_tune_rates": "continue", "original_share": 0.5}),
+            file,
+        )
+        .unwrap();
+        c.validate().unwrap();
+        assert_eq!(c.fine_tune_rates, FineTuneRates::Continue);
+        let at = |stage: &str| c.position_offset(1500, stage, &c.stage1);
+        // Quick: stage 1 and 2 run 600 iterations each, the interpolation 400.
+        assert_eq!(
+            [at("stage1"), at("stage2"), at("interpolate"), at("cycle:2")],
+            [1500, 2100, 2700, 2700]
+        );
+        let text = serde_json::to_string(&c).unwrap();
+        assert_eq!(serde_json::from_str::<PipelineConfig>(&text).unwrap(), c);
+        for bad in [0.0, 1.0, f32::NAN] {
+            let c = PipelineConfig {
+                original_share: Some(bad),
+                ..PipelineConfig::quick()
+            };
+            let e = c.validate().unwrap_err().to_string();
+            assert!(e.contains("original_share"), "{e}");
+        }
     }
 }

@@ -20,6 +20,9 @@ pub struct Inputs {
     /// The `unseen train` run (the original scene).
     pub run: PathBuf,
     pub scene: Gaussians,
+    /// The training iterations that made the scene (its PLY's `iteration_<n>`): where a
+    /// fine-tune continuing its schedule starts (`FineTuneRates::Continue`).
+    pub scene_iterations: u32,
     /// sha256 of the scene's PLY bytes.
     pub scene_sha256: String,
     /// The run's dataset at its resolution; `train` lists the run's training views.
@@ -98,7 +101,7 @@ pub fn load_inputs(
     }
     crate::train::run::require_default_conventions(run, "the pipeline")?;
     let cfg = read_config(run)?;
-    let (_, ply) = latest_ply(run)?;
+    let (scene_iterations, ply) = latest_ply(run)?;
     let bytes = std::fs::read(&ply).map_err(|e| Error::io(&ply, e))?;
     let scene_sha256 = sha256_hex(&bytes);
     // The scene must be the one the run wrote (a reused folder may hold a newer-numbered
@@ -223,6 +226,7 @@ pub fn load_inputs(
     Ok(Inputs {
         run: run.to_path_buf(),
         scene,
+        scene_iterations,
         scene_sha256,
         data,
         candidates: cands,

@@ -10,7 +10,7 @@
 //! came from (the issue's §6).
 
 use super::artifacts::{save_scene, stem};
-use super::config::{MaskSource, PipelineConfig, ReconConfig};
+use super::config::{FineTuneRates, MaskSource, PipelineConfig, ReconConfig};
 use super::rundir::{StepDone, StepWriter};
 use super::steps::{Scene, Step};
 use super::{Event, Inputs, Run};
@@ -23,7 +23,7 @@ use crate::qamask::{
     QaMaskConfig, fine_tune, mask_files, mask_scene, opacity_mask, read_mask_dir, render_qa_mask,
 };
 use crate::rng::stage_seed;
-use crate::train::trainer::{TrainConfig, Trainer};
+use crate::train::trainer::{LearningRates, TrainConfig, Trainer, ViewShare};
 
 /// One generated view for a reconstruction.
 #[derive(Clone, Debug)]
@@ -145,6 +145,17 @@ pub fn recon_key(
     );
     m.insert("recon".into(), serde_json::json!(recon));
     m.insert("seed".into(), serde_json::json!(config.seed));
+    // The fine-tune choices the paper leaves open, only away from their defaults (keys
+    // made before them keep their bytes).
+    if config.fine_tune_rates != FineTuneRates::Restart {
+        m.insert(
+            "fine_tune_rates".into(),
+            serde_json::json!(config.fine_tune_rates),
+        );
+    }
+    if let Some(share) = config.original_share {
+        m.insert("original_share".into(), serde_json::json!(share));
+    }
     key
 }
 
@@ -259,6 +270,7 @@ impl Run<'_> {
             test: Vec::new(),
             heldout: Vec::new(),
         };
+        let position_offset = config.position_offset(inputs.scene_iterations, stage, recon);
         let cfg = TrainConfig {
             iterations: recon.iterations,
             seed: stage_seed(config.seed, stage),
@@ -267,6 +279,14 @@ impl Run<'_> {
             loss: config.recon_loss(),
             background: inputs.background,
             save_iterations: Vec::new(),
+            lr: LearningRates {
+                position_offset,
+                ..LearningRates::default()
+            },
+            view_share: config.original_share.map(|share| ViewShare {
+                views: n_orig,
+                share,
+            }),
             ..TrainConfig::default()
         };
         let deg = init.sh_degree;
@@ -306,17 +326,19 @@ impl Run<'_> {
         }
         let g = trainer.gaussians;
         save_scene(w, "scene.ply", &g)?;
-        w.json(
-            "supervision.json",
-            &serde_json::json!({
-                "original_views": n_orig,
-                "original_views_depth": config.supervises_original_depth(),
-                "generated": summary,
-                "iterations": recon.iterations,
-                "refreshed": refreshed,
-                "gaussians": g.len(),
-            }),
-        )?;
+        let mut supervision = serde_json::json!({
+            "original_views": n_orig,
+            "original_views_depth": config.supervises_original_depth(),
+            "generated": summary,
+            "iterations": recon.iterations,
+            "refreshed": refreshed,
+            "gaussians": g.len(),
+        });
+        if position_offset > 0 {
+            // Only when the schedule continues: earlier runs' files keep their bytes.
+            supervision["position_offset"] = serde_json::json!(position_offset);
+        }
+        w.json("supervision.json", &supervision)?;
         Ok(g)
     }
 }

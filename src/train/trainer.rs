@@ -61,6 +61,14 @@ pub struct LearningRates {
     pub opacity: f32,
     pub scaling: f32,
     pub rotation: f32,
+    /// Steps the position schedule starts into: 0 for a new training; a fine-tune that
+    /// continues a scene's schedule starts where its training stopped (SPEC.md §20.5).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub position_offset: u32,
+}
+
+fn is_zero(n: &u32) -> bool {
+    *n == 0
 }
 
 impl Default for LearningRates {
@@ -74,6 +82,7 @@ impl Default for LearningRates {
             opacity: 0.025,
             scaling: 5e-3,
             rotation: 1e-3,
+            position_offset: 0,
         }
     }
 }
@@ -109,6 +118,19 @@ pub struct TrainConfig {
     /// the file when it is the default `inria`, so older run directories keep their bytes.
     #[serde(skip_serializing_if = "Conventions::is_default")]
     pub conventions: Conventions,
+    /// A fixed share of the iterations on the first views (a fine-tune's original
+    /// training views, the rest generated; SPEC.md §20.5); `None`: INRIA's one stack over
+    /// every view.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub view_share: Option<ViewShare>,
+}
+
+/// Each iteration draws the group of the dataset's views with index below `views` with
+/// probability `share`, then a view of that group from its own INRIA stack.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ViewShare {
+    pub views: usize,
+    pub share: f32,
 }
 
 impl Default for TrainConfig {
@@ -129,6 +151,7 @@ impl Default for TrainConfig {
             resolution: 1,
             test_every: 8,
             conventions: Conventions::Inria,
+            view_share: None,
         }
     }
 }
@@ -199,6 +222,14 @@ impl TrainConfig {
         }
         if !self.background.iter().all(|v| v.is_finite()) {
             return Err(Error::invalid("background must be finite"));
+        }
+        if let Some(s) = self.view_share
+            && !(s.share > 0.0 && s.share < 1.0)
+        {
+            return Err(Error::invalid(format!(
+                "the share of iterations on the first views must be in (0, 1), got {}",
+                s.share
+            )));
         }
         Ok(())
     }
@@ -364,7 +395,7 @@ impl<'a> Trainer<'a> {
                 final_: l.position_final * self.extent,
                 max_steps: l.position_max_steps,
             }
-            .at(it),
+            .at(it.saturating_add(l.position_offset)),
             Param::ShDc => l.sh_dc,
             Param::ShRest => l.sh_rest,
             Param::OpacityLogits => l.opacity,
@@ -412,6 +443,26 @@ impl<'a> Trainer<'a> {
     /// INRIA's view stack: refilled with every training view when empty, one removed at a
     /// uniformly drawn position per iteration.
     fn next_view(&mut self) -> usize {
+        if let Some(s) = self.config.view_share {
+            // The group first (one draw), then INRIA's stack within it: the stack holds
+            // views of both groups, and a group found empty there is refilled alone.
+            let first = self.rng.unit() < s.share;
+            let train = &self.dataset.train;
+            let has = |first: bool| train.iter().any(|&v| (v < s.views) == first);
+            let first = if has(first) { first } else { !first };
+            let member = |v: usize| (v < s.views) == first;
+            if !self.stack.iter().any(|&v| member(v)) {
+                self.stack
+                    .extend(train.iter().copied().filter(|&v| member(v)));
+            }
+            let n = self.stack.iter().filter(|&&v| member(v)).count();
+            let k = self.rng.below(n as u32) as usize;
+            let at = (0..self.stack.len())
+                .filter(|&i| member(self.stack[i]))
+                .nth(k)
+                .expect("k below the group's count");
+            return self.stack.remove(at);
+        }
         if self.stack.is_empty() {
             self.stack = self.dataset.train.clone();
         }
@@ -631,5 +682,130 @@ impl<'a> Trainer<'a> {
             self.masks[vi] = Some(m);
         }
         r
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::Camera;
+    use crate::dataset::{Layout, View};
+    use crate::io::image::ImageF32;
+    use glam::DVec3;
+
+    /// `n` views of 4×4 pixels on a circle, with a scene of one Gaussian.
+    fn trainer(n: usize, config: TrainConfig) -> (Dataset, Gaussians, TrainConfig) {
+        let views = (0..n)
+            .map(|k| {
+                let a = k as f64 * 0.3;
+                let eye = DVec3::new(a.cos(), 0.0, a.sin()) * 3.0;
+                View {
+                    camera: Camera::look_at(
+                        format!("v{k}"),
+                        4,
+                        4,
+                        1.0,
+                        eye,
+                        DVec3::ZERO,
+                        -DVec3::Y,
+                    )
+                    .unwrap(),
+                    image: ImageF32::new(4, 4, 3, vec![0.5; 48]).unwrap(),
+                    depth: None,
+                }
+            })
+            .collect();
+        let data = Dataset {
+            root: "synthetic".into(),
+            layout: Layout::Unseen,
+            views,
+            points: None,
+            train: (0..n).collect(),
+            test: Vec::new(),
+            heldout: Vec::new(),
+        };
+        let g = init_from_points(&[[0.0; 3], [0.1, 0.0, 0.0]], &[[0.5; 3]; 2], 0).unwrap();
+        (
+            data,
+            g,
+            TrainConfig {
+                sh_degree: 0,
+                ..config
+            },
+        )
+    }
+
+    /// With a share, each iteration draws the first group with that probability and cycles
+    /// each group through its own stack: every group's views come once per pass.
+    #[test]
+    fn a_view_share_draws_each_group_from_its_own_stack() {
+        let share = ViewShare {
+            views: 3,
+            share: 0.25,
+        };
+        let (data, g, cfg) = trainer(
+            12,
+            TrainConfig {
+                view_share: Some(share),
+                ..TrainConfig::default()
+            },
+        );
+        let mut t = Trainer::from_gaussians(&data, cfg, g, 0).unwrap();
+        let draws: Vec<usize> = (0..4000).map(|_| t.next_view()).collect();
+        let first: Vec<usize> = draws.iter().copied().filter(|&v| v < 3).collect();
+        let rest: Vec<usize> = draws.iter().copied().filter(|&v| v >= 3).collect();
+        // Binomial(4000, 1/4): sd ≈ 27.
+        assert!(
+            (first.len() as f64 - 1000.0).abs() < 110.0,
+            "{}",
+            first.len()
+        );
+        for (group, size) in [(&first, 3), (&rest, 9)] {
+            for pass in group.chunks_exact(size) {
+                let mut p = pass.to_vec();
+                p.sort_unstable();
+                p.dedup();
+                assert_eq!(p.len(), size, "a pass repeats a view: {pass:?}");
+            }
+        }
+        // A share outside (0, 1) is refused; none keeps INRIA's single stack.
+        let (data, g, cfg) = trainer(4, TrainConfig::default());
+        let bad = TrainConfig {
+            view_share: Some(ViewShare {
+                views: 2,
+                share: 1.0,
+            }),
+            ..cfg.clone()
+        };
+        let refused = Trainer::from_gaussians(&data, bad, g.clone(), 0).err();
+        assert!(refused.is_some_and(|e| e.to_string().contains("(0, 1)")));
+        let mut t = Trainer::from_gaussians(&data, cfg, g, 0).unwrap();
+        let mut pass: Vec<usize> = (0..4).map(|_| t.next_view()).collect();
+        pass.sort_unstable();
+        assert_eq!(pass, [0, 1, 2, 3]);
+    }
+
+    /// A continued schedule is the schedule shifted: its first step is the new training's
+    /// step `position_offset`.
+    #[test]
+    fn a_position_offset_shifts_the_schedule() {
+        let (data, g, cfg) = trainer(2, TrainConfig::default());
+        let fresh = Trainer::from_gaussians(&data, cfg.clone(), g.clone(), 0).unwrap();
+        let cfg = TrainConfig {
+            lr: LearningRates {
+                position_offset: 1500,
+                ..cfg.lr
+            },
+            ..cfg
+        };
+        let continued = Trainer::from_gaussians(&data, cfg, g, 0).unwrap();
+        for it in [1, 600, 29_000] {
+            assert_eq!(
+                continued.lr(Param::Means, it),
+                fresh.lr(Param::Means, it + 1500)
+            );
+            assert_eq!(continued.lr(Param::ShDc, it), fresh.lr(Param::ShDc, it));
+        }
+        assert!(continued.lr(Param::Means, 1) < fresh.lr(Param::Means, 1));
     }
 }

@@ -2233,6 +2233,57 @@ fn depth_supervision_reaches_the_generated_views_only_unless_the_non_paper_switc
     assert_ne!(scene(&paper, "paper"), scene(&switched, "switched"));
 }
 
+/// The fine-tune switches the paper leaves open (issue #72; SPEC.md §20.5) reach the
+/// reconstructions: a continued schedule starts stage 1 at the original scene's iterations
+/// and stage 2 after stage 1's (`supervision.json`), a share of iterations on the original
+/// views changes the scene, and the default writes no offset.
+#[test]
+fn the_fine_tune_switches_reach_the_reconstructions() {
+    let t = TempDir::new("pipeline-fine-tune-switches");
+    let Tiny { inp, .. } = TinyRun::new().build(&t);
+    let paper = PipelineConfig {
+        interpolation: false,
+        ..tiny_config()
+    };
+    let run = |cfg: &PipelineConfig, name: &str| {
+        let out = t.path().join(name);
+        pipeline::run(cfg, &inp, &out, false, &quiet).unwrap();
+        let sup = |stage: &str| -> serde_json::Value {
+            serde_json::from_slice(
+                &std::fs::read(out.join(format!("{stage}/recon/supervision.json"))).unwrap(),
+            )
+            .unwrap()
+        };
+        (
+            [sup("stage1"), sup("stage2")].map(|s| s.get("position_offset").cloned()),
+            std::fs::read(out.join("stage1/recon/scene.ply")).unwrap(),
+        )
+    };
+    let (offsets, base) = run(&paper, "paper");
+    assert_eq!(offsets, [None, None]);
+    let continued = PipelineConfig {
+        fine_tune_rates: unseen::pipeline::FineTuneRates::Continue,
+        ..paper.clone()
+    };
+    let (offsets, scene) = run(&continued, "continued");
+    assert!(inp.scene_iterations > 0);
+    assert_eq!(
+        offsets,
+        [
+            Some(serde_json::json!(inp.scene_iterations)),
+            Some(serde_json::json!(
+                inp.scene_iterations + paper.stage1.iterations
+            ))
+        ]
+    );
+    assert_ne!(scene, base);
+    let shared = PipelineConfig {
+        original_share: Some(0.5),
+        ..paper.clone()
+    };
+    assert_ne!(run(&shared, "shared").1, base);
+}
+
 /// The relative-depth mode of the ground-truth generator (SPEC.md §20.6) gives alignment
 /// real work — Eq. 2 (detection), Eq. 5 (stage-1 clips) and the stage-2 fit must undo a
 /// seeded affine map of disparity — and the pipeline still extrapolates: the stage-1
