@@ -499,11 +499,12 @@ pub struct AuditArgs {
     out: PathBuf,
     #[arg(long, value_parser = crate::one_of(&Preset::ALL, Preset::name), default_value = "quick")]
     preset: Preset,
-    /// Variants, comma-separated (default: every variant but the sensitivity pairs): full, no_qa_mask, opacity_mask,
+    /// Variants, comma-separated (default: every variant but the opt-in ones): full, no_qa_mask, opacity_mask,
     /// even_views, conflicting_views, no_depth_supervision, no_propagation, qa_sh3, qa_sh4,
     /// no_interpolation, stage2_render_fit, cycle; opt-in sensitivity pairs: full_max_cardinality,
     /// even_views_max_cardinality, full_max_coverage, even_views_max_coverage, full_hull,
-    /// even_views_hull.
+    /// even_views_hull; opt-in control: originals_only (the fine-tunes on the original views
+    /// alone).
     #[arg(long, value_delimiter = ',')]
     variants: Vec<String>,
     /// Generators, comma-separated: classical, truth-none, truth-low, truth-high,
@@ -513,7 +514,7 @@ pub struct AuditArgs {
     generators: Vec<String>,
     /// A dose–response sweep, `PARAM=v1,v2,…` with PARAM hallucination, photometric,
     /// depth_distortion or ghosting (the planted-harm control: true images shifted by
-    /// level × 8 px per call, levels up to 2) and levels in [0, 1] (e.g.
+    /// level × 8 px per call) and levels in [0, 1], ghosting's in [0, 2] (e.g.
     /// `hallucination=0,0.25,0.5,0.75,1`): one
     /// generator per level (`dose-<param>-<percent>`), added to `--generators` (alone when
     /// none is given). Repeatable.

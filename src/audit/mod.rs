@@ -83,6 +83,9 @@ pub enum Variant {
     EvenViewsMaxCoverage,
     FullHull,
     EvenViewsHull,
+    /// The reconstructions train on the original views alone (`generated_supervision`
+    /// off): a control of the fine-tune recipe, not an ablation of the paper (issue #72).
+    OriginalsOnly,
 }
 
 impl Variant {
@@ -113,9 +116,15 @@ impl Variant {
         Variant::EvenViewsHull,
     ];
 
+    /// The controls (opt-in: `--variants`).
+    pub const CONTROLS: [Variant; 1] = [Variant::OriginalsOnly];
+
     /// Every variant.
     pub fn all() -> impl Iterator<Item = Variant> {
-        Variant::PRESET.into_iter().chain(Variant::SENSITIVITY)
+        Variant::PRESET
+            .into_iter()
+            .chain(Variant::SENSITIVITY)
+            .chain(Variant::CONTROLS)
     }
 
     pub fn name(self) -> &'static str {
@@ -138,6 +147,7 @@ impl Variant {
             Variant::EvenViewsMaxCoverage => "even_views_max_coverage",
             Variant::FullHull => "full_hull",
             Variant::EvenViewsHull => "even_views_hull",
+            Variant::OriginalsOnly => "originals_only",
         }
     }
 
@@ -186,6 +196,7 @@ impl Variant {
                 c.frustum_outline = Outline::Hull;
                 c.independent_detection = false;
             }
+            Variant::OriginalsOnly => c.generated_supervision = false,
         }
     }
 }

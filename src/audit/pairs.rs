@@ -67,6 +67,13 @@ pub fn score_pair(
         for v in &views {
             let r = render(scene, &v.camera, &opts)?;
             let (w, h) = (r.width, r.height);
+            if v.image.data.len() != w * h * 3 {
+                return Err(Error::invalid(format!(
+                    "evaluation view '{}': an image of {} values for a {w}×{h} camera",
+                    v.camera.name,
+                    v.image.data.len()
+                )));
+            }
             let scored = ScoredView::of_render(r.rgb.expect("rgb"), &v.image.data, w, h);
             out.push(Seen {
                 scored,

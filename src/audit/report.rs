@@ -922,7 +922,8 @@ pub fn plot(cfg: &AuditConfig, results: &[JobResult]) -> String {
 
 impl super::Audit<'_> {
     /// Pair every run of the pool with its seed's `full` run (same generator and numerics
-    /// revision) where the pair is missing or of another `full` scene, and both runs'
+    /// revision) where the pair is missing, of another `full` scene or without multi-view
+    /// consistency (scored before it was recorded), and both runs'
     /// folders hold what the results name: the final scenes (with the digests recorded)
     /// and the run's [`super::jobs::CLASSES_FILE`] ([`mod@super::pairs`]). Without them (a report from samples
     /// alone, another machine's folders) the pool keeps the pairs it has.
@@ -945,10 +946,14 @@ impl super::Audit<'_> {
             }) else {
                 continue;
             };
-            if v.pair
-                .as_ref()
-                .is_some_and(|p| p.reference_scene == f.scene_sha256)
-            {
+            // Scored already (with multi-view consistency: a pair scored before it is
+            // scored again where the runs' folders are still there).
+            if v.pair.as_ref().is_some_and(|p| {
+                p.reference_scene == f.scene_sha256
+                    && p.views
+                        .iter()
+                        .all(|pv| pv.contested.iter().all(|s| s.consistency.is_some()))
+            }) {
                 continue;
             }
             let (Ok(generator), Ok(variant)) = (

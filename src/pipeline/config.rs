@@ -581,10 +581,20 @@ pub struct PipelineConfig {
     /// or generated, alike from one stack.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub original_share: Option<f32>,
+    /// **A control, not the paper's method** (issue #72): off, every reconstruction trains
+    /// on the original training views alone (the generated views are made and dropped), so
+    /// that what the fine-tune recipe does to original areas can be told from what generated
+    /// content does. Written only when off.
+    #[serde(skip_serializing_if = "is_true")]
+    pub generated_supervision: bool,
     /// The fixer's targets are remade from the scene being trained every this many
     /// iterations of the interpolation (paper: "on the fly"); 0 = once, from the stage-2
     /// scene.
     pub fixer_every: u32,
+}
+
+fn is_true(b: &bool) -> bool {
+    *b
 }
 
 fn is_bounding_box(o: &Outline) -> bool {
@@ -635,6 +645,7 @@ impl PipelineConfig {
             interpolate: ReconConfig::default(),
             fine_tune_rates: FineTuneRates::Restart,
             original_share: None,
+            generated_supervision: true,
             fixer_every: 3000,
         }
     }
@@ -768,26 +779,14 @@ impl PipelineConfig {
         Ok(())
     }
 
-    /// Steps into the position schedule at which the reconstruction `stage` (a scene's
-    /// name, or the cycle's `cycle:<k>`) of a scene trained `scene_iterations` starts: 0
-    /// unless `fine_tune_rates` continues, then the iterations every earlier training of
-    /// the scene took.
-    pub fn position_offset(&self, scene_iterations: u32, stage: &str, recon: &ReconConfig) -> u32 {
-        if self.fine_tune_rates == FineTuneRates::Restart {
-            return 0;
+    /// Steps into the position schedule at which a reconstruction of a scene trained
+    /// `scene_iterations` starts, after `trained_before` iterations of the pipeline's earlier
+    /// reconstructions: 0 unless `fine_tune_rates` continues, then their sum.
+    pub fn position_offset(&self, scene_iterations: u32, trained_before: u32) -> u32 {
+        match self.fine_tune_rates {
+            FineTuneRates::Restart => 0,
+            FineTuneRates::Continue => scene_iterations.saturating_add(trained_before),
         }
-        let before = match stage {
-            "stage2" => self.stage1.iterations,
-            "interpolate" => self
-                .stage1
-                .iterations
-                .saturating_add(self.stage2.iterations),
-            _ => stage
-                .strip_prefix("cycle:")
-                .and_then(|k| k.parse::<u32>().ok())
-                .map_or(0, |k| k.saturating_mul(recon.iterations)),
-        };
-        scene_iterations.saturating_add(before)
     }
 
     /// Whether the original training views' dataset depth is supervised (the non-paper
@@ -902,12 +901,12 @@ mod tests {
     /// configuration, read by name, a continued schedule's offset per reconstruction, a
     /// share outside (0, 1) refused.
     #[test]
-    fn the_fine_tune_switches_are_left_out_when_default_and_offset_each_stage() {
+    fn the_fine_tune_switches_are_left_out_when_default_and_offset_the_schedule() {
         let file = std::path::Path::new("over.json");
         let quick = PipelineConfig::quick();
         let text = serde_json::to_string(&quick).unwrap();
         assert!(!text.contains("fine_tune_rates") && !text.contains("original_share"));
-        assert_eq!(quick.position_offset(1500, "stage2", &quick.stage2), 0);
+        assert_eq!(quick.position_offset(1500, 600), 0);
         let c = PipelineConfig::with_overrides(
             Preset::Quick,
             serde_json::json!({"fine_tune_rates": "continue", "original_share": 0.5}),
@@ -916,12 +915,9 @@ mod tests {
         .unwrap();
         c.validate().unwrap();
         assert_eq!(c.fine_tune_rates, FineTuneRates::Continue);
-        let at = |stage: &str| c.position_offset(1500, stage, &c.stage1);
-        // Quick: stage 1 and 2 run 600 iterations each, the interpolation 400.
-        assert_eq!(
-            [at("stage1"), at("stage2"), at("interpolate"), at("cycle:2")],
-            [1500, 2100, 2700, 2700]
-        );
+        assert_eq!(c.position_offset(1500, 0), 1500);
+        assert_eq!(c.position_offset(1500, 1200), 2700);
+        assert_eq!(c.position_offset(u32::MAX, 1), u32::MAX);
         let text = serde_json::to_string(&c).unwrap();
         assert_eq!(serde_json::from_str::<PipelineConfig>(&text).unwrap(), c);
         for bad in [0.0, 1.0, f32::NAN] {

@@ -114,7 +114,17 @@ impl Run<'_> {
             if !self.wants(&Step::Cycle(k)) {
                 break;
             }
-            let s = self.cycle_view(views, name, iterations[k], &done, first.as_ref())?;
+            let trained_before = iterations[..k]
+                .iter()
+                .fold(0u32, |a, &b| a.saturating_add(b));
+            let s = self.cycle_view(
+                views,
+                name,
+                iterations[k],
+                trained_before,
+                &done,
+                first.as_ref(),
+            )?;
             steps.push(s.clone());
             done.push(s);
         }
@@ -133,6 +143,7 @@ impl Run<'_> {
         views: &Views,
         name: &str,
         iterations: u32,
+        trained_before: u32,
         before: &[StepDone],
         first: Option<&(Weights, Option<StepDone>)>,
     ) -> Result<StepDone> {
@@ -223,7 +234,16 @@ impl Run<'_> {
                 .collect::<Vec<_>>()
                 .into();
             let seed_key = format!("cycle:{k}");
-            self.reconstruct(&recon_config, init, &generated, weights, None, &seed_key, w)?;
+            self.reconstruct(
+                &recon_config,
+                init,
+                &generated,
+                weights,
+                None,
+                &seed_key,
+                trained_before,
+                w,
+            )?;
             w.json("cycle.json", &record)?;
             Ok(())
         })

@@ -171,6 +171,10 @@ impl Run<'_> {
                 &weights,
                 Some(&refresh),
                 Scene::Interpolate.name(),
+                config
+                    .stage1
+                    .iterations
+                    .saturating_add(config.stage2.iterations),
                 w,
             )?;
             Ok(())

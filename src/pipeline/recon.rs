@@ -156,6 +156,9 @@ pub fn recon_key(
     if let Some(share) = config.original_share {
         m.insert("original_share".into(), serde_json::json!(share));
     }
+    if !config.generated_supervision {
+        m.insert("generated_supervision".into(), serde_json::json!(false));
+    }
     key
 }
 
@@ -194,7 +197,9 @@ impl Run<'_> {
     /// of whose targets are remade on the fly), write `scene.ply` and the weight maps' heat
     /// images into `w`; returns the scene. `stage` names its random stream
     /// `stage_seed(seed, stage)` and its progress: a scene's name (`stage1`, `stage2`,
-    /// `interpolate`) or the cycle paradigm's `cycle:<k>`.
+    /// `interpolate`) or the cycle paradigm's `cycle:<k>`; `trained_before`: the iterations
+    /// this pipeline's earlier reconstructions trained the scene (where a continued
+    /// schedule starts, after the original's).
     #[allow(clippy::too_many_arguments)]
     pub fn reconstruct(
         &self,
@@ -204,9 +209,16 @@ impl Run<'_> {
         weights: &Weights,
         refresh: Option<&Refresh>,
         stage: &str,
+        trained_before: u32,
         w: &mut StepWriter,
     ) -> Result<Gaussians> {
         let (config, inputs, on_event) = (self.config, self.inputs, self.on_event);
+        // The recipe's control (`generated_supervision` off): the original views alone.
+        let (generated, refresh) = if config.generated_supervision {
+            (generated, refresh)
+        } else {
+            (&[][..], None)
+        };
         let mut views = original_views(config, inputs);
         let n_orig = views.len();
         let mut masks: Vec<Option<Vec<f32>>> = vec![None; n_orig];
@@ -270,7 +282,7 @@ impl Run<'_> {
             test: Vec::new(),
             heldout: Vec::new(),
         };
-        let position_offset = config.position_offset(inputs.scene_iterations, stage, recon);
+        let position_offset = config.position_offset(inputs.scene_iterations, trained_before);
         let cfg = TrainConfig {
             iterations: recon.iterations,
             seed: stage_seed(config.seed, stage),
@@ -334,6 +346,12 @@ impl Run<'_> {
             "refreshed": refreshed,
             "gaussians": g.len(),
         });
+        if !config.generated_supervision {
+            supervision["generated_supervision"] = serde_json::json!(false);
+        }
+        if let Some(share) = config.original_share {
+            supervision["original_share"] = serde_json::json!(share);
+        }
         if position_offset > 0 {
             // Only when the schedule continues: earlier runs' files keep their bytes.
             supervision["position_offset"] = serde_json::json!(position_offset);

@@ -141,6 +141,7 @@ impl Run<'_> {
                 &weights,
                 None,
                 Scene::Stage1.name(),
+                0,
                 w,
             )?;
             Ok(())

@@ -163,6 +163,7 @@ impl Run<'_> {
                 &weights,
                 None,
                 Scene::Stage2.name(),
+                config.stage1.iterations,
                 w,
             )?;
             Ok(())

@@ -1235,6 +1235,48 @@ fn the_original_areas_claim_is_non_inferiority_of_the_final_scene_against_the_or
     assert_eq!(large.verdict, "contradicted", "{large:?}");
 }
 
+/// The recipe's control (issue #72): full's final scene against `originals_only`'s (the
+/// same fine-tunes on the original views alone) on the training half, as non-inferiority
+/// at the margin; judged only where `originals_only` ran.
+#[test]
+fn generated_views_are_judged_against_the_recipe_on_the_training_half() {
+    use unseen::audit::{AuditConfig, GeneratorKind, Variant, stats::Rule, verdicts};
+    let id = "generated views cost original areas nothing beyond the recipe";
+    let cfg = |variants| AuditConfig {
+        variants,
+        generators: vec![GeneratorKind::Truth(unseen::pipeline::Level::Low)],
+        ..AuditConfig::quick()
+    };
+    let judge = |cost: f64| {
+        let mut pool = Vec::new();
+        for seed in 0..16u32 {
+            let mut full = sample("full", seed, 8, 20.0);
+            full.last.psnr_train_half = 30.0 - cost + 0.01 * f64::from(seed);
+            full.scene_sha256 = format!("{seed:064}");
+            let mut control = sample("originals_only", seed, 8, 20.0);
+            control.scene_sha256 = format!("{:064}", seed + 100);
+            pool.extend([full, control]);
+        }
+        let v = verdicts(
+            &cfg(vec![Variant::Full, Variant::OriginalsOnly]),
+            &pool,
+            &Rule::default(),
+        );
+        let c = v.iter().find(|v| v.claim.id == id).cloned();
+        let without = verdicts(&cfg(vec![Variant::Full]), &pool, &Rule::default());
+        assert!(!without.iter().any(|v| v.claim.id == id));
+        c.expect("judged where originals_only ran")
+    };
+    let small = judge(0.05);
+    assert_eq!((small.judged, small.null), (16, -0.2), "{small:?}");
+    assert_eq!(small.verdict, "holds", "{small:?}");
+    assert_eq!(judge(1.0).verdict, "contradicted");
+    assert_eq!(
+        Variant::by_name("originals_only").unwrap(),
+        Variant::OriginalsOnly
+    );
+}
+
 /// `conflicting_views` where no colliding set qualified (SPEC.md §20.2)
 /// generates the independent set, as `full` does, with other random streams: such a seed is
 /// not a unit of "conflicts cost at equal coverage" (its Δ would be noise between two runs
@@ -1508,6 +1550,20 @@ fn the_panel_judges_both_runs_on_the_variants_contested_pixels() {
     assert_eq!(v.iter().filter(|v| v.family == "truth-panel").count(), 14);
     let v = verdicts(&cfg, &with_consistency(Some(3)), &Rule::default());
     let contested = mvc(&v, "contested");
+    assert_eq!(
+        (contested.judged, contested.same_computation),
+        (15, 1),
+        "{contested:?}"
+    );
+    // Each run decides what its own renders see: none on the full run's side is nowhere
+    // to act as well (not a planned seed without a Δ, which would keep it interim).
+    let mut blind_full = with_consistency(None);
+    for r in blind_full.iter_mut().filter(|r| r.seed == 5) {
+        for v in r.pair.iter_mut().flat_map(|p| &mut p.views) {
+            v.contested[0].consistency = Some(Default::default());
+        }
+    }
+    let contested = mvc(&verdicts(&cfg, &blind_full, &Rule::default()), "contested");
     assert_eq!(
         (contested.judged, contested.same_computation),
         (15, 1),
@@ -2236,7 +2292,8 @@ fn depth_supervision_reaches_the_generated_views_only_unless_the_non_paper_switc
 /// The fine-tune switches the paper leaves open (issue #72; SPEC.md §20.5) reach the
 /// reconstructions: a continued schedule starts stage 1 at the original scene's iterations
 /// and stage 2 after stage 1's (`supervision.json`), a share of iterations on the original
-/// views changes the scene, and the default writes no offset.
+/// views changes the scene, the default writes no offset, and the recipe's control trains
+/// on the original views alone.
 #[test]
 fn the_fine_tune_switches_reach_the_reconstructions() {
     let t = TempDir::new("pipeline-fine-tune-switches");
@@ -2282,6 +2339,43 @@ fn the_fine_tune_switches_reach_the_reconstructions() {
         ..paper.clone()
     };
     assert_ne!(run(&shared, "shared").1, base);
+    // The cycle's k-th reconstruction continues after the k before it, whose iterations
+    // are the total split with the remainder on the first views.
+    let cycle = PipelineConfig {
+        paradigm: unseen::pipeline::Paradigm::Cycle,
+        ..continued.clone()
+    };
+    let out = t.path().join("cycle");
+    pipeline::run(&cycle, &inp, &out, false, &quiet).unwrap();
+    let trajectory = (0..)
+        .take_while(|k| out.join(format!("cycle/{k}")).is_dir())
+        .count();
+    assert!(trajectory >= 2, "{trajectory} cycle steps");
+    let split = unseen::pipeline::cycle::split_iterations(&cycle, trajectory);
+    for k in 0..trajectory {
+        let sup: serde_json::Value = serde_json::from_slice(
+            &std::fs::read(out.join(format!("cycle/{k}/supervision.json"))).unwrap(),
+        )
+        .unwrap();
+        let before: u32 = split[..k].iter().sum();
+        assert_eq!(
+            sup["position_offset"],
+            serde_json::json!(inp.scene_iterations + before),
+            "cycle step {k}"
+        );
+    }
+    // The recipe's control: the generated views made and dropped.
+    let control = PipelineConfig {
+        generated_supervision: false,
+        ..paper.clone()
+    };
+    assert_ne!(run(&control, "control").1, base);
+    let sup: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(t.path().join("control/stage2/recon/supervision.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(sup["generated"], serde_json::json!([]));
+    assert_eq!(sup["generated_supervision"], serde_json::json!(false));
 }
 
 /// The relative-depth mode of the ground-truth generator (SPEC.md §20.6) gives alignment
