@@ -144,6 +144,23 @@ pub struct JobResult {
     /// candidates. `--collect` takes a result only of the audit's own family.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub candidates: Option<super::family::Family>,
+    /// Every evaluated scene of the run in order (the original, then each stage's) on the
+    /// training half, with its Gaussian count: where original areas change (issue #72).
+    /// Empty in samples written before it was recorded.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub stages: Vec<StageRecord>,
+}
+
+/// One evaluated scene of a run (`original`, `stage1`, `stage2`, `interpolate`, or the
+/// cycle's): its training-half PSNR and SSIM and its Gaussian count.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct StageRecord {
+    pub scene: String,
+    #[serde(with = "crate::io::json_float")]
+    pub psnr_train_half: f64,
+    #[serde(with = "crate::io::json_float")]
+    pub ssim_train_half: f64,
+    pub gaussians: usize,
 }
 
 impl JobResult {
@@ -328,6 +345,16 @@ impl Audit<'_> {
                     pair: None,
                     diagnostics: Some(diagnostics),
                     candidates: family::family(dataset, self.cfg.candidates.as_deref())?,
+                    stages: summary
+                        .rows
+                        .iter()
+                        .map(|r| StageRecord {
+                            scene: r.scene.clone(),
+                            psnr_train_half: r.psnr_train_half,
+                            ssim_train_half: r.ssim_train_half,
+                            gaussians: r.gaussians,
+                        })
+                        .collect(),
                 };
                 let text = serde_json::to_string_pretty(&result).expect("serializes") + "\n";
                 crate::io::write_text(&out.join("audit_job.json"), &text)?;

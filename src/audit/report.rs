@@ -495,6 +495,81 @@ fn diagnostics_table(cfg: &AuditConfig, pool: &[JobResult]) -> String {
 
 /// `audit.md`'s sensitivity rows: the independent-views claim under each choice the
 /// paper leaves open that was run (empty when none was).
+/// audit.md's training half per stage (issue #72): per generator and variant, over the
+/// seeds that recorded their stages ([`super::jobs::StageRecord`]), each scene's change of
+/// training-half PSNR from the scene before it and the whole run's, as the median with the
+/// seeds above / below 0, and the Gaussian counts; empty when no sample recorded them.
+fn training_half_table(cfg: &AuditConfig, pool: &[JobResult]) -> String {
+    let median = |v: &[f64]| {
+        let mut s = v.to_vec();
+        s.sort_by(f64::total_cmp);
+        super::stats::quantile_sorted(&s, 0.5)
+    };
+    let mut rows = String::new();
+    for g in &cfg.generators {
+        let g = g.name();
+        for v in &cfg.variants {
+            let runs: Vec<&JobResult> = group(pool, &g, *v)
+                .into_iter()
+                .filter(|r| r.stages.len() >= 2)
+                .collect();
+            let Some(first) = runs.first() else {
+                continue;
+            };
+            // The scenes of the first run; runs with another sequence are left out.
+            let names: Vec<&str> = first.stages.iter().map(|s| s.scene.as_str()).collect();
+            let runs: Vec<&JobResult> = runs
+                .into_iter()
+                .filter(|r| {
+                    r.stages
+                        .iter()
+                        .map(|s| s.scene.as_str())
+                        .eq(names.iter().copied())
+                })
+                .collect();
+            let change = |k: usize, from: usize| {
+                let d: Vec<f64> = runs
+                    .iter()
+                    .map(|r| r.stages[k].psnr_train_half - r.stages[from].psnr_train_half)
+                    .filter(|d| d.is_finite())
+                    .collect();
+                if d.is_empty() {
+                    return "–".to_string();
+                }
+                let (up, down) = (
+                    d.iter().filter(|&&x| x > 0.0).count(),
+                    d.iter().filter(|&&x| x < 0.0).count(),
+                );
+                format!("{:+.2} ({up} / {down})", median(&d))
+            };
+            let steps: Vec<String> = (1..names.len())
+                .map(|k| format!("{} {}", names[k], change(k, k - 1)))
+                .collect();
+            let orig: Vec<f64> = runs.iter().map(|r| r.stages[0].psnr_train_half).collect();
+            let count = |k: usize| {
+                runs.iter()
+                    .map(|r| r.stages[k].gaussians as f64)
+                    .sum::<f64>()
+                    / runs.len() as f64
+            };
+            rows += &format!(
+                "| {g} | {} | {} | {:.2} | {} | {} | {:.0} → {:.0} |\n",
+                v.name(),
+                runs.len(),
+                median(&orig),
+                steps.join("; "),
+                change(names.len() - 1, 0),
+                count(0),
+                count(names.len() - 1)
+            );
+        }
+    }
+    if rows.is_empty() {
+        return rows;
+    }
+    "\n## The training half per stage (issue #72)\n\nWhere original areas change: each scene's training-half PSNR (dB) against the scene before it, and the final scene's against the original, as the median over the seeds with the seeds above / below 0; the Gaussians of the original and the final scene (mean). The recipe's control `originals_only` runs the same fine-tunes on the original views alone.\n\n| generator | variant | seeds | original (median) | change per stage | final − original | Gaussians |\n|---|---|---|---|---|---|---|\n".to_string() + &rows
+}
+
 fn sensitivity(report: &Report) -> String {
     let choices = [
         (
@@ -737,6 +812,7 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
         }
     }
     s += &diagnostics_table(cfg, &report.pool);
+    s += &training_half_table(cfg, &report.pool);
     s += "\n*compute*: the seconds each step took where it was computed; steps shared through the cache are counted in every variant that uses them.\n\n## Compute per stage (s, mean over seeds)\n\n";
     let stages = crate::pipeline::steps::Stage::ALL.map(|s| s.name());
     s += &format!(

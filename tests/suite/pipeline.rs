@@ -786,6 +786,18 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
             "{r:?}"
         );
     }
+    // Each run records its scenes on the training half, the original first and the final
+    // last (issue #72).
+    for r in &report.results {
+        let names: Vec<&str> = r.stages.iter().map(|s| s.scene.as_str()).collect();
+        assert_eq!(names.first(), Some(&"original"), "{names:?}");
+        assert_eq!(names.last(), Some(&r.last.scene.as_str()), "{names:?}");
+        let last = r.stages.last().unwrap();
+        assert_eq!(
+            (last.psnr_train_half, last.gaussians),
+            (r.last.psnr_train_half, r.last.gaussians)
+        );
+    }
     // Each run records what it did; the mask variant keeps full's views.
     for r in &report.results {
         let d = r.diagnostics.as_ref().expect("recorded");
@@ -946,6 +958,7 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
     assert!(md.contains("| truth-low | opacity_mask |"), "{md}");
     assert!(md.contains("same computation 0 of 2"), "{md}");
     assert!(md.contains("## What the step cache saves"), "{md}");
+    assert!(md.contains("## The training half per stage"), "{md}");
     assert!(md.contains("QA-Mask over opacity maps, existing"));
     let svg = std::fs::read_to_string(dir.join("inconsistency.svg")).unwrap();
     assert!(svg.starts_with("<svg") && svg.contains("<circle"));
@@ -1192,6 +1205,7 @@ fn sample(variant: &str, seed: u32, revision: u32, psnr: f64) -> unseen::audit::
         pair: None,
         diagnostics: None,
         candidates: None,
+        stages: vec![],
     }
 }
 
