@@ -8,7 +8,8 @@
 # Usage: reference_data/audit/run_control.sh DATASET A..B [UNSEEN_BINARY]
 #   DATASET: a dataset folder with truth, candidates.json and evaluation.json (any room)
 #   e.g. reference_data/audit/run_control.sh reference_data/scenes/gallery 0..4
-# LEVELS overrides the levels (default 1), VARIANTS the variants (default
+# LEVELS overrides the levels (default 1; the report judges only the levels named, so name
+# every level the folder holds), VARIANTS the variants (default
 # full,conflicting_views), FAMILY names a candidate family of the dataset (e.g. ring-13),
 # OUT the folder (default reference_data/audit/<dataset name>[-<family>]-control).
 # Low priority: nice 19 (a setsid batch needs its autogroup niced: run_mechanisms.sh).

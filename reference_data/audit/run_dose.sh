@@ -6,7 +6,8 @@
 # Usage: reference_data/audit/run_dose.sh ROOM PARAM A..B [UNSEEN_BINARY]
 #   PARAM: hallucination, photometric or depth_distortion
 #   e.g. reference_data/audit/run_dose.sh lounge hallucination 0..2
-# LEVELS overrides the levels (default 0,0.25,0.5,0.75,1). FAMILY names a candidate family
+# LEVELS overrides the levels (default 0,0.25,0.5,0.75,1; the report judges only the levels
+# named, so name every level the folder holds). FAMILY names a candidate family
 # of the room (SPEC.md §20.7, e.g. FAMILY=ring-13: the lounge's bridge views rarely give a
 # colliding set that qualifies), into reference_data/audit/<room>-<family>-dose-<param>/.
 # OUT names another folder (e.g. a re-run with the panel beside an earlier revision's).

@@ -704,30 +704,36 @@ fn every_committed_audit_follows_from_its_samples() {
     }
 }
 
-/// README.md's results table is what `unseen audit-table` makes of the committed audits it
-/// names (SPEC.md §21.7): the block between `<!-- audit-table: FOLDER… -->` and
-/// `<!-- /audit-table -->` (folders from the repository's root), byte for byte but for the
-/// blank lines around it.
+/// The results tables of README.md and the audit page (`reference_data/audit/README.md`)
+/// are what `unseen audit-table` makes of the committed audits each names (SPEC.md §21.7):
+/// every block between `<!-- audit-table: FOLDER… -->` and `<!-- /audit-table -->` (folders
+/// from the repository's root), byte for byte but for the blank lines around it.
 #[test]
 fn the_readme_results_table_is_generated_from_the_committed_audits() {
     let root = crate::support::repo_root();
-    let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
-    let (_, rest) = readme
-        .split_once("<!-- audit-table: ")
-        .expect("README.md has its results table");
-    let (folders, rest) = rest.split_once(" -->\n").unwrap();
-    let (block, _) = rest.split_once("<!-- /audit-table -->").unwrap();
-    let folders: Vec<std::path::PathBuf> =
-        folders.split_whitespace().map(|f| root.join(f)).collect();
-    let paths: Vec<&std::path::Path> = folders.iter().map(|p| p.as_path()).collect();
-    let want = unseen::audit::results::table(&paths).unwrap();
-    assert!(
-        block.trim_matches('\n') == want.trim_end_matches('\n'),
-        "README.md's results table is not what its audits give; regenerate it with\n  unseen audit-table {}\n{want}",
-        folders
-            .iter()
-            .map(|f| f.strip_prefix(&root).unwrap().display().to_string())
-            .collect::<Vec<_>>()
-            .join(" ")
-    );
+    for (page, least) in [("README.md", 1), ("reference_data/audit/README.md", 1)] {
+        let text = std::fs::read_to_string(root.join(page)).unwrap();
+        let mut blocks = 0;
+        let mut rest = text.as_str();
+        while let Some((_, after)) = rest.split_once("<!-- audit-table: ") {
+            let (folders, after) = after.split_once(" -->\n").unwrap();
+            let (block, after) = after.split_once("<!-- /audit-table -->").unwrap();
+            rest = after;
+            blocks += 1;
+            let folders: Vec<std::path::PathBuf> =
+                folders.split_whitespace().map(|f| root.join(f)).collect();
+            let paths: Vec<&std::path::Path> = folders.iter().map(|p| p.as_path()).collect();
+            let want = unseen::audit::results::table(&paths).unwrap();
+            assert!(
+                block.trim_matches('\n') == want.trim_end_matches('\n'),
+                "{page}'s results table is not what its audits give; regenerate it with\n  unseen audit-table {}\n{want}",
+                folders
+                    .iter()
+                    .map(|f| f.strip_prefix(&root).unwrap().display().to_string())
+                    .collect::<Vec<_>>()
+                    .join(" ")
+            );
+        }
+        assert!(blocks >= least, "{page} has {blocks} results tables");
+    }
 }
