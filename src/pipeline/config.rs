@@ -335,6 +335,25 @@ impl FineTuneRates {
     }
 }
 
+/// Which Gaussians a reconstruction's densification and pruning may touch (SPEC.md §20.5;
+/// issue #72: the paper does not say).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DensifyScope {
+    /// Every Gaussian, as a training does.
+    #[default]
+    All,
+    /// Only those the pipeline added (the original scene's Gaussians, first in every scene
+    /// the pipeline makes under this scope, are left to the gradient step).
+    Added,
+}
+
+impl DensifyScope {
+    fn is_all(&self) -> bool {
+        *self == DensifyScope::All
+    }
+}
+
 /// How the pipeline extrapolates (SPEC.md §20.11).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -581,6 +600,10 @@ pub struct PipelineConfig {
     /// or generated, alike from one stack.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub original_share: Option<f32>,
+    /// **A choice the paper leaves open** (issue #72): which Gaussians a reconstruction's
+    /// densification and pruning may touch. Written only away from the default.
+    #[serde(skip_serializing_if = "DensifyScope::is_all")]
+    pub densify_scope: DensifyScope,
     /// **A control, not the paper's method** (issue #72): off, every reconstruction trains
     /// on the original training views alone (the generated views are made and dropped), so
     /// that what the fine-tune recipe does to original areas can be told from what generated
@@ -645,6 +668,7 @@ impl PipelineConfig {
             interpolate: ReconConfig::default(),
             fine_tune_rates: FineTuneRates::Restart,
             original_share: None,
+            densify_scope: DensifyScope::All,
             generated_supervision: true,
             fixer_every: 3000,
         }

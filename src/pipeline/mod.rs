@@ -36,8 +36,8 @@ pub mod steps;
 pub mod views;
 
 pub use config::{
-    FineTuneRates, Hallucination, Inconsistency, Level, MaskSource, Paradigm, PipelineConfig,
-    Preset, ReconConfig, Slot, SlotNames, Stage2Depth, TruthDepth,
+    DensifyScope, FineTuneRates, Hallucination, Inconsistency, Level, MaskSource, Paradigm,
+    PipelineConfig, Preset, ReconConfig, Slot, SlotNames, Stage2Depth, TruthDepth,
 };
 
 use crate::error::{Error, Result};

@@ -10,7 +10,7 @@
 //! came from (the issue's §6).
 
 use super::artifacts::{save_scene, stem};
-use super::config::{FineTuneRates, MaskSource, PipelineConfig, ReconConfig};
+use super::config::{DensifyScope, FineTuneRates, MaskSource, PipelineConfig, ReconConfig};
 use super::rundir::{StepDone, StepWriter};
 use super::steps::{Scene, Step};
 use super::{Event, Inputs, Run};
@@ -159,6 +159,12 @@ pub fn recon_key(
     if !config.generated_supervision {
         m.insert("generated_supervision".into(), serde_json::json!(false));
     }
+    if config.densify_scope != DensifyScope::All {
+        m.insert(
+            "densify_scope".into(),
+            serde_json::json!(config.densify_scope),
+        );
+    }
     key
 }
 
@@ -287,7 +293,16 @@ impl Run<'_> {
             iterations: recon.iterations,
             seed: stage_seed(config.seed, stage),
             sh_degree: init.sh_degree,
-            densify: recon.densify,
+            // Limited to what the pipeline added: the original scene's Gaussians lead every
+            // scene it makes under this scope (appended points follow; densification keeps
+            // protected ones first).
+            densify: recon.densify.map(|d| crate::train::densify::DensifyConfig {
+                protected: match config.densify_scope {
+                    DensifyScope::All => 0,
+                    DensifyScope::Added => inputs.scene.len(),
+                },
+                ..d
+            }),
             loss: config.recon_loss(),
             background: inputs.background,
             save_iterations: Vec::new(),

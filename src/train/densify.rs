@@ -48,6 +48,15 @@ pub struct DensifyConfig {
     pub world_prune_fraction: f32,
     /// Screen-space pruning in pixels; `None` = INRIA's effective behaviour (off).
     pub max_screen_size_px: Option<f32>,
+    /// The first this many Gaussians are neither cloned, split nor pruned (they stay first,
+    /// in order): a fine-tune limited to the Gaussians it added (SPEC.md §20.5). 0, and left
+    /// out of a written configuration, by default.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub protected: usize,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 impl Default for DensifyConfig {
@@ -63,6 +72,7 @@ impl Default for DensifyConfig {
             opacity_reset_value: 0.01,
             world_prune_fraction: 0.1,
             max_screen_size_px: None,
+            protected: 0,
         }
     }
 }
@@ -218,7 +228,7 @@ pub fn densify_and_prune(
         })
         .collect();
     let dense = cfg.percent_dense * extent;
-    let hot = |i: usize| grads[i] >= cfg.grad_threshold;
+    let hot = |i: usize| i >= cfg.protected && grads[i] >= cfg.grad_threshold;
     let clone: Vec<usize> = (0..n0)
         .into_par_iter()
         .filter(|&i| hot(i) && max_scale(g.log_scales[i]) <= dense)
@@ -284,6 +294,9 @@ pub fn densify_and_prune(
     }
     let screen = cfg.max_screen_size_px.filter(|_| world_prune);
     remove.par_iter_mut().enumerate().for_each(|(i, r)| {
+        if i < cfg.protected {
+            return;
+        }
         let transparent = sigmoid(opacity(i)) < cfg.min_opacity;
         let big_world = world_prune && max_scale(log_scales(i)) > cfg.world_prune_fraction * extent;
         let big_screen = screen.is_some_and(|px| radius[i] > px);

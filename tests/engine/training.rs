@@ -204,11 +204,11 @@ fn adam_follows_the_hand_computed_sequence() {
     assert_eq!(s.at(40_000), s.at(30_000));
 }
 
-/// A constructed scene with known gradient statistics: 2 small hot Gaussians are cloned,
-/// 3 large hot ones split in two (originals removed), 1 transparent one pruned, 1 huge one
-/// pruned by the world-space test; the split samples keep the parent's statistics.
-#[test]
-fn densification_clones_splits_and_prunes_as_inria() {
+/// A constructed scene with known gradient statistics (each entry: log max scale, opacity,
+/// mean gradient), non-zero opacity moments `i + 1`, on an extent of 2: 2 small hot
+/// Gaussians to clone, 3 large hot ones to split, 1 cold, 1 transparent and 1 huge.
+#[allow(clippy::type_complexity)]
+fn hot_scene() -> (Gaussians, Adam, DensifyStats, f32, [(f32, f32, f32); 8]) {
     let extent = 2.0f32;
     let mut g = Gaussians::new(1).unwrap();
     let rest = [0.1f32; 9];
@@ -259,6 +259,15 @@ fn densification_clones_splits_and_prunes_as_inria() {
     for c in stats.count.iter_mut() {
         *c = 1;
     }
+    (g, adam, stats, extent, spec)
+}
+
+/// A constructed scene with known gradient statistics: 2 small hot Gaussians are cloned,
+/// 3 large hot ones split in two (originals removed), 1 transparent one pruned, 1 huge one
+/// pruned by the world-space test; the split samples keep the parent's statistics.
+#[test]
+fn densification_clones_splits_and_prunes_as_inria() {
+    let (mut g, mut adam, mut stats, extent, spec) = hot_scene();
     let mut rng = Uniform::new(3);
     let cfg = DensifyConfig::default();
     let r = densify_and_prune(
@@ -302,6 +311,57 @@ fn densification_clones_splits_and_prunes_as_inria() {
         assert!(1.0 / (1.0 + (-o).exp()) <= 0.010_000_1);
     }
     assert!(adam.m.opacity_logits.iter().all(|&m| m == 0.0));
+}
+
+/// With `protected` (a fine-tune limited to the Gaussians it added, SPEC.md §20.5), the
+/// first Gaussians are neither cloned, split nor pruned and stay first, in order; the rest
+/// densify as before.
+#[test]
+fn protected_gaussians_are_left_to_the_gradient_step() {
+    let (mut g, mut adam, mut stats, extent, _) = hot_scene();
+    let before: Vec<[f32; 3]> = g.means[..4].to_vec();
+    let cfg = DensifyConfig {
+        protected: 4,
+        ..DensifyConfig::default()
+    };
+    let mut rng = Uniform::new(3);
+    let r = densify_and_prune(
+        &mut g,
+        &mut adam,
+        &mut stats,
+        &cfg,
+        extent,
+        true,
+        Normals::Rng(&mut rng),
+    )
+    .unwrap();
+    // 0–3 protected (two clones and two splits forgone); 4 splits; 6 and 7 are pruned.
+    assert_eq!((r.cloned, r.split, r.pruned), (0, 1, 2), "{r:?}");
+    assert_eq!(r.after, 8 - 1 - 2 + 2);
+    assert_eq!(&g.means[..4], &before[..]);
+    assert_eq!(g.means[4][0], 5.0);
+    assert_eq!(&adam.m.opacity_logits[..5], &[1.0, 2.0, 3.0, 4.0, 6.0]);
+    // More protected than there are: all of them.
+    let (mut g, mut adam, mut stats, extent, _) = hot_scene();
+    let cfg = DensifyConfig {
+        protected: 100,
+        ..DensifyConfig::default()
+    };
+    let r = densify_and_prune(
+        &mut g,
+        &mut adam,
+        &mut stats,
+        &cfg,
+        extent,
+        true,
+        Normals::Rng(&mut rng),
+    )
+    .unwrap();
+    assert_eq!(
+        (r.cloned, r.split, r.pruned, r.after),
+        (0, 0, 0, 8),
+        "{r:?}"
+    );
 }
 
 fn lounge(resolution: u32) -> dataset::Dataset {

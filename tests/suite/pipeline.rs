@@ -2378,6 +2378,37 @@ fn the_fine_tune_switches_reach_the_reconstructions() {
             "cycle step {k}"
         );
     }
+    // Densification limited to what the pipeline added: the original scene's Gaussians are
+    // never pruned (densification on in stage 1 here; the tiny preset has it off).
+    let densifying = PipelineConfig {
+        stage1: unseen::pipeline::ReconConfig {
+            densify: Some(unseen::train::densify::DensifyConfig {
+                from_iter: 10,
+                interval: 10,
+                until_iter: 50,
+                opacity_reset_interval: 0,
+                ..Default::default()
+            }),
+            ..paper.stage1
+        },
+        ..paper.clone()
+    };
+    let limited = PipelineConfig {
+        densify_scope: unseen::pipeline::DensifyScope::Added,
+        ..densifying.clone()
+    };
+    let (_, all_scene) = run(&densifying, "densify-all");
+    let (_, added_scene) = run(&limited, "densify-added");
+    assert!(all_scene != added_scene, "the scope changed nothing");
+    let (g, _) =
+        unseen::gaussian::ply::read_ply(&t.path().join("densify-added/stage1/recon/scene.ply"))
+            .unwrap();
+    assert!(
+        g.len() >= inp.scene.len(),
+        "{} < {}",
+        g.len(),
+        inp.scene.len()
+    );
     // The recipe's control: the generated views made and dropped.
     let control = PipelineConfig {
         generated_supervision: false,
