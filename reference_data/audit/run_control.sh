@@ -11,7 +11,9 @@
 # LEVELS overrides the levels (default 1; the report judges only the levels named, so name
 # every level the folder holds), VARIANTS the variants (default
 # full,conflicting_views), FAMILY names a candidate family of the dataset (e.g. ring-13),
-# OUT the folder (default reference_data/audit/<dataset name>[-<family>]-control).
+# OUT the folder (default reference_data/audit/<dataset name>[-<family>]-control), ARGS more
+# options of `unseen audit` (e.g. ARGS="--train-resolution 1": another preset's samples
+# need a folder of their own).
 # Low priority: nice 19 (a setsid batch needs its autogroup niced: run_mechanisms.sh).
 set -euo pipefail
 dataset="$(cd "$1" && pwd)"; seeds="$2"
@@ -26,7 +28,8 @@ out="${OUT:-reference_data/audit/$name-control}"
 work="${WORK:-/tmp/unseen-control-$name}"
 mkdir -p "$work" "$out"
 cp "$out/samples.json" "$work/" 2>/dev/null || true
-nice -n 19 "$bin" audit "$dataset" --preset quick "${family[@]}" \
+# shellcheck disable=SC2086 # ARGS is a list of options
+nice -n 19 "$bin" audit "$dataset" --preset quick "${family[@]}" ${ARGS:-} \
   --variants "$variants" --sweep "ghosting=$levels" \
   --seeds "$seeds" --threads 2 --out "$work"
 cp "$work"/{samples.json,audit.json,audit.md,inconsistency.svg} "$out/"

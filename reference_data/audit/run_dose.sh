@@ -10,7 +10,8 @@
 # named, so name every level the folder holds). FAMILY names a candidate family
 # of the room (SPEC.md §20.7, e.g. FAMILY=ring-13: the lounge's bridge views rarely give a
 # colliding set that qualifies), into reference_data/audit/<room>-<family>-dose-<param>/.
-# OUT names another folder (e.g. a re-run with the panel beside an earlier revision's).
+# OUT names another folder (e.g. a re-run with the panel beside an earlier revision's), ARGS
+# more options of `unseen audit` (e.g. ARGS="--train-resolution 1").
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 room="$1"; param="$2"; seeds="$3"; bin="${4:-target/release/unseen}"
@@ -29,7 +30,8 @@ out="${OUT:-$out}"
 work="${WORK:-/tmp/unseen-dose-$room${FAMILY:+-$FAMILY}-$param}"
 mkdir -p "$work" "$out"
 cp "$out/samples.json" "$work/" 2>/dev/null || true
-nice -n 19 "$bin" audit "$dataset" --preset quick "${family[@]}" \
+# shellcheck disable=SC2086 # ARGS is a list of options
+nice -n 19 "$bin" audit "$dataset" --preset quick "${family[@]}" ${ARGS:-} \
   --variants full,even_views,conflicting_views --sweep "$param=$levels" \
   --seeds "$seeds" --threads 2 --out "$work"
 cp "$work"/{samples.json,audit.json,audit.md,inconsistency.svg} "$work"/dose-*.svg "$out/"
