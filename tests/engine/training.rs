@@ -318,45 +318,35 @@ fn densification_clones_splits_and_prunes_as_inria() {
 /// densify as before.
 #[test]
 fn protected_gaussians_are_left_to_the_gradient_step() {
-    let (mut g, mut adam, mut stats, extent, _) = hot_scene();
-    let before: Vec<[f32; 3]> = g.means[..4].to_vec();
-    let cfg = DensifyConfig {
-        protected: 4,
-        ..DensifyConfig::default()
+    let densify = |protected: usize| {
+        let (mut g, mut adam, mut stats, extent, _) = hot_scene();
+        let before = g.clone();
+        let cfg = DensifyConfig {
+            protected,
+            ..DensifyConfig::default()
+        };
+        let mut rng = Uniform::new(3);
+        let r = densify_and_prune(
+            &mut g,
+            &mut adam,
+            &mut stats,
+            &cfg,
+            extent,
+            true,
+            Normals::Rng(&mut rng),
+        )
+        .unwrap();
+        (r, before, g, adam)
     };
-    let mut rng = Uniform::new(3);
-    let r = densify_and_prune(
-        &mut g,
-        &mut adam,
-        &mut stats,
-        &cfg,
-        extent,
-        true,
-        Normals::Rng(&mut rng),
-    )
-    .unwrap();
+    let (r, before, g, adam) = densify(4);
     // 0–3 protected (two clones and two splits forgone); 4 splits; 6 and 7 are pruned.
     assert_eq!((r.cloned, r.split, r.pruned), (0, 1, 2), "{r:?}");
     assert_eq!(r.after, 8 - 1 - 2 + 2);
-    assert_eq!(&g.means[..4], &before[..]);
+    assert_eq!(&g.means[..4], &before.means[..4]);
     assert_eq!(g.means[4][0], 5.0);
     assert_eq!(&adam.m.opacity_logits[..5], &[1.0, 2.0, 3.0, 4.0, 6.0]);
     // More protected than there are: all of them.
-    let (mut g, mut adam, mut stats, extent, _) = hot_scene();
-    let cfg = DensifyConfig {
-        protected: 100,
-        ..DensifyConfig::default()
-    };
-    let r = densify_and_prune(
-        &mut g,
-        &mut adam,
-        &mut stats,
-        &cfg,
-        extent,
-        true,
-        Normals::Rng(&mut rng),
-    )
-    .unwrap();
+    let (r, ..) = densify(100);
     assert_eq!(
         (r.cloned, r.split, r.pruned, r.after),
         (0, 0, 0, 8),
