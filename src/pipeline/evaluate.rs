@@ -102,6 +102,16 @@ pub struct Consistency {
     pub squared_error: f64,
 }
 
+/// PSNR of `se`, a sum of squared errors over `n` RGB pixels: `−10·log10(se / 3n)` (NaN
+/// with no pixel, +∞ with no error).
+fn pooled_psnr(se: f64, n: u64) -> f64 {
+    if n == 0 {
+        f64::NAN
+    } else {
+        -10.0 * (se / (3 * n) as f64).log10()
+    }
+}
+
 impl ClassSums {
     /// Pooled PSNR of a set of views' sums (NaN with no pixel, +∞ with no error).
     pub fn psnr<'a>(sums: impl IntoIterator<Item = &'a ClassSums>) -> f64 {
@@ -110,11 +120,7 @@ impl ClassSums {
             se += s.squared_error;
             n += s.pixels;
         }
-        if n == 0 {
-            f64::NAN
-        } else {
-            -10.0 * (se / (3 * n) as f64).log10()
-        }
+        pooled_psnr(se, n)
     }
 
     /// Pooled SSIM of a set of views' sums: the mean of the map over their pixels (NaN
@@ -168,11 +174,7 @@ impl ClassSums {
             se += c.squared_error;
             n += c.pixels;
         }
-        if n == 0 {
-            f64::NAN
-        } else {
-            -10.0 * (se / (3 * n) as f64).log10()
-        }
+        pooled_psnr(se, n)
     }
 
     /// Add one pixel's consistency error (the sum over RGB; NaN: the pixel is not seen on
