@@ -27,12 +27,14 @@ family=()
 out="${OUT:-reference_data/audit/$name-control}"
 work="${WORK:-/tmp/unseen-control-$name}"
 mkdir -p "$work" "$out"
-cp "$out/samples.json" "$work/" 2>/dev/null || true
+# samples.json.gz (an older binary's folder: samples.json; the audit reads either)
+cp "$out"/samples.json* "$work/" 2>/dev/null || true
 # shellcheck disable=SC2086 # ARGS is a list of options
 nice -n 19 "$bin" audit "$dataset" --preset quick "${family[@]}" ${ARGS:-} \
   --variants "$variants" --sweep "ghosting=$levels" \
   --seeds "$seeds" --threads 2 --out "$work"
-cp "$work"/{samples.json,audit.json,audit.md,inconsistency.svg} "$out/"
+rm -f "$out"/samples.json "$out"/samples.json.gz
+cp "$work"/samples.json* "$work"/{audit.json,audit.md,inconsistency.svg} "$out/"
 cp "$work"/dose-*.svg "$out/" 2>/dev/null || true
 # The contact sheets audit.md shows (each primary claim's at its median seed).
 { grep -o '](sheets/[^)]*\.png)' "$work/audit.md" || true; } | sed 's/^](//; s/)$//' | while read -r f; do

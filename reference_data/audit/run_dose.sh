@@ -29,12 +29,14 @@ fi
 out="${OUT:-$out}"
 work="${WORK:-/tmp/unseen-dose-$room${FAMILY:+-$FAMILY}-$param}"
 mkdir -p "$work" "$out"
-cp "$out/samples.json" "$work/" 2>/dev/null || true
+# samples.json.gz (an older binary's folder: samples.json; the audit reads either)
+cp "$out"/samples.json* "$work/" 2>/dev/null || true
 # shellcheck disable=SC2086 # ARGS is a list of options
 nice -n 19 "$bin" audit "$dataset" --preset quick "${family[@]}" ${ARGS:-} \
   --variants full,even_views,conflicting_views --sweep "$param=$levels" \
   --seeds "$seeds" --threads 2 --out "$work"
-cp "$work"/{samples.json,audit.json,audit.md,inconsistency.svg} "$work"/dose-*.svg "$out/"
+rm -f "$out"/samples.json "$out"/samples.json.gz
+cp "$work"/samples.json* "$work"/{audit.json,audit.md,inconsistency.svg} "$work"/dose-*.svg "$out/"
 # The contact sheets audit.md shows (each primary claim's at its median seed).
 { grep -o '](sheets/[^)]*\.png)' "$work/audit.md" || true; } | sed 's/^](//; s/)$//' | while read -r f; do
   mkdir -p "$out/$(dirname "$f")" && cp "$work/$f" "$out/$f"

@@ -6,7 +6,7 @@
 # no_depth_supervision, the cycle the paper replaces, and the independent-views claim under
 # the other selection rules and the hull outline (the *_max_cardinality, *_max_coverage and
 # *_hull pairs); every run records its diagnostics (SPEC.md §21.5).
-# Seeds accumulate: each batch adds to the folder's samples.json.
+# Seeds accumulate: each batch adds to the folder's samples.json.gz.
 #
 # Usage: reference_data/audit/run_isolation.sh ROOM A..B [UNSEEN_BINARY]
 #   e.g. reference_data/audit/run_isolation.sh lounge 0..2
@@ -38,9 +38,11 @@ if [ -n "${FAMILY:-}" ]; then
 fi
 work="${WORK:-/tmp/unseen-isolation-$room${FAMILY:+-$FAMILY}}"
 mkdir -p "$work" "$out"
-cp "$out/samples.json" "$work/" 2>/dev/null || true
+# samples.json.gz (an older binary's folder: samples.json; the audit reads either)
+cp "$out"/samples.json* "$work/" 2>/dev/null || true
 nice -n 19 "$bin" audit "$dataset" --preset quick "${family[@]}" \
   --variants "$variants" --generators truth-low+hallucinating+relative \
   --seeds "$seeds" --threads 2 --out "$work"
-cp "$work"/{samples.json,audit.json,audit.md,inconsistency.svg} "$out/"
+rm -f "$out"/samples.json "$out"/samples.json.gz
+cp "$work"/samples.json* "$work"/{audit.json,audit.md,inconsistency.svg} "$out/"
 rm -rf "$work/runs" "$work/cache" "$work/original"

@@ -247,7 +247,7 @@ pub struct Missing {
 }
 
 impl Audit<'_> {
-    /// The waves still to run beside the samples in `DIR/samples.json` and the `merge`
+    /// The waves still to run beside the samples in `DIR/samples.json.gz` and the `merge`
     /// files (`pending_waves`): what `--emit-slurm` submits and `--collect` expects.
     pub fn waves_to_run(&self, merge: &[PathBuf]) -> Result<Vec<Wave>> {
         self.cfg.validate()?;

@@ -15,7 +15,7 @@ use std::path::PathBuf;
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Report {
     /// The binary that made the report: samples of other revisions are pooled (each
-    /// sample names its own, in `samples.json`).
+    /// sample names its own, in `samples.json.gz`).
     pub crate_version: String,
     pub numerics_revision: u32,
     #[serde(flatten)]
@@ -25,7 +25,7 @@ pub struct Report {
     pub revisions: Vec<u32>,
     pub samples: usize,
     /// Samples of another pipeline configuration of their (generator, variant) than this
-    /// binary's: kept in `samples.json`, left out of every verdict.
+    /// binary's: kept in `samples.json.gz`, left out of every verdict.
     pub other_config: usize,
     pub generators: Vec<String>,
     pub variants: Vec<String>,
@@ -64,12 +64,10 @@ impl Audit<'_> {
             train_resolution: cfg.train_resolution,
             candidates: super::family::family(dataset, cfg.candidates.as_deref())?,
         });
-        let own = dir.join(samples::SAMPLES_FILE);
-        let mut files: Vec<PathBuf> = merge.to_vec();
-        if own.is_file() {
-            files.insert(0, own);
-        }
-        for f in files {
+        for f in samples::files_in(dir)
+            .into_iter()
+            .chain(merge.iter().cloned())
+        {
             let s = Samples::read(&f)?;
             pool.pool(s, &f)?;
         }
@@ -79,7 +77,7 @@ impl Audit<'_> {
     /// Run every job of `cfg` that is not done — neither pooled as this binary would compute
     /// it (`pending`) nor finished in its folder (each resumes its own) — pool the
     /// results with the samples already in `dir` and in `merge` files, then write
-    /// `DIR/samples.json`, `DIR/audit.json`, `DIR/audit.md` and `DIR/inconsistency.svg`.
+    /// `DIR/samples.json.gz`, `DIR/audit.json`, `DIR/audit.md` and `DIR/inconsistency.svg`.
     pub fn run(&self, merge: &[PathBuf]) -> Result<Report> {
         self.cfg.validate()?;
         self.check_inputs()?;
@@ -110,8 +108,9 @@ impl Audit<'_> {
         let pool = self.gather(merge)?;
         if pool.samples.is_empty() {
             return Err(Error::invalid(format!(
-                "no samples to report (no {} here and no --merge file)",
-                samples::SAMPLES_FILE
+                "no samples to report (no {} or {} here and no --merge file)",
+                samples::SAMPLES_FILE,
+                samples::LEGACY_SAMPLES_FILE
             ))
             .at(dir));
         }
@@ -126,6 +125,11 @@ impl Audit<'_> {
         }
         self.pair_up(&mut pool)?;
         pool.write(&dir.join(samples::SAMPLES_FILE))?;
+        let legacy = dir.join(samples::LEGACY_SAMPLES_FILE);
+        if legacy.is_file() {
+            // Its samples were pooled by `gather` and are now in the compressed file.
+            std::fs::remove_file(&legacy).map_err(|e| Error::io(&legacy, e))?;
+        }
         let rule = stats::Rule {
             planned: cfg.planned_seeds,
             ..stats::Rule::default()
@@ -701,7 +705,7 @@ fn where_conflicts_act(report: &Report) -> String {
 pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
     let revisions: Vec<String> = report.revisions.iter().map(|r| r.to_string()).collect();
     let mut s = format!(
-        "# Audit of the paper's claims\n\nDataset `{}`; candidates: {}; preset `{}`; {} seeds ({}) in {} samples at numerics revision{} {}; original scene: {} iterations at resolution 1/{} on the training half. Metrics on the evaluation poses, pixels split into *existing* (seen by the training half) and *extrapolated*. Made by `unseen audit` (SPEC.md §21), crate {} at numerics revision {}; the samples are in `samples.json` (a later batch of seeds adds to them).\n\n",
+        "# Audit of the paper's claims\n\nDataset `{}`; candidates: {}; preset `{}`; {} seeds ({}) in {} samples at numerics revision{} {}; original scene: {} iterations at resolution 1/{} on the training half. Metrics on the evaluation poses, pixels split into *existing* (seen by the training half) and *extrapolated*. Made by `unseen audit` (SPEC.md §21), crate {} at numerics revision {}; the samples are in `samples.json.gz` (a later batch of seeds adds to them).\n\n",
         report.provenance.dataset,
         report.provenance.candidates.as_ref().map_or_else(
             || "the bundled bridge views (`candidates.json`)".to_string(),
@@ -725,7 +729,7 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
     );
     if report.other_config > 0 {
         s += &format!(
-            "**{} samples ran another pipeline configuration** than this binary's for their generator and variant (another version of the preset): kept in `samples.json`, left out of every verdict and table.\n\n",
+            "**{} samples ran another pipeline configuration** than this binary's for their generator and variant (another version of the preset): kept in `samples.json.gz`, left out of every verdict and table.\n\n",
             report.other_config
         );
     }

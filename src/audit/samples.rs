@@ -1,20 +1,39 @@
 //! The audit's samples (SPEC.md §21.3): every job result of every batch of seeds, pooled,
 //! so that seeds accumulate instead of each audit being regenerated whole.
 //!
-//! `DIR/samples.json` holds a header naming what the samples measure (dataset, preset,
-//! original-scene training) and one sample per line (a [`JobResult`] without its step
-//! list and without the original scene's per-view sums, which its seed's jobs share). A
-//! run of the audit adds its batch's results to the samples already in `DIR/samples.json`
-//! and to those of `--merge` files; samples from another dataset, preset or training are
-//! refused with the field that differs.
+//! `DIR/samples.json.gz` holds, gzip-compressed, a header naming what the samples measure
+//! (dataset, preset, original-scene training) and one sample per line (a [`JobResult`]
+//! without its step list and without the original scene's per-view sums, which its seed's
+//! jobs share). A run of the audit adds its batch's results to the samples already in the
+//! folder and to those of `--merge` files; samples from another dataset, preset or training
+//! are refused with the field that differs. A folder written before the samples were
+//! compressed holds `DIR/samples.json` (the same text, uncompressed): it is read as well,
+//! and replaced by the compressed file when the audit writes its samples.
 
 use super::JobResult;
 use crate::error::{Error, Result};
 use crate::pipeline::Preset;
 use std::path::Path;
 
-/// The file of an audit folder that holds its samples.
-pub const SAMPLES_FILE: &str = "samples.json";
+/// The file of an audit folder that holds its samples (gzip; the JSON text compresses
+/// 5–7×, which keeps the committed audits within the reference data's budget).
+pub const SAMPLES_FILE: &str = "samples.json.gz";
+
+/// The uncompressed samples file of a folder written before [`SAMPLES_FILE`]: read, never
+/// written; removed once its samples are in [`SAMPLES_FILE`].
+pub const LEGACY_SAMPLES_FILE: &str = "samples.json";
+
+/// The first two bytes of every gzip member (RFC 1952 §2.3.1).
+const GZIP_MAGIC: [u8; 2] = [0x1f, 0x8b];
+
+/// The samples files in `dir`, the compressed one first: what an audit of `dir` pools.
+pub fn files_in(dir: &Path) -> Vec<std::path::PathBuf> {
+    [SAMPLES_FILE, LEGACY_SAMPLES_FILE]
+        .iter()
+        .map(|f| dir.join(f))
+        .filter(|p| p.is_file())
+        .collect()
+}
 
 /// The format tag of [`SAMPLES_FILE`].
 pub const FORMAT: &str = "unseen-audit-samples/1";
@@ -106,10 +125,17 @@ impl Samples {
         }
     }
 
-    /// Read a [`SAMPLES_FILE`], or an `audit.json` of an earlier version (its results as
+    /// Read a samples file, gzip-compressed ([`SAMPLES_FILE`]) or not (told by its first
+    /// bytes, whatever its name), or an `audit.json` of an earlier version (its results as
     /// samples of its numerics revision).
     pub fn read(path: &Path) -> Result<Samples> {
-        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let mut bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        if bytes.starts_with(&GZIP_MAGIC) {
+            let mut text = Vec::new();
+            std::io::Read::read_to_end(&mut flate2::read::GzDecoder::new(&bytes[..]), &mut text)
+                .map_err(|e| Error::invalid(format!("damaged gzip: {e}")).at(path))?;
+            bytes = text;
+        }
         let v: serde_json::Value = serde_json::from_slice(&bytes)
             .map_err(|e| Error::invalid(format!("not JSON: {e}")).at(path))?;
         let bad = |e: serde_json::Error| {
@@ -242,8 +268,8 @@ impl Samples {
         Ok(())
     }
 
-    /// Write `path` atomically: the header, then one sample per line (a batch of new seeds
-    /// adds lines).
+    /// Write `path` atomically, gzip-compressed (level 9, no name, time 0: the same
+    /// samples give the same bytes): the header, then one sample per line.
     pub fn write(&self, path: &Path) -> Result<()> {
         let head = serde_json::to_value(&self.provenance).expect("serializes");
         let mut s = format!("{{\"format\": \"{FORMAT}\",\n");
@@ -261,7 +287,13 @@ impl Samples {
             };
         }
         s += " ]\n}\n";
-        crate::io::write_text(path, &s)
+        crate::io::write_atomic(path, |w| {
+            let mut gz = flate2::GzBuilder::new()
+                .mtime(0)
+                .write(w, flate2::Compression::best());
+            std::io::Write::write_all(&mut gz, s.as_bytes())?;
+            gz.finish().map(|_| ())
+        })
     }
 
     /// The distinct seeds and numerics revisions of the pool, ascending.

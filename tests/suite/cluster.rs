@@ -199,7 +199,7 @@ fn workers_with_receipts_merge_to_the_sequential_report_and_the_merge_names_what
     // and merges without a receipt to what a sequential audit of the same pool writes,
     // which runs nothing either. A grid with one variant more submits only its runs and
     // what they need (the originals and shared steps of their seeds).
-    let samples = dir.join("samples.json");
+    let samples = dir.join(unseen::audit::samples::SAMPLES_FILE);
     let merge = ["--merge", samples.to_str().unwrap()];
     let (again, sub2) = (t.path().join("again"), t.path().join("submit2"));
     let printed = ok(&audit(

@@ -2139,9 +2139,11 @@ fn cli_audit_bad_input_is_one_clear_error() {
     assert!(!t.path().join("listed").exists());
 }
 
-/// `samples.json` read back: the same samples; damaged (truncated anywhere, another
-/// format, a sample listed twice or without its revision), a clear error naming the file;
-/// extreme values parse and are judged without a panic.
+/// `samples.json.gz` read back: the same samples, and the same bits for the same samples;
+/// its text uncompressed (a folder written before compression) reads the same; damaged
+/// (truncated anywhere, compressed or not, another format, a sample listed twice or without
+/// its revision), a clear error naming the file; extreme values parse and are judged
+/// without a panic.
 #[test]
 fn audit_samples_round_trip_and_damaged_files_are_clear_errors() {
     use unseen::audit::samples::{Provenance, Samples};
@@ -2159,16 +2161,32 @@ fn audit_samples_round_trip_and_damaged_files_are_clear_errors() {
         s.insert(sample("full", seed, 4, 20.0 + seed as f64 * 0.1));
         s.insert(sample("no_qa_mask", seed, 4, 20.0));
     }
-    let path = t.path().join("samples.json");
+    let path = t.path().join(unseen::audit::samples::SAMPLES_FILE);
     s.write(&path).unwrap();
     assert_eq!(Samples::read(&path).unwrap(), s);
+    let bytes = std::fs::read(&path).unwrap();
+    assert_eq!(&bytes[..2], &[0x1f, 0x8b], "gzip");
+    s.write(&path).unwrap();
+    assert_eq!(
+        std::fs::read(&path).unwrap(),
+        bytes,
+        "no time stamp in the bytes"
+    );
+    let gunzip = |b: &[u8]| {
+        let mut text = String::new();
+        std::io::Read::read_to_string(&mut flate2::read::GzDecoder::new(b), &mut text).unwrap();
+        text
+    };
+    let legacy = t.path().join(unseen::audit::samples::LEGACY_SAMPLES_FILE);
+    std::fs::write(&legacy, gunzip(&bytes)).unwrap();
+    assert_eq!(Samples::read(&legacy).unwrap(), s, "uncompressed text");
     // Pools of what another dataset, candidate family, preset or training measures are
     // refused, naming what differs.
     let other = |f: &dyn Fn(&mut Provenance)| {
         let mut o = s.clone();
         f(&mut o.provenance);
         let e = s.clone().pool(o, &path).unwrap_err().to_string();
-        assert!(e.contains("samples.json"), "{e}");
+        assert!(e.contains("samples.json.gz"), "{e}");
         e
     };
     let family = unseen::audit::family::Family {
@@ -2191,7 +2209,7 @@ fn audit_samples_round_trip_and_damaged_files_are_clear_errors() {
     fam.write(&path).unwrap();
     assert_eq!(Samples::read(&path).unwrap(), fam, "the family round-trips");
     let damaged = t.path().join("family.json");
-    let text = std::fs::read_to_string(&path).unwrap();
+    let text = gunzip(&std::fs::read(&path).unwrap());
     std::fs::write(&damaged, text.replace(&"cd".repeat(32), "aéééé")).unwrap();
     let e = Samples::read(&damaged).unwrap_err().to_string();
     assert!(
@@ -2199,7 +2217,8 @@ fn audit_samples_round_trip_and_damaged_files_are_clear_errors() {
         "{e}"
     );
     s.write(&path).unwrap();
-    let text = std::fs::read_to_string(&path).unwrap();
+    let gz = std::fs::read(&path).unwrap();
+    let text = gunzip(&gz);
     assert_eq!(
         text.lines().filter(|l| l.contains("\"seed\"")).count(),
         6,
@@ -2224,6 +2243,18 @@ fn audit_samples_round_trip_and_damaged_files_are_clear_errors() {
         std::fs::write(&bad, body).unwrap();
         let e = Samples::read(&bad).unwrap_err().to_string();
         assert!(e.contains("bad.json"), "{what}: {e}");
+    }
+    // The compressed file cut anywhere after its magic bytes, or with a byte of its
+    // stream or check sum flipped.
+    let bad_gz = t.path().join("bad.json.gz");
+    let mut flipped = gz.clone();
+    let n = flipped.len();
+    flipped[n - 6] ^= 0x40;
+    let cuts = (2..gz.len()).step_by(7).map(|i| gz[..i].to_vec());
+    for body in cuts.chain([flipped]) {
+        std::fs::write(&bad_gz, &body).unwrap();
+        let e = Samples::read(&bad_gz).unwrap_err().to_string();
+        assert!(e.contains("bad.json.gz"), "{} bytes: {e}", body.len());
     }
     // Extreme values: parse, and the statistics do not panic.
     let mut s2 = s.clone();
