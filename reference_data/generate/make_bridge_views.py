@@ -34,7 +34,7 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(__file__))
-from common import camera_entry, ensure_dir, look_at  # noqa: E402
+from common import camera_entry, ensure_dir, look_at, write_depth_exr  # noqa: E402
 from make_scenes import (FOV_X_DEG, H, NEAR_CLIP, OUT, SEEDS, SPP, W, build_scene,  # noqa: E402
                          inside_any, ray_to_z, sensor)
 
@@ -173,7 +173,7 @@ def make_bridges(name):
                         integrator=path_int, spp=SPP, seed=1000 + k)
         mi.Bitmap(img).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.UInt8, srgb_gamma=True).write(
             os.path.join(out, "images", cam["name"] + ".png"))
-        mi.Bitmap(z[:, :, None]).write(os.path.join(out, "depth", cam["name"] + ".exr"))
+        write_depth_exr(os.path.join(out, "depth", cam["name"] + ".exr"), z)
         kept.append(cam)
         fracs.append(frac)
         print(f"{name}: proposal {proposals} co-visible {frac:.3f}: {cam['name']} "

@@ -39,7 +39,7 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(__file__))
-from common import camera_entry, ensure_dir, look_at  # noqa: E402
+from common import camera_entry, ensure_dir, look_at, write_depth_exr  # noqa: E402
 from make_bridge_views import cam_from_json, covisible_fraction, load_checked, read_depth, render_depth  # noqa: E402
 from make_scenes import FOV_X_DEG, H, OUT, SEEDS, SPP, W, build_scene, inside_any, sensor  # noqa: E402
 
@@ -149,7 +149,7 @@ def make_families(room):
                         integrator=path_int, spp=SPP, seed=RENDER_SEED_BASE + k)
         mi.Bitmap(img).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.UInt8, srgb_gamma=True).write(
             os.path.join(out, "images", cam["name"] + ".png"))
-        mi.Bitmap(z[:, :, None]).write(os.path.join(out, "depth", cam["name"] + ".exr"))
+        write_depth_exr(os.path.join(out, "depth", cam["name"] + ".exr"), z)
         covisible[cam["name"]] = round(float(frac), 3)
         ids[cam["name"]] = next_id + k
         print(f"{room}: {cam['name']} co-visible {frac:.3f} ({k + 1}/{len(views)}, {time.time() - t0:.0f} s)",

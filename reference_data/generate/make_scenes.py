@@ -24,7 +24,7 @@ import tempfile
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(__file__))
-from common import ensure_dir, look_at, write_cameras_json  # noqa: E402
+from common import ensure_dir, look_at, write_cameras_json, write_depth_exr  # noqa: E402
 
 import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402
@@ -322,7 +322,7 @@ def make_scene(name):
                                   integrator=depth_int, spp=1))[:, :, 0]
         hit = dist > 0
         z = np.where(hit, dist * ray_to_z(cam) + NEAR_CLIP, 0.0).astype(np.float32)
-        mi.Bitmap(z[:, :, None]).write(os.path.join(out, "depth", cam["name"] + ".exr"))
+        write_depth_exr(os.path.join(out, "depth", cam["name"] + ".exr"), z)
         if cam["name"].startswith("train"):
             rgb8 = np.array(bmp)
             ys = rng.integers(0, H, POINTS_PER_VIEW)
