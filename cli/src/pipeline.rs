@@ -304,15 +304,22 @@ fn emit_extrapolate(
 
 #[derive(Args)]
 pub struct AuditTableArgs {
-    /// Audit folders (each with an audit.json), in the table's order.
+    /// Audit folders (each with an audit.json), in the table's order; `FOLDER:GENERATOR`
+    /// shows one generator (dose level) of it.
     #[arg(required = true)]
-    folders: Vec<PathBuf>,
+    folders: Vec<String>,
+    /// At a glance: per primary claim its null, the paper's metric and SSIM on contested
+    /// pixels, the verdict's word alone (README's "Results at a glance").
+    #[arg(long)]
+    glance: bool,
 }
 
 /// `unseen audit-table`: the results table of audits, as README.md shows it.
 pub fn run_audit_table(a: &AuditTableArgs) -> Result<()> {
-    let folders: Vec<&std::path::Path> = a.folders.iter().map(PathBuf::as_path).collect();
-    print!("{}", unseen::audit::results::table(&folders)?);
+    use unseen::audit::results::{Source, Style, table};
+    let sources: Vec<Source> = a.folders.iter().map(|f| Source::parse(f)).collect();
+    let style = if a.glance { Style::Glance } else { Style::Full };
+    print!("{}", table(&sources, style)?);
     Ok(())
 }
 

@@ -724,10 +724,12 @@ fn every_committed_audit_follows_from_its_samples() {
 
 /// The results tables of README.md and the audit page (`reference_data/audit/README.md`)
 /// are what `unseen audit-table` makes of the committed audits each names (SPEC.md §21.7):
-/// every block between `<!-- audit-table: FOLDER… -->` and `<!-- /audit-table -->` (folders
-/// from the repository's root), byte for byte but for the blank lines around it.
+/// every block between `<!-- audit-table: ARGS -->` and `<!-- /audit-table -->` (ARGS:
+/// `unseen audit-table`'s, folders from the repository's root), byte for byte but for the
+/// blank lines around it.
 #[test]
 fn the_readme_results_table_is_generated_from_the_committed_audits() {
+    use unseen::audit::results::{Source, Style};
     let root = crate::support::repo_root();
     for (page, least) in [("README.md", 1), ("reference_data/audit/README.md", 1)] {
         let text = std::fs::read_to_string(root.join(page)).unwrap();
@@ -738,18 +740,32 @@ fn the_readme_results_table_is_generated_from_the_committed_audits() {
             let (block, after) = after.split_once("<!-- /audit-table -->").unwrap();
             rest = after;
             blocks += 1;
-            let folders: Vec<std::path::PathBuf> =
-                folders.split_whitespace().map(|f| root.join(f)).collect();
-            let paths: Vec<&std::path::Path> = folders.iter().map(|p| p.as_path()).collect();
-            let want = unseen::audit::results::table(&paths).unwrap();
+            let args: Vec<&str> = folders.split_whitespace().collect();
+            let style = if args.contains(&"--glance") {
+                Style::Glance
+            } else {
+                Style::Full
+            };
+            let sources: Vec<Source> = args
+                .iter()
+                .filter(|a| !a.starts_with("--"))
+                .map(|a| {
+                    let mut s = Source::parse(a);
+                    s.folder = root.join(&s.folder);
+                    s
+                })
+                .collect();
+            let want = unseen::audit::results::table(&sources, style).unwrap();
+            if style == Style::Glance {
+                // "At a glance": at most 8 rows under the header.
+                assert!(
+                    want.lines().count() <= 2 + 8,
+                    "{page}: a glance of more than 8 rows"
+                );
+            }
             assert!(
                 block.trim_matches('\n') == want.trim_end_matches('\n'),
-                "{page}'s results table is not what its audits give; regenerate it with\n  unseen audit-table {}\n{want}",
-                folders
-                    .iter()
-                    .map(|f| f.strip_prefix(&root).unwrap().display().to_string())
-                    .collect::<Vec<_>>()
-                    .join(" ")
+                "{page}'s results table is not what its audits give; regenerate it with\n  unseen audit-table {folders}\n{want}"
             );
         }
         assert!(blocks >= least, "{page} has {blocks} results tables");

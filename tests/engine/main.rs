@@ -10,6 +10,7 @@ mod architecture;
 mod audit_rule;
 mod collide;
 mod dibr;
+mod docs;
 mod golden_drjit;
 mod golden_grad;
 mod gradients;
