@@ -62,7 +62,7 @@ fn slow_tier_tests(dir: &Path) -> usize {
 
 /// README.md fits in `README_MAX_LINES`, no paragraph runs past `PARAGRAPH_MAX_WORDS`
 /// words, the number of slow-tier tests it states is the number there are, and every
-/// picture it shows is in the repository.
+/// picture it and the audit page show is in the repository.
 #[test]
 fn the_readme_is_short_true_and_complete() {
     let root = repo_root();
@@ -80,19 +80,31 @@ fn the_readme_is_short_true_and_complete() {
     let slow = slow_tier_tests(&root.join("tests")) + slow_tier_tests(&root.join("src"));
     let stated = format!("{slow} tests marked `slow tier`");
     assert!(text.contains(&stated), "README.md should say \"{stated}\"");
+    assert!(
+        !pictures(&root, "README.md").is_empty(),
+        "README.md shows no picture"
+    );
+    assert!(
+        pictures(&root, "reference_data/audit/README.md").len() >= 3,
+        "the audit page shows its plots"
+    );
+}
+
+/// The pictures `page` shows (`![…](target)`, relative to the page), each checked present.
+fn pictures(root: &Path, page: &str) -> Vec<String> {
+    let path = root.join(page);
+    let text = std::fs::read_to_string(&path).unwrap();
     let mut rest = text.as_str();
-    let mut pictures = 0;
+    let mut out = Vec::new();
     while let Some((_, after)) = rest.split_once("![") {
         let (_, after) = after.split_once("](").unwrap();
         let (target, after) = after.split_once(')').unwrap();
-        assert!(
-            root.join(target).is_file(),
-            "README.md shows {target}, which is missing"
-        );
-        pictures += 1;
+        let file = path.parent().unwrap().join(target);
+        assert!(file.is_file(), "{page} shows {target}, which is missing");
+        out.push(target.to_string());
         rest = after;
     }
-    assert!(pictures >= 1, "README.md shows no picture");
+    out
 }
 
 #[test]
