@@ -161,6 +161,10 @@ pub struct StageRecord {
     #[serde(with = "crate::io::json_float")]
     pub ssim_train_half: f64,
     pub gaussians: usize,
+    /// Where the scene's Gaussians come from (`None`, not written: the original scene, the
+    /// cycle's, and runs made before reconstructions recorded their lineage).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lineage: Option<crate::pipeline::evaluate::LineageRecord>,
 }
 
 impl JobResult {
@@ -353,6 +357,7 @@ impl Audit<'_> {
                             psnr_train_half: r.psnr_train_half,
                             ssim_train_half: r.ssim_train_half,
                             gaussians: r.gaussians,
+                            lineage: r.lineage.clone(),
                         })
                         .collect(),
                 };

@@ -45,11 +45,130 @@ pub struct Row {
     #[serde(with = "crate::io::json_float")]
     pub ssim_train_half: f64,
     pub gaussians: usize,
+    /// Where the scene's Gaussians come from against the original scene, and what the
+    /// original scene's lineage alone renders on the training half (§20.7, issue #72);
+    /// `None` (not written) for the original scene, the cycle's, and steps made before
+    /// reconstructions recorded their lineage.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lineage: Option<LineageRecord>,
     /// Per evaluation view, the sums the pooled metrics are made of (in evaluation order),
     /// so that pooled PSNR over any subset of views, and a bootstrap over views, can be
     /// computed later (SPEC.md §20.7). Empty in files written before it was recorded.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub views: Vec<ViewRecord>,
+}
+
+/// A scene's Gaussians against the original scene's, through the reconstructions' lineage
+/// files (`recon::LINEAGE_FILE`): which descend from an original Gaussian (through
+/// fine-tuning, copies and splits) and which the pipeline added (its points and their
+/// descendants), and what became of the original Gaussians.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct LineageRecord {
+    /// Mean training-half PSNR of the scene's Gaussians that descend from the original
+    /// scene's, rendered alone (as `psnr_train_half` is): against the original's, the change
+    /// within the original lineage (moved, densified, pruned); against the scene's, what the
+    /// added Gaussians do to the training views.
+    #[serde(with = "crate::io::json_float")]
+    pub psnr_train_half_originals: f64,
+    /// The scene's Gaussians descending from an original Gaussian, and the others.
+    pub from_originals: usize,
+    pub added: usize,
+    /// The original scene's Gaussians with no descendant left (pruned), with one, with more
+    /// (copied or split).
+    pub originals_lost: usize,
+    pub originals_one: usize,
+    pub originals_more: usize,
+    /// Over the originals with one descendant, the median distance it moved in units of
+    /// the original's largest standard deviation, and the median change of its opacity.
+    #[serde(with = "crate::io::json_float")]
+    pub moved_median: f64,
+    #[serde(with = "crate::io::json_float")]
+    pub opacity_change_median: f64,
+}
+
+/// No original ancestor: a Gaussian the pipeline added.
+const ADDED: u32 = u32::MAX;
+
+/// The scene a reconstruction of `scene` starts from (the head of its starting Gaussians):
+/// the chain whose lineage composes back to the original scene.
+fn predecessor(scene: Scene) -> Option<Scene> {
+    match scene {
+        Scene::Stage1 => Some(Scene::Original),
+        Scene::Stage2 => Some(Scene::Stage1),
+        Scene::Interpolate => Some(Scene::Stage2),
+        Scene::Original | Scene::Cycle => None,
+    }
+}
+
+/// Each Gaussian's original ancestor (or [`ADDED`]) after a reconstruction whose lineage is
+/// `lineage` (indices into its start: the previous scene, whose ancestors are `before`,
+/// then appended points).
+fn compose(before: &[u32], lineage: &[u32]) -> Vec<u32> {
+    lineage
+        .iter()
+        .map(|&i| before.get(i as usize).copied().unwrap_or(ADDED))
+        .collect()
+}
+
+/// The [`LineageRecord`] of `scene`, whose Gaussians' original ancestors are `ancestors`.
+fn lineage_record(
+    inputs: &Inputs,
+    scene: &Gaussians,
+    ancestors: &[u32],
+    opts: &RenderOptions,
+) -> Result<LineageRecord> {
+    let original = &inputs.scene;
+    let from: Vec<usize> = (0..scene.len())
+        .filter(|&j| ancestors[j] != ADDED)
+        .collect();
+    let mut descendants = vec![0u32; original.len()];
+    let mut last = vec![usize::MAX; original.len()];
+    for &j in &from {
+        let a = ancestors[j] as usize;
+        descendants[a] += 1;
+        last[a] = j;
+    }
+    let (mut moved, mut opacity) = (Vec::new(), Vec::new());
+    for (a, &n) in descendants.iter().enumerate() {
+        if n != 1 {
+            continue;
+        }
+        let j = last[a];
+        let sigma = original.log_scales[a]
+            .iter()
+            .fold(f32::MIN, |m, &v| m.max(v));
+        let d: f64 = (0..3)
+            .map(|c| (scene.means[j][c] as f64 - original.means[a][c] as f64).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        moved.push(d / (sigma as f64).exp());
+        let sig = |o: f32| 1.0 / (1.0 + (-(o as f64)).exp());
+        opacity.push(sig(scene.opacity_logits[j]) - sig(original.opacity_logits[a]));
+    }
+    let median = |mut v: Vec<f64>| {
+        if v.is_empty() {
+            return f64::NAN;
+        }
+        v.sort_by(f64::total_cmp);
+        let m = v.len() / 2;
+        if v.len() % 2 == 1 {
+            v[m]
+        } else {
+            0.5 * (v[m - 1] + v[m])
+        }
+    };
+    let lineage = scene.select(&from);
+    let (psnr, _) = train_half(inputs, &lineage, opts)?;
+    Ok(LineageRecord {
+        psnr_train_half_originals: psnr,
+        from_originals: from.len(),
+        added: scene.len() - from.len(),
+        originals_lost: descendants.iter().filter(|&&n| n == 0).count(),
+        originals_one: descendants.iter().filter(|&&n| n == 1).count(),
+        originals_more: descendants.iter().filter(|&&n| n > 1).count(),
+        moved_median: median(moved),
+        opacity_change_median: median(opacity),
+    })
 }
 
 /// One evaluation view's sums, per pixel class.
@@ -482,10 +601,32 @@ impl Run<'_> {
             .collect::<Result<_>>()?;
         let mut steps = vec![masks.clone()];
         let mut rows = Vec::new();
+        // Each scene's original ancestors along the chain original → stage 1 → stage 2 →
+        // interpolation (`None` where a lineage is missing or the chain breaks).
+        let mut ancestors: Option<Vec<u32>> = None;
+        let mut previous: Option<Scene> = None;
         for (name, step) in scenes {
+            ancestors = match (step, predecessor(*name)) {
+                (None, _) if *name == Scene::Original => {
+                    Some((0..inputs.scene.len() as u32).collect())
+                }
+                (Some(s), Some(p)) if previous == Some(p) => {
+                    let file = s.dir.join(super::recon::LINEAGE_FILE);
+                    match (&ancestors, file.is_file()) {
+                        (Some(before), true) => {
+                            let (_, lineage) = crate::io::npy::read_npy::<u32>(&file)?;
+                            Some(compose(before, &lineage))
+                        }
+                        _ => None,
+                    }
+                }
+                _ => None,
+            };
+            previous = Some(*name);
             if !self.wants(&Step::Eval(*name)) {
                 continue;
             }
+            let with_lineage = ancestors.as_deref().filter(|_| *name != Scene::Original);
             let name = name.name();
             let (scene, digest): (Gaussians, String) = match step {
                 None => (inputs.scene.clone(), inputs.scene_sha256.clone()),
@@ -494,10 +635,24 @@ impl Run<'_> {
             // `records`: the metrics carry per-view sums, with GMSD's (a step cached before
             // they were recorded is not reused).
             let key = serde_json::json!({
-                "scene": digest, "masks": masks.digest, "records": "per-view+gradients"
+                "scene": digest, "masks": masks.digest, "records": "per-view+gradients+lineage"
             });
             let st = self.step(&Step::Eval(name.parse()?), key, |w| {
-                let row = score(inputs, &scene, name, &existing, w)?;
+                let mut row = score(inputs, &scene, name, &existing, w)?;
+                if let Some(a) = with_lineage {
+                    if a.len() != scene.len() {
+                        return Err(Error::invalid(format!(
+                            "the lineage of scene '{name}' lists {} Gaussians, its PLY {}",
+                            a.len(),
+                            scene.len()
+                        )));
+                    }
+                    let opts = RenderOptions {
+                        background: inputs.background,
+                        ..RenderOptions::default()
+                    };
+                    row.lineage = Some(lineage_record(inputs, &scene, a, &opts)?);
+                }
                 w.json("metrics.json", &row)?;
                 Ok(())
             })?;
@@ -583,22 +738,7 @@ fn score(
             ss[k] / sn[k] as f64
         }
     };
-    let (mut tp, mut ts) = (0f64, 0f64);
-    for &i in &data.test {
-        let v = &data.views[i];
-        let rgb: Vec<f32> = render(scene, &v.camera, &opts)?
-            .rgb
-            .expect("rgb")
-            .iter()
-            .map(|x| x.clamp(0.0, 1.0))
-            .collect();
-        // As `unseen eval` scores them (§14.7).
-        tp += crate::train::loss::psnr(&rgb, &v.image.data);
-        ts +=
-            crate::train::ssim::ssim(&rgb, &v.image.data, v.image.width, v.image.height, 3, false)
-                .0;
-    }
-    let nt = data.test.len().max(1) as f64;
+    let (psnr_train_half, ssim_train_half) = train_half(inputs, scene, &opts)?;
     Ok(Row {
         scene: name.into(),
         psnr_all: psnr(0),
@@ -607,19 +747,37 @@ fn score(
         ssim_all: ssim(0),
         ssim_existing: ssim(1),
         ssim_extrapolated: ssim(2),
-        psnr_train_half: if data.test.is_empty() {
-            f64::NAN
-        } else {
-            tp / nt
-        },
-        ssim_train_half: if data.test.is_empty() {
-            f64::NAN
-        } else {
-            ts / nt
-        },
+        psnr_train_half,
+        ssim_train_half,
         gaussians: scene.len(),
+        lineage: None,
         views,
     })
+}
+
+/// Mean PSNR and SSIM of `scene` over the training half's test views, as `unseen eval`
+/// scores them (§14.7); NaN without test views.
+fn train_half(inputs: &Inputs, scene: &Gaussians, opts: &RenderOptions) -> Result<(f64, f64)> {
+    let data = &inputs.data;
+    if data.test.is_empty() {
+        return Ok((f64::NAN, f64::NAN));
+    }
+    let (mut tp, mut ts) = (0f64, 0f64);
+    for &i in &data.test {
+        let v = &data.views[i];
+        let rgb: Vec<f32> = render(scene, &v.camera, opts)?
+            .rgb
+            .expect("rgb")
+            .iter()
+            .map(|x| x.clamp(0.0, 1.0))
+            .collect();
+        tp += crate::train::loss::psnr(&rgb, &v.image.data);
+        ts +=
+            crate::train::ssim::ssim(&rgb, &v.image.data, v.image.width, v.image.height, 3, false)
+                .0;
+    }
+    let nt = data.test.len() as f64;
+    Ok((tp / nt, ts / nt))
 }
 
 #[cfg(test)]

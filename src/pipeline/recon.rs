@@ -25,6 +25,11 @@ use crate::qamask::{
 use crate::rng::stage_seed;
 use crate::train::trainer::{LearningRates, TrainConfig, Trainer, ViewShare};
 
+/// A reconstruction's lineage (`uint32`, one per Gaussian of its `scene.ply`): the index of
+/// the starting Gaussian (the scene it fine-tunes, then the points it appended) each
+/// descends from through densification.
+pub const LINEAGE_FILE: &str = "lineage.npy";
+
 /// One generated view for a reconstruction.
 #[derive(Clone, Debug)]
 pub struct Supervision {
@@ -319,6 +324,7 @@ impl Run<'_> {
         let deg = init.sh_degree;
         let mut trainer = Trainer::from_gaussians(&data, cfg, init, deg)?;
         trainer.masks = masks;
+        trainer.track_lineage();
         let mut refreshed = 0u32;
         while trainer.iteration < recon.iterations {
             if let Some(r) = refresh {
@@ -351,8 +357,13 @@ impl Run<'_> {
                 w.put(&rel, |p| crate::io::image::write_png(p, &img))?;
             }
         }
+        let lineage = trainer.lineage.take().expect("tracked");
         let g = trainer.gaussians;
         save_scene(w, "scene.ply", &g)?;
+        // Per Gaussian of the scene, the index in `init` it descends from (§20.5).
+        w.put(LINEAGE_FILE, |p| {
+            crate::io::npy::write_npy(p, &lineage, &[lineage.len()]).map(|_| ())
+        })?;
         let mut supervision = serde_json::json!({
             "original_views": n_orig,
             "original_views_depth": config.supervises_original_depth(),

@@ -194,6 +194,9 @@ fn max_scale(ls: [f32; 3]) -> f32 {
 }
 
 /// One densify-and-prune step on `g` (and the optimizer moments), resetting `stats`.
+/// `lineage` (one entry per Gaussian, when given) follows the Gaussians: a copy or a split
+/// child takes its source's entry, a pruned Gaussian's goes.
+#[allow(clippy::too_many_arguments)]
 pub fn densify_and_prune(
     g: &mut Gaussians,
     adam: &mut Adam,
@@ -202,6 +205,7 @@ pub fn densify_and_prune(
     extent: f32,
     world_prune: bool,
     mut normals: Normals<'_>,
+    lineage: Option<&mut Vec<u32>>,
 ) -> Result<DensifyReport> {
     let n0 = g.len();
     if let Normals::Given(z) = &normals
@@ -306,6 +310,20 @@ pub fn densify_and_prune(
     });
     let keep: Vec<usize> = (0..total).into_par_iter().filter(|&i| !remove[i]).collect();
     report.pruned = total - keep.len() - split.len();
+    if let Some(lineage) = lineage {
+        if lineage.len() != n0 {
+            return Err(crate::error::Error::invalid(format!(
+                "a lineage of {} entries for {n0} Gaussians",
+                lineage.len()
+            )));
+        }
+        let source = |i: usize| match i {
+            i if i < n0 => i,
+            i if i < n0 + clone.len() => clone[i - n0],
+            i => split[(i - n0 - clone.len()) % k],
+        };
+        *lineage = keep.iter().map(|&i| lineage[source(i)]).collect();
+    }
     *g = g.select_joined(&extra, &keep);
     adam.select_joined(extra.len(), &keep)?;
     *stats = DensifyStats::new(g.len());
@@ -351,6 +369,7 @@ pub fn densify_given(
         extent,
         world_prune,
         Normals::Given(normals),
+        None,
     )
 }
 

@@ -315,6 +315,11 @@ pub struct Trainer<'a> {
     pub fused_adam: bool,
     /// The backward's output, reused across iterations.
     grads: Gradients,
+    /// Per Gaussian, the index of the starting Gaussian it descends from (densification's
+    /// copies and split children take their source's), when tracked
+    /// ([`Trainer::track_lineage`]): bookkeeping beside the computation, no bit of which it
+    /// moves.
+    pub lineage: Option<Vec<u32>>,
 }
 
 /// What an iteration does besides its gradient step ([`Trainer::schedule`]).
@@ -384,7 +389,14 @@ impl<'a> Trainer<'a> {
             psnr_ema: 0.0,
             fused_adam: true,
             grads: Gradients::default(),
+            lineage: None,
         })
+    }
+
+    /// Track every Gaussian's lineage from here on ([`Trainer::lineage`]; each starting
+    /// Gaussian its own index). Checkpoints do not keep it.
+    pub fn track_lineage(&mut self) {
+        self.lineage = Some((0..self.gaussians.len() as u32).collect());
     }
 
     fn lr(&self, p: Param, it: u32) -> f32 {
@@ -597,6 +609,7 @@ impl<'a> Trainer<'a> {
                     self.extent,
                     world_prune,
                     Normals::Rng(&mut self.rng),
+                    self.lineage.as_mut(),
                 )?);
             }
             if plan.reset {

@@ -264,12 +264,14 @@ fn hot_scene() -> (Gaussians, Adam, DensifyStats, f32, [(f32, f32, f32); 8]) {
 
 /// A constructed scene with known gradient statistics: 2 small hot Gaussians are cloned,
 /// 3 large hot ones split in two (originals removed), 1 transparent one pruned, 1 huge one
-/// pruned by the world-space test; the split samples keep the parent's statistics.
+/// pruned by the world-space test; the split samples keep the parent's statistics; the
+/// lineage follows (copies and children take their source's entry, the pruned lose theirs).
 #[test]
 fn densification_clones_splits_and_prunes_as_inria() {
     let (mut g, mut adam, mut stats, extent, spec) = hot_scene();
     let mut rng = Uniform::new(3);
     let cfg = DensifyConfig::default();
+    let mut lineage: Vec<u32> = (10..18).collect();
     let r = densify_and_prune(
         &mut g,
         &mut adam,
@@ -278,6 +280,7 @@ fn densification_clones_splits_and_prunes_as_inria() {
         extent,
         true,
         Normals::Rng(&mut rng),
+        Some(&mut lineage),
     )
     .unwrap();
     assert_eq!((r.cloned, r.split, r.pruned), (2, 3, 2), "{r:?}");
@@ -285,6 +288,7 @@ fn densification_clones_splits_and_prunes_as_inria() {
     // Survivors in order: 0, 1, 5 (originals), clones of 0, 1, then 2×3 split samples.
     let xs: Vec<f32> = g.means.iter().take(5).map(|m| m[0]).collect();
     assert_eq!(xs, [0.0, 1.0, 5.0, 0.0, 1.0]);
+    assert_eq!(lineage, [10, 11, 15, 10, 11, 12, 13, 14, 12, 13, 14]);
     assert_eq!(&adam.m.opacity_logits[..3], &[1.0, 2.0, 6.0]);
     assert!(
         adam.m.opacity_logits[3..].iter().all(|&m| m == 0.0),
@@ -334,6 +338,7 @@ fn protected_gaussians_are_left_to_the_gradient_step() {
             extent,
             true,
             Normals::Rng(&mut rng),
+            None,
         )
         .unwrap();
         (r, before, g, adam)
@@ -869,6 +874,7 @@ fn densification_takes_given_normals_copy_by_copy() {
             1.0,
             false,
             Normals::Given(z),
+            None,
         )
         .map(|r| (g, r))
     };

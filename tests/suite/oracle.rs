@@ -472,6 +472,7 @@ fn oracle_densify_dumps_the_step_and_refuses_fractional_counts() {
         4.0,
         true,
         Normals::Given(&z3),
+        None,
     )
     .unwrap();
     assert!(r.cloned > 0 && r.split > 0, "{r:?}");

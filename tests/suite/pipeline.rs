@@ -797,6 +797,14 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
             (last.psnr_train_half, last.gaussians),
             (r.last.psnr_train_half, r.last.gaussians)
         );
+        // The lineage: on every scene of the chain but the original (SPEC.md §20.7).
+        for s in &r.stages {
+            let l = s.lineage.as_ref();
+            assert_eq!(l.is_some(), s.scene != "original", "{}: {l:?}", s.scene);
+            if let Some(l) = l {
+                assert_eq!(l.from_originals + l.added, s.gaussians, "{l:?}");
+            }
+        }
     }
     // Each run records what it did; the mask variant keeps full's views.
     for r in &report.results {
@@ -959,6 +967,10 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
     assert!(md.contains("same computation 0 of 2"), "{md}");
     assert!(md.contains("## What the step cache saves"), "{md}");
     assert!(md.contains("## The training half per stage"), "{md}");
+    assert!(
+        md.contains("| within the originals | added Gaussians |"),
+        "{md}"
+    );
     assert!(md.contains("QA-Mask over opacity maps, existing"));
     let svg = std::fs::read_to_string(dir.join("inconsistency.svg")).unwrap();
     assert!(svg.starts_with("<svg") && svg.contains("<circle"));
@@ -981,9 +993,16 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
     assert!(pooled.results.is_empty());
     assert_eq!(verdicts(&pooled), verdicts(&report));
     // A sample of another crate version is not this binary's computation: its job runs
-    // (resuming its folder: nothing is computed) and gives the same bits.
+    // (resuming its folder: nothing is computed) and gives the same bits. Edited as the
+    // uncompressed text of a folder written before compression, which the audit reads and
+    // replaces.
     let samples = dir.join(audit::samples::SAMPLES_FILE);
-    let text = std::fs::read_to_string(&samples).unwrap();
+    let mut text = String::new();
+    std::io::Read::read_to_string(
+        &mut flate2::read::GzDecoder::new(&std::fs::read(&samples).unwrap()[..]),
+        &mut text,
+    )
+    .unwrap();
     let one = "\"variant\":\"opacity_mask\",\"seed\":1,\"numerics_revision\"";
     assert_eq!(text.matches(one).count(), 1, "{text}");
     let at = text.find(one).unwrap();
@@ -994,7 +1013,9 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
         &text[..v],
         &text[v + version.len()..]
     );
-    std::fs::write(&samples, edited).unwrap();
+    let legacy = dir.join(audit::samples::LEGACY_SAMPLES_FILE);
+    std::fs::write(&legacy, edited).unwrap();
+    std::fs::remove_file(&samples).unwrap();
     let computed = std::sync::Mutex::new(Vec::new());
     let on_computed = |e| {
         if let Event::StepFinished { step, .. } | Event::StepStarted { step } = e {
@@ -1014,6 +1035,7 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
     };
     assert_eq!(names(&again), ["opacity_mask/1"]);
     assert!(computed.into_inner().unwrap().is_empty());
+    assert!(samples.is_file() && !legacy.exists(), "the text replaced");
     let bits = |r: &audit::JobResult| serde_json::to_string(r).unwrap();
     let first = report
         .results
@@ -1182,6 +1204,7 @@ fn sample(variant: &str, seed: u32, revision: u32, psnr: f64) -> unseen::audit::
         psnr_train_half: 30.0,
         ssim_train_half: 0.9,
         gaussians: 1,
+        lineage: None,
         views: vec![],
     };
     unseen::audit::JobResult {
@@ -2431,6 +2454,72 @@ fn the_fine_tune_switches_reach_the_reconstructions() {
     let (_, all_scene) = run(&densifying, "densify-all");
     let (_, added_scene) = run(&limited, "densify-added");
     assert!(all_scene != added_scene, "the scope changed nothing");
+    // The lineage (SPEC.md §20.5, §20.7): composed here from the reconstructions' files, it
+    // gives the counts each stage's metrics record; under the limited scope every original
+    // Gaussian keeps exactly one descendant, at its own index.
+    let n = inp.scene.len();
+    for (name, limited) in [("densify-all", false), ("densify-added", true)] {
+        let dir = t.path().join(name);
+        let mut ancestors: Vec<u32> = (0..n as u32).collect();
+        for stage in ["stage1", "stage2"] {
+            let (_, lineage) =
+                unseen::io::npy::read_npy::<u32>(&dir.join(format!("{stage}/recon/lineage.npy")))
+                    .unwrap();
+            if limited && stage == "stage1" {
+                assert_eq!(&lineage[..n], &(0..n as u32).collect::<Vec<_>>()[..]);
+            }
+            ancestors = lineage
+                .iter()
+                .map(|&i| ancestors.get(i as usize).copied().unwrap_or(u32::MAX))
+                .collect();
+            let row: serde_json::Value = serde_json::from_slice(
+                &std::fs::read(dir.join(format!("eval/{stage}/metrics.json"))).unwrap(),
+            )
+            .unwrap();
+            let l = &row["lineage"];
+            let count = |k: &str| {
+                l[k].as_u64()
+                    .unwrap_or_else(|| panic!("{name}/{stage}: {k}"))
+            };
+            let from = ancestors.iter().filter(|&&a| a != u32::MAX).count() as u64;
+            let mut per = vec![0u32; n];
+            for &a in ancestors.iter().filter(|&&a| a != u32::MAX) {
+                per[a as usize] += 1;
+            }
+            let with = |f: &dyn Fn(u32) -> bool| per.iter().filter(|&&k| f(k)).count() as u64;
+            assert_eq!(
+                [count("from_originals"), count("added")],
+                [from, ancestors.len() as u64 - from],
+                "{name}/{stage}"
+            );
+            assert_eq!(
+                [
+                    count("originals_lost"),
+                    count("originals_one"),
+                    count("originals_more")
+                ],
+                [with(&|k| k == 0), with(&|k| k == 1), with(&|k| k > 1)],
+                "{name}/{stage}"
+            );
+            assert_eq!(row["gaussians"].as_u64(), Some(ancestors.len() as u64));
+            assert!(l["psnr_train_half_originals"].as_f64().unwrap().is_finite());
+            if limited {
+                assert_eq!(count("originals_one"), n as u64, "{name}/{stage}");
+            } else if stage == "stage1" {
+                assert!(
+                    count("originals_lost") + count("originals_more") > 0,
+                    "{name}: densification touched no original Gaussian: {l}"
+                );
+            }
+        }
+        let original: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.join("eval/original/metrics.json")).unwrap())
+                .unwrap();
+        assert!(
+            original.get("lineage").is_none(),
+            "the original scene has none"
+        );
+    }
     let (g, _) =
         unseen::gaussian::ply::read_ply(&t.path().join("densify-added/stage1/recon/scene.ply"))
             .unwrap();
@@ -3323,6 +3412,7 @@ fn psnr_of_identical_images_is_infinity_in_json_and_reports() {
         psnr_train_half: 31.5,
         ssim_train_half: 0.9,
         gaussians: 7,
+        lineage: None,
         views: Vec::new(),
     };
     let s = Summary {
