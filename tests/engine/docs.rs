@@ -115,3 +115,142 @@ fn paragraphs_are_prose_runs() {
         ["One two three.", "- a b", "- c", "four"].map(String::from)
     );
 }
+
+/// A file of the specification's areas (`spec/*.md`): at most this many lines.
+const SPEC_FILE_MAX_LINES: usize = 300;
+
+/// Names the specification cites from other projects' code (INRIA's 3DGS), not ours.
+const CITED_NAMES: [&str; 1] = ["cat_tensors_to_optimizer"];
+
+/// The text files of the repository a reader or a test may follow a `SPEC.md §` reference
+/// from: sources, tests, scripts and docs (not `target/`, not hidden folders, not the
+/// committed audits' generated reports).
+fn text_files(dir: &Path, out: &mut Vec<std::path::PathBuf>) {
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        let name = p.file_name().unwrap().to_string_lossy().to_string();
+        if name.starts_with('.') && name != ".ci" || name == "target" || name == "node_modules" {
+            continue;
+        }
+        if p.is_dir() {
+            text_files(&p, out);
+        } else if ["rs", "py", "md", "sh", "toml"]
+            .iter()
+            .any(|x| p.extension().is_some_and(|e| e == *x))
+            || p.parent()
+                .and_then(Path::file_name)
+                .is_some_and(|n| n == ".ci")
+        {
+            out.push(p);
+        }
+    }
+}
+
+/// The section numbers the specification defines (`## n.` and `### n.m` headings of
+/// SPEC.md and `spec/*.md`).
+fn spec_sections(root: &Path) -> std::collections::BTreeSet<String> {
+    let mut files = vec![root.join("SPEC.md")];
+    for e in std::fs::read_dir(root.join("spec")).unwrap() {
+        files.push(e.unwrap().path());
+    }
+    let mut out = std::collections::BTreeSet::new();
+    for f in files {
+        for line in std::fs::read_to_string(&f).unwrap().lines() {
+            let Some(rest) = line
+                .strip_prefix("## ")
+                .or_else(|| line.strip_prefix("### "))
+            else {
+                continue;
+            };
+            let num = rest.split_whitespace().next().unwrap_or("");
+            let num = num.trim_end_matches('.');
+            if num.chars().next().is_some_and(|c| c.is_ascii_digit()) {
+                out.insert(num.to_string());
+            }
+        }
+    }
+    out
+}
+
+/// The specification is an index (`SPEC.md`) and area files (`spec/*.md`) of at most
+/// `SPEC_FILE_MAX_LINES` lines; every `SPEC.md §n` or `§n.m` reference in the repository's
+/// sources, tests, scripts and docs names a section one of them defines; and every test
+/// the specification names (a backticked snake_case name of four or more words) exists in
+/// the code (a Rust `fn`, a Python `def`, or a field or key of that name).
+#[test]
+fn the_spec_is_an_index_of_areas_whose_references_resolve() {
+    let root = repo_root();
+    let sections = spec_sections(&root);
+    let mut spec_files = vec![root.join("SPEC.md")];
+    for e in std::fs::read_dir(root.join("spec")).unwrap() {
+        let p = e.unwrap().path();
+        let n = std::fs::read_to_string(&p).unwrap().lines().count();
+        assert!(n <= SPEC_FILE_MAX_LINES, "{} has {n} lines", p.display());
+        spec_files.push(p);
+    }
+    let mut files = Vec::new();
+    text_files(&root, &mut files);
+    let mut unresolved = Vec::new();
+    let mut code = String::new();
+    for f in &files {
+        let Ok(text) = std::fs::read_to_string(f) else {
+            continue;
+        };
+        if f.extension().is_some_and(|e| e == "rs" || e == "py") {
+            code += &text;
+        }
+        let mut rest = text.as_str();
+        while let Some((_, after)) = rest.split_once("SPEC.md §") {
+            let num: String = after
+                .chars()
+                .take_while(|c| c.is_ascii_digit() || *c == '.')
+                .collect();
+            let num = num.trim_end_matches('.');
+            if !num.is_empty() && !sections.contains(num) {
+                unresolved.push(format!(
+                    "{}: §{num}",
+                    f.strip_prefix(&root).unwrap().display()
+                ));
+            }
+            rest = after;
+        }
+    }
+    assert!(
+        unresolved.is_empty(),
+        "unresolved references: {unresolved:#?}"
+    );
+    let mut missing = Vec::new();
+    for f in &spec_files {
+        let text = std::fs::read_to_string(f).unwrap();
+        for token in text.split('`').skip(1).step_by(2) {
+            let snake = token
+                .chars()
+                .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_')
+                && token.matches('_').count() >= 3
+                && !token.starts_with('_');
+            if !snake || CITED_NAMES.contains(&token) {
+                continue;
+            }
+            let found = [
+                format!("fn {token}("),
+                format!("def {token}("),
+                format!("{token}:"),
+                format!("\"{token}\""),
+                format!("\\\"{token}\\\""),
+                format!(".{token}"),
+            ]
+            .iter()
+            .any(|p| code.contains(p.as_str()));
+            if !found {
+                missing.push(format!(
+                    "{}: `{token}`",
+                    f.strip_prefix(&root).unwrap().display()
+                ));
+            }
+        }
+    }
+    assert!(
+        missing.is_empty(),
+        "named in the spec, found nowhere in the code: {missing:#?}"
+    );
+}
