@@ -8,7 +8,7 @@ the product only decreases.
 
 Loss L = sum(w_rgb * rgb) + sum(w_alpha * alpha) + sum(w_depth * D) with seeded random
 weights that are zero on ambiguous pixels (where an f32 renderer may branch differently).
-Writes reference_data/drjit/grad/<case>/ {scene.ply, cameras.json, weights.json,
+Writes reference_data/drjit/grad/<case>/ {scene.ply, cameras.json, weights_{rgb,alpha,depth}.npy,
 grads.json, meta.json}. Does not import the unseen crate.
 
 Run:  DRJIT_LIBLLVM_PATH=/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1 python make_grad_goldens.py
@@ -113,9 +113,10 @@ def main():
         write_inria_ply(os.path.join(d, "scene.ply"), scene["means"], scene["log_scales"],
                         scene["quats"], scene["opacity_logits"], scene["sh_dc"], scene["sh_rest"])
         write_cameras_json(os.path.join(d, "cameras.json"), [cam])
-        with open(os.path.join(d, "weights.json"), "w") as f:
-            json.dump(dict(rgb=w_rgb.reshape(-1).tolist(), alpha=w_alpha.tolist(),
-                           depth=w_depth.tolist()), f)
+        # The loss weights, float64 as Dr.Jit used them (H, W, 3) and (H, W).
+        np.save(os.path.join(d, "weights_rgb.npy"), np.asarray(w_rgb, np.float64).reshape(h, w, 3))
+        np.save(os.path.join(d, "weights_alpha.npy"), np.asarray(w_alpha, np.float64).reshape(h, w))
+        np.save(os.path.join(d, "weights_depth.npy"), np.asarray(w_depth, np.float64).reshape(h, w))
         with open(os.path.join(d, "grads.json"), "w") as f:
             json.dump(grads, f)
         with open(os.path.join(d, "meta.json"), "w") as f:
