@@ -325,7 +325,7 @@ const MAX_HEADER_BYTES: usize = 1 << 20;
 
 /// Read an INRIA 3DGS PLY file. A binary file whose vertices are fixed-size rows (every
 /// file INRIA's and gsplat's code writes) streams: its rows are decoded as they are read,
-/// so the reader holds at most [`STREAM_VERTICES`] rows of the file beside the Gaussians;
+/// so the reader holds at most 65 536 rows of the file beside the Gaussians;
 /// any other file is read whole. Both give what [`parse_ply`] gives for the file's bytes,
 /// errors included.
 pub fn read_ply(path: &Path) -> Result<(Gaussians, PlyInfo)> {
@@ -813,7 +813,8 @@ mod tests {
             g.means.push([f(i, 0), f(i, 1), 2.0 + f(i, 2)]);
             g.sh_dc.push([f(i, 3), f(i, 4), f(i, 5)]);
             g.opacity_logits.push(f(i, 6));
-            g.log_scales.push([f(i, 7) - 3.0, f(i, 8) - 3.0, f(i, 9) - 3.0]);
+            g.log_scales
+                .push([f(i, 7) - 3.0, f(i, 8) - 3.0, f(i, 9) - 3.0]);
             g.quats.push([1.0, f(i, 10), f(i, 11), f(i, 12)]);
             g.sh_rest.extend((0..45).map(|k| f(i, 13 + k)));
         }
