@@ -32,8 +32,8 @@ pub enum Style {
     /// The primary, its null and every metric of the panel, the verdict in full.
     Full,
     /// The primary, its null, PSNR over all pixels and SSIM on contested pixels; the claim
-    /// named on the primary's row, seeds as judged of run, the verdict's word alone
-    /// (README's "Results at a glance").
+    /// named on the primary's row, the room with its training resolution, seeds as judged
+    /// of run, the verdict's word alone (README's "Results at a glance").
     Glance,
 }
 
@@ -85,6 +85,11 @@ pub fn table(sources: &[Source], style: Style) -> Result<String> {
         let room = match audit.get("candidates").and_then(|c| c.get("name")) {
             Some(Value::String(f)) => format!("{} ({f})", field(&audit, "dataset")?),
             _ => field(&audit, "dataset")?,
+        };
+        // At a glance the room names the resolution its scenes were trained at.
+        let room = match (style, audit.get("train_resolution").and_then(Value::as_u64)) {
+            (Style::Glance, Some(r)) => format!("{room}, resolution 1/{r}"),
+            _ => room,
         };
         let verdicts = audit
             .get("verdicts")
