@@ -74,13 +74,24 @@ def look_at(eye, target, up):
 
 
 def write_exr(path, img):
-    """Float32 EXR via Mitsuba's Bitmap (channels Y or R,G,B)."""
-    import mitsuba as mi
+    """Float32 EXR, channels Y (2-D or one-channel `img`) or R, G, B, ZIP compression.
+
+    Mitsuba's Bitmap, which this used before, writes PIZ: on the Dr.Jit raster goldens'
+    float32 renders PIZ stores the raw samples (no gain) and ZIP, lossless, was
+    0.6 % smaller over all 30 files (1 903 900 -> 1 891 571 bytes; ZIPS 3.6 % larger) and
+    28 % smaller on the Mitsuba cross-check renders (306 688 -> 219 578 bytes).
+    recompress_exr_zip.py re-encodes older PIZ files."""
+    import OpenEXR
 
     img = np.ascontiguousarray(img, dtype=np.float32)
     if img.ndim == 2:
         img = img[:, :, None]
-    mi.Bitmap(img).write(str(path))
+    names = {1: ["Y"], 3: ["R", "G", "B"]}.get(img.shape[2])
+    if names is None:
+        raise ValueError(f"write_exr: {img.shape[2]} channels, want 1 or 3")
+    channels = {n: np.ascontiguousarray(img[:, :, k]) for k, n in enumerate(names)}
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    OpenEXR.File(header, channels).write(str(path))
 
 
 def write_depth_exr(path, z):
