@@ -493,12 +493,35 @@ impl AuditConfig {
     }
 }
 
-/// SHA-256 of a pipeline configuration's JSON with its seed set to 0: what one
+/// SHA-256 of a pipeline configuration's JSON with its seed set to 0 and the attribution
+/// off (a record beside the same computation: samples with and without it pool): what one
 /// (generator, variant) cell runs for every seed.
 pub fn config_digest(c: &PipelineConfig) -> String {
     let c = PipelineConfig {
         seed: 0,
+        attribution: false,
         ..c.clone()
     };
     crate::io::sha256_hex(&serde_json::to_vec(&c).expect("serializes"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The attribution (SPEC.md §20.5) is a record beside the same computation: samples
+    /// made with it pool with those made without it.
+    #[test]
+    fn the_attribution_leaves_the_digest() {
+        let quick = PipelineConfig::quick();
+        let on = PipelineConfig {
+            attribution: true,
+            ..quick.clone()
+        };
+        assert_ne!(
+            serde_json::to_string(&on).unwrap(),
+            serde_json::to_string(&quick).unwrap()
+        );
+        assert_eq!(config_digest(&on), config_digest(&quick));
+    }
 }

@@ -598,7 +598,71 @@ fn training_half_table(cfg: &AuditConfig, pool: &[JobResult]) -> String {
     if rows.is_empty() {
         return rows;
     }
+    let attribution = attribution_table(cfg, pool);
+    training_half_text(rows) + &attribution
+}
+
+/// The training-half table's text around its rows.
+fn training_half_text(rows: String) -> String {
     "\n## The training half per stage (issue #72)\n\nWhere original areas change: each scene's training-half PSNR (dB) against the scene before it, and the final scene's against the original, as the median over the seeds with the seeds above / below 0; the Gaussians of the original and the final scene (mean). The final change split along the Gaussians' lineage (runs that recorded it): the final scene's Gaussians descending from the original scene's, rendered alone, against the original scene (*within the originals*: moved, densified, pruned), and the whole final scene against them (*added Gaussians*: what the pipeline's Gaussians do on the training views). The recipe's control `originals_only` runs the same fine-tunes on the original views alone.\n\n| generator | variant | seeds | original (median) | change per stage | final − original | within the originals | added Gaussians | Gaussians |\n|---|---|---|---|---|---|---|---|---|\n".to_string() + &rows
+}
+
+/// audit.md's attribution of the reconstructions' movement (SPEC.md §20.5, issue #72): per
+/// generator and variant and per reconstruction, the median over the seeds of the generated
+/// views' share of the movement of the Gaussians the original views' gradients reached, for
+/// the means, the opacities and the colour (SH DC); empty when no sample recorded it (runs
+/// made before it was: their folders' reports keep their bytes).
+fn attribution_table(cfg: &AuditConfig, pool: &[JobResult]) -> String {
+    use crate::gaussian::Param;
+    let mut rows = String::new();
+    for g in &cfg.generators {
+        let g = g.name();
+        for v in &cfg.variants {
+            let runs = group(pool, &g, *v);
+            let Some(first) = runs.iter().find(|r| r.stages.len() >= 2) else {
+                continue;
+            };
+            let mut cells = Vec::new();
+            let mut seeds = 0;
+            for (k, stage) in first.stages.iter().enumerate().skip(1) {
+                let records: Vec<_> = runs
+                    .iter()
+                    .filter_map(|r| r.stages.get(k).filter(|s| s.scene == stage.scene))
+                    .filter_map(|s| s.lineage.as_ref()?.attribution.as_ref())
+                    .collect();
+                if records.is_empty() {
+                    continue;
+                }
+                seeds = seeds.max(records.len());
+                let share = |p: Param| {
+                    let mut d: Vec<f64> = records
+                        .iter()
+                        .map(|a| a.share(p))
+                        .filter(|x| x.is_finite())
+                        .collect();
+                    d.sort_by(f64::total_cmp);
+                    if d.is_empty() {
+                        return "–".to_string();
+                    }
+                    format!("{:.2}", super::stats::quantile_sorted(&d, 0.5))
+                };
+                cells.push(format!(
+                    "{} {} · {} · {}",
+                    stage.scene,
+                    share(Param::Means),
+                    share(Param::OpacityLogits),
+                    share(Param::ShDc)
+                ));
+            }
+            if !cells.is_empty() {
+                rows += &format!("| {g} | {} | {seeds} | {} |\n", v.name(), cells.join("; "));
+            }
+        }
+    }
+    if rows.is_empty() {
+        return rows;
+    }
+    "\n### Which views moved the Gaussians the original views see\n\nEvery Adam step of a reconstruction split exactly between the original and the generated views' gradients (SPEC.md §20.5): over the Gaussians the original views' gradients reached, the generated views' share of their net movement (`Σ moved · moved_generated / Σ moved²`; the original views' is one minus it), median over the seeds, per reconstruction, for the means · the opacities · the colour (SH DC). Near 0: the original views moved them, as the original training did; near 1: the generated views did.\n\n| generator | variant | seeds | generated views' share per reconstruction (means · opacity · colour) |\n|---|---|---|---|\n".to_string() + &rows
 }
 
 fn sensitivity(report: &Report) -> String {

@@ -610,6 +610,12 @@ pub struct PipelineConfig {
     /// content does. Written only when off.
     #[serde(skip_serializing_if = "is_true")]
     pub generated_supervision: bool,
+    /// **A record, not a computation** (issue #72; off by default): every reconstruction
+    /// splits its Adam steps between the original and the generated views' gradients and
+    /// records the split in its `supervision.json` (SPEC.md §20.5). No bit of any scene
+    /// changes; a reconstruction takes ≈ 1.25× as long. Written only when on.
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub attribution: bool,
     /// The fixer's targets are remade from the scene being trained every this many
     /// iterations of the interpolation (paper: "on the fly"); 0 = once, from the stage-2
     /// scene.
@@ -618,6 +624,10 @@ pub struct PipelineConfig {
 
 fn is_true(b: &bool) -> bool {
     *b
+}
+
+fn is_false(b: &bool) -> bool {
+    !*b
 }
 
 fn is_bounding_box(o: &Outline) -> bool {
@@ -670,6 +680,7 @@ impl PipelineConfig {
             original_share: None,
             densify_scope: DensifyScope::All,
             generated_supervision: true,
+            attribution: false,
             fixer_every: 3000,
         }
     }
@@ -921,8 +932,8 @@ mod tests {
         assert_eq!("cycle".parse::<Paradigm>().unwrap(), Paradigm::Cycle);
     }
 
-    /// The fine-tune switches (issue #72; SPEC.md §20.5): left out of a written default
-    /// configuration, read by name, a continued schedule's offset per reconstruction, a
+    /// The fine-tune switches and the attribution (issue #72; SPEC.md §20.5): left out of a
+    /// written default configuration, read by name, a continued schedule's offset per reconstruction, a
     /// share outside (0, 1) refused.
     #[test]
     fn the_fine_tune_switches_are_left_out_when_default_and_offset_the_schedule() {
@@ -930,7 +941,16 @@ mod tests {
         let quick = PipelineConfig::quick();
         let text = serde_json::to_string(&quick).unwrap();
         assert!(!text.contains("fine_tune_rates") && !text.contains("original_share"));
+        assert!(!text.contains("attribution"));
         assert_eq!(quick.position_offset(1500, 600), 0);
+        // The attribution is read by name (its digest: `the_attribution_leaves_the_digest`).
+        let on = PipelineConfig::with_overrides(
+            Preset::Quick,
+            serde_json::json!({"attribution": true}),
+            file,
+        )
+        .unwrap();
+        assert!(on.attribution && serde_json::to_string(&on).unwrap().contains("attribution"));
         let c = PipelineConfig::with_overrides(
             Preset::Quick,
             serde_json::json!({"fine_tune_rates": "continue", "original_share": 0.5}),

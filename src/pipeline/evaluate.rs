@@ -84,6 +84,11 @@ pub struct LineageRecord {
     pub moved_median: f64,
     #[serde(with = "crate::io::json_float")]
     pub opacity_change_median: f64,
+    /// The reconstruction that made the scene: which views' gradients moved its Gaussians
+    /// (§20.5; from its `supervision.json`, when it trained on generated views and
+    /// recorded it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub attribution: Option<crate::train::attribution::AttributionRecord>,
 }
 
 /// No original ancestor: a Gaussian the pipeline added.
@@ -108,6 +113,21 @@ fn compose(before: &[u32], lineage: &[u32]) -> Vec<u32> {
         .iter()
         .map(|&i| before.get(i as usize).copied().unwrap_or(ADDED))
         .collect()
+}
+
+/// The attribution a reconstruction recorded in its `supervision.json` (`None` where it
+/// did not: no generated views, or made before it was recorded).
+fn attribution_of(
+    recon: &std::path::Path,
+) -> Result<Option<crate::train::attribution::AttributionRecord>> {
+    let file = recon.join("supervision.json");
+    let v: serde_json::Value = read_json(&file)?;
+    v.get(super::recon::ATTRIBUTION_KEY)
+        .map(|a| {
+            serde_json::from_value(a.clone())
+                .map_err(|e| Error::invalid(format!("its attribution: {e}")).at(&file))
+        })
+        .transpose()
 }
 
 /// The [`LineageRecord`] of `scene`, whose Gaussians' original ancestors are `ancestors`.
@@ -168,6 +188,7 @@ fn lineage_record(
         originals_more: descendants.iter().filter(|&&n| n > 1).count(),
         moved_median: median(moved),
         opacity_change_median: median(opacity),
+        attribution: None,
     })
 }
 
@@ -635,7 +656,8 @@ impl Run<'_> {
             // `records`: the metrics carry per-view sums, with GMSD's (a step cached before
             // they were recorded is not reused).
             let key = serde_json::json!({
-                "scene": digest, "masks": masks.digest, "records": "per-view+gradients+lineage"
+                "scene": digest, "masks": masks.digest,
+                "records": "per-view+gradients+lineage+attribution"
             });
             let st = self.step(&Step::Eval(name.parse()?), key, |w| {
                 let mut row = score(inputs, &scene, name, &existing, w)?;
@@ -651,7 +673,11 @@ impl Run<'_> {
                         background: inputs.background,
                         ..RenderOptions::default()
                     };
-                    row.lineage = Some(lineage_record(inputs, &scene, a, &opts)?);
+                    let mut record = lineage_record(inputs, &scene, a, &opts)?;
+                    if let Some(s) = step {
+                        record.attribution = attribution_of(&s.dir)?;
+                    }
+                    row.lineage = Some(record);
                 }
                 w.json("metrics.json", &row)?;
                 Ok(())

@@ -30,6 +30,10 @@ use crate::train::trainer::{LearningRates, TrainConfig, Trainer, ViewShare};
 /// descends from through densification.
 pub const LINEAGE_FILE: &str = "lineage.npy";
 
+/// The key of a reconstruction's `supervision.json` that holds its
+/// [`crate::train::attribution::AttributionRecord`] (when it trained on generated views).
+pub const ATTRIBUTION_KEY: &str = "attribution";
+
 /// One generated view for a reconstruction.
 #[derive(Clone, Debug)]
 pub struct Supervision {
@@ -163,6 +167,9 @@ pub fn recon_key(
     }
     if !config.generated_supervision {
         m.insert("generated_supervision".into(), serde_json::json!(false));
+    }
+    if config.attribution {
+        m.insert("attribution".into(), serde_json::json!(true));
     }
     if config.densify_scope != DensifyScope::All {
         m.insert(
@@ -325,6 +332,11 @@ impl Run<'_> {
         let mut trainer = Trainer::from_gaussians(&data, cfg, init, deg)?;
         trainer.masks = masks;
         trainer.track_lineage();
+        if config.attribution {
+            // Which views' gradients move the Gaussians (§20.5): the generated views follow
+            // the originals in the dataset.
+            trainer.track_attribution((0..data.views.len()).map(|v| v >= n_orig).collect())?;
+        }
         let mut refreshed = 0u32;
         while trainer.iteration < recon.iterations {
             if let Some(r) = refresh {
@@ -358,6 +370,7 @@ impl Run<'_> {
             }
         }
         let lineage = trainer.lineage.take().expect("tracked");
+        let attribution = trainer.attribution.take();
         let g = trainer.gaussians;
         save_scene(w, "scene.ply", &g)?;
         // Per Gaussian of the scene, the index in `init` it descends from (§20.5).
@@ -374,6 +387,11 @@ impl Run<'_> {
         });
         if !config.generated_supervision {
             supervision["generated_supervision"] = serde_json::json!(false);
+        }
+        if let Some(a) = attribution.filter(|_| n_orig < data.views.len()) {
+            a.check(&g)?;
+            let all: Vec<usize> = (0..g.len()).collect();
+            supervision[ATTRIBUTION_KEY] = serde_json::json!(a.record(&all));
         }
         if let Some(share) = config.original_share {
             supervision["original_share"] = serde_json::json!(share);

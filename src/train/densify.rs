@@ -193,9 +193,27 @@ fn max_scale(ls: [f32; 3]) -> f32 {
     exp(ls[0].max(ls[1]).max(ls[2]))
 }
 
+/// Where a Gaussian after a densify step comes from: the Gaussian it was before the step,
+/// or the Gaussian a new copy or split child was made from (new Gaussians start with zero
+/// optimizer moments). Per-Gaussian bookkeeping beside training (a lineage, an attribution)
+/// follows the Gaussians through it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Origin {
+    Kept(u32),
+    New(u32),
+}
+
+impl Origin {
+    /// The index before the step that the Gaussian is, or was made from.
+    pub fn source(self) -> usize {
+        match self {
+            Origin::Kept(i) | Origin::New(i) => i as usize,
+        }
+    }
+}
+
 /// One densify-and-prune step on `g` (and the optimizer moments), resetting `stats`.
-/// `lineage` (one entry per Gaussian, when given) follows the Gaussians: a copy or a split
-/// child takes its source's entry, a pruned Gaussian's goes.
+/// `origins`, when given, receives every surviving Gaussian's [`Origin`] in the new order.
 #[allow(clippy::too_many_arguments)]
 pub fn densify_and_prune(
     g: &mut Gaussians,
@@ -205,7 +223,7 @@ pub fn densify_and_prune(
     extent: f32,
     world_prune: bool,
     mut normals: Normals<'_>,
-    lineage: Option<&mut Vec<u32>>,
+    origins: Option<&mut Vec<Origin>>,
 ) -> Result<DensifyReport> {
     let n0 = g.len();
     if let Normals::Given(z) = &normals
@@ -310,19 +328,13 @@ pub fn densify_and_prune(
     });
     let keep: Vec<usize> = (0..total).into_par_iter().filter(|&i| !remove[i]).collect();
     report.pruned = total - keep.len() - split.len();
-    if let Some(lineage) = lineage {
-        if lineage.len() != n0 {
-            return Err(crate::error::Error::invalid(format!(
-                "a lineage of {} entries for {n0} Gaussians",
-                lineage.len()
-            )));
-        }
-        let source = |i: usize| match i {
-            i if i < n0 => i,
-            i if i < n0 + clone.len() => clone[i - n0],
-            i => split[(i - n0 - clone.len()) % k],
-        };
-        *lineage = keep.iter().map(|&i| lineage[source(i)]).collect();
+    if let Some(origins) = origins {
+        origins.clear();
+        origins.extend(keep.iter().map(|&i| match i {
+            i if i < n0 => Origin::Kept(i as u32),
+            i if i < n0 + clone.len() => Origin::New(clone[i - n0] as u32),
+            i => Origin::New(split[(i - n0 - clone.len()) % k] as u32),
+        }));
     }
     *g = g.select_joined(&extra, &keep);
     adam.select_joined(extra.len(), &keep)?;

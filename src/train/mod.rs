@@ -3,6 +3,7 @@
 //! run directory ([`run`]).
 
 pub mod adam;
+pub mod attribution;
 pub mod checkpoint;
 pub mod densify;
 pub mod knn;

@@ -21,6 +21,7 @@ use crate::raster::backward::{
 use crate::raster::{Conventions, Outputs, RenderOptions};
 use crate::rng::{Uniform, stage_seed};
 use crate::train::adam::{Adam, AdamChunk, AdamConfig, ExpSchedule};
+use crate::train::attribution::Attribution;
 use crate::train::densify::{
     DensifyConfig, DensifyReport, DensifyStats, Normals, StatsChunk, densify_and_prune,
     reset_opacity,
@@ -320,6 +321,10 @@ pub struct Trainer<'a> {
     /// ([`Trainer::track_lineage`]): bookkeeping beside the computation, no bit of which it
     /// moves.
     pub lineage: Option<Vec<u32>>,
+    /// Per element, Adam's movement split between the original and the generated views
+    /// ([`Trainer::track_attribution`]): bookkeeping beside the computation, like the
+    /// lineage.
+    pub attribution: Option<Attribution>,
 }
 
 /// What an iteration does besides its gradient step ([`Trainer::schedule`]).
@@ -390,6 +395,7 @@ impl<'a> Trainer<'a> {
             fused_adam: true,
             grads: Gradients::default(),
             lineage: None,
+            attribution: None,
         })
     }
 
@@ -397,6 +403,28 @@ impl<'a> Trainer<'a> {
     /// Gaussian its own index). Checkpoints do not keep it.
     pub fn track_lineage(&mut self) {
         self.lineage = Some((0..self.gaussians.len() as u32).collect());
+    }
+
+    /// Split every Adam step from here on between the views flagged `generated` (one flag
+    /// per view of the dataset) and the others ([`Trainer::attribution`]). The iterations
+    /// then take the unfused path (the same bits).
+    pub fn track_attribution(&mut self, generated: Vec<bool>) -> Result<()> {
+        if self.config.adam.sparse {
+            // A sparse step leaves the moments of unseen Gaussians as they were, which the
+            // generated group's moment would have to mirror: not supported.
+            return Err(Error::invalid(
+                "the attribution splits dense Adam steps; sparse Adam is on",
+            ));
+        }
+        if generated.len() != self.dataset.views.len() {
+            return Err(Error::invalid(format!(
+                "{} view flags for {} views",
+                generated.len(),
+                self.dataset.views.len()
+            )));
+        }
+        self.attribution = Some(Attribution::new(&self.gaussians, generated)?);
+        Ok(())
     }
 
     fn lr(&self, p: Param, it: u32) -> f32 {
@@ -557,7 +585,11 @@ impl<'a> Trainer<'a> {
         // the backward and Adam) or Adam is sparse, Adam takes each chunk's gradients as the
         // projection backward makes them: the same bits, and the scene's gradient arrays
         // are neither written nor read back (SPEC.md §14.2).
-        let fused = self.fused_adam && !self.config.adam.sparse && !plan.densify && !plan.reset;
+        let fused = self.fused_adam
+            && !self.config.adam.sparse
+            && !plan.densify
+            && !plan.reset
+            && self.attribution.is_none();
         let pairs = if fused {
             let lrs = Param::ALL.map(|p| self.lr(p, it));
             let frozen = Param::ALL.map(|p| self.config.frozen.contains(&p));
@@ -601,6 +633,8 @@ impl<'a> Trainer<'a> {
             }
             if plan.densify {
                 let world_prune = it > d.opacity_reset_interval;
+                let follow = self.lineage.is_some() || self.attribution.is_some();
+                let mut origins = Vec::new();
                 densified = Some(densify_and_prune(
                     &mut self.gaussians,
                     &mut self.adam,
@@ -609,11 +643,20 @@ impl<'a> Trainer<'a> {
                     self.extent,
                     world_prune,
                     Normals::Rng(&mut self.rng),
-                    self.lineage.as_mut(),
+                    follow.then_some(&mut origins),
                 )?);
+                if let Some(lineage) = self.lineage.as_mut() {
+                    *lineage = origins.iter().map(|o| lineage[o.source()]).collect();
+                }
+                if let Some(a) = self.attribution.as_mut() {
+                    a.follow(&origins);
+                }
             }
             if plan.reset {
                 reset_opacity(&mut self.gaussians, &mut self.adam, d.opacity_reset_value);
+                if let Some(a) = self.attribution.as_mut() {
+                    a.reset_moments(Param::OpacityLogits);
+                }
                 reset = true;
             }
         }
@@ -629,8 +672,15 @@ impl<'a> Trainer<'a> {
                 }
                 let lr = self.lr(param, it);
                 let g = grads.param(param);
+                if let Some(a) = self.attribution.as_mut() {
+                    a.before_step(&self.gaussians, param);
+                }
                 self.adam
                     .step_sparse(&mut self.gaussians, param, g, lr, visible.as_deref());
+                if let Some(a) = self.attribution.as_mut() {
+                    let generated = a.is_generated(vi);
+                    a.after_step(&self.gaussians, &self.adam, param, g, generated);
+                }
             }
         }
         self.grads = grads;

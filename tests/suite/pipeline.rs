@@ -704,6 +704,7 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
     let cfg = AuditConfig {
         base: PipelineConfig {
             interpolation: false,
+            attribution: true,
             ..tiny_config()
         },
         variants: vec![Variant::Full, Variant::OpacityMask],
@@ -803,6 +804,11 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
             assert_eq!(l.is_some(), s.scene != "original", "{}: {l:?}", s.scene);
             if let Some(l) = l {
                 assert_eq!(l.from_originals + l.added, s.gaussians, "{l:?}");
+                // Which views moved the Gaussians (§20.5, on here): recorded by every
+                // reconstruction that trained on generated views.
+                let a = l.attribution.as_ref().expect("recorded");
+                assert!(a.reached > 0 && a.groups.len() == 5, "{a:?}");
+                assert!(a.share(unseen::gaussian::Param::Means).is_finite(), "{a:?}");
             }
         }
     }
@@ -972,6 +978,11 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
         "{md}"
     );
     assert!(md.contains("QA-Mask over opacity maps, existing"));
+    assert!(
+        md.contains("### Which views moved the Gaussians the original views see")
+            && md.contains("| truth-low | full | 2 | stage1 0."),
+        "{md}"
+    );
     let svg = std::fs::read_to_string(dir.join("inconsistency.svg")).unwrap();
     assert!(svg.starts_with("<svg") && svg.contains("<circle"));
     // Again: every job is pooled as this binary computes it, so none starts (not even its
