@@ -3,7 +3,8 @@
 # records): the pipeline under four generators — perfect (truth-none), consistent
 # (truth-low), classical, hallucinating — as the paper runs it (`full`) and with the
 # generated views dropped from every reconstruction (`originals_only`, the recipe's
-# control), quick preset. audit.md's "The training half per stage" holds the table.
+# control) and with the QA-Mask replaced by none or the opacity mask (`no_qa_mask`,
+# `opacity_mask`: the mask's own share), quick preset. audit.md's "The training half per stage" holds the table.
 # Seeds accumulate in the room's folder.
 #
 # Usage: reference_data/audit/run_training_half.sh DATASET A..B [UNSEEN_BINARY]
@@ -20,7 +21,7 @@ dataset="$(cd "$1" && pwd)"; seeds="$2"
 cd "$(dirname "$0")/../.."
 bin="${3:-target/release/unseen}"
 generators="${GENERATORS:-truth-none,truth-low,classical,truth-low+hallucinating+relative}"
-variants="${VARIANTS:-full,originals_only}"
+variants="${VARIANTS:-full,originals_only,no_qa_mask,opacity_mask}"
 name="$(basename "$dataset")"
 out="${OUT:-reference_data/audit/$name-training-half}"
 work="${WORK:-/tmp/unseen-training-half-$name}"
