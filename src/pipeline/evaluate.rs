@@ -656,8 +656,7 @@ impl Run<'_> {
             // `records`: the metrics carry per-view sums, with GMSD's (a step cached before
             // they were recorded is not reused).
             let key = serde_json::json!({
-                "scene": digest, "masks": masks.digest,
-                "records": "per-view+gradients+lineage+attribution"
+                "scene": digest, "masks": masks.digest, "records": "per-view+gradients+lineage"
             });
             let st = self.step(&Step::Eval(name.parse()?), key, |w| {
                 let mut row = score(inputs, &scene, name, &existing, w)?;

@@ -633,6 +633,17 @@ impl<'a> Trainer<'a> {
             }
             if plan.densify {
                 let world_prune = it > d.opacity_reset_interval;
+                if let Some(l) = self
+                    .lineage
+                    .as_ref()
+                    .filter(|l| l.len() != self.gaussians.len())
+                {
+                    return Err(Error::invalid(format!(
+                        "a lineage of {} entries for {} Gaussians",
+                        l.len(),
+                        self.gaussians.len()
+                    )));
+                }
                 let follow = self.lineage.is_some() || self.attribution.is_some();
                 let mut origins = Vec::new();
                 densified = Some(densify_and_prune(
