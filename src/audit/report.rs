@@ -42,9 +42,11 @@ pub struct Report {
     #[serde(skip)]
     pub pool: Vec<JobResult>,
     /// Per primary claim on contested pixels (by its index in `verdicts`), the contact
-    /// sheet of its median seed, when the audit's folder has it (SPEC.md §21.7).
+    /// sheet of the seed nearest its median among those whose sheet the audit's folder
+    /// has (SPEC.md §21.7).
     #[serde(skip)]
-    pub sheets: Vec<(usize, u32, std::path::PathBuf)>,
+    /// `(verdict, seed, whether it is the median seed itself, path)`.
+    pub sheets: Vec<(usize, u32, bool, std::path::PathBuf)>,
 }
 
 impl Audit<'_> {
@@ -162,9 +164,11 @@ impl Audit<'_> {
                     && matches!(v.claim.metric, Metric::Classes(_, Region::Contested))
             })
             .filter_map(|(k, v)| {
-                let seed = median_seed(&usable, v)?;
-                let path = super::pairs::sheet_path(&v.generator, v.claim.variant.name(), seed);
-                dir.join(&path).is_file().then_some((k, seed, path))
+                let path =
+                    |seed| super::pairs::sheet_path(&v.generator, v.claim.variant.name(), seed);
+                let seed = median_seed(&usable, v, |seed| dir.join(path(seed)).is_file())?;
+                let median = median_seed(&usable, v, |_| true) == Some(seed);
+                Some((k, seed, median, path(seed)))
             })
             .collect();
         let report = Report {
@@ -776,10 +780,15 @@ fn where_conflicts_act(report: &Report) -> String {
             v.panel_splits.as_deref().unwrap_or("–"),
         );
     }
-    for (k, seed, path) in &report.sheets {
+    for (k, seed, median, path) in &report.sheets {
         let v = &report.verdicts[*k];
+        let which = if *median {
+            format!("at its median seed ({seed})")
+        } else {
+            format!("at seed {seed}, the nearest its median of the seeds whose sheet was kept")
+        };
         s += &format!(
-            "\n**{}, {}, at its median seed ({seed})**: truth | full | {} | {}·|full − {}| on the most contested evaluation view, cropped to its contested pixels (the rest dimmed).\n\n![{} at seed {seed}]({})\n",
+            "\n**{}, {}, {which}**: truth | full | {} | {}·|full − {}| on the most contested evaluation view, cropped to its contested pixels (the rest dimmed).\n\n![{} at seed {seed}]({})\n",
             v.claim.id,
             v.generator,
             v.claim.variant.name(),

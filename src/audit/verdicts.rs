@@ -816,15 +816,17 @@ impl Verdict {
     }
 }
 
-/// The seed whose Δ of `v`'s claim lies nearest its median (the lowest of ties; within the
-/// plan), the one a contact sheet shows (SPEC.md §21.7).
-pub fn median_seed(pool: &[JobResult], v: &Verdict) -> Option<u32> {
+/// Among the seeds `eligible` accepts, the one whose Δ of `v`'s claim lies nearest its
+/// median (the lowest of ties; within the plan): the one a contact sheet shows (SPEC.md
+/// §21.7), `eligible` being "its sheet exists" (a batch may keep only some seeds' sheets).
+pub fn median_seed(pool: &[JobResult], v: &Verdict, eligible: impl Fn(u32) -> bool) -> Option<u32> {
     let c = &v.claim;
     let pairs = pairs_against(pool, &v.generator, c.reference, c.variant);
     let mut best: Option<(f64, u32)> = None;
     for (seed, d) in seed_groups(&pairs, |p| c.diff(p)) {
         let off = (d - v.median_diff).abs();
-        if (seed as usize) < v.planned && off.is_finite() && best.is_none_or(|b| off < b.0) {
+        let within = (seed as usize) < v.planned && off.is_finite() && eligible(seed);
+        if within && best.is_none_or(|b| off < b.0) {
             best = Some((off, seed));
         }
     }

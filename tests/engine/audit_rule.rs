@@ -630,8 +630,8 @@ fn committed_mechanisms_audits_follow_from_their_samples() {
 /// as the committed one.
 #[test]
 fn every_committed_audit_follows_from_its_samples() {
+    use unseen::audit;
     use unseen::audit::samples::{LEGACY_SAMPLES_FILE, SAMPLES_FILE};
-    use unseen::audit::{self, AuditConfig, GeneratorKind, Variant};
     let root = reference("audit");
     let mut judged = Vec::new();
     let mut folders: Vec<_> = std::fs::read_dir(&root)
@@ -649,28 +649,7 @@ fn every_committed_audit_follows_from_its_samples() {
         if !current {
             continue;
         }
-        let names = |key: &str| -> Vec<String> {
-            let v = head[key]
-                .as_array()
-                .unwrap_or_else(|| panic!("{name}: {key}"));
-            v.iter().map(|s| s.as_str().unwrap().to_string()).collect()
-        };
-        let preset = serde_json::from_value(head["preset"].clone()).unwrap();
-        let mut cfg = AuditConfig::preset(preset);
-        cfg.generators = names("generators")
-            .iter()
-            .map(|g| GeneratorKind::by_name(g).unwrap())
-            .collect();
-        cfg.variants = names("variants")
-            .iter()
-            .map(|v| Variant::by_name(v).unwrap())
-            .collect();
-        cfg.candidates = head["candidates"]["name"].as_str().map(String::from);
-        cfg.planned_seeds = head["rule"]["planned"].as_u64().unwrap() as usize;
-        cfg.train_iterations = head["train_iterations"].as_u64().unwrap() as u32;
-        cfg.train_resolution = head["train_resolution"].as_u64().unwrap() as u32;
-        let room = head["dataset"].as_str().unwrap();
-        let dataset = reference(&format!("scenes/{room}"));
+        let (cfg, dataset) = committed_config(&head);
         let tmp = TempDir::new(&format!("committed-{name}"));
         // Every other folder as it was before the samples were compressed: the report reads
         // the text and replaces it by the compressed file.
@@ -720,6 +699,101 @@ fn every_committed_audit_follows_from_its_samples() {
             "{must} not judged: {judged:?}"
         );
     }
+}
+
+/// The configuration a committed audit was made with, from its `audit.json`'s head, and its
+/// room's dataset folder.
+fn committed_config(head: &serde_json::Value) -> (unseen::audit::AuditConfig, std::path::PathBuf) {
+    use unseen::audit::{AuditConfig, GeneratorKind, Variant};
+    let names = |key: &str| -> Vec<String> {
+        let v = head[key].as_array().unwrap_or_else(|| panic!("{key}"));
+        v.iter().map(|s| s.as_str().unwrap().to_string()).collect()
+    };
+    let preset = serde_json::from_value(head["preset"].clone()).unwrap();
+    let mut cfg = AuditConfig::preset(preset);
+    cfg.generators = names("generators")
+        .iter()
+        .map(|g| GeneratorKind::by_name(g).unwrap())
+        .collect();
+    cfg.variants = names("variants")
+        .iter()
+        .map(|v| Variant::by_name(v).unwrap())
+        .collect();
+    cfg.candidates = head["candidates"]["name"].as_str().map(String::from);
+    cfg.planned_seeds = head["rule"]["planned"].as_u64().unwrap() as usize;
+    cfg.train_iterations = head["train_iterations"].as_u64().unwrap() as u32;
+    cfg.train_resolution = head["train_resolution"].as_u64().unwrap() as u32;
+    let room = head["dataset"].as_str().unwrap();
+    (cfg, reference(&format!("scenes/{room}")))
+}
+
+/// A primary claim's contact sheet (SPEC.md §21.7) is its median seed's when that sheet is
+/// kept, else the sheet of the seed nearest the median among those kept (a batch that ran in
+/// chunks may have lost the median seed's runs), and `audit.md` says which; with no sheet
+/// kept there is none. On the committed gallery control's samples.
+#[test]
+fn the_contact_sheet_is_the_median_seeds_or_the_nearest_kept() {
+    use unseen::audit::pairs::sheet_path;
+    use unseen::audit::samples::SAMPLES_FILE;
+    use unseen::audit::verdicts::median_seed;
+    let committed = reference("audit/gallery-control");
+    let head: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(committed.join("audit.json")).unwrap()).unwrap();
+    let (cfg, dataset) = committed_config(&head);
+    let tmp = TempDir::new("sheet-choice");
+    let gz = std::fs::read(committed.join(SAMPLES_FILE)).unwrap();
+    let report = |sheets: &[u32]| {
+        std::fs::write(tmp.join(SAMPLES_FILE), &gz).unwrap();
+        let _ = std::fs::remove_dir_all(tmp.join("sheets"));
+        let first = unseen::audit::Audit::new(&cfg, &dataset, &tmp)
+            .report(&[])
+            .unwrap();
+        let (k, v) = first
+            .verdicts
+            .iter()
+            .enumerate()
+            .find(|(_, v)| v.claim.metric.is_primary() && v.claim.id.ends_with("detail contested"))
+            .expect("a primary claim on contested pixels");
+        let path = |seed| sheet_path(&v.generator, v.claim.variant.name(), seed);
+        for &seed in sheets {
+            let file = tmp.join(path(seed));
+            std::fs::create_dir_all(file.parent().unwrap()).unwrap();
+            std::fs::write(file, b"a sheet").unwrap();
+        }
+        let median = median_seed(&first.pool, v, |_| true).unwrap();
+        let again = unseen::audit::Audit::new(&cfg, &dataset, &tmp)
+            .report(&[])
+            .unwrap();
+        let shown = again.sheets.iter().find(|s| s.0 == k).map(|s| (s.1, s.2));
+        let md = std::fs::read_to_string(tmp.join("audit.md")).unwrap();
+        (median, shown, md)
+    };
+    let (median, shown, md) = report(&[]);
+    assert_eq!(shown, None, "no sheet kept, none shown");
+    assert!(!md.contains("](sheets/"), "{md}");
+    let (_, shown, md) = report(&[median]);
+    assert_eq!(shown, Some((median, true)));
+    assert!(
+        md.contains(&format!("at its median seed ({median})")),
+        "{md}"
+    );
+    // The median seed's sheet lost: the nearest of the others kept, and the choice is a
+    // nearest one: dropping it gives the next, and of those two the first again.
+    let others: Vec<u32> = (0..16).filter(|&s| s != median).collect();
+    let (_, shown, md) = report(&others);
+    let (first, is_median) = shown.expect("a kept sheet is shown");
+    assert!(!is_median && first != median);
+    assert!(
+        md.contains(&format!(
+            "at seed {first}, the nearest its median of the seeds whose sheet was kept"
+        )),
+        "{md}"
+    );
+    let rest: Vec<u32> = others.iter().copied().filter(|&s| s != first).collect();
+    let (second, _) = report(&rest).1.expect("a kept sheet is shown");
+    assert_ne!(second, first);
+    assert_eq!(report(&[second, first]).1, Some((first, false)));
+    assert_eq!(report(&[second]).1, Some((second, false)));
 }
 
 /// The results tables of README.md and the audit page (`reference_data/audit/README.md`)
