@@ -39,7 +39,8 @@ const CHUNK: usize = 1 << 14;
 pub struct Attribution {
     /// Per view of the training set, whether it belongs to the generated group.
     generated: Vec<bool>,
-    /// The generated group's share of Adam's first moment, laid out like the parameters.
+    /// The generated group's share of Adam's first moment, laid out like the parameters
+    /// (at SH degree 0, as are the sums: [`ATTRIBUTED`] holds no `sh_rest`).
     m_generated: Gaussians,
     /// Per element, Σ of Adam's steps, and of their generated parts.
     pub moved: Gaussians,
@@ -86,7 +87,9 @@ impl Attribution {
     /// Attribution for the Gaussians `g`, the views of the training set flagged generated
     /// or not.
     pub fn new(g: &Gaussians, generated: Vec<bool>) -> Result<Self> {
-        let z = Gaussians::zeros(g.len(), g.sh_degree)?;
+        // At SH degree 0: `sh_rest` is not attributed, so its bookkeeping would be dead
+        // weight copied at every densification.
+        let z = Gaussians::zeros(g.len(), 0)?;
         Ok(Attribution {
             generated,
             m_generated: z.clone(),
