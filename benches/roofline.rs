@@ -1,6 +1,6 @@
 //! A training iteration against its roofline: `cargo bench --bench roofline [-- --quick]
 //! [--json FILE] [--warmup N] [--reps R] [--views K] [--rounds M] [--resolution D]
-//! [--threads N]`.
+//! [--threads N] [--external DIR]`.
 //!
 //! For lounge at 80×60 and 160×120, after `N` training iterations (default 1 500: a densified
 //! state as the pipeline meets it), on 1 and all threads: each stage of one iteration timed
@@ -27,7 +27,11 @@
 //! `stages` is the sum of the rows above (Adam unfused); `iteration` is `Trainer::step`
 //! itself (Adam fused into the projection backward, one densification in a hundred steps
 //! amortized), fastest of 3 rounds of `4·max(R, 5)` steps from clones of the warmed state;
-//! the floor of both is the sum of the stages' floors. `--rounds M` repeats the measurement
+//! the floor of both is the sum of the stages' floors. `--external DIR` builds the bare
+//! kernels written outside the project that `DIR` holds (`common::External`: C files, built
+//! without contracted multiply-adds, as the crate's arithmetic) and takes as the blend's and
+//! its backward's floor the faster of the crate's bare kernel and the best of those (`ext`
+//! beside a row's range, and `floor_external` in the JSON, when theirs was faster). `--rounds M` repeats the measurement
 //! M times, the pools alternating, and reports per row the round of the median ratio and
 //! the ratios' range (the machine's noise, in the same run). The first line names the CPU
 //! and the instruction set the kernels use. `--json FILE` writes one record per (stage,
@@ -36,7 +40,7 @@
 mod common;
 
 use common::{
-    FloorInput, arg, bare_backward_rate, bare_rate, blur_rate, floor_seconds, median,
+    External, FloorInput, arg, bare_backward_rate, bare_rate, blur_rate, floor_seconds, median,
     stream_seconds, tile_splats,
 };
 use std::time::Instant;
@@ -61,8 +65,9 @@ const STAGES: [&str; 8] = [
     "densify stats",
 ];
 
-/// A stage's name, measured seconds and floor seconds in one round.
-type Row = (String, f64, f64);
+/// A stage's name, measured seconds and floor seconds in one round, and whether its floor
+/// was an external kernel's (in most views).
+type Row = (String, f64, f64, bool);
 
 /// One row of the table (and of `--json`).
 #[derive(serde::Serialize)]
@@ -78,24 +83,46 @@ struct Record {
     ratio: f64,
     /// The smallest and largest ratio over the rounds.
     ratio_range: [f64; 2],
+    /// The floor was (or held) an external kernel's (`--external`), faster than the
+    /// crate's own.
+    floor_external: bool,
     rounds: usize,
 }
 
 /// The bare kernels' rates in the current pool (measured beside each view).
 struct Rates {
-    /// Forward and backward bare kernels, pairs per second.
+    /// Forward and backward bare kernels, pairs per second: the best of the crate's and the
+    /// external ones (`--external`).
     forward: f64,
     backward: f64,
+    /// Whether an external kernel was the faster.
+    forward_external: bool,
+    backward_external: bool,
     /// The SSIM blur at the image's width, outputs per second.
     blur: f64,
 }
 
 impl Rates {
-    fn measure(width: usize) -> Rates {
+    fn measure(width: usize, external: Option<&External>) -> Rates {
         let tile = tile_splats();
+        let threads = rayon::current_num_threads();
+        let best = |ours: f64, theirs: Option<(&str, f64)>| match theirs {
+            Some((_, r)) if r > ours => (r, true),
+            _ => (ours, false),
+        };
+        let (forward, forward_external) = best(
+            bare_rate(&tile, Kernel::Auto),
+            external.and_then(|e| External::best(&e.forward, threads)),
+        );
+        let (backward, backward_external) = best(
+            bare_backward_rate(&tile, Kernel::Auto),
+            external.and_then(|e| External::best(&e.backward, threads)),
+        );
         Rates {
-            forward: bare_rate(&tile, Kernel::Auto),
-            backward: bare_backward_rate(&tile, Kernel::Auto),
+            forward,
+            backward,
+            forward_external,
+            backward_external,
             blur: blur_rate(width),
         }
     }
@@ -350,14 +377,20 @@ fn measure_rows(
     views: usize,
     reps: usize,
     width: u32,
+    external: Option<&External>,
 ) -> Vec<Row> {
     let mut measured = [const { Vec::new() }; 8];
     let mut floors = [const { Vec::new() }; 8];
+    // Per stage, the views whose floor was an external kernel's (the blend's and its
+    // backward's only).
+    let mut external_views = [0usize; 8];
     for k in 0..views {
         let view = &data.views[data.train[k % data.train.len()]];
         // The bare rates beside every view's stages too, as the streaming floors: each
         // floor is then the median over the same moments as its stage.
-        let rates = Rates::measure(width as usize);
+        let rates = Rates::measure(width as usize, external);
+        external_views[2] += usize::from(rates.forward_external);
+        external_views[4] += usize::from(rates.backward_external);
         let (m, f) = stages(t, view, &rates, reps);
         for i in 0..8 {
             measured[i].push(m[i]);
@@ -372,16 +405,19 @@ fn measure_rows(
                 s.to_string(),
                 median(measured[i].clone()),
                 median(floors[i].clone()),
+                2 * external_views[i] > views,
             )
         })
         .collect();
     let floor_sum: f64 = rows.iter().map(|r| r.2).sum();
     let stage_sum: f64 = rows.iter().map(|r| r.1).sum();
-    rows.push(("stages".into(), stage_sum, floor_sum));
+    let any_external = rows.iter().any(|r| r.3);
+    rows.push(("stages".into(), stage_sum, floor_sum, any_external));
     rows.push((
         "iteration".into(),
         iteration_seconds(t, 4 * reps.max(5)),
         floor_sum,
+        any_external,
     ));
     rows
 }
@@ -402,6 +438,41 @@ fn main() {
     };
     let pools = common::pools();
     println!("{}", common::machine());
+    // `--external DIR`: bare kernels written outside the project, built and run once.
+    let external = {
+        let args: Vec<String> = std::env::args().collect();
+        args.iter()
+            .position(|a| a == "--external")
+            .and_then(|i| args.get(i + 1))
+            .map(|d| External::run(std::path::Path::new(d), pools.last().unwrap().0))
+    };
+    if let Some(e) = &external {
+        for (kind, list) in [("forward", &e.forward), ("backward", &e.backward)] {
+            for (file, threads, rate) in list {
+                println!(
+                    "external {kind} {file}: {threads} threads {:.3} G pairs/s",
+                    rate / 1e9
+                );
+            }
+        }
+        for s in &e.skipped {
+            println!("external skipped: {s}");
+        }
+        for (threads, pool) in &pools {
+            let tile = tile_splats();
+            let (f, b) = pool.install(|| {
+                (
+                    bare_rate(&tile, Kernel::Auto),
+                    bare_backward_rate(&tile, Kernel::Auto),
+                )
+            });
+            println!(
+                "crate bare forward {:.3}, backward {:.3} G pairs/s on {threads} threads",
+                f / 1e9,
+                b / 1e9
+            );
+        }
+    }
     let mut records = Vec::new();
     println!(
         "{:>13} {:>8} {:>3} {:>9} {:>12} {:>10} {:>7} {:>13}",
@@ -432,7 +503,8 @@ fn main() {
                 if only_threads != 0 && *threads != only_threads {
                     continue;
                 }
-                let rows = pool.install(|| measure_rows(&t, &data, views, reps, width));
+                let rows =
+                    pool.install(|| measure_rows(&t, &data, views, reps, width, external.as_ref()));
                 match per_pool.iter_mut().find(|(n, _)| n == threads) {
                     Some((_, r)) => r.push(rows),
                     None => per_pool.push((*threads, vec![rows])),
@@ -444,7 +516,7 @@ fn main() {
                 let mut of: Vec<&Row> = runs.iter().map(|r| &r[i]).collect();
                 of.sort_by(|a, b| (a.1 / a.2).total_cmp(&(b.1 / b.2)));
                 let (lo, hi) = (of[0].1 / of[0].2, of[of.len() - 1].1 / of[of.len() - 1].2);
-                let (stage, m, f) = of[of.len() / 2].clone();
+                let (stage, m, f, ext) = of[of.len() / 2].clone();
                 println!(
                     "{:>13} {:>8} {:>3} {:>9} {:>12.3} {:>10.3} {:>7.2} {:>13}",
                     stage,
@@ -454,7 +526,7 @@ fn main() {
                     m * 1e3,
                     f * 1e3,
                     m / f,
-                    format!("{lo:.2}-{hi:.2}")
+                    format!("{lo:.2}-{hi:.2}{}", if ext { " ext" } else { "" })
                 );
                 records.push(Record {
                     stage,
@@ -466,6 +538,7 @@ fn main() {
                     floor_seconds: f,
                     ratio: m / f,
                     ratio_range: [lo, hi],
+                    floor_external: ext,
                     rounds,
                 });
             }

@@ -439,3 +439,118 @@ pub fn machine() -> String {
     let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
     format!("{model}, {cpus} logical CPUs, {isa}{capped}")
 }
+
+/// Bare blend kernels written outside the project (`--external DIR`): every C file of `DIR`
+/// that prints lines `threads=N <name>_Gpairs_per_s=X` (one pixel × one splat a pair; a
+/// name with `backward` in it is a backward kernel), compiled here and run once per pool
+/// size. The floors of a roofline are then the best of the crate's bare kernels and these.
+///
+/// Compiled with `cc -O3 -march=native -mno-fma -ffp-contract=off -fopenmp`: the crate's
+/// arithmetic (SPEC.md §5.4) has no fused multiply-add, and GCC contracts `a·b + c` into one
+/// by default for C (`-ffp-contract=fast`) wherever the target has an FMA — which AVX-512F
+/// has at 512 bits whatever `-mno-fma` says (that flag removes only the 128/256-bit FMA3
+/// extension). A kernel contracted so does other arithmetic than the crate's (fewer
+/// roundings, other bits) in fewer instructions: measured on an Intel Xeon with AVX-512F,
+/// 1.7 G pairs/s on one thread contracted against 1.1 not, the crate's bare kernel 1.25.
+/// With `UNSEEN_MAX_ISA=avx2` the files are built with `-mno-avx512f` (the AVX-512 ones then
+/// fail to build and are skipped), so that a capped crate meets floors of its own ISA.
+pub struct External {
+    /// `(file, threads, pairs per second)` of the forward and backward kernels.
+    pub forward: Vec<(String, usize, f64)>,
+    pub backward: Vec<(String, usize, f64)>,
+    /// Files skipped, with why.
+    pub skipped: Vec<String>,
+}
+
+impl External {
+    /// Build and run every C file of `dir`, each with `OMP_NUM_THREADS` = `threads` (it
+    /// reports one thread and that many).
+    pub fn run(dir: &std::path::Path, threads: usize) -> External {
+        let mut ext = External {
+            forward: Vec::new(),
+            backward: Vec::new(),
+            skipped: Vec::new(),
+        };
+        let mut files: Vec<_> = std::fs::read_dir(dir)
+            .unwrap_or_else(|e| panic!("--external {}: {e}", dir.display()))
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "c"))
+            .collect();
+        files.sort();
+        let capped = std::env::var("UNSEEN_MAX_ISA").is_ok_and(|v| v == "avx2");
+        let build = std::env::temp_dir().join(format!("unseen-external-{}", std::process::id()));
+        std::fs::create_dir_all(&build).unwrap();
+        for file in files {
+            let name = file.file_name().unwrap().to_string_lossy().to_string();
+            let exe = build.join(name.trim_end_matches(".c"));
+            let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
+            let mut cmd = std::process::Command::new(&cc);
+            cmd.args([
+                "-O3",
+                "-march=native",
+                "-mno-fma",
+                "-ffp-contract=off",
+                "-fopenmp",
+            ]);
+            if capped {
+                cmd.arg("-mno-avx512f");
+            }
+            let built = cmd.arg(&file).arg("-o").arg(&exe).arg("-lm").output();
+            match built {
+                Ok(o) if o.status.success() => {}
+                Ok(o) => {
+                    let why = String::from_utf8_lossy(&o.stderr);
+                    let first = why.lines().find(|l| l.contains("error")).unwrap_or("");
+                    ext.skipped
+                        .push(format!("{name}: does not build ({first})"));
+                    continue;
+                }
+                Err(e) => {
+                    ext.skipped.push(format!("{name}: {cc}: {e}"));
+                    continue;
+                }
+            }
+            let out = std::process::Command::new(&exe)
+                .env("OMP_NUM_THREADS", threads.to_string())
+                .output();
+            let text = match out {
+                Ok(o) if o.status.success() => String::from_utf8_lossy(&o.stdout).to_string(),
+                _ => {
+                    ext.skipped.push(format!("{name}: does not run"));
+                    continue;
+                }
+            };
+            for line in text.lines() {
+                let mut n = None;
+                let mut rate = None;
+                let mut backward = false;
+                for field in line.split_whitespace() {
+                    if let Some(v) = field.strip_prefix("threads=") {
+                        n = v.parse::<usize>().ok();
+                    } else if let Some((key, v)) = field.split_once("_Gpairs_per_s=") {
+                        backward = key.contains("backward");
+                        rate = v.parse::<f64>().ok().map(|g| g * 1e9);
+                    }
+                }
+                if let (Some(n), Some(r)) = (n, rate) {
+                    let to = if backward {
+                        &mut ext.backward
+                    } else {
+                        &mut ext.forward
+                    };
+                    to.push((name.clone(), n, r));
+                }
+            }
+        }
+        let _ = std::fs::remove_dir_all(&build);
+        ext
+    }
+
+    /// The fastest kernel of `kind` at `threads`: `(file, pairs per second)`.
+    pub fn best(kind: &[(String, usize, f64)], threads: usize) -> Option<(&str, f64)> {
+        kind.iter()
+            .filter(|k| k.1 == threads)
+            .max_by(|a, b| a.2.total_cmp(&b.2))
+            .map(|k| (k.0.as_str(), k.2))
+    }
+}
