@@ -1,5 +1,5 @@
 //! At the scale real captures have: `cargo bench --bench scale [-- --sizes 0.1,1,3,6]
-//! [--width 1920] [--height 1080] [--modes render,oracle,train] [--json FILE]`.
+//! [--width 1920] [--height 1080] [--modes render,oracle,train] [--json FILE] [--keep DIR]`.
 //!
 //! Seeded scenes (`scene::random_scene`, SH degree 3, σ 0.002–0.02 in a box 2–6 in front of
 //! the camera: a 1080p view sees nearly every Gaussian, at σ ≈ 0.5–17 px) of each size in millions are
@@ -248,8 +248,14 @@ fn main() {
     let mut all = Vec::new();
     for &m in &sizes {
         let n = (m * 1e6).round() as usize;
-        let ply_path = dir.0.join(format!("scene-{n}.ply"));
-        {
+        // `--keep DIR`: the scenes are written there and left (to profile a child on its
+        // own: `scale --child MODE PLY WIDTH HEIGHT OUT`), and reused when present.
+        let keep = opt("--keep").map(PathBuf::from);
+        let ply_path = keep
+            .as_deref()
+            .unwrap_or(&dir.0)
+            .join(format!("scene-{n}.ply"));
+        if !ply_path.is_file() {
             let scene = unseen::scene::random_scene(n, 3, SEED, SCALE_LO, SCALE_HI);
             ply::write_ply(&scene, &ply_path).unwrap();
         }
@@ -293,7 +299,9 @@ fn main() {
             );
             all.push(r);
         }
-        let _ = std::fs::remove_file(&ply_path);
+        if keep.is_none() {
+            let _ = std::fs::remove_file(&ply_path);
+        }
     }
     if let Some(path) = opt("--json") {
         let text = serde_json::to_string_pretty(&all).unwrap();
