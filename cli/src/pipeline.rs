@@ -694,7 +694,7 @@ pub fn run_audit(a: &AuditArgs) -> Result<()> {
         return emit_audit(&cfg, a, preset, sub);
     }
     let draw = super::progress::drawer();
-    let run = audit::Audit::new(&cfg, &a.dataset, &a.out).with_events(&draw);
+    let run = audit::Audit::new(&cfg, &a.dataset, &a.out)?.with_events(&draw);
     if let Some(only) = &a.only {
         let waves = cluster::waves(&cfg);
         let job = waves
@@ -764,7 +764,7 @@ fn list_audit(cfg: &unseen::audit::AuditConfig, a: &AuditArgs) -> Result<()> {
     }
     let gb = |b: f64| b / 1e9;
     let (mut cpu_hours, mut jobs) = (0.0, 0);
-    for (wave, costs) in unseen::audit::Audit::new(cfg, &a.dataset, &a.out).estimate(&a.merge)? {
+    for (wave, costs) in unseen::audit::Audit::new(cfg, &a.dataset, &a.out)?.estimate(&a.merge)? {
         let hours: f64 = costs.iter().map(|c| c.seconds).sum::<f64>() * 2.0 / 3600.0;
         let peak = costs.iter().map(|c| c.peak_rss_bytes).fold(0.0, f64::max);
         let longest = costs.iter().map(|c| c.seconds).fold(0.0, f64::max);
@@ -844,7 +844,7 @@ fn emit_audit(
         command.extend(["--merge".into(), show(abs(m)?)]);
     }
     let opts = a.slurm.options();
-    let waves = unseen::audit::Audit::new(cfg, &a.dataset, &a.out)
+    let waves = unseen::audit::Audit::new(cfg, &a.dataset, &a.out)?
         .emit_slurm(&command, &a.merge, &sub, &opts)?;
     for (w, r) in &waves {
         println!(

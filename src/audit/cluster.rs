@@ -348,13 +348,12 @@ impl Audit<'_> {
                 let config = cfg
                     .config_digest(*generator, *variant)
                     .map_err(|e| fail(e.to_string()))?;
-                let family = super::family::family(self.dataset, cfg.candidates.as_deref())
-                    .map_err(|e| fail(e.to_string()))?;
+                let family = &self.candidates.family;
                 let same = result.generator == generator.name()
                     && result.variant == variant.name()
                     && result.seed == *seed
                     && result.config == config
-                    && result.candidates == family;
+                    && result.candidates == *family;
                 if !same {
                     return Err(fail(format!(
                         "{} is of another job or configuration",
@@ -417,13 +416,11 @@ fn work(cfg: &AuditConfig, job: &Job, (pixels, candidates): (f64, usize)) -> f64
 
 /// The training pixels of the dataset at the audit's training resolution (from its first
 /// candidate camera's size), and its number of candidate views.
-fn training_pixels(cfg: &AuditConfig, dataset: &Path) -> Result<(f64, usize)> {
-    super::family::family(dataset, cfg.candidates.as_deref())?; // a clear error when unknown
-    let file = super::family::candidates_file(dataset, cfg.candidates.as_deref());
-    let cams = crate::camera::inria::read_cameras_json(&file)?;
+fn training_pixels(cfg: &AuditConfig, file: &Path) -> Result<(f64, usize)> {
+    let cams = crate::camera::inria::read_cameras_json(file)?;
     let c = cams
         .first()
-        .ok_or_else(|| Error::invalid("lists no camera").at(&file))?;
+        .ok_or_else(|| Error::invalid("lists no camera").at(file))?;
     let r = f64::from(cfg.train_resolution.max(1));
     let pixels = (f64::from(c.width) / r).round() * (f64::from(c.height) / r).round();
     Ok((pixels, cams.len()))
@@ -437,7 +434,7 @@ impl Audit<'_> {
     /// seconds per iteration-pixel averaged over them, memory their maximum.
     pub fn estimate(&self, merge: &[PathBuf]) -> Result<Vec<(Wave, Vec<Cost>)>> {
         let (cfg, dir) = (self.cfg, self.dir);
-        let shape = training_pixels(cfg, self.dataset)?;
+        let shape = training_pixels(cfg, &self.candidates.file)?;
         let pixels = shape.0;
         let kind = |j: &Job| match j {
             Job::Original { .. } => 0,

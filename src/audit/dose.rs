@@ -154,7 +154,7 @@ pub fn responses(verdicts: &[Verdict]) -> Vec<Response> {
     // their nulls are plotted.
     let plotted = |v: &&Verdict| !v.claim.metric.is_panel() || v.claim.metric.is_primary();
     for v in verdicts.iter().filter(plotted) {
-        if let Ok(GeneratorKind::Dose { param, .. }) = GeneratorKind::by_name(&v.generator) {
+        if let GeneratorKind::Dose { param, .. } = v.generator {
             let k = (param, v.claim.id);
             if !keys.contains(&k) {
                 keys.push(k);
@@ -165,8 +165,8 @@ pub fn responses(verdicts: &[Verdict]) -> Vec<Response> {
         let mut rows: Vec<(u8, &Verdict)> = verdicts
             .iter()
             .filter(|v| v.claim.id == id)
-            .filter_map(|v| match GeneratorKind::by_name(&v.generator) {
-                Ok(GeneratorKind::Dose { param: p, percent }) if p == param => Some((percent, v)),
+            .filter_map(|v| match v.generator {
+                GeneratorKind::Dose { param: p, percent } if p == param => Some((percent, v)),
                 _ => None,
             })
             .collect();

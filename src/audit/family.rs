@@ -53,9 +53,30 @@ pub fn check_family_name(name: &str) -> Result<()> {
     }
 }
 
+/// The candidate poses an audit gives the pipeline (SPEC.md §20.7), resolved once from the
+/// configuration's choice against the dataset ([`Candidates::resolve`]): the family's record
+/// (`None` for the bundled `candidates.json`), which jobs and pools record, and the file of
+/// poses.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Candidates {
+    pub family: Option<Family>,
+    pub file: PathBuf,
+}
+
+impl Candidates {
+    /// The candidates named `family` (`None`: the bundled ones) in `dataset`: an error naming
+    /// the families there when it has none of that name.
+    pub fn resolve(dataset: &Path, family: Option<&str>) -> Result<Candidates> {
+        Ok(Candidates {
+            family: record(dataset, family)?,
+            file: candidates_file(dataset, family),
+        })
+    }
+}
+
 /// The candidate poses of `family` in `dataset`: `candidates.json` for `None`, else
 /// `families/<name>.json`.
-pub fn candidates_file(dataset: &Path, family: Option<&str>) -> PathBuf {
+fn candidates_file(dataset: &Path, family: Option<&str>) -> PathBuf {
     match family {
         None => dataset.join("candidates.json"),
         Some(f) => dataset.join(FAMILIES_DIR).join(format!("{f}.json")),
@@ -78,7 +99,7 @@ pub fn families(dataset: &Path) -> Vec<String> {
 
 /// The [`Family`] record of `family` in `dataset` (`None` for the bundled candidates): an
 /// error naming the families there when it has none of that name.
-pub fn family(dataset: &Path, family: Option<&str>) -> Result<Option<Family>> {
+fn record(dataset: &Path, family: Option<&str>) -> Result<Option<Family>> {
     let Some(name) = family else {
         return Ok(None);
     };

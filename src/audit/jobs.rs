@@ -1,7 +1,7 @@
 //! The audit's jobs: which (generator, variant, seed) runs exist, the original scene they
 //! share, one job's pipeline run and its result record, and which steps jobs share.
 
-use super::{Audit, AuditConfig, GeneratorKind, Variant, config_digest, family};
+use super::{Audit, AuditConfig, GeneratorKind, Variant, config_digest};
 use crate::error::{Error, Result};
 use crate::pipeline::evaluate::{Row, Summary};
 use crate::pipeline::steps::Step;
@@ -258,6 +258,7 @@ impl Audit<'_> {
             dataset,
             dir,
             on_event,
+            ..
         } = *self;
         cfg.validate()?;
         self.check_inputs()?;
@@ -348,7 +349,7 @@ impl Audit<'_> {
                     final_scene,
                     pair: None,
                     diagnostics: Some(diagnostics),
-                    candidates: family::family(dataset, self.cfg.candidates.as_deref())?,
+                    candidates: self.candidates.family.clone(),
                     stages: summary
                         .rows
                         .iter()
@@ -404,7 +405,7 @@ impl Audit<'_> {
         let dataset = self.dataset;
         crate::pipeline::load_inputs(
             run,
-            &family::candidates_file(dataset, self.cfg.candidates.as_deref()),
+            &self.candidates.file,
             Some(&dataset.join("evaluation.json")),
             Some(dataset),
         )
@@ -459,9 +460,10 @@ impl Audit<'_> {
         if dir.is_file() {
             return Err(Error::invalid("the output path is a file").at(dir));
         }
-        family::family(dataset, self.cfg.candidates.as_deref())?;
-        let candidates = family::candidates_file(dataset, self.cfg.candidates.as_deref());
-        for p in [candidates, dataset.join("evaluation.json")] {
+        for p in [
+            self.candidates.file.clone(),
+            dataset.join("evaluation.json"),
+        ] {
             let f = p
                 .file_name()
                 .map_or(String::new(), |f| f.to_string_lossy().into_owned());
@@ -488,6 +490,7 @@ impl Audit<'_> {
             dataset,
             dir,
             on_event,
+            ..
         } = *self;
         let run = dir.join(Job::Original { seed }.name());
         if self.original_done(&run, seed) {

@@ -336,27 +336,46 @@ impl GeneratorKind {
     }
 }
 
+impl std::fmt::Display for GeneratorKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.name())
+    }
+}
+
+/// A generator written as its name (the audit's records; read back by
+/// [`GeneratorKind::by_name`] at the edges: the CLI, the samples).
+fn generator_name<S: serde::Serializer>(
+    g: &GeneratorKind,
+    s: S,
+) -> std::result::Result<S::Ok, S::Error> {
+    s.serialize_str(&g.name())
+}
+
 /// One audit: its configuration, the dataset, the output folder and where progress goes —
 /// what every job, the merge, the estimate and the report read. The audit's operations are
 /// its methods (`run`, `report`, `run_job`, `run_job_with_receipt`, `collect`, `estimate`,
 /// `emit_slurm`).
-#[derive(Clone, Copy)]
+#[derive(Clone)]
 pub struct Audit<'a> {
     pub cfg: &'a AuditConfig,
     pub dataset: &'a Path,
     pub dir: &'a Path,
+    /// `cfg`'s candidate family, resolved against the dataset.
+    pub candidates: family::Candidates,
     pub on_event: &'a (dyn Fn(Event) + Sync),
 }
 
 impl<'a> Audit<'a> {
-    /// The audit of `cfg` on `dataset` into `dir`, without progress events.
-    pub fn new(cfg: &'a AuditConfig, dataset: &'a Path, dir: &'a Path) -> Audit<'a> {
-        Audit {
+    /// The audit of `cfg` on `dataset` into `dir`, without progress events: an error when
+    /// the dataset has no candidate family of `cfg`'s name.
+    pub fn new(cfg: &'a AuditConfig, dataset: &'a Path, dir: &'a Path) -> Result<Audit<'a>> {
+        Ok(Audit {
             cfg,
             dataset,
             dir,
+            candidates: family::Candidates::resolve(dataset, cfg.candidates.as_deref())?,
             on_event: &|_| {},
-        }
+        })
     }
 
     /// The same audit, its progress sent to `on_event`.

@@ -64,7 +64,7 @@ impl Audit<'_> {
             preset: cfg.base.preset,
             train_iterations: cfg.train_iterations,
             train_resolution: cfg.train_resolution,
-            candidates: super::family::family(dataset, cfg.candidates.as_deref())?,
+            candidates: self.candidates.family.clone(),
         });
         for f in samples::files_in(dir)
             .into_iter()
@@ -164,8 +164,9 @@ impl Audit<'_> {
                     && matches!(v.claim.metric, Metric::Classes(_, Region::Contested))
             })
             .filter_map(|(k, v)| {
-                let path =
-                    |seed| super::pairs::sheet_path(&v.generator, v.claim.variant.name(), seed);
+                let path = |seed| {
+                    super::pairs::sheet_path(&v.generator.name(), v.claim.variant.name(), seed)
+                };
                 let seed = median_seed(&usable, v, |seed| dir.join(path(seed)).is_file())?;
                 let median = median_seed(&usable, v, |_| true) == Some(seed);
                 Some((k, seed, median, path(seed)))
@@ -396,8 +397,8 @@ fn rests_on(pool: &[JobResult], v: &Verdict) -> String {
         return "full's final scene against its original scene".into();
     }
     let (full, var) = (
-        group(pool, &v.generator, claim.reference),
-        group(pool, &v.generator, claim.variant),
+        group(pool, &v.generator.name(), claim.reference),
+        group(pool, &v.generator.name(), claim.variant),
     );
     let (Some(a), Some(b)) = (diagnostics_mean(&full), diagnostics_mean(&var)) else {
         return "(not recorded)".into();

@@ -751,7 +751,9 @@ const SENSITIVITY_NOTE: &str =
 pub struct Verdict {
     #[serde(flatten)]
     pub claim: Claim,
-    pub generator: String,
+    /// Written as its name ([`GeneratorKind::name`]).
+    #[serde(serialize_with = "super::generator_name")]
+    pub generator: GeneratorKind,
     /// The Holm family: the room × generator family (`classical`, `truth`, a dose
     /// parameter's), with `-sensitivity` for the sensitivity rows (their own family).
     pub family: String,
@@ -821,7 +823,7 @@ impl Verdict {
 /// §21.7), `eligible` being "its sheet exists" (a batch may keep only some seeds' sheets).
 pub fn median_seed(pool: &[JobResult], v: &Verdict, eligible: impl Fn(u32) -> bool) -> Option<u32> {
     let c = &v.claim;
-    let pairs = pairs_against(pool, &v.generator, c.reference, c.variant);
+    let pairs = pairs_against(pool, &v.generator.name(), c.reference, c.variant);
     let mut best: Option<(f64, u32)> = None;
     for (seed, d) in seed_groups(&pairs, |p| c.diff(p)) {
         let off = (d - v.median_diff).abs();
@@ -1346,7 +1348,7 @@ pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Ve
             out[i] = Some(Verdict {
                 claim: c.claim,
                 family: family.clone(),
-                generator: g,
+                generator: c.generator,
                 seeds: c.seeds,
                 revisions,
                 judged: c.diffs.len(),

@@ -598,7 +598,10 @@ fn committed_mechanisms_audits_follow_from_their_samples() {
         cfg.generators = ["classical", "truth-low", "truth-low+hallucinating+relative"]
             .map(|g| GeneratorKind::by_name(g).unwrap())
             .to_vec();
-        let report = audit::Audit::new(&cfg, &dataset, &tmp).report(&[]).unwrap();
+        let report = audit::Audit::new(&cfg, &dataset, &tmp)
+            .unwrap()
+            .report(&[])
+            .unwrap();
         assert_eq!(report.seeds, (0..16).collect::<Vec<u32>>(), "{room}");
         assert_eq!(
             report.other_config, 0,
@@ -663,7 +666,10 @@ fn every_committed_audit_follows_from_its_samples() {
         } else {
             std::fs::write(tmp.join(SAMPLES_FILE), &gz).unwrap();
         }
-        audit::Audit::new(&cfg, &dataset, &tmp).report(&[]).unwrap();
+        audit::Audit::new(&cfg, &dataset, &tmp)
+            .unwrap()
+            .report(&[])
+            .unwrap();
         assert!(
             tmp.join(SAMPLES_FILE).is_file() && !tmp.join(LEGACY_SAMPLES_FILE).exists(),
             "{name}: the samples end compressed, the text gone (legacy: {legacy})"
@@ -746,6 +752,7 @@ fn the_contact_sheet_is_the_median_seeds_or_the_nearest_kept() {
         std::fs::write(tmp.join(SAMPLES_FILE), &gz).unwrap();
         let _ = std::fs::remove_dir_all(tmp.join("sheets"));
         let first = unseen::audit::Audit::new(&cfg, &dataset, &tmp)
+            .unwrap()
             .report(&[])
             .unwrap();
         let (k, v) = first
@@ -754,7 +761,7 @@ fn the_contact_sheet_is_the_median_seeds_or_the_nearest_kept() {
             .enumerate()
             .find(|(_, v)| v.claim.metric.is_primary() && v.claim.id.ends_with("detail contested"))
             .expect("a primary claim on contested pixels");
-        let path = |seed| sheet_path(&v.generator, v.claim.variant.name(), seed);
+        let path = |seed| sheet_path(&v.generator.name(), v.claim.variant.name(), seed);
         for &seed in sheets {
             let file = tmp.join(path(seed));
             std::fs::create_dir_all(file.parent().unwrap()).unwrap();
@@ -762,6 +769,7 @@ fn the_contact_sheet_is_the_median_seeds_or_the_nearest_kept() {
         }
         let median = median_seed(&first.pool, v, |_| true).unwrap();
         let again = unseen::audit::Audit::new(&cfg, &dataset, &tmp)
+            .unwrap()
             .report(&[])
             .unwrap();
         let shown = again.sheets.iter().find(|s| s.0 == k).map(|s| (s.1, s.2));

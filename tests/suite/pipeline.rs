@@ -724,6 +724,7 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
     };
     let lounge = lounge();
     let e = audit::Audit::new(&cfg, &lounge, &dir)
+        .unwrap()
         .run_job(&job)
         .unwrap_err()
         .to_string();
@@ -735,6 +736,7 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
         }
     };
     let report = audit::Audit::new(&cfg, &lounge, &dir)
+        .unwrap()
         .with_events(&on_cached)
         .run(&[])
         .unwrap();
@@ -997,6 +999,7 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
     };
     let verdicts = |r: &audit::Report| serde_json::to_string(&r.verdicts).unwrap();
     let pooled = audit::Audit::new(&cfg, &lounge, &dir)
+        .unwrap()
         .with_events(&on_started)
         .run(&[])
         .unwrap();
@@ -1034,6 +1037,7 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
         }
     };
     let again = audit::Audit::new(&cfg, &lounge, &dir)
+        .unwrap()
         .with_events(&on_computed)
         .run(&[])
         .unwrap();
@@ -1057,6 +1061,7 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
     // The samples alone, pooled into another folder, give the same verdicts.
     let elsewhere = t.path().join("elsewhere");
     let pooled = audit::Audit::new(&cfg, &lounge, &elsewhere)
+        .unwrap()
         .report(std::slice::from_ref(&samples))
         .unwrap();
     assert_eq!(verdicts(&pooled), verdicts(&report));
@@ -1068,6 +1073,7 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
     };
     let refused = t.path().join("refused");
     let e = audit::Audit::new(&other, &lounge, &refused)
+        .unwrap()
         .report(std::slice::from_ref(&samples))
         .unwrap_err()
         .to_string();
@@ -1081,7 +1087,10 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
         seeds: 2..3,
         ..cfg.clone()
     };
-    let grown = audit::Audit::new(&more, &lounge, &dir).run(&[]).unwrap();
+    let grown = audit::Audit::new(&more, &lounge, &dir)
+        .unwrap()
+        .run(&[])
+        .unwrap();
     assert_eq!((grown.seeds.clone(), grown.samples), (vec![0, 1, 2], 6));
     assert!(
         grown.verdicts.iter().all(|v| v.seeds == 3),
@@ -1142,7 +1151,7 @@ fn a_one_candidate_room_is_the_same_computation_and_not_tested() {
         ..cfg.clone()
     };
     let e = audit::Audit::new(&missing, &room, &dir)
-        .run(&[])
+        .and_then(|a| a.run(&[]))
         .unwrap_err()
         .to_string();
     assert!(
@@ -1150,7 +1159,10 @@ fn a_one_candidate_room_is_the_same_computation_and_not_tested() {
         "{e}"
     );
     assert!(!dir.exists(), "nothing written: {e}");
-    let report = audit::Audit::new(&cfg, &room, &dir).run(&[]).unwrap();
+    let report = audit::Audit::new(&cfg, &room, &dir)
+        .unwrap()
+        .run(&[])
+        .unwrap();
     let family = report.provenance.candidates.as_ref().expect("recorded");
     assert_eq!(family.name, "first");
     assert_eq!(family.sha256, unseen::io::sha256_hex(first.as_bytes()));
@@ -1636,6 +1648,7 @@ fn the_panel_judges_both_runs_on_the_variants_contested_pixels() {
         .write(&tmp.join(unseen::audit::samples::SAMPLES_FILE))
         .unwrap();
     unseen::audit::Audit::new(&cfg, &lounge, &tmp)
+        .unwrap()
         .report(&[])
         .unwrap();
     let md = std::fs::read_to_string(tmp.join("audit.md")).unwrap();
