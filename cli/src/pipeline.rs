@@ -648,7 +648,7 @@ pub fn run_audit(a: &AuditArgs) -> Result<()> {
         cfg.variants = a
             .variants
             .iter()
-            .map(|v| Variant::by_name(v))
+            .map(|v| v.parse::<Variant>())
             .collect::<Result<_>>()?;
     }
     if !a.generators.is_empty() {

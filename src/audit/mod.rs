@@ -88,6 +88,28 @@ pub enum Variant {
     OriginalsOnly,
 }
 
+crate::error::text_enum!(Variant, "variant", {
+    Full => "full",
+    NoQaMask => "no_qa_mask",
+    OpacityMask => "opacity_mask",
+    EvenViews => "even_views",
+    ConflictingViews => "conflicting_views",
+    NoDepthSupervision => "no_depth_supervision",
+    NoPropagation => "no_propagation",
+    QaSh3 => "qa_sh3",
+    QaSh4 => "qa_sh4",
+    NoInterpolation => "no_interpolation",
+    Stage2RenderFit => "stage2_render_fit",
+    Cycle => "cycle",
+    FullMaxCardinality => "full_max_cardinality",
+    EvenViewsMaxCardinality => "even_views_max_cardinality",
+    FullMaxCoverage => "full_max_coverage",
+    EvenViewsMaxCoverage => "even_views_max_coverage",
+    FullHull => "full_hull",
+    EvenViewsHull => "even_views_hull",
+    OriginalsOnly => "originals_only",
+});
+
 impl Variant {
     /// The variants the presets run: the paper's ablations and the comparisons that
     /// isolate its mechanisms.
@@ -118,50 +140,6 @@ impl Variant {
 
     /// The controls (opt-in: `--variants`).
     pub const CONTROLS: [Variant; 1] = [Variant::OriginalsOnly];
-
-    /// Every variant.
-    pub fn all() -> impl Iterator<Item = Variant> {
-        Variant::PRESET
-            .into_iter()
-            .chain(Variant::SENSITIVITY)
-            .chain(Variant::CONTROLS)
-    }
-
-    pub fn name(self) -> &'static str {
-        match self {
-            Variant::Full => "full",
-            Variant::NoQaMask => "no_qa_mask",
-            Variant::OpacityMask => "opacity_mask",
-            Variant::EvenViews => "even_views",
-            Variant::ConflictingViews => "conflicting_views",
-            Variant::NoDepthSupervision => "no_depth_supervision",
-            Variant::NoPropagation => "no_propagation",
-            Variant::QaSh3 => "qa_sh3",
-            Variant::QaSh4 => "qa_sh4",
-            Variant::NoInterpolation => "no_interpolation",
-            Variant::Stage2RenderFit => "stage2_render_fit",
-            Variant::Cycle => "cycle",
-            Variant::FullMaxCardinality => "full_max_cardinality",
-            Variant::EvenViewsMaxCardinality => "even_views_max_cardinality",
-            Variant::FullMaxCoverage => "full_max_coverage",
-            Variant::EvenViewsMaxCoverage => "even_views_max_coverage",
-            Variant::FullHull => "full_hull",
-            Variant::EvenViewsHull => "even_views_hull",
-            Variant::OriginalsOnly => "originals_only",
-        }
-    }
-
-    pub fn by_name(name: &str) -> Result<Variant> {
-        Variant::all().find(|v| v.name() == name).ok_or_else(|| {
-            Error::invalid(format!(
-                "unknown variant '{name}' ({})",
-                Variant::all()
-                    .map(|v| v.name())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ))
-        })
-    }
 
     /// The variant's switch on top of the preset.
     pub fn apply(self, c: &mut PipelineConfig) {

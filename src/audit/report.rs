@@ -146,7 +146,7 @@ impl Audit<'_> {
         let other = |r: &JobResult| {
             let (Ok(g), Ok(v)) = (
                 GeneratorKind::by_name(&r.generator),
-                Variant::by_name(&r.variant),
+                r.variant.parse::<Variant>(),
             ) else {
                 return false;
             };
@@ -1139,7 +1139,7 @@ impl super::Audit<'_> {
             }
             let (Ok(generator), Ok(variant)) = (
                 GeneratorKind::by_name(&v.generator),
-                Variant::by_name(&v.variant),
+                v.variant.parse::<Variant>(),
             ) else {
                 continue;
             };

@@ -593,7 +593,7 @@ fn committed_mechanisms_audits_follow_from_their_samples() {
             "no_depth_supervision",
             "stage2_render_fit",
         ]
-        .map(|v| Variant::by_name(v).unwrap())
+        .map(|v| v.parse::<Variant>().unwrap())
         .to_vec();
         cfg.generators = ["classical", "truth-low", "truth-low+hallucinating+relative"]
             .map(|g| GeneratorKind::by_name(g).unwrap())
@@ -723,7 +723,7 @@ fn committed_config(head: &serde_json::Value) -> (unseen::audit::AuditConfig, st
         .collect();
     cfg.variants = names("variants")
         .iter()
-        .map(|v| Variant::by_name(v).unwrap())
+        .map(|v| v.parse::<Variant>().unwrap())
         .collect();
     cfg.candidates = head["candidates"]["name"].as_str().map(String::from);
     cfg.planned_seeds = head["rule"]["planned"].as_u64().unwrap() as usize;

@@ -833,7 +833,7 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
         let folder = dir.join(
             Job::Run {
                 generator: GeneratorKind::by_name(&r.generator).unwrap(),
-                variant: Variant::by_name(&r.variant).unwrap(),
+                variant: r.variant.parse::<Variant>().unwrap(),
                 seed: r.seed,
             }
             .folder(),
@@ -926,7 +926,7 @@ fn audit_runs_every_job_shares_steps_and_resumes_to_the_same_results() {
             dir.join(
                 Job::Run {
                     generator: GeneratorKind::by_name(&v.generator).unwrap(),
-                    variant: Variant::by_name(variant).unwrap(),
+                    variant: variant.parse::<Variant>().unwrap(),
                     seed: v.seed,
                 }
                 .folder(),
@@ -1239,7 +1239,7 @@ fn sample(variant: &str, seed: u32, revision: u32, psnr: f64) -> unseen::audit::
         config: unseen::audit::AuditConfig::preset(unseen::pipeline::Preset::Quick)
             .config_digest(
                 unseen::audit::GeneratorKind::by_name("truth-low").unwrap(),
-                unseen::audit::Variant::by_name(variant).unwrap(),
+                variant.parse::<unseen::audit::Variant>().unwrap(),
             )
             .unwrap(),
         original: row.clone(),
@@ -1332,7 +1332,7 @@ fn generated_views_are_judged_against_the_recipe_on_the_training_half() {
     assert_eq!(small.verdict, "holds", "{small:?}");
     assert_eq!(judge(1.0).verdict, "contradicted");
     assert_eq!(
-        Variant::by_name("originals_only").unwrap(),
+        "originals_only".parse::<Variant>().unwrap(),
         Variant::OriginalsOnly
     );
 }
@@ -1711,7 +1711,7 @@ fn a_sweep_gives_each_claim_its_response_and_crossing() {
                 let mut r = sample(variant, seed, 7, psnr);
                 r.generator = g.name();
                 r.config = cfg
-                    .config_digest(g, Variant::by_name(variant).unwrap())
+                    .config_digest(g, variant.parse::<Variant>().unwrap())
                     .unwrap();
                 pool.push(r);
             }
@@ -1747,9 +1747,23 @@ fn sensitivity_rows_compare_full_and_even_views_under_the_same_choice() {
     use unseen::audit::{AuditConfig, GeneratorKind, Variant, stats::Rule, verdicts};
     use unseen::collide::frustum::Outline;
     use unseen::pipeline::selection::SelectionRule;
-    for v in Variant::all() {
-        assert_eq!(Variant::by_name(v.name()).unwrap(), v);
+    // Every variant is named once, round-trips, and is in exactly one of the lists.
+    let listed: Vec<Variant> = Variant::PRESET
+        .into_iter()
+        .chain(Variant::SENSITIVITY)
+        .chain(Variant::CONTROLS)
+        .collect();
+    assert_eq!(listed, Variant::ALL);
+    for v in Variant::ALL {
+        assert_eq!(v.name().parse::<Variant>().unwrap(), v);
     }
+    assert!(
+        "nope"
+            .parse::<Variant>()
+            .unwrap_err()
+            .to_string()
+            .contains("unknown variant 'nope'")
+    );
     let g = GeneratorKind::Truth(unseen::pipeline::Level::Low);
     let cfg = AuditConfig {
         variants: vec![
