@@ -430,7 +430,7 @@ mod tests {
         use crate::pipeline::{Hallucination, Inconsistency, Level, PipelineConfig};
         let cfg = super::super::AuditConfig::quick();
         let at = |g: GeneratorKind| cfg.pipeline_config(g, Variant::Full, 0).unwrap();
-        let base = at(GeneratorKind::Mechanisms(Level::Low));
+        let base = at(GeneratorKind::Hallucinating(Level::Low));
         let dose = |param, percent| at(GeneratorKind::Dose { param, percent });
         assert_eq!(dose(DoseParam::Hallucination, 50), base);
         assert_eq!(

@@ -187,11 +187,12 @@ pub enum GeneratorKind {
     /// The labelled ground-truth generator at a named inconsistency level.
     Truth(Level),
     /// The ground-truth generator at a level (low or high) that also hallucinates unseen
-    /// content at that level and answers depth in the relative mode (SPEC.md §20.6): the
-    /// generator under which the paper's mechanisms (independent views against conflicting
-    /// content, Eq. 5's alignment) have something to do.
-    Mechanisms(Level),
-    /// The mechanisms generator at the low level with one parameter set to a swept level
+    /// content at that level and answers depth in the relative mode (SPEC.md §20.6),
+    /// `truth-<level>+hallucinating+relative`: the generator under which the paper's
+    /// mechanisms (independent views against conflicting content, Eq. 5's alignment) have
+    /// something to do.
+    Hallucinating(Level),
+    /// The hallucinating generator at the low level with one parameter set to a swept level
     /// (a whole percentage; SPEC.md §21.6): `dose-<param>-<percent>`.
     Dose { param: dose::DoseParam, percent: u8 },
 }
@@ -201,7 +202,7 @@ impl GeneratorKind {
         match self {
             GeneratorKind::Classical => "classical".into(),
             GeneratorKind::Truth(level) => format!("truth-{}", level.name()),
-            GeneratorKind::Mechanisms(level) => {
+            GeneratorKind::Hallucinating(level) => {
                 format!("truth-{}+hallucinating+relative", level.name())
             }
             GeneratorKind::Dose { param, percent } => format!("dose-{}-{percent}", param.name()),
@@ -216,8 +217,8 @@ impl GeneratorKind {
             "truth-none" => Ok(GeneratorKind::Truth(Level::None)),
             "truth-low" => Ok(GeneratorKind::Truth(Level::Low)),
             "truth-high" => Ok(GeneratorKind::Truth(Level::High)),
-            "truth-low+hallucinating+relative" => Ok(GeneratorKind::Mechanisms(Level::Low)),
-            "truth-high+hallucinating+relative" => Ok(GeneratorKind::Mechanisms(Level::High)),
+            "truth-low+hallucinating+relative" => Ok(GeneratorKind::Hallucinating(Level::Low)),
+            "truth-high+hallucinating+relative" => Ok(GeneratorKind::Hallucinating(Level::High)),
             _ => {
                 // `dose-<param>-<percent>`, written as `name` writes it.
                 let dose = name
@@ -250,7 +251,7 @@ impl GeneratorKind {
                 c.slots = SlotNames::truth();
                 c.inconsistency = Inconsistency::at(level);
             }
-            GeneratorKind::Mechanisms(level) => {
+            GeneratorKind::Hallucinating(level) => {
                 c.slots = SlotNames::truth();
                 c.inconsistency = Inconsistency::at(level);
                 c.hallucination = Hallucination::at(level);
@@ -262,12 +263,12 @@ impl GeneratorKind {
             } => {
                 // The hallucination grid's level none (so that the views are chosen as in
                 // the claims' runs), every call shifted as a whole.
-                GeneratorKind::Mechanisms(Level::Low).apply(c);
+                GeneratorKind::Hallucinating(Level::Low).apply(c);
                 c.hallucination = Hallucination::None;
                 c.inconsistency.shift_px = f32::from(percent) / 100.0 * dose::GHOST_MAX_PX;
             }
             GeneratorKind::Dose { param, percent } => {
-                GeneratorKind::Mechanisms(Level::Low).apply(c);
+                GeneratorKind::Hallucinating(Level::Low).apply(c);
                 let t = f32::from(percent) / 100.0;
                 let high = Inconsistency::HIGH;
                 match param {
@@ -298,7 +299,7 @@ impl GeneratorKind {
     pub fn family(self) -> &'static str {
         match self {
             GeneratorKind::Classical => "classical",
-            GeneratorKind::Truth(_) | GeneratorKind::Mechanisms(_) => "truth",
+            GeneratorKind::Truth(_) | GeneratorKind::Hallucinating(_) => "truth",
             GeneratorKind::Dose { param, .. } => param.family(),
         }
     }
@@ -307,7 +308,7 @@ impl GeneratorKind {
     fn level(self) -> Option<usize> {
         match self {
             GeneratorKind::Classical
-            | GeneratorKind::Mechanisms(_)
+            | GeneratorKind::Hallucinating(_)
             | GeneratorKind::Dose { .. } => None,
             GeneratorKind::Truth(l) => Some(l as usize),
         }
