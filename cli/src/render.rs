@@ -147,10 +147,10 @@ pub enum OraclePass {
         beta2: f64,
         #[arg(long, default_value_t = 1e-15)]
         eps: f32,
-        /// The constants: `pytorch` (torch.optim.Adam's, Python-float β) or `unseen` (the
-        /// trainer's float32 β).
-        #[arg(long, default_value = "pytorch")]
-        conventions: String,
+        /// Adam's constants: `pytorch` (torch.optim.Adam's, Python-float β) or `unseen` (the
+        /// trainer's float32 β). `--conventions` is the older spelling.
+        #[arg(long, alias = "conventions", default_value = "pytorch")]
+        constants: String,
         /// Output folder.
         #[arg(long)]
         out: PathBuf,
@@ -571,11 +571,11 @@ pub fn run_oracle_command(a: OracleArgs) -> Result<()> {
             beta1,
             beta2,
             eps,
-            conventions,
+            constants,
             out,
         } => {
             use unseen::train::adam::Constants;
-            let constants = Constants::by_name(&conventions)?;
+            let constants = Constants::by_name(&constants)?;
             let (xs, x0) = unseen::io::npy::read_npy_f32(&params)?;
             let [n] = xs[..] else {
                 return Err(Error::invalid(format!(

@@ -190,16 +190,15 @@ fn oracle_adam_dumps_every_step_and_refuses_wrong_shapes() {
     write_npy(&t.path().join("x.npy"), &x0, &[3]).unwrap();
     write_npy(&t.path().join("g.npy"), &grads, &[3, 3]).unwrap();
     write_npy(&t.path().join("bad.npy"), &grads, &[9]).unwrap();
-    let run = |grads: &str, conventions: &str, out: &str| {
+    // `--constants`, and for the trainer's its older spelling `--conventions`.
+    let run = |grads: &str, constants: &str, out: &str| {
+        let flag = if constants == "unseen" {
+            "--conventions"
+        } else {
+            "--constants"
+        };
         Command::new(env!("CARGO_BIN_EXE_unseen"))
-            .args([
-                "oracle",
-                "adam",
-                "--lr",
-                "0.01",
-                "--conventions",
-                conventions,
-            ])
+            .args(["oracle", "adam", "--lr", "0.01", flag, constants])
             .arg("--params")
             .arg(t.path().join("x.npy"))
             .arg("--grads")
