@@ -1,8 +1,12 @@
+mod audit;
 mod bad_input;
 mod cli;
 mod cluster;
 mod conventions;
 mod faults;
+mod generators;
 mod oracle;
 mod pipeline;
 mod resume;
+mod selection;
+mod verdicts;

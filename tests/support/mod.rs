@@ -134,3 +134,6 @@ impl AsRef<std::ffi::OsStr> for TempDir {
         self.0.as_os_str()
     }
 }
+
+/// A pipeline event sink that drops every event.
+pub fn quiet(_: unseen::pipeline::Event) {}
