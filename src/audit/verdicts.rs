@@ -1166,212 +1166,223 @@ pub(super) fn metrics_only(r: &Row) -> Row {
 /// Every claim whose variant was run, per generator, judged by `rule` within each
 /// generator family (SPEC.md §21.2).
 pub fn verdicts(cfg: &AuditConfig, pool: &[JobResult], rule: &stats::Rule) -> Vec<Verdict> {
-    struct Cell<'a> {
-        claim: Claim,
-        generator: GeneratorKind,
-        pairs: Vec<Pair<'a>>,
-        seeds: usize,
-        diffs: Vec<f64>,
-        same: usize,
-    }
-    let mut cells = Vec::new();
-    for &claim in CLAIMS.iter().chain(&CLASS_CLAIMS) {
-        if !cfg.variants.contains(&claim.variant) || !cfg.variants.contains(&claim.reference) {
-            continue;
-        }
-        for &generator in &cfg.generators {
-            // Samples of another pipeline configuration of these cells measure something
-            // else ([`JobResult::config`]; empty: recorded before configurations were, by a
-            // binary whose method revision 5 changed, so another one).
-            let (full_cfg, variant_cfg) = match (
-                cfg.config_digest(generator, claim.reference),
-                cfg.config_digest(generator, claim.variant),
-            ) {
-                (Ok(a), Ok(b)) => (a, b),
-                _ => continue,
-            };
-            let same_config = |r: &JobResult, want: &str| r.config == want;
-            let pairs: Vec<Pair> =
-                pairs_against(pool, &generator.name(), claim.reference, claim.variant)
-                    .into_iter()
-                    .filter(|p| {
-                        same_config(p.full, &full_cfg) && same_config(p.variant, &variant_cfg)
-                    })
-                    .filter(|p| claim.diff(p).is_finite() || claim.nowhere_to_act(p))
-                    .collect();
-            if pairs.is_empty() {
-                continue;
-            }
-            // The plan is seeds 0 to `planned − 1`: later seeds are beyond it (counted in
-            // `seeds`, judged nowhere); a planned seed without a finite Δ keeps the claim
-            // interim.
-            let seeds = seed_diffs(&pairs, |p| claim.diff(p)).len();
-            let planned = u32::try_from(rule.planned).unwrap_or(u32::MAX);
-            let pairs: Vec<Pair> = pairs.into_iter().filter(|p| p.seed < planned).collect();
-            // A planned seed whose every pair is the same computation (or one where the
-            // variant's mechanism did not apply) did not compare anything: it counts towards
-            // the plan, not as a unit (SPEC.md §21.5).
-            let mut same_seeds: Vec<u32> = pairs
-                .iter()
-                .filter(|_| claim.baseline == Baseline::Variant)
-                .filter(|p| {
-                    pairs.iter().all(|q| {
-                        q.seed != p.seed
-                            || q.same_computation()
-                            || q.not_applied()
-                            || claim.nowhere_to_act(q)
-                    })
-                })
-                .map(|p| p.seed)
-                .collect();
-            same_seeds.dedup();
-            let pairs: Vec<Pair> = pairs
-                .into_iter()
-                .filter(|p| !same_seeds.contains(&p.seed))
-                .collect();
-            let diffs = seed_diffs(&pairs, |p| claim.diff(p));
-            cells.push(Cell {
-                claim,
-                generator,
-                pairs,
-                seeds,
-                diffs,
-                same: same_seeds.len(),
-            });
-        }
-    }
-    let null = |c: &Claim| match c.direction {
-        Direction::Beats => 0.0,
-        Direction::DoesNotHurt => -rule.margin,
-    };
+    let cells: Vec<Cell> = CLAIMS
+        .iter()
+        .chain(&CLASS_CLAIMS)
+        .filter(|c| cfg.variants.contains(&c.variant) && cfg.variants.contains(&c.reference))
+        .flat_map(|&claim| cfg.generators.iter().map(move |&g| (claim, g)))
+        .filter_map(|(claim, generator)| cell(cfg, pool, rule, claim, generator))
+        .collect();
     let mut out: Vec<Option<Verdict>> = cells.iter().map(|_| None).collect();
-    // Holm's families: the generator family, the sensitivity rows apart from the paper's
-    // claims (they ask another question: whether one claim's verdict turns on a choice the
-    // paper leaves open; sharing the family would make every claim's correction depend on
-    // how many choices were tried).
-    // The panel's claims likewise: the primary claims with their within-pair null, and the
-    // secondary panel (SPEC.md §21.7), so that neither moves the paper's claims.
-    let family_of = |c: &Cell| {
-        let g = c.generator.family();
-        match c.claim.metric {
-            _ if c.claim.reference != Variant::Full => format!("{g}-sensitivity"),
-            m if m.is_primary() => format!("{g}-classes"),
-            m if m.is_panel() => format!("{g}-panel"),
-            _ => g.to_string(),
-        }
-    };
     let mut families: Vec<String> = Vec::new();
     for c in &cells {
-        if !families.contains(&family_of(c)) {
-            families.push(family_of(c));
+        if !families.contains(&holm_family(c)) {
+            families.push(holm_family(c));
         }
     }
     for family in families {
         let members: Vec<usize> = (0..cells.len())
-            .filter(|&i| family_of(&cells[i]) == family)
+            .filter(|&i| holm_family(&cells[i]) == family)
             .collect();
         let data: Vec<stats::ClaimData> = members
             .iter()
-            .map(|&i| {
-                let c = &cells[i];
-                stats::ClaimData {
-                    diffs: &c.diffs,
-                    null: null(&c.claim),
-                    untested: c.same,
-                }
+            .map(|&i| stats::ClaimData {
+                diffs: &cells[i].diffs,
+                null: null_of(&cells[i].claim, rule),
+                untested: cells[i].same,
             })
             .collect();
         for (&i, j) in members.iter().zip(rule.judge(&data)) {
-            let c = &cells[i];
-            let g = c.generator.name();
-            let (mean, std) = mean_std(&c.diffs);
-            let mut revisions: Vec<u32> = c.pairs.iter().map(|p| p.revision).collect();
-            revisions.sort_unstable();
-            revisions.dedup();
-            let (hier, hier_units) = hierarchical(
-                &newest_per_seed(&c.pairs),
-                &c.claim,
-                rule.alpha,
-                bootstrap_seed(&c.claim, &g, "hierarchical"),
-            );
-            let conflicting = c.claim.variant == Variant::ConflictingViews;
-            let mut verdict = match j.outcome {
-                stats::Outcome::Interim => {
-                    format!(
-                        "interim ({} of {} seeds)",
-                        c.diffs.len() + c.same,
-                        rule.planned
-                    )
-                }
-                stats::Outcome::NotTested if c.claim.metric.is_panel() => format!(
-                    "not tested here (on all {} seeds the same scene, no colliding set qualified, or no contested pixel)",
-                    c.same
-                ),
-                stats::Outcome::NotTested if conflicting => format!(
-                    "not tested here (on all {} seeds the same scene, or no colliding set qualified)",
-                    c.same
-                ),
-                stats::Outcome::NotTested => format!(
-                    "not tested here (same computation on all {} seeds: both runs evaluated the same scene)",
-                    c.same
-                ),
-                stats::Outcome::NoVerdict
-                    if c.diffs.iter().all(|&d| d == 0.0)
-                        && c.claim.baseline == Baseline::Variant =>
-                {
-                    "no verdict (Δ = 0 on every seed: the variant computes what full computes)"
-                        .to_string()
-                }
-                stats::Outcome::NoVerdict => {
-                    "no verdict (the same Δ on every seed: one draw, not n)".to_string()
-                }
-                stats::Outcome::Inconclusive if j.median_and_mean_disagree => {
-                    "inconclusive (the median and the mean lie on opposite sides)".to_string()
-                }
-                o => o.word().to_string(),
-            };
-            if c.same > 0 && j.outcome != stats::Outcome::NotTested {
-                verdict += &format!(
-                    "; not tested on {} of {} seeds ({})",
-                    c.same,
-                    c.same + c.diffs.len(),
-                    if c.claim.metric.is_panel() {
-                        "the same scene, no colliding set qualified, or no contested pixel"
-                    } else if conflicting {
-                        "the same scene, or no colliding set qualified"
-                    } else {
-                        "same computation"
-                    }
-                );
-            }
-            let median = j.test.map_or(f64::NAN, |t| t.median);
-            out[i] = Some(Verdict {
-                claim: c.claim,
-                family: family.clone(),
-                generator: c.generator,
-                seeds: c.seeds,
-                revisions,
-                judged: c.diffs.len(),
-                same_computation: c.same,
-                planned: rule.planned,
-                median_diff: median,
-                mean_diff: mean,
-                std_diff: std,
-                null: null(&c.claim),
-                method: j.test.map(|t| t.method),
-                above: j.test.map_or(0, |t| t.above),
-                below: j.test.map_or(0, |t| t.below),
-                ci: j.test.and_then(|t| t.interval),
-                p_holm: j.p_holm,
-                min_detectable: j.min_detectable(rule),
-                hierarchical: hier,
-                hierarchical_units: hier_units,
-                verdict,
-                panel_splits: None,
-            });
+            out[i] = Some(verdict_of(&cells[i], &j, &family, rule));
         }
     }
     let mut out: Vec<Verdict> = out.into_iter().flatten().collect();
     flag_panel_splits(&mut out);
     out
+}
+
+/// One claim under one generator, as the pool gives it: its pairs within the plan, the
+/// per-seed Δ of the seeds that compared something, and how many did not.
+struct Cell<'a> {
+    claim: Claim,
+    generator: GeneratorKind,
+    pairs: Vec<Pair<'a>>,
+    /// Seeds with a finite Δ, the plan's or beyond it.
+    seeds: usize,
+    diffs: Vec<f64>,
+    /// Planned seeds on which nothing was compared (SPEC.md §21.5).
+    same: usize,
+}
+
+/// The cell of `claim` under `generator`, if the pool holds a pair of it.
+fn cell<'a>(
+    cfg: &AuditConfig,
+    pool: &'a [JobResult],
+    rule: &stats::Rule,
+    claim: Claim,
+    generator: GeneratorKind,
+) -> Option<Cell<'a>> {
+    // Samples of another pipeline configuration of these cells measure something else
+    // ([`JobResult::config`]; empty: recorded before configurations were, by a binary whose
+    // method revision 5 changed, so another one).
+    let full_cfg = cfg.config_digest(generator, claim.reference).ok()?;
+    let variant_cfg = cfg.config_digest(generator, claim.variant).ok()?;
+    let pairs: Vec<Pair> = pairs_against(pool, &generator.name(), claim.reference, claim.variant)
+        .into_iter()
+        .filter(|p| p.full.config == full_cfg && p.variant.config == variant_cfg)
+        .filter(|p| claim.diff(p).is_finite() || claim.nowhere_to_act(p))
+        .collect();
+    if pairs.is_empty() {
+        return None;
+    }
+    // The plan is seeds 0 to `planned − 1`: later seeds are beyond it (counted in `seeds`,
+    // judged nowhere); a planned seed without a finite Δ keeps the claim interim.
+    let seeds = seed_diffs(&pairs, |p| claim.diff(p)).len();
+    let planned = u32::try_from(rule.planned).unwrap_or(u32::MAX);
+    let pairs: Vec<Pair> = pairs.into_iter().filter(|p| p.seed < planned).collect();
+    // A planned seed whose every pair is the same computation (or one where the variant's
+    // mechanism did not apply) did not compare anything: it counts towards the plan, not as
+    // a unit (SPEC.md §21.5).
+    let mut same_seeds: Vec<u32> = pairs
+        .iter()
+        .filter(|_| claim.baseline == Baseline::Variant)
+        .filter(|p| {
+            pairs.iter().all(|q| {
+                q.seed != p.seed
+                    || q.same_computation()
+                    || q.not_applied()
+                    || claim.nowhere_to_act(q)
+            })
+        })
+        .map(|p| p.seed)
+        .collect();
+    same_seeds.dedup();
+    let pairs: Vec<Pair> = pairs
+        .into_iter()
+        .filter(|p| !same_seeds.contains(&p.seed))
+        .collect();
+    let diffs = seed_diffs(&pairs, |p| claim.diff(p));
+    Some(Cell {
+        claim,
+        generator,
+        pairs,
+        seeds,
+        diffs,
+        same: same_seeds.len(),
+    })
+}
+
+/// The null a claim's Δ is tested against: 0 ("better") or `−margin` ("does not hurt").
+fn null_of(c: &Claim, rule: &stats::Rule) -> f64 {
+    match c.direction {
+        Direction::Beats => 0.0,
+        Direction::DoesNotHurt => -rule.margin,
+    }
+}
+
+/// A cell's Holm family: the generator family; the sensitivity rows apart from the paper's
+/// claims (they ask another question: whether one claim's verdict turns on a choice the
+/// paper leaves open; sharing the family would make every claim's correction depend on how
+/// many choices were tried); the panel's claims likewise, the primary claims with their
+/// within-pair null and the secondary panel (SPEC.md §21.7), so that neither moves the
+/// paper's claims.
+fn holm_family(c: &Cell) -> String {
+    let g = c.generator.family();
+    match c.claim.metric {
+        _ if c.claim.reference != Variant::Full => format!("{g}-sensitivity"),
+        m if m.is_primary() => format!("{g}-classes"),
+        m if m.is_panel() => format!("{g}-panel"),
+        _ => g.to_string(),
+    }
+}
+
+/// The verdict's words for a cell judged `j`.
+fn verdict_words(c: &Cell, j: &stats::Judgement, rule: &stats::Rule) -> String {
+    let conflicting = c.claim.variant == Variant::ConflictingViews;
+    let mut verdict = match j.outcome {
+        stats::Outcome::Interim => {
+            format!(
+                "interim ({} of {} seeds)",
+                c.diffs.len() + c.same,
+                rule.planned
+            )
+        }
+        stats::Outcome::NotTested if c.claim.metric.is_panel() => format!(
+            "not tested here (on all {} seeds the same scene, no colliding set qualified, or no contested pixel)",
+            c.same
+        ),
+        stats::Outcome::NotTested if conflicting => format!(
+            "not tested here (on all {} seeds the same scene, or no colliding set qualified)",
+            c.same
+        ),
+        stats::Outcome::NotTested => format!(
+            "not tested here (same computation on all {} seeds: both runs evaluated the same scene)",
+            c.same
+        ),
+        stats::Outcome::NoVerdict
+            if c.diffs.iter().all(|&d| d == 0.0) && c.claim.baseline == Baseline::Variant =>
+        {
+            "no verdict (Δ = 0 on every seed: the variant computes what full computes)".to_string()
+        }
+        stats::Outcome::NoVerdict => {
+            "no verdict (the same Δ on every seed: one draw, not n)".to_string()
+        }
+        stats::Outcome::Inconclusive if j.median_and_mean_disagree => {
+            "inconclusive (the median and the mean lie on opposite sides)".to_string()
+        }
+        o => o.word().to_string(),
+    };
+    if c.same > 0 && j.outcome != stats::Outcome::NotTested {
+        verdict += &format!(
+            "; not tested on {} of {} seeds ({})",
+            c.same,
+            c.same + c.diffs.len(),
+            if c.claim.metric.is_panel() {
+                "the same scene, no colliding set qualified, or no contested pixel"
+            } else if conflicting {
+                "the same scene, or no colliding set qualified"
+            } else {
+                "same computation"
+            }
+        );
+    }
+    verdict
+}
+
+/// The verdict of a cell judged `j` in Holm family `family`.
+fn verdict_of(c: &Cell, j: &stats::Judgement, family: &str, rule: &stats::Rule) -> Verdict {
+    let (mean, std) = mean_std(&c.diffs);
+    let mut revisions: Vec<u32> = c.pairs.iter().map(|p| p.revision).collect();
+    revisions.sort_unstable();
+    revisions.dedup();
+    let (hier, hier_units) = hierarchical(
+        &newest_per_seed(&c.pairs),
+        &c.claim,
+        rule.alpha,
+        bootstrap_seed(&c.claim, &c.generator.name(), "hierarchical"),
+    );
+    Verdict {
+        claim: c.claim,
+        family: family.to_string(),
+        generator: c.generator,
+        seeds: c.seeds,
+        revisions,
+        judged: c.diffs.len(),
+        same_computation: c.same,
+        planned: rule.planned,
+        median_diff: j.test.map_or(f64::NAN, |t| t.median),
+        mean_diff: mean,
+        std_diff: std,
+        null: null_of(&c.claim, rule),
+        method: j.test.map(|t| t.method),
+        above: j.test.map_or(0, |t| t.above),
+        below: j.test.map_or(0, |t| t.below),
+        ci: j.test.and_then(|t| t.interval),
+        p_holm: j.p_holm,
+        min_detectable: j.min_detectable(rule),
+        hierarchical: hier,
+        hierarchical_units: hier_units,
+        verdict: verdict_words(c, j, rule),
+        panel_splits: None,
+    }
 }
