@@ -804,6 +804,22 @@ fn where_conflicts_act(report: &Report) -> String {
 
 /// `audit.md`.
 pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
+    let mut s = heading(report);
+    s += &claims_table(report);
+    s += &sensitivity(report);
+    s += &where_conflicts_act(report);
+    s += &every_variant_table(cfg, report);
+    s += &diagnostics_table(cfg, &report.pool);
+    s += &training_half_table(cfg, &report.pool);
+    s += &compute_table(cfg, report);
+    s += &cache_table(report);
+    s += &super::dose::markdown(&report.responses);
+    s += "\n![PSNR against the generator's inconsistency](inconsistency.svg)\n";
+    s
+}
+
+/// `audit.md`'s title, what was run, and samples of another configuration.
+fn heading(report: &Report) -> String {
     let revisions: Vec<String> = report.revisions.iter().map(|r| r.to_string()).collect();
     let mut s = format!(
         "# Audit of the paper's claims\n\nDataset `{}`; candidates: {}; preset `{}`; {} seeds ({}) in {} samples at numerics revision{} {}; original scene: {} iterations at resolution 1/{} on the training half. Metrics on the evaluation poses, pixels split into *existing* (seen by the training half) and *extrapolated*. Made by `unseen audit` (SPEC.md §21), crate {} at numerics revision {}; the samples are in `samples.json.gz` (a later batch of seeds adds to them).\n\n",
@@ -834,6 +850,12 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
             report.other_config
         );
     }
+    s
+}
+
+/// The paper's claims: how to read them, then a row per claim off the panel.
+fn claims_table(report: &Report) -> String {
+    let mut s = String::new();
     let r = &report.rule;
     s += &format!(
         "## Claims\n\n**How to read this.** Δ = full − variant (dB), one value per seed: both runs of a seed start from the same original scene with the same random numbers, so Δ is paired; the same seed at another numerics revision is another draw when both of its runs changed (a pair sharing a run's bits with one already counted counts once), and a seed's Δ is the mean of its draws (draws of one seed are correlated: the seed is the unit). **The plan**: each claim is judged on seeds 0 to {} − 1; with fewer it is **interim** — a look at a growing pool, not a verdict, and without a p-value here (stopping at the first decisive look would make false verdicts several times as likely) — and seeds beyond the plan are judged nowhere. **The test** is the sign test of the *median* Δ: the count of seeds above (+) and below (−) the null value against a fair coin, exact for every distribution of Δ (skewed ones too, where no test of the mean keeps its error rate at these sizes; SPEC.md §21.2). So a verdict is about the *typical seed*, not the average: where the mean lies on the other side of the null value the claim stays inconclusive. A claim that the full method is better **holds** when the median Δ is significantly above 0 and is **contradicted** when significantly below; a claim that the full method *does not hurt* (non-inferiority) holds when the median Δ is significantly above −{} dB (the margin) and is contradicted when significantly below it. *Significantly*: the two-sided p-value, after Holm's correction over the claims of the same generator family (classical; truth: every truth-* generator together) on this dataset (the sensitivity rows below form a family of their own), is below α = {}. Otherwise **inconclusive**: the *MDE* column is the smallest shift of the median from the null value that this many seeds find with {:.0} % power at the family's strictest Holm level, were Δ normal with the measured spread (∞: too few seeds to reach that level) — an effect smaller than that could be there. **No verdict** where every seed gave the same Δ: the seeds do not vary the comparison. **Not tested here** where both runs of a seed evaluated the same scene (equal final-scene digests: the variant changed nothing on that seed, e.g. both picked the same views), or where the variant's mechanism did not apply (`conflicting_views` found no colliding set that qualifies — coverage within 10 % of the independent set's and generations overlapping on ≥ 5 % of the evaluated surface — and generated the independent set): such a seed counts towards the plan but is no unit, and a claim with only such seeds gets no test and no MDE. *Rests on*: what the two runs did, mean over the seeds (section *What each run did*). *95 % CI*: the median's distribution-free interval (order statistics, from 6 seeds). *Hierarchical*: a 95 % percentile interval of the mean from resampling seeds, then each seed's evaluation views (pooled PSNR), from {} seeds with per-view records. The paper's numbers are from ScanNet++ / Mip-NeRF 360 with diffusion generators: compare directions, not values.\n\n| claim | metric | paper | generator | n | median Δ (dB) | + / − | 95 % CI | mean ± sd | hierarchical | p (Holm) | MDE (dB) | verdict | rests on (full → variant) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
@@ -891,8 +913,12 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
             rests_on(&report.pool, v)
         );
     }
-    s += &sensitivity(report);
-    s += &where_conflicts_act(report);
+    s
+}
+
+/// Every variant's metrics per generator, the original scene first.
+fn every_variant_table(cfg: &AuditConfig, report: &Report) -> String {
+    let mut s = String::new();
     s += "\n## Every variant\n\n| generator | variant | PSNR existing | PSNR extrapolated | PSNR all | SSIM existing | SSIM extrapolated | train-half PSNR | compute (s) |\n|---|---|---|---|---|---|---|---|---|\n";
     for g in &cfg.generators {
         let g = g.name();
@@ -916,8 +942,12 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
             );
         }
     }
-    s += &diagnostics_table(cfg, &report.pool);
-    s += &training_half_table(cfg, &report.pool);
+    s
+}
+
+/// Seconds per stage and variant.
+fn compute_table(cfg: &AuditConfig, report: &Report) -> String {
+    let mut s = String::new();
     s += "\n*compute*: the seconds each step took where it was computed; steps shared through the cache are counted in every variant that uses them.\n\n## Compute per stage (s, mean over seeds)\n\n";
     let stages = crate::pipeline::steps::Stage::ALL.map(|s| s.name());
     s += &format!(
@@ -946,6 +976,12 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
             s += &format!("| {g} | {} | {} |\n", v.name(), cells.join(" | "));
         }
     }
+    s
+}
+
+/// What the step cache saved (nothing when no step was shared).
+fn cache_table(report: &Report) -> String {
+    let mut s = String::new();
     let shared = sharing(&report.results);
     if !shared.is_empty() {
         s += "\n## What the step cache saves\n\nSteps whose inputs are equal (same manifest digest) are computed once and reused by every job that needs them (SPEC.md §20.8). *executions*: steps over all jobs; *distinct*: different steps; compute in seconds if every job computed its own steps, and with each distinct step computed once (what a fresh audit computes; a resumed audit, parallel `--only` workers or a cache from an earlier audit may have computed some twice or none here). The original scenes (one training per seed) are not counted.\n\n| stage | executions | distinct | every job its own (s) | each distinct step once (s) | saved |\n|---|---|---|---|---|---|\n";
@@ -964,8 +1000,6 @@ pub fn markdown(cfg: &AuditConfig, report: &Report) -> String {
             );
         }
     }
-    s += &super::dose::markdown(&report.responses);
-    s += "\n![PSNR against the generator's inconsistency](inconsistency.svg)\n";
     s
 }
 
