@@ -228,58 +228,9 @@ pub fn train_run_resuming(
     let meter = CostMeter::start();
     let data = load_dataset(dataset_dir, config)?;
     let ck_path = checkpoint_path(run);
-    let resumed = if checkpoints.resume && ck_path.is_file() {
-        Some(Checkpoint::read(&ck_path)?)
-    } else {
-        if checkpoints.resume && run.join("manifest.json").is_file() {
-            return Err(Error::invalid(
-                "the run is complete (manifest.json and no checkpoint.bin): nothing to resume",
-            )
-            .at(run));
-        }
-        None
-    };
-    create_dir_all(run)?;
-    // What a killed process was writing when it died (§10).
-    remove_stale_temporaries(run)?;
-    if let Ok(entries) = std::fs::read_dir(run.join("point_cloud")) {
-        for e in entries.flatten() {
-            remove_stale_temporaries(&e.path())?;
-        }
-    }
-    if resumed.is_none() {
-        // A fresh start: the checkpoint and the completion records of an earlier run here
-        // no longer belong to it (a kill before the first checkpoint must not leave the
-        // folder looking complete).
-        for p in [
-            &ck_path,
-            &run.join("manifest.json"),
-            &run.join("train_stats.json"),
-        ] {
-            remove_if_present(p)?;
-        }
-    }
-    let config_text = serde_json::to_string_pretty(config).expect("config serializes");
-    write_text(&run.join("config.json"), &config_text)?;
-    write_text(&run.join("cfg_args"), &cfg_args(dataset_dir, run, config))?;
-    let cams: Vec<_> = data.views.iter().map(|v| v.camera.clone()).collect();
-    write_text(&run.join("cameras.json"), &cameras_json_string(&cams))?;
-
-    let mut trainer = match init {
-        None => Trainer::new(&data, config.clone())?,
-        Some(i) => {
-            let deg = i.scene.sh_degree;
-            let mut t = Trainer::from_gaussians(&data, config.clone(), i.scene.clone(), deg)?;
-            let mut masks = vec![None; data.views.len()];
-            if let Some(w) = i.weights {
-                for &vi in &data.train {
-                    masks[vi] = w(&data.views[vi].camera)?;
-                }
-            }
-            t.masks = masks;
-            t
-        }
-    };
+    let resumed = open_run(run, &ck_path, checkpoints.resume)?;
+    write_run_records(dataset_dir, run, config, &data)?;
+    let mut trainer = new_trainer(&data, config, init)?;
     // What the training reads, so that a checkpoint only continues the run it was made by.
     let inputs_sha256 = if checkpoints.every > 0 || checkpoints.resume {
         inputs_digest(&trainer, init.map(|i| &i.scene))?
@@ -288,24 +239,7 @@ pub fn train_run_resuming(
     };
     let mut book = Book::default();
     if let Some(ck) = resumed {
-        let at = |e: Error| e.at(&ck_path);
-        if ck.header.inputs_sha256 != inputs_sha256 {
-            return Err(at(Error::invalid(
-                "the checkpoint was made from other inputs (the dataset's cameras or training \
-                 images, the --init scene or the --mask weights differ)",
-            )));
-        }
-        book = serde_json::from_value(ck.header.run.clone())
-            .map_err(|e| Error::parse(&ck_path, format!("invalid run record: {e}")))?;
-        for (rel, sha) in &book.files {
-            let p = run.join(rel);
-            let bytes = std::fs::read(&p).map_err(|e| Error::io(&p, e))?;
-            if sha256_hex(&bytes) != *sha {
-                return Err(Error::invalid("changed since the checkpoint was written").at(&p));
-            }
-        }
-        ck.restore(&mut trainer).map_err(at)?;
-        trainer.times = book.times;
+        book = resume(ck, &ck_path, run, &inputs_sha256, &mut trainer)?;
         on_resume(trainer.iteration);
     }
     let mut stages = vec![("load".to_string(), meter.finish())];
@@ -340,8 +274,134 @@ pub fn train_run_resuming(
         on_progress(&p);
     }
     let wall = elapsed(&book);
-    let pairs = book.pairs;
     stages.push(("train".to_string(), meter.finish()));
+    finish_run(
+        dataset_dir,
+        run,
+        config,
+        &data,
+        &trainer,
+        book,
+        wall,
+        stages,
+    )
+}
+
+/// Open `run` for a training: the checkpoint to continue (with `resume` and one there; a
+/// complete run is refused), the folder made and cleared of what a killed process was
+/// writing (§10), and on a fresh start the checkpoint and completion records of an earlier
+/// run removed (a kill before the first checkpoint must not leave the folder looking
+/// complete).
+fn open_run(run: &Path, ck_path: &Path, resume: bool) -> Result<Option<Checkpoint>> {
+    let resumed = if resume && ck_path.is_file() {
+        Some(Checkpoint::read(ck_path)?)
+    } else {
+        if resume && run.join("manifest.json").is_file() {
+            return Err(Error::invalid(
+                "the run is complete (manifest.json and no checkpoint.bin): nothing to resume",
+            )
+            .at(run));
+        }
+        None
+    };
+    create_dir_all(run)?;
+    remove_stale_temporaries(run)?;
+    if let Ok(entries) = std::fs::read_dir(run.join("point_cloud")) {
+        for e in entries.flatten() {
+            remove_stale_temporaries(&e.path())?;
+        }
+    }
+    if resumed.is_none() {
+        for p in [
+            ck_path,
+            &run.join("manifest.json"),
+            &run.join("train_stats.json"),
+        ] {
+            remove_if_present(p)?;
+        }
+    }
+    Ok(resumed)
+}
+
+/// The run's records of what it trains: `config.json`, `cfg_args`, `cameras.json`.
+fn write_run_records(
+    dataset_dir: &Path,
+    run: &Path,
+    config: &TrainConfig,
+    data: &Dataset,
+) -> Result<()> {
+    let config_text = serde_json::to_string_pretty(config).expect("config serializes");
+    write_text(&run.join("config.json"), &config_text)?;
+    write_text(&run.join("cfg_args"), &cfg_args(dataset_dir, run, config))?;
+    let cams: Vec<_> = data.views.iter().map(|v| v.camera.clone()).collect();
+    write_text(&run.join("cameras.json"), &cameras_json_string(&cams))
+}
+
+/// The trainer of a run: INRIA's initialisation, or a fine-tune of `init`'s scene with its
+/// per-view loss weights.
+fn new_trainer<'a>(
+    data: &'a Dataset,
+    config: &TrainConfig,
+    init: Option<&Init<'_>>,
+) -> Result<Trainer<'a>> {
+    let Some(i) = init else {
+        return Trainer::new(data, config.clone());
+    };
+    let deg = i.scene.sh_degree;
+    let mut t = Trainer::from_gaussians(data, config.clone(), i.scene.clone(), deg)?;
+    let mut masks = vec![None; data.views.len()];
+    if let Some(w) = i.weights {
+        for &vi in &data.train {
+            masks[vi] = w(&data.views[vi].camera)?;
+        }
+    }
+    t.masks = masks;
+    Ok(t)
+}
+
+/// Continue from checkpoint `ck`: refused when it was made from other inputs or a file it
+/// records has changed since; the trainer restored; the run's record so far.
+fn resume(
+    ck: Checkpoint,
+    ck_path: &Path,
+    run: &Path,
+    inputs_sha256: &str,
+    trainer: &mut Trainer,
+) -> Result<Book> {
+    let at = |e: Error| e.at(ck_path);
+    if ck.header.inputs_sha256 != inputs_sha256 {
+        return Err(at(Error::invalid(
+            "the checkpoint was made from other inputs (the dataset's cameras or training \
+             images, the --init scene or the --mask weights differ)",
+        )));
+    }
+    let book: Book = serde_json::from_value(ck.header.run.clone())
+        .map_err(|e| Error::parse(ck_path, format!("invalid run record: {e}")))?;
+    for (rel, sha) in &book.files {
+        let p = run.join(rel);
+        let bytes = std::fs::read(&p).map_err(|e| Error::io(&p, e))?;
+        if sha256_hex(&bytes) != *sha {
+            return Err(Error::invalid("changed since the checkpoint was written").at(&p));
+        }
+    }
+    ck.restore(trainer).map_err(at)?;
+    trainer.times = book.times;
+    Ok(book)
+}
+
+/// Complete a run: its manifest over every file it wrote, `train_stats.json`, and the
+/// checkpoint removed.
+#[allow(clippy::too_many_arguments)]
+fn finish_run(
+    dataset_dir: &Path,
+    run: &Path,
+    config: &TrainConfig,
+    data: &Dataset,
+    trainer: &Trainer,
+    book: Book,
+    wall: f64,
+    stages: Vec<(String, crate::io::Cost)>,
+) -> Result<RunSummary> {
     let ply = book
         .files
         .last()
@@ -374,7 +434,7 @@ pub fn train_run_resuming(
         gaussians: trainer.gaussians.len(),
         wall_seconds: wall,
         iterations_per_second: trainer.iteration as f64 / wall.max(1e-9),
-        pairs_per_second: pairs as f64 / wall.max(1e-9),
+        pairs_per_second: book.pairs as f64 / wall.max(1e-9),
         peak_memory_bytes: peak_memory_bytes(),
         stages,
         iteration_seconds: trainer.times,
@@ -392,7 +452,7 @@ pub fn train_run_resuming(
         &run.join("train_stats.json"),
         &serde_json::to_string_pretty(&summary).expect("summary serializes"),
     )?;
-    remove_if_present(&ck_path)?;
+    remove_if_present(&checkpoint_path(run))?;
     Ok(summary)
 }
 
