@@ -117,14 +117,14 @@ fn child(mode: &str, ply_path: &Path, width: u32, height: u32, out: &Path) -> Me
                 ..RenderOptions::default()
             };
             let t = Instant::now();
-            let r = render(&scene, &cam, &opts).unwrap();
+            let mut r = render(&scene, &cam, &opts).unwrap();
             let compute = t.elapsed().as_secs_f64();
             let t = Instant::now();
             let img = unseen::io::image::ImageF32::new(
                 r.width,
                 r.height,
                 3,
-                r.rgb.clone().unwrap_or_default(),
+                r.rgb.take().unwrap_or_default(),
             )
             .unwrap();
             unseen::io::image::write_png(&out.join("render.png"), &img).unwrap();

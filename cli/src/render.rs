@@ -342,13 +342,14 @@ fn run_render(job: &Job) -> Result<Vec<PathBuf>> {
     let (mut pairs, mut secs, mut skipped) = (0u64, 0f64, 0u64);
     for cam in &job.cameras {
         let t = Instant::now();
-        let r = render(&scene, cam, &job.opts)?;
+        let mut r = render(&scene, cam, &job.opts)?;
         secs += t.elapsed().as_secs_f64();
         pairs += r.report.pairs_evaluated;
         skipped += r.report.non_finite + r.report.degenerate;
         let (w, h) = (r.width, r.height);
         let stem = job.out.join(file_stem(&cam.name));
-        let rgb = ImageF32::new(w, h, 3, r.rgb.clone().unwrap_or_default())?;
+        // Moved, not copied: a 4K frame's colour is 100 MB.
+        let rgb = ImageF32::new(w, h, 3, r.rgb.take().unwrap_or_default())?;
         let mut put = |suffix: &str, img: &ImageF32, exr: bool| -> Result<()> {
             let p = stem.with_extension(suffix);
             if exr {
