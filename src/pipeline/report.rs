@@ -24,6 +24,23 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
                cycle the paper's hierarchical pipeline replaces (§1), one trajectory view after \
                another (SPEC.md §20.11); stages 1, 2 and the interpolation did not run.\n\n";
     }
+    md += &configuration(config, &prefix);
+    if let Some(m) = &out.metrics {
+        md += &metrics_section(m);
+    }
+    md += &views_section(&plan, run, &prefix);
+    if cycle {
+        md += &cycle_table(&plan, run, &prefix);
+    } else {
+        md += &stages_table(config, &plan, run, &prefix);
+    }
+    md += &tail(run, out, wall, &prefix);
+    Ok(md)
+}
+
+/// What ran: the preset, the slots and the switches, the labelled deviations in bold.
+fn configuration(config: &PipelineConfig, prefix: &str) -> String {
+    let mut md = String::new();
     md += &format!(
         "Preset `{}`, slots: inpaint `{}`, depth `{}`, video `{}`, video depth `{}`, fixer `{}`{}; \
          mask `{}`, depth supervision {}{}, DIBR propagation {}, stage-2 depth {}, independent \
@@ -77,16 +94,25 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
         config.independent_detection,
         config.interpolation,
     );
-    if let Some(m) = &out.metrics {
-        md += &format!(
-            "## Metrics\n\nOn {} evaluation poses never given to the pipeline ({:.1} % of their \
+    md
+}
+
+/// The metrics table on the evaluation poses and the training half's test views.
+fn metrics_section(m: &super::evaluate::Summary) -> String {
+    format!(
+        "## Metrics\n\nOn {} evaluation poses never given to the pipeline ({:.1} % of their \
              pixels show surfaces a training camera saw: *existing*; the rest *extrapolated*), \
              and on the training half's test views:\n\n{}\n",
-            m.evaluation_views,
-            100.0 * m.existing_fraction,
-            m.table()
-        );
-    }
+        m.evaluation_views,
+        100.0 * m.existing_fraction,
+        m.table()
+    )
+}
+
+/// Independent view detection: its counts, the frustums, the views set aside, the first
+/// candidates' renders and inpaintings, and a pair of conflicting generations.
+fn views_section(plan: &Plan, run: &Path, prefix: &str) -> String {
+    let mut md = String::new();
     md += &format!(
         "## Independent views (§3.2)\n\n{} candidates, {} already covered, {} frustum \
          collisions; independent: {}; closed trajectory: {}. Frustums of the inpainted \
@@ -130,13 +156,7 @@ pub fn markdown(config: &PipelineConfig, run: &Path, out: &Outcome, wall: f64) -
             views = Step::Views,
         );
     }
-    if cycle {
-        md += &cycle_table(&plan, run, &prefix);
-    } else {
-        md += &stages_table(config, &plan, run, &prefix);
-    }
-    md += &tail(run, out, wall, &prefix);
-    Ok(md)
+    md
 }
 
 /// The cycle paradigm's views in trajectory order: what each generated, its iterations,
