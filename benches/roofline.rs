@@ -40,8 +40,8 @@
 mod common;
 
 use common::{
-    External, FloorInput, arg, bare_backward_rate, bare_rate, blur_rate, floor_seconds, median,
-    stream_seconds, tile_splats,
+    External, FloorInput, arg, arg_text, bare_backward_rate, bare_rate, blur_rate, floor_seconds,
+    median, stream_seconds, tile_splats,
 };
 use std::time::Instant;
 use unseen::dataset;
@@ -429,23 +429,12 @@ fn main() {
     let reps = arg("--reps", if quick { 3 } else { 5 });
     let views = arg("--views", if quick { 4 } else { 16 });
     let rounds = arg("--rounds", 1).max(1);
-    let json = {
-        let args: Vec<String> = std::env::args().collect();
-        args.iter()
-            .position(|a| a == "--json")
-            .and_then(|i| args.get(i + 1))
-            .cloned()
-    };
+    let json = arg_text("--json");
     let pools = common::pools();
     println!("{}", common::machine());
     // `--external DIR`: bare kernels written outside the project, built and run once.
-    let external = {
-        let args: Vec<String> = std::env::args().collect();
-        args.iter()
-            .position(|a| a == "--external")
-            .and_then(|i| args.get(i + 1))
-            .map(|d| External::run(std::path::Path::new(d), pools.last().unwrap().0))
-    };
+    let external = arg_text("--external")
+        .map(|d| External::run(std::path::Path::new(&d), pools.last().unwrap().0));
     if let Some(e) = &external {
         for (kind, list) in [("forward", &e.forward), ("backward", &e.backward)] {
             for (file, threads, rate) in list {

@@ -58,18 +58,6 @@ impl Drop for Scratch {
     }
 }
 
-fn args() -> Vec<String> {
-    std::env::args().collect()
-}
-
-fn opt(name: &str) -> Option<String> {
-    let a = args();
-    a.iter()
-        .position(|x| x == name)
-        .and_then(|i| a.get(i + 1))
-        .cloned()
-}
-
 /// The camera the scenes are rendered from, and the shifted one a training target is.
 fn camera(width: u32, height: u32, shifted: bool) -> Camera {
     use glam::DVec3;
@@ -203,7 +191,7 @@ fn child(mode: &str, ply_path: &Path, width: u32, height: u32, out: &Path) -> Me
 }
 
 fn main() {
-    let a = args();
+    let a: Vec<String> = std::env::args().collect();
     if let Some(i) = a.iter().position(|x| x == "--child") {
         let m = child(
             &a[i + 1],
@@ -215,14 +203,14 @@ fn main() {
         println!("{}", serde_json::to_string(&m).unwrap());
         return;
     }
-    let sizes: Vec<f64> = opt("--sizes")
+    let sizes: Vec<f64> = common::arg_text("--sizes")
         .unwrap_or_else(|| "0.1,1,3".into())
         .split(',')
         .map(|s| s.parse().expect("sizes in millions"))
         .collect();
-    let width: u32 = opt("--width").map_or(1920, |v| v.parse().unwrap());
-    let height: u32 = opt("--height").map_or(1080, |v| v.parse().unwrap());
-    let modes: Vec<String> = opt("--modes")
+    let width: u32 = common::arg_text("--width").map_or(1920, |v| v.parse().unwrap());
+    let height: u32 = common::arg_text("--height").map_or(1080, |v| v.parse().unwrap());
+    let modes: Vec<String> = common::arg_text("--modes")
         .unwrap_or_else(|| "render,oracle,train".into())
         .split(',')
         .map(String::from)
@@ -250,7 +238,7 @@ fn main() {
         let n = (m * 1e6).round() as usize;
         // `--keep DIR`: the scenes are written there and left (to profile a child on its
         // own: `scale --child MODE PLY WIDTH HEIGHT OUT`), and reused when present.
-        let keep = opt("--keep").map(PathBuf::from);
+        let keep = common::arg_text("--keep").map(PathBuf::from);
         let ply_path = keep
             .as_deref()
             .unwrap_or(&dir.0)
@@ -303,7 +291,7 @@ fn main() {
             let _ = std::fs::remove_file(&ply_path);
         }
     }
-    if let Some(path) = opt("--json") {
+    if let Some(path) = common::arg_text("--json") {
         let text = serde_json::to_string_pretty(&all).unwrap();
         std::fs::write(&path, text).unwrap_or_else(|e| panic!("{path}: {e}"));
     }

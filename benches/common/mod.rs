@@ -410,11 +410,16 @@ pub fn lounge(
 
 /// The number after `name` on the command line (`default` without it).
 pub fn arg(name: &str, default: usize) -> usize {
+    arg_text(name).map_or(default, |v| v.parse().expect("a number"))
+}
+
+/// The value after `name` on the command line, if given.
+pub fn arg_text(name: &str) -> Option<String> {
     let args: Vec<String> = std::env::args().collect();
     args.iter()
         .position(|a| a == name)
         .and_then(|i| args.get(i + 1))
-        .map_or(default, |v| v.parse().expect("a number"))
+        .cloned()
 }
 
 /// The CPU's model name (from `/proc/cpuinfo` where there is one), its logical CPUs and the
